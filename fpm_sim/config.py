@@ -1,0 +1,488 @@
+"""Manipulator and test-rig descriptions: typed dataclasses, TOML loading, validation, provenance.
+
+Every physical value lives in SI units inside the dataclasses. In a TOML file a value is either a
+bare number (its provenance then reads ``"user: <file>"``) or an inline table carrying its source::
+
+    proximal_length_m = { value = 0.228, source = "assumed: length of the study's test link" }
+
+A source starts with ``study``, ``assumed: <why>`` or ``identified: <from what>`` in the shipped
+default. Angles are written in degrees in TOML (keys ending in ``_deg``) and held in radians.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import tomllib
+
+__all__ = [
+    "ConfigError",
+    "Geometry",
+    "Section",
+    "Material",
+    "LumpedMass",
+    "Hardware",
+    "Compliance",
+    "Motors",
+    "Damping",
+    "RigConfig",
+    "Manipulator",
+    "load_config",
+    "default_config",
+    "DEFAULT_CONFIG_NAME",
+]
+
+DEFAULT_CONFIG_NAME = "default_3rrr.toml"
+
+
+class ConfigError(ValueError):
+    """A manipulator description is invalid; the message names the offending field."""
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """Planar 3RRR geometry in the base plane (z = 0), SI units.
+
+    Chain ``i`` runs from the motor axis ``A_i`` on the base circle through the elbow ``B_i`` to the
+    platform joint ``C_i``. ``elbow_branch[i]`` (+1 or -1) selects which of the two inverse-kinematics
+    solutions the chain takes: +1 puts the elbow to the left of the line ``A_i -> C_i``.
+    """
+
+    base_radius_m: float
+    base_angles_rad: tuple[float, float, float]
+    proximal_length_m: float
+    distal_length_m: float
+    platform_radius_m: float
+    platform_angles_rad: tuple[float, float, float]
+    elbow_branch: tuple[int, int, int] = (1, 1, 1)
+
+
+@dataclass(frozen=True)
+class Section:
+    """Rectangular link cross-section: ``thickness_m`` in the base plane, ``height_m`` out of it."""
+
+    thickness_m: float
+    height_m: float
+
+    @property
+    def area_m2(self) -> float:
+        return self.thickness_m * self.height_m
+
+    @property
+    def i_inplane_m4(self) -> float:
+        """Second moment for bending in the base plane (deflection along the thickness)."""
+        return self.height_m * self.thickness_m**3 / 12.0
+
+    @property
+    def i_outofplane_m4(self) -> float:
+        """Second moment for bending out of the base plane (deflection along the height)."""
+        return self.thickness_m * self.height_m**3 / 12.0
+
+    @property
+    def torsion_constant_m4(self) -> float:
+        """Saint-Venant torsion constant of a solid rectangle (Roark, series approximation, <0.5 %)."""
+        a, b = max(self.thickness_m, self.height_m), min(self.thickness_m, self.height_m)
+        r = b / a
+        return a * b**3 * (1.0 / 3.0 - 0.21 * r * (1.0 - r**4 / 12.0))
+
+
+@dataclass(frozen=True)
+class Material:
+    """Linear elastic isotropic material."""
+
+    young_pa: float
+    poisson: float
+    density_kg_m3: float
+
+    @property
+    def shear_pa(self) -> float:
+        return self.young_pa / (2.0 * (1.0 + self.poisson))
+
+
+@dataclass(frozen=True)
+class LumpedMass:
+    """A rigid lump: mass and principal inertia about its own centre, axes of the link frame
+    (x along the link, z along the joint axis)."""
+
+    mass_kg: float = 0.0
+    inertia_kg_m2: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class Hardware:
+    """Lumped joint hardware, platform and payload."""
+
+    elbow_joint: LumpedMass = field(default_factory=LumpedMass)
+    platform_joint: LumpedMass = field(default_factory=LumpedMass)
+    motor_flange: LumpedMass = field(default_factory=LumpedMass)
+    platform: LumpedMass = field(default_factory=lambda: LumpedMass(0.1, (1e-4, 1e-4, 2e-4)))
+    payload: LumpedMass = field(default_factory=LumpedMass)
+
+
+@dataclass(frozen=True)
+class Compliance:
+    """Optional joint compliances as rotational stiffness; ``math.inf`` means rigid.
+
+    ``passive_joint_tilt_nm_per_rad``: bearing stiffness of each passive hinge about the two axes
+    normal to its own (out-of-plane tilt). ``motor_clamp_nm_per_rad``: stiffness of each locked motor
+    about its axis. ``base_clamp_nm_per_rad``: rotational stiffness of the rigs' clamps (the study's
+    concrete cylinders) about both bending axes.
+    """
+
+    passive_joint_tilt_nm_per_rad: float = math.inf
+    motor_clamp_nm_per_rad: float = math.inf
+    base_clamp_nm_per_rad: float = math.inf
+
+
+@dataclass(frozen=True)
+class Motors:
+    """Motor state: ``"locked"`` (rigid, or ``Compliance.motor_clamp_nm_per_rad``) or ``"servo"``."""
+
+    mode: str = "locked"
+    servo_stiffness_nm_per_rad: float = 0.0
+    servo_damping_nms_per_rad: float = 0.0
+
+
+@dataclass(frozen=True)
+class Damping:
+    """Structural damping, stiffness-proportional: each link spring gets damping ``beta * k``.
+
+    A mode dominated by link bending at angular frequency w then has damping ratio ``beta * w / 2``.
+    """
+
+    stiffness_proportional_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class RigConfig:
+    """The study's subsystem test pieces (single link, two-link chain)."""
+
+    length_m: float
+    section: Section
+    material: Material
+    clamped_length_m: float = 0.0
+    chain_hinge: LumpedMass = field(default_factory=LumpedMass)
+
+
+@dataclass(frozen=True)
+class Manipulator:
+    """A whole planar 3RRR description. ``provenance`` maps dotted field paths to their source."""
+
+    name: str
+    geometry: Geometry
+    section: Section
+    material: Material
+    hardware: Hardware = field(default_factory=Hardware)
+    compliance: Compliance = field(default_factory=Compliance)
+    motors: Motors = field(default_factory=Motors)
+    damping: Damping = field(default_factory=Damping)
+    rig: RigConfig | None = None
+    provenance: dict[str, str] = field(default_factory=dict, compare=False)
+
+    def replace(self, **changes: Any) -> Manipulator:
+        """A copy with top-level fields replaced, validated."""
+        new = dataclasses.replace(self, **changes)
+        validate(new)
+        return new
+
+    def with_section(self, *, thickness_m: float | None = None, height_m: float | None = None) -> Manipulator:
+        """A copy with the link section changed (provenance marked as a user override)."""
+        sec = Section(
+            thickness_m=self.section.thickness_m if thickness_m is None else thickness_m,
+            height_m=self.section.height_m if height_m is None else height_m,
+        )
+        prov = dict(self.provenance)
+        if thickness_m is not None:
+            prov["section.thickness_m"] = "user: override"
+        if height_m is not None:
+            prov["section.height_m"] = "user: override"
+        return dataclasses.replace(self, section=sec, provenance=prov).replace()
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-data view (for JSON), SI units, with provenance."""
+        d = dataclasses.asdict(self)
+        return d
+
+
+# ---------------------------------------------------------------------------------------------
+# loading
+
+
+class _Reader:
+    """Reads values out of a TOML table, recording provenance and naming fields in errors."""
+
+    def __init__(self, default_source: str) -> None:
+        self.default_source = default_source
+        self.provenance: dict[str, str] = {}
+
+    def get(self, table: dict[str, Any], path: str, key: str, default: Any = dataclasses.MISSING) -> Any:
+        full = f"{path}.{key}" if path else key
+        if key not in table:
+            if default is dataclasses.MISSING:
+                raise ConfigError(f"missing field '{full}'")
+            return default
+        raw = table[key]
+        if isinstance(raw, dict) and "value" in raw:
+            unknown = set(raw) - {"value", "source"}
+            if unknown:
+                raise ConfigError(f"field '{full}': unknown keys {sorted(unknown)} (expected 'value', 'source')")
+            source = raw.get("source", self.default_source)
+            if not isinstance(source, str) or not source:
+                raise ConfigError(f"field '{full}': 'source' must be a non-empty string")
+            self.provenance[full] = source
+            return raw["value"]
+        self.provenance[full] = self.default_source
+        return raw
+
+    def number(self, table: dict[str, Any], path: str, key: str, default: Any = dataclasses.MISSING) -> float:
+        v = self.get(table, path, key, default)
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise ConfigError(f"field '{path}.{key}' must be a number, got {v!r}")
+        return float(v)
+
+    def triple(self, table: dict[str, Any], path: str, key: str, default: Any = dataclasses.MISSING) -> tuple:
+        v = self.get(table, path, key, default)
+        if not isinstance(v, (list, tuple)) or len(v) != 3:
+            raise ConfigError(f"field '{path}.{key}' must be a list of 3 numbers, got {v!r}")
+        for x in v:
+            if isinstance(x, bool) or not isinstance(x, (int, float)):
+                raise ConfigError(f"field '{path}.{key}' must be a list of 3 numbers, got {v!r}")
+        return tuple(float(x) for x in v)
+
+    def table(self, parent: dict[str, Any], path: str, key: str, required: bool = True) -> dict[str, Any]:
+        full = f"{path}.{key}" if path else key
+        if key not in parent:
+            if required:
+                raise ConfigError(f"missing table '[{full}]'")
+            return {}
+        t = parent[key]
+        if not isinstance(t, dict):
+            raise ConfigError(f"'{full}' must be a table")
+        return t
+
+
+def _check_keys(table: dict[str, Any], path: str, allowed: set[str]) -> None:
+    unknown = set(table) - allowed
+    if unknown:
+        raise ConfigError(f"unknown field(s) in '[{path}]': {sorted(unknown)}; allowed: {sorted(allowed)}")
+
+
+def _lump(r: _Reader, t: dict[str, Any], path: str) -> LumpedMass:
+    _check_keys(t, path, {"mass_kg", "inertia_kg_m2"})
+    return LumpedMass(
+        mass_kg=r.number(t, path, "mass_kg", 0.0),
+        inertia_kg_m2=r.triple(t, path, "inertia_kg_m2", (0.0, 0.0, 0.0)),
+    )
+
+
+def _section(r: _Reader, t: dict[str, Any], path: str) -> Section:
+    return Section(thickness_m=r.number(t, path, "thickness_m"), height_m=r.number(t, path, "height_m"))
+
+
+def _material(r: _Reader, t: dict[str, Any], path: str) -> Material:
+    return Material(
+        young_pa=r.number(t, path, "young_pa"),
+        poisson=r.number(t, path, "poisson"),
+        density_kg_m3=r.number(t, path, "density_kg_m3"),
+    )
+
+
+def parse_config(data: dict[str, Any], *, source: str = "user") -> Manipulator:
+    """Build a validated :class:`Manipulator` from parsed TOML data."""
+    r = _Reader(default_source=source)
+    _check_keys(
+        data,
+        "<top>",
+        {"name", "geometry", "section", "material", "hardware", "compliance", "motors", "damping", "rig"},
+    )
+    g = r.table(data, "", "geometry")
+    _check_keys(
+        g,
+        "geometry",
+        {
+            "base_radius_m",
+            "base_angles_deg",
+            "proximal_length_m",
+            "distal_length_m",
+            "platform_radius_m",
+            "platform_angles_deg",
+            "elbow_branch",
+        },
+    )
+    branch = r.get(g, "geometry", "elbow_branch", [1, 1, 1])
+    if not isinstance(branch, (list, tuple)) or len(branch) != 3 or any(b not in (1, -1) for b in branch):
+        raise ConfigError(f"field 'geometry.elbow_branch' must be three values each +1 or -1, got {branch!r}")
+    geometry = Geometry(
+        base_radius_m=r.number(g, "geometry", "base_radius_m"),
+        base_angles_rad=tuple(math.radians(a) for a in r.triple(g, "geometry", "base_angles_deg")),
+        proximal_length_m=r.number(g, "geometry", "proximal_length_m"),
+        distal_length_m=r.number(g, "geometry", "distal_length_m"),
+        platform_radius_m=r.number(g, "geometry", "platform_radius_m"),
+        platform_angles_rad=tuple(math.radians(a) for a in r.triple(g, "geometry", "platform_angles_deg")),
+        elbow_branch=tuple(int(b) for b in branch),
+    )
+    s = r.table(data, "", "section")
+    _check_keys(s, "section", {"thickness_m", "height_m"})
+    m = r.table(data, "", "material")
+    _check_keys(m, "material", {"young_pa", "poisson", "density_kg_m3"})
+    hw = r.table(data, "", "hardware", required=False)
+    _check_keys(hw, "hardware", {f.name for f in dataclasses.fields(Hardware)})
+    hardware = Hardware(
+        **{k: _lump(r, r.table(hw, "hardware", k), f"hardware.{k}") for k in hw}  # type: ignore[arg-type]
+    )
+    c = r.table(data, "", "compliance", required=False)
+    _check_keys(c, "compliance", {f.name for f in dataclasses.fields(Compliance)})
+    compliance = Compliance(**{k: r.number(c, "compliance", k) for k in c})
+    mo = r.table(data, "", "motors", required=False)
+    _check_keys(mo, "motors", {f.name for f in dataclasses.fields(Motors)})
+    motors = Motors(
+        mode=str(r.get(mo, "motors", "mode", "locked")),
+        servo_stiffness_nm_per_rad=r.number(mo, "motors", "servo_stiffness_nm_per_rad", 0.0),
+        servo_damping_nms_per_rad=r.number(mo, "motors", "servo_damping_nms_per_rad", 0.0),
+    )
+    dmp = r.table(data, "", "damping", required=False)
+    _check_keys(dmp, "damping", {"stiffness_proportional_s"})
+    damping = Damping(stiffness_proportional_s=r.number(dmp, "damping", "stiffness_proportional_s", 0.0))
+    material = _material(r, m, "material")
+    rig = None
+    if "rig" in data:
+        rt = r.table(data, "", "rig")
+        _check_keys(rt, "rig", {"length_m", "clamped_length_m", "section", "material", "chain_hinge"})
+        rig = RigConfig(
+            length_m=r.number(rt, "rig", "length_m"),
+            section=_section(r, r.table(rt, "rig", "section"), "rig.section"),
+            material=_material(r, r.table(rt, "rig", "material"), "rig.material") if "material" in rt else material,
+            clamped_length_m=r.number(rt, "rig", "clamped_length_m", 0.0),
+            chain_hinge=_lump(r, r.table(rt, "rig", "chain_hinge"), "rig.chain_hinge")
+            if "chain_hinge" in rt
+            else LumpedMass(),
+        )
+    manip = Manipulator(
+        name=str(data.get("name", "unnamed 3RRR")),
+        geometry=geometry,
+        section=_section(r, s, "section"),
+        material=material,
+        hardware=hardware,
+        compliance=compliance,
+        motors=motors,
+        damping=damping,
+        rig=rig,
+        provenance=r.provenance,
+    )
+    validate(manip)
+    return manip
+
+
+def load_config(path: str | Path) -> Manipulator:
+    """Load and validate a manipulator description from a TOML file.
+
+    Raises
+    ------
+    ConfigError
+        With the dotted name of the offending field.
+    """
+    p = Path(path)
+    try:
+        data = tomllib.loads(p.read_text())
+    except FileNotFoundError as exc:
+        raise ConfigError(f"config file not found: {p}") from exc
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{p}: invalid TOML: {exc}") from exc
+    return parse_config(data, source=f"user: {p.name}")
+
+
+def default_config() -> Manipulator:
+    """The embedded default: the study's prototype, every value with its provenance."""
+    text = resources.files("fpm_sim.data").joinpath(DEFAULT_CONFIG_NAME).read_text()
+    return parse_config(tomllib.loads(text), source="default")
+
+
+def default_config_text() -> str:
+    """The embedded default TOML, as text (a template for users)."""
+    return resources.files("fpm_sim.data").joinpath(DEFAULT_CONFIG_NAME).read_text()
+
+
+# ---------------------------------------------------------------------------------------------
+# validation
+
+
+def _positive(value: float, name: str) -> None:
+    if not (math.isfinite(value) and value > 0.0):
+        raise ConfigError(f"field '{name}' must be a positive finite number, got {value!r}")
+
+
+def _nonneg(value: float, name: str, allow_inf: bool = False) -> None:
+    ok = value >= 0.0 and (allow_inf or math.isfinite(value))
+    if not ok or math.isnan(value):
+        raise ConfigError(f"field '{name}' must be >= 0{' (inf = rigid)' if allow_inf else ''}, got {value!r}")
+
+
+def _validate_lump(lump: LumpedMass, name: str) -> None:
+    _nonneg(lump.mass_kg, f"{name}.mass_kg")
+    for k, v in zip("xyz", lump.inertia_kg_m2):
+        _nonneg(v, f"{name}.inertia_kg_m2[{k}]")
+    a, b, c = lump.inertia_kg_m2
+    if a + b < c * (1 - 1e-9) or b + c < a * (1 - 1e-9) or a + c < b * (1 - 1e-9):
+        raise ConfigError(f"field '{name}.inertia_kg_m2' violates the triangle inequality: {lump.inertia_kg_m2}")
+
+
+def _validate_section_material(sec: Section, mat: Material, prefix: str) -> None:
+    _positive(sec.thickness_m, f"{prefix}section.thickness_m")
+    _positive(sec.height_m, f"{prefix}section.height_m")
+    _positive(mat.young_pa, f"{prefix}material.young_pa")
+    _positive(mat.density_kg_m3, f"{prefix}material.density_kg_m3")
+    if not (-1.0 < mat.poisson < 0.5):
+        raise ConfigError(f"field '{prefix}material.poisson' must lie in (-1, 0.5), got {mat.poisson!r}")
+
+
+def validate(m: Manipulator) -> None:
+    """Check a description for values no physical manipulator can have. Raises :class:`ConfigError`."""
+    g = m.geometry
+    _positive(g.base_radius_m, "geometry.base_radius_m")
+    _positive(g.proximal_length_m, "geometry.proximal_length_m")
+    _positive(g.distal_length_m, "geometry.distal_length_m")
+    _nonneg(g.platform_radius_m, "geometry.platform_radius_m")
+    for name, angles in (("base_angles_deg", g.base_angles_rad), ("platform_angles_deg", g.platform_angles_rad)):
+        pts = [(math.cos(a), math.sin(a)) for a in angles]
+        for i in range(3):
+            for j in range(i + 1, 3):
+                if math.dist(pts[i], pts[j]) < 1e-6:
+                    raise ConfigError(f"field 'geometry.{name}': chains {i} and {j} share an angle")
+    if g.platform_radius_m >= g.base_radius_m:
+        raise ConfigError(
+            f"field 'geometry.platform_radius_m' ({g.platform_radius_m} m) must be smaller than "
+            f"'geometry.base_radius_m' ({g.base_radius_m} m)"
+        )
+    _validate_section_material(m.section, m.material, "")
+    for f in dataclasses.fields(Hardware):
+        _validate_lump(getattr(m.hardware, f.name), f"hardware.{f.name}")
+    for f in dataclasses.fields(Compliance):
+        _nonneg(getattr(m.compliance, f.name), f"compliance.{f.name}", allow_inf=True)
+        if getattr(m.compliance, f.name) == 0.0:
+            raise ConfigError(
+                f"field 'compliance.{f.name}' is 0: that is a free joint, not a compliance; use inf for rigid"
+            )
+    if m.motors.mode not in ("locked", "servo"):
+        raise ConfigError(f"field 'motors.mode' must be 'locked' or 'servo', got {m.motors.mode!r}")
+    _nonneg(m.motors.servo_stiffness_nm_per_rad, "motors.servo_stiffness_nm_per_rad")
+    _nonneg(m.motors.servo_damping_nms_per_rad, "motors.servo_damping_nms_per_rad")
+    if m.motors.mode == "servo" and m.motors.servo_stiffness_nm_per_rad <= 0.0:
+        raise ConfigError("field 'motors.servo_stiffness_nm_per_rad' must be > 0 when motors.mode = 'servo'")
+    _nonneg(m.damping.stiffness_proportional_s, "damping.stiffness_proportional_s")
+    if m.hardware.platform.mass_kg + m.hardware.payload.mass_kg <= 0.0:
+        raise ConfigError("field 'hardware.platform.mass_kg' must be > 0 (the platform is a rigid body)")
+    if m.rig is not None:
+        _positive(m.rig.length_m, "rig.length_m")
+        _validate_section_material(m.rig.section, m.rig.material, "rig.")
+        _nonneg(m.rig.clamped_length_m, "rig.clamped_length_m")
+        if m.rig.clamped_length_m >= m.rig.length_m:
+            raise ConfigError(
+                f"field 'rig.clamped_length_m' ({m.rig.clamped_length_m} m) must be shorter than 'rig.length_m' "
+                f"({m.rig.length_m} m)"
+            )
+        _validate_lump(m.rig.chain_hinge, "rig.chain_hinge")

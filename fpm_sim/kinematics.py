@@ -1,0 +1,279 @@
+"""Planar 3RRR kinematics: inverse and forward kinematics, Jacobians, singularity measure.
+
+Conventions: the base plane is the world xy plane; chain ``i`` has its motor axis at
+``A_i = R_b (cos a_i, sin a_i)``, its elbow at ``B_i`` and its platform joint at
+``C_i = p + Rot(phi) r_p (cos g_i, sin g_i)``. Motor angle ``q_i`` is the direction of ``A_i -> B_i``.
+
+Velocity relation (from d/dt |C_i - B_i|^2 = 0)::
+
+    Jx @ [xdot, ydot, phidot] = Jq @ qdot
+    Jx[i] = [u_i, cross(r_i, u_i)]            u_i = (C_i - B_i) / L2,  r_i = C_i - p
+    Jq    = diag(L1 * cross(w_i, u_i))         w_i = (B_i - A_i) / L1
+
+``Jq`` singular: a chain is stretched or folded (serial, type 1). ``Jx`` singular: the three distal
+link lines meet in a point or are parallel (parallel, type 2; the platform gains a motion with the
+motors locked: its stiffness, and so its natural frequencies, drop to zero there).
+
+Singularity measure (dimensionless, 0 at a singularity, 1 at best):
+``min(min_i |cross(w_i, u_i)|, sigma_min(Jx_n) / sigma_max(Jx_n))`` where ``Jx_n`` is ``Jx`` with
+its rotation column divided by the characteristic length ``max(r_p, L2 / 4)``.
+Poses whose measure is below :data:`SINGULAR_TOL` are refused (:class:`SingularPoseError`); below
+:data:`NEAR_SINGULAR_WARN` a :class:`NearSingularityWarning` is issued.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from .config import Geometry
+
+__all__ = [
+    "Pose",
+    "Assembly",
+    "SingularityMeasure",
+    "UnreachablePoseError",
+    "SingularPoseError",
+    "NearSingularityWarning",
+    "SINGULAR_TOL",
+    "NEAR_SINGULAR_WARN",
+    "inverse_kinematics",
+    "forward_kinematics",
+    "jacobians",
+    "singularity_measure",
+    "base_points",
+    "platform_points",
+]
+
+SINGULAR_TOL = 1e-3
+"""Singularity measure below which a pose is refused (stiffness ~ measure^2 -> frequencies vanish)."""
+NEAR_SINGULAR_WARN = 0.05
+"""Singularity measure below which a pose is accepted with a :class:`NearSingularityWarning`."""
+
+
+class UnreachablePoseError(ValueError):
+    """No assembly exists: a chain cannot span the distance from its motor to its platform joint."""
+
+
+class SingularPoseError(ValueError):
+    """The pose is (numerically) at a serial or parallel singularity."""
+
+
+class NearSingularityWarning(UserWarning):
+    """The pose is close to a singularity: results are valid but very sensitive to the pose."""
+
+
+@dataclass(frozen=True)
+class Pose:
+    """End-effector pose: platform centre (m) and rotation about the motor axes (rad)."""
+
+    x_m: float
+    y_m: float
+    phi_rad: float = 0.0
+
+    @classmethod
+    def from_mm(cls, x_mm: float, y_mm: float, phi_rad: float = 0.0) -> Pose:
+        return cls(x_mm * 1e-3, y_mm * 1e-3, phi_rad)
+
+    def as_array(self) -> np.ndarray:
+        return np.array([self.x_m, self.y_m, self.phi_rad])
+
+    def label(self) -> str:
+        return f"(x={self.x_m * 1e3:.1f} mm, y={self.y_m * 1e3:.1f} mm, phi={self.phi_rad:.3f} rad)"
+
+
+@dataclass(frozen=True)
+class SingularityMeasure:
+    """Dimensionless distances from the two singularity types (0 = singular, 1 = best)."""
+
+    serial: float
+    parallel: float
+    worst_chain: int
+
+    @property
+    def value(self) -> float:
+        return min(self.serial, self.parallel)
+
+    @property
+    def kind(self) -> str:
+        return (
+            "serial (a chain stretched or folded)"
+            if self.serial <= self.parallel
+            else "parallel (distal lines concurrent)"
+        )
+
+
+@dataclass(frozen=True)
+class Assembly:
+    """An assembled configuration: joint points (3 x 2 arrays, m) and motor angles (rad)."""
+
+    pose: Pose
+    a: np.ndarray
+    b: np.ndarray
+    c: np.ndarray
+    motor_angles_rad: np.ndarray
+    singularity: SingularityMeasure
+
+    @property
+    def proximal_dirs(self) -> np.ndarray:
+        d = self.b - self.a
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+    @property
+    def distal_dirs(self) -> np.ndarray:
+        d = self.c - self.b
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def _rot(phi: float) -> np.ndarray:
+    c, s = math.cos(phi), math.sin(phi)
+    return np.array([[c, -s], [s, c]])
+
+
+def _cross2(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+
+
+def base_points(g: Geometry) -> np.ndarray:
+    """Motor axis points A_i (3 x 2, m)."""
+    ang = np.asarray(g.base_angles_rad)
+    return g.base_radius_m * np.stack([np.cos(ang), np.sin(ang)], axis=1)
+
+
+def platform_points(g: Geometry, pose: Pose) -> np.ndarray:
+    """Platform joint points C_i in the world (3 x 2, m)."""
+    ang = np.asarray(g.platform_angles_rad)
+    local = g.platform_radius_m * np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    return np.array([pose.x_m, pose.y_m]) + local @ _rot(pose.phi_rad).T
+
+
+def _char_length(g: Geometry) -> float:
+    return max(g.platform_radius_m, g.distal_length_m / 4.0)
+
+
+def jacobians(g: Geometry, asm: Assembly) -> tuple[np.ndarray, np.ndarray]:
+    """``(Jx, Jq)`` with ``Jx @ [xdot, ydot, phidot] = Jq @ qdot`` (see module docstring)."""
+    u = asm.distal_dirs
+    w = asm.proximal_dirs
+    r = asm.c - np.array([asm.pose.x_m, asm.pose.y_m])
+    jx = np.column_stack([u, _cross2(r, u)])
+    jq = np.diag(g.proximal_length_m * _cross2(w, u))
+    return jx, jq
+
+
+def singularity_measure(g: Geometry, asm: Assembly) -> SingularityMeasure:
+    """Serial and parallel singularity measures of an assembly (see module docstring)."""
+    serial_each = np.abs(_cross2(asm.proximal_dirs, asm.distal_dirs))
+    jx, _ = jacobians(g, asm)
+    jxn = jx.copy()
+    jxn[:, 2] /= _char_length(g)
+    s = np.linalg.svd(jxn, compute_uv=False)
+    parallel = float(s[-1] / s[0])
+    return SingularityMeasure(serial=float(serial_each.min()), parallel=parallel, worst_chain=int(serial_each.argmin()))
+
+
+def inverse_kinematics(
+    g: Geometry,
+    pose: Pose,
+    *,
+    check_singularity: bool = True,
+) -> Assembly:
+    """Assemble the manipulator at ``pose``.
+
+    Parameters
+    ----------
+    g
+        Geometry; ``g.elbow_branch`` picks each chain's solution.
+    pose
+        Platform pose.
+    check_singularity
+        Refuse singular poses and warn near them (thresholds :data:`SINGULAR_TOL`,
+        :data:`NEAR_SINGULAR_WARN`).
+
+    Raises
+    ------
+    UnreachablePoseError
+        Naming the chain whose motor-to-platform-joint distance is outside ``[|L1-L2|, L1+L2]``.
+    SingularPoseError
+        When the singularity measure is below :data:`SINGULAR_TOL`.
+    """
+    a = base_points(g)
+    c = platform_points(g, pose)
+    l1, l2 = g.proximal_length_m, g.distal_length_m
+    b = np.zeros((3, 2))
+    q = np.zeros(3)
+    for i in range(3):
+        d = c[i] - a[i]
+        dist = float(np.hypot(*d))
+        lo, hi = abs(l1 - l2), l1 + l2
+        if not (lo <= dist <= hi):
+            raise UnreachablePoseError(
+                f"pose {pose.label()} is unreachable: chain {i} needs {dist * 1e3:.2f} mm from motor to "
+                f"platform joint but its links span {lo * 1e3:.2f}..{hi * 1e3:.2f} mm; move the pose towards "
+                f"the workspace centre or change geometry.proximal_length_m / distal_length_m"
+            )
+        cos_alpha = np.clip((l1**2 + dist**2 - l2**2) / (2.0 * l1 * dist), -1.0, 1.0)
+        q[i] = math.atan2(d[1], d[0]) + g.elbow_branch[i] * math.acos(cos_alpha)
+        b[i] = a[i] + l1 * np.array([math.cos(q[i]), math.sin(q[i])])
+    measure = SingularityMeasure(serial=0.0, parallel=0.0, worst_chain=0)
+    asm = Assembly(pose=pose, a=a, b=b, c=c, motor_angles_rad=q, singularity=measure)
+    measure = singularity_measure(g, asm)
+    asm = Assembly(pose=pose, a=a, b=b, c=c, motor_angles_rad=q, singularity=measure)
+    if check_singularity:
+        if measure.value < SINGULAR_TOL:
+            raise SingularPoseError(
+                f"pose {pose.label()} is singular: measure {measure.value:.2e} < {SINGULAR_TOL:g} "
+                f"({measure.kind}); the locked manipulator has a zero-stiffness motion there. Move the pose or "
+                f"rotate the platform (phi_rad)"
+            )
+        if measure.value < NEAR_SINGULAR_WARN:
+            warnings.warn(
+                f"pose {pose.label()} is near a {measure.kind} singularity: measure {measure.value:.3f} < "
+                f"{NEAR_SINGULAR_WARN:g}; low frequencies there are very sensitive to the pose",
+                NearSingularityWarning,
+                stacklevel=2,
+            )
+    return asm
+
+
+def forward_kinematics(
+    g: Geometry,
+    motor_angles_rad: np.ndarray,
+    *,
+    guess: Pose,
+    tol_m: float = 1e-13,
+    max_iter: int = 50,
+) -> Pose:
+    """Platform pose from motor angles by Newton's method on ``|C_i - B_i|^2 = L2^2``.
+
+    The 3RRR has up to six assembly modes; the one nearest ``guess`` is returned.
+
+    Raises
+    ------
+    UnreachablePoseError
+        If Newton's method does not converge (no assembly near ``guess``).
+    """
+    q = np.asarray(motor_angles_rad, dtype=float)
+    a = base_points(g)
+    b = a + g.proximal_length_m * np.stack([np.cos(q), np.sin(q)], axis=1)
+    ang = np.asarray(g.platform_angles_rad)
+    local = g.platform_radius_m * np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    x = guess.as_array().astype(float)
+    for _ in range(max_iter):
+        rot = _rot(x[2])
+        r = local @ rot.T
+        c = x[:2] + r
+        d = c - b
+        f = np.sum(d * d, axis=1) - g.distal_length_m**2
+        jac = 2.0 * np.column_stack([d, _cross2(r, d)])
+        try:
+            step = np.linalg.solve(jac, -f)
+        except np.linalg.LinAlgError as exc:
+            raise SingularPoseError("forward kinematics hit a parallel singularity") from exc
+        x += step
+        if np.max(np.abs(step[:2])) < tol_m and abs(step[2]) * max(g.platform_radius_m, 1e-3) < tol_m:
+            return Pose(float(x[0]), float(x[1]), float(x[2]))
+    raise UnreachablePoseError(f"forward kinematics did not converge from guess {guess.label()}")

@@ -1,0 +1,213 @@
+"""Flexible link discretisations added to a :class:`mujoco.MjSpec`.
+
+``segments`` (default): the rigid-finite-element layout. A link of length L is cut into ``n`` equal
+parts of length ``l = L / n``; a spring-damper element sits at the centre of each part, so the rigid
+pieces are ``l/2, l, ..., l, l/2`` long (``n + 1`` bodies, ``n`` spring locations). Each spring
+location carries three hinges of the link frame (x along the link, z along the motor axes):
+
+=========  ======  ===============  ============================================
+kind       axis    stiffness        what it is
+=========  ======  ===============  ============================================
+bend_in    z       E * I_in / l      bending in the base plane (I_in = h t^3 / 12)
+bend_out   y       E * I_out / l     bending out of the base plane (I_out = t h^3 / 12)
+twist      x       G * J / l         torsion (Saint-Venant J of the rectangle)
+axial      x       E * A / l         optional slide: axial stretch
+=========  ======  ===============  ============================================
+
+Each spring gets damping ``beta * k`` (``Damping.stiffness_proportional_s``). Masses and inertias of
+the pieces are computed exactly (boxes) and lumped hardware is added at the link ends; the resulting
+inertia is set explicitly on each body.
+
+``rigid``: one rigid body per link (no springs): the kinematic-chain limit, for comparison.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+from .config import LumpedMass, Material, Section
+
+__all__ = ["LINK_MODELS", "LinkBuild", "LinkModelError", "add_link", "SPRING_KINDS"]
+
+LINK_MODELS = ("segments", "rigid")
+"""Link models available; ``cable`` and ``flex`` are planned (MuJoCo deformables)."""
+
+SPRING_KINDS = ("bend_in", "bend_out", "twist", "axial")
+
+_MAX_SEGMENTS = 200
+
+
+class LinkModelError(ValueError):
+    """Unknown link model, or a resolution the model cannot take."""
+
+
+def check_link_model(link_model: str, segments: int) -> None:
+    """Raise :class:`LinkModelError` for an unknown model or an impossible resolution."""
+    if link_model not in LINK_MODELS:
+        raise LinkModelError(
+            f"unknown link model {link_model!r} (--link-model); choose one of {', '.join(LINK_MODELS)}"
+        )
+    if link_model == "segments" and not (isinstance(segments, int) and 1 <= segments <= _MAX_SEGMENTS):
+        raise LinkModelError(
+            f"link model 'segments' needs 1 <= segments <= {_MAX_SEGMENTS} (--segments), got {segments!r}"
+        )
+
+
+@dataclass
+class LinkBuild:
+    """Handles of one link in the spec, filled by :func:`add_link`."""
+
+    name: str
+    bodies: list[mujoco.MjsBody]
+    piece_lengths_m: list[float]
+    joints: list[tuple[str, str]] = field(default_factory=list)  # (joint name, kind)
+    sites: list[str] = field(default_factory=list)  # along the link, start to end
+
+    @property
+    def first(self) -> mujoco.MjsBody:
+        return self.bodies[0]
+
+    @property
+    def last(self) -> mujoco.MjsBody:
+        return self.bodies[-1]
+
+    @property
+    def last_length_m(self) -> float:
+        return self.piece_lengths_m[-1]
+
+
+def quat_z(angle_rad: float) -> list[float]:
+    """Quaternion (w, x, y, z) of a rotation about z."""
+    return [math.cos(angle_rad / 2.0), 0.0, 0.0, math.sin(angle_rad / 2.0)]
+
+
+def _combined_inertia(
+    parts: list[tuple[float, np.ndarray, np.ndarray]],
+) -> tuple[float, np.ndarray, np.ndarray]:
+    """Mass, centre and 3x3 inertia about the centre of point-bodies ``(mass, pos, inertia_about_own_com)``."""
+    mass = sum(p[0] for p in parts)
+    com = sum(p[0] * p[1] for p in parts) / mass
+    inertia = np.zeros((3, 3))
+    for m, pos, i_own in parts:
+        r = pos - com
+        inertia += i_own + m * (np.dot(r, r) * np.eye(3) - np.outer(r, r))
+    return mass, com, inertia
+
+
+def set_inertial(body: mujoco.MjsBody, parts: list[tuple[float, np.ndarray, np.ndarray]]) -> None:
+    """Set a body's explicit inertial from lumped parts (see :func:`_combined_inertia`)."""
+    mass, com, inertia = _combined_inertia(parts)
+    body.mass = mass
+    body.ipos = com
+    body.fullinertia = [inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2]]
+    body.explicitinertial = True
+
+
+def lump_part(lump: LumpedMass, pos: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    return (lump.mass_kg, np.asarray(pos, float), np.diag(lump.inertia_kg_m2))
+
+
+def box_part(
+    length: float, section: Section, material: Material, x0: float, *, rotary_inertia: bool = False
+) -> tuple[float, np.ndarray, np.ndarray]:
+    """A box piece along x from ``x0`` to ``x0 + length``.
+
+    ``rotary_inertia=False`` drops the section's own rotary inertia about the bending axes (the
+    ``t^2/12`` and ``h^2/12`` terms), keeping the ``l^2/12`` term of the piece's distributed mass:
+    the chain then converges to an Euler-Bernoulli beam instead of a Rayleigh beam.
+    """
+    t, h = section.thickness_m, section.height_m
+    m = material.density_kg_m3 * length * t * h
+    r = 1.0 if rotary_inertia else 0.0
+    iyy, izz = m * (length**2 + r * h**2) / 12.0, m * (length**2 + r * t**2) / 12.0
+    # Without rotary inertia the twist inertia is capped at iyy + izz (MuJoCo's triangle inequality).
+    ixx = min(m * (t**2 + h**2) / 12.0, iyy + izz)
+    i = np.diag([ixx, iyy, izz])
+    return (m, np.array([x0 + length / 2.0, 0.0, 0.0]), i)
+
+
+def _add_spring(body: mujoco.MjsBody, name: str, kind: str, stiffness: float, beta: float) -> None:
+    axis = {"bend_in": [0, 0, 1], "bend_out": [0, 1, 0], "twist": [1, 0, 0], "axial": [1, 0, 0]}[kind]
+    jtype = mujoco.mjtJoint.mjJNT_SLIDE if kind == "axial" else mujoco.mjtJoint.mjJNT_HINGE
+    j = body.add_joint(name=name, type=jtype, axis=axis)
+    j.stiffness = [stiffness, 0.0, 0.0]
+    j.springref = 0.0
+    j.damping = [beta * stiffness, 0.0, 0.0]
+
+
+def add_link(
+    parent: mujoco.MjsBody,
+    *,
+    name: str,
+    pos: np.ndarray,
+    angle_rad: float,
+    length_m: float,
+    section: Section,
+    material: Material,
+    link_model: str = "segments",
+    segments: int = 12,
+    axial: bool = True,
+    rotary_inertia: bool = False,
+    damping_beta_s: float = 0.0,
+    start_lumps: tuple[LumpedMass, ...] = (),
+    end_lumps: tuple[LumpedMass, ...] = (),
+    rgba: tuple[float, float, float, float] = (0.3, 0.5, 0.8, 1.0),
+) -> LinkBuild:
+    """Add a straight link starting at ``pos`` (parent frame), pointing at ``angle_rad`` about z.
+
+    The first body's frame sits at the link start with x along the link; the caller adds the joint
+    connecting it to ``parent`` (none = clamped). Lumped masses are placed at the link's start and end.
+    """
+    check_link_model(link_model, segments)
+    if link_model == "rigid":
+        lengths = [length_m]
+    else:
+        l_seg = length_m / segments
+        lengths = [l_seg / 2.0] + [l_seg] * (segments - 1) + [l_seg / 2.0]
+    sec, mat = section, material
+    k = {
+        "bend_in": mat.young_pa * sec.i_inplane_m4,
+        "bend_out": mat.young_pa * sec.i_outofplane_m4,
+        "twist": mat.shear_pa * sec.torsion_constant_m4,
+        "axial": mat.young_pa * sec.area_m2,
+    }
+    build = LinkBuild(name=name, bodies=[], piece_lengths_m=lengths)
+    body = parent
+    for j, piece in enumerate(lengths):
+        if j == 0:
+            body = body.add_body(name=f"{name}_b0", pos=list(pos), quat=quat_z(angle_rad))
+        else:
+            body = body.add_body(name=f"{name}_b{j}", pos=[lengths[j - 1], 0.0, 0.0])
+            l_spring = length_m / segments
+            kinds = ["bend_in", "bend_out", "twist"] + (["axial"] if axial else [])
+            for kind in kinds:
+                jn = f"{name}_s{j}_{kind}"
+                _add_spring(body, jn, kind, k[kind] / l_spring, damping_beta_s)
+                build.joints.append((jn, kind))
+        parts = [box_part(piece, sec, mat, 0.0, rotary_inertia=rotary_inertia)]
+        if j == 0:
+            parts += [lump_part(lump, np.zeros(3)) for lump in start_lumps if lump.mass_kg > 0]
+        if j == len(lengths) - 1:
+            parts += [lump_part(lump, np.array([piece, 0.0, 0.0])) for lump in end_lumps if lump.mass_kg > 0]
+        set_inertial(body, parts)
+        body.add_geom(
+            name=f"{name}_g{j}",
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            size=[piece / 2.0, sec.thickness_m / 2.0, sec.height_m / 2.0],
+            pos=[piece / 2.0, 0.0, 0.0],
+            rgba=list(rgba),
+            contype=0,
+            conaffinity=0,
+        )
+        site = f"{name}_p{j}"
+        body.add_site(name=site, pos=[0.0, 0.0, 0.0], size=[0.002, 0, 0])
+        build.sites.append(site)
+        build.bodies.append(body)
+    end_site = f"{name}_p{len(lengths)}"
+    body.add_site(name=end_site, pos=[lengths[-1], 0.0, 0.0], size=[0.002, 0, 0])
+    build.sites.append(end_site)
+    return build

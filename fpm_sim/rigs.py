@@ -1,0 +1,141 @@
+"""The study's subsystem test rigs as MuJoCo models.
+
+``free-free``
+    One link floating freely (the study hung it on elastic bands): a free joint at its root, gravity
+    off; its six rigid-body modes are dropped by the zero-frequency criterion.
+``cantilever``
+    One link with ``clamped_length_m`` of its length cast in the clamp; the free part is modelled,
+    its root fixed to the world (or held by ``compliance.base_clamp_nm_per_rad`` springs).
+``chain``
+    Two links joined by a passive hinge (axis z) whose interior angle is ``angle_deg`` (180 = straight),
+    both far ends clamped: the first link's root is fixed, the second link's end is welded to the world.
+    Half the hinge hardware sits on each link end.
+
+All lie in the base plane with x along the first link; gravity (if on) acts along -z.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import mujoco
+import numpy as np
+
+from .config import Compliance, LumpedMass, RigConfig
+from .links import add_link
+from .manipulator_model import _add_hinge, _half, dof_kinds_of
+from .model import BuiltModel, ModelOptions, add_weld, compile_model, new_spec
+
+__all__ = ["RIGS", "RigError", "build_rig", "RigSetup"]
+
+RIGS = ("free-free", "cantilever", "chain")
+
+
+class RigError(ValueError):
+    """Impossible rig settings (unknown rig, angle out of range, clamp longer than the link)."""
+
+
+@dataclass(frozen=True)
+class RigSetup:
+    """Which rig and its settings beyond the test piece itself."""
+
+    rig: str
+    angle_deg: float = 180.0
+    damping_beta_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.rig not in RIGS:
+            raise RigError(f"unknown rig {self.rig!r}; choose one of {', '.join(RIGS)}")
+        if self.rig == "chain" and not (10.0 <= self.angle_deg <= 180.0):
+            raise RigError(f"chain hinge angle --angle-deg must lie in [10, 180] degrees, got {self.angle_deg}")
+
+
+def _clamp_springs(body: mujoco.MjsBody, prefix: str, k: float, beta: float, kinds: dict[str, str]) -> None:
+    if math.isfinite(k):
+        for ax, axis in (("y", [0, 1, 0]), ("z", [0, 0, 1])):
+            _add_hinge(body, f"{prefix}_clamp{ax}", axis, k, beta * k)
+            kinds[f"{prefix}_clamp{ax}"] = "clamp"
+
+
+def build_rig(
+    setup: RigSetup,
+    piece: RigConfig,
+    options: ModelOptions | None = None,
+    *,
+    compliance: Compliance | None = None,
+) -> BuiltModel:
+    """Generate and compile a subsystem rig (see module docstring)."""
+    opts = options or ModelOptions()
+    comp = compliance or Compliance()
+    free_len = piece.length_m - piece.clamped_length_m
+    if free_len <= 0:
+        raise RigError(
+            f"clamped_length_m ({piece.clamped_length_m} m) must be shorter than length_m ({piece.length_m} m)"
+        )
+    gravity = opts.gravity and setup.rig != "free-free"
+    spec = new_spec(f"fpm_rig_{setup.rig.replace('-', '_')}", gravity=gravity)
+    kinds: dict[str, str] = {}
+    links: dict[str, list[str]] = {}
+    kw = dict(
+        section=piece.section,
+        material=piece.material,
+        link_model=opts.link_model,
+        segments=opts.segments,
+        axial=opts.axial,
+        rotary_inertia=opts.rotary_inertia,
+        damping_beta_s=setup.damping_beta_s,
+    )
+    hinge = piece.chain_hinge if setup.rig == "chain" else LumpedMass()
+    first = add_link(
+        spec.worldbody,
+        name="link_0",
+        pos=np.zeros(3),
+        angle_rad=0.0,
+        length_m=free_len,
+        end_lumps=(_half(hinge),) if hinge.mass_kg > 0 else (),
+        **kw,
+    )
+    links[first.name] = first.sites
+    kinds.update(dict(first.joints))
+    if setup.rig == "free-free":
+        first.first.add_freejoint(name="float")
+    else:
+        _clamp_springs(first.first, "root", comp.base_clamp_nm_per_rad, setup.damping_beta_s, kinds)
+    if setup.rig == "chain":
+        turn = math.pi - math.radians(setup.angle_deg)
+        second = add_link(
+            first.last,
+            name="link_1",
+            pos=np.array([first.last_length_m, 0.0, 0.0]),
+            angle_rad=turn,
+            length_m=free_len,
+            start_lumps=(_half(hinge),) if hinge.mass_kg > 0 else (),
+            **kw,
+        )
+        _add_hinge(second.first, "hinge", [0, 0, 1])
+        kinds["hinge"] = "passive"
+        links[second.name] = second.sites
+        kinds.update(dict(second.joints))
+        tip = second.last.add_body(name="tip", pos=[second.last_length_m, 0.0, 0.0])
+        tip.mass = 1e-4
+        tip.fullinertia = [1e-9, 1e-9, 1e-9, 0, 0, 0]
+        tip.explicitinertial = True
+        _clamp_springs(tip, "tip", comp.base_clamp_nm_per_rad, setup.damping_beta_s, kinds)
+        add_weld(spec, "clamp_far", "tip", "world")
+    model = compile_model(spec, timestep_s=opts.timestep_s)
+    return BuiltModel(
+        model=model,
+        spec=spec,
+        name=setup.rig,
+        links=links,
+        dof_kinds=dof_kinds_of(model, kinds),
+        parameters={
+            "rig": asdict(setup),
+            "piece": asdict(piece),
+            "free_length_m": free_len,
+            "options": asdict(opts),
+            "timestep_s": float(model.opt.timestep),
+            "nv": int(model.nv),
+        },
+    )
