@@ -146,6 +146,34 @@ def _header(built: BuiltModel, title: str) -> str:
 # commands
 
 
+def _shapes_and_plot(args: argparse.Namespace, result: ModalResult | ModalComparison, payload: dict[str, Any]) -> str:
+    """Add Cartesian mode shapes to the payload (``--shapes``) and save a figure (``--plot``)."""
+    primary = result.transition_fd if isinstance(result, ModalComparison) else result
+    note = ""
+    if args.shapes:
+        n = min(args.n_modes, len(primary.modes))
+        for i, mode_payload in enumerate(payload["modes"][:n]):
+            disp = primary.point_displacements(i)
+            peak = max(float(np.max(np.linalg.norm(d, axis=1))) for d in disp.values()) or 1.0
+            mode_payload["points_displacement"] = {k: (v / peak).tolist() for k, v in disp.items()}
+        payload["points_position_m"] = {k: v.tolist() for k, v in primary.point_positions().items()}
+    if args.plot:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        n = min(args.n_modes, len(primary.modes), 6)
+        fig = plt.figure(figsize=(4.5 * n, 4.5))
+        for i in range(n):
+            primary.plot(i, ax=fig.add_subplot(1, n, i + 1, projection="3d"))
+        fig.tight_layout()
+        fig.savefig(args.plot, dpi=120)
+        plt.close(fig)
+        note = f"\nmode shapes plotted to {args.plot}"
+    return note
+
+
 def cmd_modes(args: argparse.Namespace) -> int:
     manip = load_manipulator(args)
     pose = pose_of(args)
@@ -153,7 +181,8 @@ def cmd_modes(args: argparse.Namespace) -> int:
     result = _analyse(built, args.method, args.n_modes)
     payload, table = _result_payload(result, args.n_modes)
     payload["config"] = manip.name
-    text = _header(built, f"{manip.name}\n  pose {pose.label()}") + "\n" + table
+    note = _shapes_and_plot(args, result, payload)
+    text = _header(built, f"{manip.name}\n  pose {pose.label()}") + "\n" + table + note
     emit(args, payload, text)
     return 0
 
@@ -244,6 +273,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_config_args(p)
     add_model_args(p)
     _add_analysis_args(p)
+    p.add_argument("--shapes", action="store_true", help="with --json: Cartesian mode shapes of points along each link")
+    p.add_argument("--plot", type=Path, help="save the first mode shapes (base-plane view) to this image file")
     add_output_args(p)
     p.set_defaults(func=cmd_modes)
 

@@ -180,23 +180,36 @@ class ModalResult:
         return "\n".join(lines)
 
     def plot(self, index: int = 0, *, ax: Any = None, scale_m: float = 0.03) -> Any:
-        """Plot mode ``index`` in the base plane over the equilibrium shape (matplotlib)."""
+        """Draw mode ``index`` in 3D over the equilibrium shape (matplotlib).
+
+        The largest point displacement is drawn ``scale_m`` long; out-of-plane modes show along z.
+        Pass a 3D axes (``projection="3d"``) as ``ax`` or get a new figure.
+        """
         import matplotlib.pyplot as plt
 
         if ax is None:
-            _, ax = plt.subplots(figsize=(5, 5))
+            fig = plt.figure(figsize=(5, 5))
+            ax = fig.add_subplot(projection="3d")
         pos = self.point_positions()
         disp = self.point_displacements(index)
-        peak = max(float(np.max(np.abs(d))) for d in disp.values()) or 1.0
+        peak = max(float(np.max(np.linalg.norm(d, axis=1))) for d in disp.values()) or 1.0
+        ends = []
         for link, p in pos.items():
-            ax.plot(p[:, 0], p[:, 1], color="0.7", lw=1)
+            ax.plot(p[:, 0], p[:, 1], p[:, 2], color="0.75", lw=1)
             q = p + disp[link] * (scale_m / peak)
-            ax.plot(q[:, 0], q[:, 1], lw=2)
-        ax.set_aspect("equal")
+            ax.plot(q[:, 0], q[:, 1], q[:, 2], lw=2)
+            if link.startswith("distal"):
+                ends.append(q[-1])
+        if len(ends) == 3:  # the platform triangle through the platform joints
+            tri = np.array(ends + ends[:1])
+            ax.plot(tri[:, 0], tri[:, 1], tri[:, 2], color="k", lw=1.5)
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
+        ax.set_zlabel("z (m)")
+        span = max(float(np.ptp(np.concatenate(list(pos.values()))[:, :2], axis=0).max()), 1e-3)
+        ax.set_zlim(-span / 2, span / 2)
         m = self.modes[index]
-        ax.set_title(f"mode {index + 1}: {m.frequency_hz:.2f} Hz ({self.method})")
+        ax.set_title(f"mode {index + 1}: {m.frequency_hz:.2f} Hz, {m.dominant}")
         return ax
 
 

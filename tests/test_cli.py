@@ -22,6 +22,17 @@ def test_modes_json(capsys):
     assert data["parameters"]["options"]["segments"] == 3
 
 
+def test_modes_shapes_and_plot(capsys, tmp_path):
+    png = tmp_path / "m.png"
+    code, out, _ = run(capsys, "modes", "--segments", "2", "--n-modes", "2", "--json", "--shapes", "--plot", str(png))
+    assert code == 0 and png.stat().st_size > 1000
+    data = json.loads(out)
+    pts = data["modes"][0]["points_displacement"]
+    assert len(pts["distal_1"]) == 4  # 2 segments -> 3 pieces -> 4 points
+    peak = max(sum(c * c for c in p) ** 0.5 for link in pts.values() for p in link)
+    assert abs(peak - 1.0) < 1e-12
+
+
 def test_modes_table_both_methods(capsys):
     code, out, _ = run(capsys, "modes", "--segments", "3", "--n-modes", "3", "--method", "both")
     assert code == 0
