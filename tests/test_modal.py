@@ -68,10 +68,22 @@ def test_point_displacements_and_shapes(home):
 
 
 def test_coarse_timestep_warns(steel_bar):
-    # stable (omega_max h = 0.48 < 2) but coarse for the top of the band when every mode is asked for
+    # stable (omega_max h < 2) but coarse for the top of the band when every mode is asked for
     built = build_rig(RigSetup("free-free"), steel_bar, ModelOptions(segments=6, timestep_s=1.8e-6))
     with pytest.warns(TimestepWarning, match="timestep_s"):
         modes_transition_fd(built, n_modes=None)
+
+
+def test_timestep_error_follows_the_step_map(steel_bar):
+    """transitionFD frequencies exceed the constrained (exact) ones by (omega h)^2 / 24."""
+    from fpm_sim.api import compare_methods
+
+    built = build_rig(RigSetup("cantilever"), steel_bar, ModelOptions(segments=6, timestep_s=4e-6, gravity=False))
+    cmp = compare_methods(built, n_modes=6)
+    f_fd, f_con = cmp.transition_fd.frequencies_hz, cmp.constrained.frequencies_hz
+    wh = 2 * np.pi * f_con * 4e-6
+    # stiffness-proportional damping is 0 here (rig default); remaining mismatch is FD noise ~1e-7
+    assert f_fd / f_con - 1 == pytest.approx(wh**2 / 24, rel=0.05, abs=2e-6)
 
 
 def test_fine_timestep_is_quiet(steel_bar):
