@@ -18,7 +18,7 @@ import numpy as np
 
 from . import __version__
 from .api import ModalComparison, _analyse, rig_piece
-from .config import ConfigError, Manipulator, default_config, load_config
+from .config import ConfigError, Manipulator, default_config, default_config_text, load_config
 from .kinematics import Pose, SingularPoseError, UnreachablePoseError
 from .links import LINK_MODELS, LinkModelError
 from .manipulator_model import build_manipulator
@@ -181,6 +181,7 @@ def cmd_modes(args: argparse.Namespace) -> int:
     result = _analyse(built, args.method, args.n_modes)
     payload, table = _result_payload(result, args.n_modes)
     payload["config"] = manip.name
+    payload["manipulator"] = manip.to_dict()
     note = _shapes_and_plot(args, result, payload)
     text = _header(built, f"{manip.name}\n  pose {pose.label()}") + "\n" + table + note
     emit(args, payload, text)
@@ -213,6 +214,21 @@ def cmd_rig(args: argparse.Namespace) -> int:
     payload, table = _result_payload(result, args.n_modes)
     title = f"rig {args.rig}" + (f" (hinge angle {args.angle_deg:g} deg)" if args.rig == "chain" else "")
     emit(args, payload, _header(built, title) + "\n" + table)
+    return 0
+
+
+def cmd_config(args: argparse.Namespace) -> int:
+    """Print the embedded default description (a template), or a file's values with their provenance."""
+    if args.json:
+        emit(args, load_manipulator(args).to_dict(), "")
+    elif args.config:
+        manip = load_manipulator(args)
+        width = max(len(k) for k in manip.provenance)
+        print(manip.name)
+        for key, source in sorted(manip.provenance.items()):
+            print(f"  {key:<{width}}  {source}")
+    else:
+        print(default_config_text(), end="")
     return 0
 
 
@@ -286,6 +302,11 @@ def build_parser() -> argparse.ArgumentParser:
     _add_analysis_args(p)
     add_output_args(p)
     p.set_defaults(func=cmd_rig)
+
+    p = sub.add_parser("config", help="print the default description (TOML template) or a file's provenance")
+    add_config_args(p)
+    add_output_args(p)
+    p.set_defaults(func=cmd_config)
 
     p = sub.add_parser("export-mjcf", help="write the generated MJCF of the manipulator at a pose, or of a rig")
     p.add_argument("what", choices=("manipulator", *RIGS))

@@ -60,6 +60,19 @@ def test_rig_json(capsys):
     assert data["parameters"]["piece"]["section"]["thickness_m"] == 0.012
 
 
+def test_config_template_round_trips(tmp_path, capsys):
+    code, out, _ = run(capsys, "config")
+    assert code == 0
+    path = tmp_path / "c.toml"
+    path.write_text(out)
+    code, out, _ = run(capsys, "config", "--config", str(path))
+    assert code == 0 and "geometry.base_radius_m" in out and "assumed:" in out
+    code, out, _ = run(capsys, "config", "--json")
+    data = json.loads(out)
+    assert data["compliance"]["motor_clamp_nm_per_rad"] == "inf"
+    assert data["provenance"]["section.thickness_m"].startswith(("study", "assumed", "identified"))
+
+
 def test_export_mjcf(tmp_path, capsys):
     out_file = tmp_path / "m.xml"
     code, out, _ = run(capsys, "export-mjcf", "manipulator", "--segments", "2", "--out", str(out_file))
