@@ -1,9 +1,20 @@
 """Static equilibrium of a generated model under gravity (the linearisation point).
 
-The equilibrium solves ``qacc(q, v = 0) = 0`` for the model exactly as MuJoCo simulates it (springs,
-gravity and the soft weld constraints), by Newton's (chord) method with a centred finite-difference
-Jacobian ``d qacc / d q`` taken once at ``qpos0``. Linearising anywhere else would linearise a
-drifting state: the prestress of gravity on a closed loop changes the tangent stiffness.
+Solves the hard-constraint statics
+
+    f(q) + J(q)^T lam = 0,    r(q) = 0,
+
+with ``f = qfrc_passive - qfrc_bias`` at zero velocity (springs and gravity) and ``r``, ``J`` the
+equality-constraint residual (``efc_pos``) and Jacobian (``efc_J``) of the loop closures, by a
+Newton-KKT iteration whose tangent stiffness ``K = -df/dq`` (centred differences) is taken once at
+``qpos0`` (the springs are linear; gravity's contribution barely changes over the sag).
+
+Why not ``qacc = 0`` of the simulated model directly: MuJoCo's soft welds at the stiff limit make
+``qacc`` depend on round-off in the constraint solver amplified by the weld stiffness (~1/(2h)^2);
+for thin links the condition number of ``d qacc / d q`` reaches 1e11 and Newton on it diverged
+(5 mm links, 12 segments, axial springs). The hard-constraint equilibrium differs from the soft one
+by ``weld compliance x force`` (below 1e-9 m here) and is the state the linearisation needs:
+prestressed, not drifting.
 """
 
 from __future__ import annotations
@@ -11,81 +22,104 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-__all__ = ["EquilibriumError", "static_equilibrium", "qacc_jacobian"]
+__all__ = ["EquilibriumError", "static_equilibrium", "applied_forces", "force_jacobian"]
 
 
 class EquilibriumError(RuntimeError):
-    """Newton's method found no static equilibrium (buckling, a mechanism, or a floating model under gravity)."""
+    """No static equilibrium found (buckling, a mechanism, or a floating model under gravity)."""
 
 
-def _qacc(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray) -> np.ndarray:
+def _smooth(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray) -> None:
+    """Position and velocity stages only (no constraint solve): kinematics, efc rows, forces."""
     data.qpos[:] = qpos
     data.qvel[:] = 0.0
     data.act[:] = 0.0
-    mujoco.mj_forward(model, data)
-    return data.qacc.copy()
+    mujoco.mj_fwdPosition(model, data)
+    mujoco.mj_fwdVelocity(model, data)
 
 
-def qacc_jacobian(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray, eps: float = 1e-7) -> np.ndarray:
-    """Centred finite-difference ``d qacc / d qpos`` at zero velocity (needs ``nq == nv``)."""
+def applied_forces(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray) -> np.ndarray:
+    """``qfrc_passive - qfrc_bias`` at ``qpos``, zero velocity (springs and gravity)."""
+    _smooth(model, data, qpos)
+    return data.qfrc_passive - data.qfrc_bias
+
+
+def force_jacobian(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray, eps: float = 1e-7) -> np.ndarray:
+    """Centred finite-difference ``d f / d qpos`` of :func:`applied_forces` (needs ``nq == nv``)."""
     jac = np.zeros((model.nv, model.nv))
     for k in range(model.nv):
         q = qpos.copy()
         q[k] += eps
-        ap = _qacc(model, data, q)
+        fp = applied_forces(model, data, q)
         q[k] -= 2 * eps
-        am = _qacc(model, data, q)
-        jac[:, k] = (ap - am) / (2 * eps)
+        jac[:, k] = (fp - applied_forces(model, data, q)) / (2 * eps)
     return jac
+
+
+def _constraints(
+    model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(f, r, J)`` at ``qpos``: applied forces, equality residuals and their Jacobian."""
+    f = applied_forces(model, data, qpos)
+    rows = np.asarray(data.efc_type[: data.nefc]) == mujoco.mjtConstraint.mjCNSTR_EQUALITY
+    jac = np.asarray(data.efc_J[: data.nefc * model.nv]).reshape(data.nefc, model.nv)[rows].copy()
+    return f, np.asarray(data.efc_pos[: data.nefc])[rows].copy(), jac
 
 
 def static_equilibrium(
     model: mujoco.MjModel,
     data: mujoco.MjData | None = None,
     *,
-    rtol: float = 1e-5,
-    step_tol: float = 1e-12,
-    max_iter: int = 30,
+    rtol: float = 1e-9,
+    pos_tol_m: float = 1e-12,
+    max_iter: int = 50,
 ) -> np.ndarray:
-    """``qpos`` of the static equilibrium nearest ``qpos0``.
+    """``qpos`` of the static equilibrium nearest ``qpos0`` (see module docstring).
 
     Parameters
     ----------
     model
-        A model without free or ball joints, or one with zero gravity (returned as ``qpos0``).
+        A model without free or ball joints, or one without applied forces at ``qpos0`` (returned as is).
     rtol
-        Converged when ``|qacc|_inf`` falls below ``rtol`` times its value at ``qpos0``.
-    step_tol
-        ... or when a Newton step moves no coordinate by more than ``step_tol`` (m or rad): the
-        residual has reached its round-off floor (the stiff welds amplify round-off in ``qacc`` to
-        ~1e-6 of the gravity load).
+        Converged when the force imbalance ``|f + J^T lam|_inf`` is below ``rtol`` times ``|f(qpos0)|_inf``
+        and the loop-closure residual below ``pos_tol_m``.
+    max_iter
+        Newton-KKT iterations allowed.
 
     Raises
     ------
     EquilibriumError
-        If a floating model has gravity, or Newton's method does not converge.
+        If a floating model carries loads, or the iteration does not converge.
     """
     data = data if data is not None else mujoco.MjData(model)
     q = model.qpos0.copy()
-    a0 = _qacc(model, data, q)
-    scale = float(np.max(np.abs(a0)))
-    if scale < 1e-12:
+    f, r, jac = _constraints(model, data, q)
+    scale = float(np.max(np.abs(f))) if f.size else 0.0
+    if scale < 1e-12 and (r.size == 0 or np.max(np.abs(r)) < pos_tol_m):
         return q
     if model.nq != model.nv:
         raise EquilibriumError(
             "a floating model (free or ball joint) has no static equilibrium under gravity; switch gravity off"
         )
-    a = a0
-    # Chord method: the Jacobian at qpos0 serves every step (gravity sag is small, the model nearly
-    # linear), so each step costs one forward pass instead of 2 nv.
-    jac = qacc_jacobian(model, data, q)
+    stiffness = -force_jacobian(model, data, q)
+    nc = r.size
+    lam = np.zeros(nc)
+    # Scale the constraint block to the stiffness (spring constants reach 1e9 N/m, J is O(1)):
+    # unscaled, the KKT matrix had a condition number of 1e14 and the loop residual stalled.
+    s = max(float(np.max(np.abs(np.diag(stiffness)))), 1.0)
     for _ in range(max_iter):
-        step = np.linalg.lstsq(jac, -a, rcond=None)[0]
-        q = q + step
-        a = _qacc(model, data, q)
-        if float(np.max(np.abs(a))) <= rtol * scale or float(np.max(np.abs(step))) < step_tol:
+        kkt = np.block([[stiffness, -s * jac.T], [s * jac, np.zeros((nc, nc))]])
+        rhs = np.concatenate([f + jac.T @ lam, -s * r])
+        sol = np.linalg.lstsq(kkt, rhs, rcond=1e-13)[0]
+        q = q + sol[: model.nv]
+        lam = lam + s * sol[model.nv :]
+        f, r, jac = _constraints(model, data, q)
+        imbalance = float(np.max(np.abs(f + jac.T @ lam)))
+        closure = float(np.max(np.abs(r))) if nc else 0.0
+        if imbalance <= rtol * scale and closure <= pos_tol_m:
             return q
     raise EquilibriumError(
-        f"no static equilibrium after {max_iter} Newton steps (|qacc| = {np.max(np.abs(a)):.3e} from {scale:.3e}); "
-        "the structure may buckle under gravity or be a mechanism (check compliances and motors.mode)"
+        f"no static equilibrium after {max_iter} Newton steps (force imbalance {imbalance:.3e} of {scale:.3e}, "
+        f"loop-closure residual {closure:.3e} m); the structure may buckle under gravity or be a mechanism "
+        "(check compliances and motors.mode)"
     )

@@ -39,3 +39,23 @@ def test_floating_model_under_gravity_is_refused(steel_bar):
     m.opt.gravity[:] = [0, 0, -9.81]
     with pytest.raises(EquilibriumError, match="gravity"):
         static_equilibrium(m)
+
+
+def test_thin_links_closed_loops_converge(default_manip):
+    """Regression: 5 mm links, 12 segments, axial springs (KKT condition number 1e14 unscaled)."""
+    from fpm_sim.equilibrium import applied_forces
+    from fpm_sim.kinematics import Pose
+    from fpm_sim.manipulator_model import build_manipulator
+
+    built = build_manipulator(default_manip.with_section(thickness_m=0.005), Pose(0.0, 0.0, 0.0))
+    m = built.model
+    d = mujoco.MjData(m)
+    q = static_equilibrium(m, d)
+    f = applied_forces(m, d, q)
+    rows = d.efc_type[: d.nefc] == mujoco.mjtConstraint.mjCNSTR_EQUALITY
+    assert np.max(np.abs(d.efc_pos[: d.nefc][rows])) < 1e-12  # loops closed
+    jac = d.efc_J[: d.nefc * m.nv].reshape(d.nefc, m.nv)[rows]
+    lam = np.linalg.lstsq(jac.T, -f, rcond=None)[0]
+    # gravity is balanced by springs and loop forces alone (relative imbalance at round-off level)
+    assert np.max(np.abs(f + jac.T @ lam)) < 1e-8 * np.max(np.abs(applied_forces(m, d, m.qpos0)))
+    assert np.max(np.abs(q)) > 1e-6  # and it did sag
