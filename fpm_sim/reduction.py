@@ -485,7 +485,7 @@ class ReducedModel:
             inputs=list(self.input_names),
             outputs=list(self.output_names),
             states=self.state_names,
-            name=f"fpm_rom_{self.pose.label()}",
+            name="fpm_rom",
         )
 
     def plot(self, input_name: str = "force_x", *, duration_s: float = 0.2, ax: Any = None) -> Any:
