@@ -36,10 +36,20 @@ import numpy as np
 from .config import Manipulator
 from .equilibrium import static_equilibrium
 from .kinematics import Pose, forward_kinematics, inverse_kinematics
-from .model import BuiltModel
+from .manipulator_model import build_manipulator
+from .model import BuiltModel, ModelOptions
 from .reduction import END_EFFECTOR_SITE, motor_dofs
 
-__all__ = ["RolloutError", "RolloutResult", "rollout", "constant", "step_at", "sine", "end_effector_pose"]
+__all__ = [
+    "aligned_options",
+    "RolloutError",
+    "RolloutResult",
+    "rollout",
+    "constant",
+    "step_at",
+    "sine",
+    "end_effector_pose",
+]
 
 Profile = Callable[[float], Sequence[float]]
 
@@ -174,6 +184,14 @@ class RolloutResult:
             ax.legend(loc="upper left", fontsize=8)
         axes[-1].set_xlabel("t (s)")
         return axes
+
+
+def aligned_options(manip: Manipulator, pose: Pose, options: ModelOptions, output_step_s: float) -> ModelOptions:
+    """``options`` with the automatic timestep rounded down so that ``output_step_s`` is a whole number of
+    steps (an explicit ``options.timestep_s`` is rounded the same way)."""
+    h_auto = options.timestep_s or build_manipulator(manip, pose, options).timestep_s
+    n = int(np.ceil(output_step_s / h_auto * (1 - 1e-12)))
+    return dataclasses.replace(options, timestep_s=output_step_s / n)
 
 
 def _platform_phi(data: mujoco.MjData, body_id: int) -> float:

@@ -33,7 +33,7 @@ from .kinematics import Pose
 from .manipulator_model import build_manipulator
 from .model import ModelOptions
 from .reduction import ReducedModel, reduce_model
-from .rollout import constant, rollout
+from .rollout import aligned_options, constant, rollout
 
 __all__ = [
     "STUDY_FORCE_N",
@@ -45,7 +45,6 @@ __all__ = [
     "TransientResult",
     "study_transient",
     "nrms_error",
-    "aligned_options",
 ]
 
 STUDY_FORCE_N = 10.0
@@ -71,13 +70,6 @@ def nrms_error(full: np.ndarray, reduced: np.ndarray) -> float:
     """``rms(full - reduced) / rms(full)``."""
     full, reduced = np.asarray(full, float), np.asarray(reduced, float)
     return float(np.sqrt(np.mean((full - reduced) ** 2)) / np.sqrt(np.mean(full**2)))
-
-
-def aligned_options(manip: Manipulator, pose: Pose, options: ModelOptions, output_step_s: float) -> ModelOptions:
-    """``options`` with the timestep rounded down so that ``output_step_s`` is a whole number of steps."""
-    h_auto = build_manipulator(manip, pose, options).timestep_s
-    n = int(np.ceil(output_step_s / h_auto * (1 - 1e-12)))
-    return dataclasses.replace(options, timestep_s=output_step_s / n)
 
 
 @dataclass
