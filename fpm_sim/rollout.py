@@ -304,14 +304,7 @@ def rollout(
                 mujoco.mj_objectAcceleration(model, data, mujoco.mjtObj.mjOBJ_SITE, i, res6, 0)
                 acc[s][k] = res6[3:] + gravity  # cacc carries -gravity (accelerometer convention)
 
-    record(0)
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=n_out, desc="rollout", unit="sample", leave=False)
-    start = time.perf_counter()
-    for k in range(n_out):
+    def apply_loads(k: int) -> None:
         tk = t[k]
         data.xfrc_applied[bid] = 0.0
         data.qfrc_applied[:] = 0.0
@@ -328,21 +321,31 @@ def rollout(
         if mdofs:
             torque[k] = tau
             data.qfrc_applied[mdofs] = tau
+
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=n_out, desc="rollout", unit="sample", leave=False)
+    start = time.perf_counter()
+    # sample k holds the state at t_k and the loads applied from t_k on (accelerations include them)
+    for k in range(n_out + 1):
+        apply_loads(k)
+        if acc_ids:
+            mujoco.mj_forward(model, data)
+        else:
+            mujoco.mj_kinematics(model, data)
+        record(k)
+        if k == n_out:
+            break
         mujoco.mj_step(model, data, nstep=n_sub)
         if not np.all(np.isfinite(data.qpos)):
             raise RolloutError(f"the simulation diverged at t = {data.time:.4g} s; reduce timestep_s or the loads")
-        if acc_ids:
-            mujoco.mj_forward(model, data)  # accelerations at the sampled state, same loads
-        else:
-            mujoco.mj_kinematics(model, data)
-        record(k + 1)
         if bar is not None:
             bar.update(1)
     wall = time.perf_counter() - start
     if bar is not None:
         bar.close()
-    wrench[-1] = wrench[-2] if n_out else wrench[-1]
-    torque[-1] = torque[-2] if n_out else torque[-1]
     return RolloutResult(
         t_s=t,
         ee_pose=ee,
