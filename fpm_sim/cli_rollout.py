@@ -23,7 +23,7 @@ from .cli import (
 from .config import Motors
 from .manipulator_model import build_manipulator
 from .reduction import ReductionError, accel_site_names
-from .rollout import RolloutError, constant, rollout, sine, step_at
+from .rollout import RolloutError, aligned_options, constant, rollout, sine, step_at
 
 __all__ = ["register", "user_errors"]
 
@@ -71,7 +71,11 @@ def cmd_rollout(args: argparse.Namespace) -> int:
         raise RolloutError(f"--out {args.out} must end in .csv or .npz")
     if args.plot is not None and args.plot.suffix not in (".png", ".pdf", ".svg"):
         raise RolloutError(f"--plot {args.plot} must end in .png, .pdf or .svg")
-    built = build_manipulator(manip, pose_of(args), model_options(args))
+    pose = pose_of(args)
+    if not args.output_step_s > 0:
+        raise RolloutError(f"--output-step-s must be positive, got {args.output_step_s!r}")
+    # timestep rounded down so that the output step is a whole number of steps
+    built = build_manipulator(manip, pose, aligned_options(manip, pose, model_options(args), args.output_step_s))
     wrench = [args.force_x_n, args.force_y_n, args.moment_z_nm]
     ee = _profile(args.load_profile, wrench, args.load_start_s, args.load_freq_hz) if any(wrench) else None
     torque = (

@@ -164,16 +164,20 @@ class FlexibleRegulation(control.Task):
 
     def initialize_episode(self, physics: dm_mujoco.Physics) -> None:
         if self._target is None:
-            physics.data.qpos[:] = self._q_eq
-            physics.data.qvel[:] = 0.0
-            mujoco.mj_forward(physics.model.ptr, physics.data.ptr)
-            self._target = self._ee(physics)
+            self.set_target(physics)
         mag = self._dist_force * math.sqrt(self._random.uniform())
         ang = self._random.uniform(0.0, 2.0 * math.pi)
         self.initial_force_n = mag * np.array([math.cos(ang), math.sin(ang)])
         physics.data.qpos[:] = self._q_eq + self._flex_b @ self.initial_force_n
         physics.data.qvel[:] = 0.0
         physics.data.ctrl[:] = 0.0
+
+    def set_target(self, physics: dm_mujoco.Physics) -> None:
+        """Put ``physics`` at rest at the equilibrium and take its end-effector pose as the target."""
+        with physics.reset_context():
+            physics.data.qpos[:] = self._q_eq
+            physics.data.qvel[:] = 0.0
+        self._target = self._ee(physics)
 
     def _ee(self, physics: dm_mujoco.Physics) -> np.ndarray:
         sd = physics.named.data.sensordata
@@ -275,6 +279,7 @@ def regulation_env(
         reward_scale_m=reward_scale_m,
         random=seed,
     )
+    task.set_target(physics)
     env = control.Environment(physics, task, time_limit=time_limit_s, control_timestep=control_timestep_s)
     env.parameters = {  # type: ignore[attr-defined]
         **built.parameters,
