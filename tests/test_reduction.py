@@ -174,6 +174,9 @@ def test_file_round_trip(rom, tmp_path, suffix):
     assert back.input_names == rom.input_names and back.output_names == rom.output_names
     assert back.input_units == rom.input_units and back.output_units == rom.output_units
     assert back.pose == rom.pose and back.static_correction == rom.static_correction
+    # provenance travels with the matrices
+    assert back.parameters["reduction"]["n_modes"] == rom.n_modes
+    assert back.parameters["timestep_s"] == rom.parameters["timestep_s"]
 
 
 def test_mat_file_layout(rom, tmp_path):
