@@ -21,6 +21,7 @@ from .cli import (
     pose_of,
 )
 from .config import Manipulator, Motors
+from .equilibrium import EquilibriumError
 from .manipulator_model import build_manipulator
 from .reduction import ReductionError, accel_site_names
 from .rollout import RolloutError, aligned_options, constant, rollout, sine, step_at
@@ -37,6 +38,15 @@ def user_errors(func: Callable[[argparse.Namespace], int]) -> Callable[[argparse
             return func(args)
         except (RolloutError, ReductionError) as exc:
             print(f"fpm-sim: error: {exc}", file=sys.stderr)
+            return 2
+        except EquilibriumError as exc:
+            hint = (
+                "; thin links with axial springs can stall the equilibrium solver (measured for 5 mm links): "
+                "try --no-axial"
+                if not getattr(args, "no_axial", True)
+                else ""
+            )
+            print(f"fpm-sim: error: {exc}{hint}", file=sys.stderr)
             return 2
 
     return wrapped
@@ -154,10 +164,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "rollout",
         help="headless nonlinear simulation from the static equilibrium under end-effector and motor loads",
         description=(
-            "Steps the full MuJoCo model from its static equilibrium under gravity. Loads are held over each output "
-            "step. Motor torques need --motors servo (locked motors have no joint). Writes a CSV/NPZ of end-effector "
-            "pose, displacement, deflection (pose minus rigid-link kinematics), motor angles, loads and "
-            "accelerations, and a plot."
+            "Steps the full MuJoCo model from its static equilibrium under gravity. Loads are held over each "
+            "output step. The default resolution (12 segments, axial springs) needs ~1 us steps: for long "
+            "rollouts use e.g. --segments 6 --no-axial. Motor torques need --motors servo (locked motors have no "
+            "joint). Writes a CSV/NPZ of end-effector pose, displacement, deflection (pose minus rigid-link "
+            "kinematics), motor angles, loads and accelerations, and a plot."
         ),
     )
     p.add_argument("--duration-s", type=float, default=0.2, help="simulated time (s, default 0.2)")
