@@ -29,6 +29,7 @@ from .rigs import RIGS, RigError, RigSetup, build_rig
 __all__ = ["main", "COMMAND_MODULES"]
 
 COMMAND_MODULES: list[str] = []
+COMMAND_MODULES += ["fpm_sim.cli_rollout", "fpm_sim.cli_reduce", "fpm_sim.cli_transient"]  # issue 6
 """Extra command modules (``module.register(subparsers)``), added by later features."""
 
 _USER_ERRORS = (

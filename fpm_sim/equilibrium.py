@@ -4,7 +4,8 @@ Solves the hard-constraint statics
 
     f(q) + J(q)^T lam = 0,    r(q) = 0,
 
-with ``f = qfrc_passive - qfrc_bias`` at zero velocity (springs and gravity) and ``r``, ``J`` the
+with ``f = qfrc_smooth`` at zero velocity (springs, gravity and any loads the caller put in
+``data.qfrc_applied``, ``data.xfrc_applied`` or ``data.ctrl``) and ``r``, ``J`` the
 equality-constraint residual (``efc_pos``) and Jacobian (``efc_J``) of the loop closures, by a
 Newton-KKT iteration whose tangent stiffness ``K = -df/dq`` (centred differences) is taken once at
 ``qpos0`` (the springs are linear; gravity's contribution barely changes over the sag).
@@ -30,18 +31,21 @@ class EquilibriumError(RuntimeError):
 
 
 def _smooth(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray) -> None:
-    """Position and velocity stages only (no constraint solve): kinematics, efc rows, forces."""
+    """All stages but the constraint solve: kinematics, efc rows, and every non-constraint force."""
     data.qpos[:] = qpos
     data.qvel[:] = 0.0
     data.act[:] = 0.0
     mujoco.mj_fwdPosition(model, data)
     mujoco.mj_fwdVelocity(model, data)
+    mujoco.mj_fwdActuation(model, data)
+    mujoco.mj_fwdAcceleration(model, data)
 
 
 def applied_forces(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray) -> np.ndarray:
-    """``qfrc_passive - qfrc_bias`` at ``qpos``, zero velocity (springs and gravity)."""
+    """``qfrc_smooth`` at ``qpos``, zero velocity: springs, gravity, ``qfrc_applied``,
+    ``xfrc_applied`` and actuator forces (from ``data.ctrl``) — everything but the constraints."""
     _smooth(model, data, qpos)
-    return data.qfrc_passive - data.qfrc_bias
+    return data.qfrc_smooth.copy()
 
 
 def force_jacobian(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray, eps: float = 1e-7) -> np.ndarray:
