@@ -26,15 +26,21 @@ def _qacc(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray) -> np.nd
     return data.qacc.copy()
 
 
+def _moved(model: mujoco.MjModel, qpos: np.ndarray, dq: np.ndarray) -> np.ndarray:
+    """``qpos`` moved by the tangent vector ``dq`` (plain addition for hinges and slides)."""
+    q = qpos.copy()
+    mujoco.mj_integratePos(model, q, dq, 1.0)
+    return q
+
+
 def qacc_jacobian(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray, eps: float = 1e-7) -> np.ndarray:
-    """Centred finite-difference ``d qacc / d qpos`` at zero velocity (needs ``nq == nv``)."""
+    """Centred finite-difference ``d qacc / d q`` at zero velocity, in the tangent space (ball joints included)."""
     jac = np.zeros((model.nv, model.nv))
     for k in range(model.nv):
-        q = qpos.copy()
-        q[k] += eps
-        ap = _qacc(model, data, q)
-        q[k] -= 2 * eps
-        am = _qacc(model, data, q)
+        dq = np.zeros(model.nv)
+        dq[k] = eps
+        ap = _qacc(model, data, _moved(model, qpos, dq))
+        am = _qacc(model, data, _moved(model, qpos, -dq))
         jac[:, k] = (ap - am) / (2 * eps)
     return jac
 
@@ -52,7 +58,8 @@ def static_equilibrium(
     Parameters
     ----------
     model
-        A model without free or ball joints, or one with zero gravity (returned as ``qpos0``).
+        A model without free joints, or one with zero gravity (returned as ``qpos0``); ball joints
+        (``cable`` links) are stepped in the tangent space.
     rtol
         Converged when ``|qacc|_inf`` falls below ``rtol`` times its value at ``qpos0``.
     step_tol
@@ -71,9 +78,9 @@ def static_equilibrium(
     scale = float(np.max(np.abs(a0)))
     if scale < 1e-12:
         return q
-    if model.nq != model.nv:
+    if np.any(model.jnt_type == mujoco.mjtJoint.mjJNT_FREE):
         raise EquilibriumError(
-            "a floating model (free or ball joint) has no static equilibrium under gravity; switch gravity off"
+            "a floating model (free joint) has no static equilibrium under gravity; switch gravity off"
         )
     a = a0
     # Chord method: the Jacobian at qpos0 serves every step (gravity sag is small, the model nearly
@@ -81,7 +88,7 @@ def static_equilibrium(
     jac = qacc_jacobian(model, data, q)
     for _ in range(max_iter):
         step = np.linalg.lstsq(jac, -a, rcond=None)[0]
-        q = q + step
+        q = _moved(model, q, step)
         a = _qacc(model, data, q)
         if float(np.max(np.abs(a))) <= rtol * scale or float(np.max(np.abs(step))) < step_tol:
             return q

@@ -38,7 +38,7 @@ import numpy as np
 import scipy.linalg
 
 from .equilibrium import static_equilibrium
-from .model import BuiltModel, dof_stiffness
+from .model import BuiltModel, dof_stiffness, has_internal_elasticity, passive_stiffness_matrix
 
 __all__ = [
     "Mode",
@@ -243,10 +243,15 @@ def stiffness_matrix(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarra
 
     k = np.zeros((model.nv, model.nv))
     for j in range(model.nv):
+        # tangent-space steps (mj_integratePos): plain addition for hinges and slides, and correct
+        # for the ball joints of ``cable`` links
+        dq = np.zeros(model.nv)
+        dq[j] = eps
         q = qpos.copy()
-        q[j] += eps
+        mujoco.mj_integratePos(model, q, dq, 1.0)
         fp = force(q)
-        q[j] -= 2 * eps
+        q = qpos.copy()
+        mujoco.mj_integratePos(model, q, -dq, 1.0)
         fm = force(q)
         k[:, j] = -(fp - fm) / (2 * eps)
     return 0.5 * (k + k.T)
@@ -378,7 +383,7 @@ def modes_constrained(
     model = built.model
     data = mujoco.MjData(model)
     q_eq = static_equilibrium(model, data) if qpos is None else np.asarray(qpos, float)
-    if model.nq != model.nv:
+    if built.floating:
         # floating rig: linearise in the tangent space at qpos0 (no gravity by construction)
         q_eq = model.qpos0.copy()
         return _constrained_floating(built, q_eq, n_modes, filt)
@@ -396,7 +401,8 @@ def _constrained_floating(built: BuiltModel, q0: np.ndarray, n_modes: int | None
     data = mujoco.MjData(model)
     _forward_at(model, data, q0)
     mass = mass_matrix(model, data)
-    stiff = np.diag(dof_stiffness(model))
+    # joint springs only: the diagonal; a cable plugin's torques: differentiated (no gravity here)
+    stiff = passive_stiffness_matrix(model, q0) if has_internal_elasticity(model) else np.diag(dof_stiffness(model))
     damp = damping_matrix(model)
     jac = np.zeros((0, model.nv))
     return _solve_reduced(built, q0, mass, stiff, damp, jac, n_modes, filt)

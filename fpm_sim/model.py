@@ -36,6 +36,8 @@ __all__ = [
     "highest_frequency_rad_s",
     "WELD_SOLIMP",
     "dof_stiffness",
+    "has_internal_elasticity",
+    "passive_stiffness_matrix",
 ]
 
 DEFAULT_SEGMENTS = 12
@@ -168,16 +170,56 @@ def dof_stiffness(model: mujoco.MjModel) -> np.ndarray:
     return k
 
 
+def has_internal_elasticity(model: mujoco.MjModel) -> bool:
+    """Whether passive forces come from more than joint springs (a plugin or a flex: ``cable``, ``flex`` links)."""
+    return bool(model.nplugin > 0 or model.nflex > 0)
+
+
+def passive_stiffness_matrix(model: mujoco.MjModel, qpos: np.ndarray | None = None, eps: float = 1e-7) -> np.ndarray:
+    """``-d qfrc_passive / dq`` at ``qpos`` (default ``qpos0``), zero velocity, by centred differences.
+
+    Differences are taken in the tangent space (``mj_integratePos``), so ball and free joints are
+    handled; this captures joint springs, the cable plugin's torques and flex bending and edge
+    springs alike (gravity and constraints are not passive forces).
+    """
+    data = mujoco.MjData(model)
+    q0 = model.qpos0.copy() if qpos is None else np.asarray(qpos, float)
+    k = np.zeros((model.nv, model.nv))
+    for j in range(model.nv):
+        cols = []
+        for sign in (1.0, -1.0):
+            dq = np.zeros(model.nv)
+            dq[j] = sign * eps
+            q = q0.copy()
+            mujoco.mj_integratePos(model, q, dq, 1.0)
+            data.qpos[:] = q
+            data.qvel[:] = 0.0
+            mujoco.mj_forward(model, data)
+            cols.append(data.qfrc_passive.copy())
+        k[:, j] = -(cols[0] - cols[1]) / (2 * eps)
+    return 0.5 * (k + k.T)
+
+
 def highest_frequency_rad_s(model: mujoco.MjModel) -> float:
-    """Highest natural frequency of the joint springs (constraints ignored) at ``qpos0`` (rad/s)."""
+    """Highest natural frequency of the passive stiffness (constraints ignored) at ``qpos0`` (rad/s).
+
+    Joint springs give a diagonal stiffness; models with a cable plugin or a flex use
+    :func:`passive_stiffness_matrix`.
+    """
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
     mass = np.zeros((model.nv, model.nv))
     mujoco.mj_fullM(model, data, mass)
-    k = dof_stiffness(model)
-    if not np.any(k > 0):
-        return 0.0
-    w2 = scipy.linalg.eigh(np.diag(k), mass, eigvals_only=True, subset_by_index=[model.nv - 1, model.nv - 1])
+    if has_internal_elasticity(model):
+        stiff = passive_stiffness_matrix(model)
+        if not np.any(np.abs(stiff) > 0):
+            return 0.0
+    else:
+        k = dof_stiffness(model)
+        if not np.any(k > 0):
+            return 0.0
+        stiff = np.diag(k)
+    w2 = scipy.linalg.eigh(stiff, mass, eigvals_only=True, subset_by_index=[model.nv - 1, model.nv - 1])
     return float(np.sqrt(max(w2[0], 0.0)))
 
 

@@ -85,6 +85,7 @@ def build_rig(
         axial=opts.axial,
         rotary_inertia=opts.rotary_inertia,
         damping_beta_s=setup.damping_beta_s,
+        spec=spec,
     )
     hinge = piece.chain_hinge if setup.rig == "chain" else LumpedMass()
     first = add_link(
@@ -94,12 +95,15 @@ def build_rig(
         angle_rad=0.0,
         length_m=free_len,
         end_lumps=(_half(hinge),) if hinge.mass_kg > 0 else (),
+        free_start=setup.rig == "free-free",
+        free_end=setup.rig != "chain",
         **kw,
     )
     links[first.name] = first.sites
     kinds.update(dict(first.joints))
     if setup.rig == "free-free":
-        first.first.add_freejoint(name="float")
+        if opts.link_model != "flex":  # a flex link's vertices are free already
+            first.first.add_freejoint(name="float")
     else:
         _clamp_springs(first.first, "root", comp.base_clamp_nm_per_rad, setup.damping_beta_s, kinds)
     if setup.rig == "chain":
@@ -111,6 +115,7 @@ def build_rig(
             angle_rad=turn,
             length_m=free_len,
             start_lumps=(_half(hinge),) if hinge.mass_kg > 0 else (),
+            free_end=False,
             **kw,
         )
         _add_hinge(second.first, "hinge", [0, 0, 1])
