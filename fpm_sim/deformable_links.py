@@ -72,6 +72,10 @@ _HUB_INERTIA_KG_M2 = 1e-9
 MuJoCo needs a positive inertia on every moving body."""
 
 
+_VERTEX_INERTIA_KG_M2 = 1e-12
+"""Inertia of a vertex body (slides only: it never rotates; MuJoCo wants a positive value)."""
+
+
 class SectionWarning(UserWarning):
     """The link model cannot represent the requested cross-section; it computes an approximation."""
 
@@ -266,9 +270,8 @@ def add_flex_link(
         elif k == n:
             mass, lumps = m_l / 2.0, end_lumps
         # a vertex is a point: hardware inertia cannot be carried, only its mass
-        vb.mass = mass + sum(lump.mass_kg for lump in lumps)
-        vb.inertia = [1e-12, 1e-12, 1e-12]
-        vb.explicitinertial = True
+        point = mass + sum(lump.mass_kg for lump in lumps)
+        set_inertial(vb, [(point, np.zeros(3), np.eye(3) * _VERTEX_INERTIA_KG_M2)])
         vb.add_site(name=f"{name}_p{k}", pos=[0.0, 0.0, 0.0], size=[0.002, 0, 0])
         build.sites.append(f"{name}_p{k}")
         build.bodies.append(vb)
@@ -287,7 +290,10 @@ def add_flex_link(
             build.joints.append((jn, "hub"))
         parts = [(m_l, np.array([s[n - 1] - length_m, 0.0, 0.0]), np.zeros((3, 3)))]
         parts += [lump_part(lump, np.zeros(3)) for lump in end_lumps if lump.mass_kg > 0]
-        parts.append((0.0, np.zeros(3), np.eye(3) * _HUB_INERTIA_KG_M2))
+        # the inertia of the rod cell it carries about its centre (a vertex is a point; without
+        # it the hub's twist would have no inertia)
+        cell = m_l * np.array([min(t**2 + h**2, 2 * l_v**2), l_v**2, l_v**2]) / 12.0
+        parts.append((0.0, np.zeros(3), np.diag(cell) + np.eye(3) * _HUB_INERTIA_KG_M2))
         _set_parts(hub, parts, set_inertial)
         vert_bodies += [hub.name, hub.name]
         vert_pos += [s[n - 1] - length_m, 0.0, 0.0, s[n] - length_m, 0.0, 0.0]
@@ -322,7 +328,9 @@ def add_flex_link(
     if damping_beta_s > 0:
         # per-vertex damping is not stiffness-proportional; the flex's bending damping is
         flex.damping = damping_beta_s
-    build.piece_lengths_m = [l_v] * n
+    build.piece_lengths_m = [l_v] * n  # the edges
+    # a hub's origin is the link's end; a free end vertex is the end itself
+    build.end_offset_m = 0.0
     return build
 
 

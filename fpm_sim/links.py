@@ -77,6 +77,7 @@ class LinkBuild:
     piece_lengths_m: list[float]
     joints: list[tuple[str, str]] = field(default_factory=list)  # (joint name, kind)
     sites: list[str] = field(default_factory=list)  # along the link, start to end
+    end_offset_m: float | None = None  # where the link ends on ``last`` (default: its piece length)
 
     @property
     def first(self) -> mujoco.MjsBody:
@@ -88,7 +89,8 @@ class LinkBuild:
 
     @property
     def last_length_m(self) -> float:
-        return self.piece_lengths_m[-1]
+        """Distance along ``last``'s x axis from its origin to the link's end."""
+        return self.piece_lengths_m[-1] if self.end_offset_m is None else self.end_offset_m
 
 
 def quat_z(angle_rad: float) -> list[float]:
