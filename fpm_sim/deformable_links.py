@@ -214,13 +214,14 @@ def add_flex_link(
     from .links import LinkBuild, lump_part, quat_z, set_inertial
 
     t, h = section.thickness_m, section.height_m
+    i_in, i_out = section.i_inplane_m4, section.i_outofplane_m4
     if not math.isclose(t, h, rel_tol=1e-9):
         weak = "in-plane" if t < h else "out-of-plane"
         warnings.warn(
             f"link model 'flex' cannot represent the {t * 1e3:g} x {h * 1e3:g} mm section of {name!r} "
             f"(thickness_m != height_m): MuJoCo's 1D flex has one bending stiffness, that of the weaker "
             f"({weak}) axis, so the other plane is too soft by I_max/I_min = "
-            f"{max(section.i_inplane_m4, section.i_outofplane_m4) / min(section.i_inplane_m4, section.i_outofplane_m4):.2f}x; "
+            f"{max(i_in, i_out) / min(i_in, i_out):.2f}x; "
             "use --link-model segments or cable for such sections",
             SectionWarning,
             stacklevel=3,
@@ -321,9 +322,7 @@ def add_flex_link(
         flex.edgestiffness = k_axial
         flex.edgedamping = damping_beta_s * k_axial
     else:
-        eq = spec.add_equality(
-            name=f"{name}_edges", type=mujoco.mjtEq.mjEQ_FLEX, objtype=mujoco.mjtObj.mjOBJ_FLEX
-        )
+        eq = spec.add_equality(name=f"{name}_edges", type=mujoco.mjtEq.mjEQ_FLEX, objtype=mujoco.mjtObj.mjOBJ_FLEX)
         eq.name1 = flex.name
     if damping_beta_s > 0:
         # per-vertex damping is not stiffness-proportional; the flex's bending damping is

@@ -22,7 +22,7 @@ import mujoco
 import numpy as np
 import scipy.linalg
 
-from .links import check_link_model
+from .links import DEFAULT_RESOLUTION, check_link_model
 
 __all__ = [
     "ModelOptions",
@@ -62,9 +62,12 @@ class ModelOptions:
     Parameters
     ----------
     link_model
-        ``"segments"`` (rigid-finite-element chain, default) or ``"rigid"``.
+        ``"segments"`` (rigid-finite-element chain, default), ``"rigid"``, ``"cable"`` (MuJoCo's
+        cable plugin) or ``"flex"`` (a 1D flex); see :mod:`fpm_sim.deformable_links`.
     segments
-        Number of spring locations per link (``segments`` model).
+        Resolution per link: spring locations (``segments``), elastic joints (``cable``) or flex
+        edges (``flex``); ``None`` takes the model's default
+        (:data:`fpm_sim.links.DEFAULT_RESOLUTION`: 12, 12, 16).
     axial
         Add an axial spring at each spring location (default). Without it the links are
         inextensible: 2.4 times cheaper for the manipulator and within 0.1 % on its in-plane modes,
@@ -82,13 +85,15 @@ class ModelOptions:
     """
 
     link_model: str = "segments"
-    segments: int = DEFAULT_SEGMENTS
+    segments: int | None = None
     axial: bool = True
     rotary_inertia: bool = False
     gravity: bool = True
     timestep_s: float | None = None
 
     def __post_init__(self) -> None:
+        if self.segments is None and self.link_model in DEFAULT_RESOLUTION:
+            object.__setattr__(self, "segments", DEFAULT_RESOLUTION[self.link_model])
         check_link_model(self.link_model, self.segments)
         if self.timestep_s is not None and not (0.0 < self.timestep_s <= 1e-2):
             raise TimestepError(f"timestep_s must be in (0, 0.01] s, got {self.timestep_s!r}")

@@ -1,0 +1,176 @@
+"""The ``cable`` and ``flex`` link models against theory, the segment chain and a second linearisation."""
+
+import dataclasses
+import warnings
+
+import mujoco
+import numpy as np
+import pytest
+
+from fpm_sim.beam_theory import euler_bernoulli_hz
+from fpm_sim.config import Section
+from fpm_sim.deformable_links import SectionWarning
+from fpm_sim.kinematics import Pose
+from fpm_sim.links import DEFAULT_RESOLUTION, LinkModelError
+from fpm_sim.manipulator_model import build_manipulator
+from fpm_sim.modal import modes_constrained, modes_transition_fd
+from fpm_sim.model import ModelOptions
+from fpm_sim.rigs import RigSetup, build_rig
+
+
+def _in_plane(built, n=3):
+    """Square bar: degenerate in/out-of-plane pairs; one of each of the first ``n`` pairs."""
+    f = modes_transition_fd(built, n_modes=2 * n).frequencies_hz
+    # the pairs are degenerate to round-off of the eigen-solve (same stiffness and mass both planes)
+    assert np.allclose(f[0::2], f[1::2], rtol=1e-6), f
+    return f[0::2]
+
+
+def _eb(piece, boundary):
+    return euler_bernoulli_hz(boundary, length_m=piece.length_m, section=piece.section, material=piece.material)
+
+
+@pytest.mark.parametrize("link_model", ["cable", "flex"])
+def test_cantilever_first_frequency_at_default_resolution(steel_bar, link_model):
+    built = build_rig(RigSetup("cantilever"), steel_bar, ModelOptions(link_model=link_model))
+    assert built.parameters["options"]["segments"] == DEFAULT_RESOLUTION[link_model]
+    f = _in_plane(built, 1)
+    # the issue's bound: 2 % on the cantilever's first frequency (measured: +0.16 % cable, -0.1 % flex)
+    assert abs(f[0] / _eb(steel_bar, "cantilever")[0] - 1) < 0.02
+
+
+@pytest.mark.parametrize("link_model", ["cable", "flex"])
+@pytest.mark.parametrize("boundary", ["cantilever", "free-free"])
+def test_error_falls_with_resolution(steel_bar, link_model, boundary):
+    eb = _eb(steel_bar, boundary)
+    errs = np.array(
+        [
+            np.abs(
+                _in_plane(build_rig(RigSetup(boundary), steel_bar, ModelOptions(link_model=link_model, segments=n)))
+                / eb
+                - 1
+            )
+            for n in (4, 8, 16)
+        ]
+    )
+    # modes 2 and 3 converge monotonically for both models and both boundaries (mode 1 of the
+    # flex cantilever crosses zero error near n = 8, so its magnitude is not monotone)
+    assert np.all(np.diff(errs[:, 1:], axis=0) < 0), errs
+    # at least second-order: doubling n divides the mode-3 error by more than 3
+    assert errs[1, 2] / errs[2, 2] > 3.0, errs
+
+
+def test_cable_equals_segment_chain_with_anisotropic_section(steel_bar):
+    """Same joint locations and k = E I / l: the plugin and the hinge springs give one linear model,
+    also for t != h (both bending planes and torsion)."""
+    piece = dataclasses.replace(steel_bar, section=Section(thickness_m=0.005, height_m=0.010))
+    fs = [
+        modes_transition_fd(
+            build_rig(RigSetup("cantilever"), piece, ModelOptions(link_model=lm, segments=6, axial=False)), n_modes=6
+        ).frequencies_hz
+        for lm in ("segments", "cable")
+    ]
+    # identical linear models: only finite-difference round-off separates them
+    np.testing.assert_allclose(fs[1], fs[0], rtol=1e-5)
+
+
+@pytest.mark.parametrize("link_model", ["cable", "flex"])
+def test_transition_fd_matches_constrained_on_chain_rig(steel_bar, link_model):
+    built = build_rig(RigSetup("chain", angle_deg=90.0), steel_bar, ModelOptions(link_model=link_model, segments=6))
+    fd = modes_transition_fd(built, n_modes=4)
+    con = modes_constrained(built, n_modes=4)
+    # the two methods differ by the timestep error (omega h)^2 < 1e-4 and the weld's compliance
+    # (measured <= 0.1 %); 0.5 % leaves room for neither
+    np.testing.assert_allclose(fd.frequencies_hz, con.frequencies_hz, rtol=5e-3)
+    # the filter dropped the weld's own motions and kept clean structural modes
+    assert fd.dropped.get("constraint", 0) > 0
+    assert max(m.constraint_ratio for m in fd.modes) < 1e-3
+
+
+@pytest.mark.parametrize("link_model", ["cable", "flex"])
+def test_transition_fd_captures_the_whole_state(steel_bar, link_model):
+    """mjd_transitionFD against a centred difference that restores mjSTATE_FULLPHYSICS (plugin and
+    flex state included) around every perturbed step."""
+    built = build_rig(RigSetup("cantilever"), steel_bar, ModelOptions(link_model=link_model, segments=4))
+    m = built.model
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    assert m.npluginstate == 0
+    nx = 2 * m.nv + m.na
+    a_fd = np.zeros((nx, nx))
+    mujoco.mjd_transitionFD(m, d, 1e-6, True, a_fd, None, None, None)
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    s0 = np.zeros(mujoco.mj_stateSize(m, spec))
+    mujoco.mj_getState(m, d, s0, spec)
+    q0 = d.qpos.copy()
+    a_ref = np.zeros((nx, nx))
+    for i in range(nx):
+        cols = []
+        for sign in (1.0, -1.0):
+            mujoco.mj_setState(m, d, s0, spec)
+            dx = np.zeros(nx)
+            dx[i] = sign * 1e-6
+            q = q0.copy()
+            mujoco.mj_integratePos(m, q, dx[: m.nv], 1.0)
+            d.qpos[:] = q
+            d.qvel[:] += dx[m.nv :]
+            mujoco.mj_step(m, d)
+            out = np.zeros(nx)
+            dq = np.zeros(m.nv)
+            mujoco.mj_differentiatePos(m, dq, 1.0, q0, d.qpos)
+            out[: m.nv], out[m.nv :] = dq, d.qvel
+            cols.append(out)
+        a_ref[:, i] = (cols[0] - cols[1]) / 2e-6
+    # same centred difference, same step: equal to round-off amplified by 1/eps (~1e-10 * |A|)
+    assert np.max(np.abs(a_fd - a_ref)) < 1e-6 * max(1.0, np.max(np.abs(a_ref)))
+
+
+def test_three_models_agree_on_the_manipulator_home_pose(default_manip):
+    """Segments and cable agree to 3 % (they are the same linear model); flex is documented to miss
+    (no torsion, one bending stiffness for the 30 x 10 mm links): strict xfail below."""
+    opts = dict(segments=4, axial=False)
+    f = {
+        lm: modes_constrained(
+            build_manipulator(default_manip, Pose(0, 0, 0), ModelOptions(link_model=lm, **opts)), n_modes=1
+        ).frequencies_hz[0]
+        for lm in ("segments", "cable")
+    }
+    # 3 %: the issue's bound (measured 0.01 %: finite-difference round-off only)
+    assert f["cable"] == pytest.approx(f["segments"], rel=0.03)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="1D flex has no torsion and uses the weak-axis I in both planes "
+    "(docs/link_models.md): its manipulator f1 is ~35 % low",
+)
+def test_flex_agrees_on_the_manipulator_home_pose(default_manip):
+    opts = dict(segments=4, axial=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SectionWarning)
+        f_flex = modes_constrained(
+            build_manipulator(default_manip, Pose(0, 0, 0), ModelOptions(link_model="flex", **opts)), n_modes=1
+        ).frequencies_hz[0]
+    f_seg = modes_constrained(
+        build_manipulator(default_manip, Pose(0, 0, 0), ModelOptions(link_model="segments", **opts)), n_modes=1
+    ).frequencies_hz[0]
+    assert f_flex == pytest.approx(f_seg, rel=0.03)
+
+
+def test_flex_warns_about_an_anisotropic_section(default_manip):
+    with pytest.warns(SectionWarning, match="thickness_m != height_m"):
+        build_manipulator(default_manip, Pose(0, 0, 0), ModelOptions(link_model="flex", segments=4, axial=False))
+
+
+@pytest.mark.parametrize(
+    ("kw", "match"),
+    [
+        ({"link_model": "noodle"}, "unknown link model"),
+        ({"link_model": "flex", "segments": 3}, "4 <= segments"),
+        ({"link_model": "cable", "segments": 0}, "1 <= segments"),
+        ({"link_model": "cable", "segments": 2.5}, "segments"),
+    ],
+)
+def test_bad_link_model_or_resolution(kw, match):
+    with pytest.raises(LinkModelError, match=match):
+        ModelOptions(**kw)
