@@ -26,8 +26,10 @@ to ``build.last`` at ``build.last_length_m`` along its x axis.
 ``flex`` (1D ``flex``, ``dim = 1``)
     ``n`` edges between vertex bodies (three slide joints each, lumped mass ``rho A l``, ``rho A l/2``
     at a free end, hardware lumps at the ends), bending from ``young``/``poisson`` with
-    ``section = box`` and ``sectionsize = (t/2, h/2)``. Axial: with ``axial`` each edge is a spring
-    ``E A / l`` (``edgestiffness``), otherwise an inextensible edge equality. A constrained end (the
+    ``section = box`` and ``sectionsize = (t/2, h/2)``; damping ``beta`` on the bending forces (the
+    flex's stiffness-proportional ``damping``). Axial: with ``axial`` each edge is an undamped
+    spring ``E A / l`` (``edgestiffness``; see the comment in :func:`add_flex_link`), otherwise an
+    inextensible edge equality. A constrained end (the
     start, unless ``free_start``; the end, unless ``free_end``) owns the two vertices at ``-l/2`` and
     ``+l/2`` around the end point (this placement makes the clamp second-order accurate; placing the
     clamp at a vertex is first-order wrong by about ``1/n``), and ``l`` is chosen so that the span
@@ -318,15 +320,17 @@ def add_flex_link(
         rgba=list(rgba),
     )
     if axial:
-        k_axial = material.young_pa * section.area_m2 / l_v
-        flex.edgestiffness = k_axial
-        flex.edgedamping = damping_beta_s * k_axial
+        # the edges are axial springs E A / l, left undamped: MuJoCo 3.17 applies flex edge damping
+        # explicitly, and beta * E A / l on the light vertices (c h / m ~ 2.3 at the automatic
+        # timestep) made the discrete map unstable and gave the manipulator spurious undamped modes
+        # (32.8 / 34.4 / 38.8 Hz against 46.3 / 49.0 / 49.0 Hz without it, segments = 8)
+        flex.edgestiffness = material.young_pa * section.area_m2 / l_v
     else:
         eq = spec.add_equality(name=f"{name}_edges", type=mujoco.mjtEq.mjEQ_FLEX, objtype=mujoco.mjtObj.mjOBJ_FLEX)
         eq.name1 = flex.name
-    if damping_beta_s > 0:
-        # per-vertex damping is not stiffness-proportional; the flex's bending damping is
-        flex.damping = damping_beta_s
+    # the flex's own damping is stiffness-proportional on its bending forces (checked: modal damping
+    # ratio beta * omega / 2)
+    flex.damping = damping_beta_s
     build.piece_lengths_m = [l_v] * n  # the edges
     # a hub's origin is the link's end; a free end vertex is the end itself
     build.end_offset_m = 0.0

@@ -38,7 +38,13 @@ import numpy as np
 import scipy.linalg
 
 from .equilibrium import static_equilibrium
-from .model import BuiltModel, dof_stiffness, has_internal_elasticity, passive_stiffness_matrix
+from .model import (
+    BuiltModel,
+    dof_stiffness,
+    has_internal_elasticity,
+    passive_damping_matrix,
+    passive_stiffness_matrix,
+)
 
 __all__ = [
     "Mode",
@@ -391,7 +397,7 @@ def modes_constrained(
     mass = mass_matrix(model, data)
     jac = equality_jacobian(model, data)
     stiff = stiffness_matrix(model, data, q_eq)
-    damp = damping_matrix(model)
+    damp = passive_damping_matrix(model, q_eq) if has_internal_elasticity(model) else damping_matrix(model)
     return _solve_reduced(built, q_eq, mass, stiff, damp, jac, n_modes, filt)
 
 
@@ -402,8 +408,9 @@ def _constrained_floating(built: BuiltModel, q0: np.ndarray, n_modes: int | None
     _forward_at(model, data, q0)
     mass = mass_matrix(model, data)
     # joint springs only: the diagonal; a cable plugin's torques: differentiated (no gravity here)
-    stiff = passive_stiffness_matrix(model, q0) if has_internal_elasticity(model) else np.diag(dof_stiffness(model))
-    damp = damping_matrix(model)
+    internal = has_internal_elasticity(model)
+    stiff = passive_stiffness_matrix(model, q0) if internal else np.diag(dof_stiffness(model))
+    damp = passive_damping_matrix(model, q0) if internal else damping_matrix(model)
     jac = np.zeros((0, model.nv))
     return _solve_reduced(built, q0, mass, stiff, damp, jac, n_modes, filt)
 

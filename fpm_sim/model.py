@@ -38,6 +38,7 @@ __all__ = [
     "dof_stiffness",
     "has_internal_elasticity",
     "passive_stiffness_matrix",
+    "passive_damping_matrix",
 ]
 
 DEFAULT_SEGMENTS = 12
@@ -203,6 +204,23 @@ def passive_stiffness_matrix(model: mujoco.MjModel, qpos: np.ndarray | None = No
             cols.append(data.qfrc_passive.copy())
         k[:, j] = -(cols[0] - cols[1]) / (2 * eps)
     return 0.5 * (k + k.T)
+
+
+def passive_damping_matrix(model: mujoco.MjModel, qpos: np.ndarray, eps: float = 1e-6) -> np.ndarray:
+    """``-d qfrc_passive / d qvel`` at ``qpos`` by centred differences (joint dampers, the cable
+    joints' damping and the flex's bending damping alike)."""
+    data = mujoco.MjData(model)
+    c = np.zeros((model.nv, model.nv))
+    for j in range(model.nv):
+        cols = []
+        for sign in (1.0, -1.0):
+            data.qpos[:] = qpos
+            data.qvel[:] = 0.0
+            data.qvel[j] = sign * eps
+            mujoco.mj_forward(model, data)
+            cols.append(data.qfrc_passive.copy())
+        c[:, j] = -(cols[0] - cols[1]) / (2 * eps)
+    return 0.5 * (c + c.T)
 
 
 def highest_frequency_rad_s(model: mujoco.MjModel) -> float:
