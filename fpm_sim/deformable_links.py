@@ -35,7 +35,9 @@ to ``build.last`` at ``build.last_length_m`` along its x axis.
     clamp at a vertex is first-order wrong by about ``1/n``), and ``l`` is chosen so that the span
     between the end points is ``L``. The start's two vertices belong to ``build.first`` (a body in
     the parent's frame, so no joint = clamped); the end's two vertices belong to a *hub*, a child of
-    the world with three slides and three hinges, which is ``build.last``.
+    the world with three slides and three hinges, which is ``build.last``. Degrees of freedom are
+    of kind ``flex_in`` (motion in the base plane: x, y slides, z hinge) or ``flex_out`` (z slide,
+    x and y hinges), so a mode's ``character`` tells in-plane from out-of-plane.
 
     What the 1D flex of MuJoCo 3.17 cannot represent: it has **one** bending stiffness per vertex
     triple, computed with the second moment of the **weaker** axis, so a section with ``t != h``
@@ -265,7 +267,7 @@ def add_flex_link(
         for ax_name, axis in zip("xyz", np.eye(3)):
             jn = f"{name}_v{k}_{ax_name}"
             vb.add_joint(name=jn, type=mujoco.mjtJoint.mjJNT_SLIDE, axis=list(axis))
-            build.joints.append((jn, "vertex"))
+            build.joints.append((jn, "flex_out" if ax_name == "z" else "flex_in"))
         mass = m_l
         lumps: tuple[LumpedMass, ...] = ()
         if k == 0:
@@ -286,11 +288,11 @@ def add_flex_link(
         for ax_name, axis in zip("xyz", np.eye(3)):
             jn = f"{name}_hub_t{ax_name}"
             hub.add_joint(name=jn, type=mujoco.mjtJoint.mjJNT_SLIDE, axis=list(axis))
-            build.joints.append((jn, "hub"))
+            build.joints.append((jn, "flex_out" if ax_name == "z" else "flex_in"))
         for ax_name, axis in zip("xyz", np.eye(3)):
             jn = f"{name}_hub_r{ax_name}"
             hub.add_joint(name=jn, type=mujoco.mjtJoint.mjJNT_HINGE, axis=list(axis))
-            build.joints.append((jn, "hub"))
+            build.joints.append((jn, "flex_in" if ax_name == "z" else "flex_out"))
         parts = [(m_l, np.array([s[n - 1] - length_m, 0.0, 0.0]), np.zeros((3, 3)))]
         parts += [lump_part(lump, np.zeros(3)) for lump in end_lumps if lump.mass_kg > 0]
         # the inertia of the rod cell it carries about its centre (a vertex is a point; without

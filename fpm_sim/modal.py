@@ -269,6 +269,15 @@ def damping_matrix(model: mujoco.MjModel) -> np.ndarray:
     return np.diag(np.asarray(model.dof_damping, float))
 
 
+def _energy_stiffness(model: mujoco.MjModel) -> np.ndarray:
+    """Per-dof stiffness that splits a mode's strain energy by kind: the joint springs, or for
+    ``cable``/``flex`` links the diagonal of the passive stiffness at ``qpos0`` (an estimate: it
+    leaves out the coupling terms)."""
+    if has_internal_elasticity(model):
+        return np.clip(np.diag(passive_stiffness_matrix(model)), 0.0, None)
+    return dof_stiffness(model)
+
+
 def _character(shape: np.ndarray, k_dof: np.ndarray, kinds: list[str]) -> dict[str, float]:
     energy = 0.5 * k_dof * shape**2
     total = float(energy.sum())
@@ -342,7 +351,7 @@ def modes_transition_fd(
     lam, vec = np.linalg.eig(a)
     h = model.opt.timestep
     s = np.log(lam.astype(complex)) / h
-    k_dof = dof_stiffness(model)
+    k_dof = _energy_stiffness(model)
     dropped: dict[str, int] = {}
     modes: list[Mode] = []
     for idx in np.argsort(np.abs(s)):
@@ -434,7 +443,7 @@ def _solve_reduced(
     mr = z.T @ mass @ z
     cr = z.T @ damp @ z
     w2, x = scipy.linalg.eigh(0.5 * (kr + kr.T), 0.5 * (mr + mr.T))
-    k_dof = dof_stiffness(built.model)
+    k_dof = _energy_stiffness(built.model)
     dropped: dict[str, int] = {}
     modes: list[Mode] = []
     scale = max(float(np.max(np.abs(w2))), 1.0)
