@@ -27,7 +27,8 @@ to ``build.last`` at ``build.last_length_m`` along its x axis.
     ``n`` edges between vertex bodies (three slide joints each, lumped mass ``rho A l``, ``rho A l/2``
     at a free end, hardware lumps at the ends), bending from ``young``/``poisson`` with
     ``section = box`` and ``sectionsize = (t/2, h/2)``; damping ``beta`` on the bending forces (the
-    flex's stiffness-proportional ``damping``). Axial: with ``axial`` each edge is an undamped
+    flex's stiffness-proportional ``damping``, which in 3.17 damps out-of-plane bending only:
+    :class:`DampingWarning`). Axial: with ``axial`` each edge is an undamped
     spring ``E A / l`` (``edgestiffness``; see the comment in :func:`add_flex_link`), otherwise an
     inextensible edge equality. A constrained end (the
     start, unless ``free_start``; the end, unless ``free_end``) owns the two vertices at ``-l/2`` and
@@ -43,7 +44,7 @@ to ``build.last`` at ``build.last_length_m`` along its x axis.
     triple, computed with the second moment of the **weaker** axis, so a section with ``t != h``
     bends in both planes with ``min(I_in, I_out)`` (:class:`SectionWarning`); its vertices are points,
     so it has **no torsion** stiffness or twist inertia (modes that twist a link come out too low),
-    and no rotary inertia of the section.
+    and no rotary inertia of the section; its damping leaves in-plane bending undamped.
 """
 
 from __future__ import annotations
@@ -59,6 +60,7 @@ from .config import LumpedMass, Material, Section
 __all__ = [
     "CABLE_PLUGIN",
     "MIN_FLEX_EDGES",
+    "DampingWarning",
     "SectionWarning",
     "add_cable_link",
     "add_flex_link",
@@ -82,6 +84,10 @@ _VERTEX_INERTIA_KG_M2 = 1e-12
 
 class SectionWarning(UserWarning):
     """The link model cannot represent the requested cross-section; it computes an approximation."""
+
+
+class DampingWarning(UserWarning):
+    """The link model cannot apply the requested damping everywhere."""
 
 
 def _box_geom(body: mujoco.MjsBody, name: str, length: float, section: Section, x0: float, rgba) -> None:
@@ -222,7 +228,7 @@ def add_flex_link(
     if not math.isclose(t, h, rel_tol=1e-9):
         weak = "in-plane" if t < h else "out-of-plane"
         warnings.warn(
-            f"link model 'flex' cannot represent the {t * 1e3:g} x {h * 1e3:g} mm section of {name!r} "
+            f"link model 'flex' cannot represent the {t * 1e3:g} x {h * 1e3:g} mm section "
             f"(thickness_m != height_m): MuJoCo's 1D flex has one bending stiffness, that of the weaker "
             f"({weak}) axis, so the other plane is too soft by I_max/I_min = "
             f"{max(i_in, i_out) / min(i_in, i_out):.2f}x; "
@@ -330,9 +336,17 @@ def add_flex_link(
     else:
         eq = spec.add_equality(name=f"{name}_edges", type=mujoco.mjtEq.mjEQ_FLEX, objtype=mujoco.mjtObj.mjOBJ_FLEX)
         eq.name1 = flex.name
-    # the flex's own damping is stiffness-proportional on its bending forces (checked: modal damping
-    # ratio beta * omega / 2)
+    # the flex's own damping is stiffness-proportional on its bending forces, but in 3.17 it damps
+    # out-of-plane bending only (measured on the cantilever: zeta = beta omega / 2 out of plane, 0 in
+    # plane)
     flex.damping = damping_beta_s
+    if damping_beta_s > 0:
+        warnings.warn(
+            "link model 'flex' damps only out-of-plane bending (MuJoCo 3.17's 1D flex damping): its in-plane "
+            "modes come out undamped; use --link-model segments or cable for modal damping ratios",
+            DampingWarning,
+            stacklevel=3,
+        )
     build.piece_lengths_m = [l_v] * n  # the edges
     # a hub's origin is the link's end; a free end vertex is the end itself
     build.end_offset_m = 0.0
