@@ -90,6 +90,28 @@ class DampingWarning(UserWarning):
     """The link model cannot apply the requested damping everywhere."""
 
 
+def _check_engine(link_model: str) -> None:
+    """Refuse engines on which the model is missing or its linearisation is known to be wrong.
+
+    MuJoCo 4.0 removed the cable plugin, and keeps 1D-flex rod frames in ``mjData.plastic``, which
+    ``mjd_transitionFD`` does not restore (shared/mission/ENGINE_NOTES.md); 3.17 has neither issue
+    (tests/test_deformable_links.py checks ``mjd_transitionFD`` against a full-state difference).
+    """
+    from .links import LinkModelError
+
+    major = int(mujoco.__version__.split(".")[0])
+    if major >= 4 and link_model == "cable":
+        raise LinkModelError(
+            f"link model 'cable' needs the mujoco.elasticity.cable plugin, removed in MuJoCo {mujoco.__version__}; "
+            "install mujoco==3.17.0 (the pinned version) or use --link-model segments"
+        )
+    if major >= 4 and link_model == "flex":
+        raise LinkModelError(
+            f"link model 'flex' is not linearised correctly on MuJoCo {mujoco.__version__} (mjd_transitionFD "
+            "misses the rod frames in mjData.plastic); install mujoco==3.17.0 or use --link-model segments"
+        )
+
+
 def _box_geom(body: mujoco.MjsBody, name: str, length: float, section: Section, x0: float, rgba) -> None:
     body.add_geom(
         name=name,
@@ -123,6 +145,7 @@ def add_cable_link(
     """Add a cable-plugin link (see module docstring); arguments as :func:`fpm_sim.links.add_link`."""
     from .links import LinkBuild, box_part, lump_part, quat_z, set_inertial
 
+    _check_engine("cable")
     n = segments
     l_seg = length_m / n
     lengths = [l_seg / 2.0] + [l_seg] * (n - 1) + [l_seg / 2.0]
@@ -223,6 +246,7 @@ def add_flex_link(
     """
     from .links import LinkBuild, lump_part, quat_z, set_inertial
 
+    _check_engine("flex")
     t, h = section.thickness_m, section.height_m
     i_in, i_out = section.i_inplane_m4, section.i_outofplane_m4
     if not math.isclose(t, h, rel_tol=1e-9):
