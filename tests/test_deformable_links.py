@@ -232,3 +232,26 @@ def test_generated_mjcf_reloads_to_the_same_model(default_manip, link_model):
     # the XML prints 6 significant digits
     np.testing.assert_allclose(again.body_mass, built.model.body_mass, rtol=1e-5)
     assert again.opt.timestep == pytest.approx(built.model.opt.timestep, rel=1e-5)
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["modes", "--link-model", "flex", "--segments", "3"], "4 <= segments"),
+        (["rig", "cantilever", "--link-model", "cable", "--segments", "0"], "--segments"),
+        (["rig", "cantilever", "--link-model", "cabel"], "choose one of segments, rigid, cable, flex"),
+    ],
+)
+def test_cli_rejects_bad_link_model_or_resolution(capsys, argv, message):
+    from fpm_sim.cli import main
+
+    assert main(argv) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_cli_runs_a_rig_with_each_deformable(capsys):
+    from fpm_sim.cli import main
+
+    for lm in ("cable", "flex"):
+        assert main(["rig", "cantilever", "--link-model", lm, "--segments", "4", "--n-modes", "2"]) == 0
+        assert f"link model = {lm} (4 segments)" in capsys.readouterr().out
