@@ -56,6 +56,7 @@ import mujoco
 import numpy as np
 
 from .config import LumpedMass, Material, Section
+from .links import _MIN_FLEX_EDGES, LinkBuild, LinkModelError, box_part, lump_part, quat_z, set_inertial
 
 __all__ = [
     "CABLE_PLUGIN",
@@ -69,13 +70,12 @@ __all__ = [
 
 CABLE_PLUGIN = "mujoco.elasticity.cable"
 
-MIN_FLEX_EDGES = 4
+MIN_FLEX_EDGES = _MIN_FLEX_EDGES
 """Fewest flex edges per link: two constrained ends own two vertices each and need one free vertex
 between them."""
 
 _HUB_INERTIA_KG_M2 = 1e-9
-"""Rotary inertia given to a flex hub (a point in the continuum: the vertices carry the mass);
-MuJoCo needs a positive inertia on every moving body."""
+"""Rotary inertia added to a flex end body (MuJoCo needs a positive inertia on every moving body)."""
 
 
 _VERTEX_INERTIA_KG_M2 = 1e-12
@@ -97,8 +97,6 @@ def _check_engine(link_model: str) -> None:
     ``mjd_transitionFD`` does not restore (shared/mission/ENGINE_NOTES.md); 3.17 has neither issue
     (tests/test_deformable_links.py checks ``mjd_transitionFD`` against a full-state difference).
     """
-    from .links import LinkModelError
-
     major = int(mujoco.__version__.split(".")[0])
     if major >= 4 and link_model == "cable":
         raise LinkModelError(
@@ -143,8 +141,6 @@ def add_cable_link(
     rgba: tuple[float, float, float, float],
 ):
     """Add a cable-plugin link (see module docstring); arguments as :func:`fpm_sim.links.add_link`."""
-    from .links import LinkBuild, box_part, lump_part, quat_z, set_inertial
-
     _check_engine("cable")
     n = segments
     l_seg = length_m / n
@@ -243,9 +239,9 @@ def add_flex_link(
     -----
     SectionWarning
         If ``thickness_m != height_m``: the flex bends in both planes with the weaker axis.
+    DampingWarning
+        If ``damping_beta_s > 0``: in-plane bending stays undamped.
     """
-    from .links import LinkBuild, lump_part, quat_z, set_inertial
-
     _check_engine("flex")
     t, h = section.thickness_m, section.height_m
     i_in, i_out = section.i_inplane_m4, section.i_outofplane_m4
@@ -265,6 +261,10 @@ def add_flex_link(
     s0 = 0.0 if free_start else -l_v / 2.0
     s = s0 + l_v * np.arange(n + 1)  # arc length of each vertex from the link start
     m_l = material.density_kg_m3 * section.area_m2 * l_v
+    # an end body carries its vertex cell (length l, mass rho A l) with the cell's own inertia about
+    # its centre: free vertices are points, but without it a hub's twist would have no inertia and
+    # a weld on it would be soft (MuJoCo scales constraint stiffness with the effective mass)
+    cell = m_l * np.array([min(t**2 + h**2, 2 * l_v**2), l_v**2, l_v**2]) / 12.0
     build = LinkBuild(name=name, bodies=[], piece_lengths_m=[])
     vert_bodies: list[str] = []
     vert_pos: list[float] = []
@@ -280,10 +280,10 @@ def add_flex_link(
         host = parent.add_body(name=f"{name}_b0", pos=list(pos), quat=quat)
         # the rod between the start point and the first free vertex's cell: vertex v1 (at +l/2)
         # carries rho A l, as every interior vertex; hardware lumps sit at the start point
-        parts = [(m_l, np.array([s[1], 0.0, 0.0]), np.zeros((3, 3)))]
+        parts = [(m_l, np.array([s[1], 0.0, 0.0]), np.diag(cell))]
         parts += [lump_part(lump, np.zeros(3)) for lump in start_lumps if lump.mass_kg > 0]
         parts.append((0.0, np.zeros(3), np.eye(3) * _HUB_INERTIA_KG_M2))
-        _set_parts(host, parts, set_inertial)
+        _set_parts(host, parts)
         vert_bodies += [host.name, host.name]
         vert_pos += [s[0], 0.0, 0.0, s[1], 0.0, 0.0]
         host.add_site(name=f"{name}_p0", pos=[0.0, 0.0, 0.0], size=[0.002, 0, 0])
@@ -323,13 +323,10 @@ def add_flex_link(
             jn = f"{name}_hub_r{ax_name}"
             hub.add_joint(name=jn, type=mujoco.mjtJoint.mjJNT_HINGE, axis=list(axis))
             build.joints.append((jn, "flex_in" if ax_name == "z" else "flex_out"))
-        parts = [(m_l, np.array([s[n - 1] - length_m, 0.0, 0.0]), np.zeros((3, 3)))]
+        parts = [(m_l, np.array([s[n - 1] - length_m, 0.0, 0.0]), np.diag(cell))]
         parts += [lump_part(lump, np.zeros(3)) for lump in end_lumps if lump.mass_kg > 0]
-        # the inertia of the rod cell it carries about its centre (a vertex is a point; without
-        # it the hub's twist would have no inertia)
-        cell = m_l * np.array([min(t**2 + h**2, 2 * l_v**2), l_v**2, l_v**2]) / 12.0
-        parts.append((0.0, np.zeros(3), np.diag(cell) + np.eye(3) * _HUB_INERTIA_KG_M2))
-        _set_parts(hub, parts, set_inertial)
+        parts.append((0.0, np.zeros(3), np.eye(3) * _HUB_INERTIA_KG_M2))
+        _set_parts(hub, parts)
         vert_bodies += [hub.name, hub.name]
         vert_pos += [s[n - 1] - length_m, 0.0, 0.0, s[n] - length_m, 0.0, 0.0]
         hub.add_site(name=f"{name}_p{n}", pos=[0.0, 0.0, 0.0], size=[0.002, 0, 0])
@@ -377,7 +374,7 @@ def add_flex_link(
     return build
 
 
-def _set_parts(body: mujoco.MjsBody, parts, set_inertial) -> None:
+def _set_parts(body: mujoco.MjsBody, parts) -> None:
     mass = sum(p[0] for p in parts)
     if mass <= 0.0:
         raise ValueError(f"body {body.name!r} has no mass")
