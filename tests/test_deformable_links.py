@@ -35,7 +35,7 @@ def test_cantilever_first_frequency_at_default_resolution(steel_bar, link_model)
     built = build_rig(RigSetup("cantilever"), steel_bar, ModelOptions(link_model=link_model))
     assert built.parameters["options"]["segments"] == DEFAULT_RESOLUTION[link_model]
     f = _in_plane(built, 1)
-    # the bound: 2 % on the cantilever's first frequency (measured: +0.16 % cable, -0.1 % flex)
+    # the bound: 2 % on the cantilever's first frequency (measured: +0.16 % cable, -0.07 % flex)
     assert abs(f[0] / _eb(steel_bar, "cantilever")[0] - 1) < 0.02
 
 
@@ -135,14 +135,14 @@ def test_three_models_agree_on_the_manipulator_home_pose(default_manip):
         ).frequencies_hz[0]
         for lm in ("segments", "cable")
     }
-    # 3 %: the bound (measured 0.01 %: finite-difference round-off only)
+    # 3 %: the bound (measured 5e-10: finite-difference round-off only)
     assert f["cable"] == pytest.approx(f["segments"], rel=0.03)
 
 
 @pytest.mark.xfail(
     strict=True,
     reason="1D flex has no torsion and uses the weak-axis I in both planes "
-    "(docs/link_models.md): its manipulator f1 is ~35 % low",
+    "(docs/link_models.md): its manipulator f1 is 34 % low",
 )
 def test_flex_agrees_on_the_manipulator_home_pose(default_manip):
     opts = dict(segments=4, axial=False)
@@ -183,7 +183,7 @@ def test_flex_gap_on_the_manipulator_is_its_missing_torsion_and_section(default_
     ][0]
     f_flex = modes_constrained(flex, n_modes=1).frequencies_hz[0]
     # two discretisations of the same continuum at n = 4 (rigid pieces vs lumped vertices): measured
-    # 0.19 % apart (0.02 % at n = 6); the unexplained gap would be ~35 %
+    # 0.12 % apart (0.003 % at n = 6); the unexplained gap would be 34 %
     assert f_flex == pytest.approx(f_lim, rel=0.01)
 
 
