@@ -27,7 +27,8 @@ to ``build.last`` at ``build.last_length_m`` along its x axis.
     ``n`` edges between vertex bodies (three slide joints each, lumped mass ``rho A l``, ``rho A l/2``
     at a free end, hardware lumps at the ends), bending from ``young``/``poisson`` with
     ``section = box`` and ``sectionsize = (t/2, h/2)``; damping ``beta`` on the bending forces (the
-    flex's stiffness-proportional ``damping``, which in 3.17 damps out-of-plane bending only:
+    flex's stiffness-proportional ``damping``, which in 3.17 acts only along the rod's current
+    curvature, so a gravity sag out of plane leaves the in-plane modes undamped:
     :class:`DampingWarning`). Axial: with ``axial`` each edge is an undamped
     spring ``E A / l`` (``edgestiffness``; see the comment in :func:`add_flex_link`), otherwise an
     inextensible edge equality. A constrained end (the
@@ -44,7 +45,8 @@ to ``build.last`` at ``build.last_length_m`` along its x axis.
     triple, computed with the second moment of the **weaker** axis, so a section with ``t != h``
     bends in both planes with ``min(I_in, I_out)`` (:class:`SectionWarning`); its vertices are points,
     so it has **no torsion** stiffness or twist inertia (modes that twist a link come out too low),
-    and no rotary inertia of the section; its damping leaves in-plane bending undamped.
+    and no rotary inertia of the section; its damping leaves in-plane bending undamped once the rod
+    sags out of plane.
 """
 
 from __future__ import annotations
@@ -240,7 +242,7 @@ def add_flex_link(
     SectionWarning
         If ``thickness_m != height_m``: the flex bends in both planes with the weaker axis.
     DampingWarning
-        If ``damping_beta_s > 0``: in-plane bending stays undamped.
+        If ``damping_beta_s > 0``: bending is damped only along the current curvature.
     """
     _check_engine("flex")
     t, h = section.thickness_m, section.height_m
@@ -357,14 +359,16 @@ def add_flex_link(
     else:
         eq = spec.add_equality(name=f"{name}_edges", type=mujoco.mjtEq.mjEQ_FLEX, objtype=mujoco.mjtObj.mjOBJ_FLEX)
         eq.name1 = flex.name
-    # the flex's own damping is stiffness-proportional on its bending forces, but in 3.17 it damps
-    # out-of-plane bending only (measured on the cantilever: zeta = beta omega / 2 out of plane, 0 in
-    # plane)
+    # the flex's own damping is stiffness-proportional on its bending forces, but in 3.17, linearised
+    # about a bent rod, it acts only along the existing curvature (measured on the cantilever:
+    # straight, zeta = beta omega / 2 in both planes; sagged by gravity out of plane, by micrometres,
+    # zeta = 0 in plane)
     flex.damping = damping_beta_s
     if damping_beta_s > 0:
         warnings.warn(
-            "link model 'flex' damps only out-of-plane bending (MuJoCo 3.17's 1D flex damping): its in-plane "
-            "modes come out undamped; use --link-model segments or cable for modal damping ratios",
+            "link model 'flex' damps bending only along the rod's current curvature (MuJoCo 3.17's 1D flex "
+            "damping): at an equilibrium sagged out of plane by gravity its in-plane modes come out undamped; "
+            "use --link-model segments or cable for modal damping ratios",
             DampingWarning,
             stacklevel=3,
         )
