@@ -20,10 +20,10 @@ from . import __version__
 from .api import ModalComparison, _analyse, rig_piece
 from .config import ConfigError, Manipulator, default_config, default_config_text, load_config
 from .kinematics import Pose, SingularPoseError, UnreachablePoseError
-from .links import LINK_MODELS, LinkModelError
+from .links import DEFAULT_RESOLUTION, LINK_MODELS, LinkModelError
 from .manipulator_model import build_manipulator
 from .modal import ModalResult
-from .model import DEFAULT_SEGMENTS, BuiltModel, ModelOptions, TimestepError
+from .model import BuiltModel, ModelOptions, TimestepError
 from .rigs import RIGS, RigError, RigSetup, build_rig
 
 __all__ = ["main", "COMMAND_MODULES"]
@@ -53,9 +53,17 @@ def add_config_args(p: argparse.ArgumentParser) -> None:
 
 def add_model_args(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("model")
-    g.add_argument("--link-model", default="segments", help=f"link model: {', '.join(LINK_MODELS)} (default segments)")
     g.add_argument(
-        "--segments", type=int, default=DEFAULT_SEGMENTS, help=f"spring locations per link (default {DEFAULT_SEGMENTS})"
+        "--link-model",
+        default="segments",
+        help=f"link model: {', '.join(LINK_MODELS)} (default segments; see docs/link_models.md)",
+    )
+    g.add_argument(
+        "--segments",
+        type=int,
+        default=None,
+        help=f"resolution per link: spring locations (segments), elastic joints (cable) or flex edges (flex); "
+        f"default per model {DEFAULT_RESOLUTION}",
     )
     g.add_argument("--no-axial", action="store_true", help="inextensible links (no axial springs; faster)")
     g.add_argument("--rotary-inertia", action="store_true", help="include section rotary inertia (Rayleigh beam)")
@@ -139,7 +147,7 @@ def _header(built: BuiltModel, title: str) -> str:
     p = built.parameters
     return (
         f"{title}\n  nv = {p['nv']}, timestep = {p['timestep_s']:.3g} s, link model = {p['options']['link_model']}"
-        + (f" ({p['options']['segments']} segments)" if p["options"]["link_model"] == "segments" else "")
+        + (f" ({p['options']['segments']} segments)" if p["options"]["link_model"] != "rigid" else "")
     )
 
 

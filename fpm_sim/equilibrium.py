@@ -49,15 +49,22 @@ def applied_forces(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray)
 
 
 def force_jacobian(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray, eps: float = 1e-7) -> np.ndarray:
-    """Centred finite-difference ``d f / d qpos`` of :func:`applied_forces` (needs ``nq == nv``)."""
+    """Centred finite-difference ``d f / d q`` of :func:`applied_forces`, in the tangent space."""
     jac = np.zeros((model.nv, model.nv))
     for k in range(model.nv):
-        q = qpos.copy()
-        q[k] += eps
-        fp = applied_forces(model, data, q)
-        q[k] -= 2 * eps
-        jac[:, k] = (fp - applied_forces(model, data, q)) / (2 * eps)
+        dq = np.zeros(model.nv)
+        dq[k] = eps
+        fp = applied_forces(model, data, _moved(model, qpos, dq))
+        jac[:, k] = (fp - applied_forces(model, data, _moved(model, qpos, -dq))) / (2 * eps)
     return jac
+
+
+def _moved(model: mujoco.MjModel, qpos: np.ndarray, dq: np.ndarray) -> np.ndarray:
+    """``qpos`` moved by the tangent vector ``dq`` (plain addition for hinges and slides; quaternion
+    integration for the ball joints of ``cable`` links)."""
+    q = qpos.copy()
+    mujoco.mj_integratePos(model, q, dq, 1.0)
+    return q
 
 
 def _constraints(
@@ -76,6 +83,7 @@ def static_equilibrium(
     *,
     rtol: float = 1e-9,
     pos_tol_m: float = 1e-12,
+    step_tol: float = 1e-12,
     max_iter: int = 50,
 ) -> np.ndarray:
     """``qpos`` of the static equilibrium nearest ``qpos0`` (see module docstring).
@@ -83,10 +91,14 @@ def static_equilibrium(
     Parameters
     ----------
     model
-        A model without free or ball joints, or one without applied forces at ``qpos0`` (returned as is).
+        A model without free joints, or one without applied forces at ``qpos0`` (returned as is);
+        ball joints (``cable`` links) are stepped in the tangent space.
     rtol
         Converged when the force imbalance ``|f + J^T lam|_inf`` is below ``rtol`` times ``|f(qpos0)|_inf``
-        and the loop-closure residual below ``pos_tol_m``.
+        and the loop-closure residual below ``pos_tol_m``, ...
+    step_tol
+        ... or when an iteration moves no coordinate by more than ``step_tol`` (m or rad) with the loops
+        closed: the imbalance has reached its round-off floor (flex bending forces: ~4e-7 relative).
     max_iter
         Newton-KKT iterations allowed.
 
@@ -101,9 +113,9 @@ def static_equilibrium(
     scale = float(np.max(np.abs(f))) if f.size else 0.0
     if scale < 1e-12 and (r.size == 0 or np.max(np.abs(r)) < pos_tol_m):
         return q
-    if model.nq != model.nv:
+    if np.any(model.jnt_type == mujoco.mjtJoint.mjJNT_FREE):
         raise EquilibriumError(
-            "a floating model (free or ball joint) has no static equilibrium under gravity; switch gravity off"
+            "a floating model (free joint) has no static equilibrium under gravity; switch gravity off"
         )
     stiffness = -force_jacobian(model, data, q)
     nc = r.size
@@ -115,12 +127,13 @@ def static_equilibrium(
         kkt = np.block([[stiffness, -s * jac.T], [s * jac, np.zeros((nc, nc))]])
         rhs = np.concatenate([f + jac.T @ lam, -s * r])
         sol = np.linalg.lstsq(kkt, rhs, rcond=1e-13)[0]
-        q = q + sol[: model.nv]
+        q = _moved(model, q, sol[: model.nv])
         lam = lam + s * sol[model.nv :]
         f, r, jac = _constraints(model, data, q)
         imbalance = float(np.max(np.abs(f + jac.T @ lam)))
         closure = float(np.max(np.abs(r))) if nc else 0.0
-        if imbalance <= rtol * scale and closure <= pos_tol_m:
+        small_step = float(np.max(np.abs(sol[: model.nv]))) < step_tol
+        if closure <= pos_tol_m and (imbalance <= rtol * scale or small_step):
             return q
     raise EquilibriumError(
         f"no static equilibrium after {max_iter} Newton steps (force imbalance {imbalance:.3e} of {scale:.3e}, "

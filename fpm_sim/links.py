@@ -19,6 +19,11 @@ the pieces are computed exactly (boxes) and lumped hardware is added at the link
 inertia is set explicitly on each body.
 
 ``rigid``: one rigid body per link (no springs): the kinematic-chain limit, for comparison.
+
+``cable`` and ``flex``: MuJoCo's own deformables (the ``mujoco.elasticity.cable`` plugin on the
+segment chain's bodies, and a 1D ``flex`` rod); built by :mod:`fpm_sim.deformable_links`, which
+states what each can and cannot represent. Their ``segments`` is the number of elastic joints
+(``cable``) or flex edges (``flex``). Neither is available in MJX; ``segments`` stays the default.
 """
 
 from __future__ import annotations
@@ -31,14 +36,29 @@ import numpy as np
 
 from .config import LumpedMass, Material, Section
 
-__all__ = ["LINK_MODELS", "LinkBuild", "LinkModelError", "add_link", "SPRING_KINDS"]
+__all__ = [
+    "DEFAULT_RESOLUTION",
+    "LINK_MODELS",
+    "LinkBuild",
+    "LinkModelError",
+    "add_link",
+    "check_link_model",
+    "SPRING_KINDS",
+]
 
-LINK_MODELS = ("segments", "rigid")
-"""Link models available; ``cable`` and ``flex`` are planned (MuJoCo deformables)."""
+LINK_MODELS = ("segments", "rigid", "cable", "flex")
+"""Link models available (see the module docstring)."""
 
 SPRING_KINDS = ("bend_in", "bend_out", "twist", "axial")
 
+DEFAULT_RESOLUTION = {"segments": 12, "rigid": 1, "cable": 12, "flex": 16}
+"""Default ``segments`` per link model, chosen from ``docs/link_models.md`` (228 mm steel bar):
+``segments`` and ``cable`` (one linear model) at 12 put the cantilever's first three frequencies
++0.16 / +0.56 / +0.91 % from Euler-Bernoulli; ``flex`` at 16 puts them -0.07 / -0.79 / -2.12 % (its
+lumped free-free modes are -1.6 / -3.4 / -5.7 % there, -0.4 / -0.9 / -1.5 % at 32)."""
+
 _MAX_SEGMENTS = 200
+_MIN_FLEX_EDGES = 4  # two constrained ends own two vertices each and need a free vertex between them
 
 
 class LinkModelError(ValueError):
@@ -51,9 +71,14 @@ def check_link_model(link_model: str, segments: int) -> None:
         raise LinkModelError(
             f"unknown link model {link_model!r} (--link-model); choose one of {', '.join(LINK_MODELS)}"
         )
-    if link_model == "segments" and not (isinstance(segments, int) and 1 <= segments <= _MAX_SEGMENTS):
+    if link_model == "rigid":
+        return
+    low = _MIN_FLEX_EDGES if link_model == "flex" else 1
+    if not (isinstance(segments, int) and not isinstance(segments, bool) and low <= segments <= _MAX_SEGMENTS):
+        what = {"flex": "flex edges", "segments": "spring locations", "cable": "elastic joints"}[link_model]
         raise LinkModelError(
-            f"link model 'segments' needs 1 <= segments <= {_MAX_SEGMENTS} (--segments), got {segments!r}"
+            f"link model {link_model!r} needs {low} <= segments <= {_MAX_SEGMENTS} ({what} per link; --segments), "
+            f"got {segments!r}"
         )
 
 
@@ -66,6 +91,7 @@ class LinkBuild:
     piece_lengths_m: list[float]
     joints: list[tuple[str, str]] = field(default_factory=list)  # (joint name, kind)
     sites: list[str] = field(default_factory=list)  # along the link, start to end
+    end_offset_m: float | None = None  # where the link ends on ``last`` (default: its piece length)
 
     @property
     def first(self) -> mujoco.MjsBody:
@@ -77,7 +103,8 @@ class LinkBuild:
 
     @property
     def last_length_m(self) -> float:
-        return self.piece_lengths_m[-1]
+        """Distance along ``last``'s x axis from its origin to the link's end."""
+        return self.piece_lengths_m[-1] if self.end_offset_m is None else self.end_offset_m
 
 
 def quat_z(angle_rad: float) -> list[float]:
@@ -156,13 +183,44 @@ def add_link(
     start_lumps: tuple[LumpedMass, ...] = (),
     end_lumps: tuple[LumpedMass, ...] = (),
     rgba: tuple[float, float, float, float] = (0.3, 0.5, 0.8, 1.0),
+    spec: mujoco.MjSpec | None = None,
+    free_start: bool = False,
+    free_end: bool = False,
 ) -> LinkBuild:
     """Add a straight link starting at ``pos`` (parent frame), pointing at ``angle_rad`` about z.
 
     The first body's frame sits at the link start with x along the link; the caller adds the joint
     connecting it to ``parent`` (none = clamped). Lumped masses are placed at the link's start and end.
+
+    ``spec`` (the spec ``parent`` belongs to) is needed by ``cable`` and ``flex``. ``free_start``
+    and ``free_end`` say that nothing holds the link's start (the caller gives the chain models a
+    free joint; ``flex`` then starts on a free vertex and ``build.first`` is that vertex's body) or
+    attaches to ``build.last`` (``flex`` then ends on a free vertex instead of a hub); the chain
+    models ignore both.
     """
     check_link_model(link_model, segments)
+    if link_model in ("cable", "flex"):
+        from .deformable_links import add_cable_link, add_flex_link
+
+        if spec is None:
+            raise TypeError(f"add_link(link_model={link_model!r}) needs spec= (the MjSpec of parent)")
+        common = dict(
+            name=name,
+            pos=pos,
+            angle_rad=angle_rad,
+            length_m=length_m,
+            section=section,
+            material=material,
+            segments=segments,
+            axial=axial,
+            damping_beta_s=damping_beta_s,
+            start_lumps=start_lumps,
+            end_lumps=end_lumps,
+            rgba=rgba,
+        )
+        if link_model == "flex":
+            return add_flex_link(spec, parent, free_start=free_start, free_end=free_end, **common)
+        return add_cable_link(spec, parent, rotary_inertia=rotary_inertia, **common)
     if link_model == "rigid":
         lengths = [length_m]
     else:

@@ -88,6 +88,7 @@ def build_manipulator(
         axial=opts.axial,
         rotary_inertia=opts.rotary_inertia,
         damping_beta_s=beta,
+        spec=spec,
     )
     pins: list[mujoco.MjsBody] = []
     for i in range(3):
@@ -174,12 +175,16 @@ def build_manipulator(
 
 
 def dof_kinds_of(model: mujoco.MjModel, kinds: dict[str, str]) -> list[str]:
-    """Kind of each degree of freedom from the joint-name -> kind map (free joints: ``free``)."""
+    """Kind of each degree of freedom from the joint-name -> kind map (free joints: ``free``; the
+    three dofs of a ``cable`` link's ball joint, in the link frame: ``twist``, ``bend_out``, ``bend_in``)."""
     out = ["free"] * model.nv
     for j in range(model.njnt):
         name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j)
         adr = model.jnt_dofadr[j]
         if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE:
+            continue
+        if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_BALL:
+            out[adr : adr + 3] = ["twist", "bend_out", "bend_in"]
             continue
         out[adr] = kinds.get(name, "passive")
     return out

@@ -39,7 +39,13 @@ import numpy as np
 import scipy.linalg
 
 from .equilibrium import static_equilibrium
-from .model import BuiltModel, dof_stiffness
+from .model import (
+    BuiltModel,
+    dof_stiffness,
+    has_internal_elasticity,
+    passive_damping_matrix,
+    passive_stiffness_matrix,
+)
 
 __all__ = [
     "Mode",
@@ -257,10 +263,15 @@ def stiffness_matrix(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarra
 
     k = np.zeros((model.nv, model.nv))
     for j in range(model.nv):
+        # tangent-space steps (mj_integratePos): plain addition for hinges and slides, and correct
+        # for the ball joints of ``cable`` links
+        dq = np.zeros(model.nv)
+        dq[j] = eps
         q = qpos.copy()
-        q[j] += eps
+        mujoco.mj_integratePos(model, q, dq, 1.0)
         fp = force(q)
-        q[j] -= 2 * eps
+        q = qpos.copy()
+        mujoco.mj_integratePos(model, q, -dq, 1.0)
         fm = force(q)
         k[:, j] = -(fp - fm) / (2 * eps)
     return 0.5 * (k + k.T)
@@ -270,6 +281,15 @@ def damping_matrix(model: mujoco.MjModel) -> np.ndarray:
     """``-d qfrc_passive / d qdot``: the joint dampers, the only velocity-dependent passive forces of
     the generated models (no fluid, no tendons)."""
     return np.diag(np.asarray(model.dof_damping, float))
+
+
+def _energy_stiffness(model: mujoco.MjModel) -> np.ndarray:
+    """Per-dof stiffness that splits a mode's strain energy by kind: the joint springs, or for
+    ``cable``/``flex`` links the diagonal of the passive stiffness at ``qpos0`` (an estimate: it
+    leaves out the coupling terms)."""
+    if has_internal_elasticity(model):
+        return np.clip(np.diag(passive_stiffness_matrix(model)), 0.0, None)
+    return dof_stiffness(model)
 
 
 def _character(shape: np.ndarray, k_dof: np.ndarray, kinds: list[str]) -> dict[str, float]:
@@ -345,7 +365,7 @@ def modes_transition_fd(
     lam, vec = np.linalg.eig(a)
     h = model.opt.timestep
     s = np.log(lam.astype(complex)) / h
-    k_dof = dof_stiffness(model)
+    k_dof = _energy_stiffness(model)
     dropped: dict[str, int] = {}
     modes: list[Mode] = []
     for idx in np.argsort(np.abs(s)):
@@ -392,7 +412,7 @@ def modes_constrained(
     model = built.model
     data = mujoco.MjData(model)
     q_eq = static_equilibrium(model, data) if qpos is None else np.asarray(qpos, float)
-    if model.nq != model.nv:
+    if built.floating:
         # floating rig: linearise in the tangent space at qpos0 (no gravity by construction)
         q_eq = model.qpos0.copy()
         return _constrained_floating(built, q_eq, n_modes, filt)
@@ -400,7 +420,7 @@ def modes_constrained(
     mass = mass_matrix(model, data)
     jac = equality_jacobian(model, data)
     stiff = stiffness_matrix(model, data, q_eq)
-    damp = damping_matrix(model)
+    damp = passive_damping_matrix(model, q_eq) if has_internal_elasticity(model) else damping_matrix(model)
     return _solve_reduced(built, q_eq, mass, stiff, damp, jac, n_modes, filt)
 
 
@@ -410,8 +430,10 @@ def _constrained_floating(built: BuiltModel, q0: np.ndarray, n_modes: int | None
     data = mujoco.MjData(model)
     _forward_at(model, data, q0)
     mass = mass_matrix(model, data)
-    stiff = np.diag(dof_stiffness(model))
-    damp = damping_matrix(model)
+    # joint springs only: the diagonal; a cable plugin's torques: differentiated (no gravity here)
+    internal = has_internal_elasticity(model)
+    stiff = passive_stiffness_matrix(model, q0) if internal else np.diag(dof_stiffness(model))
+    damp = passive_damping_matrix(model, q0) if internal else damping_matrix(model)
     jac = np.zeros((0, model.nv))
     return _solve_reduced(built, q0, mass, stiff, damp, jac, n_modes, filt)
 
@@ -435,7 +457,7 @@ def _solve_reduced(
     mr = z.T @ mass @ z
     cr = z.T @ damp @ z
     w2, x = scipy.linalg.eigh(0.5 * (kr + kr.T), 0.5 * (mr + mr.T))
-    k_dof = dof_stiffness(built.model)
+    k_dof = _energy_stiffness(built.model)
     dropped: dict[str, int] = {}
     modes: list[Mode] = []
     scale = max(float(np.max(np.abs(w2))), 1.0)

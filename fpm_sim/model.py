@@ -22,7 +22,7 @@ import mujoco
 import numpy as np
 import scipy.linalg
 
-from .links import check_link_model
+from .links import DEFAULT_RESOLUTION, check_link_model
 
 __all__ = [
     "ModelOptions",
@@ -36,6 +36,9 @@ __all__ = [
     "highest_frequency_rad_s",
     "WELD_SOLIMP",
     "dof_stiffness",
+    "has_internal_elasticity",
+    "passive_stiffness_matrix",
+    "passive_damping_matrix",
 ]
 
 DEFAULT_SEGMENTS = 12
@@ -60,9 +63,12 @@ class ModelOptions:
     Parameters
     ----------
     link_model
-        ``"segments"`` (rigid-finite-element chain, default) or ``"rigid"``.
+        ``"segments"`` (rigid-finite-element chain, default), ``"rigid"``, ``"cable"`` (MuJoCo's
+        cable plugin) or ``"flex"`` (a 1D flex); see :mod:`fpm_sim.deformable_links`.
     segments
-        Number of spring locations per link (``segments`` model).
+        Resolution per link: spring locations (``segments``), elastic joints (``cable``) or flex
+        edges (``flex``); ``None`` takes the model's default
+        (:data:`fpm_sim.links.DEFAULT_RESOLUTION`: 12, 12, 16).
     axial
         Add an axial spring at each spring location (default). Without it the links are
         inextensible: 2.4 times cheaper for the manipulator and within 0.1 % on its in-plane modes,
@@ -80,13 +86,15 @@ class ModelOptions:
     """
 
     link_model: str = "segments"
-    segments: int = DEFAULT_SEGMENTS
+    segments: int | None = None
     axial: bool = True
     rotary_inertia: bool = False
     gravity: bool = True
     timestep_s: float | None = None
 
     def __post_init__(self) -> None:
+        if self.segments is None and self.link_model in DEFAULT_RESOLUTION:
+            object.__setattr__(self, "segments", DEFAULT_RESOLUTION[self.link_model])
         check_link_model(self.link_model, self.segments)
         if self.timestep_s is not None and not (0.0 < self.timestep_s <= 1e-2):
             raise TimestepError(f"timestep_s must be in (0, 0.01] s, got {self.timestep_s!r}")
@@ -168,16 +176,73 @@ def dof_stiffness(model: mujoco.MjModel) -> np.ndarray:
     return k
 
 
+def has_internal_elasticity(model: mujoco.MjModel) -> bool:
+    """Whether passive forces come from more than joint springs (a plugin or a flex: ``cable``, ``flex`` links)."""
+    return bool(model.nplugin > 0 or model.nflex > 0)
+
+
+def passive_stiffness_matrix(model: mujoco.MjModel, qpos: np.ndarray | None = None, eps: float = 1e-7) -> np.ndarray:
+    """``-d qfrc_passive / dq`` at ``qpos`` (default ``qpos0``), zero velocity, by centred differences.
+
+    Differences are taken in the tangent space (``mj_integratePos``), so ball and free joints are
+    handled; this captures joint springs, the cable plugin's torques and flex bending and edge
+    springs alike (gravity and constraints are not passive forces).
+    """
+    data = mujoco.MjData(model)
+    q0 = model.qpos0.copy() if qpos is None else np.asarray(qpos, float)
+    k = np.zeros((model.nv, model.nv))
+    for j in range(model.nv):
+        cols = []
+        for sign in (1.0, -1.0):
+            dq = np.zeros(model.nv)
+            dq[j] = sign * eps
+            q = q0.copy()
+            mujoco.mj_integratePos(model, q, dq, 1.0)
+            data.qpos[:] = q
+            data.qvel[:] = 0.0
+            mujoco.mj_forward(model, data)
+            cols.append(data.qfrc_passive.copy())
+        k[:, j] = -(cols[0] - cols[1]) / (2 * eps)
+    return 0.5 * (k + k.T)
+
+
+def passive_damping_matrix(model: mujoco.MjModel, qpos: np.ndarray, eps: float = 1e-6) -> np.ndarray:
+    """``-d qfrc_passive / d qvel`` at ``qpos`` by centred differences (joint dampers, the cable
+    joints' damping and the flex's bending damping alike)."""
+    data = mujoco.MjData(model)
+    c = np.zeros((model.nv, model.nv))
+    for j in range(model.nv):
+        cols = []
+        for sign in (1.0, -1.0):
+            data.qpos[:] = qpos
+            data.qvel[:] = 0.0
+            data.qvel[j] = sign * eps
+            mujoco.mj_forward(model, data)
+            cols.append(data.qfrc_passive.copy())
+        c[:, j] = -(cols[0] - cols[1]) / (2 * eps)
+    return 0.5 * (c + c.T)
+
+
 def highest_frequency_rad_s(model: mujoco.MjModel) -> float:
-    """Highest natural frequency of the joint springs (constraints ignored) at ``qpos0`` (rad/s)."""
+    """Highest natural frequency of the passive stiffness (constraints ignored) at ``qpos0`` (rad/s).
+
+    Joint springs give a diagonal stiffness; models with a cable plugin or a flex use
+    :func:`passive_stiffness_matrix`.
+    """
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
     mass = np.zeros((model.nv, model.nv))
     mujoco.mj_fullM(model, data, mass)
-    k = dof_stiffness(model)
-    if not np.any(k > 0):
-        return 0.0
-    w2 = scipy.linalg.eigh(np.diag(k), mass, eigvals_only=True, subset_by_index=[model.nv - 1, model.nv - 1])
+    if has_internal_elasticity(model):
+        stiff = passive_stiffness_matrix(model)
+        if not np.any(np.abs(stiff) > 0):
+            return 0.0
+    else:
+        k = dof_stiffness(model)
+        if not np.any(k > 0):
+            return 0.0
+        stiff = np.diag(k)
+    w2 = scipy.linalg.eigh(stiff, mass, eigvals_only=True, subset_by_index=[model.nv - 1, model.nv - 1])
     return float(np.sqrt(max(w2[0], 0.0)))
 
 

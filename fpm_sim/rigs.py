@@ -23,7 +23,7 @@ import mujoco
 import numpy as np
 
 from .config import Compliance, LumpedMass, RigConfig
-from .links import add_link
+from .links import add_link, lump_part, set_inertial
 from .manipulator_model import _add_hinge, _half, dof_kinds_of
 from .model import BuiltModel, ModelOptions, add_weld, compile_model, new_spec
 
@@ -85,6 +85,7 @@ def build_rig(
         axial=opts.axial,
         rotary_inertia=opts.rotary_inertia,
         damping_beta_s=setup.damping_beta_s,
+        spec=spec,
     )
     hinge = piece.chain_hinge if setup.rig == "chain" else LumpedMass()
     first = add_link(
@@ -94,12 +95,15 @@ def build_rig(
         angle_rad=0.0,
         length_m=free_len,
         end_lumps=(_half(hinge),) if hinge.mass_kg > 0 else (),
+        free_start=setup.rig == "free-free",
+        free_end=setup.rig != "chain",
         **kw,
     )
     links[first.name] = first.sites
     kinds.update(dict(first.joints))
     if setup.rig == "free-free":
-        first.first.add_freejoint(name="float")
+        if opts.link_model != "flex":  # a flex link's vertices are free already
+            first.first.add_freejoint(name="float")
     else:
         _clamp_springs(first.first, "root", comp.base_clamp_nm_per_rad, setup.damping_beta_s, kinds)
     if setup.rig == "chain":
@@ -111,6 +115,7 @@ def build_rig(
             angle_rad=turn,
             length_m=free_len,
             start_lumps=(_half(hinge),) if hinge.mass_kg > 0 else (),
+            free_end=False,
             **kw,
         )
         _add_hinge(second.first, "hinge", [0, 0, 1])
@@ -118,9 +123,7 @@ def build_rig(
         links[second.name] = second.sites
         kinds.update(dict(second.joints))
         tip = second.last.add_body(name="tip", pos=[second.last_length_m, 0.0, 0.0])
-        tip.mass = 1e-4
-        tip.fullinertia = [1e-9, 1e-9, 1e-9, 0, 0, 0]
-        tip.explicitinertial = True
+        set_inertial(tip, [lump_part(LumpedMass(1e-4, (1e-9, 1e-9, 1e-9)), np.zeros(3))])
         _clamp_springs(tip, "tip", comp.base_clamp_nm_per_rad, setup.damping_beta_s, kinds)
         add_weld(spec, "clamp_far", "tip", "world")
     model = compile_model(spec, timestep_s=opts.timestep_s)
