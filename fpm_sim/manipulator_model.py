@@ -46,15 +46,25 @@ def _add_hinge(
     j.damping = [damping, 0.0, 0.0]
 
 
+_AXES = {"x": [1, 0, 0], "y": [0, 1, 0], "z": [0, 0, 1]}
+
+
+def add_compliance_springs(
+    body: mujoco.MjsBody, prefix: str, axes: str, k: float, beta: float, kind: str, kinds: dict[str, str]
+) -> None:
+    """Rotational springs ``{prefix}{axis}`` of stiffness ``k`` (damping ``beta k``) about each of
+    ``axes`` (e.g. ``"xy"``); nothing when ``k`` is infinite (rigid)."""
+    if math.isfinite(k):
+        for ax in axes:
+            _add_hinge(body, f"{prefix}{ax}", _AXES[ax], k, beta * k)
+            kinds[f"{prefix}{ax}"] = kind
+
+
 def _add_passive_joint(body: mujoco.MjsBody, name: str, manip: Manipulator, kinds: dict[str, str]) -> None:
     _add_hinge(body, name, [0, 0, 1])
     kinds[name] = "passive"
     k_tilt = manip.compliance.passive_joint_tilt_nm_per_rad
-    if math.isfinite(k_tilt):
-        beta = manip.damping.stiffness_proportional_s
-        for ax, axis in (("x", [1, 0, 0]), ("y", [0, 1, 0])):
-            _add_hinge(body, f"{name}_tilt{ax}", axis, k_tilt, beta * k_tilt)
-            kinds[f"{name}_tilt{ax}"] = "tilt"
+    add_compliance_springs(body, f"{name}_tilt", "xy", k_tilt, manip.damping.stiffness_proportional_s, "tilt", kinds)
 
 
 def build_manipulator(

@@ -24,7 +24,7 @@ import numpy as np
 
 from .config import Compliance, LumpedMass, RigConfig
 from .links import add_link, lump_part, set_inertial
-from .manipulator_model import _add_hinge, _half, dof_kinds_of
+from .manipulator_model import _add_hinge, _half, add_compliance_springs, dof_kinds_of
 from .model import BuiltModel, ModelOptions, add_weld, compile_model, new_spec
 
 __all__ = ["RIGS", "RigError", "build_rig", "RigSetup"]
@@ -52,10 +52,7 @@ class RigSetup:
 
 
 def _clamp_springs(body: mujoco.MjsBody, prefix: str, k: float, beta: float, kinds: dict[str, str]) -> None:
-    if math.isfinite(k):
-        for ax, axis in (("y", [0, 1, 0]), ("z", [0, 0, 1])):
-            _add_hinge(body, f"{prefix}_clamp{ax}", axis, k, beta * k)
-            kinds[f"{prefix}_clamp{ax}"] = "clamp"
+    add_compliance_springs(body, f"{prefix}_clamp", "yz", k, beta, "clamp", kinds)
 
 
 def build_rig(
