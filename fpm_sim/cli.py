@@ -198,7 +198,7 @@ def cmd_modes(args: argparse.Namespace) -> int:
 
 
 def _rig_setup(args: argparse.Namespace, manip: Manipulator) -> RigSetup:
-    return RigSetup(args.rig, angle_deg=args.angle_deg, damping_beta_s=manip.damping.stiffness_proportional_s)
+    return RigSetup(args.rig, angle_deg=args.angle_deg, damping_beta_s=args.damping_beta_s)
 
 
 def _rig_piece(args: argparse.Namespace, manip: Manipulator):  # noqa: ANN202
@@ -273,6 +273,12 @@ def _add_rig_overrides(p: argparse.ArgumentParser) -> None:
     g.add_argument("--density-kg-m3", type=float)
     g.add_argument("--clamped-length-m", type=float, help="length held in each clamp")
     p.add_argument("--angle-deg", type=float, default=180.0, help="chain hinge interior angle (180 = straight)")
+    p.add_argument(
+        "--damping-beta-s",
+        type=float,
+        default=0.0,
+        help="rig stiffness-proportional damping (s; default 0: the config's value is for the manipulator)",
+    )
 
 
 def _add_analysis_args(p: argparse.ArgumentParser) -> None:

@@ -22,7 +22,7 @@ __all__ = ["REFERENCE_MODELS", "write_reference_mjcf"]
 def _rig(name: str, angle_deg: float = 180.0) -> Callable[[], BuiltModel]:
     def make() -> BuiltModel:
         cfg = default_config()
-        setup = RigSetup(name, angle_deg=angle_deg, damping_beta_s=cfg.damping.stiffness_proportional_s)
+        setup = RigSetup(name, angle_deg=angle_deg)
         return build_rig(setup, rig_piece(cfg), compliance=cfg.compliance)
 
     return make
