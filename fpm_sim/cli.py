@@ -30,6 +30,7 @@ __all__ = ["main", "COMMAND_MODULES"]
 
 COMMAND_MODULES: list[str] = []
 COMMAND_MODULES += ["fpm_sim.cli_rollout", "fpm_sim.cli_reduce", "fpm_sim.cli_transient"]  # issue 6
+COMMAND_MODULES += ["fpm_sim.cli_frf", "fpm_sim.cli_impact", "fpm_sim.cli_readability", "fpm_sim.cli_atlas"]  # issue 7
 """Extra command modules (``module.register(subparsers)``), added by later features."""
 
 _USER_ERRORS = (

@@ -300,8 +300,9 @@ class FrequencyResponse:
             raise FrfError(f"FRF file {str(p)!r} must end in .csv")
         p.parent.mkdir(parents=True, exist_ok=True)
         cols = self.columns()
-        header = f"# {self.quantity} ({self.unit}), excitation {self.excitation}, response {self.response}\n" + ",".join(
-            cols
+        header = (
+            f"# {self.quantity} ({self.unit}), excitation {self.excitation}, response {self.response}\n"
+            + ",".join(cols)
         )
         np.savetxt(p, np.column_stack(list(cols.values())), delimiter=",", header=header, comments="", fmt="%.10g")
         return p

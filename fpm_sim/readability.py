@@ -44,7 +44,7 @@ import numpy as np
 from tqdm import tqdm
 
 from .config import Manipulator
-from .frf import FrequencyResponse, LinkPoint, modal_frf, pick_peaks
+from .frf import FrequencyResponse, FrfError, LinkPoint, modal_frf, pick_peaks
 from .impact_test import STUDY_IMPACT_POINT
 from .kinematics import Pose
 from .manipulator_model import build_manipulator
@@ -104,9 +104,9 @@ def study_grid(*, row_is: str = "x", phi_sign: int = 1) -> list[GridPose]:
         Sign of the 0.2 rad platform rotation at the cells written ``(x, 0)``.
     """
     if row_is not in ("x", "y"):
-        raise ValueError(f"row_is must be 'x' or 'y', got {row_is!r}")
+        raise FrfError(f"row_is must be 'x' or 'y', got {row_is!r}")
     if phi_sign not in (1, -1):
-        raise ValueError(f"phi_sign must be +1 or -1, got {phi_sign!r}")
+        raise FrfError(f"phi_sign must be +1 or -1, got {phi_sign!r}")
     text = resources.files("fpm_sim.data").joinpath("comsol_table5.csv").read_text()
     lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
     out = []
@@ -163,7 +163,7 @@ def mode1_readability(
     """
     f1 = float(system.frequencies_hz[0])
     if f_max_hz <= f1:
-        raise ValueError(f"f_max_hz ({f_max_hz:g} Hz) must exceed the first frequency {f1:.4g} Hz")
+        raise FrfError(f"f_max_hz ({f_max_hz:g} Hz) must exceed the first frequency {f1:.4g} Hz")
     frf = modal_frf(
         system,
         excitation=point,
@@ -314,7 +314,8 @@ class ReadabilityTable:
         for k in range(len(self.points)):
             a = self.agreement(k)
             out.append(
-                f"{a['point']}: predicted unreadable {a['predicted_unreadable']}/{a['n']} (study {a['study_unreadable']}), "
+                f"{a['point']}: predicted unreadable {a['predicted_unreadable']}/{a['n']} "
+                f"(study {a['study_unreadable']}), "
                 f"both unreadable {a['both_unreadable']}, agreement {a['agree']}/{a['n']}, "
                 f"AUC of prominence {a['auc_prominence']:.2f} (0.5 = no explanation, 1 = perfect)"
             )
