@@ -10,7 +10,7 @@ import numpy as np
 from .cli import add_config_args, add_output_args, add_pose_args, emit, load_manipulator, pose_of
 from .cli_frf import frf_user_errors
 from .manipulator_model import build_manipulator
-from .modal_atlas import AtlasError, build_atlas, load_atlas
+from .modal_atlas import AtlasError, build_atlas, load_atlas, mac_matrix
 from .model import ModelOptions
 from .reduction import modal_system
 
@@ -72,13 +72,26 @@ def cmd_atlas_query(args: argparse.Namespace) -> int:
         opts = ModelOptions(
             **{k: o[k] for k in ("link_model", "segments", "axial", "rotary_inertia", "gravity", "timestep_s")}
         )
-        direct = modal_system(build_manipulator(manip, pose, opts)).frequencies_hz[: rom.n_modes]
+        system = modal_system(build_manipulator(manip, pose, opts))
+        # each interpolated mode against the direct mode of the most similar shape (MAC), which need not
+        # be the same sorted position: the atlas keeps the tracked modes, not always the lowest ones
+        mac = mac_matrix(rom.mode_shapes, system.phi)
+        match = np.argmax(mac, axis=1)
+        direct = system.frequencies_hz[match]
         rel = rom.frequencies_hz / direct - 1.0
         payload["direct_frequencies_hz"] = direct.tolist()
+        payload["direct_mode_index"] = (match + 1).tolist()
+        payload["mac"] = mac[np.arange(len(match)), match].tolist()
         payload["relative_difference"] = rel.tolist()
-        lines.append(f"{'mode':>4}  {'atlas (Hz)':>11}  {'direct (Hz)':>11}  {'diff %':>8}  {'damping':>8}")
-        for i, (f, d, r, z) in enumerate(zip(rom.frequencies_hz, direct, rel, rom.damping_ratios), 1):
-            lines.append(f"{i:>4}  {f:>11.3f}  {d:>11.3f}  {r * 100:>8.3f}  {z:>8.4f}")
+        payload["lowest_direct_frequencies_hz"] = system.frequencies_hz[: rom.n_modes].tolist()
+        lines.append(
+            f"{'mode':>4}  {'atlas (Hz)':>11}  {'direct (Hz)':>11}  {'direct #':>8}  {'MAC':>6}  {'diff %':>8}  "
+            f"{'damping':>8}"
+        )
+        for i, (f, d, j, r, z) in enumerate(zip(rom.frequencies_hz, direct, match, rel, rom.damping_ratios), 1):
+            lines.append(
+                f"{i:>4}  {f:>11.3f}  {d:>11.3f}  {j + 1:>8}  {mac[i - 1, j]:>6.3f}  {r * 100:>8.3f}  {z:>8.4f}"
+            )
     else:
         lines.append(rom.table())
     if args.out:

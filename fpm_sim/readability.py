@@ -178,8 +178,8 @@ def mode1_readability(
     peaks = pick_peaks(frf.freq_hz, mag, min_prominence_db=0.0)
     near = [p for p in peaks if abs(p.freq_hz / f1 - 1.0) <= F1_MATCH]
     best = max(near, key=lambda p: p.prominence_db) if near else None
-    top = float(mag.max())
     at_f1 = best.magnitude if best else float(mag[np.argmin(np.abs(frf.freq_hz - f1))])
+    top = max(float(mag.max()), at_f1)  # the refined peak may top the samples
     b = frf.residues[0]
     exc = float(math.sqrt(abs(b)))  # driving point: (c phi)(phi' b) = (phi' b)^2
     metrics = Mode1Readability(
