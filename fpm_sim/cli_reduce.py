@@ -15,7 +15,7 @@ from .cli import (
     model_options,
     pose_of,
 )
-from .cli_rollout import user_errors
+from .cli_rollout import add_motor_args, apply_motor_args, user_errors
 from .manipulator_model import build_manipulator
 from .reduction import ReductionError, reduce_model
 
@@ -26,7 +26,9 @@ __all__ = ["register"]
 def cmd_reduce(args: argparse.Namespace) -> int:
     if args.out is not None and args.out.suffix not in (".mat", ".npz"):
         raise ReductionError(f"--out {args.out} must end in .mat or .npz")
-    manip = load_manipulator(args)
+    if args.modes is not None and args.modes < 1:
+        raise ReductionError(f"--modes must be at least 1, got {args.modes}")
+    manip = apply_motor_args(load_manipulator(args), args)
     built = build_manipulator(manip, pose_of(args), model_options(args))
     rom = reduce_model(
         built,
@@ -85,6 +87,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--accel-fraction", type=float, default=0.5, help="accelerometer position on each distal link (0..1 from elbow)"
     )
+    add_motor_args(p)
     add_pose_args(p)
     add_config_args(p)
     add_model_args(p)

@@ -20,12 +20,13 @@ from .cli import (
     model_options,
     pose_of,
 )
-from .config import Motors
+from .config import Manipulator, Motors
+from .equilibrium import EquilibriumError
 from .manipulator_model import build_manipulator
 from .reduction import ReductionError, accel_site_names
 from .rollout import RolloutError, aligned_options, constant, rollout, sine, step_at
 
-__all__ = ["register", "user_errors"]
+__all__ = ["register", "user_errors", "add_motor_args", "apply_motor_args"]
 
 
 def user_errors(func: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
@@ -38,8 +39,39 @@ def user_errors(func: Callable[[argparse.Namespace], int]) -> Callable[[argparse
         except (RolloutError, ReductionError) as exc:
             print(f"fpm-sim: error: {exc}", file=sys.stderr)
             return 2
+        except EquilibriumError as exc:
+            hint = (
+                "; thin links with axial springs can stall the equilibrium solver (measured for 5 mm links): "
+                "try --no-axial"
+                if not getattr(args, "no_axial", True)
+                else ""
+            )
+            print(f"fpm-sim: error: {exc}{hint}", file=sys.stderr)
+            return 2
 
     return wrapped
+
+
+def add_motor_args(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("motors")
+    g.add_argument("--motors", choices=("config", "servo"), default="config", help="motors as configured, or servo")
+    g.add_argument("--servo-stiffness-nm-per-rad", type=float, help="servo stiffness (with --motors servo)")
+    g.add_argument("--servo-damping-nms-per-rad", type=float, default=0.0, help="servo damping (with --motors servo)")
+
+
+def apply_motor_args(manip: Manipulator, args: argparse.Namespace) -> Manipulator:
+    """``manip`` with servo motors if ``--motors servo`` (locked motors have no joint to drive)."""
+    if args.motors != "servo":
+        return manip
+    if not args.servo_stiffness_nm_per_rad or args.servo_stiffness_nm_per_rad <= 0:
+        raise RolloutError("--motors servo needs --servo-stiffness-nm-per-rad > 0")
+    return manip.replace(
+        motors=Motors(
+            mode="servo",
+            servo_stiffness_nm_per_rad=args.servo_stiffness_nm_per_rad,
+            servo_damping_nms_per_rad=args.servo_damping_nms_per_rad,
+        )
+    )
 
 
 def _profile(kind: str, values: list[float], t0_s: float, freq_hz: float):  # noqa: ANN202
@@ -57,16 +89,7 @@ def cmd_rollout(args: argparse.Namespace) -> int:
     manip = load_manipulator(args)
     if args.thickness_m is not None:
         manip = manip.with_section(thickness_m=args.thickness_m)
-    if args.motors == "servo":
-        if not args.servo_stiffness_nm_per_rad or args.servo_stiffness_nm_per_rad <= 0:
-            raise RolloutError("--motors servo needs --servo-stiffness-nm-per-rad > 0")
-        manip = manip.replace(
-            motors=Motors(
-                mode="servo",
-                servo_stiffness_nm_per_rad=args.servo_stiffness_nm_per_rad,
-                servo_damping_nms_per_rad=args.servo_damping_nms_per_rad,
-            )
-        )
+    manip = apply_motor_args(manip, args)
     if args.out is not None and args.out.suffix not in (".csv", ".npz"):
         raise RolloutError(f"--out {args.out} must end in .csv or .npz")
     if args.plot is not None and args.plot.suffix not in (".png", ".pdf", ".svg"):
@@ -141,10 +164,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "rollout",
         help="headless nonlinear simulation from the static equilibrium under end-effector and motor loads",
         description=(
-            "Steps the full MuJoCo model from its static equilibrium under gravity. Loads are held over each output "
-            "step. Motor torques need --motors servo (locked motors have no joint). Writes a CSV/NPZ of end-effector "
-            "pose, displacement, deflection (pose minus rigid-link kinematics), motor angles, loads and "
-            "accelerations, and a plot."
+            "Steps the full MuJoCo model from its static equilibrium under gravity. Loads are held over each "
+            "output step. The default resolution (12 segments, axial springs) needs ~1 us steps: for long "
+            "rollouts use e.g. --segments 6 --no-axial. Motor torques need --motors servo (locked motors have no "
+            "joint). Writes a CSV/NPZ of end-effector pose, displacement, deflection (pose minus rigid-link "
+            "kinematics), motor angles, loads and accelerations, and a plot."
         ),
     )
     p.add_argument("--duration-s", type=float, default=0.2, help="simulated time (s, default 0.2)")
@@ -156,9 +180,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--load-profile", choices=("constant", "step", "sine"), default="constant", help="load time profile")
     p.add_argument("--load-start-s", type=float, default=0.0, help="step time (s) for --load-profile step")
     p.add_argument("--load-freq-hz", type=float, default=10.0, help="frequency (Hz) for --load-profile sine")
-    p.add_argument("--motors", choices=("config", "servo"), default="config", help="motors as configured, or servo")
-    p.add_argument("--servo-stiffness-nm-per-rad", type=float, help="servo stiffness (with --motors servo)")
-    p.add_argument("--servo-damping-nms-per-rad", type=float, default=0.0, help="servo damping (with --motors servo)")
+    add_motor_args(p)
     p.add_argument("--thickness-m", type=float, help="link in-plane thickness override (m)")
     p.add_argument(
         "--accel-fraction", type=float, default=0.5, help="record accelerations on each distal link at this fraction"

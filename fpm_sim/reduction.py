@@ -41,6 +41,7 @@ relative Frobenius error at most ``error_bound``; see :func:`static_truncation_e
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -65,6 +66,8 @@ __all__ = [
     "static_truncation_error",
     "END_EFFECTOR_SITE",
     "load_reduced_model",
+    "motor_dofs",
+    "accel_site_names",
 ]
 
 END_EFFECTOR_SITE = "platform_center"
@@ -106,8 +109,6 @@ class ModalSystem:
         Names and units of the inputs and of the outputs (displacements first, then accelerations).
     accel_sites
         Site of each acceleration output.
-    dropped
-        Modes left out by the :class:`~fpm_sim.modal.ModeFilter` (e.g. ``zero``: below 1 Hz).
     """
 
     built: BuiltModel
@@ -124,7 +125,6 @@ class ModalSystem:
     output_names: list[str]
     output_units: list[str]
     accel_sites: list[str]
-    dropped: dict[str, int] = field(default_factory=dict)
 
     @property
     def frequencies_hz(self) -> np.ndarray:
@@ -217,7 +217,8 @@ def modal_system(
         Position of the accelerometer on each distal link, as a fraction of its length from the
         elbow (nearest segment site).
     filt
-        Drops modes below ``filt.zero_freq_hz`` (rigid-body motion, mechanisms).
+        ``filt.zero_freq_hz``: a mode below it (rigid-body motion, a mechanism) raises
+        :class:`ReductionError`, as no static correction exists then.
     """
     filt = filt or ModeFilter()
     model = built.model
@@ -225,7 +226,7 @@ def modal_system(
         raise ReductionError("reduced models need a model without free joints (the manipulator or a clamped rig)")
     data = mujoco.MjData(model)
     q_eq = static_equilibrium(model, data) if qpos is None else np.asarray(qpos, float)
-    stiff = stiffness_matrix(model, data, q_eq)  # leaves data at q_eq after its last perturbation
+    stiff = stiffness_matrix(model, data, q_eq)  # leaves data at a perturbed state: reset below
     data.qpos[:] = q_eq
     data.qvel[:] = 0.0
     mujoco.mj_forward(model, data)
@@ -247,7 +248,6 @@ def modal_system(
         )
     w = np.sqrt(np.maximum(w2, 0.0))
     keep = w / (2 * np.pi) >= filt.zero_freq_hz
-    dropped = {"zero": int(np.sum(~keep))} if np.any(~keep) else {}
     if np.any(~keep):
         raise ReductionError(
             f"{int(np.sum(~keep))} mode(s) below {filt.zero_freq_hz} Hz (a mechanism or rigid-body motion): a "
@@ -276,7 +276,6 @@ def modal_system(
         output_names=out_names,
         output_units=out_units,
         accel_sites=accel_sites,
-        dropped=dropped,
     )
 
 
@@ -513,6 +512,7 @@ class ReducedModel:
             "mode_shapes": self.mode_shapes,
             "qpos": self.qpos,
             "static_correction": int(self.static_correction),
+            "parameters_json": json.dumps(_jsonable(self.parameters)),
         }
 
     def save(self, path: str | Path) -> Path:
@@ -542,6 +542,18 @@ class ReducedModel:
         else:
             raise ReductionError(f"output file {str(p)!r} must end in .mat or .npz (--out)")
         return p
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple, np.ndarray)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, (np.floating, float)):
+        return float(obj) if math.isfinite(obj) else str(obj)
+    if isinstance(obj, np.integer):
+        return int(obj)
+    return obj
 
 
 def _strings(v: Any) -> list[str]:
@@ -586,6 +598,7 @@ def load_reduced_model(path: str | Path) -> ReducedModel:
         mode_shapes=np.asarray(raw["mode_shapes"], float),
         qpos=vec("qpos"),
         static_correction=bool(int(np.asarray(raw["static_correction"]).ravel()[0])),
+        parameters=json.loads(_strings(raw["parameters_json"])[0]) if "parameters_json" in raw else {},
     )
 
 

@@ -129,6 +129,8 @@ class TransientResult:
             out["y_over_x_peak_rom"] = y.peak_rom_m / x.peak_rom_m
             out["y_larger_than_x"] = bool(y.peak_full_m > x.peak_full_m)
             ratio = out["y_over_x_peak_full"]
+            gain = self.rom.static_gain()
+            out["static_compliance_m_per_n"] = {"x": float(gain[0, 0]), "y": float(gain[1, 1])}
             out["anisotropy_verdict"] = (
                 f"y larger than x by more than {ANISOTROPY_TOL:.0%}"
                 if ratio > 1 + ANISOTROPY_TOL
@@ -161,7 +163,9 @@ class TransientResult:
         if "y_larger_than_x" in s:
             lines.append(
                 f"y peak / x peak: {s['y_over_x_peak_full']:.4f} (full), {s['y_over_x_peak_rom']:.4f} (ROM): "
-                "y displacement " + ("IS" if s["y_larger_than_x"] else "is NOT") + " larger than x"
+                + s["anisotropy_verdict"]
+                + f" (study: y larger than x); ROM static compliance x {s['static_compliance_m_per_n']['x']:.4g}, "
+                f"y {s['static_compliance_m_per_n']['y']:.4g} m/N"
             )
         lines.append(
             f"wall time: full nonlinear {s['wall_full_s']:.2f} s, reduced model {s['wall_rom_total_s']:.3f} s "

@@ -43,12 +43,32 @@ def test_reduce_table_and_band(capsys):
     assert "freq (Hz)" in text and "force_x (N)" in text and "acc_distal_0 (m/s^2)" in text
 
 
+def test_reduce_servo_motors_add_torque_inputs(capsys):
+    code, text, _ = run(
+        capsys,
+        "reduce",
+        "--segments",
+        "3",
+        "--no-axial",
+        "--modes",
+        "4",
+        "--motors",
+        "servo",
+        "--servo-stiffness-nm-per-rad",
+        "500",
+        "--json",
+    )
+    assert code == 0
+    assert json.loads(text)["inputs"][3:] == ["motor_torque_0 (N m)", "motor_torque_1 (N m)", "motor_torque_2 (N m)"]
+
+
 @pytest.mark.parametrize(
     "argv, match",
     [
         (["--modes", "0"], "--modes"),
         (["--modes", "2", "--out", "rom.txt"], ".mat or .npz"),
         (["--error-bound", "3"], "--error-bound"),
+        (["--modes", "2", "--motors", "servo"], "--servo-stiffness-nm-per-rad"),
     ],
 )
 def test_reduce_errors(capsys, argv, match):
