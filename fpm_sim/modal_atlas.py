@@ -252,14 +252,13 @@ class ModalAtlas:
             if len(ax) == 1:
                 out = np.take(out, 0, axis=i)
                 continue
-            spline = scipy.interpolate.make_interp_spline(ax, out, k=3 if method == "cubic" else 1, axis=i)
+            k = 3 if method == "cubic" or (method == "auto" and len(ax) >= 4) else 1
+            spline = scipy.interpolate.make_interp_spline(ax, out, k=k, axis=i)
             out = spline(point[i])
         return np.asarray(out)
 
     def _method(self, method: str) -> str:
-        if method == "auto":
-            return "cubic" if all(len(a) >= 4 for a in self._axes()[0]) else "linear"
-        if method not in ("linear", "cubic"):
+        if method not in ("auto", "linear", "cubic"):
             raise AtlasError(f"method must be 'auto', 'linear' or 'cubic', got {method!r}")
         return method
 
@@ -270,9 +269,10 @@ class ModalAtlas:
         ----------
         method
             ``"linear"`` (multilinear), ``"cubic"`` (needs 4 or more values on each axis) or ``"auto"``
-            (cubic where possible). Measured on the 5 x 5 paper grid (3 segments, 6 tracked modes, phi 0):
-            f1..f3 at the 16 cell midpoints within 0.73 % (cubic) and 2.4 % (linear) of a direct
-            computation; see ``tests/test_modal_atlas.py``.
+            (cubic along the axes with 4 or more values, linear along the others). Measured on the
+            5 x 5 paper grid (3 segments, 6 tracked modes, phi 0): f1..f3 at the 16 cell midpoints
+            within 0.73 % (cubic) and 2.4 % (linear) of a direct computation; see
+            ``tests/test_modal_atlas.py``.
         """
         method = self._method(method)
         get = {

@@ -149,3 +149,17 @@ def test_bad_grids_are_refused(default_manip):
         build_atlas(default_manip, x_m=[0.0, 0.0], y_m=[0.0], options=OPTS)
     with pytest.raises(AtlasError, match="root"):
         build_atlas(default_manip, x_m=[0.0, 0.05], y_m=[0.0], options=OPTS, root=Pose(0.01, 0.0, 0.0))
+
+
+def test_rotation_axis_and_mixed_orders(default_manip):
+    """A grid in x (4 values: cubic under 'auto') and phi (2 values: linear), queried between rotations."""
+    xs = np.array([-0.075, -0.025, 0.025, 0.075])
+    at = build_atlas(default_manip, x_m=xs, y_m=[0.025], phi_rad=[0.0, 0.2], options=OPTS, n_modes=6)
+    pose = Pose(0.0, 0.025, 0.1)
+    direct = modal_system(build_manipulator(default_manip, pose, OPTS)).frequencies_hz[:3]
+    auto = at.query(pose).frequencies_hz[:3]
+    # 0.1 rad and 25 mm from the nearest nodes; measured 0.07 %
+    assert np.max(np.abs(auto / direct - 1.0)) < INTERP_TOL
+    assert not np.allclose(auto, at.query(pose, method="linear").frequencies_hz[:3], rtol=1e-9)
+    with pytest.raises(AtlasError, match="cubic"):
+        at.query(pose, method="cubic")
