@@ -274,6 +274,13 @@ class ImpactTestResult:
     parameters: dict[str, Any] = field(default_factory=dict)
 
     @property
+    def identified_damping_ratio(self) -> float:
+        """Damping ratio of the first mode identified from the test: the half-power reading minus the damping
+        the exponential window adds (pass it to :func:`fpm_sim.frf.modal_frf` or ``fpm-sim frf
+        --damping-ratio``)."""
+        return self.damping_half_power - self.window_damping
+
+    @property
     def relative_error(self) -> float:
         """``first_peak_hz / modal_f1_hz - 1``."""
         return self.first_peak_hz / self.modal_f1_hz - 1.0
@@ -293,6 +300,7 @@ class ImpactTestResult:
             ][:8],
             "damping_ratio_half_power": self.damping_half_power,
             "window_added_damping_at_first_peak": self.window_damping,
+            "identified_damping_ratio": self.identified_damping_ratio,
             "min_coherence_in_band": float(np.min(self.frf.coherence[band & (self.frf.freq_hz >= self.setup.f_min_hz)]))
             if self.frf.coherence.size
             else None,
@@ -313,7 +321,7 @@ class ImpactTestResult:
             f"  first FRF peak   {self.first_peak_hz:10.3f} Hz",
             f"  modal f1         {self.modal_f1_hz:10.3f} Hz   (difference {self.relative_error * 100:+.3f} %)",
             f"  half-power zeta  {self.damping_half_power:10.4f}     (includes {self.window_damping:.4f} from the "
-            "exponential window)",
+            f"exponential window: identified {self.identified_damping_ratio:.4f})",
             f"{'peak':>6}  {'freq (Hz)':>10}  {'prominence (dB)':>16}",
         ]
         for i, p in enumerate(d["peaks"], 1):
