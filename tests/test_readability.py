@@ -14,6 +14,7 @@ from fpm_sim.readability import (
     READABLE_PROMINENCE_DB,
     GridPose,
     auc,
+    auc_p_value,
     mode1_readability,
     readability_table,
     study_grid,
@@ -45,6 +46,17 @@ def test_auc():
     assert auc(np.array([1.0]), np.array([2.0])) == 0.0
     assert auc(np.array([1.0, 2.0]), np.array([1.0, 2.0])) == 0.5
     assert math.isnan(auc(np.array([]), np.array([1.0])))
+
+
+def test_auc_p_value():
+    scores = np.arange(25.0)
+    neg = np.zeros(25, bool)
+    neg[:7] = True  # the 7 lowest scores are the negatives: AUC 1, reached by 1 of C(25, 7) labellings
+    assert auc(scores[~neg], scores[neg]) == 1.0
+    assert auc_p_value(scores, neg, draws=2000) < 0.005
+    neg = np.zeros(25, bool)
+    neg[::4] = True  # spread evenly: AUC about 0.5, an unremarkable labelling
+    assert 0.2 < auc_p_value(scores, neg, draws=2000) < 0.8
 
 
 @pytest.fixture(scope="module")
