@@ -42,8 +42,10 @@ def cmd_atlas_build(args: argparse.Namespace) -> int:
         f"atlas of {int(np.prod(atlas.grid_shape))} poses ({' x '.join(map(str, atlas.grid_shape))}), "
         f"{atlas.n_modes} tracked modes; tracked frequency (Hz) per label, (#n) = sorted position where it moved:\n"
         + atlas.table()
-        + f"\n{len(weak)} weak links (MAC with the parent pose below 0.5: the grid is coarse for those modes there)"
-        + f"\nwrote {args.out}"
+        + f"\n{len(atlas.label_changes())} label changes (a mode's shape MAC with the parent pose below 0.5: its "
+        "per-label frequency is unreliable there)"
+        + f"\n{len(weak)} weak links (aligned basis MAC with the parent pose below 0.8: interpolated models unreliable "
+        f"there); lowest aligned MAC {float(atlas.nodes['mac_aligned'].min()):.3f}" + f"\nwrote {args.out}"
     )
     emit(args, payload, text)
     return 0

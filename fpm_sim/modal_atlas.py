@@ -29,7 +29,11 @@ arbitrary signs, and with an arbitrary basis inside (near-)repeated frequencies 
    entries vary smoothly where eigenvalues have kinks.
 
 Per-label frequencies (``label_freq_hz``, the tracked frequency of each reference mode at each grid
-pose, and which sorted mode it is there) are kept for tables and plots.
+pose, and which sorted mode it is there) are kept for tables and plots. Two diagnostics:
+``label_changes`` (a label's own shape changes character between neighbouring poses: its per-label
+frequency is unreliable there, which near repeated or veering modes is common and harmless for the
+reduced models) and ``weak_links`` (the aligned basis itself turns: the interpolated reduced models are
+unreliable there).
 """
 
 from __future__ import annotations
@@ -65,11 +69,18 @@ __all__ = [
     "build_atlas",
     "load_atlas",
     "MAC_WARN",
+    "BASIS_MAC_WARN",
 ]
 
 MAC_WARN = 0.5
-"""A tracked mode whose MAC with its parent is below this is reported as ambiguous (``weak_links``):
-two candidates then share the parent's shape about equally; refine the grid there."""
+"""A label whose matched shape has a MAC below this with its parent's changes character there
+(``label_changes``): two candidates share the parent's shape about equally, e.g. modes mixing near a
+veering. Its per-label frequency is then not to be trusted; the interpolated reduced models are
+unaffected as long as the aligned basis stays consistent (``weak_links``)."""
+BASIS_MAC_WARN = 0.8
+"""An aligned basis vector whose MAC with its parent's is below this means the tracked modal subspace
+itself turns between the two poses (``weak_links``): the interpolated reduced models are then poor
+between them; refine the grid or track more modes."""
 
 
 class AtlasError(ValueError):
@@ -95,6 +106,8 @@ class Alignment:
         ``(k,)`` sorted-mode index at this pose of each label.
     mac
         ``(k,)`` MAC of each matched shape with the parent's shape of the same label.
+    mac_aligned
+        ``(k,)`` MAC of each aligned basis vector with the parent's (after the Procrustes rotation).
     rotation
         ``(k, k)`` Procrustes rotation ``Q``.
     basis
@@ -105,6 +118,7 @@ class Alignment:
     mac: np.ndarray
     rotation: np.ndarray
     basis: np.ndarray
+    mac_aligned: np.ndarray
 
 
 def align_modes(parent_basis: np.ndarray, phi: np.ndarray, *, n_candidates: int | None = None) -> Alignment:
@@ -126,7 +140,11 @@ def align_modes(parent_basis: np.ndarray, phi: np.ndarray, *, n_candidates: int 
     v = cand[:, index]
     u, _, wt = np.linalg.svd(v.T @ parent_basis)
     q = u @ wt
-    return Alignment(index=index, mac=m[np.arange(k), index], rotation=q, basis=v @ q)
+    basis = v @ q
+    aligned = np.sum(basis * parent_basis, axis=0) ** 2 / (
+        np.sum(basis * basis, axis=0) * np.sum(parent_basis * parent_basis, axis=0)
+    )
+    return Alignment(index=index, mac=m[np.arange(k), index], rotation=q, basis=basis, mac_aligned=aligned)
 
 
 def track_modes(
@@ -164,7 +182,7 @@ def track_modes(
         raise AtlasError(f"n_modes must lie in [1, {n_all}], got {n_modes!r}")
     out: list[Alignment | None] = [None] * n
     base = systems[root].phi[:, :n_modes]
-    out[root] = Alignment(np.arange(n_modes), np.ones(n_modes), np.eye(n_modes), base.copy())
+    out[root] = Alignment(np.arange(n_modes), np.ones(n_modes), np.eye(n_modes), base.copy(), np.ones(n_modes))
     for i in range(n):
         if i == root:
             continue
@@ -178,7 +196,20 @@ def track_modes(
 # the atlas
 
 
-_NODE_KEYS = ("lam", "xi", "gamma", "cq_phi", "ca_phi", "d", "basis", "qpos", "label_freq_hz", "label_index", "mac")
+_NODE_KEYS = (
+    "lam",
+    "xi",
+    "gamma",
+    "cq_phi",
+    "ca_phi",
+    "d",
+    "basis",
+    "qpos",
+    "label_freq_hz",
+    "label_index",
+    "mac",
+    "mac_aligned",
+)
 
 
 @dataclass
@@ -212,14 +243,21 @@ class ModalAtlas:
     def poses(self) -> list[Pose]:
         return [Pose(float(x), float(y), float(p)) for x in self.x_m for y in self.y_m for p in self.phi_rad]
 
-    def weak_links(self, threshold: float = MAC_WARN) -> list[tuple[Pose, int, float]]:
-        """Tracked modes whose MAC with the parent is below ``threshold``: (pose, label, MAC)."""
+    def _below(self, key: str, threshold: float) -> list[tuple[Pose, int, float]]:
         out = []
         for flat, pose in enumerate(self.poses()):
             idx = np.unravel_index(flat, self.grid_shape)
-            mac = self.nodes["mac"][idx]
+            mac = self.nodes[key][idx]
             out += [(pose, j, float(mac[j])) for j in range(self.n_modes) if mac[j] < threshold]
         return out
+
+    def label_changes(self, threshold: float = MAC_WARN) -> list[tuple[Pose, int, float]]:
+        """Labels whose matched shape has a MAC below ``threshold`` with the parent pose's: (pose, label, MAC)."""
+        return self._below("mac", threshold)
+
+    def weak_links(self, threshold: float = BASIS_MAC_WARN) -> list[tuple[Pose, int, float]]:
+        """Aligned basis vectors with a MAC below ``threshold`` with the parent pose's: (pose, label, MAC)."""
+        return self._below("mac_aligned", threshold)
 
     def _axes(self) -> tuple[list[np.ndarray], list[int]]:
         axes = [self.x_m, self.y_m, self.phi_rad]
@@ -318,7 +356,8 @@ class ModalAtlas:
     def label_frequencies(self, pose: Pose, *, method: str = "auto") -> np.ndarray:
         """Tracked frequency (Hz) of each reference mode label at ``pose``, interpolated per label.
 
-        Coarser than :meth:`query` wherever a label changes character between grid poses (a weak link).
+        Coarser than :meth:`query` wherever a label changes character between grid poses
+        (:meth:`label_changes`).
         """
         return self._interp("label_freq_hz", pose, self._method(method))
 
@@ -336,9 +375,14 @@ class ModalAtlas:
             "inputs": self.input_names,
             "outputs": self.output_names,
             "weak_links": [
-                {"pose_mm": [p.x_m * 1e3, p.y_m * 1e3, p.phi_rad], "label": j + 1, "mac": m}
+                {"pose_mm": [p.x_m * 1e3, p.y_m * 1e3, p.phi_rad], "label": j + 1, "mac_aligned": m}
                 for p, j, m in self.weak_links()
             ],
+            "label_changes": [
+                {"pose_mm": [p.x_m * 1e3, p.y_m * 1e3, p.phi_rad], "label": j + 1, "mac": m}
+                for p, j, m in self.label_changes()
+            ],
+            "min_mac_aligned": float(self.nodes["mac_aligned"].min()),
             "parameters": self.parameters,
         }
 
@@ -486,7 +530,9 @@ def build_atlas(
         if n_modes + n_extra > k_all:
             raise AtlasError(f"n_modes + n_extra = {n_modes + n_extra} exceeds the {k_all} modes of the model")
         if parent[f] < 0:
-            al = Alignment(np.arange(n_modes), np.ones(n_modes), np.eye(n_modes), system.phi[:, :n_modes].copy())
+            al = Alignment(
+                np.arange(n_modes), np.ones(n_modes), np.eye(n_modes), system.phi[:, :n_modes].copy(), np.ones(n_modes)
+            )
         else:
             al = align_modes(aligned[parent[f]], system.phi, n_candidates=n_modes + n_extra)
         aligned[f] = al.basis
@@ -514,6 +560,7 @@ def build_atlas(
             "label_freq_hz": om / (2 * np.pi),
             "label_index": al.index.astype(float),
             "mac": al.mac,
+            "mac_aligned": al.mac_aligned,
         }
         for key, v in item.items():
             if key not in nodes:

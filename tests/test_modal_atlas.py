@@ -105,6 +105,14 @@ def test_atlas_reproduces_its_grid_poses(default_manip, atlas):
     assert compared_io >= 3
 
 
+def test_aligned_basis_is_consistent_on_the_paper_grid(atlas):
+    """Labels may change character between 50 mm neighbours (modes 2-6 mix near the symmetric pose), but the
+    tracked six-mode subspace does not turn: every aligned basis vector keeps a MAC above 0.8 (measured 0.89)
+    with its parent's, which is what makes the matrix interpolation work."""
+    assert atlas.weak_links() == []
+    assert len(atlas.label_changes()) > 0  # the raw per-mode identity does change: the diagnostic sees it
+
+
 @pytest.mark.parametrize("x_mm", MIDPOINTS_MM)
 def test_interpolated_frequencies_at_paper_grid_midpoints(default_manip, atlas, x_mm):
     for y_mm in MIDPOINTS_MM:
