@@ -345,6 +345,7 @@ class ImpactTestResult:
             modal_freq_hz=self.modal_freq_hz,
         )
         sub.plot(axes=axes[:2], label=f"H1, {len(self.records)} impacts")
+        axes[1].set_xlabel("")
         axes[0].axvline(self.first_peak_hz, color="r", ls="--", lw=0.8)
         axes[2].plot(self.frf.freq_hz[band], self.frf.coherence[band], lw=1.0)
         axes[2].set_ylabel("coherence")
