@@ -7,11 +7,12 @@ import mujoco
 import numpy as np
 import pytest
 
-from fpm_sim.frf import FrfError, LinkPoint, locate
+from fpm_sim.frf import FrfError, LinkPoint, locate, modal_frf
 from fpm_sim.impact_test import ImpactRecord, ImpactSetup, h1_estimate, point_acceleration, virtual_impact_test
 from fpm_sim.kinematics import Pose
 from fpm_sim.manipulator_model import build_manipulator
 from fpm_sim.model import ModelOptions
+from fpm_sim.reduction import modal_system
 
 FIRST_PEAK_TOL = 0.02
 """The issue's target: the first FRF peak within 2 % of the modal f1. Sources of difference: the FFT line
@@ -40,6 +41,17 @@ def test_first_peak_matches_modal_f1_with_noise(default_manip):
     assert res.frf.coherence[at_peak] > 0.99
     d = res.to_dict()
     assert d["first_peak_hz"] == res.first_peak_hz and d["modal_f1_hz"] == res.modal_f1_hz
+    # end to end: the H1 of the nonlinear rollouts against the linear modal FRF of the same model, with the
+    # window's damping 1 / (tau omega_r) added to every mode (exact for a sum of decaying modes). Left over:
+    # leakage from truncating a 0.2 s record, the neighbouring modes, noise and nonlinearity: measured 2.6 %
+    # of the peak at worst over 20-400 Hz (median 0.7 %); a wrong point, axis, sign or scale is O(1)
+    system = modal_system(built)
+    tau = res.records[0].t_s[-1] / math.log(1.0 / setup.window_end)
+    zeta = np.minimum(np.diag(system.xi) / (2 * system.omega_rad_s) + 1.0 / (tau * system.omega_rad_s), 0.99)
+    band = (res.frf.freq_hz >= 20.0) & (res.frf.freq_hz <= 400.0)
+    linear = modal_frf(system, excitation=setup.impact, response=setup.accelerometer, freq_hz=res.frf.freq_hz[band],
+                       damping_ratio=zeta).h  # fmt: skip
+    assert np.max(np.abs(res.frf.h[band] - linear)) < 0.05 * np.max(np.abs(linear))
 
 
 @pytest.mark.slow
