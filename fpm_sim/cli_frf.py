@@ -101,6 +101,10 @@ def cmd_frf(args: argparse.Namespace) -> int:
         raise FrfError("need 0 <= --f-min-hz < --f-max-hz and --df-hz > 0")
     if args.csv is not None and args.csv.suffix != ".csv":
         raise FrfError(f"--csv {args.csv} must end in .csv")
+    if args.link_model == "rigid":
+        raise FrfError(
+            "an FRF needs flexible links: with rigid links and locked motors nothing moves; use --link-model segments"
+        )
     manip = load_manipulator(args)
     built = build_manipulator(manip, pose_of(args), model_options(args))
     exc = point_of(args, "input", LinkPoint("distal_0", 0.5, "z"))

@@ -383,7 +383,23 @@ def readability_table(
     progress: bool = False,
 ) -> ReadabilityTable:
     """Mode-1 readability at the study's 25 poses (or ``poses``) for a driving-point test at ``point``
-    and at the same point on the other two distal links (see module docstring)."""
+    and at the same point on the other two distal links (see module docstring).
+
+    Parameters
+    ----------
+    options
+        Model options (default: 6 segments, inextensible links).
+    row_is, phi_sign
+        Reading of the study's table (:func:`study_grid`).
+    f_max_hz
+        FRF band (Hz).
+    damping_ratio
+        ``None``: the model's modal damping; else one ratio for every mode.
+    poses
+        Cells to evaluate instead of the study's 25.
+    progress
+        Show a tqdm progress bar.
+    """
     opts = options or ModelOptions(segments=6, axial=False)
     cells = poses if poses is not None else study_grid(row_is=row_is, phi_sign=phi_sign)
     others = [point]

@@ -48,6 +48,7 @@ def test_frf_table_with_user_damping(capsys):
         (["--damping-ratio", "1.5"], "damping"),
         (["--f-max-hz", "0"], "--f-max-hz"),
         (["--csv", "x.txt"], ".csv"),
+        (["--link-model", "rigid"], "flexible links"),
     ],
 )
 def test_frf_errors(capsys, argv, match):
