@@ -275,6 +275,14 @@ class ImpactTestResult:
     parameters: dict[str, Any] = field(default_factory=dict)
 
     @property
+    def first_peak_mode(self) -> int:
+        """1-based index of the model's mode nearest the first peak (1: the test reads mode 1; more: mode 1
+        is not seen at this hammer/accelerometer set-up). 0 when there is no peak."""
+        if not math.isfinite(self.first_peak_hz):
+            return 0
+        return int(np.argmin(np.abs(self.modal_freq_hz - self.first_peak_hz))) + 1
+
+    @property
     def identified_damping_ratio(self) -> float:
         """Damping ratio of the first mode identified from the test: the half-power reading minus the damping
         the exponential window adds (pass it to :func:`fpm_sim.frf.modal_frf` or ``fpm-sim frf
@@ -292,6 +300,7 @@ class ImpactTestResult:
         return {
             "first_peak_hz": self.first_peak_hz,
             "modal_f1_hz": self.modal_f1_hz,
+            "first_peak_mode": self.first_peak_mode,
             "relative_error": self.relative_error,
             "modal_freq_hz": self.modal_freq_hz[:8].tolist(),
             "peaks": [
@@ -321,6 +330,8 @@ class ImpactTestResult:
             f"{len(self.records)} impacts of {self.setup.pulse_s * 1e3:g} ms, record {self.setup.record_s:g} s",
             f"  first FRF peak   {self.first_peak_hz:10.3f} Hz",
             f"  modal f1         {self.modal_f1_hz:10.3f} Hz   (difference {self.relative_error * 100:+.3f} %)",
+            f"  first peak is mode {self.first_peak_mode}"
+            + ("" if self.first_peak_mode == 1 else ": mode 1 is not seen with this hammer and accelerometer"),
             f"  half-power zeta  {self.damping_half_power:10.4f}     (includes {self.window_damping:.4f} from the "
             f"exponential window: identified {self.identified_damping_ratio:.4f})",
             f"{'peak':>6}  {'freq (Hz)':>10}  {'prominence (dB)':>16}",

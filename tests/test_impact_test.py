@@ -29,6 +29,7 @@ def test_first_peak_matches_modal_f1_with_noise(default_manip):
     assert len(res.records) == 3
     assert len({r.peak_force_n for r in res.records}) == 3  # three different impacts
     assert abs(res.relative_error) < FIRST_PEAK_TOL
+    assert res.first_peak_mode == 1
     # the exponential window adds known damping; what is left is the model's own (1.2 % at f1 from the
     # configured stiffness-proportional damping, beta omega / 2); the half-power read of a 0.2 s record
     # with 0.125 Hz lines resolves it to a few tenths of a percent of damping
@@ -63,6 +64,17 @@ def test_first_peak_matches_modal_f1_at_study_poses(default_manip, pose_mm):
     built = build_manipulator(default_manip, Pose.from_mm(*pose_mm), ModelOptions(segments=4, axial=False))
     res = virtual_impact_test(built, ImpactSetup())
     assert abs(res.relative_error) < FIRST_PEAK_TOL
+
+
+def test_an_in_plane_hammer_misses_the_out_of_plane_mode_1(default_manip):
+    """Hammer and accelerometer along the in-plane normal: the first peak is the first in-plane mode, and the
+    result says so (mode 1, out-of-plane bending for the default sections, is not excited)."""
+    built = build_manipulator(default_manip, Pose(0.0, 0.0, 0.0), ModelOptions(segments=3, axial=False))
+    hit = LinkPoint("distal_0", 0.5, "normal")
+    res = virtual_impact_test(built, ImpactSetup(impact=hit, accelerometer=hit, record_s=0.1, n_impacts=1))
+    assert res.first_peak_mode > 1
+    assert res.first_peak_hz > 1.5 * res.modal_f1_hz
+    assert "not seen" in res.table()
 
 
 def test_h1_recovers_a_single_mode():
