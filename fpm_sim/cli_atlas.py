@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from .cli import add_config_args, add_output_args, add_pose_args, emit, load_manipulator, pose_of
-from .cli_frf import frf_user_errors
+from .cli_frf import frf_user_errors, save_figure
 from .manipulator_model import build_manipulator
 from .modal_atlas import AtlasError, build_atlas, load_atlas, mac_matrix
 from .model import ModelOptions
@@ -35,6 +35,8 @@ def cmd_atlas_build(args: argparse.Namespace) -> int:
         progress=not args.json,
     )
     atlas.save(args.out)
+    if args.plot:
+        save_figure(args.plot, lambda: atlas.plot())
     payload = atlas.to_dict()
     payload["out"] = str(args.out)
     weak = atlas.weak_links()
@@ -45,7 +47,9 @@ def cmd_atlas_build(args: argparse.Namespace) -> int:
         + f"\n{len(atlas.label_changes())} label changes (a mode's shape MAC with the parent pose below 0.5: its "
         "per-label frequency is unreliable there)"
         + f"\n{len(weak)} weak links (aligned basis MAC with the parent pose below 0.8: interpolated models unreliable "
-        f"there); lowest aligned MAC {float(atlas.nodes['mac_aligned'].min()):.3f}" + f"\nwrote {args.out}"
+        f"there); lowest aligned MAC {float(atlas.nodes['mac_aligned'].min()):.3f}"
+        + f"\nwrote {args.out}"
+        + (f"\nwrote {args.plot}" if args.plot else "")
     )
     emit(args, payload, text)
     return 0
@@ -122,6 +126,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--segments", type=int, default=6, help="spring locations per link (default 6)")
     b.add_argument("--axial", action="store_true", help="axial springs")
     b.add_argument("--out", type=Path, required=True, help="atlas file (.npz)")
+    b.add_argument("--plot", type=Path, help="tracked f1..f3 over the grid (.png, .pdf, .svg)")
     add_config_args(b)
     add_output_args(b)
     b.set_defaults(func=cmd_atlas_build)

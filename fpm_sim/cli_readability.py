@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from .cli import add_config_args, add_output_args, emit, load_manipulator
-from .cli_frf import add_point_args, frf_user_errors, point_of
+from .cli_frf import add_point_args, frf_user_errors, point_of, save_figure
 from .frf import FrfError
 from .impact_test import STUDY_IMPACT_POINT
 from .model import ModelOptions
@@ -30,12 +30,15 @@ def cmd_readability(args: argparse.Namespace) -> int:
         damping_ratio=args.damping_ratio,
         progress=not args.json,
     )
+    if args.plot:
+        save_figure(args.plot, lambda: tab.plot())
     if args.markdown:
         args.markdown.parent.mkdir(parents=True, exist_ok=True)
         args.markdown.write_text(tab.to_markdown() + "\n")
     payload = tab.to_dict()
     payload["markdown"] = str(args.markdown) if args.markdown else None
-    emit(args, payload, tab.table() + (f"\nwrote {args.markdown}" if args.markdown else ""))
+    payload["plot"] = str(args.plot) if args.plot else None
+    emit(args, payload, tab.table() + "".join(f"\nwrote {f}" for f in (args.markdown, args.plot) if f))
     return 0
 
 
@@ -57,6 +60,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--segments", type=int, default=6, help="spring locations per link (default 6)")
     p.add_argument("--axial", action="store_true", help="axial springs")
     p.add_argument("--markdown", type=Path, help="write the markdown table (.md) for the reproduce report")
+    p.add_argument("--plot", type=Path, help="prominence map over the poses (.png, .pdf, .svg)")
     add_config_args(p)
     add_output_args(p)
     p.set_defaults(func=cmd_readability)

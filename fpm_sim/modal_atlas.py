@@ -402,6 +402,28 @@ class ModalAtlas:
             lines.append(f"{pose.x_m * 1e3:>7.1f} {pose.y_m * 1e3:>7.1f} {pose.phi_rad:>6.3f}  " + "  ".join(cells))
         return "\n".join(lines)
 
+    def plot(self, labels: Sequence[int] = (1, 2, 3), *, phi_index: int = 0, axes: Any = None) -> Any:
+        """Tracked frequency (Hz) of the given mode labels (1-based) over the x-y grid at one rotation, with
+        the label changes marked (matplotlib)."""
+        import matplotlib.pyplot as plt
+
+        labels = list(labels)
+        if axes is None:
+            _, axes = plt.subplots(1, len(labels), figsize=(4.2 * len(labels), 3.8), squeeze=False)
+            axes = axes[0]
+        xx, yy = np.meshgrid(self.x_m * 1e3, self.y_m * 1e3, indexing="ij")
+        for ax, lab in zip(np.atleast_1d(axes), labels):
+            f = self.nodes["label_freq_hz"][:, :, phi_index, lab - 1]
+            sc = ax.scatter(xx, yy, c=f, s=160, cmap="viridis")
+            weak = self.nodes["mac"][:, :, phi_index, lab - 1] < MAC_WARN
+            ax.scatter(xx[weak], yy[weak], marker="x", color="r", s=60)
+            ax.set_title(f"mode {lab} (tracked), phi = {self.phi_rad[phi_index]:g} rad", fontsize=9)
+            ax.set_xlabel("x (mm)")
+            ax.set_ylabel("y (mm)")
+            ax.set_aspect("equal")
+            ax.figure.colorbar(sc, ax=ax, shrink=0.8, label="Hz")
+        return axes
+
     def save(self, path: str | Path) -> Path:
         p = Path(path)
         if p.suffix != ".npz":

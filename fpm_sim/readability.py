@@ -355,6 +355,29 @@ class ReadabilityTable:
         )
         return "\n".join([intro, "", *self._lines(" | ", True), "", *("- " + s for s in self.summary_lines())])
 
+    def plot(self, *, axes: Any = None) -> Any:
+        """Mode-1 prominence (dB) at each pose for each point, study-unreadable poses circled (matplotlib)."""
+        import matplotlib.pyplot as plt
+
+        n = len(self.points)
+        if axes is None:
+            _, axes = plt.subplots(1, n, figsize=(4.2 * n, 3.8), squeeze=False)
+            axes = axes[0]
+        x = np.array([r.cell.pose.x_m * 1e3 for r in self.rows])
+        y = np.array([r.cell.pose.y_m * 1e3 for r in self.rows])
+        bad = np.array([r.cell.study_unreadable for r in self.rows])
+        for k, ax in enumerate(np.atleast_1d(axes)):
+            prom = np.array([r.metrics[k].prominence_db for r in self.rows])
+            sc = ax.scatter(x, y, c=prom, s=160, cmap="viridis", vmin=0.0)
+            ax.scatter(x[bad], y[bad], s=420, facecolors="none", edgecolors="r", linewidths=1.5)
+            ax.set_title(f"{self.points[k]}: prominence (dB)", fontsize=9)
+            ax.set_xlabel("x (mm)")
+            ax.set_ylabel("y (mm)")
+            ax.set_aspect("equal")
+            ax.figure.colorbar(sc, ax=ax, shrink=0.8)
+        np.atleast_1d(axes)[0].figure.suptitle("mode-1 readability (red circles: unreadable in the study)", fontsize=10)
+        return axes
+
     def table(self) -> str:
         """Plain-text version."""
         return "\n".join([*self._lines("  ", False), *self.summary_lines()])

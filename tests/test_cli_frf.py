@@ -78,22 +78,26 @@ def test_impact_errors(capsys):
 
 
 def test_readability_markdown(capsys, tmp_path):
-    md = tmp_path / "readability.md"
-    code, text, _ = run(capsys, "readability", "--segments", "3", "--markdown", str(md), "--json")
+    md, png = tmp_path / "readability.md", tmp_path / "readability.png"
+    code, text, _ = run(
+        capsys, "readability", "--segments", "3", "--markdown", str(md), "--plot", str(png), "--json"
+    )  # fmt: skip
     assert code == 0
     d = json.loads(text)
     assert len(d["rows"]) == 25 and sum(r["study_unreadable"] for r in d["rows"]) == 7
     assert len(d["agreement"]) == 3
     assert md.read_text().count("\n| (") == 25
+    assert png.stat().st_size > 1000
 
 
 def test_atlas_build_and_query(capsys, tmp_path):
-    atlas, rom = tmp_path / "atlas.npz", tmp_path / "rom.mat"
+    atlas, rom, png = tmp_path / "atlas.npz", tmp_path / "rom.mat", tmp_path / "atlas.png"
     code, text, _ = run(
         capsys, "atlas", "build", "--segments", "3", "--x-mm", "-50", "0", "50", "--y-mm", "0", "50",
-        "--modes", "4", "--out", str(atlas),
+        "--modes", "4", "--out", str(atlas), "--plot", str(png),
     )  # fmt: skip
     assert code == 0 and "mode 4" in text and atlas.exists() and "weak links" in text
+    assert png.stat().st_size > 1000
     code, text, _ = run(
         capsys, "atlas", "query", str(atlas), "--x-mm", "25", "--y-mm", "25", "--direct", "--out", str(rom), "--json",
     )  # fmt: skip
