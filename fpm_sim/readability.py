@@ -225,9 +225,13 @@ def auc(scores_positive: np.ndarray, scores_negative: np.ndarray) -> float:
 
 @dataclass
 class ReadabilityRow:
-    """One pose of the table: the study cell, mode 1's frequency and character, metrics per chain."""
+    """One pose of the table: the study cell, mode 1's frequency and character, metrics per chain.
 
-    cell: GridPose
+    ``cell`` is any object with ``row_mm``, ``col_mm``, ``pose`` and ``comsol_hz`` (NaN: unreadable in the
+    study): a :class:`GridPose`, or a pose of another study-pose generator with those fields.
+    """
+
+    cell: Any
     f1_hz: float
     f1_character: str
     metrics: list[Mode1Readability]
@@ -235,6 +239,11 @@ class ReadabilityRow:
     @property
     def primary(self) -> Mode1Readability:
         return self.metrics[0]
+
+    @property
+    def study_unreadable(self) -> bool:
+        """The study gives no frequency for this cell (NaN ``comsol_hz``)."""
+        return not math.isfinite(self.cell.comsol_hz)
 
 
 @dataclass
@@ -253,7 +262,7 @@ class ReadabilityTable:
 
     def agreement(self, k: int = 0) -> dict[str, Any]:
         """Against the study for point ``k``: AUC of the prominence and the confusion counts."""
-        ok = np.array([not r.cell.study_unreadable for r in self.rows])
+        ok = np.array([not r.study_unreadable for r in self.rows])
         prom = np.array([r.metrics[k].prominence_db for r in self.rows])
         pred = np.array([r.metrics[k].readable for r in self.rows])
         return {
@@ -281,7 +290,7 @@ class ReadabilityTable:
                     "y_mm": r.cell.pose.y_m * 1e3,
                     "phi_rad": r.cell.pose.phi_rad,
                     "comsol_hz": r.cell.comsol_hz,
-                    "study_unreadable": r.cell.study_unreadable,
+                    "study_unreadable": r.study_unreadable,
                     "f1_hz": r.f1_hz,
                     "f1_character": r.f1_character,
                     "metrics": [
@@ -314,9 +323,9 @@ class ReadabilityTable:
             out.append(sep.join(head))
         for r in self.rows:
             m = r.primary
-            study = "unreadable" if r.cell.study_unreadable else f"{r.cell.comsol_hz:.2f} Hz"
+            study = "unreadable" if r.study_unreadable else f"{r.cell.comsol_hz:.2f} Hz"
             pred = "readable" if m.readable else "UNREADABLE"
-            agrees = "yes" if m.readable != r.cell.study_unreadable else "no"
+            agrees = "yes" if m.readable != r.study_unreadable else "no"
             cells = [
                 f"({r.cell.row_mm:g}, {r.cell.col_mm:g})",
                 f"{r.cell.pose.x_m * 1e3:g}, {r.cell.pose.y_m * 1e3:g}; {r.cell.pose.phi_rad:g}",
@@ -365,7 +374,7 @@ class ReadabilityTable:
             axes = axes[0]
         x = np.array([r.cell.pose.x_m * 1e3 for r in self.rows])
         y = np.array([r.cell.pose.y_m * 1e3 for r in self.rows])
-        bad = np.array([r.cell.study_unreadable for r in self.rows])
+        bad = np.array([r.study_unreadable for r in self.rows])
         for k, ax in enumerate(np.atleast_1d(axes)):
             prom = np.array([r.metrics[k].prominence_db for r in self.rows])
             sc = ax.scatter(x, y, c=prom, s=160, cmap="viridis", vmin=0.0)
@@ -402,7 +411,7 @@ def readability_table(
     phi_sign: int = 1,
     f_max_hz: float = 500.0,
     damping_ratio: float | None = None,
-    poses: list[GridPose] | None = None,
+    poses: list[Any] | None = None,
     progress: bool = False,
 ) -> ReadabilityTable:
     """Mode-1 readability at the study's 25 poses (or ``poses``) for a driving-point test at ``point``
@@ -419,7 +428,8 @@ def readability_table(
     damping_ratio
         ``None``: the model's modal damping; else one ratio for every mode.
     poses
-        Cells to evaluate instead of the study's 25.
+        Cells to evaluate instead of the study's 25: objects with ``row_mm``, ``col_mm``, ``pose`` and
+        ``comsol_hz`` (NaN where the study could not read the first peak), e.g. :class:`GridPose`.
     progress
         Show a tqdm progress bar.
     """

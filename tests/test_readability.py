@@ -2,6 +2,7 @@
 mode 1; a point at a node of mode 1 hides it), the ROC area, the table and its markdown."""
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import pytest
@@ -12,7 +13,6 @@ from fpm_sim.manipulator_model import build_manipulator
 from fpm_sim.model import ModelOptions
 from fpm_sim.readability import (
     READABLE_PROMINENCE_DB,
-    GridPose,
     auc,
     auc_p_value,
     mode1_readability,
@@ -103,7 +103,16 @@ def test_table_and_markdown(default_manip):
 
 
 def test_custom_poses_keep_their_flag(default_manip):
-    cell = GridPose(0.0, 0.0, Pose(0.0, 0.0, 0.2), math.nan)
+    """Any object with row_mm, col_mm, pose and comsol_hz serves as a cell (e.g. another pose generator's)."""
+
+    @dataclass(frozen=True)
+    class OtherPose:
+        row_mm: float
+        col_mm: float
+        pose: Pose
+        comsol_hz: float
+
+    cell = OtherPose(0.0, 0.0, Pose(0.0, 0.0, 0.2), math.nan)
     tab = readability_table(default_manip, options=OPTS, poses=[cell], point=LinkPoint("distal_2", 0.4, "z"))
-    assert tab.rows[0].cell.study_unreadable
+    assert tab.rows[0].study_unreadable
     assert [m.point.split("@")[0] for m in tab.rows[0].metrics] == ["distal_2", "distal_0", "distal_1"]
