@@ -60,7 +60,7 @@ def test_first_peak_matches_modal_f1_with_noise(default_manip):
 @pytest.mark.slow
 @pytest.mark.parametrize("pose_mm", [(0.0, 0.0, 0.0), (100.0, -100.0, 0.0), (-50.0, 50.0, 0.0), (50.0, 0.0, 0.2)])
 def test_first_peak_matches_modal_f1_at_study_poses(default_manip, pose_mm):
-    """Four study poses, 4 segments, the default 0.5 s records (55-100 s each on a shared 2-core machine)."""
+    """Four study poses, 4 segments, the default 0.5 s records (20-100 s each on the shared 2-core machine)."""
     built = build_manipulator(default_manip, Pose.from_mm(*pose_mm), ModelOptions(segments=4, axial=False))
     res = virtual_impact_test(built, ImpactSetup())
     assert abs(res.relative_error) < FIRST_PEAK_TOL
