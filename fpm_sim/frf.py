@@ -48,6 +48,9 @@ __all__ = [
     "QUANTITIES",
     "FrfError",
     "LinkPoint",
+    "MaterialPoint",
+    "material_point",
+    "locate",
     "Peak",
     "FrequencyResponse",
     "point_row",
@@ -103,41 +106,56 @@ class LinkPoint:
             raise FrfError("the platform has no link axis: use axis x, y or z")
 
 
-def locate(built: BuiltModel, data: mujoco.MjData, point: LinkPoint) -> tuple[int, np.ndarray, np.ndarray]:
-    """Body id, world position (m) and world unit axis of ``point`` after a forward pass of ``data``."""
+@dataclass(frozen=True)
+class MaterialPoint:
+    """Where a :class:`LinkPoint` sits in a compiled model: its body, the body-frame position (m) and
+    the axis rule; :meth:`world` gives the world position and axis in any state (after a forward pass)."""
+
+    body_id: int
+    local_m: np.ndarray
+    axis: str
+    platform: bool
+
+    def world(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
+        rot = data.xmat[self.body_id].reshape(3, 3)
+        pos = data.xpos[self.body_id] + rot @ self.local_m
+        if self.axis == "x":
+            return pos, np.array([1.0, 0.0, 0.0])
+        if self.axis == "y":
+            return pos, np.array([0.0, 1.0, 0.0])
+        if self.axis == "z" and self.platform:
+            return pos, np.array([0.0, 0.0, 1.0])
+        axis = rot[:, {"normal": 1, "along": 0, "z": 2}[self.axis]].copy()
+        if self.axis == "normal":  # keep it in the base plane
+            axis[2] = 0.0
+        return pos, axis / np.linalg.norm(axis)
+
+
+def material_point(built: BuiltModel, point: LinkPoint) -> MaterialPoint:
+    """The body and body-frame position of ``point`` (checked against ``built``)."""
     point.check(built)
     model = built.model
     if point.link == "platform":
         sid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, "platform_center")
-        bid = int(model.site_bodyid[sid])
-        pos = data.site_xpos[sid].copy()
-        rot = np.eye(3)
-    else:
-        sites = built.links[point.link]
-        ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, s) for s in sites]
-        # sites p0..p{n} sit at the origins of the link's bodies b0..b{n} (spring locations) and
-        # p{n+1} at the link's end; body b{j+1} sits at (piece_j, 0, 0) in b{j}'s frame, and the end
-        # site at (last piece, 0, 0) in the last body's frame
-        bodies = [int(model.site_bodyid[k]) for k in ids[:-1]]
-        pieces = [float(model.body_pos[b][0]) for b in bodies[1:]] + [float(model.site_pos[ids[-1]][0])]
-        starts = np.concatenate([[0.0], np.cumsum(pieces)])
-        length = float(starts[-1])
-        arc = point.fraction * length
-        j = int(np.clip(np.searchsorted(starts, arc, side="right") - 1, 0, len(bodies) - 1))
-        bid = bodies[j]
-        rot = data.xmat[bid].reshape(3, 3)
-        local = np.array([arc - starts[j], 0.0, 0.0])
-        pos = data.xpos[bid] + rot @ local
-    axis = {
-        "normal": rot[:, 1],
-        "along": rot[:, 0],
-        "z": np.array([0.0, 0.0, 1.0]) if point.link == "platform" else rot[:, 2],
-        "x": np.array([1.0, 0.0, 0.0]),
-        "y": np.array([0.0, 1.0, 0.0]),
-    }[point.axis].copy()
-    if point.axis == "normal":  # keep it in the base plane
-        axis[2] = 0.0
-    return bid, pos, axis / np.linalg.norm(axis)
+        return MaterialPoint(int(model.site_bodyid[sid]), model.site_pos[sid].copy(), point.axis, True)
+    sites = built.links[point.link]
+    ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, s) for s in sites]
+    # sites p0..p{n} sit at the origins of the link's bodies b0..b{n} (spring locations) and p{n+1} at
+    # the link's end; body b{j+1} sits at (piece_j, 0, 0) in b{j}'s frame, and the end site at
+    # (last piece, 0, 0) in the last body's frame
+    bodies = [int(model.site_bodyid[k]) for k in ids[:-1]]
+    pieces = [float(model.body_pos[b][0]) for b in bodies[1:]] + [float(model.site_pos[ids[-1]][0])]
+    starts = np.concatenate([[0.0], np.cumsum(pieces)])
+    arc = point.fraction * float(starts[-1])
+    j = int(np.clip(np.searchsorted(starts, arc, side="right") - 1, 0, len(bodies) - 1))
+    return MaterialPoint(bodies[j], np.array([arc - starts[j], 0.0, 0.0]), point.axis, False)
+
+
+def locate(built: BuiltModel, data: mujoco.MjData, point: LinkPoint) -> tuple[int, np.ndarray, np.ndarray]:
+    """Body id, world position (m) and world unit axis of ``point`` after a forward pass of ``data``."""
+    mp = material_point(built, point)
+    pos, axis = mp.world(data)
+    return mp.body_id, pos, axis
 
 
 def point_row(built: BuiltModel, qpos: np.ndarray, point: LinkPoint) -> np.ndarray:
