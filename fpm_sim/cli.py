@@ -28,9 +28,16 @@ from .rigs import RIGS, RigError, RigSetup, build_rig
 
 __all__ = ["main", "COMMAND_MODULES"]
 
-COMMAND_MODULES: list[str] = []
-COMMAND_MODULES += ["fpm_sim.cli_rollout", "fpm_sim.cli_reduce", "fpm_sim.cli_transient"]  # issue 6
-"""Extra command modules (``module.register(subparsers)``), added by later features."""
+COMMAND_MODULES: list[str] = [
+    "fpm_sim.cli_rollout",
+    "fpm_sim.cli_reduce",
+    "fpm_sim.cli_transient",
+    "fpm_sim.cli_frf",
+    "fpm_sim.cli_impact",
+    "fpm_sim.cli_readability",
+    "fpm_sim.cli_atlas",
+]
+"""Command modules beyond the core ones (each exposes ``register(subparsers)``)."""
 
 _USER_ERRORS = (
     ConfigError,
