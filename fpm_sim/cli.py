@@ -29,6 +29,7 @@ from .rigs import RIGS, RigError, RigSetup, build_rig
 __all__ = ["main", "COMMAND_MODULES"]
 
 COMMAND_MODULES: list[str] = []
+COMMAND_MODULES.append("fpm_sim.cli_reproduce")
 """Extra command modules (``module.register(subparsers)``), added by later features."""
 
 _USER_ERRORS = (
