@@ -30,6 +30,7 @@ __all__ = ["main", "COMMAND_MODULES"]
 
 COMMAND_MODULES: list[str] = []
 COMMAND_MODULES.append("fpm_sim.cli_reproduce")
+COMMAND_MODULES.append("fpm_sim.cli_sweep")
 """Extra command modules (``module.register(subparsers)``), added by later features."""
 
 _USER_ERRORS = (
