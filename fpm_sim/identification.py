@@ -1,0 +1,330 @@
+"""Identification of what the study does not state, by bounded least squares on its frequencies.
+
+Generic part: :func:`fit` takes a model ``theta -> predicted frequencies``, the data and
+:class:`Parameter` bounds, solves ``min sum((pred / data - 1)^2)`` with
+:func:`scipy.optimize.least_squares` and reports, at the solution, the relative sensitivities
+``d ln f / d ln theta``, the parameters' standard deviations and correlations from the Gauss-Newton
+covariance ``s^2 (J'J)^-1`` (``s^2`` the residual variance; where the fit has no residual degrees of
+freedom, an assumed measurement scatter :data:`ASSUMED_MEASUREMENT_REL_STD` instead), and the residuals.
+
+The study's steps (each a small fit with few parameters):
+
+1. :func:`identify_link`: link length and clamped length from the single-link tests (free-free
+   985 Hz, cantilever 221 Hz). A bar's bending frequencies fix only ``sqrt(E/rho) t / L^2``: with
+   ``E``, ``rho`` (steel) and ``t`` (10 mm, the study) held, ``L`` carries that group; the
+   cantilever then fixes the free length, i.e. the clamped length (a rigid clamp assumed: clamp
+   compliance and clamped length are not separable from one frequency).
+2. :func:`identify_chain`: hinge hardware mass and the hinge's tilt compliance from the chain tests
+   (79 / 88 / 81 Hz at 60 / 90 / 180 degrees).
+3. :func:`identify_manipulator`: geometry and platform mass against COMSOL's 18 frequencies.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from .config import Geometry, LumpedMass, Manipulator
+from .fast_frequencies import pose_frequencies
+from .kinematics import Pose
+from .model import ModelOptions
+from .study_comparison import subsystem_frequencies
+from .study_data import SubsystemTest, subsystem_tests
+
+__all__ = [
+    "Parameter",
+    "FitResult",
+    "fit",
+    "ASSUMED_MEASUREMENT_REL_STD",
+    "identify_link",
+    "identify_chain",
+    "identify_manipulator",
+    "geometry_from",
+    "GEOMETRY_PARAMETERS",
+]
+
+ASSUMED_MEASUREMENT_REL_STD = 0.01
+"""Relative scatter assumed for a measured frequency where a fit leaves no residual to estimate it
+(impact-hammer FRF peaks read to about 1 %)."""
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """A free parameter: name (with unit), initial value and bounds (SI)."""
+
+    name: str
+    initial: float
+    lower: float
+    upper: float
+
+
+@dataclass
+class FitResult:
+    """Outcome of :func:`fit`."""
+
+    parameters: list[Parameter]
+    values: np.ndarray
+    std: np.ndarray
+    correlation: np.ndarray
+    sensitivity: np.ndarray  # (n_data, n_params) d ln f / d ln theta (d ln f / d theta for angles)
+    labels: list[str]
+    data: np.ndarray
+    predicted: np.ndarray
+    success: bool
+    nfev: int
+    std_source: str
+
+    @property
+    def residual_pct(self) -> np.ndarray:
+        return 100.0 * (self.predicted / self.data - 1.0)
+
+    def as_dict(self) -> dict[str, float]:
+        return {p.name: float(v) for p, v in zip(self.parameters, self.values)}
+
+    def table(self) -> str:
+        lines = [f"{'parameter':<34}{'value':>14}{'std':>12}  bounds"]
+        for p, v, s in zip(self.parameters, self.values, self.std):
+            lines.append(f"{p.name:<34}{v:>14.6g}{s:>12.3g}  [{p.lower:g}, {p.upper:g}]")
+        lines.append(f"std from {self.std_source}")
+        lines.append(f"{'data':<28}{'target':>10}{'fit':>10}{'resid %':>9}")
+        for lab, d, f in zip(self.labels, self.data, self.predicted):
+            lines.append(f"{lab:<28}{d:>10.3f}{f:>10.3f}{100 * (f / d - 1):>+9.2f}")
+        if len(self.parameters) > 1:
+            lines.append("correlations:")
+            for i, p in enumerate(self.parameters):
+                lines.append(f"  {p.name:<32}" + " ".join(f"{c:+.2f}" for c in self.correlation[i]))
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict:
+        return {
+            "parameters": {
+                p.name: {"value": float(v), "std": float(s)} for p, v, s in zip(self.parameters, self.values, self.std)
+            },
+            "std_source": self.std_source,
+            "correlation": self.correlation.tolist(),
+            "sensitivity": self.sensitivity.tolist(),
+            "data": dict(zip(self.labels, self.data.tolist())),
+            "predicted": dict(zip(self.labels, self.predicted.tolist())),
+            "residual_pct": dict(zip(self.labels, self.residual_pct.tolist())),
+            "success": self.success,
+            "nfev": self.nfev,
+        }
+
+
+def fit(
+    model: Callable[[np.ndarray], np.ndarray],
+    data: Sequence[float],
+    parameters: Sequence[Parameter],
+    *,
+    labels: Sequence[str] | None = None,
+    diff_step: float = 1e-3,
+    max_nfev: int = 200,
+) -> FitResult:
+    """Bounded least squares on relative residuals ``model(theta) / data - 1`` (see module docstring)."""
+    d = np.asarray(data, float)
+    params = list(parameters)
+    lo = np.array([p.lower for p in params])
+    hi = np.array([p.upper for p in params])
+    x0 = np.clip(np.array([p.initial for p in params]), lo, hi)
+    scale = np.maximum(np.abs(x0), 1e-12)
+
+    def resid(z: np.ndarray) -> np.ndarray:
+        return np.asarray(model(z * scale), float) / d - 1.0
+
+    sol = least_squares(
+        resid, x0 / scale, bounds=(lo / scale, hi / scale), diff_step=diff_step, max_nfev=max_nfev, x_scale="jac"
+    )
+    x = sol.x * scale
+    pred = (sol.fun + 1.0) * d
+    jac = sol.jac / scale  # d (f/d) / d theta
+    n, k = len(d), len(params)
+    dof = n - k
+    if dof > 0:
+        s2 = float(np.sum(sol.fun**2)) / dof
+        source = f"residual variance ({dof} residual degrees of freedom)"
+    else:
+        s2 = ASSUMED_MEASUREMENT_REL_STD**2
+        source = (
+            f"an assumed {100 * ASSUMED_MEASUREMENT_REL_STD:g} % measurement scatter (no residual degrees of freedom)"
+        )
+    jtj = jac.T @ jac
+    try:
+        cov = s2 * np.linalg.inv(jtj)
+        std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        corr = cov / np.outer(std, std)
+    except np.linalg.LinAlgError:
+        std = np.full(k, np.nan)
+        corr = np.full((k, k), np.nan)
+    sens = jac * (d / pred)[:, None] * x[None, :]  # d ln f / d ln theta
+    return FitResult(
+        params,
+        x,
+        std,
+        corr,
+        sens,
+        list(labels or [f"data {i}" for i in range(n)]),
+        d,
+        pred,
+        bool(sol.success),
+        sol.nfev,
+        source,
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# step 1 and 2: subsystems
+
+
+def _with_rig(config: Manipulator, **changes: float) -> Manipulator:
+    rig = config.rig
+    if rig is None:
+        raise ValueError("the configuration has no [rig] table: the subsystem tests need the test piece")
+    return config.replace(rig=dataclasses.replace(rig, **changes))
+
+
+def identify_link(
+    config: Manipulator,
+    *,
+    tests: list[SubsystemTest] | None = None,
+    segments: int = 12,
+) -> tuple[FitResult, Manipulator]:
+    """Rig length and clamped length from the single-link free-free and cantilever tests."""
+    tests = [t for t in (tests or subsystem_tests()) if t.rig in ("free-free", "cantilever")]
+    rig = config.rig
+    if rig is None:
+        raise ValueError("the configuration has no [rig] table")
+
+    def model(theta: np.ndarray) -> np.ndarray:
+        cfg = _with_rig(config, length_m=float(theta[0]), clamped_length_m=float(theta[1]))
+        return np.array([r.ours_hz for r in subsystem_frequencies(cfg, segments=segments, tests=tests)])
+
+    params = [
+        Parameter("rig.length_m", rig.length_m, 0.5 * rig.length_m, 2.0 * rig.length_m),
+        Parameter("rig.clamped_length_m", max(rig.clamped_length_m, 0.02 * rig.length_m), 0.0, 0.5 * rig.length_m),
+    ]
+    res = fit(model, [t.experimental_hz for t in tests], params, labels=[t.label for t in tests])
+    return res, _with_rig(config, length_m=float(res.values[0]), clamped_length_m=float(res.values[1]))
+
+
+HINGE_GYRATION_RADIUS_M = 0.015
+"""Assumed radius of gyration of the passive-joint hardware (bearing housing): inertia = m r^2."""
+
+
+def _hinge(mass_kg: float, gyration_radius_m: float = HINGE_GYRATION_RADIUS_M) -> LumpedMass:
+    i = mass_kg * gyration_radius_m**2
+    return LumpedMass(mass_kg, (i, i, i))
+
+
+def identify_chain(
+    config: Manipulator,
+    *,
+    tests: list[SubsystemTest] | None = None,
+    segments: int = 12,
+    tilt: bool = True,
+    gyration: bool = False,
+) -> tuple[FitResult, Manipulator]:
+    """Chain hinge mass (with ``tilt`` the hinge tilt stiffness, with ``gyration`` the hardware's
+    radius of gyration) from the chain tests."""
+    tests = [t for t in (tests or subsystem_tests()) if t.rig == "chain"]
+    rig = config.rig
+    if rig is None:
+        raise ValueError("the configuration has no [rig] table")
+
+    def configure(theta: np.ndarray) -> Manipulator:
+        r_g = float(theta[-1]) if gyration else HINGE_GYRATION_RADIUS_M
+        cfg = _with_rig(config, chain_hinge=_hinge(float(theta[0]), r_g))
+        if tilt:
+            cfg = cfg.replace(
+                compliance=dataclasses.replace(cfg.compliance, passive_joint_tilt_nm_per_rad=float(theta[1]))
+            )
+        return cfg
+
+    def model(theta: np.ndarray) -> np.ndarray:
+        return np.array([r.ours_hz for r in subsystem_frequencies(configure(theta), segments=segments, tests=tests)])
+
+    params = [Parameter("rig.chain_hinge.mass_kg", max(rig.chain_hinge.mass_kg, 0.05), 0.0, 2.0)]
+    if tilt:
+        params.append(Parameter("compliance.passive_joint_tilt_nm_per_rad", 2e4, 1e2, 1e7))
+    if gyration:
+        params.append(Parameter("rig.chain_hinge.gyration_radius_m", HINGE_GYRATION_RADIUS_M, 0.003, 0.06))
+    res = fit(model, [t.experimental_hz for t in tests], params, labels=[t.label for t in tests])
+    return res, configure(res.values)
+
+
+# ---------------------------------------------------------------------------------------------
+# step 3: the manipulator
+
+
+GEOMETRY_PARAMETERS = (
+    "base_radius_m",
+    "platform_radius_m",
+    "link_length_m",
+    "base_rotation_deg",
+    "platform_offset_deg",
+)
+"""The geometry is parametrised as a symmetric layout (motors and platform joints 120 deg apart):
+base radius, platform radius, one length for both links, the rotation of the motor triangle
+(0 = first motor at 90 deg) and the platform joints' angular offset from the motors at phi = 0."""
+
+
+def geometry_from(values: Sequence[float], elbow_branch: tuple[int, int, int]) -> Geometry:
+    """Geometry from :data:`GEOMETRY_PARAMETERS` values (SI, degrees)."""
+    r_b, r_p, length, rot, off = (float(v) for v in values)
+    base = tuple(math.radians(rot + a) for a in (90.0, 210.0, 330.0))
+    plat = tuple(math.radians(rot + off + a) for a in (90.0, 210.0, 330.0))
+    return Geometry(r_b, base, length, length, r_p, plat, elbow_branch)
+
+
+def identify_manipulator(
+    config: Manipulator,
+    poses: Sequence[Pose],
+    comsol_hz: Sequence[float],
+    *,
+    initial: Sequence[float],
+    elbow_branch: tuple[int, int, int],
+    options: ModelOptions | None = None,
+    free_platform_mass: bool = True,
+    max_nfev: int = 60,
+) -> tuple[FitResult, Manipulator]:
+    """Geometry (and platform mass) against COMSOL's frequencies at ``poses`` (NaN entries skipped)."""
+    c = np.asarray(comsol_hz, float)
+    ok = np.isfinite(c)
+    use = [p for p, k in zip(poses, ok) if k]
+
+    def configure(theta: np.ndarray) -> Manipulator:
+        cfg = config.replace(geometry=geometry_from(theta[:5], elbow_branch))
+        if free_platform_mass:
+            hw = config.hardware
+            m0 = hw.platform.mass_kg
+            ratio = float(theta[5]) / m0
+            plat = LumpedMass(float(theta[5]), tuple(v * ratio for v in hw.platform.inertia_kg_m2))
+            cfg = cfg.replace(hardware=dataclasses.replace(hw, platform=plat))
+        return cfg
+
+    def model(theta: np.ndarray) -> np.ndarray:
+        try:
+            cfg = configure(theta)
+        except ValueError:
+            return np.full(len(use), 1e3)
+        f = pose_frequencies(cfg, use, n_modes=1, options=options).f1_hz
+        return np.where(np.isfinite(f), f, 1e3)  # unreachable/singular: a large residual
+
+    r_b, r_p, length, rot, off = initial[:5]
+    params = [
+        Parameter("geometry.base_radius_m", r_b, 0.12, 0.5),
+        Parameter("geometry.platform_radius_m", r_p, 0.02, 0.16),
+        Parameter("geometry.link_length_m", length, 0.12, 0.4),
+        Parameter("geometry.base_rotation_deg", rot, rot - 60.0, rot + 60.0),
+        Parameter("geometry.platform_offset_deg", off, off - 60.0, off + 60.0),
+    ]
+    if free_platform_mass:
+        m = config.hardware.platform.mass_kg if len(initial) < 6 else initial[5]
+        params.append(Parameter("hardware.platform.mass_kg", m, 0.05, 10.0))
+    labels = [f"pose ({p.x_m * 1e3:g}, {p.y_m * 1e3:g}, {p.phi_rad:g})" for p in use]
+    res = fit(model, c[ok], params, labels=labels, max_nfev=max_nfev)
+    return res, configure(res.values)
