@@ -256,6 +256,62 @@ def identify_chain(
     return res, configure(res.values)
 
 
+SUBSYSTEM_PARAMETERS: dict[str, tuple[float, float]] = {
+    "rig.length_m": (0.1, 0.5),
+    "rig.clamped_length_m": (0.0, 0.1),
+    "compliance.base_clamp_nm_per_rad": (1e2, 1e7),
+    "rig.chain_hinge.mass_kg": (0.0, 2.0),
+    "compliance.passive_joint_tilt_nm_per_rad": (1e1, 1e7),
+}
+"""Subsystem parameters :func:`identify_subsystems` can free, with their bounds (SI)."""
+
+
+def _set_subsystem(config: Manipulator, name: str, value: float) -> Manipulator:
+    rig = config.rig
+    assert rig is not None
+    if name == "rig.length_m":
+        return config.replace(rig=dataclasses.replace(rig, length_m=value))
+    if name == "rig.clamped_length_m":
+        return config.replace(rig=dataclasses.replace(rig, clamped_length_m=value))
+    if name == "rig.chain_hinge.mass_kg":
+        return config.replace(rig=dataclasses.replace(rig, chain_hinge=_hinge(value)))
+    if name.startswith("compliance."):
+        return config.replace(compliance=dataclasses.replace(config.compliance, **{name.split(".")[1]: value}))
+    raise ValueError(f"unknown subsystem parameter {name!r}; choose from {sorted(SUBSYSTEM_PARAMETERS)}")
+
+
+def identify_subsystems(
+    config: Manipulator,
+    free: Sequence[str],
+    *,
+    tests: list[SubsystemTest] | None = None,
+    initial: dict[str, float] | None = None,
+    segments: int = 12,
+) -> tuple[FitResult, Manipulator]:
+    """Fit the parameters named in ``free`` (keys of :data:`SUBSYSTEM_PARAMETERS`) to the tests' measured
+    frequencies, all tests at once."""
+    if config.rig is None:
+        raise ValueError("the configuration has no [rig] table")
+    tests = tests or subsystem_tests()
+    init = initial or {}
+
+    def configure(theta: np.ndarray) -> Manipulator:
+        cfg = config
+        for name, v in zip(free, theta):
+            cfg = _set_subsystem(cfg, name, float(v))
+        return cfg
+
+    def model(theta: np.ndarray) -> np.ndarray:
+        return np.array([r.ours_hz for r in subsystem_frequencies(configure(theta), segments=segments, tests=tests)])
+
+    params = []
+    for name in free:
+        lo, hi = SUBSYSTEM_PARAMETERS[name]
+        params.append(Parameter(name, init[name], lo, hi))
+    res = fit(model, [t.experimental_hz for t in tests], params, labels=[t.label for t in tests])
+    return res, configure(res.values)
+
+
 # ---------------------------------------------------------------------------------------------
 # step 3: the manipulator
 
@@ -263,21 +319,22 @@ def identify_chain(
 GEOMETRY_PARAMETERS = (
     "base_radius_m",
     "platform_radius_m",
-    "link_length_m",
+    "proximal_length_m",
+    "distal_length_m",
     "base_rotation_deg",
     "platform_offset_deg",
 )
 """The geometry is parametrised as a symmetric layout (motors and platform joints 120 deg apart):
-base radius, platform radius, one length for both links, the rotation of the motor triangle
-(0 = first motor at 90 deg) and the platform joints' angular offset from the motors at phi = 0."""
+base radius, platform radius, the two link lengths, the rotation of the motor triangle (0 = first
+motor at 90 deg) and the platform joints' angular offset from the motors at phi = 0."""
 
 
 def geometry_from(values: Sequence[float], elbow_branch: tuple[int, int, int]) -> Geometry:
     """Geometry from :data:`GEOMETRY_PARAMETERS` values (SI, degrees)."""
-    r_b, r_p, length, rot, off = (float(v) for v in values)
+    r_b, r_p, l1, l2, rot, off = (float(v) for v in values[:6])
     base = tuple(math.radians(rot + a) for a in (90.0, 210.0, 330.0))
     plat = tuple(math.radians(rot + off + a) for a in (90.0, 210.0, 330.0))
-    return Geometry(r_b, base, length, length, r_p, plat, elbow_branch)
+    return Geometry(r_b, base, l1, l2, r_p, plat, elbow_branch)
 
 
 def identify_manipulator(
@@ -297,12 +354,12 @@ def identify_manipulator(
     use = [p for p, k in zip(poses, ok) if k]
 
     def configure(theta: np.ndarray) -> Manipulator:
-        cfg = config.replace(geometry=geometry_from(theta[:5], elbow_branch))
+        cfg = config.replace(geometry=geometry_from(theta[:6], elbow_branch))
         if free_platform_mass:
             hw = config.hardware
             m0 = hw.platform.mass_kg
-            ratio = float(theta[5]) / m0
-            plat = LumpedMass(float(theta[5]), tuple(v * ratio for v in hw.platform.inertia_kg_m2))
+            ratio = float(theta[6]) / m0
+            plat = LumpedMass(float(theta[6]), tuple(v * ratio for v in hw.platform.inertia_kg_m2))
             cfg = cfg.replace(hardware=dataclasses.replace(hw, platform=plat))
         return cfg
 
@@ -314,17 +371,101 @@ def identify_manipulator(
         f = pose_frequencies(cfg, use, n_modes=1, options=options).f1_hz
         return np.where(np.isfinite(f), f, 1e3)  # unreachable/singular: a large residual
 
-    r_b, r_p, length, rot, off = initial[:5]
+    r_b, r_p, l1, l2, rot, off = initial[:6]
     params = [
         Parameter("geometry.base_radius_m", r_b, 0.12, 0.5),
         Parameter("geometry.platform_radius_m", r_p, 0.02, 0.16),
-        Parameter("geometry.link_length_m", length, 0.12, 0.4),
+        Parameter("geometry.proximal_length_m", l1, 0.12, 0.4),
+        Parameter("geometry.distal_length_m", l2, 0.12, 0.4),
         Parameter("geometry.base_rotation_deg", rot, rot - 60.0, rot + 60.0),
         Parameter("geometry.platform_offset_deg", off, off - 60.0, off + 60.0),
     ]
     if free_platform_mass:
-        m = config.hardware.platform.mass_kg if len(initial) < 6 else initial[5]
+        m = config.hardware.platform.mass_kg if len(initial) < 7 else initial[6]
         params.append(Parameter("hardware.platform.mass_kg", m, 0.05, 10.0))
     labels = [f"pose ({p.x_m * 1e3:g}, {p.y_m * 1e3:g}, {p.phi_rad:g})" for p in use]
     res = fit(model, c[ok], params, labels=labels, max_nfev=max_nfev)
     return res, configure(res.values)
+
+
+# ---------------------------------------------------------------------------------------------
+# global screening of the geometry with the in-plane surrogate
+
+ELBOW_BRANCH_CLASSES = ((1, 1, 1), (-1, -1, -1), (1, 1, -1), (1, -1, -1))
+"""Elbow branches up to a rotation of the layout by 120 deg (the base rotation covers the rest)."""
+
+SCREEN_BOUNDS = (
+    (0.12, 0.5),  # base radius (m)
+    (0.02, 0.16),  # platform radius (m)
+    (0.12, 0.4),  # proximal length (m)
+    (0.12, 0.4),  # distal length (m)
+    (-180.0, 180.0),  # base rotation (deg)
+    (-180.0, 180.0),  # platform offset (deg)
+)
+
+
+@dataclass
+class Screening:
+    """Best scale-free geometry of one (reading, elbow branch) combination."""
+
+    reading: str
+    elbow_branch: tuple[int, int, int]
+    values: np.ndarray
+    rms_log: float
+    spearman: float
+    scale: float
+
+
+def _screen_residuals(config: Manipulator, poses: Sequence[Pose], comsol: np.ndarray, values, branch) -> np.ndarray:
+    from .inplane_surrogate import inplane_first_frequencies
+
+    ok = np.isfinite(comsol)
+    try:
+        cfg = config.replace(geometry=geometry_from(values, branch))
+    except ValueError:
+        return np.full(len(poses), 2.0)
+    f = inplane_first_frequencies(cfg, poses)
+    bad = ~np.isfinite(f) | (f <= 0)
+    lf = np.log(np.where(bad, 1.0, f))
+    d = lf[ok] - np.log(comsol[ok])
+    good = ~bad[ok]
+    if good.any():
+        d = d - d[good].mean()
+    d[~good] = 2.0  # an unreachable or singular study pose: the study measured there
+    return np.concatenate([d, np.where(bad[~ok], 2.0, 0.0)])
+
+
+def screen_geometry(
+    config: Manipulator,
+    poses: Sequence[Pose],
+    comsol_hz: Sequence[float],
+    *,
+    elbow_branch: tuple[int, int, int],
+    reading: str = "",
+    seed: int = 0,
+    maxiter: int = 300,
+) -> Screening:
+    """Global search (differential evolution) of the geometry on the in-plane surrogate.
+
+    Scale-free: the objective is the spread of ``ln(f_surrogate / f_comsol)`` over the poses with a
+    COMSOL value (the level is set later by the masses); every one of ``poses`` must be reachable
+    and non-singular.
+    """
+    from scipy.optimize import differential_evolution
+    from scipy.stats import spearmanr
+
+    from .inplane_surrogate import inplane_first_frequencies
+
+    c = np.asarray(comsol_hz, float)
+
+    def cost(v: np.ndarray) -> float:
+        return float(np.sum(_screen_residuals(config, poses, c, v, elbow_branch) ** 2))
+
+    sol = differential_evolution(cost, SCREEN_BOUNDS, seed=seed, maxiter=maxiter, popsize=20, tol=1e-7, polish=True)
+    cfg = config.replace(geometry=geometry_from(sol.x, elbow_branch))
+    f = inplane_first_frequencies(cfg, poses)
+    ok = np.isfinite(c) & np.isfinite(f)
+    rho = float(spearmanr(f[ok], c[ok]).statistic) if ok.sum() > 2 else math.nan
+    scale = float(np.exp(np.mean(np.log(c[ok] / f[ok])))) if ok.any() else math.nan
+    rms = float(np.sqrt(np.mean(_screen_residuals(config, poses, c, sol.x, elbow_branch) ** 2)))
+    return Screening(reading, elbow_branch, sol.x, rms, rho, scale)
