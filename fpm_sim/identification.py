@@ -262,6 +262,7 @@ SUBSYSTEM_PARAMETERS: dict[str, tuple[float, float]] = {
     "compliance.base_clamp_nm_per_rad": (1e2, 1e7),
     "rig.chain_hinge.mass_kg": (0.0, 2.0),
     "compliance.passive_joint_tilt_nm_per_rad": (1e1, 1e7),
+    "rig.section.height_m": (0.004, 0.03),
 }
 """Subsystem parameters :func:`identify_subsystems` can free, with their bounds (SI)."""
 
@@ -275,6 +276,8 @@ def _set_subsystem(config: Manipulator, name: str, value: float) -> Manipulator:
         return config.replace(rig=dataclasses.replace(rig, clamped_length_m=value))
     if name == "rig.chain_hinge.mass_kg":
         return config.replace(rig=dataclasses.replace(rig, chain_hinge=_hinge(value)))
+    if name == "rig.section.height_m":
+        return config.replace(rig=dataclasses.replace(rig, section=dataclasses.replace(rig.section, height_m=value)))
     if name.startswith("compliance."):
         return config.replace(compliance=dataclasses.replace(config.compliance, **{name.split(".")[1]: value}))
     raise ValueError(f"unknown subsystem parameter {name!r}; choose from {sorted(SUBSYSTEM_PARAMETERS)}")
@@ -346,15 +349,27 @@ def identify_manipulator(
     elbow_branch: tuple[int, int, int],
     options: ModelOptions | None = None,
     free_platform_mass: bool = True,
+    geometry_free: bool = True,
+    span: float = 0.25,
+    span_deg: float = 20.0,
     max_nfev: int = 60,
 ) -> tuple[FitResult, Manipulator]:
-    """Geometry (and platform mass) against COMSOL's frequencies at ``poses`` (NaN entries skipped)."""
+    """Geometry (and platform mass) against COMSOL's frequencies at ``poses`` (NaN entries skipped).
+
+    ``initial``: the :data:`GEOMETRY_PARAMETERS` values (and the platform mass); lengths may move by
+    ``span`` (relative) and angles by ``span_deg`` around them (a local refinement of a screened
+    geometry). ``geometry_free=False`` fits the platform mass alone (the frequency level).
+    """
     c = np.asarray(comsol_hz, float)
     ok = np.isfinite(c)
     use = [p for p, k in zip(poses, ok) if k]
 
+    fixed_geometry = np.asarray(initial[:6], float)
+
     def configure(theta: np.ndarray) -> Manipulator:
-        cfg = config.replace(geometry=geometry_from(theta[:6], elbow_branch))
+        g_vals = theta[:6] if geometry_free else fixed_geometry
+        cfg = config.replace(geometry=geometry_from(g_vals, elbow_branch))
+        theta = np.concatenate([g_vals, theta[6:] if geometry_free else theta])
         if free_platform_mass:
             hw = config.hardware
             m0 = hw.platform.mass_kg
@@ -372,14 +387,17 @@ def identify_manipulator(
         return np.where(np.isfinite(f), f, 1e3)  # unreachable/singular: a large residual
 
     r_b, r_p, l1, l2, rot, off = initial[:6]
+    lo, hi = 1.0 - span, 1.0 + span
     params = [
-        Parameter("geometry.base_radius_m", r_b, 0.12, 0.5),
-        Parameter("geometry.platform_radius_m", r_p, 0.02, 0.16),
-        Parameter("geometry.proximal_length_m", l1, 0.12, 0.4),
-        Parameter("geometry.distal_length_m", l2, 0.12, 0.4),
-        Parameter("geometry.base_rotation_deg", rot, rot - 60.0, rot + 60.0),
-        Parameter("geometry.platform_offset_deg", off, off - 60.0, off + 60.0),
+        Parameter("geometry.base_radius_m", r_b, lo * r_b, hi * r_b),
+        Parameter("geometry.platform_radius_m", r_p, lo * r_p, hi * r_p),
+        Parameter("geometry.proximal_length_m", l1, lo * l1, hi * l1),
+        Parameter("geometry.distal_length_m", l2, lo * l2, hi * l2),
+        Parameter("geometry.base_rotation_deg", rot, rot - span_deg, rot + span_deg),
+        Parameter("geometry.platform_offset_deg", off, off - span_deg, off + span_deg),
     ]
+    if not geometry_free:
+        params = []
     if free_platform_mass:
         m = config.hardware.platform.mass_kg if len(initial) < 7 else initial[6]
         params.append(Parameter("hardware.platform.mass_kg", m, 0.05, 10.0))
