@@ -254,6 +254,30 @@ class StudyReproduction:
         paths[1].write_text(self.markdown())
         return paths
 
+    def _unclear_poses_section(self) -> list[str]:
+        """Our model at the study's 7 poses without a COMSOL value (unreadable FRFs) vs the other 18."""
+        has = np.isfinite(self.comsol_hz)
+        if has.all() or not has.any():
+            return []
+        fr = self.frequencies
+        rows = [
+            ("mean first frequency (Hz)", np.nanmean(fr.f1_hz[~has]), np.nanmean(fr.f1_hz[has])),
+            ("mean singularity measure", np.nanmean(fr.singularity[~has]), np.nanmean(fr.singularity[has])),
+            ("min singularity measure", np.nanmin(fr.singularity[~has]), np.nanmin(fr.singularity[has])),
+            ("mean in-plane share of mode 1", np.nanmean(fr.in_plane[~has, 0]), np.nanmean(fr.in_plane[has, 0])),
+        ]
+        out = [
+            f"## The {int((~has).sum())} poses the study could not read",
+            "",
+            "The study's FRFs were unreadable at these poses; a model can say whether they sit nearer a singularity "
+            "(low, pose-sensitive first frequency) than the others.",
+            "",
+            "| quantity | unreadable poses | poses with a COMSOL value |",
+            "|---|---:|---:|",
+        ]
+        out += [f"| {name} | {a:.3f} | {b:.3f} |" for name, a, b in rows]
+        return out + [""]
+
     def markdown(self) -> str:
         """The report (Markdown)."""
         st = self.stats()
@@ -326,13 +350,33 @@ class StudyReproduction:
                 f"{st['mean_signed_pct']:+.2f} %.",
                 "",
             ]
-        lines += ["![heatmaps](heatmaps.png)", "", "## Parameters and their provenance", ""]
+        lines += ["![heatmaps](heatmaps.png)", ""]
+        lines += self._unclear_poses_section()
+        ident = {k: v for k, v in self.config.provenance.items() if v.startswith("identified")}
+        if ident:
+            lines += ["## Identified parameters (value; source, with +- one standard deviation)", ""]
+            lines += ["| parameter | value | from |", "|---|---|---|"]
+            for k, v in sorted(ident.items()):
+                lines.append(f"| `{k}` | {_value_of(self.config, k)} | {v[len('identified: ') :]} |")
+            lines.append("")
+        lines += ["## Parameters and their provenance", ""]
         lines += ["| parameter | source |", "|---|---|"]
         for k, v in sorted(self.config.provenance.items()):
             lines.append(f"| `{k}` | {v} |")
         if self.notes:
             lines += ["", "## Notes", ""] + [f"- {n}" for n in self.notes]
         return "\n".join(lines) + "\n"
+
+
+def _value_of(config: Manipulator, dotted: str) -> str:
+    obj: Any = config
+    for part in dotted.split("."):
+        obj = getattr(obj, part.replace("_deg", "_rad"), None) if obj is not None else None
+    if obj is None:
+        return "-"
+    if dotted.endswith("_deg"):
+        return str([round(math.degrees(a), 3) for a in obj])
+    return str(obj) if not isinstance(obj, float) else f"{obj:.6g}"
 
 
 def _f(v: float, fmt: str = ".2f") -> str:
