@@ -23,7 +23,7 @@ import numpy as np
 
 from .config import Manipulator
 from .fast_frequencies import PoseFrequencies, pose_frequencies
-from .kinematics import Pose, UnreachablePoseError, inverse_kinematics, jacobians
+from .kinematics import Pose, UnreachablePoseError, inverse_kinematics
 from .model import ModelOptions
 from .study_poses import TableReading, study_poses
 
@@ -70,22 +70,30 @@ def dense_grid(config: Manipulator, *, step_mm: float, phi_rad: float = 0.0) -> 
 def singularity_fields(
     config: Manipulator, x_mm: np.ndarray, y_mm: np.ndarray, phi_rad: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``det(Jx)`` (normalised) and ``min_i |cross(w_i, u_i)|`` on the grid ``y_mm x x_mm`` (NaN unreachable)."""
+    """``det(Jx)`` (rotation column over the characteristic length) and ``min_i |cross(w_i, u_i)|`` on the
+    grid ``y_mm x x_mm`` (NaN where unreachable); vectorised inverse kinematics, as in
+    :func:`fpm_sim.kinematics.inverse_kinematics`."""
     g = config.geometry
-    det = np.full((len(y_mm), len(x_mm)), np.nan)
-    ser = np.full_like(det, np.nan)
-    lc = max(g.platform_radius_m, g.distal_length_m / 4.0)
-    for iy, y in enumerate(y_mm):
-        for ix, x in enumerate(x_mm):
-            try:
-                asm = inverse_kinematics(g, Pose.from_mm(x, y, phi_rad), check_singularity=False)
-            except UnreachablePoseError:
-                continue
-            jx, _ = jacobians(g, asm)
-            jx[:, 2] /= lc
-            det[iy, ix] = np.linalg.det(jx)
-            w, u = asm.proximal_dirs, asm.distal_dirs
-            ser[iy, ix] = np.min(np.abs(w[:, 0] * u[:, 1] - w[:, 1] * u[:, 0]))
+    l1, l2 = g.proximal_length_m, g.distal_length_m
+    xx, yy = np.meshgrid(np.asarray(x_mm, float) * 1e-3, np.asarray(y_mm, float) * 1e-3)
+    p = np.stack([xx.ravel(), yy.ravel()], axis=1)  # (n, 2)
+    base = np.asarray(g.base_angles_rad)
+    a = g.base_radius_m * np.stack([np.cos(base), np.sin(base)], axis=1)
+    ang = np.asarray(g.platform_angles_rad) + phi_rad
+    r = g.platform_radius_m * np.stack([np.cos(ang), np.sin(ang)], axis=1)  # (3, 2)
+    c = p[:, None, :] + r[None]
+    d = c - a[None]
+    dist = np.hypot(d[..., 0], d[..., 1])
+    reach = np.all((dist >= abs(l1 - l2)) & (dist <= l1 + l2), axis=1)
+    cos_alpha = np.clip((l1**2 + dist**2 - l2**2) / (2.0 * l1 * np.maximum(dist, 1e-300)), -1.0, 1.0)
+    q = np.arctan2(d[..., 1], d[..., 0]) + np.asarray(g.elbow_branch)[None, :] * np.arccos(cos_alpha)
+    w = np.stack([np.cos(q), np.sin(q)], axis=2)
+    u = (c - (a[None] + l1 * w)) / l2
+    cross = w[..., 0] * u[..., 1] - w[..., 1] * u[..., 0]
+    lc = max(g.platform_radius_m, l2 / 4.0)
+    jx = np.concatenate([u, ((r[None, :, 0] * u[..., 1] - r[None, :, 1] * u[..., 0]) / lc)[..., None]], axis=2)
+    det = np.where(reach, np.linalg.det(jx), np.nan).reshape(xx.shape)
+    ser = np.where(reach, np.min(np.abs(cross), axis=1), np.nan).reshape(xx.shape)
     return det, ser
 
 

@@ -64,3 +64,20 @@ def test_bad_input_is_named(capsys, argv, message, tmp_path):
     code = main([*argv, "--out", str(tmp_path)])
     assert code == 2
     assert message in capsys.readouterr().err
+
+
+def test_singularity_fields_match_the_kinematics_module(default_manip):
+    from fpm_sim.kinematics import Pose, UnreachablePoseError, inverse_kinematics
+    from fpm_sim.workspace_sweep import singularity_fields
+
+    xs, ys = np.array([-120.0, 0.0, 90.0, 400.0]), np.array([-80.0, 0.0, 60.0])
+    det, ser = singularity_fields(default_manip, xs, ys, 0.1)
+    for iy, y in enumerate(ys):
+        for ix, x in enumerate(xs):
+            try:
+                asm = inverse_kinematics(default_manip.geometry, Pose.from_mm(x, y, 0.1), check_singularity=False)
+            except UnreachablePoseError:
+                assert np.isnan(det[iy, ix]) and np.isnan(ser[iy, ix])
+                continue
+            assert ser[iy, ix] == pytest.approx(asm.singularity.serial, abs=1e-12)
+            assert np.isfinite(det[iy, ix])
