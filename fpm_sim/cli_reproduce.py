@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from .cli import add_config_args, add_output_args, emit, load_manipulator
-from .fast_frequencies import FAST_SEGMENTS, fast_options
+from .fast_frequencies import BACKENDS, FAST_SEGMENTS, fast_options
 from .study_comparison import reproduce_study
 from .study_poses import parse_reading
 
@@ -49,6 +49,8 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         opts = fast_options(segments=args.segments, axial=args.axial)
         if args.workers < 1:
             raise ValueError(f"--workers must be >= 1, got {args.workers}")
+        if args.backend not in BACKENDS:
+            raise ValueError(f"unknown --backend {args.backend!r}; available: {', '.join(sorted(BACKENDS))}")
     except ValueError as exc:
         print(f"fpm-sim: error: {exc}", file=sys.stderr)
         return 2

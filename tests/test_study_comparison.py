@@ -58,6 +58,8 @@ def test_sweep_keeps_every_point_with_a_status(tmp_path, capsys):
         (["reproduce", "--reading", "q+"], "x+, x-"),
         (["reproduce", "--thickness-mm", "-5"], "--thickness-mm"),
         (["sweep", "--step-mm", "0"], "--step-mm"),
+        (["reproduce", "--backend", "gpu-dream"], "--backend"),
+        (["reproduce", "--segments", "0"], "--segments"),
     ],
 )
 def test_bad_input_is_named(capsys, argv, message, tmp_path):
