@@ -2,15 +2,16 @@
 
     nice python scripts/identify_study.py --out out/identification [--seeds 1] [--quick]
 
-1. link: rig length and clamped length from the free-free and cantilever tests;
-2. chain: hinge hardware mass and the hinge tilt compliance from the chain tests;
+1-2. link and chain tests together: rig length, clamped length, the test piece's second dimension
+   and the chain hinge's mass;
 3. geometry screening: for each reading of the table and each elbow-branch class, a global search
    (differential evolution) on the in-plane surrogate, scale-free; the table of best fits is the
    evidence for the reading;
 4. rotation sign: at the poses written (x, 0), the singularity measure at phi = 0 and at +-0.2 rad
    for the best geometry of each reading (the study turned the platform to move away from a
    singularity);
-5. refinement of the best combination on the segment model (geometry and platform mass).
+5. refinement of the best combination on the segment model (platform mass, then geometry with it),
+   and the final geometry evaluated under all four readings.
 
 Writes ``identification.json`` into ``--out``. Long (tens of minutes on 2 busy cores): run it with
 ``nice``.
@@ -29,7 +30,7 @@ import numpy as np
 
 import fpm_sim  # noqa: F401
 from fpm_sim.config import Section, default_config
-from fpm_sim.fast_frequencies import fast_options
+from fpm_sim.fast_frequencies import fast_options, first_frequencies
 from fpm_sim.identification import (
     ELBOW_BRANCH_CLASSES,
     geometry_from,
@@ -38,6 +39,7 @@ from fpm_sim.identification import (
     screen_geometry,
 )
 from fpm_sim.kinematics import Pose, UnreachablePoseError, inverse_kinematics
+from fpm_sim.study_comparison import error_stats
 from fpm_sim.study_data import subsystem_tests
 from fpm_sim.study_poses import READINGS, ROTATION_RAD, study_poses
 
@@ -70,25 +72,23 @@ def main() -> None:
     report: dict = {}
     base = default_config()
 
-    # 1-2: subsystems -------------------------------------------------------------------------
+    # 1-2: subsystems: all five tests at once -------------------------------------------------
     t0 = time.time()
-    tests = subsystem_tests()
-    link_tests = [t for t in tests if t.rig != "chain"]
-    chain_tests = [t for t in tests if t.rig == "chain"]
-    init = {"rig.length_m": 0.2295, "rig.clamped_length_m": 0.04}
-    r_link, cfg = identify_subsystems(base, list(init), tests=link_tests, initial=init)
-    print("step 1, link\n" + r_link.table(), f"\n({time.time() - t0:.0f} s)\n", flush=True)
-    report["link"] = r_link.to_dict()
-    t0 = time.time()
-    init = {"rig.chain_hinge.mass_kg": 0.3, "compliance.passive_joint_tilt_nm_per_rad": 500.0}
-    r_chain, cfg = identify_subsystems(cfg, list(init), tests=chain_tests, initial=init)
-    print("step 2, chain\n" + r_chain.table(), f"\n({time.time() - t0:.0f} s)\n", flush=True)
-    report["chain"] = r_chain.to_dict()
+    init = {
+        "rig.length_m": 0.2295,
+        "rig.clamped_length_m": 0.037,
+        "rig.section.height_m": 0.0091,
+        "rig.chain_hinge.mass_kg": 0.42,
+    }
+    r_sub, cfg = identify_subsystems(base, list(init), tests=subsystem_tests(), initial=init)
+    print("steps 1-2, link and chain tests\n" + r_sub.table(), f"\n({time.time() - t0:.0f} s)\n", flush=True)
+    report["subsystems"] = r_sub.to_dict()
 
-    # the manipulator: links 10 mm in-plane x 30 mm, hinge hardware as identified on the chain
+    # the manipulator: links 30 mm in-plane (the study) x the test pieces' identified plate, joint
+    # hardware as identified on the chain
     hinge = cfg.rig.chain_hinge
     cfg = cfg.replace(
-        section=Section(0.010, 0.030),
+        section=Section(0.030, cfg.rig.section.height_m),
         hardware=dataclasses.replace(cfg.hardware, elbow_joint=hinge, platform_joint=hinge),
     )
 
@@ -131,25 +131,49 @@ def main() -> None:
         report["rotation"][rd.name] = rotation_evidence(g_cfg, rd)
         print(f"step 4, {rd.name}: singularity measure at (x, 0) poses", report["rotation"][rd.name], flush=True)
 
-    # 5: refinement -------------------------------------------------------------------------------
+    # 5: refinement: level (platform mass) first, then geometry and level ----------------------
     best = min(screens, key=lambda s: s.rms_log)
     rd = [r for r in READINGS if r.name == best.reading][0]
     sp = study_poses(rd)
+    poses, comsol = [p.pose for p in sp], [p.comsol_hz for p in sp]
+    opts = fast_options(segments=4)
     t0 = time.time()
+    lvl, _ = identify_manipulator(
+        cfg,
+        poses,
+        comsol,
+        initial=[*best.values, 1.0],
+        elbow_branch=best.elbow_branch,
+        options=opts,
+        geometry_free=False,
+        max_nfev=20,
+    )
     res, final = identify_manipulator(
         cfg,
-        [p.pose for p in sp],
-        [p.comsol_hz for p in sp],
-        initial=[*best.values, cfg.hardware.platform.mass_kg],
+        poses,
+        comsol,
+        initial=[*best.values, float(lvl.values[0])],
         elbow_branch=best.elbow_branch,
-        options=fast_options(segments=4),
-        max_nfev=30 if args.quick else 80,
+        options=opts,
+        span=0.25,
+        span_deg=20.0,
+        max_nfev=30 if args.quick else 60,
     )
     print(f"step 5, refinement ({rd.name}, branch {best.elbow_branch})\n" + res.table(), f"({time.time() - t0:.0f} s)")
     report["manipulator"] = {"reading": rd.name, "elbow_branch": best.elbow_branch, "fit": res.to_dict()}
+    readings = {}
+    for other in READINGS:
+        osp = study_poses(other)
+        f = first_frequencies(final, [p.pose for p in osp])[:, 0]
+        readings[other.name] = error_stats(f, np.array([p.comsol_hz for p in osp]))
+        st = readings[other.name]
+        print(
+            f"  {other.name}: mean {st['mean_abs_pct']:.2f} %, max {st['max_abs_pct']:.2f} %, "
+            f"Spearman {st['spearman']:.3f}"
+        )
+    report["readings_with_final_geometry"] = readings
     (args.out / "identification.json").write_text(json.dumps(report, indent=1, default=float))
     print(f"wrote {args.out / 'identification.json'}")
-    _ = np.nan
 
 
 if __name__ == "__main__":
