@@ -29,6 +29,8 @@ from .rigs import RIGS, RigError, RigSetup, build_rig
 __all__ = ["main", "COMMAND_MODULES"]
 
 COMMAND_MODULES: list[str] = [
+    "fpm_sim.cli_reproduce",
+    "fpm_sim.cli_sweep",
     "fpm_sim.cli_rollout",
     "fpm_sim.cli_reduce",
     "fpm_sim.cli_transient",

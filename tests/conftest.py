@@ -1,9 +1,11 @@
 """Shared small fixtures. Importing fpm_sim first keeps BLAS single-threaded (see fpm_sim/__init__)."""
 
+from pathlib import Path
+
 import pytest
 
 import fpm_sim  # noqa: F401
-from fpm_sim.config import Manipulator, Material, RigConfig, Section, default_config
+from fpm_sim.config import Manipulator, Material, RigConfig, Section, default_config, load_config
 
 
 @pytest.fixture(scope="session")
@@ -15,3 +17,12 @@ def default_manip() -> Manipulator:
 def steel_bar() -> RigConfig:
     """The ENGINE_NOTES probe bar: steel 10 x 10 x 228 mm."""
     return RigConfig(length_m=0.228, section=Section(0.010, 0.010), material=Material(200e9, 0.3, 7850.0))
+
+
+SYMMETRIC_CONFIG = Path(__file__).resolve().parent / "data" / "symmetric_3rrr.toml"
+
+
+@pytest.fixture(scope="session")
+def symmetric_manip() -> Manipulator:
+    """A well-conditioned, three-fold symmetric 3RRR (the pre-identification default) for method tests."""
+    return load_config(SYMMETRIC_CONFIG)

@@ -4,13 +4,15 @@ import json
 
 import numpy as np
 import pytest
+from conftest import SYMMETRIC_CONFIG
 
 from fpm_sim.cli import main
 from fpm_sim.reduction import load_reduced_model
 
 
 def run(capsys, *argv):
-    code = main(list(argv))
+    # every command runs on the symmetric test fixture, not the identified default
+    code = main([*argv, "--config", str(SYMMETRIC_CONFIG)])
     out = capsys.readouterr()
     return code, out.out, out.err
 

@@ -25,14 +25,14 @@ IN_B = LinkPoint("proximal_2", 0.7, "normal")
 
 
 @pytest.fixture(scope="module")
-def system(default_manip):
-    built = build_manipulator(default_manip, POSE, ModelOptions(segments=3, axial=False))
+def system(symmetric_manip):
+    built = build_manipulator(symmetric_manip, POSE, ModelOptions(segments=3, axial=False))
     return modal_system(built)
 
 
 @pytest.fixture(scope="module")
-def system_no_gravity(default_manip):
-    built = build_manipulator(default_manip, POSE, ModelOptions(segments=3, axial=False, gravity=False))
+def system_no_gravity(symmetric_manip):
+    built = build_manipulator(symmetric_manip, POSE, ModelOptions(segments=3, axial=False, gravity=False))
     return modal_system(built)
 
 

@@ -21,9 +21,9 @@ f1 / sqrt(1 - 2 zeta^2) (+0.01 % at 1 %), the neighbouring modes' skirts, the im
 ((omega h)^2 / 3 ~ 1e-6) and the soft welds (~1e-4). Measured -0.1 to -0.25 %."""
 
 
-def test_first_peak_matches_modal_f1_with_noise(default_manip):
+def test_first_peak_matches_modal_f1_with_noise(symmetric_manip):
     """Pose (0, 0, 0), the coarsest flexible model, three impacts with accelerometer noise."""
-    built = build_manipulator(default_manip, Pose(0.0, 0.0, 0.0), ModelOptions(segments=3, axial=False))
+    built = build_manipulator(symmetric_manip, Pose(0.0, 0.0, 0.0), ModelOptions(segments=3, axial=False))
     setup = ImpactSetup(record_s=0.2, noise_m_s2=0.05, seed=3)
     res = virtual_impact_test(built, setup)
     assert len(res.records) == 3
@@ -33,7 +33,7 @@ def test_first_peak_matches_modal_f1_with_noise(default_manip):
     # the exponential window adds known damping; what is left is the model's own (1.2 % at f1 from the
     # configured stiffness-proportional damping, beta omega / 2); the half-power read of a 0.2 s record
     # with 0.125 Hz lines resolves it to a few tenths of a percent of damping
-    model_zeta = default_manip.damping.stiffness_proportional_s * 2 * math.pi * res.modal_f1_hz / 2
+    model_zeta = symmetric_manip.damping.stiffness_proportional_s * 2 * math.pi * res.modal_f1_hz / 2
     assert res.identified_damping_ratio == pytest.approx(model_zeta, abs=4e-3)
     # noise lowers the coherence below 1 somewhere in the band, but not at the resonance
     band = (res.frf.freq_hz > 5) & (res.frf.freq_hz < 1000)
@@ -59,17 +59,17 @@ def test_first_peak_matches_modal_f1_with_noise(default_manip):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("pose_mm", [(0.0, 0.0, 0.0), (100.0, -100.0, 0.0), (-50.0, 50.0, 0.0), (50.0, 0.0, 0.2)])
-def test_first_peak_matches_modal_f1_at_study_poses(default_manip, pose_mm):
+def test_first_peak_matches_modal_f1_at_study_poses(symmetric_manip, pose_mm):
     """Four study poses, 4 segments, the default 0.5 s records (20-100 s each on the shared 2-core machine)."""
-    built = build_manipulator(default_manip, Pose.from_mm(*pose_mm), ModelOptions(segments=4, axial=False))
+    built = build_manipulator(symmetric_manip, Pose.from_mm(*pose_mm), ModelOptions(segments=4, axial=False))
     res = virtual_impact_test(built, ImpactSetup())
     assert abs(res.relative_error) < FIRST_PEAK_TOL
 
 
-def test_an_in_plane_hammer_misses_the_out_of_plane_mode_1(default_manip):
+def test_an_in_plane_hammer_misses_the_out_of_plane_mode_1(symmetric_manip):
     """Hammer and accelerometer along the in-plane normal: the first peak is the first in-plane mode, and the
     result says so (mode 1, out-of-plane bending for the default sections, is not excited)."""
-    built = build_manipulator(default_manip, Pose(0.0, 0.0, 0.0), ModelOptions(segments=3, axial=False))
+    built = build_manipulator(symmetric_manip, Pose(0.0, 0.0, 0.0), ModelOptions(segments=3, axial=False))
     hit = LinkPoint("distal_0", 0.5, "normal")
     res = virtual_impact_test(built, ImpactSetup(impact=hit, accelerometer=hit, record_s=0.1, n_impacts=1))
     assert res.first_peak_mode > 1
@@ -100,9 +100,9 @@ def test_h1_recovers_a_single_mode():
     assert np.allclose(coh[band], 1.0, atol=1e-6)  # noise-free, linear: perfectly coherent
 
 
-def test_point_acceleration_is_rigid_body_kinematics(default_manip):
+def test_point_acceleration_is_rigid_body_kinematics(symmetric_manip):
     """At rest under a load the acceleration of a material point equals J qacc (velocity terms vanish)."""
-    built = build_manipulator(default_manip, Pose(0.02, 0.03, 0.0), ModelOptions(segments=3, axial=False))
+    built = build_manipulator(symmetric_manip, Pose(0.02, 0.03, 0.0), ModelOptions(segments=3, axial=False))
     model = built.model
     data = mujoco.MjData(model)
     pt = LinkPoint("distal_1", 0.37, "z")
@@ -128,7 +128,7 @@ def test_point_acceleration_is_rigid_body_kinematics(default_manip):
         ({"impact": LinkPoint("distal_9", 0.5, "z")}, "unknown link"),
     ],
 )
-def test_bad_setups_name_the_parameter(default_manip, kwargs, message):
-    built = build_manipulator(default_manip, Pose(0.0, 0.0, 0.0), ModelOptions(segments=3, axial=False))
+def test_bad_setups_name_the_parameter(symmetric_manip, kwargs, message):
+    built = build_manipulator(symmetric_manip, Pose(0.0, 0.0, 0.0), ModelOptions(segments=3, axial=False))
     with pytest.raises(FrfError, match=message):
         virtual_impact_test(built, ImpactSetup(**kwargs))

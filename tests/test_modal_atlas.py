@@ -51,14 +51,14 @@ def _out_of_plane_share(system, v):
     return e[(kinds == "bend_out") | (kinds == "twist")].sum() / e.sum()
 
 
-def test_tracking_keeps_labels_through_a_crossing(default_manip):
+def test_tracking_keeps_labels_through_a_crossing(symmetric_manip):
     """Raise the links' out-of-plane height: out-of-plane bending stiffens (f ~ height) while in-plane
     bending does not (EI and mass both scale with height), so out-of-plane modes climb through in-plane
     ones. Gravity off: the planes decouple exactly, so these are true crossings, not veerings."""
     pose = Pose(0.05, -0.05, 0.1)
     heights = np.linspace(0.010, 0.024, 15)
     opts = ModelOptions(segments=3, axial=False, gravity=False)
-    systems = [modal_system(build_manipulator(default_manip.with_section(height_m=h), pose, opts)) for h in heights]
+    systems = [modal_system(build_manipulator(symmetric_manip.with_section(height_m=h), pose, opts)) for h in heights]
     al = track_modes(systems, n_modes=4, n_extra=4)
     share = np.array([[_out_of_plane_share(s, s.phi[:, i]) for i in a.index] for s, a in zip(systems, al)])
     # the sweep does contain crossings: label 1 (out of plane) ends as the 2nd mode, label 4 (in plane) as the 1st
@@ -75,11 +75,11 @@ def test_tracking_keeps_labels_through_a_crossing(default_manip):
 
 
 @pytest.fixture(scope="module")
-def atlas(default_manip):
-    return build_atlas(default_manip, x_m=PAPER_GRID_M, y_m=PAPER_GRID_M, options=OPTS, n_modes=6)
+def atlas(symmetric_manip):
+    return build_atlas(symmetric_manip, x_m=PAPER_GRID_M, y_m=PAPER_GRID_M, options=OPTS, n_modes=6)
 
 
-def test_atlas_reproduces_its_grid_poses(default_manip, atlas):
+def test_atlas_reproduces_its_grid_poses(symmetric_manip, atlas):
     compared_io = 0
     for pose in (
         Pose(0.0, 0.0, 0.0),
@@ -89,7 +89,7 @@ def test_atlas_reproduces_its_grid_poses(default_manip, atlas):
         Pose(-0.1, 0.1, 0.0),
     ):
         rom = atlas.query(pose)
-        system = modal_system(build_manipulator(default_manip, pose, OPTS))
+        system = modal_system(build_manipulator(symmetric_manip, pose, OPTS))
         node = (int(np.argmin(np.abs(atlas.x_m - pose.x_m))), int(np.argmin(np.abs(atlas.y_m - pose.y_m))), 0)
         tracked = np.sort(atlas.nodes["label_index"][node].astype(int))
         # the atlas keeps the tracked modes, which far from the root need not be the lowest six
@@ -114,19 +114,19 @@ def test_aligned_basis_is_consistent_on_the_paper_grid(atlas):
 
 
 @pytest.mark.parametrize("x_mm", MIDPOINTS_MM)
-def test_interpolated_frequencies_at_paper_grid_midpoints(default_manip, atlas, x_mm):
+def test_interpolated_frequencies_at_paper_grid_midpoints(symmetric_manip, atlas, x_mm):
     for y_mm in MIDPOINTS_MM:
         pose = Pose.from_mm(x_mm, y_mm, 0.0)
         rom = atlas.query(pose)
-        direct = modal_system(build_manipulator(default_manip, pose, OPTS)).frequencies_hz[:3]
+        direct = modal_system(build_manipulator(symmetric_manip, pose, OPTS)).frequencies_hz[:3]
         assert np.max(np.abs(rom.frequencies_hz[:3] / direct - 1.0)) < INTERP_TOL, (x_mm, y_mm)
 
 
-def test_interpolated_model_is_close_in_input_output_terms(default_manip, atlas):
+def test_interpolated_model_is_close_in_input_output_terms(symmetric_manip, atlas):
     """Static gain (end-effector compliance) at a midpoint: interpolated vs direct reduced model."""
     pose = Pose.from_mm(25.0, -25.0, 0.0)
     rom = atlas.query(pose)
-    direct = reduce_model(modal_system(build_manipulator(default_manip, pose, OPTS)), n_modes=6)
+    direct = reduce_model(modal_system(build_manipulator(symmetric_manip, pose, OPTS)), n_modes=6)
     g_i, g_d = rom.static_gain()[:3, :3], direct.static_gain()[:3, :3]
     # the in-plane compliance changes by tens of percent over 50 mm near the centre; a consistent basis keeps
     # the interpolated gain within a few percent (measured below 1 %); an inconsistent one (sign flips) gives
@@ -152,19 +152,19 @@ def test_queries_outside_the_grid_are_refused(atlas):
         atlas.query(Pose(0.0, 0.0, 0.0), method="spline")
 
 
-def test_bad_grids_are_refused(default_manip):
+def test_bad_grids_are_refused(symmetric_manip):
     with pytest.raises(AtlasError, match="x_m"):
-        build_atlas(default_manip, x_m=[0.0, 0.0], y_m=[0.0], options=OPTS)
+        build_atlas(symmetric_manip, x_m=[0.0, 0.0], y_m=[0.0], options=OPTS)
     with pytest.raises(AtlasError, match="root"):
-        build_atlas(default_manip, x_m=[0.0, 0.05], y_m=[0.0], options=OPTS, root=Pose(0.01, 0.0, 0.0))
+        build_atlas(symmetric_manip, x_m=[0.0, 0.05], y_m=[0.0], options=OPTS, root=Pose(0.01, 0.0, 0.0))
 
 
-def test_rotation_axis_and_mixed_orders(default_manip):
+def test_rotation_axis_and_mixed_orders(symmetric_manip):
     """A grid in x (4 values: cubic under 'auto') and phi (2 values: linear), queried between rotations."""
     xs = np.array([-0.075, -0.025, 0.025, 0.075])
-    at = build_atlas(default_manip, x_m=xs, y_m=[0.025], phi_rad=[0.0, 0.2], options=OPTS, n_modes=6)
+    at = build_atlas(symmetric_manip, x_m=xs, y_m=[0.025], phi_rad=[0.0, 0.2], options=OPTS, n_modes=6)
     pose = Pose(0.0, 0.025, 0.1)
-    direct = modal_system(build_manipulator(default_manip, pose, OPTS)).frequencies_hz[:3]
+    direct = modal_system(build_manipulator(symmetric_manip, pose, OPTS)).frequencies_hz[:3]
     auto = at.query(pose).frequencies_hz[:3]
     # 0.1 rad and 25 mm from the nearest nodes; measured 0.07 %
     assert np.max(np.abs(auto / direct - 1.0)) < INTERP_TOL
@@ -174,14 +174,14 @@ def test_rotation_axis_and_mixed_orders(default_manip):
 
 
 @pytest.mark.slow
-def test_interpolated_frequencies_at_six_segments(default_manip):
+def test_interpolated_frequencies_at_six_segments(symmetric_manip):
     """The CLI's default resolution (6 segments): measured 0.79 % worst over the 16 midpoints."""
     opts = ModelOptions(segments=6, axial=False)
-    at = build_atlas(default_manip, x_m=PAPER_GRID_M, y_m=PAPER_GRID_M, options=opts, n_modes=6)
+    at = build_atlas(symmetric_manip, x_m=PAPER_GRID_M, y_m=PAPER_GRID_M, options=opts, n_modes=6)
     worst = 0.0
     for x_mm in MIDPOINTS_MM:
         for y_mm in MIDPOINTS_MM:
             pose = Pose.from_mm(x_mm, y_mm, 0.0)
-            direct = modal_system(build_manipulator(default_manip, pose, opts)).frequencies_hz[:3]
+            direct = modal_system(build_manipulator(symmetric_manip, pose, opts)).frequencies_hz[:3]
             worst = max(worst, float(np.max(np.abs(at.query(pose).frequencies_hz[:3] / direct - 1.0))))
     assert worst < INTERP_TOL

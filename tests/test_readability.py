@@ -60,8 +60,8 @@ def test_auc_p_value():
 
 
 @pytest.fixture(scope="module")
-def system(default_manip):
-    return modal_system(build_manipulator(default_manip, Pose(0.05, -0.05, 0.0), OPTS))
+def system(symmetric_manip):
+    return modal_system(build_manipulator(symmetric_manip, Pose(0.05, -0.05, 0.0), OPTS))
 
 
 def test_mode1_is_seen_out_of_plane_and_not_in_plane(system):
@@ -85,10 +85,10 @@ def test_peak_height_is_the_single_mode_resonance(system):
     assert peak == pytest.approx(m.residue / (2 * zeta), rel=0.02)
 
 
-def test_table_and_markdown(default_manip):
+def test_table_and_markdown(symmetric_manip):
     cells = [c for c in study_grid() if c.row_mm == -50.0]  # 3 unreadable and 2 readable study cells
     assert sum(c.study_unreadable for c in cells) == 3
-    tab = readability_table(default_manip, options=OPTS, poses=cells)
+    tab = readability_table(symmetric_manip, options=OPTS, poses=cells)
     assert len(tab.rows) == 5 and len(tab.rows[0].metrics) == 3
     md = tab.to_markdown()
     assert md.count("\n| (") == 5 and "| cell (row, col) mm |" in md
@@ -102,7 +102,7 @@ def test_table_and_markdown(default_manip):
         assert r.f1_hz > 0 and r.f1_character.split()[0] in ("bend_out", "bend_in", "twist")
 
 
-def test_custom_poses_keep_their_flag(default_manip):
+def test_custom_poses_keep_their_flag(symmetric_manip):
     """Any object with row_mm, col_mm, pose and comsol_hz serves as a cell (e.g. another pose generator's)."""
 
     @dataclass(frozen=True)
@@ -113,6 +113,6 @@ def test_custom_poses_keep_their_flag(default_manip):
         comsol_hz: float
 
     cell = OtherPose(0.0, 0.0, Pose(0.0, 0.0, 0.2), math.nan)
-    tab = readability_table(default_manip, options=OPTS, poses=[cell], point=LinkPoint("distal_2", 0.4, "z"))
+    tab = readability_table(symmetric_manip, options=OPTS, poses=[cell], point=LinkPoint("distal_2", 0.4, "z"))
     assert tab.rows[0].study_unreadable
     assert [m.point.split("@")[0] for m in tab.rows[0].metrics] == ["distal_2", "distal_0", "distal_1"]

@@ -24,9 +24,9 @@ BAND_HZ = 400.0
 
 
 @pytest.fixture(scope="module")
-def flexible(default_manip):
+def flexible(symmetric_manip):
     """5 mm links (the study's flexible manipulator), 3 segments, inextensible: small and fast."""
-    manip = default_manip.with_section(thickness_m=0.005)
+    manip = symmetric_manip.with_section(thickness_m=0.005)
     built = build_manipulator(manip, POSE, ModelOptions(segments=3, axial=False))
     return manip, built, modal_system(built)
 
@@ -210,8 +210,8 @@ def test_python_control_state_space(rom):
     assert np.allclose(control.dcgain(sys), rom.static_gain(), rtol=1e-8, atol=1e-14)
 
 
-def test_servo_motors_add_torque_inputs(default_manip):
-    manip = default_manip.with_section(thickness_m=0.005).replace(
+def test_servo_motors_add_torque_inputs(symmetric_manip):
+    manip = symmetric_manip.with_section(thickness_m=0.005).replace(
         motors=Motors(mode="servo", servo_stiffness_nm_per_rad=500.0, servo_damping_nms_per_rad=1.0)
     )
     built = build_manipulator(manip, Pose(0.0, 0.0, 0.0), ModelOptions(segments=3, axial=False))
@@ -230,9 +230,9 @@ def test_servo_motors_add_torque_inputs(default_manip):
 
 
 @pytest.mark.slow
-def test_eigenvalues_at_the_default_resolution(default_manip):
+def test_eigenvalues_at_the_default_resolution(symmetric_manip):
     """The shipped default (30 mm links, 12 segments with axial springs) at (0, 0): ~10 s."""
-    built = build_manipulator(default_manip, Pose(0.0, 0.0, 0.0))
+    built = build_manipulator(symmetric_manip, Pose(0.0, 0.0, 0.0))
     system = modal_system(built)
     rom = reduce_model(system, n_modes=10)
     fd = modes_transition_fd(built, n_modes=10, qpos=system.qpos)

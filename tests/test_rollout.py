@@ -20,8 +20,8 @@ def _nrms(full, reduced):
 
 
 @pytest.fixture(scope="module")
-def flexible(default_manip):
-    manip = default_manip.with_section(thickness_m=0.005)
+def flexible(symmetric_manip):
+    manip = symmetric_manip.with_section(thickness_m=0.005)
     opts = aligned_options(manip, POSE, ModelOptions(segments=3, axial=False), 1e-4)
     built = build_manipulator(manip, POSE, opts)
     return manip, built, modal_system(built)
@@ -79,8 +79,8 @@ def test_small_force_rollout_matches_the_reduced_model(flexible):
         assert _nrms(res.accel[site] @ normal, y[:, rom.output_index(f"acc_distal_{i}")]) < 1e-2
 
 
-def test_motor_torque_rollout_matches_the_reduced_model(default_manip):
-    manip = default_manip.with_section(thickness_m=0.005).replace(
+def test_motor_torque_rollout_matches_the_reduced_model(symmetric_manip):
+    manip = symmetric_manip.with_section(thickness_m=0.005).replace(
         motors=Motors(mode="servo", servo_stiffness_nm_per_rad=500.0, servo_damping_nms_per_rad=1.0)
     )
     pose = Pose(0.0, 0.0, 0.0)
