@@ -107,6 +107,8 @@ class StudyReproduction:
     subsystems: list[SubsystemResult]
     options: ModelOptions
     notes: list[str] = field(default_factory=list)
+    readability: list[Any] = field(default_factory=list)
+    """Mode-1 readability tables (:class:`fpm_sim.readability.ReadabilityTable`), one per hammer axis."""
 
     @property
     def comsol_hz(self) -> np.ndarray:
@@ -276,7 +278,20 @@ class StudyReproduction:
             "|---|---:|---:|",
         ]
         out += [f"| {name} | {a:.3f} | {b:.3f} |" for name, a, b in rows]
-        return out + [""]
+        out.append("")
+        for table in self.readability:
+            out += [
+                f"### Mode-1 readability, virtual driving-point hammer test along {table.point.axis!r} "
+                f"at {table.point.link} ({table.point.fraction:g} of its length)",
+                "",
+                "How strongly a hammer at the assumed accelerometer point excites mode 1 and how far its peak stands "
+                "out in the FRF (`fpm-sim readability`; docs/frf_impact_atlas.md), against the study's seven "
+                "unreadable poses:",
+                "",
+                table.to_markdown(),
+                "",
+            ]
+        return out
 
     def markdown(self) -> str:
         """The report (Markdown)."""
@@ -398,6 +413,7 @@ def reproduce_study(
     workers: int = 1,
     progress: bool = False,
     subsystems: bool = True,
+    readability: bool = True,
 ) -> StudyReproduction:
     """Run the study's subsystem tests and its 25 poses on ``config``.
 
@@ -413,6 +429,9 @@ def reproduce_study(
         Passed to :func:`fpm_sim.fast_frequencies.pose_frequencies`.
     subsystems
         Also solve the subsystem rigs (needs ``config.rig``).
+    readability
+        Also tabulate mode-1 readability for a driving-point hammer along z and along the in-plane
+        normal of chain 0's distal link at mid-span (the study's set-up is not stated; both axes).
     """
     from .fast_frequencies import fast_options
 
@@ -430,4 +449,15 @@ def reproduce_study(
         desc="study poses",
     )
     subs = subsystem_frequencies(config) if subsystems and config.rig is not None else []
-    return StudyReproduction(config, rd, poses, freqs, subs, opts)
+    tables = []
+    if readability:
+        from .frf import LinkPoint
+        from .readability import readability_table
+
+        for axis in ("z", "normal"):
+            tables.append(
+                readability_table(
+                    config, options=opts, poses=poses, point=LinkPoint("distal_0", 0.5, axis), progress=progress
+                )
+            )
+    return StudyReproduction(config, rd, poses, freqs, subs, opts, readability=tables)

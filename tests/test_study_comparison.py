@@ -33,7 +33,7 @@ def test_reproduce_writes_csv_report_and_figures(tmp_path, capsys):
         assert float(r["phi_rad"]) == (-0.2 if float(r["col_mm"]) == 0 else 0.0)
         assert all(math.isfinite(float(r[f"f{k}_hz"])) for k in (1, 2, 3))
     report = (out / "report.md").read_text()
-    for needle in ("Subsystem tests", "The 25 poses", "Error statistics", "provenance"):
+    for needle in ("Subsystem tests", "The 25 poses", "Error statistics", "provenance", "Mode-1 readability"):
         assert needle in report
     assert (out / "heatmaps.png").stat().st_size > 0 and (out / "subsystems.png").stat().st_size > 0
 
