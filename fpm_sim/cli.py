@@ -30,6 +30,8 @@ __all__ = ["main", "COMMAND_MODULES"]
 
 COMMAND_MODULES: list[str] = []
 COMMAND_MODULES += ["fpm_sim.cli_rollout", "fpm_sim.cli_reduce", "fpm_sim.cli_transient"]  # issue 6
+COMMAND_MODULES.append("fpm_sim.cli_reproduce")
+COMMAND_MODULES.append("fpm_sim.cli_sweep")
 """Extra command modules (``module.register(subparsers)``), added by later features."""
 
 _USER_ERRORS = (

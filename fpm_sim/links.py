@@ -151,8 +151,9 @@ def box_part(
     m = material.density_kg_m3 * length * t * h
     r = 1.0 if rotary_inertia else 0.0
     iyy, izz = m * (length**2 + r * h**2) / 12.0, m * (length**2 + r * t**2) / 12.0
-    # Without rotary inertia the twist inertia is capped at iyy + izz (MuJoCo's triangle inequality).
-    ixx = min(m * (t**2 + h**2) / 12.0, iyy + izz)
+    # Without rotary inertia the twist inertia is capped at iyy + izz (MuJoCo's triangle inequality),
+    # 1e-5 below it so that the inequality survives the rounding of the written MJCF.
+    ixx = min(m * (t**2 + h**2) / 12.0, (iyy + izz) * (1.0 - 1e-5))
     i = np.diag([ixx, iyy, izz])
     return (m, np.array([x0 + length / 2.0, 0.0, 0.0]), i)
 

@@ -65,7 +65,8 @@ def build_rig(
     """Generate and compile a subsystem rig (see module docstring)."""
     opts = options or ModelOptions()
     comp = compliance or Compliance()
-    free_len = piece.length_m - piece.clamped_length_m
+    # the free-free bar hangs whole; only the clamped rigs lose clamped_length_m to each clamp
+    free_len = piece.length_m if setup.rig == "free-free" else piece.length_m - piece.clamped_length_m
     if free_len <= 0:
         raise RigError(
             f"clamped_length_m ({piece.clamped_length_m} m) must be shorter than length_m ({piece.length_m} m)"
@@ -117,6 +118,11 @@ def build_rig(
         )
         _add_hinge(second.first, "hinge", [0, 0, 1])
         kinds["hinge"] = "passive"
+        if math.isfinite(comp.passive_joint_tilt_nm_per_rad):  # the same bearing compliance as the manipulator's
+            k_t = comp.passive_joint_tilt_nm_per_rad
+            for ax, axis in (("x", [1, 0, 0]), ("y", [0, 1, 0])):
+                _add_hinge(second.first, f"hinge_tilt{ax}", axis, k_t, setup.damping_beta_s * k_t)
+                kinds[f"hinge_tilt{ax}"] = "tilt"
         links[second.name] = second.sites
         kinds.update(dict(second.joints))
         tip = second.last.add_body(name="tip", pos=[second.last_length_m, 0.0, 0.0])

@@ -2,6 +2,7 @@ import math
 import textwrap
 
 import pytest
+import tomllib
 
 from fpm_sim.config import ConfigError, default_config, default_config_text, load_config
 
@@ -30,7 +31,8 @@ def test_default_loads_and_every_value_has_provenance():
 
 def test_angles_converted_to_radians():
     cfg = default_config()
-    assert math.isclose(cfg.geometry.base_angles_rad[0], math.radians(90.0))
+    deg = tomllib.loads(default_config_text())["geometry"]["base_angles_deg"]["value"][0]
+    assert math.isclose(cfg.geometry.base_angles_rad[0], math.radians(deg))
 
 
 def _write(tmp_path, body: str):

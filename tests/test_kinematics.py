@@ -65,7 +65,7 @@ def test_elbow_branch_changes_solution(default_manip):
 
     g = default_manip.geometry
     a = inverse_kinematics(g, Pose(0, 0, 0))
-    b = inverse_kinematics(replace(g, elbow_branch=(-1, 1, 1)), Pose(0, 0, 0))
+    b = inverse_kinematics(replace(g, elbow_branch=(-g.elbow_branch[0], *g.elbow_branch[1:])), Pose(0, 0, 0))
     assert not np.allclose(a.b[0], b.b[0])
     assert np.allclose(a.b[1:], b.b[1:])
 
