@@ -71,10 +71,18 @@ def main() -> None:
         f"{'mjx 1st':>9}{'mjx 2nd':>9}{'cpu1/mjx2':>10}{'par/mjx2':>9}{'max rel diff':>14}"
     )
     print(header)
+    kw = {"n_modes": args.modes, "options": opts}
+    # All cpu runs first: the cpu backend's worker processes are forked, and forking after JAX has
+    # started its threads risks a deadlock (JAX warns about it).
+    cpu = {
+        label: (
+            timed(config, poses, backend="cpu", workers=1, **kw),
+            timed(config, poses, backend="cpu", workers=args.workers, **kw),
+        )
+        for label, poses in sets.items()
+    }
     for label, poses in sets.items():
-        kw = {"n_modes": args.modes, "options": opts}
-        cpu1, t_cpu1 = timed(config, poses, backend="cpu", workers=1, **kw)
-        cpup, t_cpup = timed(config, poses, backend="cpu", workers=args.workers, **kw)
+        (cpu1, t_cpu1), (cpup, t_cpup) = cpu[label]
         mjx1, t_mjx1 = timed(config, poses, backend="mjx", **kw)
         compile_s = LAST_TIMINGS.compile_s
         mjx2, t_mjx2 = timed(config, poses, backend="mjx", **kw)
