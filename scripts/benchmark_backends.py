@@ -24,8 +24,8 @@ import numpy as np
 
 from fpm_sim.config import default_config
 from fpm_sim.fast_frequencies import FAST_SEGMENTS, fast_options, pose_frequencies
-from fpm_sim.kinematics import NearSingularityWarning, inverse_kinematics
-from fpm_sim.mjx_backend import LAST_TIMINGS
+from fpm_sim.kinematics import NearSingularityWarning, Pose, inverse_kinematics
+from fpm_sim.mjx_backend import LAST_TIMINGS, frequency_gradients, parameter_value, with_parameter
 from fpm_sim.study_poses import study_poses
 from fpm_sim.workspace_sweep import dense_grid
 
@@ -99,6 +99,28 @@ def main() -> None:
     print(
         "cpu1/mjx2, par/mjx2: steady-state ratios (> 1: mjx faster). 'mjx 1st' includes the compile; "
         "'run' is the batched JAX linearisation + eigen-solve alone (build = per-pose MuJoCo models, CPU)."
+    )
+    grad_names = ["section.thickness_m", "material.young_pa", "hardware.platform.mass_kg"]
+    pose = Pose.from_mm(50.0, -50.0, 0.0)
+    times = []
+    for _ in range(2):
+        t0 = time.perf_counter()
+        grad = frequency_gradients(config, pose, grad_names, n_modes=args.modes, options=opts)
+        times.append(time.perf_counter() - t0)
+    t0 = time.perf_counter()
+    worst = 0.0
+    for k, name in enumerate(grad_names):
+        v = parameter_value(config, name)
+        h = 1e-4 * v
+        up = pose_frequencies(with_parameter(config, name, v + h), [pose], n_modes=args.modes, options=opts)
+        down = pose_frequencies(with_parameter(config, name, v - h), [pose], n_modes=args.modes, options=opts)
+        fd = (up.frequencies_hz[0] - down.frequencies_hz[0]) / (2 * h)
+        worst = max(worst, float(np.abs(grad.gradient[:, k] / fd - 1).max()))
+    t_fd = time.perf_counter() - t0
+    print(
+        f"gradients at (50, -50, 0) mm, {len(grad_names)} parameters: first call {times[0]:.2f} s "
+        f"({grad.timings_s}), second {times[1]:.3f} s; cpu central differences {t_fd:.3f} s "
+        f"(ratio {t_fd / times[1]:.2f}); max rel diff {worst:.1e}"
     )
 
 
