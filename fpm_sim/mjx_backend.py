@@ -142,15 +142,20 @@ def mjx_pose_frequencies(
 ) -> PoseFrequencies:
     """Lowest ``n_modes`` frequencies (Hz) at each pose, all poses in one batched JAX computation.
 
-    Same arguments and result as :func:`fpm_sim.fast_frequencies.pose_frequencies` (``workers`` is
-    ignored: the batch is one vectorised computation). The compiled function is cached per model
-    structure, batch size and ``n_modes``; :data:`LAST_TIMINGS` holds the build / compile / run times.
+    Same arguments and result as :func:`fpm_sim.fast_frequencies.pose_frequencies`. ``workers`` is
+    ignored: the per-pose models are built in this process (building them is most of the cost, but
+    forking worker processes after JAX has started its threads risks deadlocks, and ``forkserver`` or
+    ``spawn`` workers re-import the caller's main module), and the solve of all poses is one vectorised
+    JAX computation. The compiled function is cached per model structure, batch size and ``n_modes``;
+    :data:`LAST_TIMINGS` holds the build / compile / run times. A pose whose weld Jacobian is
+    rank-deficient (singular-value ratio below :data:`NULLSPACE_RCOND`) is reported ``singular`` with
+    NaN frequencies and a warning.
 
     Raises
     ------
     ValueError
-        ``options.gravity`` is on (the backend linearises the unstressed model at ``qpos0``), or the
-        link model is not ``segments``.
+        ``options.gravity`` is on (the backend linearises the unstressed model at ``qpos0``), the link
+        model is not ``segments``, or the poses' models differ in structure.
     """
     import jax.numpy as jnp
 
@@ -195,10 +200,13 @@ def mjx_pose_frequencies(
         inplane = np.array([kind in IN_PLANE_KINDS for kind in built[ok[0]].dof_kinds])
         for r, i in enumerate(ok):
             if ratio[r] < NULLSPACE_RCOND:
-                raise ValueError(
+                warnings.warn(
                     f"pose {poses[i]}: weld Jacobian is rank-deficient (singular value ratio {ratio[r]:.1e}); "
-                    "use the cpu backend, whose null space takes the rank"
+                    "reported singular (the cpu backend's null space takes the rank)",
+                    stacklevel=2,
                 )
+                status[i] = STATUS_SINGULAR
+                continue
             freq[i, :n] = np.sqrt(np.maximum(w2[r], 0.0)) / (2 * np.pi)
             energy = kdiag[r][:, None] * x[r] ** 2
             tot = energy.sum(axis=0)
