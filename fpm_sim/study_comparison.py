@@ -233,7 +233,7 @@ class StudyReproduction:
             ax.set_xticks(x)
             ax.set_xticklabels([s.test.label for s in grp])
             ax.set_ylabel("first natural frequency (Hz)")
-            ax.legend(fontsize=8)
+            ax.legend(fontsize=8, loc="lower center")
         fig.suptitle("subsystem tests", fontsize=10)
         return fig
 

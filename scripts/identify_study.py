@@ -33,6 +33,7 @@ from fpm_sim.config import Section, default_config
 from fpm_sim.fast_frequencies import fast_options, first_frequencies
 from fpm_sim.identification import (
     ELBOW_BRANCH_CLASSES,
+    Screening,
     geometry_from,
     identify_manipulator,
     identify_subsystems,
@@ -41,7 +42,7 @@ from fpm_sim.identification import (
 from fpm_sim.kinematics import Pose, UnreachablePoseError, inverse_kinematics
 from fpm_sim.study_comparison import error_stats
 from fpm_sim.study_data import subsystem_tests
-from fpm_sim.study_poses import READINGS, ROTATION_RAD, study_poses
+from fpm_sim.study_poses import READINGS, ROTATION_RAD, parse_reading, study_poses
 
 
 def rotation_evidence(cfg, reading) -> dict:  # noqa: ANN001
@@ -66,6 +67,11 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("out/identification"))
     ap.add_argument("--seeds", type=int, default=1, help="differential-evolution seeds per combination")
     ap.add_argument("--quick", action="store_true", help="small searches (a smoke run, not a result)")
+    ap.add_argument(
+        "--start",
+        help="skip the screening: refine from this geometry, 'READING;B1,B2,B3;R,r,L1,L2,rot_deg,off_deg' "
+        "(the embedded default: 'x+;-1,-1,-1;0.1569,0.0942,0.1553,0.1553,59.3143,30.5384')",
+    )
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     args.out.mkdir(parents=True, exist_ok=True)
@@ -92,47 +98,56 @@ def main() -> None:
         hardware=dataclasses.replace(cfg.hardware, elbow_joint=hinge, platform_joint=hinge),
     )
 
-    # 3: screening ------------------------------------------------------------------------------
-    screens = []
-    maxiter = 30 if args.quick else 300
-    for rd in READINGS:
-        sp = study_poses(rd)
-        poses, comsol = [p.pose for p in sp], [p.comsol_hz for p in sp]
-        for br in ELBOW_BRANCH_CLASSES:
-            for seed in range(args.seeds):
-                t0 = time.time()
-                s = screen_geometry(cfg, poses, comsol, elbow_branch=br, reading=rd.name, seed=seed, maxiter=maxiter)
-                screens.append(s)
-                print(
-                    f"step 3, {rd.name:>15} branch {br}: rms(ln f) {s.rms_log:.4f}, Spearman {s.spearman:.3f} "
-                    f"({time.time() - t0:.0f} s)",
-                    flush=True,
-                )
-    report["screening"] = [
-        {
-            "reading": s.reading,
-            "elbow_branch": s.elbow_branch,
-            "values": s.values.tolist(),
-            "rms_log": s.rms_log,
-            "spearman": s.spearman,
-        }
-        for s in screens
-    ]
-    best_by_reading = {}
-    for s in screens:
-        if s.reading not in best_by_reading or s.rms_log < best_by_reading[s.reading].rms_log:
-            best_by_reading[s.reading] = s
+    if args.start:
+        rd_text, br_text, x_text = args.start.split(";")
+        start_reading = parse_reading(rd_text)
+        start_branch = tuple(int(v) for v in br_text.split(","))
+        start_values = np.array([float(v) for v in x_text.split(",")])
+        screens = [Screening(start_reading.name, start_branch, start_values, float("nan"), float("nan"), float("nan"))]
+    else:
+        # 3: screening ------------------------------------------------------------------------------
+        screens = []
+        maxiter = 30 if args.quick else 300
+        for rd in READINGS:
+            sp = study_poses(rd)
+            poses, comsol = [p.pose for p in sp], [p.comsol_hz for p in sp]
+            for br in ELBOW_BRANCH_CLASSES:
+                for seed in range(args.seeds):
+                    t0 = time.time()
+                    s = screen_geometry(
+                        cfg, poses, comsol, elbow_branch=br, reading=rd.name, seed=seed, maxiter=maxiter
+                    )
+                    screens.append(s)
+                    print(
+                        f"step 3, {rd.name:>15} branch {br}: rms(ln f) {s.rms_log:.4f}, Spearman {s.spearman:.3f} "
+                        f"({time.time() - t0:.0f} s)",
+                        flush=True,
+                    )
+        report["screening"] = [
+            {
+                "reading": s.reading,
+                "elbow_branch": s.elbow_branch,
+                "values": s.values.tolist(),
+                "rms_log": s.rms_log,
+                "spearman": s.spearman,
+            }
+            for s in screens
+        ]
+        best_by_reading = {}
+        for s in screens:
+            if s.reading not in best_by_reading or s.rms_log < best_by_reading[s.reading].rms_log:
+                best_by_reading[s.reading] = s
 
-    # 4: rotation sign ----------------------------------------------------------------------------
-    report["rotation"] = {}
-    for rd in READINGS:
-        s = best_by_reading[rd.name]
-        g_cfg = cfg.replace(geometry=geometry_from(s.values, s.elbow_branch))
-        report["rotation"][rd.name] = rotation_evidence(g_cfg, rd)
-        print(f"step 4, {rd.name}: singularity measure at (x, 0) poses", report["rotation"][rd.name], flush=True)
+        # 4: rotation sign ----------------------------------------------------------------------------
+        report["rotation"] = {}
+        for rd in READINGS:
+            s = best_by_reading[rd.name]
+            g_cfg = cfg.replace(geometry=geometry_from(s.values, s.elbow_branch))
+            report["rotation"][rd.name] = rotation_evidence(g_cfg, rd)
+            print(f"step 4, {rd.name}: singularity measure at (x, 0) poses", report["rotation"][rd.name], flush=True)
 
     # 5: refinement: level (platform mass) first, then geometry and level ----------------------
-    best = min(screens, key=lambda s: s.rms_log)
+    best = screens[0] if args.start else min(screens, key=lambda s: s.rms_log)
     rd = [r for r in READINGS if r.name == best.reading][0]
     sp = study_poses(rd)
     poses, comsol = [p.pose for p in sp], [p.comsol_hz for p in sp]
@@ -172,6 +187,8 @@ def main() -> None:
             f"Spearman {st['spearman']:.3f}"
         )
     report["readings_with_final_geometry"] = readings
+    report["rotation_final"] = {r.name: rotation_evidence(final, r) for r in READINGS if r.row_is == rd.row_is}
+    print("singularity measure at the (x, 0) poses, phi 0 / +0.2 / -0.2:", report["rotation_final"][rd.name])
     (args.out / "identification.json").write_text(json.dumps(report, indent=1, default=float))
     print(f"wrote {args.out / 'identification.json'}")
 
