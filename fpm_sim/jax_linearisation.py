@@ -23,11 +23,15 @@ the segment count. The per-pose models share one structure (topology), which is 
 fields (:data:`PARAM_FIELDS`) are stacked along a leading pose axis and ``vmap``-ped.
 
 Importing this module imports JAX and enables float64 (``jax_enable_x64``); the rest of fpm_sim does not
-import it (the backend registration in :mod:`fpm_sim.mjx_backend` imports it on first use).
+import it (the backend registration in :mod:`fpm_sim.mjx_backend` imports it on first use). With the
+environment variable ``FPM_SIM_JAX_CACHE_DIR`` set, JAX's persistent compilation cache is used there:
+measured on the 25 study poses, a second process's compile step took 2.5 s instead of 5.2 s (tracing and
+lowering remain).
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -35,6 +39,9 @@ from typing import Any
 import jax
 
 jax.config.update("jax_enable_x64", True)
+if os.environ.get("FPM_SIM_JAX_CACHE_DIR"):  # opt-in persistent XLA cache: later processes skip the compile
+    jax.config.update("jax_compilation_cache_dir", os.environ["FPM_SIM_JAX_CACHE_DIR"])
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
 
 import jax.numpy as jnp  # noqa: E402
 import mujoco  # noqa: E402
