@@ -323,7 +323,8 @@ def frequency_gradients(
     ``K_twist ~ G J(t)``, masses ~ ``t``, ...). The builder is MuJoCo's C compiler, which JAX cannot
     trace, so the array tangents ``d(arrays)/dp`` are central differences of the compiled arrays
     (relative step ``rel_step``; the arrays are smooth closed-form functions of ``p``, so the truncation
-    error is ~``rel_step^2``). From the arrays on everything is exact: ``dM``, ``dK`` are ``jax.jvp``
+    error is ~``rel_step^2``: measured, the gradients at 3 segments change by at most 3e-9 relative
+    for ``rel_step`` from 1e-4 to 1e-7). From the arrays on everything is exact: ``dM``, ``dK`` are ``jax.jvp``
     tangents of the linearisation and ``d(w^2) = x'(dK - w^2 dM)x`` with M-normalised modes ``x``.
 
     Exact for distinct eigenvalues; for a (near-)repeated pair only the sum of the pair's derivatives is
