@@ -117,6 +117,8 @@ def test_bad_input_is_refused_with_the_parameter_named():
         frequency_gradients(config, Pose(0, 0, 0), ["section.width_m"], options=fast_options(segments=2))
     with pytest.raises(ValueError, match="unknown parameter"):
         with_parameter(config, "hardware.nothing.mass_kg", 1.0)
+    with pytest.raises(ValueError, match="moves the geometry"):
+        frequency_gradients(config, Pose(0, 0, 0), ["geometry.proximal_length_m"], options=fast_options(segments=2))
     with pytest.raises(ValueError, match="unreachable"):
         frequency_gradients(config, Pose(1.0, 0.0, 0.0), options=fast_options(segments=2))
 
