@@ -54,6 +54,7 @@ __all__ = [
     "FrequencyGradients",
     "GRADIENT_PARAMETERS",
     "frequency_gradients",
+    "pose_frequency_gradients",
     "parameter_value",
     "with_parameter",
 ]
@@ -336,33 +337,28 @@ def frequency_gradients(
         Unknown or non-positive parameter, gravity on, an unreachable/singular pose, or a parameter that
         changes the geometry.
     """
-    import jax
-    import jax.numpy as jnp
+    return pose_frequency_gradients(config, [pose], parameters, n_modes=n_modes, options=options, rel_step=rel_step)[0]
 
+
+def _pose_tangents(
+    config: Manipulator, pose: Pose, names: list[str], values: np.ndarray, opts: ModelOptions, rel_step: float
+) -> tuple[dict[str, np.ndarray], Any, dict[str, np.ndarray]]:
+    """Nominal arrays, structure and stacked array tangents ``d(arrays)/dp_k`` at one pose."""
     from . import jax_linearisation as jl
 
-    opts = options or fast_options()
-    _check_options(opts)
-    names = list(parameters)
-    if not names:
-        raise ValueError("parameters: give at least one name")
-    t0 = time.perf_counter()
     base, _, status = _assemble(config, pose, opts)
     if base is None:
         raise ValueError(f"pose {pose} is {status}: no frequencies to differentiate")
     p0 = jl.params_of(base.model)
     structure = jl.structure_of(base.model)
-    values = np.array([parameter_value(config, n) for n in names])
     tangents: list[dict[str, np.ndarray]] = []
     for name, v in zip(names, values):
-        if not v > 0:
-            raise ValueError(f"parameter {name!r} = {v}: gradients need a positive value (relative step)")
         h = rel_step * v
         arrays = []
         for sign in (1.0, -1.0):
             b, _, _ = _assemble(with_parameter(config, name, v + sign * h), pose, opts)
-            if not jl.structure_of(b.model).same_as(structure):
-                raise ValueError(f"parameter {name!r} changes the model structure")
+            if b is None or not jl.structure_of(b.model).same_as(structure):
+                raise ValueError(f"parameter {name!r} changes the model structure at pose {pose}")
             arrays.append(jl.params_of(b.model))
         t = {k: (arrays[0][k] - arrays[1][k]) / (2 * h) for k in jl.PARAM_FIELDS}
         for k in _GEOMETRY_FIELDS:
@@ -371,22 +367,71 @@ def frequency_gradients(
                 raise ValueError(f"parameter {name!r} moves the geometry ({k}); not supported by the modal formula")
             t[k] = np.zeros_like(t[k])
         tangents.append(t)
-    stacked = jl.stack_params(tangents)
+    return p0, structure, jl.stack_params(tangents)
+
+
+def pose_frequency_gradients(
+    config: Manipulator,
+    poses: Sequence[Pose],
+    parameters: Sequence[str] = GRADIENT_PARAMETERS,
+    *,
+    n_modes: int = 6,
+    options: ModelOptions | None = None,
+    rel_step: float = 1e-6,
+) -> list[FrequencyGradients]:
+    """:func:`frequency_gradients` at many poses, all solved in one ``jit``/``vmap`` JAX computation.
+
+    The compiled function is cached per model structure, pose count, parameter count and mode count.
+    Every pose must be reachable and not singular (``ValueError`` names the first that is not).
+    """
+    import jax
+    import jax.numpy as jnp
+
+    from . import jax_linearisation as jl
+
+    opts = options or fast_options()
+    _check_options(opts)
+    names = list(parameters)
+    poses = list(poses)
+    if not names:
+        raise ValueError("parameters: give at least one name")
+    if not poses:
+        raise ValueError("poses: give at least one pose")
+    values = np.array([parameter_value(config, n) for n in names])
+    for name, v in zip(names, values):
+        if not v > 0:
+            raise ValueError(f"parameter {name!r} = {v}: gradients need a positive value (relative step)")
+    t0 = time.perf_counter()
+    per_pose = [_pose_tangents(config, p, names, values, opts, rel_step) for p in poses]
+    structure = per_pose[0][1]
+    for pose, (_, s, _) in zip(poses[1:], per_pose[1:]):
+        if not s.same_as(structure):
+            raise ValueError(f"pose {pose}: model structure differs from the first pose's")
+    p0 = jl.stack_params([x[0] for x in per_pose])
+    tangents = {k: np.stack([x[2][k] for x in per_pose]) for k in jl.PARAM_FIELDS}
     n = min(n_modes, structure.nv - 6 * len(structure.weld_b1))
     t1 = time.perf_counter()
-    key = ("gradients", structure.key(), len(names), n)
+    key = ("gradients", structure.key(), len(poses), len(names), n)
     if key not in _COMPILED:
-        _COMPILED[key] = jax.jit(lambda p, t: jl.modal_sensitivity(structure, p, t, n_modes=n, geometric=False))
+
+        def one(p: dict[str, Any], t: dict[str, Any]) -> Any:
+            return jl.modal_sensitivity(structure, p, t, n_modes=n, geometric=False)
+
+        _COMPILED[key] = jax.jit(jax.vmap(one))
     f_hz, df = _COMPILED[key](
-        {k: jnp.asarray(v) for k, v in p0.items()}, {k: jnp.asarray(v) for k, v in stacked.items()}
+        {k: jnp.asarray(v) for k, v in p0.items()}, {k: jnp.asarray(v) for k, v in tangents.items()}
     )
     f_hz, df = np.asarray(f_hz), np.asarray(df)
     t2 = time.perf_counter()
-    return FrequencyGradients(
-        pose=pose,
-        frequencies_hz=f_hz,
-        parameters=names,
-        values=values,
-        gradient=df.T,
-        timings_s={"build": t1 - t0, "jax": t2 - t1},
-    )
+    timings = {"build": t1 - t0, "jax": t2 - t1}
+    return [
+        FrequencyGradients(
+            pose=pose,
+            frequencies_hz=f_hz[i],
+            parameters=names,
+            values=values,
+            gradient=df[i].T,
+            timings_s=timings,
+        )
+        for i, pose in enumerate(poses)
+    ]
