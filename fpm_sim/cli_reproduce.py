@@ -26,7 +26,12 @@ def add_study_args(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--axial", action="store_true", help="add axial springs (extensible links; slower)")
     p.add_argument("--workers", type=int, default=2, help="processes for the pose loop (default 2)")
-    p.add_argument("--backend", default="cpu", help="pose-loop backend (default cpu)")
+    p.add_argument(
+        "--backend",
+        default="cpu",
+        help="pose-loop backend: cpu (scipy per pose, --workers processes) or mjx (all poses in one batched JAX "
+        "computation; compiles once, seconds); default cpu",
+    )
 
 
 def study_manipulator(args: argparse.Namespace):  # noqa: ANN201

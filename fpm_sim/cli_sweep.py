@@ -37,6 +37,13 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         print(f"fpm-sim: error: {exc}", file=sys.stderr)
         return 2
     paths = sw.write(args.out)
+    if args.grid == "paper":  # the reproduce command's poses.csv, from the same frequencies
+        from .study_comparison import StudyReproduction
+        from .study_poses import study_poses
+
+        rep = StudyReproduction(manip, reading, study_poses(reading), sw.frequencies, [], opts)
+        rep.write_csv(Path(args.out) / "poses.csv")
+        paths.append(Path(args.out) / "poses.csv")
     f1 = sw.frequencies.f1_hz
     counts = sw.counts()
     text = (
@@ -62,7 +69,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "sweep",
         help="first natural frequencies over the workspace (dense grid or the study's 25 poses)",
         description="Writes OUT/sweep_<grid>.csv (every grid point, with its status: ok, near_singular, singular, "
-        "unreachable) and a heatmap with the singularity loci.",
+        "unreachable) and a heatmap with the singularity loci; with --grid paper also OUT/poses.csv (as reproduce).",
     )
     p.add_argument("--grid", choices=("paper", "dense"), default="dense", help="dense grid or the study's poses")
     p.add_argument("--step-mm", type=float, default=10.0, help="dense grid spacing (mm, default 10)")

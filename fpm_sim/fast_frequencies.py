@@ -260,3 +260,6 @@ def first_frequencies(
     return pose_frequencies(
         config, poses, backend=backend, n_modes=n_modes, options=options, workers=workers, progress=progress
     ).frequencies_hz
+
+
+from . import mjx_backend as _mjx_backend  # noqa: E402,F401  registers "mjx" (imports JAX only when called)
