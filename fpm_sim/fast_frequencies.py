@@ -42,9 +42,10 @@ from .kinematics import (
 )
 from .manipulator_model import build_manipulator
 from .modal import NULLSPACE_RCOND, equality_jacobian, mass_matrix
-from .model import ModelOptions, dof_stiffness
+from .model import BuiltModel, ModelOptions, dof_stiffness
 
 __all__ = [
+    "assemble_pose",
     "FAST_SEGMENTS",
     "PoseFrequencies",
     "first_frequencies",
@@ -103,20 +104,33 @@ def fast_options(*, segments: int = FAST_SEGMENTS, axial: bool = False) -> Model
     return ModelOptions(segments=segments, axial=axial, gravity=False)
 
 
+def assemble_pose(config: Manipulator, pose: Pose, options: ModelOptions) -> tuple[BuiltModel | None, float, str]:
+    """``(built model or None, singularity measure, status)`` of one pose, for any backend.
+
+    Unreachable and singular poses get no model (status :data:`STATUS_UNREACHABLE` /
+    :data:`STATUS_SINGULAR`); near-singular ones are built and marked :data:`STATUS_NEAR`.
+    """
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", NearSingularityWarning)
+            asm = inverse_kinematics(config.geometry, pose)
+    except UnreachablePoseError:
+        return None, math.nan, STATUS_UNREACHABLE
+    except SingularPoseError:
+        asm = inverse_kinematics(config.geometry, pose, check_singularity=False)
+        return None, asm.singularity.value, STATUS_SINGULAR
+    built = build_manipulator(config, pose, options, assembly=asm)
+    status = STATUS_NEAR if asm.singularity.value < NEAR_SINGULAR_WARN else STATUS_OK
+    return built, asm.singularity.value, status
+
+
 def _solve_pose(
     manip: Manipulator, pose: Pose, opts: ModelOptions, n_modes: int
 ) -> tuple[np.ndarray, np.ndarray, float, str]:
     nan = np.full(n_modes, np.nan)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", NearSingularityWarning)
-            asm = inverse_kinematics(manip.geometry, pose)
-    except UnreachablePoseError:
-        return nan, nan, math.nan, STATUS_UNREACHABLE
-    except SingularPoseError:
-        asm = inverse_kinematics(manip.geometry, pose, check_singularity=False)
-        return nan, nan, asm.singularity.value, STATUS_SINGULAR
-    built = build_manipulator(manip, pose, opts, assembly=asm)
+    built, singularity, status = assemble_pose(manip, pose, opts)
+    if built is None:
+        return nan, nan, singularity, status
     model = built.model
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
@@ -137,8 +151,7 @@ def _solve_pose(
         e = k * v**2
         tot = float(e.sum())
         frac[i] = float(e[inplane_mask].sum()) / tot if tot > 0 else math.nan
-    status = STATUS_NEAR if asm.singularity.value < NEAR_SINGULAR_WARN else STATUS_OK
-    return freq, frac, asm.singularity.value, status
+    return freq, frac, singularity, status
 
 
 def _solve_chunk(args: tuple[Manipulator, list[Pose], ModelOptions, int]) -> list[tuple]:

@@ -29,21 +29,14 @@ import numpy as np
 from .config import Manipulator
 from .fast_frequencies import (
     IN_PLANE_KINDS,
-    STATUS_NEAR,
-    STATUS_OK,
     STATUS_SINGULAR,
-    STATUS_UNREACHABLE,
     PoseFrequencies,
+    assemble_pose,
     fast_options,
     register_backend,
 )
 from .kinematics import (
-    NEAR_SINGULAR_WARN,
-    NearSingularityWarning,
     Pose,
-    SingularPoseError,
-    UnreachablePoseError,
-    inverse_kinematics,
 )
 from .model import ModelOptions
 
@@ -91,24 +84,6 @@ def _check_options(options: ModelOptions) -> None:
         )
     if options.link_model != "segments":
         raise ValueError(f"the mjx backend needs link_model='segments', got {options.link_model!r}")
-
-
-def _assemble(config: Manipulator, pose: Pose, options: ModelOptions) -> tuple[Any, float, str]:
-    """``(built model or None, singularity measure, status)`` of one pose (as the cpu backend)."""
-    from .manipulator_model import build_manipulator
-
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", NearSingularityWarning)
-            asm = inverse_kinematics(config.geometry, pose)
-    except UnreachablePoseError:
-        return None, math.nan, STATUS_UNREACHABLE
-    except SingularPoseError:
-        asm = inverse_kinematics(config.geometry, pose, check_singularity=False)
-        return None, asm.singularity.value, STATUS_SINGULAR
-    built = build_manipulator(config, pose, options, assembly=asm)
-    status = STATUS_NEAR if asm.singularity.value < NEAR_SINGULAR_WARN else STATUS_OK
-    return built, asm.singularity.value, status
 
 
 def _compiled_modes(structure: Any, params: dict[str, np.ndarray], n_modes: int) -> tuple[Any, float]:
@@ -176,7 +151,7 @@ def mjx_pose_frequencies(
 
         iterator = tqdm(poses, desc=f"{desc} (build)", unit="pose")
     for i, p in enumerate(iterator):
-        b, sing[i], st = _assemble(config, p, opts)
+        b, sing[i], st = assemble_pose(config, p, opts)
         built.append(b)
         status.append(st)
     ok = [i for i, b in enumerate(built) if b is not None]
@@ -346,7 +321,7 @@ def _pose_tangents(
     """Nominal arrays, structure and stacked array tangents ``d(arrays)/dp_k`` at one pose."""
     from . import jax_linearisation as jl
 
-    base, _, status = _assemble(config, pose, opts)
+    base, _, status = assemble_pose(config, pose, opts)
     if base is None:
         raise ValueError(f"pose {pose} is {status}: no frequencies to differentiate")
     p0 = jl.params_of(base.model)
@@ -356,7 +331,7 @@ def _pose_tangents(
         h = rel_step * v
         arrays = []
         for sign in (1.0, -1.0):
-            b, _, _ = _assemble(with_parameter(config, name, v + sign * h), pose, opts)
+            b, _, _ = assemble_pose(with_parameter(config, name, v + sign * h), pose, opts)
             if b is None or not jl.structure_of(b.model).same_as(structure):
                 raise ValueError(f"parameter {name!r} changes the model structure at pose {pose}")
             arrays.append(jl.params_of(b.model))
