@@ -58,7 +58,7 @@ import mujoco
 import numpy as np
 
 from .config import LumpedMass, Material, Section
-from .links import _MIN_FLEX_EDGES, LinkBuild, LinkModelError, box_part, lump_part, quat_z, set_inertial
+from .links import _MIN_FLEX_EDGES, LinkBuild, LinkModelError, add_box_geom, box_part, lump_part, quat_z, set_inertial
 
 __all__ = [
     "CABLE_PLUGIN",
@@ -112,18 +112,6 @@ def _check_engine(link_model: str) -> None:
         )
 
 
-def _box_geom(body: mujoco.MjsBody, name: str, length: float, section: Section, x0: float, rgba) -> None:
-    body.add_geom(
-        name=name,
-        type=mujoco.mjtGeom.mjGEOM_BOX,
-        size=[length / 2.0, section.thickness_m / 2.0, section.height_m / 2.0],
-        pos=[x0 + length / 2.0, 0.0, 0.0],
-        rgba=list(rgba),
-        contype=0,
-        conaffinity=0,
-    )
-
-
 def add_cable_link(
     spec: mujoco.MjSpec,
     parent: mujoco.MjsBody,
@@ -157,7 +145,7 @@ def add_cable_link(
             body = parent.add_body(name=f"{name}_b0", pos=list(pos), quat=quat_z(angle_rad))
             anchor = body.add_body(name=f"{name}_anchor", pos=[-l_seg / 2.0, 0.0, 0.0])
             # the plugin reads the section from the first geom of each plugin body
-            _box_geom(anchor, f"{name}_ganchor", l_seg / 2.0, section, l_seg / 2.0, (0, 0, 0, 0))
+            add_box_geom(anchor, f"{name}_ganchor", l_seg / 2.0, section, l_seg / 2.0, (0, 0, 0, 0))
             anchor.plugin = plugin
         else:
             # piece 1 hangs from the anchor (so the plugin bodies are consecutive and the first
@@ -177,7 +165,7 @@ def add_cable_link(
             build.joints.append((jn, "ball"))
             body.plugin = plugin
         # the first piece's frame is at the link start; every later piece's at its proximal joint
-        _box_geom(body, f"{name}_g{j}", piece, section, 0.0, rgba)
+        add_box_geom(body, f"{name}_g{j}", piece, section, 0.0, rgba)
         parts = [box_part(piece, section, material, 0.0, rotary_inertia=rotary_inertia)]
         if j == 0:
             parts += [lump_part(lump, np.zeros(3)) for lump in start_lumps if lump.mass_kg > 0]

@@ -158,6 +158,27 @@ def box_part(
     return (m, np.array([x0 + length / 2.0, 0.0, 0.0]), i)
 
 
+def add_box_geom(
+    body: mujoco.MjsBody,
+    name: str,
+    length: float,
+    section: Section,
+    x0: float,
+    rgba: tuple[float, float, float, float],
+) -> None:
+    """A contact-free box geom of the link section from ``x0`` to ``x0 + length`` along x (the cable
+    plugin also reads its section from it)."""
+    body.add_geom(
+        name=name,
+        type=mujoco.mjtGeom.mjGEOM_BOX,
+        size=[length / 2.0, section.thickness_m / 2.0, section.height_m / 2.0],
+        pos=[x0 + length / 2.0, 0.0, 0.0],
+        rgba=list(rgba),
+        contype=0,
+        conaffinity=0,
+    )
+
+
 def _add_spring(body: mujoco.MjsBody, name: str, kind: str, stiffness: float, beta: float) -> None:
     axis = {"bend_in": [0, 0, 1], "bend_out": [0, 1, 0], "twist": [1, 0, 0], "axial": [1, 0, 0]}[kind]
     jtype = mujoco.mjtJoint.mjJNT_SLIDE if kind == "axial" else mujoco.mjtJoint.mjJNT_HINGE
@@ -253,15 +274,7 @@ def add_link(
         if j == len(lengths) - 1:
             parts += [lump_part(lump, np.array([piece, 0.0, 0.0])) for lump in end_lumps if lump.mass_kg > 0]
         set_inertial(body, parts)
-        body.add_geom(
-            name=f"{name}_g{j}",
-            type=mujoco.mjtGeom.mjGEOM_BOX,
-            size=[piece / 2.0, sec.thickness_m / 2.0, sec.height_m / 2.0],
-            pos=[piece / 2.0, 0.0, 0.0],
-            rgba=list(rgba),
-            contype=0,
-            conaffinity=0,
-        )
+        add_box_geom(body, f"{name}_g{j}", piece, sec, 0.0, rgba)
         site = f"{name}_p{j}"
         body.add_site(name=site, pos=[0.0, 0.0, 0.0], size=[0.002, 0, 0])
         build.sites.append(site)
