@@ -3,14 +3,17 @@
 Writes its tables into ``docs/link_models.md`` (between the ``tables`` markers; the text around
 them is kept). For each model and resolution:
 
-1. the bar (the rig piece of the default configuration): first three in-plane bending frequencies
-   of the free-free and the cantilever bar against Euler-Bernoulli;
+1. the ENGINE_NOTES probe bar (steel, 10 x 10 x 228 mm, nothing clamped): first three in-plane
+   bending frequencies of the free-free and the cantilever bar against Euler-Bernoulli;
 2. the chain rig at 60, 90 and 180 degrees: first three frequencies against the converged segment
    chain (``--ref-segments``, constrained eigen-solve);
 3. the manipulator at three poses: first three frequencies against the converged segment chain,
    and the wall time per pose (build + ``mjd_transitionFD`` linearisation at the equilibrium).
 
-Run: ``nice python scripts/link_model_study.py`` (about 10 min on 2 cores); ``--quick`` for a smoke run.
+The chain rig uses the configuration's ``rig`` piece and the manipulator the configuration itself
+(``--config``, default: the embedded default). docs/link_models.md was generated with
+``nice python scripts/link_model_study.py --config tests/data/symmetric_3rrr.toml`` (about 10 min on
+2 cores); ``--quick`` for a smoke run.
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ import numpy as np
 from tqdm import tqdm
 
 from fpm_sim.beam_theory import euler_bernoulli_hz
-from fpm_sim.config import default_config
+from fpm_sim.config import Manipulator, Material, RigConfig, Section, default_config, load_config
 from fpm_sim.kinematics import Pose
 from fpm_sim.manipulator_model import build_manipulator
 from fpm_sim.modal import modes_constrained, modes_transition_fd
@@ -49,9 +52,15 @@ def _pct(x: np.ndarray, ref: np.ndarray) -> str:
     return " / ".join(f"{100 * (a / b - 1):+.2f}" for a, b in zip(x, ref))
 
 
+PROBE_BAR = RigConfig(length_m=0.228, section=Section(0.010, 0.010), material=Material(200e9, 0.3, 7850.0))
+"""The ENGINE_NOTES probe bar: steel 10 x 10 x 228 mm, nothing held in a clamp."""
+
+CONFIG: Manipulator = default_config()
+"""The configuration of the chain rig and the manipulator (``--config``)."""
+
+
 def bar_study(resolutions: dict[str, list[int]]) -> list[str]:
-    cfg = default_config()
-    piece = cfg.rig
+    piece = PROBE_BAR
     lines = []
     for boundary in ("cantilever", "free-free"):
         eb = euler_bernoulli_hz(boundary, length_m=piece.length_m, section=piece.section, material=piece.material)
@@ -72,7 +81,7 @@ def bar_study(resolutions: dict[str, list[int]]) -> list[str]:
 
 
 def chain_study(resolutions: dict[str, list[int]], ref_n: int) -> list[str]:
-    piece = default_config().rig
+    piece = CONFIG.rig
     lines = [
         f"\n### chain rig (reference: segments n = {ref_n}, constrained eigen-solve)\n",
         "| angle | model | n | nv | f1 / f2 / f3 (Hz) | error vs reference (%) | dropped (transitionFD) |",
@@ -97,7 +106,7 @@ def chain_study(resolutions: dict[str, list[int]], ref_n: int) -> list[str]:
 
 
 def manipulator_study(resolutions: dict[str, list[int]], ref_n: int) -> list[str]:
-    cfg = default_config()
+    cfg = CONFIG
     lines = [
         f"\n### manipulator (default configuration; reference: segments n = {ref_n}, constrained eigen-solve)\n",
         "| pose | model | n | nv | f1 / f2 / f3 (Hz) | error vs reference (%) | time per pose (s) "
@@ -142,7 +151,7 @@ def with_flex_limits(built, *, torsion: bool, inplane: bool):
         if torsion and kind == "twist":
             scale = 1e-6
         if inplane and kind == "bend_in":
-            sec = default_config().section
+            sec = CONFIG.section
             scale = sec.i_outofplane_m4 / sec.i_inplane_m4
         # stiffness and its proportional damping together
         m.jnt_stiffness[j] *= scale
@@ -153,7 +162,7 @@ def with_flex_limits(built, *, torsion: bool, inplane: bool):
 def flex_gap_study(n: int) -> list[str]:
     """Manipulator first modes at (0, 0, 0): flex against the segment chain stripped of torsion and
     of its in-plane section (the flex's two limitations), at the same resolution."""
-    cfg = default_config()
+    cfg = CONFIG
     pose = POSES["(0, 0, 0)"]
     lines = [
         f"\n### cause of the flex gap on the manipulator at (0, 0, 0), n = {n} (constrained eigen-solve, "
@@ -194,7 +203,7 @@ def square_section_study(n: int) -> list[str]:
 
     from fpm_sim.config import Section
 
-    cfg = dataclasses.replace(default_config(), section=Section(0.010, 0.010))
+    cfg = dataclasses.replace(CONFIG, section=Section(0.010, 0.010))
     lines = [
         f"\n### manipulator at (0, 0, 0) with 10 x 10 mm links, n = {n} (constrained eigen-solve)\n",
         "| model | f1 / f2 / f3 / f4 (Hz) | dominant strain energy |",
@@ -215,7 +224,11 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="two resolutions per model (smoke run)")
     p.add_argument("--out", type=Path, default=Path("docs/link_models.md"))
+    p.add_argument("--config", type=Path, help="manipulator TOML for the chain rig and the manipulator")
     args = p.parse_args()
+    global CONFIG
+    if args.config is not None:
+        CONFIG = load_config(args.config)
     if args.quick:
         bars = {m: [4, 8] for m in MODELS}
         rig = {m: [4, 8] for m in MODELS}
@@ -226,7 +239,8 @@ def main() -> None:
         rig = {m: [4, 8, 12, 16] for m in MODELS}
         manip = {m: [4, 8, 12] for m in MODELS}
         ref_rig, ref_manip = 32, 24
-    lines = [f"Generated by `python scripts/link_model_study.py{' --quick' if args.quick else ''}`."]
+    flags = (" --quick" if args.quick else "") + (f" --config {args.config}" if args.config else "")
+    lines = [f"Generated by `python scripts/link_model_study.py{flags}`."]
     args.out.parent.mkdir(parents=True, exist_ok=True)
     text = args.out.read_text() if args.out.exists() else f"# Link models\n\n{BEGIN}\n{END}\n"
     if BEGIN not in text or END not in text:
