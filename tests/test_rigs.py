@@ -65,7 +65,7 @@ def test_chain_methods_agree(steel_bar, angle):
     assert len(cmp.transition_fd.modes) == 6 and len(cmp.constrained.modes) == 6
     diffs = np.abs(cmp.relative_differences(6))
     # 0.5 %: the agreement target; the two differ only by the weld's softness and the
-    # discrete map's (omega h)^2 error, measured ~1e-5 here
+    # discrete map's (omega h)^2 error: measured <= 7e-4 below 1 kHz, 2.7e-3 at the 1.9 kHz sixth mode
     assert np.all(diffs < 0.005), diffs
 
 
