@@ -1,8 +1,8 @@
 import math
 import textwrap
+import tomllib
 
 import pytest
-import tomllib
 
 from fpm_sim.config import ConfigError, default_config, default_config_text, load_config
 
