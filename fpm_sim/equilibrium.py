@@ -23,6 +23,8 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
+from .model import tangent_jacobian
+
 __all__ = ["EquilibriumError", "static_equilibrium", "applied_forces", "force_jacobian"]
 
 
@@ -50,13 +52,7 @@ def applied_forces(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray)
 
 def force_jacobian(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray, eps: float = 1e-7) -> np.ndarray:
     """Centred finite-difference ``d f / d q`` of :func:`applied_forces`, in the tangent space."""
-    jac = np.zeros((model.nv, model.nv))
-    for k in range(model.nv):
-        dq = np.zeros(model.nv)
-        dq[k] = eps
-        fp = applied_forces(model, data, _moved(model, qpos, dq))
-        jac[:, k] = (fp - applied_forces(model, data, _moved(model, qpos, -dq))) / (2 * eps)
-    return jac
+    return tangent_jacobian(model, qpos, lambda q: applied_forces(model, data, q), eps)
 
 
 def _moved(model: mujoco.MjModel, qpos: np.ndarray, dq: np.ndarray) -> np.ndarray:

@@ -45,6 +45,7 @@ from .model import (
     has_internal_elasticity,
     passive_damping_matrix,
     passive_stiffness_matrix,
+    tangent_jacobian,
 )
 
 __all__ = [
@@ -255,25 +256,17 @@ def stiffness_matrix(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarra
     lam = np.asarray(data.efc_force[: data.nefc])[rows].copy()
 
     def force(q: np.ndarray) -> np.ndarray:
-        _forward_at(model, data, q)
+        # position and velocity stages only: forces and efc_J need no constraint solve
+        data.qpos[:] = q
+        data.qvel[:] = 0.0
+        mujoco.mj_fwdPosition(model, data)
+        mujoco.mj_fwdVelocity(model, data)
         f = data.qfrc_passive - data.qfrc_bias
         if lam.size:
             f = f + equality_jacobian(model, data).T @ lam
         return f
 
-    k = np.zeros((model.nv, model.nv))
-    for j in range(model.nv):
-        # tangent-space steps (mj_integratePos): plain addition for hinges and slides, and correct
-        # for the ball joints of ``cable`` links
-        dq = np.zeros(model.nv)
-        dq[j] = eps
-        q = qpos.copy()
-        mujoco.mj_integratePos(model, q, dq, 1.0)
-        fp = force(q)
-        q = qpos.copy()
-        mujoco.mj_integratePos(model, q, -dq, 1.0)
-        fm = force(q)
-        k[:, j] = -(fp - fm) / (2 * eps)
+    k = -tangent_jacobian(model, qpos, force, eps)
     return 0.5 * (k + k.T)
 
 

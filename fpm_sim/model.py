@@ -15,6 +15,7 @@ Every generated model shares these settings:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -38,6 +39,7 @@ __all__ = [
     "dof_stiffness",
     "has_internal_elasticity",
     "passive_stiffness_matrix",
+    "tangent_jacobian",
     "passive_damping_matrix",
 ]
 
@@ -181,28 +183,44 @@ def has_internal_elasticity(model: mujoco.MjModel) -> bool:
     return bool(model.nplugin > 0 or model.nflex > 0)
 
 
-def passive_stiffness_matrix(model: mujoco.MjModel, qpos: np.ndarray | None = None, eps: float = 1e-7) -> np.ndarray:
-    """``-d qfrc_passive / dq`` at ``qpos`` (default ``qpos0``), zero velocity, by centred differences.
+def tangent_jacobian(
+    model: mujoco.MjModel, qpos: np.ndarray, fn: Callable[[np.ndarray], np.ndarray], eps: float = 1e-7
+) -> np.ndarray:
+    """Centred finite-difference ``d fn(q) / dq`` at ``qpos``, one column per degree of freedom.
 
-    Differences are taken in the tangent space (``mj_integratePos``), so ball and free joints are
-    handled; this captures joint springs, the cable plugin's torques and flex bending and edge
-    springs alike (gravity and constraints are not passive forces).
+    Steps are taken in the tangent space (``mj_integratePos``): plain addition for hinges and
+    slides, quaternion integration for ball and free joints (``cable`` links).
     """
-    data = mujoco.MjData(model)
-    q0 = model.qpos0.copy() if qpos is None else np.asarray(qpos, float)
-    k = np.zeros((model.nv, model.nv))
+    jac = np.zeros((model.nv, model.nv))
     for j in range(model.nv):
         cols = []
         for sign in (1.0, -1.0):
             dq = np.zeros(model.nv)
             dq[j] = sign * eps
-            q = q0.copy()
+            q = np.array(qpos, dtype=float)
             mujoco.mj_integratePos(model, q, dq, 1.0)
-            data.qpos[:] = q
-            data.qvel[:] = 0.0
-            mujoco.mj_forward(model, data)
-            cols.append(data.qfrc_passive.copy())
-        k[:, j] = -(cols[0] - cols[1]) / (2 * eps)
+            cols.append(np.array(fn(q), dtype=float))
+        jac[:, j] = (cols[0] - cols[1]) / (2 * eps)
+    return jac
+
+
+def passive_stiffness_matrix(model: mujoco.MjModel, qpos: np.ndarray | None = None, eps: float = 1e-7) -> np.ndarray:
+    """``-d qfrc_passive / dq`` at ``qpos`` (default ``qpos0``), zero velocity, by centred differences.
+
+    Differences are taken in the tangent space (:func:`tangent_jacobian`), so ball and free joints are
+    handled; this captures joint springs, the cable plugin's torques and flex bending and edge
+    springs alike (gravity and constraints are not passive forces).
+    """
+    data = mujoco.MjData(model)
+    q0 = model.qpos0.copy() if qpos is None else np.asarray(qpos, float)
+
+    def passive(q: np.ndarray) -> np.ndarray:
+        data.qpos[:] = q
+        data.qvel[:] = 0.0
+        mujoco.mj_forward(model, data)
+        return data.qfrc_passive.copy()
+
+    k = -tangent_jacobian(model, q0, passive, eps)
     return 0.5 * (k + k.T)
 
 
