@@ -58,6 +58,7 @@ __all__ = [
     "modes_constrained",
     "modal_analysis",
     "equality_jacobian",
+    "reduced_eigenproblem",
     "mass_matrix",
     "stiffness_matrix",
 ]
@@ -431,6 +432,28 @@ def _constrained_floating(built: BuiltModel, q0: np.ndarray, n_modes: int | None
     return _solve_reduced(built, q0, mass, stiff, damp, jac, n_modes, filt)
 
 
+def reduced_eigenproblem(
+    mass: np.ndarray, stiff: np.ndarray, jac: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The constrained generalised eigenproblem ``Z'KZ x = w^2 Z'MZ x`` on ``Z = null(jac)``.
+
+    Constraint directions whose singular value is below ``NULLSPACE_RCOND * sigma_max`` are redundant
+    to first order (e.g. the axial row of a straight, inextensible clamped-clamped chain) and are not
+    imposed: imposing them would remove physical motions.
+
+    Returns ``(z, kr, mr, w2, x)``: the null-space basis, the symmetrised reduced stiffness and mass,
+    the eigenvalues ``w^2`` (ascending) and the ``mr``-normalised eigenvectors.
+    """
+    nv = mass.shape[0]
+    z = scipy.linalg.null_space(jac, rcond=NULLSPACE_RCOND) if jac.shape[0] else np.eye(nv)
+    kr = z.T @ stiff @ z
+    kr = 0.5 * (kr + kr.T)
+    mr = z.T @ mass @ z
+    mr = 0.5 * (mr + mr.T)
+    w2, x = scipy.linalg.eigh(kr, mr)
+    return z, kr, mr, w2, x
+
+
 def _solve_reduced(
     built: BuiltModel,
     q_eq: np.ndarray,
@@ -441,15 +464,8 @@ def _solve_reduced(
     n_modes: int | None,
     filt: ModeFilter,
 ) -> ModalResult:
-    nv = mass.shape[0]
-    # Constraint directions whose singular value is below NULLSPACE_RCOND * sigma_max are redundant
-    # to first order (e.g. the axial row of a straight, inextensible clamped-clamped chain) and are
-    # not imposed: imposing them would remove physical motions.
-    z = scipy.linalg.null_space(jac, rcond=NULLSPACE_RCOND) if jac.shape[0] else np.eye(nv)
-    kr = z.T @ stiff @ z
-    mr = z.T @ mass @ z
+    z, _, _, w2, x = reduced_eigenproblem(mass, stiff, jac)
     cr = z.T @ damp @ z
-    w2, x = scipy.linalg.eigh(0.5 * (kr + kr.T), 0.5 * (mr + mr.T))
     k_dof = _energy_stiffness(built.model)
     dropped: dict[str, int] = {}
     modes: list[Mode] = []

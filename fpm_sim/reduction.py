@@ -53,7 +53,14 @@ import scipy.linalg
 
 from .equilibrium import static_equilibrium
 from .kinematics import Pose
-from .modal import NULLSPACE_RCOND, ModeFilter, damping_matrix, equality_jacobian, mass_matrix, stiffness_matrix
+from .modal import (
+    ModeFilter,
+    damping_matrix,
+    equality_jacobian,
+    mass_matrix,
+    reduced_eigenproblem,
+    stiffness_matrix,
+)
 from .model import BuiltModel
 
 __all__ = [
@@ -233,13 +240,7 @@ def modal_system(
     mass = mass_matrix(model, data)
     jac = equality_jacobian(model, data)
     damp = damping_matrix(model)
-    # same null space and rank rule as fpm_sim.modal (constrained method)
-    z = scipy.linalg.null_space(jac, rcond=NULLSPACE_RCOND) if jac.shape[0] else np.eye(model.nv)
-    kr = z.T @ stiff @ z
-    kr = 0.5 * (kr + kr.T)
-    mr = z.T @ mass @ z
-    mr = 0.5 * (mr + mr.T)
-    w2, x = scipy.linalg.eigh(kr, mr)
+    z, kr, _, w2, x = reduced_eigenproblem(mass, stiff, jac)  # the constrained method's own solve
     scale = max(float(np.max(np.abs(w2))), 1.0)
     if np.any(w2 < -1e-9 * scale):
         raise ReductionError(
