@@ -15,7 +15,7 @@ from .modal import Method, ModalResult, modes_constrained, modes_transition_fd
 from .model import BuiltModel, ModelOptions
 from .rigs import RigError, RigSetup, build_rig
 
-__all__ = ["ModalComparison", "manipulator_modes", "rig_modes", "rig_piece", "compare_methods"]
+__all__ = ["ModalComparison", "analyse", "manipulator_modes", "rig_modes", "rig_piece", "compare_methods"]
 
 
 @dataclass
@@ -32,8 +32,10 @@ class ModalComparison:
         return [float(a[i] / b[i] - 1.0) for i in range(n)]
 
 
-def _analyse(built: BuiltModel, method: Method | str, n_modes: int | None) -> ModalResult | ModalComparison:
-    qpos = static_equilibrium(built.model, mujoco.MjData(built.model)) if built.model.nq == built.model.nv else None
+def analyse(built: BuiltModel, method: Method | str, n_modes: int | None) -> ModalResult | ModalComparison:
+    """Modes of ``built`` by ``"transition_fd"``, ``"constrained"`` or ``"both"``, with the static
+    equilibrium solved once (floating models are linearised at ``qpos0`` by each method)."""
+    qpos = None if built.floating else static_equilibrium(built.model, mujoco.MjData(built.model))
     if method == "transition_fd":
         return modes_transition_fd(built, n_modes=n_modes, qpos=qpos)
     if method == "constrained":
@@ -48,7 +50,7 @@ def _analyse(built: BuiltModel, method: Method | str, n_modes: int | None) -> Mo
 
 def compare_methods(built: BuiltModel, *, n_modes: int | None = 10) -> ModalComparison:
     """Analyse ``built`` by both methods at one shared equilibrium."""
-    out = _analyse(built, "both", n_modes)
+    out = analyse(built, "both", n_modes)
     assert isinstance(out, ModalComparison)
     return out
 
@@ -77,7 +79,7 @@ def manipulator_modes(
         ``"transition_fd"`` (``mjd_transitionFD``) or ``"constrained"`` (constrained eigen-solve).
     """
     built = build_manipulator(config or default_config(), pose, options)
-    result = _analyse(built, method, n_modes)
+    result = analyse(built, method, n_modes)
     assert isinstance(result, ModalResult)
     return result
 
@@ -139,6 +141,6 @@ def rig_modes(
     cfg = config or default_config()
     setup = RigSetup(rig, angle_deg=angle_deg, damping_beta_s=damping_beta_s)
     built = build_rig(setup, piece or rig_piece(cfg), options, compliance=cfg.compliance)
-    result = _analyse(built, method, n_modes)
+    result = analyse(built, method, n_modes)
     assert isinstance(result, ModalResult)
     return result

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from . import __version__
-from .api import ModalComparison, _analyse, rig_piece
+from .api import ModalComparison, analyse, rig_piece
 from .config import ConfigError, Manipulator, default_config, default_config_text, load_config
 from .kinematics import Pose, SingularPoseError, UnreachablePoseError
 from .links import DEFAULT_RESOLUTION, LINK_MODELS, LinkModelError
@@ -196,7 +196,7 @@ def cmd_modes(args: argparse.Namespace) -> int:
     manip = load_manipulator(args)
     pose = pose_of(args)
     built = build_manipulator(manip, pose, model_options(args))
-    result = _analyse(built, args.method, args.n_modes)
+    result = analyse(built, args.method, args.n_modes)
     payload, table = _result_payload(result, args.n_modes)
     payload["config"] = manip.name
     payload["manipulator"] = manip.to_dict()
@@ -228,7 +228,7 @@ def cmd_rig(args: argparse.Namespace) -> int:
     built = build_rig(
         _rig_setup(args, manip), _rig_piece(args, manip), model_options(args), compliance=manip.compliance
     )
-    result = _analyse(built, args.method, args.n_modes)
+    result = analyse(built, args.method, args.n_modes)
     payload, table = _result_payload(result, args.n_modes)
     title = f"rig {args.rig}" + (f" (hinge angle {args.angle_deg:g} deg)" if args.rig == "chain" else "")
     emit(args, payload, _header(built, title) + "\n" + table)
