@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from .config import Material, Section
+from fpm_sim.config import Material, Section
 
 __all__ = ["BETA_L", "euler_bernoulli_hz"]
 

@@ -1,7 +1,7 @@
 """Frequency response functions (FRFs) of the linearised manipulator between points on its links.
 
 The model is linearised at its static equilibrium under gravity and solved by the constrained
-eigenproblem of :func:`fpm_sim.reduction.modal_system` (all modes, mass-normalised shapes ``phi_r``,
+eigenproblem of :func:`fpm_sim.rom.reduction.modal_system` (all modes, mass-normalised shapes ``phi_r``,
 natural frequencies ``omega_r``). A unit force along the world direction ``e_in`` at a point ``p_in``
 of a link enters as the generalised force ``b = J_in' e_in`` (``J_in`` the translational Jacobian of
 the material point); an accelerometer at ``p_out`` with sensitive axis ``e_out`` reads
@@ -40,8 +40,8 @@ import mujoco
 import numpy as np
 import scipy.signal
 
-from .model import BuiltModel
-from .reduction import ModalSystem
+from fpm_sim.model.options import BuiltModel
+from fpm_sim.rom.reduction import ModalSystem
 
 __all__ = [
     "AXES",
@@ -395,7 +395,7 @@ def modal_frf(
     Parameters
     ----------
     system
-        The modal system (:func:`fpm_sim.reduction.modal_system`) of the model at its equilibrium.
+        The modal system (:func:`fpm_sim.rom.reduction.modal_system`) of the model at its equilibrium.
     excitation, response
         Force input point/direction and response point/axis.
     freq_hz

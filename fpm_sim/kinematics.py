@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .config import Geometry
+from fpm_sim.config import Geometry
 
 __all__ = [
     "Pose",

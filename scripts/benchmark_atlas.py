@@ -19,10 +19,10 @@ import numpy as np
 import fpm_sim  # noqa: F401  (single-threaded BLAS)
 from fpm_sim.config import default_config
 from fpm_sim.kinematics import Pose
-from fpm_sim.manipulator_model import build_manipulator
-from fpm_sim.modal_atlas import build_atlas
-from fpm_sim.model import ModelOptions
-from fpm_sim.reduction import reduce_model
+from fpm_sim.model.manipulator import build_manipulator
+from fpm_sim.model.options import ModelOptions
+from fpm_sim.rom.atlas import build_atlas
+from fpm_sim.rom.reduction import reduce_model
 
 
 def main() -> None:

@@ -10,7 +10,7 @@ resolution (default 6 segments per link, inextensible, gravity off), it times
   (steady state);
 
 checks that the backends agree on the first six frequencies, and prints the ratios; then times
-:func:`fpm_sim.mjx_backend.frequency_gradients` (first call with its compile, second call) against central
+:func:`fpm_sim.batch.jax_backend.frequency_gradients` (first call with its compile, second call) against central
 differences of the cpu path, and prints their largest relative difference.
 
 Usage: ``python scripts/benchmark_backends.py [--segments 6] [--workers 2] [--n-dense 400]``
@@ -24,18 +24,19 @@ import warnings
 
 import numpy as np
 
-from fpm_sim.config import default_config
-from fpm_sim.fast_frequencies import FAST_SEGMENTS, fast_options, pose_frequencies
-from fpm_sim.kinematics import NearSingularityWarning, Pose, inverse_kinematics
-from fpm_sim.mjx_backend import (
+from fpm_sim.batch.frequencies import pose_frequencies
+from fpm_sim.batch.jax_backend import (
     LAST_TIMINGS,
     frequency_gradients,
     parameter_value,
     pose_frequency_gradients,
     with_parameter,
 )
-from fpm_sim.study_poses import study_poses
-from fpm_sim.workspace_sweep import dense_grid
+from fpm_sim.batch.pose_loop import FAST_SEGMENTS, fast_options
+from fpm_sim.config import default_config
+from fpm_sim.kinematics import NearSingularityWarning, Pose, inverse_kinematics
+from fpm_sim.study.poses import study_poses
+from fpm_sim.study.sweep import dense_grid
 
 
 def reachable_poses(config, n: int) -> list:  # noqa: ANN001

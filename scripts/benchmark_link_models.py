@@ -13,10 +13,10 @@ import warnings
 
 from fpm_sim.config import default_config
 from fpm_sim.kinematics import Pose
-from fpm_sim.links import DEFAULT_RESOLUTION
-from fpm_sim.manipulator_model import build_manipulator
-from fpm_sim.modal import modes_transition_fd
-from fpm_sim.model import ModelOptions
+from fpm_sim.linear.modal import modes_transition_fd
+from fpm_sim.model.manipulator import build_manipulator
+from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.parts import DEFAULT_RESOLUTION
 
 
 def time_pose(link_model: str, pose: Pose) -> tuple[float, int, float]:

@@ -19,11 +19,11 @@ import mujoco
 
 import fpm_sim  # noqa: F401  (single-threaded BLAS)
 from fpm_sim.config import default_config
-from fpm_sim.equilibrium import static_equilibrium
 from fpm_sim.kinematics import Pose
-from fpm_sim.manipulator_model import build_manipulator
-from fpm_sim.modal import modes_constrained, modes_transition_fd
-from fpm_sim.model import ModelOptions
+from fpm_sim.linear.equilibrium import static_equilibrium
+from fpm_sim.linear.modal import modes_constrained, modes_transition_fd
+from fpm_sim.model.manipulator import build_manipulator
+from fpm_sim.model.options import ModelOptions
 
 
 def time_once(segments: int) -> dict[str, float]:

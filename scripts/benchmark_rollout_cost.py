@@ -18,8 +18,8 @@ import mujoco
 import fpm_sim  # noqa: F401  (single-threaded BLAS)
 from fpm_sim.config import default_config
 from fpm_sim.kinematics import Pose
-from fpm_sim.manipulator_model import build_manipulator
-from fpm_sim.model import ModelOptions
+from fpm_sim.model.manipulator import build_manipulator
+from fpm_sim.model.options import ModelOptions
 
 CASES = [(6, False), (12, False), (12, True)]
 

@@ -16,12 +16,13 @@ import warnings
 import numpy as np
 
 import fpm_sim  # noqa: F401  (single-threaded BLAS)
-from fpm_sim.api import manipulator_modes
+from fpm_sim.batch.frequencies import pose_frequencies
+from fpm_sim.batch.pose_loop import fast_options
 from fpm_sim.config import default_config
-from fpm_sim.equilibrium import EquilibriumError
-from fpm_sim.fast_frequencies import fast_options, pose_frequencies
 from fpm_sim.kinematics import Pose
-from fpm_sim.workspace_sweep import dense_grid
+from fpm_sim.linear.analysis import manipulator_modes
+from fpm_sim.linear.equilibrium import EquilibriumError
+from fpm_sim.study.sweep import dense_grid
 
 
 def main() -> None:

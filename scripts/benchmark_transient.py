@@ -18,7 +18,7 @@ import time
 
 import fpm_sim  # noqa: F401  (single-threaded BLAS)
 from fpm_sim.config import default_config
-from fpm_sim.transient import STUDY_FULL_MODEL_WALL_S, study_transient
+from fpm_sim.study.transient import STUDY_FULL_MODEL_WALL_S, study_transient
 
 
 def main() -> None:

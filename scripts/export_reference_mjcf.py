@@ -2,7 +2,7 @@
 
 from pathlib import Path
 
-from fpm_sim.reference_mjcf import write_reference_mjcf
+from fpm_sim.model.mjcf_export import write_reference_mjcf
 
 if __name__ == "__main__":
     for p in write_reference_mjcf(Path(__file__).resolve().parent.parent / "mjcf"):

@@ -29,9 +29,11 @@ from pathlib import Path
 import numpy as np
 
 import fpm_sim  # noqa: F401
+from fpm_sim.batch.frequencies import first_frequencies
+from fpm_sim.batch.pose_loop import fast_options
 from fpm_sim.config import Section, default_config
-from fpm_sim.fast_frequencies import fast_options, first_frequencies
-from fpm_sim.identification import (
+from fpm_sim.kinematics import Pose, UnreachablePoseError, inverse_kinematics
+from fpm_sim.study.identification import (
     ELBOW_BRANCH_CLASSES,
     Screening,
     geometry_from,
@@ -39,10 +41,9 @@ from fpm_sim.identification import (
     identify_subsystems,
     screen_geometry,
 )
-from fpm_sim.kinematics import Pose, UnreachablePoseError, inverse_kinematics
-from fpm_sim.study_comparison import error_stats
-from fpm_sim.study_data import subsystem_tests
-from fpm_sim.study_poses import READINGS, ROTATION_RAD, parse_reading, study_poses
+from fpm_sim.study.poses import READINGS, ROTATION_RAD, parse_reading, study_poses
+from fpm_sim.study.reproduce import error_stats
+from fpm_sim.study.tables import subsystem_tests
 
 
 def rotation_evidence(cfg, reading) -> dict:  # noqa: ANN001

@@ -29,10 +29,10 @@ from tqdm import tqdm
 from fpm_sim.beam_theory import euler_bernoulli_hz
 from fpm_sim.config import Manipulator, Material, RigConfig, Section, default_config, load_config
 from fpm_sim.kinematics import Pose
-from fpm_sim.manipulator_model import build_manipulator
-from fpm_sim.modal import modes_constrained, modes_transition_fd
-from fpm_sim.model import ModelOptions
-from fpm_sim.rigs import RigSetup, build_rig
+from fpm_sim.linear.modal import modes_constrained, modes_transition_fd
+from fpm_sim.model.manipulator import build_manipulator
+from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.rigs import RigSetup, build_rig
 
 MODELS = ("segments", "cable", "flex")
 BEGIN, END = "<!-- tables:begin (scripts/link_model_study.py) -->", "<!-- tables:end -->"

@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from fpm_sim.equilibrium import static_equilibrium
 from fpm_sim.frf import FrfError, LinkPoint, half_power_damping, locate, modal_frf, pick_peaks, point_row
 from fpm_sim.kinematics import Pose
-from fpm_sim.manipulator_model import build_manipulator
-from fpm_sim.modal import NULLSPACE_RCOND, damping_matrix, equality_jacobian, mass_matrix, stiffness_matrix
-from fpm_sim.model import ModelOptions
-from fpm_sim.reduction import modal_system
+from fpm_sim.linear.equilibrium import static_equilibrium
+from fpm_sim.linear.modal import NULLSPACE_RCOND, damping_matrix, equality_jacobian, mass_matrix, stiffness_matrix
+from fpm_sim.model.manipulator import build_manipulator
+from fpm_sim.model.options import ModelOptions
+from fpm_sim.rom.reduction import modal_system
 
 POSE = Pose(0.05, -0.05, 0.1)  # off-centre and rotated: no symmetry to hide errors behind
 HIT = LinkPoint("distal_0", 0.5, "z")

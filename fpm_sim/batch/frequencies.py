@@ -1,0 +1,102 @@
+"""The pose loop's entry point: lowest frequencies at many poses, on a backend chosen by name.
+
+``cpu`` (:mod:`fpm_sim.batch.pose_loop`) builds one MuJoCo model per pose and solves the constrained
+eigenproblem with SciPy; ``mjx`` (:mod:`fpm_sim.batch.jax_backend`) evaluates MuJoCo's formulas in JAX
+for all poses at once (JAX is imported only when that backend is called).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from fpm_sim.batch.pose_loop import PoseFrequencies, cpu_backend, fast_options
+from fpm_sim.config import Manipulator
+from fpm_sim.kinematics import Pose
+from fpm_sim.model.options import ModelOptions
+
+__all__ = ["BACKENDS", "first_frequencies", "pose_frequencies", "register_backend"]
+
+
+def _jax_backend(config: Manipulator, poses: Sequence[Pose], **kwargs: Any) -> PoseFrequencies:
+    from fpm_sim.batch.jax_backend import mjx_pose_frequencies
+
+    return mjx_pose_frequencies(config, poses, **kwargs)
+
+
+Backend = Callable[..., PoseFrequencies]
+BACKENDS: dict[str, Backend] = {"cpu": cpu_backend, "mjx": _jax_backend}
+"""Pose-loop backends by name; see :func:`register_backend`."""
+
+
+def register_backend(name: str, fn: Backend) -> None:
+    """Make ``fn`` available as ``first_frequencies(..., backend=name)``.
+
+    ``fn(config, poses, *, n_modes, options, workers, progress, desc) -> PoseFrequencies``.
+    """
+    BACKENDS[name] = fn
+
+
+def pose_frequencies(
+    config: Manipulator,
+    poses: Sequence[Pose],
+    *,
+    backend: str = "cpu",
+    n_modes: int = 3,
+    options: ModelOptions | None = None,
+    workers: int = 1,
+    progress: bool = False,
+    desc: str = "poses",
+) -> PoseFrequencies:
+    """Lowest ``n_modes`` natural frequencies (Hz) at each pose, with status and mode character.
+
+    Parameters
+    ----------
+    config
+        The manipulator.
+    poses
+        End-effector poses (m, m, rad).
+    backend
+        Name in :data:`BACKENDS` (``"cpu"``: constrained eigen-solve, gravity off).
+    n_modes
+        Modes per pose.
+    options
+        Discretisation (default :func:`fast_options`); gravity is ignored by the ``cpu`` backend's
+        solve (it uses spring stiffness only).
+    workers
+        Processes for the ``cpu`` backend (poses are independent).
+    progress
+        Show a tqdm progress bar.
+    """
+    if backend not in BACKENDS:
+        raise ValueError(f"unknown backend {backend!r} (--backend); available: {', '.join(sorted(BACKENDS))}")
+    if n_modes < 1:
+        raise ValueError(f"n_modes must be >= 1, got {n_modes}")
+    if workers < 1:
+        raise ValueError(f"workers must be >= 1 (--workers), got {workers}")
+    opts = options or fast_options()
+    return BACKENDS[backend](
+        config, poses, n_modes=n_modes, options=opts, workers=workers, progress=progress, desc=desc
+    )
+
+
+def first_frequencies(
+    config: Manipulator,
+    poses: Sequence[Pose],
+    *,
+    backend: str = "cpu",
+    n_modes: int = 1,
+    options: ModelOptions | None = None,
+    workers: int = 1,
+    progress: bool = False,
+) -> np.ndarray:
+    """``(n_poses, n_modes)`` lowest natural frequencies (Hz); NaN where unreachable or singular.
+
+    See :func:`pose_frequencies` for the parameters and the details per pose.
+    """
+    return pose_frequencies(
+        config, poses, backend=backend, n_modes=n_modes, options=options, workers=workers, progress=progress
+    ).frequencies_hz
+

@@ -1,0 +1,141 @@
+"""``fpm-sim atlas build|query``: reduced models on a pose grid, tracked by MAC, interpolated between."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from fpm_sim.cli.frf import frf_user_errors, save_figure
+from fpm_sim.cli.main import add_config_args, add_output_args, add_pose_args, emit, load_manipulator, pose_of
+from fpm_sim.model.manipulator import build_manipulator
+from fpm_sim.model.options import ModelOptions
+from fpm_sim.rom.atlas import AtlasError, build_atlas, load_atlas, mac_matrix
+from fpm_sim.rom.reduction import modal_system
+
+__all__ = ["register"]
+
+PAPER_GRID_MM = [-100.0, -50.0, 0.0, 50.0, 100.0]
+
+
+@frf_user_errors
+def cmd_atlas_build(args: argparse.Namespace) -> int:
+    if args.out.suffix != ".npz":
+        raise AtlasError(f"--out {args.out} must end in .npz")
+    manip = load_manipulator(args)
+    atlas = build_atlas(
+        manip,
+        x_m=[v * 1e-3 for v in args.x_mm],
+        y_m=[v * 1e-3 for v in args.y_mm],
+        phi_rad=args.phi_rad,
+        options=ModelOptions(segments=args.segments, axial=args.axial),
+        n_modes=args.modes,
+        n_extra=args.extra,
+        progress=not args.json,
+    )
+    atlas.save(args.out)
+    if args.plot:
+        save_figure(args.plot, lambda: atlas.plot())
+    payload = atlas.to_dict()
+    payload["out"] = str(args.out)
+    weak = atlas.weak_links()
+    text = (
+        f"atlas of {int(np.prod(atlas.grid_shape))} poses ({' x '.join(map(str, atlas.grid_shape))}), "
+        f"{atlas.n_modes} tracked modes; tracked frequency (Hz) per label, (#n) = sorted position where it moved:\n"
+        + atlas.table()
+        + f"\n{len(atlas.label_changes())} label changes (a mode's shape MAC with the parent pose below 0.5: its "
+        "per-label frequency is unreliable there)"
+        + f"\n{len(weak)} weak links (aligned basis MAC with the parent pose below 0.8: interpolated models unreliable "
+        f"there); lowest aligned MAC {float(atlas.nodes['mac_aligned'].min()):.3f}"
+        + f"\nwrote {args.out}"
+        + (f"\nwrote {args.plot}" if args.plot else "")
+    )
+    emit(args, payload, text)
+    return 0
+
+
+@frf_user_errors
+def cmd_atlas_query(args: argparse.Namespace) -> int:
+    if not args.atlas.exists():
+        raise AtlasError(f"atlas file {args.atlas} not found; build one with 'fpm-sim atlas build --out FILE.npz'")
+    atlas = load_atlas(args.atlas)
+    pose = pose_of(args)
+    rom = atlas.query(pose, method=args.method)
+    if args.out:
+        rom.save(args.out)
+    payload = rom.to_dict()
+    payload["atlas"] = str(args.atlas)
+    lines = [f"interpolated reduced model at {pose.label()} from {args.atlas} ({args.method}):"]
+    if args.direct:
+        manip = load_manipulator(args)
+        if manip.name != atlas.parameters.get("config"):
+            raise AtlasError(
+                f"the atlas was built for config {atlas.parameters.get('config')!r}, not {manip.name!r}; "
+                "pass its --config"
+            )
+        o = atlas.parameters["options"]
+        opts = ModelOptions(
+            **{k: o[k] for k in ("link_model", "segments", "axial", "rotary_inertia", "gravity", "timestep_s")}
+        )
+        system = modal_system(build_manipulator(manip, pose, opts))
+        # each interpolated mode against the direct mode of the most similar shape (MAC), which need not
+        # be the same sorted position: the atlas keeps the tracked modes, not always the lowest ones
+        mac = mac_matrix(rom.mode_shapes, system.phi)
+        match = np.argmax(mac, axis=1)
+        direct = system.frequencies_hz[match]
+        rel = rom.frequencies_hz / direct - 1.0
+        payload["direct_frequencies_hz"] = direct.tolist()
+        payload["direct_mode_index"] = (match + 1).tolist()
+        payload["mac"] = mac[np.arange(len(match)), match].tolist()
+        payload["relative_difference"] = rel.tolist()
+        payload["lowest_direct_frequencies_hz"] = system.frequencies_hz[: rom.n_modes].tolist()
+        lines.append(
+            f"{'mode':>4}  {'atlas (Hz)':>11}  {'direct (Hz)':>11}  {'direct #':>8}  {'MAC':>6}  {'diff %':>8}  "
+            f"{'damping':>8}"
+        )
+        for i, (f, d, j, r, z) in enumerate(zip(rom.frequencies_hz, direct, match, rel, rom.damping_ratios), 1):
+            lines.append(
+                f"{i:>4}  {f:>11.3f}  {d:>11.3f}  {j + 1:>8}  {mac[i - 1, j]:>6.3f}  {r * 100:>8.3f}  {z:>8.4f}"
+            )
+    else:
+        lines.append(rom.table())
+    if args.out:
+        lines.append(f"wrote {args.out}")
+    emit(args, payload, "\n".join(lines))
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "atlas",
+        help="modal atlas: reduced models on a pose grid tracked by MAC, interpolated at poses in between",
+        description=(
+            "build: modal systems on an x/y/phi grid (default the study's 5 x 5 grid, phi 0), modes tracked from the "
+            "central pose by MAC and aligned by Procrustes rotations, saved to .npz. query: the interpolated reduced "
+            "model at a pose (optionally compared with a direct computation, --direct; exported with --out)."
+        ),
+    )
+    sp = p.add_subparsers(dest="atlas_command", required=True)
+    b = sp.add_parser("build", help="build and save an atlas")
+    b.add_argument("--x-mm", type=float, nargs="+", default=PAPER_GRID_MM, help="grid x values (mm)")
+    b.add_argument("--y-mm", type=float, nargs="+", default=PAPER_GRID_MM, help="grid y values (mm)")
+    b.add_argument("--phi-rad", type=float, nargs="+", default=[0.0], help="grid rotations (rad, default 0)")
+    b.add_argument("--modes", type=int, default=6, help="tracked modes (default 6)")
+    b.add_argument("--extra", type=int, default=4, help="extra candidate modes per pose (default 4)")
+    b.add_argument("--segments", type=int, default=6, help="spring locations per link (default 6)")
+    b.add_argument("--axial", action="store_true", help="axial springs")
+    b.add_argument("--out", type=Path, required=True, help="atlas file (.npz)")
+    b.add_argument("--plot", type=Path, help="tracked f1..f3 over the grid (.png, .pdf, .svg)")
+    add_config_args(b)
+    add_output_args(b)
+    b.set_defaults(func=cmd_atlas_build)
+    q = sp.add_parser("query", help="interpolated reduced model at a pose")
+    q.add_argument("atlas", type=Path, help="atlas file from 'atlas build'")
+    q.add_argument("--method", choices=("auto", "linear", "cubic"), default="auto", help="interpolation (default auto)")
+    q.add_argument("--direct", action="store_true", help="compare with a direct computation at the pose")
+    q.add_argument("--out", type=Path, help="export the reduced model (.mat or .npz)")
+    add_pose_args(q)
+    add_config_args(q)
+    add_output_args(q)
+    q.set_defaults(func=cmd_atlas_query)

@@ -1,0 +1,184 @@
+"""``fpm-sim frf``: FRF of the linearised manipulator between two link points (table, CSV, plot)."""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from fpm_sim.cli.main import (
+    add_config_args,
+    add_model_args,
+    add_output_args,
+    add_pose_args,
+    emit,
+    load_manipulator,
+    model_options,
+    pose_of,
+)
+from fpm_sim.frf import AXES, QUANTITIES, FrfError, LinkPoint, modal_frf
+from fpm_sim.model.manipulator import build_manipulator
+from fpm_sim.rom.atlas import AtlasError
+from fpm_sim.rom.reduction import ReductionError, modal_system
+
+__all__ = ["register", "frf_user_errors", "add_point_args", "point_of", "save_figure"]
+
+
+def frf_user_errors(func: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
+    """Report these features' user errors like the core ones: a message on stderr and exit status 2."""
+
+    @functools.wraps(func)
+    def wrapped(args: argparse.Namespace) -> int:
+        try:
+            return func(args)
+        except (FrfError, AtlasError, ReductionError) as exc:
+            print(f"fpm-sim: error: {exc}", file=sys.stderr)
+            return 2
+
+    return wrapped
+
+
+def add_point_args(p: argparse.ArgumentParser, prefix: str, what: str, default: LinkPoint | None) -> None:
+    g = p.add_argument_group(what)
+    d = default or LinkPoint()
+    same = default is None
+    g.add_argument(
+        f"--{prefix}-link",
+        default=None if same else d.link,
+        help="proximal_i, distal_i or platform" + (" (default: as the excitation)" if same else f" (default {d.link})"),
+    )
+    g.add_argument(
+        f"--{prefix}-fraction",
+        type=float,
+        default=None if same else d.fraction,
+        help="position along the link from its start, 0..1" + ("" if same else f" (default {d.fraction:g})"),
+    )
+    g.add_argument(
+        f"--{prefix}-axis",
+        choices=AXES,
+        default=None if same else d.axis,
+        help="normal (in-plane, normal to the link), along, z (out of plane), x, y"
+        + ("" if same else f" (default {d.axis})"),
+    )
+
+
+def point_of(args: argparse.Namespace, prefix: str, fallback: LinkPoint | None = None) -> LinkPoint:
+    key = prefix.replace("-", "_")
+    fb = fallback or LinkPoint()
+    link = getattr(args, f"{key}_link")
+    frac = getattr(args, f"{key}_fraction")
+    axis = getattr(args, f"{key}_axis")
+    return LinkPoint(
+        link=fb.link if link is None else link,
+        fraction=fb.fraction if frac is None else frac,
+        axis=fb.axis if axis is None else axis,
+    )
+
+
+def save_figure(path: Path, draw: Callable[[], object]) -> None:
+    if path.suffix not in (".png", ".pdf", ".svg"):
+        raise FrfError(f"--plot {path} must end in .png, .pdf or .svg")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    axes = draw()
+    fig = np.atleast_1d(axes)[0].figure
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+@frf_user_errors
+def cmd_frf(args: argparse.Namespace) -> int:
+    if not (0.0 <= args.f_min_hz < args.f_max_hz) or args.df_hz <= 0:
+        raise FrfError("need 0 <= --f-min-hz < --f-max-hz and --df-hz > 0")
+    if args.csv is not None and args.csv.suffix != ".csv":
+        raise FrfError(f"--csv {args.csv} must end in .csv")
+    if args.link_model == "rigid":
+        raise FrfError(
+            "an FRF needs flexible links: with rigid links and locked motors nothing moves; use --link-model segments"
+        )
+    manip = load_manipulator(args)
+    built = build_manipulator(manip, pose_of(args), model_options(args))
+    exc = point_of(args, "input", LinkPoint("distal_0", 0.5, "z"))
+    resp = point_of(args, "output", exc)
+    exc.check(built)
+    resp.check(built)
+    system = modal_system(built)
+    freq = np.arange(args.f_min_hz, args.f_max_hz + args.df_hz / 2, args.df_hz)
+    freq = np.unique(
+        np.concatenate(
+            [freq, system.frequencies_hz[(system.frequencies_hz >= freq[0]) & (system.frequencies_hz <= freq[-1])]]
+        )
+    )
+    frf = modal_frf(
+        system,
+        excitation=exc,
+        response=resp,
+        freq_hz=freq,
+        quantity=args.quantity,
+        damping_ratio=args.damping_ratio,
+        n_modes=args.n_modes,
+    )
+    if args.csv:
+        frf.save_csv(args.csv)
+    if args.plot:
+        save_figure(args.plot, lambda: frf.plot())
+    payload = frf.to_dict()
+    payload["damping"] = "model" if args.damping_ratio is None else args.damping_ratio
+    payload["parameters"] = built.parameters
+    payload["csv"] = str(args.csv) if args.csv else None
+    payload["plot"] = str(args.plot) if args.plot else None
+    peaks = frf.peaks()
+    lines = [
+        f"{frf.quantity} ({frf.unit}) from {frf.excitation} to {frf.response}, pose {pose_of(args).label()}, "
+        f"{len(freq)} frequencies {freq[0]:g}..{freq[-1]:g} Hz, damping "
+        + ("model" if args.damping_ratio is None else f"{args.damping_ratio:g} (all modes)"),
+        f"{'mode':>4}  {'freq (Hz)':>10}  {'damping':>8}  {'residue (1/kg)':>15}",
+    ]
+    for i, (f, z, r) in enumerate(zip(frf.modal_freq_hz, frf.damping_ratios, frf.residues)):
+        if f > freq[-1]:
+            break
+        lines.append(f"{i + 1:>4}  {f:>10.3f}  {z:>8.4f}  {r:>15.4e}")
+    lines.append(f"{'peak':>4}  {'freq (Hz)':>10}  {'|H|':>10}  {'prominence (dB)':>15}")
+    for i, p in enumerate(peaks, 1):
+        lines.append(f"{i:>4}  {p.freq_hz:>10.3f}  {p.magnitude:>10.4g}  {p.prominence_db:>15.1f}")
+    lines += [f"wrote {f}" for f in (args.csv, args.plot) if f]
+    emit(args, payload, "\n".join(lines))
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "frf",
+        help="frequency response function of the linearised model between two link points (CSV, plot)",
+        description=(
+            "Modal-superposition FRF (all constrained modes) at the static equilibrium from a unit force at a link "
+            "point/direction to the response of a link point along an axis. Damping: the model's modal damping, or "
+            "--damping-ratio for every mode (e.g. a value identified from a measured FRF)."
+        ),
+    )
+    add_point_args(p, "input", "force input (default distal_0 mid-span, z)", LinkPoint("distal_0", 0.5, "z"))
+    add_point_args(p, "output", "response (default: the input point and axis, a driving-point FRF)", None)
+    p.add_argument(
+        "--quantity", choices=tuple(QUANTITIES), default="accelerance", help="FRF kind (default accelerance)"
+    )
+    p.add_argument("--f-min-hz", type=float, default=1.0, help="lowest frequency (Hz, default 1)")
+    p.add_argument("--f-max-hz", type=float, default=500.0, help="highest frequency (Hz, default 500)")
+    p.add_argument("--df-hz", type=float, default=0.1, help="frequency step (Hz, default 0.1)")
+    p.add_argument("--damping-ratio", type=float, help="modal damping ratio for every mode (default: the model's)")
+    p.add_argument("--n-modes", type=int, help="sum over the lowest N modes only (default all)")
+    p.add_argument("--csv", type=Path, help="write the FRF (re, im, magnitude, dB, phase) to this CSV")
+    p.add_argument("--plot", type=Path, help="magnitude/phase plot (.png, .pdf, .svg)")
+    add_pose_args(p)
+    add_config_args(p)
+    add_model_args(p)
+    add_output_args(p)
+    p.set_defaults(func=cmd_frf)

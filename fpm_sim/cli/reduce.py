@@ -1,0 +1,95 @@
+"""``fpm-sim reduce``: a reduced-order state-space model at one pose, exported to .mat or .npz."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from fpm_sim.cli.main import (
+    add_config_args,
+    add_model_args,
+    add_output_args,
+    add_pose_args,
+    emit,
+    load_manipulator,
+    model_options,
+    pose_of,
+)
+from fpm_sim.cli.rollout import add_motor_args, apply_motor_args, user_errors
+from fpm_sim.model.manipulator import build_manipulator
+from fpm_sim.rom.reduction import ReductionError, reduce_model
+
+__all__ = ["register"]
+
+
+@user_errors
+def cmd_reduce(args: argparse.Namespace) -> int:
+    if args.out is not None and args.out.suffix not in (".mat", ".npz"):
+        raise ReductionError(f"--out {args.out} must end in .mat or .npz")
+    if args.modes is not None and args.modes < 1:
+        raise ReductionError(f"--modes must be at least 1, got {args.modes}")
+    manip = apply_motor_args(load_manipulator(args), args)
+    built = build_manipulator(manip, pose_of(args), model_options(args))
+    rom = reduce_model(
+        built,
+        n_modes=args.modes,
+        band_hz=args.band_hz,
+        error_bound=args.error_bound,
+        static_correction=not args.no_static_correction,
+        accel_fraction=args.accel_fraction,
+    )
+    if args.out:
+        rom.save(args.out)
+    payload = rom.to_dict()
+    payload["out"] = str(args.out) if args.out else None
+    control_note = ""
+    try:
+        sys_ = rom.to_control()
+        payload["python_control"] = repr(type(sys_).__name__)
+        control_note = (
+            f"\npython-control StateSpace: {sys_.nstates} states, {sys_.ninputs} inputs, {sys_.noutputs} outputs"
+        )
+    except ImportError:
+        payload["python_control"] = None
+        control_note = "\npython-control not installed (pip install 'fpm-sim[control]' for a StateSpace)"
+    text = (
+        f"reduced model at pose {rom.pose.label()}: {rom.n_modes} modes of "
+        f"{rom.parameters['reduction']['n_modes_full']}, "
+        f"static correction {rom.static_correction}, uncorrected static truncation error "
+        f"{rom.parameters['reduction']['static_truncation_error']:.2e}\n"
+        f"inputs:  {', '.join(f'{n} ({u})' for n, u in zip(rom.input_names, rom.input_units))}\n"
+        f"outputs: {', '.join(f'{n} ({u})' for n, u in zip(rom.output_names, rom.output_units))}\n"
+        + rom.table()
+        + control_note
+        + (f"\nwrote {args.out}" if args.out else "")
+    )
+    emit(args, payload, text)
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "reduce",
+        help="reduced-order state-space model (modal truncation) at one pose; export .mat/.npz",
+        description=(
+            "Modal truncation in physical modal coordinates at the static equilibrium: A, B, C, D with inputs "
+            "force_x, force_y (N), moment_z (N m) at the end effector and motor_torque_i (N m, servo motors only); "
+            "outputs disp_x, disp_y (m), rot_z (rad) and acc_distal_i (m/s^2). Choose modes by --modes, "
+            "--band-hz or --error-bound."
+        ),
+    )
+    g = p.add_mutually_exclusive_group(required=True)
+    g.add_argument("--modes", type=int, help="number of modes kept")
+    g.add_argument("--band-hz", type=float, help="keep every mode up to this frequency (Hz)")
+    g.add_argument("--error-bound", type=float, help="fewest modes with relative static truncation error <= this")
+    p.add_argument("--out", type=Path, help="output file, .mat (MATLAB) or .npz")
+    p.add_argument("--no-static-correction", action="store_true", help="no feedthrough for the truncated modes")
+    p.add_argument(
+        "--accel-fraction", type=float, default=0.5, help="accelerometer position on each distal link (0..1 from elbow)"
+    )
+    add_motor_args(p)
+    add_pose_args(p)
+    add_config_args(p)
+    add_model_args(p)
+    add_output_args(p)
+    p.set_defaults(func=cmd_reduce)

@@ -1,0 +1,1 @@
+"""Static equilibrium, linearisation (transitionFD and constrained) and modes."""

@@ -1,0 +1,1 @@
+"""Reduced-order modal models and the modal atlas (reduced models across poses)."""

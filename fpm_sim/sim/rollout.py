@@ -1,0 +1,367 @@
+"""Headless nonlinear rollouts of the full flexible manipulator.
+
+A rollout starts at the static equilibrium under gravity (zero velocity) and steps the full MuJoCo
+model (``mj_step``, the model's own timestep and integrator) for ``duration_s``. Loads are evaluated
+once per output step and held constant over it (zero-order hold, the same convention as
+:meth:`fpm_sim.rom.reduction.ReducedModel.simulate`):
+
+- ``ee_wrench(t) -> (F_x, F_y, M_z)`` (N, N, N m): a wrench on the end effector at
+  ``platform_center``, world axes, applied through ``xfrc_applied`` of the platform body, whose
+  centre of mass is that site (checked), so it follows the platform as it moves;
+- ``motor_torque(t) -> (tau_0, tau_1, tau_2)`` (N m) on the motor hinges ``motor_i`` (needs
+  ``motors.mode = "servo"`` or a compliant clamp; locked motors have no joint);
+- ``motor_reference(t) -> (theta_0, ...)`` (rad): servo drive. The servo hinge is a spring-damper of
+  stiffness ``k`` about the assembled angle; a reference ``theta_ref`` adds the torque
+  ``k * theta_ref`` (the spring's set point moved to ``theta_ref``).
+
+Outputs per sample (``t = 0, dt, 2 dt, ...``): end-effector position ``(x, y)`` and rotation ``phi``,
+its displacement from the equilibrium, the *deflection* (end-effector pose minus the rigid-link
+forward kinematics of the current motor angles: what link bending adds), motor angles, and the
+accelerations (world frame, m/s^2, gravity excluded) at chosen sites, e.g. ``distal_0_p2``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from fpm_sim.config import Manipulator
+from fpm_sim.kinematics import Pose, forward_kinematics, inverse_kinematics
+from fpm_sim.linear.equilibrium import static_equilibrium
+from fpm_sim.model.manipulator import build_manipulator
+from fpm_sim.model.options import BuiltModel, ModelOptions
+from fpm_sim.rom.reduction import END_EFFECTOR_SITE, motor_dofs
+
+__all__ = [
+    "aligned_options",
+    "RolloutError",
+    "RolloutResult",
+    "rollout",
+    "constant",
+    "step_at",
+    "sine",
+    "end_effector_pose",
+]
+
+Profile = Callable[[float], Sequence[float]]
+
+
+class RolloutError(ValueError):
+    """Inconsistent rollout options (named in the message)."""
+
+
+def constant(*values: float) -> Profile:
+    """A constant load profile (switched on at ``t = 0``)."""
+    v = np.array(values, float)
+    return lambda t: v
+
+
+def step_at(t0_s: float, *values: float) -> Profile:
+    """Zero before ``t0_s``, ``values`` from then on."""
+    v = np.array(values, float)
+    z = np.zeros_like(v)
+    return lambda t: v if t >= t0_s else z
+
+
+def sine(freq_hz: float, *amplitudes: float) -> Profile:
+    """``amplitudes * sin(2 pi f t)``."""
+    a = np.array(amplitudes, float)
+    return lambda t: a * math.sin(2.0 * math.pi * freq_hz * t)
+
+
+@dataclass
+class RolloutResult:
+    """Time histories of one rollout (SI units).
+
+    Attributes
+    ----------
+    t_s
+        Sample times (s), from 0.
+    ee_pose
+        ``(n, 3)``: end-effector ``x, y`` (m) and rotation ``phi`` (rad), absolute.
+    ee_disp
+        ``(n, 3)``: ``ee_pose`` minus its value at the equilibrium (``t = 0``).
+    deflection
+        ``(n, 3)``: ``ee_pose`` minus the rigid-link forward kinematics of the motor angles.
+    motor_angles_rad
+        ``(n, 3)`` motor angles (constant when locked).
+    accel
+        Site name -> ``(n, 3)`` world-frame linear acceleration (m/s^2), gravity excluded.
+    wrench, motor_torque
+        ``(n, 3)`` loads applied over each sample's interval.
+    wall_s
+        Wall-clock time of the stepping loop (s).
+    parameters
+        Model and run description.
+    """
+
+    t_s: np.ndarray
+    ee_pose: np.ndarray
+    ee_disp: np.ndarray
+    deflection: np.ndarray
+    motor_angles_rad: np.ndarray
+    accel: dict[str, np.ndarray]
+    wrench: np.ndarray
+    motor_torque: np.ndarray
+    wall_s: float
+    n_steps: int
+    parameters: dict[str, Any] = field(default_factory=dict)
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """Flat name -> column view (units in the names)."""
+        cols: dict[str, np.ndarray] = {"t_s": self.t_s}
+        for k, n in enumerate(("x_m", "y_m", "phi_rad")):
+            cols[f"ee_{n}"] = self.ee_pose[:, k]
+        for k, n in enumerate(("x_m", "y_m", "phi_rad")):
+            cols[f"disp_{n}"] = self.ee_disp[:, k]
+        for k, n in enumerate(("x_m", "y_m", "phi_rad")):
+            cols[f"deflection_{n}"] = self.deflection[:, k]
+        for i in range(3):
+            cols[f"motor_{i}_rad"] = self.motor_angles_rad[:, i]
+        for k, n in enumerate(("fx_n", "fy_n", "mz_nm")):
+            cols[f"load_{n}"] = self.wrench[:, k]
+        for i in range(3):
+            cols[f"motor_torque_{i}_nm"] = self.motor_torque[:, i]
+        for site, a in self.accel.items():
+            for k, ax in enumerate("xyz"):
+                cols[f"acc_{site}_{ax}_m_s2"] = a[:, k]
+        return cols
+
+    def save(self, path: str | Path) -> Path:
+        """Write ``.csv`` (one column per signal) or ``.npz`` by suffix."""
+        p = Path(path)
+        p.parent.mkdir(parents=True, exist_ok=True)
+        cols = self.columns()
+        if p.suffix == ".csv":
+            names = list(cols)
+            np.savetxt(
+                p,
+                np.column_stack([cols[n] for n in names]),
+                delimiter=",",
+                header=",".join(names),
+                comments="",
+                fmt="%.10g",
+            )
+        elif p.suffix == ".npz":
+            np.savez(p, **cols)
+        else:
+            raise RolloutError(f"output file {str(p)!r} must end in .csv or .npz (--out)")
+        return p
+
+    def plot(self, *, axes: Any = None) -> Any:
+        """End-effector displacement, deflection and accelerations against time (matplotlib)."""
+        import matplotlib.pyplot as plt
+
+        n_ax = 3 if self.accel else 2
+        if axes is None:
+            _, axes = plt.subplots(n_ax, 1, figsize=(8, 2.6 * n_ax), sharex=True)
+        ax = axes[0]
+        ax.plot(self.t_s, self.ee_disp[:, 0] * 1e3, label="x")
+        ax.plot(self.t_s, self.ee_disp[:, 1] * 1e3, label="y")
+        ax.set_ylabel("EE displacement (mm)")
+        ax2 = ax.twinx()
+        ax2.plot(self.t_s, self.ee_disp[:, 2] * 1e3, color="0.5", lw=0.8, label="phi")
+        ax2.set_ylabel("phi (mrad)")
+        ax.legend(loc="upper left", fontsize=8)
+        ax = axes[1]
+        ax.plot(self.t_s, self.deflection[:, 0] * 1e3, label="x")
+        ax.plot(self.t_s, self.deflection[:, 1] * 1e3, label="y")
+        ax.set_ylabel("deflection (mm)")
+        ax.legend(loc="upper left", fontsize=8)
+        if self.accel:
+            ax = axes[2]
+            for site, a in self.accel.items():
+                ax.plot(self.t_s, np.linalg.norm(a[:, :2], axis=1), lw=0.8, label=site)
+            ax.set_ylabel("|in-plane acc| (m/s^2)")
+            ax.legend(loc="upper left", fontsize=8)
+        axes[-1].set_xlabel("t (s)")
+        return axes
+
+
+def aligned_options(manip: Manipulator, pose: Pose, options: ModelOptions, output_step_s: float) -> ModelOptions:
+    """``options`` with the automatic timestep rounded down so that ``output_step_s`` is a whole number of
+    steps (an explicit ``options.timestep_s`` is rounded the same way)."""
+    h_auto = options.timestep_s or build_manipulator(manip, pose, options).timestep_s
+    n = int(np.ceil(output_step_s / h_auto * (1 - 1e-12)))
+    return dataclasses.replace(options, timestep_s=output_step_s / n)
+
+
+def _platform_phi(data: mujoco.MjData, body_id: int) -> float:
+    r = data.xmat[body_id].reshape(3, 3)
+    return math.atan2(r[1, 0], r[0, 0])
+
+
+def end_effector_pose(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
+    """``(x, y, phi)`` of ``platform_center`` after a forward pass."""
+    sid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, END_EFFECTOR_SITE)
+    bid = int(model.site_bodyid[sid])
+    p = data.site_xpos[sid]
+    return np.array([p[0], p[1], _platform_phi(data, bid)])
+
+
+def rollout(
+    built: BuiltModel,
+    manip: Manipulator,
+    *,
+    duration_s: float,
+    output_step_s: float = 1e-4,
+    ee_wrench: Profile | None = None,
+    motor_torque: Profile | None = None,
+    motor_reference: Profile | None = None,
+    accel_sites: Sequence[str] = (),
+    qpos: np.ndarray | None = None,
+    progress: bool = False,
+) -> RolloutResult:
+    """Simulate the full nonlinear model from its static equilibrium (see module docstring).
+
+    Parameters
+    ----------
+    built, manip
+        The model (from :func:`fpm_sim.model.manipulator.build_manipulator`) and the description it
+        was built from (for the rigid forward kinematics and the servo stiffness).
+    duration_s
+        Simulated time (s).
+    output_step_s
+        Output (and load hold) interval; rounded to a whole number of model timesteps.
+    ee_wrench, motor_torque, motor_reference
+        Load profiles ``t -> 3 values`` (see module docstring); ``None``: none.
+    accel_sites
+        Sites whose acceleration is recorded.
+    qpos
+        Initial configuration (default: static equilibrium under gravity).
+    progress
+        Show a tqdm progress bar.
+    """
+    model = built.model
+    if not (duration_s > 0 and math.isfinite(duration_s)):
+        raise RolloutError(f"duration_s must be positive, got {duration_s!r}")
+    h = float(model.opt.timestep)
+    if not (output_step_s >= h * (1 - 1e-9)):
+        raise RolloutError(f"output_step_s ({output_step_s:g} s) must be at least the model timestep ({h:.3g} s)")
+    n_sub = max(1, int(round(output_step_s / h)))
+    dt_out = n_sub * h
+    n_out = int(round(duration_s / dt_out))
+    mdofs = motor_dofs(model)
+    if (motor_torque is not None or motor_reference is not None) and len(mdofs) != 3:
+        raise RolloutError(
+            "motor torques or references need motor hinges: set motors.mode = 'servo' (Motors(mode='servo', "
+            "servo_stiffness_nm_per_rad=...)); locked motors have no joint"
+        )
+    if motor_reference is not None and manip.motors.mode != "servo":
+        raise RolloutError("motor_reference drives a servo: set motors.mode = 'servo'")
+    sid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, END_EFFECTOR_SITE)
+    bid = int(model.site_bodyid[sid])
+    if ee_wrench is not None and not np.allclose(model.body_ipos[bid], model.site_pos[sid], atol=1e-12):
+        raise RolloutError("the platform's centre of mass is not at platform_center; wrench application unsupported")
+    acc_ids = []
+    for s in accel_sites:
+        k = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, s)
+        if k < 0:
+            raise RolloutError(f"unknown site {s!r} in accel_sites (e.g. distal_0_p2, platform_center)")
+        acc_ids.append(k)
+    pose = Pose(**built.parameters["pose"])
+    asm = inverse_kinematics(manip.geometry, pose)
+    motor0 = np.asarray(asm.motor_angles_rad, float)
+    k_servo = manip.motors.servo_stiffness_nm_per_rad
+
+    data = mujoco.MjData(model)
+    q0 = static_equilibrium(model, data) if qpos is None else np.asarray(qpos, float)
+    data.qpos[:] = q0
+    data.qvel[:] = 0.0
+    mujoco.mj_forward(model, data)
+    ee0 = end_effector_pose(model, data)
+    gravity = model.opt.gravity.copy()
+
+    t = np.arange(n_out + 1) * dt_out
+    ee = np.zeros((n_out + 1, 3))
+    motors = np.zeros((n_out + 1, 3))
+    defl = np.zeros((n_out + 1, 3))
+    wrench = np.zeros((n_out + 1, 3))
+    torque = np.zeros((n_out + 1, 3))
+    acc = {s: np.zeros((n_out + 1, 3)) for s in accel_sites}
+    res6 = np.zeros(6)
+    guess = pose
+
+    def record(k: int) -> None:
+        nonlocal guess
+        ee[k] = end_effector_pose(model, data)
+        ma = motor0 + (np.array([data.qpos[model.jnt_qposadr[model.dof_jntid[d]]] for d in mdofs]) if mdofs else 0.0)
+        motors[k] = ma
+        rigid = forward_kinematics(manip.geometry, ma, guess=guess) if mdofs else pose
+        guess = rigid
+        defl[k] = ee[k] - rigid.as_array()
+        if acc_ids:
+            mujoco.mj_rnePostConstraint(model, data)
+            for s, i in zip(accel_sites, acc_ids):
+                mujoco.mj_objectAcceleration(model, data, mujoco.mjtObj.mjOBJ_SITE, i, res6, 0)
+                acc[s][k] = res6[3:] + gravity  # cacc carries -gravity (accelerometer convention)
+
+    def apply_loads(k: int) -> None:
+        tk = t[k]
+        data.xfrc_applied[bid] = 0.0
+        data.qfrc_applied[:] = 0.0
+        if ee_wrench is not None:
+            w = np.asarray(ee_wrench(tk), float)
+            wrench[k] = w
+            data.xfrc_applied[bid, 0:2] = w[0:2]
+            data.xfrc_applied[bid, 5] = w[2]
+        tau = np.zeros(3)
+        if motor_torque is not None:
+            tau += np.asarray(motor_torque(tk), float)
+        if motor_reference is not None:
+            tau += k_servo * np.asarray(motor_reference(tk), float)
+        if mdofs:
+            torque[k] = tau
+            data.qfrc_applied[mdofs] = tau
+
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=n_out, desc="rollout", unit="sample", leave=False)
+    start = time.perf_counter()
+    # sample k holds the state at t_k and the loads applied from t_k on (accelerations include them)
+    for k in range(n_out + 1):
+        apply_loads(k)
+        if acc_ids:
+            mujoco.mj_forward(model, data)
+        else:
+            mujoco.mj_kinematics(model, data)
+        record(k)
+        if k == n_out:
+            break
+        mujoco.mj_step(model, data, nstep=n_sub)
+        if not np.all(np.isfinite(data.qpos)):
+            raise RolloutError(f"the simulation diverged at t = {data.time:.4g} s; reduce timestep_s or the loads")
+        if bar is not None:
+            bar.update(1)
+    wall = time.perf_counter() - start
+    if bar is not None:
+        bar.close()
+    return RolloutResult(
+        t_s=t,
+        ee_pose=ee,
+        ee_disp=ee - ee0,
+        deflection=defl,
+        motor_angles_rad=motors,
+        accel=acc,
+        wrench=wrench,
+        motor_torque=torque,
+        wall_s=wall,
+        n_steps=n_out * n_sub,
+        parameters={
+            **built.parameters,
+            "duration_s": float(t[-1]),
+            "output_step_s": dt_out,
+            "steps_per_output": n_sub,
+            "motors": dataclasses.asdict(manip.motors),
+        },
+    )

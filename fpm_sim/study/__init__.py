@@ -1,0 +1,1 @@
+"""The study's data and poses, its reproduction, identification, readability, transient."""

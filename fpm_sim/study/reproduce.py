@@ -1,0 +1,464 @@
+"""Reproduce the study: subsystem tests, the 25 poses, error statistics, figures and a Markdown report.
+
+Compute first (:func:`reproduce_study` returns a :class:`StudyReproduction`), write second
+(:meth:`StudyReproduction.write`: ``poses.csv``, ``report.md``, PNG figures).
+
+The pose loop is :func:`fpm_sim.batch.pose_loop.pose_frequencies` (replaceable backend); the
+subsystem rigs are solved by the constrained eigen-solve with gravity off (the free-free rig has no
+gravity anyway; for the clamped rigs gravity's prestress is negligible: the links hang in the base
+plane with gravity along the motor axes).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.stats import spearmanr
+
+from fpm_sim.batch.frequencies import pose_frequencies
+from fpm_sim.batch.pose_loop import PoseFrequencies
+from fpm_sim.config import Manipulator
+from fpm_sim.linear.analysis import rig_modes
+from fpm_sim.model.options import ModelOptions
+from fpm_sim.study.poses import GRID_MM, StudyPose, TableReading, study_poses
+from fpm_sim.study.tables import STUDY_COMSOL_VS_EXPERIMENT, SubsystemTest, subsystem_tests
+
+__all__ = [
+    "POSES_CSV_COLUMNS",
+    "SubsystemResult",
+    "StudyReproduction",
+    "error_stats",
+    "subsystem_frequencies",
+    "reproduce_study",
+    "SUBSYSTEM_SEGMENTS",
+]
+
+POSES_CSV_COLUMNS = ("row_mm", "col_mm", "x_mm", "y_mm", "phi_rad", "f1_hz", "f2_hz", "f3_hz", "comsol_hz")
+SUBSYSTEM_SEGMENTS = 12
+"""Spring locations per link for the subsystem rigs (cantilever mode 1 within +0.2 % of Euler-Bernoulli)."""
+
+
+def error_stats(ours: np.ndarray, reference: np.ndarray) -> dict[str, float]:
+    """The study's error statistics of ``ours`` against ``reference`` where both are finite.
+
+    Returns min, max, mean and median of ``|ours - reference|`` (Hz) and of the same relative to the
+    reference (%), the signed mean (%), Spearman's rank correlation and the count.
+    """
+    o, r = np.asarray(ours, float), np.asarray(reference, float)
+    ok = np.isfinite(o) & np.isfinite(r)
+    if not np.any(ok):
+        return {"n": 0}
+    d = np.abs(o[ok] - r[ok])
+    p = 100.0 * d / np.abs(r[ok])
+    rho = float(spearmanr(o[ok], r[ok]).statistic) if ok.sum() > 2 else math.nan
+    return {
+        "n": int(ok.sum()),
+        "min_abs_hz": float(d.min()),
+        "max_abs_hz": float(d.max()),
+        "mean_abs_hz": float(d.mean()),
+        "median_abs_hz": float(np.median(d)),
+        "min_abs_pct": float(p.min()),
+        "max_abs_pct": float(p.max()),
+        "mean_abs_pct": float(p.mean()),
+        "median_abs_pct": float(np.median(p)),
+        "mean_signed_pct": float(np.mean(100.0 * (o[ok] - r[ok]) / np.abs(r[ok]))),
+        "spearman": rho,
+    }
+
+
+@dataclass
+class SubsystemResult:
+    """One subsystem test with our first frequency and its mode's dominant spring kind."""
+
+    test: SubsystemTest
+    ours_hz: float
+    dominant: str
+
+    @property
+    def error_pct(self) -> float:
+        return 100.0 * (self.ours_hz / self.test.experimental_hz - 1.0)
+
+
+def subsystem_frequencies(
+    config: Manipulator, *, segments: int = SUBSYSTEM_SEGMENTS, tests: list[SubsystemTest] | None = None
+) -> list[SubsystemResult]:
+    """Our first frequency of each of the study's subsystem tests (rigs from ``config.rig``)."""
+    opts = ModelOptions(segments=segments, gravity=False)
+    out = []
+    for t in tests or subsystem_tests():
+        res = rig_modes(t.rig, angle_deg=t.angle_deg, config=config, options=opts, n_modes=1, method="constrained")
+        m = res.modes[0]
+        out.append(SubsystemResult(t, float(m.frequency_hz), m.dominant))
+    return out
+
+
+@dataclass
+class StudyReproduction:
+    """Everything the reproduce report shows."""
+
+    config: Manipulator
+    reading: TableReading
+    poses: list[StudyPose]
+    frequencies: PoseFrequencies
+    subsystems: list[SubsystemResult]
+    options: ModelOptions
+    notes: list[str] = field(default_factory=list)
+    readability: list[Any] = field(default_factory=list)
+    """Mode-1 readability tables (:class:`fpm_sim.study.readability.ReadabilityTable`), one per hammer axis."""
+
+    @property
+    def comsol_hz(self) -> np.ndarray:
+        return np.array([p.comsol_hz for p in self.poses])
+
+    @property
+    def f1_hz(self) -> np.ndarray:
+        return self.frequencies.f1_hz
+
+    def stats(self) -> dict[str, float]:
+        """Error statistics of our f1 against COMSOL over the poses with a COMSOL value."""
+        return error_stats(self.f1_hz, self.comsol_hz)
+
+    def rows(self) -> list[dict[str, Any]]:
+        """One dict per pose with the :data:`POSES_CSV_COLUMNS`."""
+        out = []
+        f = self.frequencies.frequencies_hz
+        for i, p in enumerate(self.poses):
+            row: dict[str, Any] = {
+                "row_mm": p.row_mm,
+                "col_mm": p.col_mm,
+                "x_mm": p.pose.x_m * 1e3,
+                "y_mm": p.pose.y_m * 1e3,
+                "phi_rad": p.pose.phi_rad,
+            }
+            for k in range(3):
+                row[f"f{k + 1}_hz"] = float(f[i, k]) if k < f.shape[1] else math.nan
+            row["comsol_hz"] = p.comsol_hz
+            out.append(row)
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "config": self.config.name,
+            "reading": self.reading.name,
+            "options": {"segments": self.options.segments, "axial": self.options.axial},
+            "poses": self.rows(),
+            "status": self.frequencies.status,
+            "in_plane_fraction_mode1": self.frequencies.in_plane[:, 0].tolist(),
+            "stats_vs_comsol": self.stats(),
+            "subsystems": [
+                {
+                    "test": s.test.label,
+                    "experimental_hz": s.test.experimental_hz,
+                    "comsol_hz": s.test.comsol_hz,
+                    "ours_hz": s.ours_hz,
+                    "error_pct": s.error_pct,
+                    "dominant": s.dominant,
+                }
+                for s in self.subsystems
+            ],
+        }
+
+    # ------------------------------------------------------------------ output
+
+    def write_csv(self, path: Path) -> None:
+        with open(path, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(POSES_CSV_COLUMNS)
+            for row in self.rows():
+                w.writerow([_fmt_csv(row[c]) for c in POSES_CSV_COLUMNS])
+
+    def grid(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(x_mm, y_mm, Z)`` with ``Z[iy, ix]`` the value at grid position (x, y) under the reading."""
+        xs = np.array(GRID_MM)
+        z = np.full((len(xs), len(xs)), np.nan)
+        for p, v in zip(self.poses, values):
+            ix = int(np.argmin(np.abs(xs - p.pose.x_m * 1e3)))
+            iy = int(np.argmin(np.abs(xs - p.pose.y_m * 1e3)))
+            z[iy, ix] = v
+        return xs, xs, z
+
+    def plot_heatmaps(self) -> Any:
+        """Figure: our f1, COMSOL's, and their difference (%) over the grid (x, y under the reading)."""
+        import matplotlib
+
+        matplotlib.use("Agg", force=False)
+        import matplotlib.pyplot as plt
+
+        fig, axes = plt.subplots(1, 3, figsize=(14, 4.4), constrained_layout=True)
+        diff = 100.0 * (self.f1_hz / self.comsol_hz - 1.0)
+        lo = float(np.nanmin([np.nanmin(self.f1_hz), np.nanmin(self.comsol_hz)]))
+        hi = float(np.nanmax([np.nanmax(self.f1_hz), np.nanmax(self.comsol_hz)]))
+        lim = float(np.nanmax(np.abs(diff))) if np.any(np.isfinite(diff)) else 1.0
+        panels = [
+            (self.f1_hz, "fpm-sim f1 (Hz)", "viridis", lo, hi),
+            (self.comsol_hz, "COMSOL f1 (Hz), study Table 5", "viridis", lo, hi),
+            (diff, "fpm-sim / COMSOL - 1 (%)", "RdBu_r", -lim, lim),
+        ]
+        for ax, (vals, title, cmap, vmin, vmax) in zip(axes, panels):
+            xs, ys, z = self.grid(vals)
+            im = ax.imshow(z, origin="lower", extent=(-125, 125, -125, 125), cmap=cmap, vmin=vmin, vmax=vmax)
+            for iy in range(z.shape[0]):
+                for ix in range(z.shape[1]):
+                    txt = "-" if not np.isfinite(z[iy, ix]) else f"{z[iy, ix]:.1f}"
+                    ax.text(xs[ix], ys[iy], txt, ha="center", va="center", fontsize=8, color="k")
+            ax.set_title(title)
+            ax.set_xlabel("x (mm)")
+            ax.set_ylabel("y (mm)")
+            ax.set_xticks(xs)
+            ax.set_yticks(ys)
+            fig.colorbar(im, ax=ax, shrink=0.85)
+        fig.suptitle(f"{self.config.name}\ntable reading {self.reading.name}", fontsize=9)
+        return fig
+
+    def plot_subsystems(self) -> Any:
+        """Figure: subsystem first frequencies, measured vs COMSOL vs fpm-sim."""
+        import matplotlib
+
+        matplotlib.use("Agg", force=False)
+        import matplotlib.pyplot as plt
+
+        fig, axes = plt.subplots(1, 2, figsize=(11, 4), constrained_layout=True)
+        groups = [
+            [s for s in self.subsystems if s.test.rig != "chain"],
+            [s for s in self.subsystems if s.test.rig == "chain"],
+        ]
+        for ax, grp in zip(axes, groups):
+            x = np.arange(len(grp))
+            w = 0.27
+            ax.bar(x - w, [s.test.experimental_hz for s in grp], w, label="measured (study)")
+            ax.bar(x, [s.test.comsol_hz for s in grp], w, label="COMSOL (study)")
+            ax.bar(x + w, [s.ours_hz for s in grp], w, label="fpm-sim")
+            ax.set_xticks(x)
+            ax.set_xticklabels([s.test.label for s in grp])
+            ax.set_ylabel("first natural frequency (Hz)")
+            ax.legend(fontsize=8, loc="lower center")
+        fig.suptitle("subsystem tests", fontsize=10)
+        return fig
+
+    def write(self, out_dir: str | Path) -> list[Path]:
+        """Write ``poses.csv``, ``report.md``, ``heatmaps.png``, ``subsystems.png``; returns the paths."""
+        import matplotlib.pyplot as plt
+
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        paths = [out / "poses.csv", out / "report.md", out / "heatmaps.png", out / "subsystems.png"]
+        self.write_csv(paths[0])
+        fig = self.plot_heatmaps()
+        fig.savefig(paths[2], dpi=110)
+        plt.close(fig)
+        fig = self.plot_subsystems()
+        fig.savefig(paths[3], dpi=110)
+        plt.close(fig)
+        paths[1].write_text(self.markdown())
+        return paths
+
+    def _unclear_poses_section(self) -> list[str]:
+        """Our model at the study's 7 poses without a COMSOL value (unreadable FRFs) vs the other 18."""
+        has = np.isfinite(self.comsol_hz)
+        if has.all() or not has.any():
+            return []
+        fr = self.frequencies
+        rows = [
+            ("mean first frequency (Hz)", np.nanmean(fr.f1_hz[~has]), np.nanmean(fr.f1_hz[has])),
+            ("mean singularity measure", np.nanmean(fr.singularity[~has]), np.nanmean(fr.singularity[has])),
+            ("min singularity measure", np.nanmin(fr.singularity[~has]), np.nanmin(fr.singularity[has])),
+            ("mean in-plane share of mode 1", np.nanmean(fr.in_plane[~has, 0]), np.nanmean(fr.in_plane[has, 0])),
+        ]
+        out = [
+            f"## The {int((~has).sum())} poses the study could not read",
+            "",
+            "The study's FRFs were unreadable at these poses; a model can say whether they sit nearer a singularity "
+            "(low, pose-sensitive first frequency) than the others.",
+            "",
+            "| quantity | unreadable poses | poses with a COMSOL value |",
+            "|---|---:|---:|",
+        ]
+        out += [f"| {name} | {a:.3f} | {b:.3f} |" for name, a, b in rows]
+        out.append("")
+        for table in self.readability:
+            out += [
+                f"### Mode-1 readability, virtual driving-point hammer test along {table.point.axis!r} "
+                f"at {table.point.link} ({table.point.fraction:g} of its length)",
+                "",
+                "How strongly a hammer at the assumed accelerometer point excites mode 1 and how far its peak stands "
+                "out in the FRF (`fpm-sim readability`; docs/frf_impact_atlas.md), against the study's seven "
+                "unreadable poses:",
+                "",
+                table.to_markdown(),
+                "",
+            ]
+        return out
+
+    def markdown(self) -> str:
+        """The report (Markdown)."""
+        st = self.stats()
+        lines = [
+            "# fpm-sim reproduction of the study (Segura, c. 2021)",
+            "",
+            f"Configuration: **{self.config.name}**; link section {self.config.section.thickness_m * 1e3:g} mm "
+            f"(in-plane) x {self.config.section.height_m * 1e3:g} mm (out-of-plane).",
+            f"Table reading: **{self.reading.name}** (rows are {self.reading.row_is}; the poses written (x, 0) "
+            f"turned {self.reading.phi_sign * 0.2:+.1f} rad).",
+            f"Pose loop: constrained eigen-solve, gravity off, {self.options.segments} segments per link"
+            f"{', axial springs' if self.options.axial else ', inextensible links'}.",
+            "",
+            "## Subsystem tests (first natural frequency)",
+            "",
+            "| test | measured (Hz) | COMSOL (Hz) | fpm-sim (Hz) | fpm-sim vs measured | mode |",
+            "|---|---:|---:|---:|---:|---|",
+        ]
+        for s in self.subsystems:
+            lines.append(
+                f"| {s.test.label} | {s.test.experimental_hz:g} | {s.test.comsol_hz:g} | {s.ours_hz:.2f} | "
+                f"{s.error_pct:+.2f} % | {s.dominant} |"
+            )
+        lines += [
+            "",
+            "![subsystems](subsystems.png)",
+            "",
+            "## The 25 poses",
+            "",
+            "| row (mm) | col (mm) | x (mm) | y (mm) | phi (rad) | f1 (Hz) | f2 (Hz) | f3 (Hz) | COMSOL (Hz) "
+            "| diff (%) "
+            "| in-plane share of mode 1 | singularity measure | status |",
+            "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+        ]
+        fr = self.frequencies
+        for i, row in enumerate(self.rows()):
+            c = row["comsol_hz"]
+            d = 100.0 * (row["f1_hz"] / c - 1.0) if math.isfinite(c) else math.nan
+            lines.append(
+                f"| {row['row_mm']:g} | {row['col_mm']:g} | {row['x_mm']:g} | {row['y_mm']:g} "
+                f"| {row['phi_rad']:+.1f} | "
+                f"{_f(row['f1_hz'])} | {_f(row['f2_hz'])} | {_f(row['f3_hz'])} | {_f(c)} | {_f(d, '+.1f')} | "
+                f"{_f(fr.in_plane[i, 0], '.2f')} | {_f(fr.singularity[i], '.3f')} | {fr.status[i]} |"
+            )
+        ref = STUDY_COMSOL_VS_EXPERIMENT
+        lines += [
+            "",
+            f"## Error statistics over the {st.get('n', 0)} poses with a COMSOL value",
+            "",
+            "In the study's form (absolute error; relative to the reference).",
+            "",
+            "| comparison | min (Hz) | max (Hz) | mean (Hz) | median (Hz) "
+            "| min (%) | max (%) | mean (%) | median (%) |",
+            "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+        ]
+        if st.get("n", 0):
+            lines.append(
+                f"| fpm-sim vs COMSOL | {st['min_abs_hz']:.2f} | {st['max_abs_hz']:.2f} | {st['mean_abs_hz']:.2f} | "
+                f"{st['median_abs_hz']:.2f} | {st['min_abs_pct']:.2f} | {st['max_abs_pct']:.2f} | "
+                f"{st['mean_abs_pct']:.2f} | {st['median_abs_pct']:.2f} |"
+            )
+        lines += [
+            f"| COMSOL vs measured (the study's own) | - | {ref['max_abs_hz']} | {ref['mean_abs_hz']} | "
+            f"{ref['median_abs_hz']} | - | {ref['max_abs_pct']} | {ref['mean_abs_pct']} | {ref['median_abs_pct']} |",
+            "",
+        ]
+        if st.get("n", 0):
+            lines += [
+                f"Spearman rank correlation fpm-sim vs COMSOL: **{st['spearman']:.3f}**; signed mean error "
+                f"{st['mean_signed_pct']:+.2f} %.",
+                "",
+            ]
+        lines += ["![heatmaps](heatmaps.png)", ""]
+        lines += self._unclear_poses_section()
+        ident = {k: v for k, v in self.config.provenance.items() if v.startswith("identified")}
+        if ident:
+            lines += ["## Identified parameters (value; source, with +- one standard deviation)", ""]
+            lines += ["| parameter | value | from |", "|---|---|---|"]
+            for k, v in sorted(ident.items()):
+                lines.append(f"| `{k}` | {_value_of(self.config, k)} | {v[len('identified: ') :]} |")
+            lines.append("")
+        lines += ["## Parameters and their provenance", ""]
+        lines += ["| parameter | source |", "|---|---|"]
+        for k, v in sorted(self.config.provenance.items()):
+            lines.append(f"| `{k}` | {v} |")
+        if self.notes:
+            lines += ["", "## Notes", ""] + [f"- {n}" for n in self.notes]
+        return "\n".join(lines) + "\n"
+
+
+def _value_of(config: Manipulator, dotted: str) -> str:
+    obj: Any = config
+    for part in dotted.split("."):
+        obj = getattr(obj, part.replace("_deg", "_rad"), None) if obj is not None else None
+    if obj is None:
+        return "-"
+    if dotted.endswith("_deg"):
+        return str([round(math.degrees(a), 3) for a in obj])
+    return str(obj) if not isinstance(obj, float) else f"{obj:.6g}"
+
+
+def _f(v: float, fmt: str = ".2f") -> str:
+    return "-" if v is None or not math.isfinite(v) else format(v, fmt)
+
+
+def _fmt_csv(v: Any) -> str:
+    if isinstance(v, float):
+        return "" if not math.isfinite(v) else repr(round(v, 6))
+    return str(v)
+
+
+def reproduce_study(
+    config: Manipulator,
+    *,
+    reading: TableReading | None = None,
+    options: ModelOptions | None = None,
+    backend: str = "cpu",
+    workers: int = 1,
+    progress: bool = False,
+    subsystems: bool = True,
+    readability: bool = True,
+) -> StudyReproduction:
+    """Run the study's subsystem tests and its 25 poses on ``config``.
+
+    Parameters
+    ----------
+    config
+        The manipulator (its ``rig`` table describes the test pieces).
+    reading
+        How the study's table maps to poses (default: rows are x, +0.2 rad).
+    options
+        Pose-loop discretisation (default :func:`fpm_sim.batch.pose_loop.fast_options`).
+    backend, workers, progress
+        Passed to :func:`fpm_sim.batch.pose_loop.pose_frequencies`.
+    subsystems
+        Also solve the subsystem rigs (needs ``config.rig``).
+    readability
+        Also tabulate mode-1 readability for a driving-point hammer along z and along the in-plane
+        normal of chain 0's distal link at mid-span (the study's set-up is not stated; both axes).
+    """
+    from fpm_sim.batch.pose_loop import fast_options
+
+    rd = reading or TableReading()
+    opts = options or fast_options()
+    poses = study_poses(rd)
+    freqs = pose_frequencies(
+        config,
+        [p.pose for p in poses],
+        backend=backend,
+        n_modes=3,
+        options=opts,
+        workers=workers,
+        progress=progress,
+        desc="study poses",
+    )
+    subs = subsystem_frequencies(config) if subsystems and config.rig is not None else []
+    tables = []
+    if readability:
+        from fpm_sim.frf import LinkPoint
+        from fpm_sim.study.readability import readability_table
+
+        for axis in ("z", "normal"):
+            tables.append(
+                readability_table(
+                    config, options=opts, poses=poses, point=LinkPoint("distal_0", 0.5, axis), progress=progress
+                )
+            )
+    return StudyReproduction(config, rd, poses, freqs, subs, opts, readability=tables)

@@ -1,0 +1,232 @@
+"""First natural frequencies over the reachable workspace, with the singularity loci.
+
+:func:`sweep_workspace` evaluates a grid of positions at one platform rotation (``dense``: every
+``step_mm`` over the square that holds the reachable workspace; ``paper``: the study's 25 poses
+under a table reading). Every grid point is kept and given a status (``ok``, ``near_singular``,
+``singular``, ``unreachable``): nothing is dropped silently.
+
+The singularity loci drawn on the heatmap are the zero level sets, on a finer grid, of
+``det(Jx)`` (parallel singularity: the distal link lines concurrent) and of each chain's
+``cross(w_i, u_i)`` (serial: chain ``i`` stretched or folded).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fpm_sim.batch.frequencies import pose_frequencies
+from fpm_sim.batch.pose_loop import PoseFrequencies
+from fpm_sim.config import Manipulator
+from fpm_sim.kinematics import Pose, UnreachablePoseError, inverse_kinematics
+from fpm_sim.model.options import ModelOptions
+from fpm_sim.study.poses import TableReading, study_poses
+
+__all__ = ["WorkspaceSweep", "sweep_workspace", "dense_grid", "singularity_fields", "SWEEP_CSV_COLUMNS"]
+
+SWEEP_CSV_COLUMNS = ("x_mm", "y_mm", "phi_rad", "f1_hz", "f2_hz", "f3_hz", "in_plane_mode1", "singularity", "status")
+
+
+def _reach_half_width(config: Manipulator) -> float:
+    """Half-width (m) of a square centred on the base centre that holds every reachable position."""
+    g = config.geometry
+    return g.proximal_length_m + g.distal_length_m + g.platform_radius_m - g.base_radius_m / 2.0 + 1e-9
+
+
+def dense_grid(config: Manipulator, *, step_mm: float, phi_rad: float = 0.0) -> list[Pose]:
+    """Positions every ``step_mm`` (aligned on the origin) over the square holding the workspace.
+
+    Rows of the square with no reachable point are trimmed away; inside the kept bounding box every
+    point is returned (reachable or not).
+    """
+    if not step_mm > 0:
+        raise ValueError(f"--step-mm must be > 0, got {step_mm}")
+    half = _reach_half_width(config)
+    n = int(math.floor(half * 1e3 / step_mm))
+    ticks = np.arange(-n, n + 1) * step_mm
+    if ticks.size > 401:
+        raise ValueError(f"--step-mm {step_mm} gives {ticks.size} x {ticks.size} points; use a larger step")
+    reach = np.zeros((ticks.size, ticks.size), bool)
+    g = config.geometry
+    for iy, y in enumerate(ticks):
+        for ix, x in enumerate(ticks):
+            try:
+                inverse_kinematics(g, Pose.from_mm(x, y, phi_rad), check_singularity=False)
+                reach[iy, ix] = True
+            except UnreachablePoseError:
+                pass
+    if not reach.any():
+        raise ValueError(f"no reachable position at phi = {phi_rad} rad with step {step_mm} mm (--phi-rad)")
+    rows, cols = np.where(reach.any(axis=1))[0], np.where(reach.any(axis=0))[0]
+    ys, xs = ticks[rows.min() : rows.max() + 1], ticks[cols.min() : cols.max() + 1]
+    return [Pose.from_mm(float(x), float(y), phi_rad) for y in ys for x in xs]
+
+
+def singularity_fields(
+    config: Manipulator, x_mm: np.ndarray, y_mm: np.ndarray, phi_rad: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """``det(Jx)`` (rotation column over the characteristic length) and ``min_i |cross(w_i, u_i)|`` on the
+    grid ``y_mm x x_mm`` (NaN where unreachable); vectorised inverse kinematics, as in
+    :func:`fpm_sim.kinematics.inverse_kinematics`."""
+    g = config.geometry
+    l1, l2 = g.proximal_length_m, g.distal_length_m
+    xx, yy = np.meshgrid(np.asarray(x_mm, float) * 1e-3, np.asarray(y_mm, float) * 1e-3)
+    p = np.stack([xx.ravel(), yy.ravel()], axis=1)  # (n, 2)
+    base = np.asarray(g.base_angles_rad)
+    a = g.base_radius_m * np.stack([np.cos(base), np.sin(base)], axis=1)
+    ang = np.asarray(g.platform_angles_rad) + phi_rad
+    r = g.platform_radius_m * np.stack([np.cos(ang), np.sin(ang)], axis=1)  # (3, 2)
+    c = p[:, None, :] + r[None]
+    d = c - a[None]
+    dist = np.hypot(d[..., 0], d[..., 1])
+    reach = np.all((dist >= abs(l1 - l2)) & (dist <= l1 + l2), axis=1)
+    cos_alpha = np.clip((l1**2 + dist**2 - l2**2) / (2.0 * l1 * np.maximum(dist, 1e-300)), -1.0, 1.0)
+    q = np.arctan2(d[..., 1], d[..., 0]) + np.asarray(g.elbow_branch)[None, :] * np.arccos(cos_alpha)
+    w = np.stack([np.cos(q), np.sin(q)], axis=2)
+    u = (c - (a[None] + l1 * w)) / l2
+    cross = w[..., 0] * u[..., 1] - w[..., 1] * u[..., 0]
+    lc = max(g.platform_radius_m, l2 / 4.0)
+    jx = np.concatenate([u, ((r[None, :, 0] * u[..., 1] - r[None, :, 1] * u[..., 0]) / lc)[..., None]], axis=2)
+    det = np.where(reach, np.linalg.det(jx), np.nan).reshape(xx.shape)
+    ser = np.where(reach, np.min(np.abs(cross), axis=1), np.nan).reshape(xx.shape)
+    return det, ser
+
+
+@dataclass
+class WorkspaceSweep:
+    """Result of :func:`sweep_workspace`."""
+
+    config: Manipulator
+    grid: str
+    phi_rad: float
+    step_mm: float
+    frequencies: PoseFrequencies
+
+    def rows(self) -> list[dict[str, Any]]:
+        fr = self.frequencies
+        out = []
+        for i, p in enumerate(fr.poses):
+            f = fr.frequencies_hz[i]
+            out.append(
+                {
+                    "x_mm": round(p.x_m * 1e3, 6),
+                    "y_mm": round(p.y_m * 1e3, 6),
+                    "phi_rad": p.phi_rad,
+                    "f1_hz": float(f[0]),
+                    "f2_hz": float(f[1]) if f.size > 1 else math.nan,
+                    "f3_hz": float(f[2]) if f.size > 2 else math.nan,
+                    "in_plane_mode1": float(fr.in_plane[i, 0]),
+                    "singularity": float(fr.singularity[i]),
+                    "status": fr.status[i],
+                }
+            )
+        return out
+
+    def counts(self) -> dict[str, int]:
+        out: dict[str, int] = {}
+        for s in self.frequencies.status:
+            out[s] = out.get(s, 0) + 1
+        return out
+
+    def write_csv(self, path: Path) -> None:
+        with open(path, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(SWEEP_CSV_COLUMNS)
+            for r in self.rows():
+                w.writerow(
+                    ["" if isinstance(r[c], float) and not math.isfinite(r[c]) else r[c] for c in SWEEP_CSV_COLUMNS]
+                )
+
+    def plot(self) -> Any:
+        """Heatmap of f1 with unreachable/singular points marked and the singularity loci drawn."""
+        import matplotlib
+
+        matplotlib.use("Agg", force=False)
+        import matplotlib.pyplot as plt
+
+        rows = self.rows()
+        xs = np.array(sorted({r["x_mm"] for r in rows}))
+        ys = np.array(sorted({r["y_mm"] for r in rows}))
+        fig, ax = plt.subplots(figsize=(7, 6), constrained_layout=True)
+        if self.grid == "dense":
+            z = np.full((len(ys), len(xs)), np.nan)
+            for r in rows:
+                z[np.searchsorted(ys, r["y_mm"]), np.searchsorted(xs, r["x_mm"])] = r["f1_hz"]
+            step = self.step_mm
+            im = ax.imshow(
+                z,
+                origin="lower",
+                extent=(xs[0] - step / 2, xs[-1] + step / 2, ys[0] - step / 2, ys[-1] + step / 2),
+                cmap="viridis",
+            )
+        else:
+            im = ax.scatter([r["x_mm"] for r in rows], [r["y_mm"] for r in rows], c=[r["f1_hz"] for r in rows], s=400)
+            for r in rows:
+                ax.text(r["x_mm"], r["y_mm"], f"{r['f1_hz']:.1f}", ha="center", va="center", fontsize=7)
+        fig.colorbar(im, ax=ax, label="first natural frequency (Hz)")
+        marks = {"unreachable": ("x", "0.5"), "singular": ("s", "red"), "near_singular": ("o", "orange")}
+        for status, (marker, color) in marks.items():
+            pts = [(r["x_mm"], r["y_mm"]) for r in rows if r["status"] == status]
+            if pts:
+                ax.scatter(*zip(*pts), marker=marker, s=12, color=color, label=status.replace("_", " "), zorder=3)
+        pad = 20.0
+        fx = np.linspace(xs[0] - pad, xs[-1] + pad, 241)
+        fy = np.linspace(ys[0] - pad, ys[-1] + pad, 241)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            det, ser = singularity_fields(self.config, fx, fy, self.phi_rad)
+            if np.nanmin(det) < 0 < np.nanmax(det):
+                ax.contour(fx, fy, det, levels=[0.0], colors="red", linewidths=1.5)
+            ax.contour(fx, fy, ser, levels=[0.02], colors="black", linewidths=1.0, linestyles="dashed")
+        ax.plot([], [], color="red", label="parallel singularity (det Jx = 0)")
+        ax.plot([], [], color="black", ls="--", label="serial singularity (chain straight/folded)")
+        ax.set_xlabel("x (mm)")
+        ax.set_ylabel("y (mm)")
+        ax.set_aspect("equal")
+        ax.legend(fontsize=7, loc="upper right")
+        ax.set_title(f"{self.config.name}\nphi = {self.phi_rad:g} rad, grid {self.grid}", fontsize=9)
+        return fig
+
+    def write(self, out_dir: str | Path) -> list[Path]:
+        import matplotlib.pyplot as plt
+
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        csv_path, png_path = out / f"sweep_{self.grid}.csv", out / f"sweep_{self.grid}.png"
+        self.write_csv(csv_path)
+        fig = self.plot()
+        fig.savefig(png_path, dpi=110)
+        plt.close(fig)
+        return [csv_path, png_path]
+
+
+def sweep_workspace(
+    config: Manipulator,
+    *,
+    grid: str = "dense",
+    step_mm: float = 10.0,
+    phi_rad: float = 0.0,
+    reading: TableReading | None = None,
+    options: ModelOptions | None = None,
+    backend: str = "cpu",
+    workers: int = 2,
+    progress: bool = False,
+) -> WorkspaceSweep:
+    """First three frequencies over the workspace (``grid="dense"``) or at the study's poses (``"paper"``)."""
+    if grid == "dense":
+        poses = dense_grid(config, step_mm=step_mm, phi_rad=phi_rad)
+    elif grid == "paper":
+        poses = [p.pose for p in study_poses(reading)]
+        step_mm = 50.0
+    else:
+        raise ValueError(f"--grid must be 'paper' or 'dense', got {grid!r}")
+    fr = pose_frequencies(
+        config, poses, backend=backend, n_modes=3, options=options, workers=workers, progress=progress, desc="sweep"
+    )
+    return WorkspaceSweep(config, grid, phi_rad, step_mm, fr)

@@ -1,0 +1,25 @@
+"""The MJCF files checked into mjcf/ must be what the code generates now."""
+
+from pathlib import Path
+
+import mujoco
+import pytest
+
+from fpm_sim.model.mjcf_export import REFERENCE_MODELS
+
+MJCF_DIR = Path(__file__).resolve().parents[2] / "mjcf"
+
+
+@pytest.mark.parametrize("name", sorted(REFERENCE_MODELS))
+def test_checked_in_mjcf_is_fresh(name):
+    path = MJCF_DIR / name
+    assert path.exists(), f"{path} missing: run python scripts/export_reference_mjcf.py"
+    assert path.read_text() == REFERENCE_MODELS[name]().to_xml(), (
+        f"{path} is stale: run python scripts/export_reference_mjcf.py and commit the result"
+    )
+
+
+@pytest.mark.parametrize("name", sorted(REFERENCE_MODELS))
+def test_checked_in_mjcf_loads(name):
+    model = mujoco.MjModel.from_xml_path(str(MJCF_DIR / name))
+    assert model.nv > 0

@@ -1,0 +1,187 @@
+"""Modal atlas: MAC, matching and Procrustes alignment, tracking through a crossing of an in-plane and an
+out-of-plane mode, interpolated reduced models against direct computations, file round trip, errors."""
+
+import numpy as np
+import pytest
+
+from fpm_sim.kinematics import Pose
+from fpm_sim.model.manipulator import build_manipulator
+from fpm_sim.model.options import ModelOptions, dof_stiffness
+from fpm_sim.rom.atlas import AtlasError, align_modes, build_atlas, load_atlas, mac_matrix, track_modes
+from fpm_sim.rom.reduction import modal_system, reduce_model
+
+OPTS = ModelOptions(segments=3, axial=False)
+PAPER_GRID_M = np.array([-100.0, -50.0, 0.0, 50.0, 100.0]) * 1e-3
+MIDPOINTS_MM = [-75.0, -25.0, 25.0, 75.0]
+INTERP_TOL = 0.02
+"""The issue's target: interpolated f1..f3 within 2 % of a direct computation at the midpoints of the
+paper grid (50 mm spacing). Measured on this 3-segment model: 0.73 % worst with cubic interpolation
+(2.4 % with multilinear, which is why 'auto' picks cubic on a 5 x 5 grid)."""
+
+
+def test_mac_matrix():
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(20, 3))
+    m = mac_matrix(a, np.column_stack([-2.0 * a[:, 1], a[:, 0]]))
+    assert m[1, 0] == pytest.approx(1.0) and m[0, 1] == pytest.approx(1.0)  # scale and sign do not matter
+    q, _ = np.linalg.qr(a)
+    assert mac_matrix(q[:, :1], q[:, 1:2])[0, 0] == pytest.approx(0.0, abs=1e-20)
+
+
+def test_align_recovers_order_signs_and_a_rotated_repeated_pair():
+    rng = np.random.default_rng(1)
+    p, _ = np.linalg.qr(rng.normal(size=(30, 4)))
+    c, s = np.cos(0.7), np.sin(0.7)
+    rot = np.array([[c, -s], [s, c]])
+    # candidates: the pair (1, 2) rotated within its plane (a repeated frequency's arbitrary basis), then
+    # everything permuted and sign-flipped, plus an unrelated extra mode
+    pair = p[:, 1:3] @ rot
+    extra = rng.normal(size=(30, 1))
+    extra -= p @ (p.T @ extra)
+    cand = np.column_stack([-p[:, 3], pair[:, 1], p[:, 0], extra[:, 0], -pair[:, 0]])
+    al = align_modes(p, cand)
+    assert set(al.index) == {0, 1, 2, 4}  # the unrelated mode takes no label
+    np.testing.assert_allclose(al.basis, p, atol=1e-12)
+
+
+def _out_of_plane_share(system, v):
+    k = dof_stiffness(system.built.model)
+    kinds = np.array(system.built.dof_kinds)
+    e = k * v**2
+    return e[(kinds == "bend_out") | (kinds == "twist")].sum() / e.sum()
+
+
+def test_tracking_keeps_labels_through_a_crossing(symmetric_manip):
+    """Raise the links' out-of-plane height: out-of-plane bending stiffens (f ~ height) while in-plane
+    bending does not (EI and mass both scale with height), so out-of-plane modes climb through in-plane
+    ones. Gravity off: the planes decouple exactly, so these are true crossings, not veerings."""
+    pose = Pose(0.05, -0.05, 0.1)
+    heights = np.linspace(0.010, 0.024, 15)
+    opts = ModelOptions(segments=3, axial=False, gravity=False)
+    systems = [modal_system(build_manipulator(symmetric_manip.with_section(height_m=h), pose, opts)) for h in heights]
+    al = track_modes(systems, n_modes=4, n_extra=4)
+    share = np.array([[_out_of_plane_share(s, s.phi[:, i]) for i in a.index] for s, a in zip(systems, al)])
+    # the sweep does contain crossings: label 1 (out of plane) ends as the 2nd mode, label 4 (in plane) as the 1st
+    assert al[0].index[0] == 0 and al[-1].index[0] == 1
+    assert al[0].index[3] == 3 and al[-1].index[3] == 0
+    # every label keeps its character along the sweep (a wrong swap would flip the share to ~0 or ~1)
+    start = share[0] > 0.5
+    assert np.all((share > 0.5) == start)
+    assert np.all(np.abs(share - 0.5) > 0.45)  # the planes decouple: shares are 0 or 1
+    assert min(a.mac.min() for a in al[1:]) > 0.9
+    # negative control: labelling by sorted order changes character at the crossing
+    naive = np.array([_out_of_plane_share(s, s.phi[:, 0]) for s in systems])
+    assert naive[0] > 0.5 and naive[-1] < 0.5
+
+
+@pytest.fixture(scope="module")
+def atlas(symmetric_manip):
+    return build_atlas(symmetric_manip, x_m=PAPER_GRID_M, y_m=PAPER_GRID_M, options=OPTS, n_modes=6)
+
+
+def test_atlas_reproduces_its_grid_poses(symmetric_manip, atlas):
+    compared_io = 0
+    for pose in (
+        Pose(0.0, 0.0, 0.0),
+        Pose(-0.05, 0.0, 0.0),
+        Pose(0.0, -0.05, 0.0),
+        Pose(0.05, -0.1, 0.0),
+        Pose(-0.1, 0.1, 0.0),
+    ):
+        rom = atlas.query(pose)
+        system = modal_system(build_manipulator(symmetric_manip, pose, OPTS))
+        node = (int(np.argmin(np.abs(atlas.x_m - pose.x_m))), int(np.argmin(np.abs(atlas.y_m - pose.y_m))), 0)
+        tracked = np.sort(atlas.nodes["label_index"][node].astype(int))
+        # the atlas keeps the tracked modes, which far from the root need not be the lowest six
+        np.testing.assert_allclose(rom.frequencies_hz, system.frequencies_hz[tracked], rtol=1e-9)
+        if np.array_equal(tracked, np.arange(6)):
+            compared_io += 1
+            direct = reduce_model(system, n_modes=6)
+            # same modes, same static correction: the same input-output map (a basis-free comparison)
+            np.testing.assert_allclose(rom.static_gain(), direct.static_gain(), rtol=1e-6, atol=1e-12)
+            f = np.array([30.0, 95.0, 140.0])
+            h_a, h_d = rom.frequency_response(f), direct.frequency_response(f)
+            np.testing.assert_allclose(h_a, h_d, rtol=1e-6, atol=1e-9 * np.abs(h_d).max())
+    assert compared_io >= 3
+
+
+def test_aligned_basis_is_consistent_on_the_paper_grid(atlas):
+    """Labels may change character between 50 mm neighbours (modes 2-6 mix near the symmetric pose), but the
+    tracked six-mode subspace does not turn: every aligned basis vector keeps a MAC above 0.8 (measured 0.89)
+    with its parent's, which is what makes the matrix interpolation work."""
+    assert atlas.weak_links() == []
+    assert len(atlas.label_changes()) > 0  # the raw per-mode identity does change: the diagnostic sees it
+
+
+@pytest.mark.parametrize("x_mm", MIDPOINTS_MM)
+def test_interpolated_frequencies_at_paper_grid_midpoints(symmetric_manip, atlas, x_mm):
+    for y_mm in MIDPOINTS_MM:
+        pose = Pose.from_mm(x_mm, y_mm, 0.0)
+        rom = atlas.query(pose)
+        direct = modal_system(build_manipulator(symmetric_manip, pose, OPTS)).frequencies_hz[:3]
+        assert np.max(np.abs(rom.frequencies_hz[:3] / direct - 1.0)) < INTERP_TOL, (x_mm, y_mm)
+
+
+def test_interpolated_model_is_close_in_input_output_terms(symmetric_manip, atlas):
+    """Static gain (end-effector compliance) at a midpoint: interpolated vs direct reduced model."""
+    pose = Pose.from_mm(25.0, -25.0, 0.0)
+    rom = atlas.query(pose)
+    direct = reduce_model(modal_system(build_manipulator(symmetric_manip, pose, OPTS)), n_modes=6)
+    g_i, g_d = rom.static_gain()[:3, :3], direct.static_gain()[:3, :3]
+    # the in-plane compliance changes by tens of percent over 50 mm near the centre; a consistent basis keeps
+    # the interpolated gain within a few percent (measured below 1 %); an inconsistent one (sign flips) gives
+    # O(1) errors
+    assert np.linalg.norm(g_i - g_d) / np.linalg.norm(g_d) < 0.05
+
+
+def test_save_load_round_trip(atlas, tmp_path):
+    p = atlas.save(tmp_path / "atlas.npz")
+    back = load_atlas(p)
+    pose = Pose.from_mm(-25.0, 75.0, 0.0)
+    np.testing.assert_allclose(back.query(pose).a, atlas.query(pose).a)
+    assert back.parameters["options"]["segments"] == 3
+    assert back.table() == atlas.table()
+
+
+def test_queries_outside_the_grid_are_refused(atlas):
+    with pytest.raises(AtlasError, match="outside"):
+        atlas.query(Pose.from_mm(120.0, 0.0, 0.0))
+    with pytest.raises(AtlasError, match="single value"):
+        atlas.query(Pose.from_mm(0.0, 0.0, 0.1))
+    with pytest.raises(AtlasError, match="method"):
+        atlas.query(Pose(0.0, 0.0, 0.0), method="spline")
+
+
+def test_bad_grids_are_refused(symmetric_manip):
+    with pytest.raises(AtlasError, match="x_m"):
+        build_atlas(symmetric_manip, x_m=[0.0, 0.0], y_m=[0.0], options=OPTS)
+    with pytest.raises(AtlasError, match="root"):
+        build_atlas(symmetric_manip, x_m=[0.0, 0.05], y_m=[0.0], options=OPTS, root=Pose(0.01, 0.0, 0.0))
+
+
+def test_rotation_axis_and_mixed_orders(symmetric_manip):
+    """A grid in x (4 values: cubic under 'auto') and phi (2 values: linear), queried between rotations."""
+    xs = np.array([-0.075, -0.025, 0.025, 0.075])
+    at = build_atlas(symmetric_manip, x_m=xs, y_m=[0.025], phi_rad=[0.0, 0.2], options=OPTS, n_modes=6)
+    pose = Pose(0.0, 0.025, 0.1)
+    direct = modal_system(build_manipulator(symmetric_manip, pose, OPTS)).frequencies_hz[:3]
+    auto = at.query(pose).frequencies_hz[:3]
+    # 0.1 rad and 25 mm from the nearest nodes; measured 0.07 %
+    assert np.max(np.abs(auto / direct - 1.0)) < INTERP_TOL
+    assert not np.allclose(auto, at.query(pose, method="linear").frequencies_hz[:3], rtol=1e-9)
+    with pytest.raises(AtlasError, match="cubic"):
+        at.query(pose, method="cubic")
+
+
+@pytest.mark.slow
+def test_interpolated_frequencies_at_six_segments(symmetric_manip):
+    """The CLI's default resolution (6 segments): measured 0.79 % worst over the 16 midpoints."""
+    opts = ModelOptions(segments=6, axial=False)
+    at = build_atlas(symmetric_manip, x_m=PAPER_GRID_M, y_m=PAPER_GRID_M, options=opts, n_modes=6)
+    worst = 0.0
+    for x_mm in MIDPOINTS_MM:
+        for y_mm in MIDPOINTS_MM:
+            pose = Pose.from_mm(x_mm, y_mm, 0.0)
+            direct = modal_system(build_manipulator(symmetric_manip, pose, opts)).frequencies_hz[:3]
+            worst = max(worst, float(np.max(np.abs(at.query(pose).frequencies_hz[:3] / direct - 1.0))))
+    assert worst < INTERP_TOL

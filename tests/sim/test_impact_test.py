@@ -1,0 +1,134 @@
+"""Virtual impact test: the first peak of the H1 FRF from nonlinear rollouts against the modal f1 of the
+same model; H1 on synthetic signals; the accelerometer kinematics; errors."""
+
+import math
+
+import mujoco
+import numpy as np
+import pytest
+
+from fpm_sim.frf import FrfError, LinkPoint, locate, modal_frf
+from fpm_sim.kinematics import Pose
+from fpm_sim.model.manipulator import build_manipulator
+from fpm_sim.model.options import ModelOptions
+from fpm_sim.rom.reduction import modal_system
+from fpm_sim.sim.impact import ImpactRecord, ImpactSetup, h1_estimate, point_acceleration, virtual_impact_test
+
+FIRST_PEAK_TOL = 0.02
+"""The issue's target: the first FRF peak within 2 % of the modal f1. Sources of difference: the FFT line
+spacing after zero padding (0.125 Hz at 8 s, refined by a parabola), the accelerance peak sitting at
+f1 / sqrt(1 - 2 zeta^2) (+0.01 % at 1 %), the neighbouring modes' skirts, the implicit integrator
+((omega h)^2 / 3 ~ 1e-6) and the soft welds (~1e-4). Measured -0.1 to -0.25 %."""
+
+
+def test_first_peak_matches_modal_f1_with_noise(symmetric_manip):
+    """Pose (0, 0, 0), the coarsest flexible model, three impacts with accelerometer noise."""
+    built = build_manipulator(symmetric_manip, Pose(0.0, 0.0, 0.0), ModelOptions(segments=3, axial=False))
+    setup = ImpactSetup(record_s=0.2, noise_m_s2=0.05, seed=3)
+    res = virtual_impact_test(built, setup)
+    assert len(res.records) == 3
+    assert len({r.peak_force_n for r in res.records}) == 3  # three different impacts
+    assert abs(res.relative_error) < FIRST_PEAK_TOL
+    assert res.first_peak_mode == 1
+    # the exponential window adds known damping; what is left is the model's own (1.2 % at f1 from the
+    # configured stiffness-proportional damping, beta omega / 2); the half-power read of a 0.2 s record
+    # with 0.125 Hz lines resolves it to a few tenths of a percent of damping
+    model_zeta = symmetric_manip.damping.stiffness_proportional_s * 2 * math.pi * res.modal_f1_hz / 2
+    assert res.identified_damping_ratio == pytest.approx(model_zeta, abs=4e-3)
+    # noise lowers the coherence below 1 somewhere in the band, but not at the resonance
+    band = (res.frf.freq_hz > 5) & (res.frf.freq_hz < 1000)
+    assert res.frf.coherence[band].min() < 0.999
+    at_peak = np.argmin(np.abs(res.frf.freq_hz - res.first_peak_hz))
+    assert res.frf.coherence[at_peak] > 0.99
+    d = res.to_dict()
+    assert d["first_peak_hz"] == res.first_peak_hz and d["modal_f1_hz"] == res.modal_f1_hz
+    # end to end: the H1 of the nonlinear rollouts against the linear modal FRF of the same model, with the
+    # window's damping 1 / (tau omega_r) added to every mode (exact for a sum of decaying modes). Left over:
+    # leakage from truncating a 0.2 s record, the neighbouring modes, noise and nonlinearity: measured 2.6 %
+    # of the peak at worst over 20-400 Hz (median 0.7 %); a wrong point, axis, sign or scale is O(1)
+    system = modal_system(built)
+    tau = res.records[0].t_s[-1] / math.log(1.0 / setup.window_end)
+    zeta = np.minimum(np.diag(system.xi) / (2 * system.omega_rad_s) + 1.0 / (tau * system.omega_rad_s), 0.99)
+    band = (res.frf.freq_hz >= 20.0) & (res.frf.freq_hz <= 400.0)
+    f_band = res.frf.freq_hz[band]
+    linear = modal_frf(
+        system, excitation=setup.impact, response=setup.accelerometer, freq_hz=f_band, damping_ratio=zeta
+    ).h
+    assert np.max(np.abs(res.frf.h[band] - linear)) < 0.05 * np.max(np.abs(linear))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("pose_mm", [(0.0, 0.0, 0.0), (100.0, -100.0, 0.0), (-50.0, 50.0, 0.0), (50.0, 0.0, 0.2)])
+def test_first_peak_matches_modal_f1_at_study_poses(symmetric_manip, pose_mm):
+    """Four study poses, 4 segments, the default 0.5 s records (20-100 s each on the shared 2-core machine)."""
+    built = build_manipulator(symmetric_manip, Pose.from_mm(*pose_mm), ModelOptions(segments=4, axial=False))
+    res = virtual_impact_test(built, ImpactSetup())
+    assert abs(res.relative_error) < FIRST_PEAK_TOL
+
+
+def test_an_in_plane_hammer_misses_the_out_of_plane_mode_1(symmetric_manip):
+    """Hammer and accelerometer along the in-plane normal: the first peak is the first in-plane mode, and the
+    result says so (mode 1, out-of-plane bending for the default sections, is not excited)."""
+    built = build_manipulator(symmetric_manip, Pose(0.0, 0.0, 0.0), ModelOptions(segments=3, axial=False))
+    hit = LinkPoint("distal_0", 0.5, "normal")
+    res = virtual_impact_test(built, ImpactSetup(impact=hit, accelerometer=hit, record_s=0.1, n_impacts=1))
+    assert res.first_peak_mode > 1
+    assert res.first_peak_hz > 1.5 * res.modal_f1_hz
+    assert "not seen" in res.table()
+
+
+def test_h1_recovers_a_single_mode():
+    """Synthetic records: the analytic impulse response of a 1-dof oscillator to a short pulse."""
+    fn, zeta, dt = 63.0, 0.01, 1e-4
+    t = np.arange(5001) * dt
+    wn = 2 * math.pi * fn
+    wd = wn * math.sqrt(1 - zeta**2)
+    recs = []
+    for amp in (1.0, 0.8, 1.2):
+        force = np.zeros_like(t)
+        force[0] = amp / dt  # an impulse of amp N s
+        # acceleration of x'' + 2 zeta wn x' + wn^2 x = F / 1 kg after a unit impulse (t > 0)
+        x = np.exp(-zeta * wn * t) * np.sin(wd * t) / wd
+        v = np.gradient(x, dt)
+        a = np.gradient(v, dt)
+        recs.append(ImpactRecord(t, force, amp * a, amp, 0.0))
+    freq, h1, coh = h1_estimate(recs, pad_s=8.0, window_end=0.01)
+    band = (freq > 10) & (freq < 200)
+    peak = freq[band][np.argmax(np.abs(h1[band]))]
+    # 0.125 Hz lines; accelerance peak at fn / sqrt(1 - 2 zeta^2) = fn (1 + 1e-4)
+    assert peak == pytest.approx(fn, abs=0.2)
+    assert np.allclose(coh[band], 1.0, atol=1e-6)  # noise-free, linear: perfectly coherent
+
+
+def test_point_acceleration_is_rigid_body_kinematics(symmetric_manip):
+    """At rest under a load the acceleration of a material point equals J qacc (velocity terms vanish)."""
+    built = build_manipulator(symmetric_manip, Pose(0.02, 0.03, 0.0), ModelOptions(segments=3, axial=False))
+    model = built.model
+    data = mujoco.MjData(model)
+    pt = LinkPoint("distal_1", 0.37, "z")
+    mujoco.mj_forward(model, data)
+    bid, p, e = locate(built, data, pt)
+    mujoco.mj_applyFT(model, data, np.array([0.0, 0.0, 3.0]), np.zeros(3), p, bid, data.qfrc_applied)
+    mujoco.mj_forward(model, data)
+    mujoco.mj_rnePostConstraint(model, data)
+    acc = point_acceleration(model, data, bid, p)
+    jacp = np.zeros((3, model.nv))
+    mujoco.mj_jac(model, data, jacp, None, p, bid)
+    np.testing.assert_allclose(acc, jacp @ data.qacc, rtol=1e-6, atol=1e-9)
+    assert abs(acc[2]) > 1.0  # a real acceleration (m/s^2), not zeros agreeing
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"n_impacts": 0}, "n_impacts"),
+        ({"pulse_s": 0.5, "record_s": 0.2}, "pulse_s"),
+        ({"f_max_hz": 6000.0}, "Nyquist"),
+        ({"window_end": 0.0}, "window_end"),
+        ({"impact": LinkPoint("distal_9", 0.5, "z")}, "unknown link"),
+    ],
+)
+def test_bad_setups_name_the_parameter(symmetric_manip, kwargs, message):
+    built = build_manipulator(symmetric_manip, Pose(0.0, 0.0, 0.0), ModelOptions(segments=3, axial=False))
+    with pytest.raises(FrfError, match=message):
+        virtual_impact_test(built, ImpactSetup(**kwargs))

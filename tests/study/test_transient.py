@@ -1,0 +1,52 @@
+"""The study's full-vs-reduced transient: error per load axis, files, and the full study run (slow)."""
+
+import numpy as np
+import pytest
+
+from fpm_sim.study.transient import STUDY_FORCE_N, nrms_error, study_transient
+
+
+@pytest.fixture(scope="module")
+def short(default_manip):
+    """The study's setup on a coarse 3-segment discretisation and a 40 ms window (fast)."""
+    return study_transient(default_manip, segments=3, duration_s=0.04)
+
+
+def test_reduced_model_follows_the_nonlinear_rollout(short):
+    assert [c.axis for c in short.cases] == ["x", "y"]
+    for c in short.cases:
+        # the issue's target is 5 %; at 10 N the gap is geometric nonlinearity (measured ~1 to 2 %)
+        assert c.nrms <= 0.05
+        assert c.force_n == STUDY_FORCE_N
+        assert len(c.t_s) == 401 and np.allclose(np.diff(c.t_s), 1e-4)
+        # the response is a deflection along the load, of the order of the static compliance
+        assert c.disp_full_m.max() > 1e-4
+    s = short.summary()
+    assert s["anisotropy_verdict"] and "y_over_x_peak_full" in s
+    assert s["wall_full_s"] > 0 and s["wall_rom_total_s"] > 0
+
+
+def test_nrms_error():
+    t = np.linspace(0, 1, 1001)
+    a = np.sin(2 * np.pi * t)
+    assert nrms_error(a, a) == 0.0
+    assert nrms_error(a, 1.1 * a) == pytest.approx(0.1)
+
+
+def test_files(short, tmp_path):
+    files = short.save(tmp_path / "out")
+    lines = files["csv"].read_text().splitlines()
+    assert lines[0] == "t_s,load_axis,disp_full_m,disp_rom_m"
+    assert len(lines) == 1 + 2 * 401
+    assert lines[1].split(",")[1] == "x" and lines[-1].split(",")[1] == "y"
+    assert files["plot"].stat().st_size > 1000
+    assert "wall time" in files["summary_txt"].read_text()
+
+
+@pytest.mark.slow
+def test_study_transient(default_manip):
+    """The study's transient as shipped (6 segments, 0.2 s at 0.1 ms): about 25 s."""
+    res = study_transient(default_manip)
+    for c in res.cases:
+        assert c.nrms <= 0.05  # the issue's target; measured 1.6 % (x) and 2.0 % (y)
+        assert len(c.t_s) == 2001
