@@ -40,6 +40,7 @@ import mujoco
 import numpy as np
 import scipy.signal
 
+from fpm_sim.errors import FpmSimError
 from fpm_sim.model.options import BuiltModel
 from fpm_sim.rom.reduction import ModalSystem
 
@@ -66,7 +67,7 @@ DEFAULT_MIN_PROMINENCE_DB = 3.0
 rise above the deeper of the two surrounding valleys, the half-power criterion of modal testing."""
 
 
-class FrfError(ValueError):
+class FrfError(FpmSimError):
     """Inconsistent FRF options (named in the message)."""
 
 

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fpm_sim.config import Geometry
+from fpm_sim.errors import FpmSimError, FpmSimWarning
 
 __all__ = [
     "Pose",
@@ -54,15 +55,15 @@ NEAR_SINGULAR_WARN = 0.05
 """Singularity measure below which a pose is accepted with a :class:`NearSingularityWarning`."""
 
 
-class UnreachablePoseError(ValueError):
+class UnreachablePoseError(FpmSimError):
     """No assembly exists: a chain cannot span the distance from its motor to its platform joint."""
 
 
-class SingularPoseError(ValueError):
+class SingularPoseError(FpmSimError):
     """The pose is (numerically) at a serial or parallel singularity."""
 
 
-class NearSingularityWarning(UserWarning):
+class NearSingularityWarning(FpmSimWarning):
     """The pose is close to a singularity: results are valid but very sensitive to the pose."""
 
 

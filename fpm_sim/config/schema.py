@@ -19,6 +19,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from fpm_sim.errors import FpmSimError
+
 __all__ = [
     "ConfigError",
     "Geometry",
@@ -39,7 +41,7 @@ __all__ = [
 DEFAULT_CONFIG_NAME = "default_3rrr.toml"
 
 
-class ConfigError(ValueError):
+class ConfigError(FpmSimError):
     """A manipulator description is invalid; the message names the offending field."""
 
 

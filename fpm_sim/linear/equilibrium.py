@@ -23,12 +23,13 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
+from fpm_sim.errors import FpmSimError
 from fpm_sim.model.options import tangent_jacobian
 
 __all__ = ["EquilibriumError", "static_equilibrium", "applied_forces", "force_jacobian"]
 
 
-class EquilibriumError(RuntimeError):
+class EquilibriumError(FpmSimError, RuntimeError):
     """No static equilibrium found (buckling, a mechanism, or a floating model under gravity)."""
 
 

@@ -38,6 +38,7 @@ import mujoco
 import numpy as np
 import scipy.linalg
 
+from fpm_sim.errors import FpmSimWarning
 from fpm_sim.linear.equilibrium import static_equilibrium
 from fpm_sim.model.options import (
     BuiltModel,
@@ -72,7 +73,7 @@ NULLSPACE_RCOND = 1e-4
 Method = Literal["transition_fd", "constrained"]
 
 
-class TimestepWarning(UserWarning):
+class TimestepWarning(FpmSimWarning):
     """The timestep is too coarse for the frequency band being reported."""
 
 

@@ -58,6 +58,7 @@ import mujoco
 import numpy as np
 
 from fpm_sim.config import LumpedMass, Material, Section
+from fpm_sim.errors import FpmSimWarning
 from fpm_sim.model.parts import (
     LinkBuild,
     LinkModelError,
@@ -88,11 +89,11 @@ _VERTEX_INERTIA_KG_M2 = 1e-12
 """Inertia of a vertex body (slides only: it never rotates; MuJoCo wants a positive value)."""
 
 
-class SectionWarning(UserWarning):
+class SectionWarning(FpmSimWarning):
     """The link model cannot represent the requested cross-section; it computes an approximation."""
 
 
-class DampingWarning(UserWarning):
+class DampingWarning(FpmSimWarning):
     """The link model cannot apply the requested damping everywhere."""
 
 

@@ -23,6 +23,7 @@ import mujoco
 import numpy as np
 import scipy.linalg
 
+from fpm_sim.errors import FpmSimError
 from fpm_sim.model.parts import DEFAULT_RESOLUTION, check_link_model
 
 __all__ = [
@@ -54,7 +55,7 @@ TIMESTEP_SAFETY = 0.5
 WELD_SOLIMP = (0.9999, 0.9999, 0.001, 0.5, 2.0)
 
 
-class TimestepError(ValueError):
+class TimestepError(FpmSimError):
     """The requested timestep cannot integrate the model's stiffest spring stably."""
 
 

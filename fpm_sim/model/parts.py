@@ -10,6 +10,7 @@ import mujoco
 import numpy as np
 
 from fpm_sim.config import LumpedMass, Material, Section
+from fpm_sim.errors import FpmSimError
 
 __all__ = [
     "DEFAULT_RESOLUTION",
@@ -42,7 +43,7 @@ MAX_SEGMENTS = 200
 MIN_FLEX_EDGES = 4  # two constrained ends own two vertices each and need a free vertex between them
 
 
-class LinkModelError(ValueError):
+class LinkModelError(FpmSimError):
     """Unknown link model, or a resolution the model cannot take."""
 
 

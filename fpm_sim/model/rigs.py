@@ -24,6 +24,7 @@ import mujoco
 import numpy as np
 
 from fpm_sim.config import Compliance, LumpedMass, Manipulator, Material, RigConfig, Section, default_config
+from fpm_sim.errors import FpmSimError
 from fpm_sim.model.links import add_link
 from fpm_sim.model.manipulator import dof_kinds_of
 from fpm_sim.model.options import BuiltModel, ModelOptions, add_weld, compile_model, new_spec
@@ -34,7 +35,7 @@ __all__ = ["RIGS", "RigError", "RigSetup", "build_rig", "rig_piece"]
 RIGS = ("free-free", "cantilever", "chain")
 
 
-class RigError(ValueError):
+class RigError(FpmSimError):
     """Impossible rig settings (unknown rig, angle out of range, clamp longer than the link)."""
 
 

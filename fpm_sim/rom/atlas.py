@@ -53,6 +53,7 @@ import scipy.optimize
 from tqdm import tqdm
 
 from fpm_sim.config import Manipulator
+from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose
 from fpm_sim.linear.modal import damping_matrix
 from fpm_sim.model.manipulator import build_manipulator
@@ -83,7 +84,7 @@ itself turns between the two poses (``weak_links``): the interpolated reduced mo
 between them; refine the grid or track more modes."""
 
 
-class AtlasError(ValueError):
+class AtlasError(FpmSimError):
     """Inconsistent atlas options or queries (named in the message)."""
 
 

@@ -51,6 +51,7 @@ import mujoco
 import numpy as np
 import scipy.linalg
 
+from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose
 from fpm_sim.linear.equilibrium import static_equilibrium
 from fpm_sim.linear.modal import (
@@ -83,7 +84,7 @@ WRENCH_INPUTS = (("force_x", "N"), ("force_y", "N"), ("moment_z", "N m"))
 DISP_OUTPUTS = (("disp_x", "m"), ("disp_y", "m"), ("rot_z", "rad"))
 
 
-class ReductionError(ValueError):
+class ReductionError(FpmSimError):
     """A reduction was asked for with inconsistent or impossible options."""
 
 

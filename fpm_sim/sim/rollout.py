@@ -34,6 +34,7 @@ import mujoco
 import numpy as np
 
 from fpm_sim.config import Manipulator
+from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose, forward_kinematics, inverse_kinematics
 from fpm_sim.linear.equilibrium import static_equilibrium
 from fpm_sim.model.manipulator import build_manipulator
@@ -54,7 +55,7 @@ __all__ = [
 Profile = Callable[[float], Sequence[float]]
 
 
-class RolloutError(ValueError):
+class RolloutError(FpmSimError):
     """Inconsistent rollout options (named in the message)."""
 
 
