@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose
 from fpm_sim.study.tables import comsol_table
 
@@ -46,9 +47,9 @@ class TableReading:
 
     def __post_init__(self) -> None:
         if self.row_is not in ("x", "y"):
-            raise ValueError(f"TableReading.row_is must be 'x' or 'y', got {self.row_is!r}")
+            raise FpmSimError(f"TableReading.row_is must be 'x' or 'y', got {self.row_is!r}")
         if self.phi_sign not in (1, -1):
-            raise ValueError(f"TableReading.phi_sign must be +1 or -1, got {self.phi_sign!r}")
+            raise FpmSimError(f"TableReading.phi_sign must be +1 or -1, got {self.phi_sign!r}")
 
     @property
     def name(self) -> str:
@@ -69,7 +70,7 @@ def parse_reading(text: str) -> TableReading:
     """``"x+"``, ``"x-"``, ``"y+"`` or ``"y-"`` (row label, rotation sign) -> :class:`TableReading`."""
     t = text.strip().lower()
     if len(t) != 2 or t[0] not in "xy" or t[1] not in "+-":
-        raise ValueError(
+        raise FpmSimError(
             f"table reading {text!r} not understood; use x+, x-, y+ or y- (rows are x or y, rotation sign)"
         )
     return TableReading(t[0], 1 if t[1] == "+" else -1)

@@ -27,18 +27,15 @@ unreadable one; 0.5 = no explanation, 1 = perfect) and its one-sided permutation
 25 poses, random labellings exceed an AUC of 0.71 one time in 20). The study does not say which chain carried the
 accelerometer, so the prominence is reported for the same point on all three distal links.
 
-The 25 poses: a minimal local generator (:func:`study_grid`) of the study's 5 x 5 grid (-100..100 mm,
+The 25 poses: the study's 5 x 5 grid (:func:`fpm_sim.study.poses.study_poses`; -100..100 mm,
 step 50) with the platform turned by ``phi_sign * 0.2`` rad at the cells written ``(x, 0)`` (second
 label zero), and a choice of whether the table's row label is x or y.
 """
 
 from __future__ import annotations
 
-import csv
-import io
 import math
 from dataclasses import dataclass, field, replace
-from importlib import resources
 from typing import Any
 
 import numpy as np
@@ -46,18 +43,15 @@ from tqdm import tqdm
 
 from fpm_sim.config import Manipulator
 from fpm_sim.frf import FrequencyResponse, FrfError, LinkPoint, modal_frf, pick_peaks
-from fpm_sim.kinematics import Pose
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import ModelOptions, dof_stiffness
 from fpm_sim.rom.reduction import ModalSystem, modal_system
 from fpm_sim.sim.impact import STUDY_IMPACT_POINT
+from fpm_sim.study.poses import ROTATION_RAD, TableReading, study_poses
 
 __all__ = [
     "READABLE_PROMINENCE_DB",
     "READABLE_HEIGHT_DB",
-    "STUDY_ROTATION_RAD",
-    "GridPose",
-    "study_grid",
     "Mode1Readability",
     "mode1_readability",
     "ReadabilityRow",
@@ -74,51 +68,9 @@ that low is already hard to tell from leakage and noise ripple on a log plot."""
 READABLE_HEIGHT_DB = -20.0
 """...and if it is no more than 20 dB (ten times) below the highest peak of the band. Assumed: a
 hammer test's usable dynamic range around a dominant resonance on a single range setting."""
-STUDY_ROTATION_RAD = 0.2
-GRID_MM = (-100.0, -50.0, 0.0, 50.0, 100.0)
 F1_MATCH = 0.02
 """A peak within 2 % of ``f_1`` is mode 1's (a 1 %-damped peak lies within 0.01 % of ``f_1``; the
 nearest other modes of the manipulator are > 10 % away at the study poses)."""
-
-
-@dataclass(frozen=True)
-class GridPose:
-    """One study cell: the table's labels (mm), the pose under a reading, COMSOL's value (NaN: none)."""
-
-    row_mm: float
-    col_mm: float
-    pose: Pose
-    comsol_hz: float
-
-    @property
-    def study_unreadable(self) -> bool:
-        return not math.isfinite(self.comsol_hz)
-
-
-def study_grid(*, row_is: str = "x", phi_sign: int = 1) -> list[GridPose]:
-    """The study's 25 poses in its table's order (minimal local generator; see module docstring).
-
-    Parameters
-    ----------
-    row_is
-        ``"x"``: the table's row label is x (column y); ``"y"``: the reverse.
-    phi_sign
-        Sign of the 0.2 rad platform rotation at the cells written ``(x, 0)``.
-    """
-    if row_is not in ("x", "y"):
-        raise FrfError(f"row_is must be 'x' or 'y', got {row_is!r}")
-    if phi_sign not in (1, -1):
-        raise FrfError(f"phi_sign must be +1 or -1, got {phi_sign!r}")
-    text = resources.files("fpm_sim.data").joinpath("comsol_table5.csv").read_text()
-    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
-    out = []
-    for r in csv.DictReader(io.StringIO("\n".join(lines))):
-        row, col = float(r["row_mm"]), float(r["col_mm"])
-        hz = float(r["comsol_hz"]) if r["comsol_hz"].strip() else math.nan
-        x, y = (row, col) if row_is == "x" else (col, row)
-        phi = phi_sign * STUDY_ROTATION_RAD if col == 0.0 else 0.0
-        out.append(GridPose(row, col, Pose.from_mm(x, y, phi), hz))
-    return out
 
 
 @dataclass(frozen=True)
@@ -228,7 +180,7 @@ class ReadabilityRow:
     """One pose of the table: the study cell, mode 1's frequency and character, metrics per chain.
 
     ``cell`` is any object with ``row_mm``, ``col_mm``, ``pose`` and ``comsol_hz`` (NaN: unreadable in the
-    study): a :class:`GridPose`, or a pose of another study-pose generator with those fields.
+    study): a :class:`~fpm_sim.study.poses.StudyPose`, or a pose of another study-pose generator with those fields.
     """
 
     cell: Any
@@ -422,19 +374,19 @@ def readability_table(
     options
         Model options (default: 6 segments, inextensible links).
     row_is, phi_sign
-        Reading of the study's table (:func:`study_grid`).
+        Reading of the study's table (:func:`fpm_sim.study.poses.study_poses`).
     f_max_hz
         FRF band (Hz).
     damping_ratio
         ``None``: the model's modal damping; else one ratio for every mode.
     poses
         Cells to evaluate instead of the study's 25: objects with ``row_mm``, ``col_mm``, ``pose`` and
-        ``comsol_hz`` (NaN where the study could not read the first peak), e.g. :class:`GridPose`.
+        ``comsol_hz`` (NaN where the study could not read the first peak), e.g. :class:`~fpm_sim.study.poses.StudyPose`.
     progress
         Show a tqdm progress bar.
     """
     opts = options or ModelOptions(segments=6, axial=False)
-    cells = poses if poses is not None else study_grid(row_is=row_is, phi_sign=phi_sign)
+    cells = poses if poses is not None else study_poses(TableReading(row_is, phi_sign))
     others = [point]
     if point.link.startswith("distal_"):
         others += [replace(point, link=f"distal_{i}") for i in range(3) if f"distal_{i}" != point.link]
@@ -448,12 +400,12 @@ def readability_table(
     return ReadabilityTable(
         rows=rows,
         point=point,
-        reading=f"row={row_is}, phi={'+' if phi_sign > 0 else '-'}{STUDY_ROTATION_RAD:g}",
+        reading=f"row={row_is}, phi={'+' if phi_sign > 0 else '-'}{ROTATION_RAD:g}",
         parameters={
             "config": manip.name,
             "options": {"segments": opts.segments, "axial": opts.axial, "link_model": opts.link_model},
             "f_max_hz": f_max_hz,
             "damping_ratio": damping_ratio,
-            "grid_source": "local minimal generator (fpm_sim.readability.study_grid)",
+            "grid_source": "fpm_sim.study.poses.study_poses",
         },
     )

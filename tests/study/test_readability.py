@@ -7,38 +7,31 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from fpm_sim.frf import FrfError, LinkPoint
+from fpm_sim.config import default_config
+from fpm_sim.errors import FpmSimError
+from fpm_sim.frf import LinkPoint
 from fpm_sim.kinematics import Pose
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.rom.reduction import modal_system
+from fpm_sim.study.poses import study_poses
 from fpm_sim.study.readability import (
     READABLE_PROMINENCE_DB,
     auc,
     auc_p_value,
     mode1_readability,
     readability_table,
-    study_grid,
 )
 
 OPTS = ModelOptions(segments=3, axial=False)
 
 
-def test_study_grid():
-    cells = study_grid()
+def test_readability_uses_the_study_poses_and_rejects_a_bad_reading():
+    cells = study_poses()
     assert len(cells) == 25
-    assert sum(c.study_unreadable for c in cells) == 7
-    xs = sorted({round(c.pose.x_m * 1e3) for c in cells})
-    assert xs == [-100, -50, 0, 50, 100]
-    for c in cells:
-        assert c.pose.phi_rad == (0.2 if c.col_mm == 0.0 else 0.0)
-        assert (c.pose.x_m * 1e3, c.pose.y_m * 1e3) == pytest.approx((c.row_mm, c.col_mm))
-    swapped = study_grid(row_is="y", phi_sign=-1)
-    for c, s in zip(cells, swapped):
-        assert (s.pose.x_m, s.pose.y_m) == pytest.approx((c.pose.y_m, c.pose.x_m))
-        assert s.pose.phi_rad == -c.pose.phi_rad
-    with pytest.raises(FrfError, match="row_is"):
-        study_grid(row_is="z")
+    assert sum(not math.isfinite(c.comsol_hz) for c in cells) == 7
+    with pytest.raises(FpmSimError, match="row_is"):
+        readability_table(default_config(), row_is="z")
 
 
 def test_auc():
@@ -86,8 +79,8 @@ def test_peak_height_is_the_single_mode_resonance(system):
 
 
 def test_table_and_markdown(symmetric_manip):
-    cells = [c for c in study_grid() if c.row_mm == -50.0]  # 3 unreadable and 2 readable study cells
-    assert sum(c.study_unreadable for c in cells) == 3
+    cells = [c for c in study_poses() if c.row_mm == -50.0]  # 3 unreadable and 2 readable study cells
+    assert sum(not math.isfinite(c.comsol_hz) for c in cells) == 3
     tab = readability_table(symmetric_manip, options=OPTS, poses=cells)
     assert len(tab.rows) == 5 and len(tab.rows[0].metrics) == 3
     md = tab.to_markdown()
