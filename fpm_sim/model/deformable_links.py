@@ -101,7 +101,7 @@ def _check_engine(link_model: str) -> None:
     """Refuse engines on which the model is missing or its linearisation is known to be wrong.
 
     MuJoCo 4.0 removed the cable plugin, and keeps 1D-flex rod frames in ``mjData.plastic``, which
-    ``mjd_transitionFD`` does not restore (shared/mission/ENGINE_NOTES.md); 3.17 has neither issue
+    ``mjd_transitionFD`` does not restore (noted before the project began, on older MuJoCo); 3.17 has neither issue
     (tests/test_deformable_links.py checks ``mjd_transitionFD`` against a full-state difference).
     """
     major = int(mujoco.__version__.split(".")[0])

@@ -1,7 +1,7 @@
 """The study's published numbers, packaged with fpm-sim (``fpm_sim/data/*.csv``).
 
 Source: Segura, "Model reduction of a 3RRR flexible parallel manipulator with experimental
-validation" (Ciência em Foco vol. V, c. 2021), restated in the project's ``STUDY.md``. Each CSV keeps
+validation" (Ciência em Foco vol. V, c. 2021), restated in the project's ``docs/study.md``. Each CSV keeps
 its provenance comments (lines starting with ``#``).
 
 - :func:`subsystem_tests`: the single-link (free-free, cantilever) and two-link chain tests, measured
