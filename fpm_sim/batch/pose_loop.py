@@ -21,26 +21,15 @@ same arguments.
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
-from multiprocessing import get_context
 
 import mujoco
 import numpy as np
-import scipy.linalg
 
 from fpm_sim.config import Manipulator
-from fpm_sim.kinematics import (
-    NEAR_SINGULAR_WARN,
-    NearSingularityWarning,
-    Pose,
-    SingularPoseError,
-    UnreachablePoseError,
-    inverse_kinematics,
-)
-from fpm_sim.linear.modal import NULLSPACE_RCOND, equality_jacobian, mass_matrix
+from fpm_sim.kinematics import NEAR_SINGULAR_WARN, SINGULAR_TOL, Assembly, Pose, assemble_many
+from fpm_sim.linear.modal import equality_jacobian, mass_matrix, reduced_eigenproblem
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import BuiltModel, ModelOptions, dof_stiffness
 
@@ -100,97 +89,185 @@ def fast_options(*, segments: int = FAST_SEGMENTS, axial: bool = False) -> Model
     return ModelOptions(segments=segments, axial=axial, gravity=False)
 
 
+def _status(singularity: float, reachable: bool) -> str:
+    if not reachable:
+        return STATUS_UNREACHABLE
+    if singularity < SINGULAR_TOL:
+        return STATUS_SINGULAR
+    return STATUS_NEAR if singularity < NEAR_SINGULAR_WARN else STATUS_OK
+
+
+def pose_assembly(config: Manipulator, pose: Pose) -> tuple[Assembly | None, float, str]:
+    """``(assembly or None, singularity measure, status)`` of one pose (no model built).
+
+    Unreachable and singular poses get no assembly (status :data:`STATUS_UNREACHABLE` /
+    :data:`STATUS_SINGULAR`); near-singular ones are assembled and marked :data:`STATUS_NEAR`.
+    """
+    many = assemble_many(config.geometry, pose.x_m, pose.y_m, pose.phi_rad)
+    singularity, status = float(many.singularity[0]), _status(float(many.singularity[0]), bool(many.reachable[0]))
+    if status in (STATUS_UNREACHABLE, STATUS_SINGULAR):
+        return None, singularity, status
+    return many.assembly(0, pose), singularity, status
+
+
 def assemble_pose(config: Manipulator, pose: Pose, options: ModelOptions) -> tuple[BuiltModel | None, float, str]:
     """``(built model or None, singularity measure, status)`` of one pose, for any backend.
 
-    Unreachable and singular poses get no model (status :data:`STATUS_UNREACHABLE` /
-    :data:`STATUS_SINGULAR`); near-singular ones are built and marked :data:`STATUS_NEAR`.
+    Compiles one model for the pose (:func:`fpm_sim.model.manipulator.build_manipulator`); see
+    :func:`pose_assembly` for the statuses.
     """
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", NearSingularityWarning)
-            asm = inverse_kinematics(config.geometry, pose)
-    except UnreachablePoseError:
-        return None, math.nan, STATUS_UNREACHABLE
-    except SingularPoseError:
-        asm = inverse_kinematics(config.geometry, pose, check_singularity=False)
-        return None, asm.singularity.value, STATUS_SINGULAR
-    built = build_manipulator(config, pose, options, assembly=asm)
-    status = STATUS_NEAR if asm.singularity.value < NEAR_SINGULAR_WARN else STATUS_OK
-    return built, asm.singularity.value, status
+    asm, singularity, status = pose_assembly(config, pose)
+    if asm is None:
+        return None, singularity, status
+    return build_manipulator(config, pose, options, assembly=asm), singularity, status
 
 
-def _solve_pose(
-    manip: Manipulator, pose: Pose, opts: ModelOptions, n_modes: int
-) -> tuple[np.ndarray, np.ndarray, float, str]:
-    nan = np.full(n_modes, np.nan)
-    built, singularity, status = assemble_pose(manip, pose, opts)
-    if built is None:
-        return nan, nan, singularity, status
-    model = built.model
-    data = mujoco.MjData(model)
-    mujoco.mj_forward(model, data)
-    mass = mass_matrix(model, data)
-    k = dof_stiffness(model)
-    jac = equality_jacobian(model, data)
-    z = scipy.linalg.null_space(jac, rcond=NULLSPACE_RCOND)
-    kr = z.T @ (k[:, None] * z)
-    mr = z.T @ mass @ z
-    n = min(n_modes, kr.shape[0])
-    w2, x = scipy.linalg.eigh(0.5 * (kr + kr.T), 0.5 * (mr + mr.T), subset_by_index=[0, n - 1])
+def _pose_angles(asm: Assembly) -> list[tuple[str, float]]:
+    """``(body name, rotation about z)`` of every body whose frame depends on the pose.
+
+    The builder (:func:`fpm_sim.model.manipulator.build_manipulator`) places link ``proximal_i`` at the
+    motor point ``A_i`` (fixed) turned by the proximal angle, ``distal_i`` at the proximal link's end turned
+    by the elbow angle, and ``pin_i`` turned by ``phi - distal angle``; every other body sits at a fixed
+    offset in its parent's frame (``tests/batch/test_fast_frequencies.py`` checks this against a per-pose
+    compile).
+    """
+    out = []
+    for i in range(3):
+        a, b, c = asm.a[i], asm.b[i], asm.c[i]
+        ang_p = math.atan2(*(b - a)[::-1])
+        ang_d = math.atan2(*(c - b)[::-1])
+        out += [(f"proximal_{i}_b0", ang_p), (f"distal_{i}_b0", ang_d - ang_p), (f"pin_{i}", asm.pose.phi_rad - ang_d)]
+    return out
+
+
+class PoseModel:
+    """One compiled manipulator model, re-posed in place for every pose (no recompile per pose).
+
+    The topology, masses, inertias and spring stiffnesses do not depend on the pose: only nine body
+    orientations do (:func:`_pose_angles`), and the welds' relative poses, which the compiler takes from
+    the bodies at ``qpos0``. The model is compiled once, at ``reference`` (an assembled pose of the same
+    configuration); :meth:`solve` sets the orientations, recomputes the weld relative poses as the
+    compiler does, runs the position stage (``mj_fwdPosition``: kinematics, mass matrix, constraint
+    Jacobian) and solves the constrained eigenproblem (:func:`fpm_sim.linear.modal.reduced_eigenproblem`).
+
+    Parameters
+    ----------
+    config
+        The manipulator.
+    options
+        Discretisation; ``link_model="segments"`` or ``"rigid"`` (the chain models).
+    reference
+        An assembled pose of ``config`` to compile at.
+    """
+
+    def __init__(self, config: Manipulator, options: ModelOptions, reference: Assembly) -> None:
+        if options.link_model not in REPOSABLE_LINK_MODELS:
+            raise ValueError(f"PoseModel needs link_model 'segments' or 'rigid', got {options.link_model!r}")
+        self.built = build_manipulator(config, reference.pose, options, assembly=reference)
+        self.model = self.built.model
+        self.data = mujoco.MjData(self.model)
+        self.stiffness = dof_stiffness(self.model)
+        self.in_plane = np.array([kind in IN_PLANE_KINDS for kind in self.built.dof_kinds])
+        bid = self.model.body
+        self._body_ids = [bid(name).id for name, _ in _pose_angles(reference)]
+        weld = self.model.eq_type == mujoco.mjtEq.mjEQ_WELD
+        self._welds = np.where(weld)[0]
+
+    def set_pose(self, asm: Assembly) -> None:
+        """Re-pose the model at ``asm``: body orientations, then the welds' relative poses at ``qpos0``."""
+        m, d = self.model, self.data
+        for body, (_, ang) in zip(self._body_ids, _pose_angles(asm)):
+            m.body_quat[body] = (math.cos(ang / 2.0), 0.0, 0.0, math.sin(ang / 2.0))
+        d.qpos[:] = m.qpos0
+        mujoco.mj_kinematics(m, d)
+        inv = np.zeros(4)
+        for e in self._welds:  # relpose of body 2 in body 1 with mj_setConst's operations (eq_data[3:10])
+            b1, b2 = m.eq_obj1id[e], m.eq_obj2id[e]
+            mujoco.mju_mulMatTVec3(m.eq_data[e, 3:6], d.xmat[b1], d.xpos[b2] - d.xpos[b1])
+            mujoco.mju_negQuat(inv, d.xquat[b1])
+            mujoco.mju_mulQuat(m.eq_data[e, 6:10], inv, d.xquat[b2])
+
+    def solve(self, asm: Assembly, n_modes: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(frequencies_hz, in_plane)`` of the lowest ``n_modes`` modes at ``asm`` (NaN-padded)."""
+        self.set_pose(asm)
+        mujoco.mj_fwdPosition(self.model, self.data)
+        return _modes(self.model, self.data, self.stiffness, self.in_plane, n_modes)
+
+
+REPOSABLE_LINK_MODELS = ("segments", "rigid")
+"""Link models :class:`PoseModel` re-poses (chains of rigid bodies); the others compile one model per pose."""
+
+
+def _modes(
+    model: mujoco.MjModel, data: mujoco.MjData, stiffness: np.ndarray, in_plane: np.ndarray, n_modes: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Lowest ``n_modes`` constrained modes after the position stage at ``qpos0``: frequencies, in-plane share."""
+    z, _, _, w2, x = reduced_eigenproblem(mass_matrix(model, data), np.diag(stiffness), equality_jacobian(model, data))
+    n = min(n_modes, w2.size)
     freq = np.full(n_modes, np.nan)
-    freq[:n] = np.sqrt(np.maximum(w2, 0.0)) / (2 * np.pi)
-    inplane_mask = np.array([kind in IN_PLANE_KINDS for kind in built.dof_kinds])
     frac = np.full(n_modes, np.nan)
-    for i in range(n):
-        v = z @ x[:, i]
-        e = k * v**2
-        tot = float(e.sum())
-        frac[i] = float(e[inplane_mask].sum()) / tot if tot > 0 else math.nan
-    return freq, frac, singularity, status
+    freq[:n] = np.sqrt(np.maximum(w2[:n], 0.0)) / (2 * np.pi)
+    energy = stiffness[:, None] * (z @ x[:, :n]) ** 2
+    tot = energy.sum(axis=0)
+    frac[:n] = np.where(tot > 0, energy[in_plane].sum(axis=0) / np.where(tot > 0, tot, 1.0), np.nan)
+    return freq, frac
 
 
-def _solve_chunk(args: tuple[Manipulator, list[Pose], ModelOptions, int]) -> list[tuple]:
-    manip, poses, opts, n_modes = args
-    return [_solve_pose(manip, p, opts, n_modes) for p in poses]
+_POSE_MODELS: dict[str, PoseModel] = {}
+"""Per-process cache of re-posable models by configuration and options (workers reuse them across chunks)."""
 
 
-def cpu_backend(
+def _pose_model(config: Manipulator, options: ModelOptions, reference: Assembly) -> PoseModel:
+    key = repr((config, options))
+    pm = _POSE_MODELS.get(key)
+    if pm is None:
+        if len(_POSE_MODELS) >= 8:
+            _POSE_MODELS.pop(next(iter(_POSE_MODELS)))
+        pm = _POSE_MODELS[key] = PoseModel(config, options, reference)
+    return pm
+
+
+def solve_poses(
     config: Manipulator,
     poses: Sequence[Pose],
     *,
     n_modes: int,
     options: ModelOptions,
-    workers: int,
-    progress: bool,
-    desc: str,
+    recompile: bool = False,
 ) -> PoseFrequencies:
-    poses = list(poses)
-    results: list[tuple] = []
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
+    """Lowest ``n_modes`` frequencies at ``poses``, in this process (one chunk of the pose loop).
 
-        bar = tqdm(total=len(poses), desc=desc, unit="pose")
-    if workers <= 1 or len(poses) < 2 * workers:
-        for p in poses:
-            results.append(_solve_pose(config, p, options, n_modes))
-            if bar is not None:
-                bar.update(1)
-    else:
-        chunk = max(1, min(16, len(poses) // (4 * workers)))
-        jobs = [(config, poses[i : i + chunk], options, n_modes) for i in range(0, len(poses), chunk)]
-        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("fork")) as ex:
-            for res in ex.map(_solve_chunk, jobs):
-                results.extend(res)
-                if bar is not None:
-                    bar.update(len(res))
-    if bar is not None:
-        bar.close()
-    return PoseFrequencies(
-        poses=poses,
-        frequencies_hz=np.array([r[0] for r in results]).reshape(len(poses), n_modes),
-        in_plane=np.array([r[1] for r in results]).reshape(len(poses), n_modes),
-        singularity=np.array([r[2] for r in results]),
-        status=[r[3] for r in results],
+    Parameters
+    ----------
+    config, poses, n_modes, options
+        As :func:`fpm_sim.batch.frequencies.pose_frequencies`.
+    recompile
+        Compile one model per pose (the reference path, several times slower) instead of re-posing one
+        compiled model (:class:`PoseModel`). Link models other than :data:`REPOSABLE_LINK_MODELS` always
+        recompile.
+    """
+    poses = list(poses)
+    freq = np.full((len(poses), n_modes), np.nan)
+    frac = np.full((len(poses), n_modes), np.nan)
+    if not poses:
+        return PoseFrequencies(poses=[], frequencies_hz=freq, in_plane=frac, singularity=np.zeros(0), status=[])
+    many = assemble_many(
+        config.geometry, [p.x_m for p in poses], [p.y_m for p in poses], [p.phi_rad for p in poses]
     )
+    sing = many.singularity
+    status = [_status(float(v), bool(r)) for v, r in zip(sing, many.reachable)]
+    reposable = options.link_model in REPOSABLE_LINK_MODELS and not recompile
+    for i, pose in enumerate(poses):
+        if status[i] in (STATUS_UNREACHABLE, STATUS_SINGULAR):
+            continue
+        asm = many.assembly(i, pose)
+        if reposable:
+            freq[i], frac[i] = _pose_model(config, options, asm).solve(asm, n_modes)
+        else:
+            built = build_manipulator(config, pose, options, assembly=asm)
+            data = mujoco.MjData(built.model)
+            mujoco.mj_forward(built.model, data)
+            k = dof_stiffness(built.model)
+            inplane = np.array([kind in IN_PLANE_KINDS for kind in built.dof_kinds])
+            freq[i], frac[i] = _modes(built.model, data, k, inplane, n_modes)
+    return PoseFrequencies(poses=poses, frequencies_hz=freq, in_plane=frac, singularity=sing, status=status)
