@@ -224,7 +224,12 @@ class Assemblies:
             serial=float(self.serial[k]), parallel=float(self.parallel[k]), worst_chain=int(serial_each.argmin())
         )
         return Assembly(
-            pose=pose, a=self.a, b=self.b[k], c=self.c[k], motor_angles_rad=self.motor_angles_rad[k], singularity=measure
+            pose=pose,
+            a=self.a,
+            b=self.b[k],
+            c=self.c[k],
+            motor_angles_rad=self.motor_angles_rad[k],
+            singularity=measure,
         )
 
 

@@ -5,7 +5,14 @@ gravity equilibrium, ``mjd_transitionFD``) costs seconds per pose. Here each pos
 constrained eigenproblem at the assembled configuration with gravity off:
 
 ``M`` from ``mj_fullM`` at ``qpos0``, ``K = diag(joint spring stiffness)``, the weld Jacobian ``J``
-from one ``mj_forward``; ``Z = null(J)``, ``Z'KZ x = w^2 Z'MZ x``.
+from the position stage; ``Z = null(J)``, ``Z'KZ x = w^2 Z'MZ x``
+(:func:`fpm_sim.linear.modal.reduced_eigenproblem`).
+
+The model is compiled once per structure and configuration (:class:`PoseModel`) and re-posed in place
+for every pose: nine body orientations and the welds' relative poses, set as the compiler sets them, so
+the result equals a per-pose compile bit for bit (``recompile=True`` of :func:`solve_poses`, tested) at a
+fraction of the cost (compiling was 70-80 % of the per-pose time). Chunks of poses run on the engine
+(:mod:`fpm_sim.batch.engine`: Dask, streamed to disk, resumable).
 
 This is exact for the linear model without prestress (straight, unstressed links at ``qpos0``); what
 it leaves out is the geometric stiffness of gravity's prestress, a small effect for motor axes along
@@ -13,13 +20,14 @@ gravity (measured in ``docs/benchmarks.md`` and ``tests/test_fast_frequencies.py
 analysis). Coarser links (default :data:`FAST_SEGMENTS`) cost a discretisation error that scales as
 ``1/n^2`` and is also measured there.
 
-:func:`first_frequencies` is the replaceable pose loop: ``backend="cpu"`` is this module; another
-backend (e.g. MJX on an accelerator) registers itself with :func:`register_backend` and receives the
-same arguments.
+:func:`fpm_sim.batch.frequencies.first_frequencies` is the replaceable pose loop: ``backend="cpu"`` is
+:func:`cpu_backend`; another backend registers itself with
+:func:`fpm_sim.batch.frequencies.register_backend` and receives the same arguments.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -27,18 +35,27 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
+from fpm_sim.batch.engine import EngineOptions, chunk_size, run_chunks, split
 from fpm_sim.config import Manipulator
 from fpm_sim.kinematics import NEAR_SINGULAR_WARN, SINGULAR_TOL, Assembly, Pose, assemble_many
-from fpm_sim.linear.modal import equality_jacobian, mass_matrix, reduced_eigenproblem
+from fpm_sim.linear.modal import NULLSPACE_RCOND, equality_jacobian, mass_matrix, reduced_eigenproblem
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import BuiltModel, ModelOptions, dof_stiffness
 
 __all__ = [
     "assemble_pose",
+    "pose_assembly",
+    "PoseModel",
+    "solve_poses",
+    "cpu_backend",
+    "merge",
+    "REPOSABLE_LINK_MODELS",
     "FAST_SEGMENTS",
     "PoseFrequencies",
     "fast_options",
     "IN_PLANE_KINDS",
+    "IN_PLANE_DOF_KINDS",
+    "plane_blocks",
 ]
 
 FAST_SEGMENTS = 6
@@ -167,7 +184,7 @@ class PoseModel:
         self.model = self.built.model
         self.data = mujoco.MjData(self.model)
         self.stiffness = dof_stiffness(self.model)
-        self.in_plane = np.array([kind in IN_PLANE_KINDS for kind in self.built.dof_kinds])
+        self.in_plane = np.array([kind in IN_PLANE_DOF_KINDS for kind in self.built.dof_kinds])
         bid = self.model.body
         self._body_ids = [bid(name).id for name, _ in _pose_angles(reference)]
         weld = self.model.eq_type == mujoco.mjtEq.mjEQ_WELD
@@ -198,16 +215,66 @@ REPOSABLE_LINK_MODELS = ("segments", "rigid")
 """Link models :class:`PoseModel` re-poses (chains of rigid bodies); the others compile one model per pose."""
 
 
+IN_PLANE_DOF_KINDS = IN_PLANE_KINDS + ("passive",)
+"""Degrees of freedom that move in the base plane (the z-hinges included); the rest move out of it."""
+
+
+def plane_blocks(mass: np.ndarray, jac: np.ndarray, in_plane: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]] | None:
+    """``[(dofs, rows), (dofs, rows)]`` of the in-plane and out-of-plane problems if they are exactly decoupled.
+
+    A planar manipulator whose parts are symmetric about the base plane has no mass and no constraint
+    coupling between in-plane and out-of-plane motion: ``M`` and the weld Jacobian are block-diagonal (exact
+    zeros, checked here every time). Two smaller eigenproblems then give the same modes at a third of the
+    cost. The split is refused (``None``) unless it keeps exactly the constraint directions the whole problem
+    keeps: the singular values of a block-diagonal ``J`` are those of its blocks, and
+    :func:`fpm_sim.linear.modal.reduced_eigenproblem` drops those below ``NULLSPACE_RCOND`` times the largest.
+    """
+    out = ~in_plane
+    if not in_plane.any() or not out.any() or np.any(mass[np.ix_(in_plane, out)] != 0.0):
+        return None
+    rows_in = np.any(jac[:, in_plane] != 0.0, axis=1)
+    rows_out = np.any(jac[:, out] != 0.0, axis=1)
+    if np.any(rows_in & rows_out):
+        return None
+    blocks = [(np.where(in_plane)[0], np.where(rows_in)[0]), (np.where(out)[0], np.where(rows_out)[0])]
+    svs = [np.linalg.svd(jac[np.ix_(r, d)], compute_uv=False) if r.size else np.zeros(0) for d, r in blocks]
+    top = max((float(sv.max()) for sv in svs if sv.size), default=0.0)
+    for sv in svs:
+        if sv.size and np.sum(sv > NULLSPACE_RCOND * top) != np.sum(sv > NULLSPACE_RCOND * sv.max()):
+            return None
+    return blocks
+
+
 def _modes(
     model: mujoco.MjModel, data: mujoco.MjData, stiffness: np.ndarray, in_plane: np.ndarray, n_modes: int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Lowest ``n_modes`` constrained modes after the position stage at ``qpos0``: frequencies, in-plane share."""
-    z, _, _, w2, x = reduced_eigenproblem(mass_matrix(model, data), np.diag(stiffness), equality_jacobian(model, data))
-    n = min(n_modes, w2.size)
+    """Lowest ``n_modes`` constrained modes after the position stage at ``qpos0``: frequencies, in-plane share.
+
+    ``in_plane`` marks the in-plane degrees of freedom (:data:`IN_PLANE_DOF_KINDS`; the passive hinges among
+    them have no spring, so the energy share counts the springs of :data:`IN_PLANE_KINDS`). The eigenproblem is
+    :func:`fpm_sim.linear.modal.reduced_eigenproblem`, on the in-plane and out-of-plane blocks separately
+    when they are exactly decoupled (:func:`_plane_blocks`).
+    """
+    mass, jac = mass_matrix(model, data), equality_jacobian(model, data)
+    blocks = plane_blocks(mass, jac, in_plane) or [(np.arange(model.nv), np.arange(jac.shape[0]))]
+    w2_all, shapes = [], []
+    for dofs, rows in blocks:
+        z, _, _, w2, x = reduced_eigenproblem(
+            mass[np.ix_(dofs, dofs)], np.diag(stiffness[dofs]), jac[np.ix_(rows, dofs)]
+        )
+        m = min(n_modes, w2.size)
+        w2_all.append(w2[:m])
+        v = np.zeros((model.nv, m))
+        v[dofs] = z @ x[:, :m]
+        shapes.append(v)
+    w2 = np.concatenate(w2_all)
+    v = np.concatenate(shapes, axis=1)
+    order = np.argsort(w2, kind="stable")[:n_modes]
+    n = order.size
     freq = np.full(n_modes, np.nan)
     frac = np.full(n_modes, np.nan)
-    freq[:n] = np.sqrt(np.maximum(w2[:n], 0.0)) / (2 * np.pi)
-    energy = stiffness[:, None] * (z @ x[:, :n]) ** 2
+    freq[:n] = np.sqrt(np.maximum(w2[order], 0.0)) / (2 * np.pi)
+    energy = stiffness[:, None] * v[:, order] ** 2
     tot = energy.sum(axis=0)
     frac[:n] = np.where(tot > 0, energy[in_plane].sum(axis=0) / np.where(tot > 0, tot, 1.0), np.nan)
     return freq, frac
@@ -251,9 +318,7 @@ def solve_poses(
     frac = np.full((len(poses), n_modes), np.nan)
     if not poses:
         return PoseFrequencies(poses=[], frequencies_hz=freq, in_plane=frac, singularity=np.zeros(0), status=[])
-    many = assemble_many(
-        config.geometry, [p.x_m for p in poses], [p.y_m for p in poses], [p.phi_rad for p in poses]
-    )
+    many = assemble_many(config.geometry, [p.x_m for p in poses], [p.y_m for p in poses], [p.phi_rad for p in poses])
     sing = many.singularity
     status = [_status(float(v), bool(r)) for v, r in zip(sing, many.reachable)]
     reposable = options.link_model in REPOSABLE_LINK_MODELS and not recompile
@@ -268,6 +333,62 @@ def solve_poses(
             data = mujoco.MjData(built.model)
             mujoco.mj_forward(built.model, data)
             k = dof_stiffness(built.model)
-            inplane = np.array([kind in IN_PLANE_KINDS for kind in built.dof_kinds])
+            inplane = np.array([kind in IN_PLANE_DOF_KINDS for kind in built.dof_kinds])
             freq[i], frac[i] = _modes(built.model, data, k, inplane, n_modes)
     return PoseFrequencies(poses=poses, frequencies_hz=freq, in_plane=frac, singularity=sing, status=status)
+
+
+def _solve_chunk(poses: list[Pose], *, config: Manipulator, n_modes: int, options: ModelOptions) -> PoseFrequencies:
+    return solve_poses(config, poses, n_modes=n_modes, options=options)
+
+
+def merge(parts: Sequence[PoseFrequencies]) -> PoseFrequencies:
+    """One :class:`PoseFrequencies` from consecutive chunks (all with the same ``n_modes``)."""
+    parts = list(parts)
+    if not parts:
+        raise ValueError("merge: no chunks")
+    return PoseFrequencies(
+        poses=[p for part in parts for p in part.poses],
+        frequencies_hz=np.concatenate([part.frequencies_hz for part in parts]),
+        in_plane=np.concatenate([part.in_plane for part in parts]),
+        singularity=np.concatenate([part.singularity for part in parts]),
+        status=[s for part in parts for s in part.status],
+    )
+
+
+def cpu_backend(
+    config: Manipulator,
+    poses: Sequence[Pose],
+    *,
+    n_modes: int,
+    options: ModelOptions,
+    workers: int,
+    progress: bool,
+    desc: str,
+    engine: EngineOptions | None = None,
+) -> PoseFrequencies:
+    """The ``cpu`` backend: :func:`solve_poses` on chunks of poses, on the engine (:mod:`fpm_sim.batch.engine`).
+
+    ``engine`` says where (default: a local cluster of ``workers`` processes; one worker runs here);
+    ``workers``, ``progress`` and ``desc`` fill its fields left unset.
+    """
+    poses = list(poses)
+    eng = engine or EngineOptions()
+    eng = dataclasses.replace(
+        eng,
+        workers=eng.workers or workers,
+        progress=eng.progress or progress,
+        desc=desc if eng.desc == "poses" else eng.desc,
+    )
+    if not poses:
+        return solve_poses(config, poses, n_modes=n_modes, options=options)
+    size = eng.chunk or chunk_size(len(poses), eng.n_workers)
+    chunks = split(poses, size)
+    parts = run_chunks(
+        _solve_chunk,
+        chunks,
+        kwargs={"config": config, "n_modes": n_modes, "options": options},
+        weights=[len(c) for c in chunks],
+        options=eng,
+    )
+    return merge(parts)
