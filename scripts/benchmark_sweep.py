@@ -13,7 +13,9 @@ Measured in one run, on the same poses:
    eigenpairs only (``subset_by_index``);
 4. the largest relative difference of f1..f3 between "before" and "now" (same segments).
 
-Prints wall times and ratios. On a shared machine absolute times move; the ratios come from one run.
+Prints CPU times of this process (``time.process_time``: what a pose costs, insensitive to other programs
+sharing the cores) for the in-process runs and the floors, and wall times for the multi-process runs (their
+work happens in other processes). On a shared machine absolute times move; the ratios come from one run.
 """
 
 from __future__ import annotations
@@ -106,21 +108,21 @@ def _floor(cfg, poses, opts):  # noqa: ANN001, ANN202
         blocks = plane_blocks(m, j, pm.in_plane) or [(np.arange(m.shape[0]), np.arange(j.shape[0]))]
         sub = [(m[np.ix_(d, d)], np.diag(pm.stiffness[d]), j[np.ix_(r, d)]) for d, r in blocks]
         mats.append((m, np.diag(pm.stiffness), j, sub))
-    t0 = time.perf_counter()
+    t0 = time.process_time()
     for _, _, _, sub in mats:
         for m, k, j in sub:
             reduced_eigenproblem(m, k, j)
-    t_blocks = time.perf_counter() - t0
-    t0 = time.perf_counter()
+    t_blocks = time.process_time() - t0
+    t0 = time.process_time()
     for m, k, j, _ in mats:
         reduced_eigenproblem(m, k, j)
-    t_full = time.perf_counter() - t0
-    t0 = time.perf_counter()
+    t_full = time.process_time() - t0
+    t0 = time.process_time()
     for m, k, j, _ in mats:
         z = scipy.linalg.null_space(j, rcond=NULLSPACE_RCOND)
         kr, mr = z.T @ k @ z, z.T @ m @ z
         scipy.linalg.eigh(0.5 * (kr + kr.T), 0.5 * (mr + mr.T), subset_by_index=[0, 2])
-    return t_blocks, t_full, time.perf_counter() - t0, len(mats)
+    return t_blocks, t_full, time.process_time() - t0, len(mats)
 
 
 def main() -> None:
@@ -132,24 +134,24 @@ def main() -> None:
     args = ap.parse_args()
     cfg = default_config()
     opts = fast_options(segments=args.segments)
-    t0 = time.perf_counter()
+    t0 = time.process_time()
     poses = dense_grid(cfg, step_mm=args.step_mm)
-    t_grid = time.perf_counter() - t0
+    t_grid = time.process_time() - t0
     times: dict[str, float] = {}
 
-    t0 = time.perf_counter()
+    t0 = time.process_time()
     f_before = _before(cfg, poses, opts, 1)
-    times["before, 1 process"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
+    times["before, 1 process (CPU)"] = time.process_time() - t0
+    t0 = time.process_time()
     now = solve_poses(cfg, poses, n_modes=3, options=opts)
-    times["now, 1 process"] = time.perf_counter() - t0
+    times["now, 1 process (CPU)"] = time.process_time() - t0
     if not args.skip_dask:
         t0 = time.perf_counter()
         _before(cfg, poses, opts, 2)
-        times["before, 2-process pool"] = time.perf_counter() - t0
+        times["before, 2-process pool (wall)"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         dask = pose_frequencies(cfg, poses, n_modes=3, options=opts, engine=EngineOptions(scheduler="local", workers=2))
-        times["now, Dask LocalCluster 2 workers (start included)"] = time.perf_counter() - t0
+        times["now, Dask LocalCluster 2 workers, start incl. (wall)"] = time.perf_counter() - t0
         same = np.array_equal(dask.frequencies_hz, now.frequencies_hz, equal_nan=True)
         print(f"Dask run equals the in-process run: {same}")
     t_floor, t_whole, t_whole3, n_ok = _floor(cfg, poses, opts)
@@ -165,11 +167,11 @@ def main() -> None:
     }
     for k, t in floors.items():
         print(f"  {k:<52} {t:8.2f} s  ({t / n_ok * 1e3:6.2f} ms)")
-    b1, n1 = times["before, 1 process"], times["now, 1 process"]
+    b1, n1 = times["before, 1 process (CPU)"], times["now, 1 process (CPU)"]
     print(f"  speed-up, 1 process: {b1 / n1:.1f}x;  now / eigen-solve floor: {n1 / t_floor:.2f}x")
     if not args.skip_dask:
-        b2 = times["before, 2-process pool"]
-        print(f"  speed-up, before 2-process pool / now 1 process: {b2 / n1:.1f}x")
+        b2, d2 = times["before, 2-process pool (wall)"], times["now, Dask LocalCluster 2 workers, start incl. (wall)"]
+        print(f"  speed-up, 2 processes (wall): before pool / now Dask: {b2 / d2:.1f}x")
     fb, fn = f_before, now.frequencies_hz
     ok = np.isfinite(fb) & np.isfinite(fn)
     rel = np.abs(fn[ok] / fb[ok] - 1.0)

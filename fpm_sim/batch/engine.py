@@ -69,6 +69,8 @@ class EngineOptions:
         Show a progress bar.
     desc
         Label of the progress bar.
+    connect_timeout_s
+        How long to try to reach a remote scheduler.
     """
 
     scheduler: str | None = None
@@ -78,6 +80,7 @@ class EngineOptions:
     resume: bool = False
     progress: bool = False
     desc: str = "poses"
+    connect_timeout_s: float = 20.0
 
     def __post_init__(self) -> None:
         if self.workers is not None and self.workers < 1:
@@ -215,7 +218,7 @@ def _run_dask(
     cluster = None
     try:
         if opts.remote:
-            client = Client(opts.scheduler, timeout="20s")
+            client = Client(opts.scheduler, timeout=f"{opts.connect_timeout_s}s")
         else:
             dashboard = ":0" if _has_bokeh() else None
             cluster = LocalCluster(
