@@ -3,9 +3,11 @@
 :func:`run_chunks` calls ``fn(item, **kwargs)`` for every item (a chunk of poses, or a design and a chunk
 of poses) and returns the results in order:
 
-- ``scheduler=None`` or ``"local"``: a :class:`distributed.LocalCluster` of ``workers`` processes with one
-  thread each (the default ``workers`` is the machine's CPU count); with one worker, or a single chunk,
-  the work runs in this process and no cluster is started;
+- ``scheduler="local"``: a :class:`distributed.LocalCluster` of ``workers`` processes with one thread each
+  (the default ``workers`` is the machine's CPU count);
+- ``scheduler=None`` (the default): the same, unless the work is too small to pay for starting the
+  cluster (a few seconds): with one worker, a single chunk or fewer than :data:`LOCAL_CLUSTER_MIN_ITEMS`
+  items (poses) it runs in this process;
 - ``scheduler="tcp://host:port"``: an existing cluster, used as it is (nothing is started or closed);
 - ``scheduler="serial"``: in this process, always.
 
@@ -36,12 +38,24 @@ from typing import Any
 
 from fpm_sim.errors import FpmSimError
 
-__all__ = ["EngineOptions", "EngineError", "run_chunks", "chunk_size", "split", "MIN_CHUNK", "MAX_CHUNK"]
+__all__ = [
+    "EngineOptions",
+    "EngineError",
+    "run_chunks",
+    "chunk_size",
+    "split",
+    "MIN_CHUNK",
+    "MAX_CHUNK",
+    "LOCAL_CLUSTER_MIN_ITEMS",
+]
 
 MIN_CHUNK = 16
 """Fewest poses per task (at ~1-3 ms per pose, below this the scheduler's per-task cost shows)."""
 MAX_CHUNK = 512
 """Most poses per task (keeps the progress bar moving and a killed run's loss small)."""
+LOCAL_CLUSTER_MIN_ITEMS = 2000
+"""Fewest poses for which the default engine starts a local cluster: starting one costs ~3 s, a pose ~2.5 ms,
+so on two workers the cluster pays off from about 2400 poses (docs/design.md, "Scale on paper")."""
 
 
 class EngineError(FpmSimError):
@@ -55,8 +69,9 @@ class EngineOptions:
     Parameters
     ----------
     scheduler
-        ``None``/``"local"`` (a local cluster of ``workers`` processes), ``"serial"`` (this process), or the
-        address of a running scheduler (``tcp://host:port``), used unchanged.
+        ``"local"`` (a local cluster of ``workers`` processes), ``None`` (the same when the work is large
+        enough, see the module doc), ``"serial"`` (this process), or the address of a running scheduler
+        (``tcp://host:port``), used unchanged.
     workers
         Processes of the local cluster (default: the CPU count). One worker runs in this process.
     chunk
@@ -194,7 +209,8 @@ def run_chunks(
             bar.update(wts[i])
 
     try:
-        serial = opts.scheduler == "serial" or (not opts.remote and (opts.n_workers == 1 or len(todo) <= 1))
+        small = sum(wts[i] for i in todo) < LOCAL_CLUSTER_MIN_ITEMS and opts.scheduler is None
+        serial = opts.scheduler == "serial" or (not opts.remote and (opts.n_workers == 1 or len(todo) <= 1 or small))
         if serial:
             for i in todo:
                 finished(i, fn(items[i], **kw))

@@ -27,16 +27,19 @@ analysis). Coarser links (default :data:`FAST_SEGMENTS`) cost a discretisation e
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import mujoco
 import numpy as np
 
 from fpm_sim.batch.engine import EngineOptions, chunk_size, run_chunks, split
 from fpm_sim.config import Manipulator
+from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import NEAR_SINGULAR_WARN, SINGULAR_TOL, Assembly, Pose, assemble_many
 from fpm_sim.linear.modal import NULLSPACE_RCOND, equality_jacobian, mass_matrix, reduced_eigenproblem
 from fpm_sim.model.manipulator import build_manipulator
@@ -49,6 +52,8 @@ __all__ = [
     "solve_poses",
     "cpu_backend",
     "merge",
+    "read_poses_csv",
+    "PosesFileError",
     "REPOSABLE_LINK_MODELS",
     "FAST_SEGMENTS",
     "PoseFrequencies",
@@ -392,3 +397,28 @@ def cpu_backend(
         options=eng,
     )
     return merge(parts)
+
+
+class PosesFileError(FpmSimError):
+    """A poses CSV file (``--poses``) is missing, empty or malformed."""
+
+
+def read_poses_csv(path: str | Path) -> list[Pose]:
+    """Poses from a CSV file with columns ``x_mm,y_mm,phi_rad`` (other columns are ignored)."""
+    p = Path(path)
+    if not p.is_file():
+        raise PosesFileError(f"--poses {p}: no such file")
+    with open(p, newline="") as fh:
+        reader = csv.DictReader(fh)
+        missing = {"x_mm", "y_mm", "phi_rad"} - set(reader.fieldnames or [])
+        if missing:
+            raise PosesFileError(
+                f"--poses {p}: missing column(s) {', '.join(sorted(missing))} (the header must hold x_mm,y_mm,phi_rad)"
+            )
+        try:
+            poses = [Pose.from_mm(float(r["x_mm"]), float(r["y_mm"]), float(r["phi_rad"])) for r in reader]
+        except (TypeError, ValueError):
+            raise PosesFileError(f"--poses {p}: x_mm, y_mm and phi_rad must be numbers on every row") from None
+    if not poses:
+        raise PosesFileError(f"--poses {p}: no rows after the header")
+    return poses

@@ -15,12 +15,14 @@ from __future__ import annotations
 import csv
 import math
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from fpm_sim.batch.engine import EngineOptions
 from fpm_sim.batch.frequencies import pose_frequencies
 from fpm_sim.batch.pose_loop import PoseFrequencies
 from fpm_sim.config import Manipulator
@@ -186,20 +188,38 @@ def sweep_workspace(
     step_mm: float = 10.0,
     phi_rad: float = 0.0,
     reading: TableReading | None = None,
+    poses: Sequence[Pose] | None = None,
     options: ModelOptions | None = None,
     backend: str = "cpu",
     workers: int = 2,
     progress: bool = False,
+    engine: EngineOptions | None = None,
 ) -> WorkspaceSweep:
-    """First three frequencies over the workspace (``grid="dense"``) or at the study's poses (``"paper"``)."""
-    if grid == "dense":
+    """First three frequencies over the workspace (``grid="dense"``), at the study's poses (``"paper"``) or at
+    given ``poses`` (``"poses"``; written to ``sweep_poses.csv``). ``engine`` says where the ``cpu`` backend
+    runs (:class:`fpm_sim.batch.engine.EngineOptions`)."""
+    if grid == "poses":
+        if not poses:
+            raise ValueError("grid='poses' needs poses (--poses FILE.csv with columns x_mm,y_mm,phi_rad)")
+        poses = list(poses)
+    elif poses is not None:
+        raise ValueError(f"poses are given: use grid='poses', not {grid!r} (--poses replaces --grid)")
+    elif grid == "dense":
         poses = dense_grid(config, step_mm=step_mm, phi_rad=phi_rad)
     elif grid == "paper":
         poses = [p.pose for p in study_poses(reading)]
         step_mm = 50.0
     else:
-        raise ValueError(f"--grid must be 'paper' or 'dense', got {grid!r}")
+        raise ValueError(f"--grid must be 'paper', 'dense' or 'poses', got {grid!r}")
     fr = pose_frequencies(
-        config, poses, backend=backend, n_modes=3, options=options, workers=workers, progress=progress, desc="sweep"
+        config,
+        poses,
+        backend=backend,
+        n_modes=3,
+        options=options,
+        workers=workers,
+        progress=progress,
+        desc="sweep",
+        engine=engine,
     )
     return WorkspaceSweep(config, grid, phi_rad, step_mm, fr)
