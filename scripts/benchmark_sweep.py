@@ -125,12 +125,37 @@ def _floor(cfg, poses, opts):  # noqa: ANN001, ANN202
     return t_blocks, t_full, time.process_time() - t0, len(mats)
 
 
+def _noop(item: int) -> int:
+    return item
+
+
+def _engine_overhead(n_tasks: int) -> tuple[float, float, float]:
+    """Seconds to start a 2-worker LocalCluster, and per no-op task (submit to result) on it, for n_tasks
+    tasks: submitted all at once (throughput), and one at a time (latency)."""
+    from distributed import Client, LocalCluster
+
+    t0 = time.perf_counter()
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        with Client(cluster) as client:
+            client.wait_for_workers(2)
+            t_start = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            client.gather(client.map(_noop, range(n_tasks), pure=False))
+            t_many = (time.perf_counter() - t0) / n_tasks
+            t0 = time.perf_counter()
+            for i in range(100):
+                client.submit(_noop, i, pure=False).result()
+            t_one = (time.perf_counter() - t0) / 100
+    return t_start, t_many, t_one
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--step-mm", type=float, default=10.0)
     ap.add_argument("--segments", type=int, default=6)
     ap.add_argument("--skip-dask", action="store_true", help="skip the two-process runs (pool and Dask cluster)")
     ap.add_argument("--full-poses", type=int, default=0, help="poses compared with the full analysis (slow)")
+    ap.add_argument("--engine-tasks", type=int, default=2000, help="no-op tasks timing Dask's per-task cost (0: skip)")
     args = ap.parse_args()
     cfg = default_config()
     opts = fast_options(segments=args.segments)
@@ -179,6 +204,12 @@ def main() -> None:
         f"  statuses agree: {np.array_equal(np.isfinite(fb), np.isfinite(fn))};  max |f/f_before - 1| over f1..f3: "
         f"{rel.max():.2e} (f1: {np.nanmax(np.abs(fn[:, 0] / fb[:, 0] - 1)):.2e})"
     )
+    if args.engine_tasks:
+        t_start, t_many, t_one = _engine_overhead(args.engine_tasks)
+        print(
+            f"  Dask LocalCluster (2 workers): start {t_start:.2f} s; per no-op task {t_many * 1e3:.2f} ms "
+            f"({args.engine_tasks} submitted at once), {t_one * 1e3:.2f} ms (one at a time)"
+        )
     picks = [Pose.from_mm(0, 0, 0.2), Pose.from_mm(100, -100, 0.0), Pose.from_mm(-50, 50, 0.0)][: args.full_poses]
     for p in picks:
         try:

@@ -231,14 +231,17 @@ class DesignResult:
         )
 
     def summary(self) -> list[dict[str, Any]]:
-        """Per design: min and mean f1 over the computed poses, the share of the reachable poses with
-        ``f1 >= f_min_hz`` (singular poses count as reachable and below), counts, link and moving mass."""
+        """Per design: min and mean f1 over the computed poses (``ok`` and ``near_singular``), min f1 over the
+        ``ok`` poses (away from singularities, where f1 does not dive to zero), the share of the reachable poses
+        with ``f1 >= f_min_hz`` (singular poses count as reachable and below), the weakest pose, counts, link
+        and moving mass."""
         rows = []
         for d, values in enumerate(self.designs):
             st = self.status[d]
             computed = np.isin(st, COMPUTED) & np.isfinite(self.frequencies_hz[d, :, 0])
             reachable = st != STATUS_UNREACHABLE
             f1 = self.frequencies_hz[d, computed, 0]
+            f1_ok = self.frequencies_hz[d, (st == "ok") & computed, 0]
             share = math.nan
             if self.f_min_hz is not None and reachable.any():
                 share = float(np.sum(f1 >= self.f_min_hz) / reachable.sum())
@@ -248,6 +251,7 @@ class DesignResult:
                 {
                     "min_f1_hz": float(f1.min()) if f1.size else math.nan,
                     "mean_f1_hz": float(f1.mean()) if f1.size else math.nan,
+                    "min_f1_ok_hz": float(f1_ok.min()) if f1_ok.size else math.nan,
                     "share_above_f_min": share,
                     "computed_poses": int(computed.sum()),
                     "reachable_poses": int(reachable.sum()),
@@ -264,12 +268,13 @@ class DesignResult:
         """The summary as a text table."""
         rows = self.summary()
         share_head = f"share>={self.f_min_hz:g}Hz" if self.f_min_hz is not None else "share"
-        heads = [*self.fields, "min f1 Hz", "mean f1 Hz", share_head, "poses", "links kg", "moving kg"]
+        heads = [*self.fields, "min f1 Hz", "min f1 ok Hz", "mean f1 Hz", share_head, "poses", "links kg", "moving kg"]
         width = [max(len(h), 12) for h in heads]
         lines = ["  ".join(h.rjust(w) for h, w in zip(heads, width))]
         for r in rows:
             cells = [f"{r[f]:.6g}" for f in self.fields] + [
                 f"{r['min_f1_hz']:.2f}",
+                f"{r['min_f1_ok_hz']:.2f}",
                 f"{r['mean_f1_hz']:.2f}",
                 "-" if math.isnan(r["share_above_f_min"]) else f"{100 * r['share_above_f_min']:.1f} %",
                 f"{r['computed_poses']}/{len(self.poses)}",
@@ -395,7 +400,8 @@ class DesignResult:
 
     def plot(self, ax: Any = None) -> Any:
         """Minimum f1 over the workspace against each varied field (one panel per field, one line per value
-        of the other fields); with ``ax`` only the first field, on that axes. Returns the ``Figure``."""
+        of the other fields; solid: the ``ok`` poses, dotted: near-singular poses included); with ``ax`` only
+        the first field, on that axes. Returns the ``Figure``."""
         import matplotlib.pyplot as plt
 
         rows = self.summary()
@@ -413,11 +419,13 @@ class DesignResult:
             for key, grp in groups.items():
                 grp = sorted(grp, key=lambda r: r[f])
                 label = ", ".join(f"{o}={v:g}" for o, v in zip(others, key)) or None
-                a.plot([r[f] for r in grp], [r["min_f1_hz"] for r in grp], "o-", label=label)
+                (line,) = a.plot([r[f] for r in grp], [r["min_f1_ok_hz"] for r in grp], "o-", label=label)
+                a.plot([r[f] for r in grp], [r["min_f1_hz"] for r in grp], ".:", color=line.get_color(), lw=0.8)
             if self.f_min_hz is not None:
                 a.axhline(self.f_min_hz, color="red", ls="--", lw=1, label=f"f_min {self.f_min_hz:g} Hz")
             a.set_xlabel(f)
             a.set_ylabel("minimum f1 over the workspace (Hz)")
+            a.plot([], [], "k.:", lw=0.8, label="dotted: near-singular poses included")
             a.grid(alpha=0.3)
             if any(line.get_label() and not line.get_label().startswith("_") for line in a.get_lines()):
                 a.legend(fontsize=7)
@@ -468,7 +476,7 @@ class DesignResult:
         if self.f_min_hz is not None:
             ax.axhline(self.f_min_hz, color="red", ls="--", lw=1)
         ax.set_xlabel("moving mass (kg)")
-        ax.set_ylabel("minimum f1 over the workspace (Hz)")
+        ax.set_ylabel("minimum f1 over the ok poses (Hz)")
         ax.set_title(f"trade-off ({', '.join(self.fields)})", fontsize=8)
         ax.grid(alpha=0.3)
         return fig
