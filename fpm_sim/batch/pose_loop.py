@@ -61,6 +61,7 @@ __all__ = [
     "IN_PLANE_KINDS",
     "IN_PLANE_DOF_KINDS",
     "plane_blocks",
+    "PlaneSplit",
 ]
 
 FAST_SEGMENTS = 6
@@ -190,6 +191,7 @@ class PoseModel:
         self.data = mujoco.MjData(self.model)
         self.stiffness = dof_stiffness(self.model)
         self.in_plane = np.array([kind in IN_PLANE_DOF_KINDS for kind in self.built.dof_kinds])
+        self.split = PlaneSplit(self.in_plane, self.stiffness)
         bid = self.model.body
         self._body_ids = [bid(name).id for name, _ in _pose_angles(reference)]
         weld = self.model.eq_type == mujoco.mjtEq.mjEQ_WELD
@@ -213,7 +215,7 @@ class PoseModel:
         """``(frequencies_hz, in_plane)`` of the lowest ``n_modes`` modes at ``asm`` (NaN-padded)."""
         self.set_pose(asm)
         mujoco.mj_fwdPosition(self.model, self.data)
-        return _modes(self.model, self.data, self.stiffness, self.in_plane, n_modes)
+        return self.split.modes(mass_matrix(self.model, self.data), equality_jacobian(self.model, self.data), n_modes)
 
 
 REPOSABLE_LINK_MODELS = ("segments", "rigid")
@@ -224,65 +226,87 @@ IN_PLANE_DOF_KINDS = IN_PLANE_KINDS + ("passive",)
 """Degrees of freedom that move in the base plane (the z-hinges included); the rest move out of it."""
 
 
-def plane_blocks(mass: np.ndarray, jac: np.ndarray, in_plane: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]] | None:
-    """``[(dofs, rows), (dofs, rows)]`` of the in-plane and out-of-plane problems if they are exactly decoupled.
+class PlaneSplit:
+    """The in-plane / out-of-plane split of a model's eigenproblem (index arrays cached per model).
 
     A planar manipulator whose parts are symmetric about the base plane has no mass and no constraint
-    coupling between in-plane and out-of-plane motion: ``M`` and the weld Jacobian are block-diagonal (exact
-    zeros, checked here every time). Two smaller eigenproblems then give the same modes at a third of the
-    cost. The split is refused (``None``) unless it keeps exactly the constraint directions the whole problem
-    keeps: the singular values of a block-diagonal ``J`` are those of its blocks, and
+    coupling between in-plane and out-of-plane motion: ``M`` and the weld Jacobian are block-diagonal. Two
+    smaller eigenproblems then give the same modes at a third of the cost. :meth:`blocks` checks the exact
+    zeros at every pose and refuses the split (``None``) unless it keeps exactly the constraint directions
+    the whole problem keeps: the singular values of a block-diagonal ``J`` are those of its blocks, and
     :func:`fpm_sim.linear.modal.reduced_eigenproblem` drops those below ``NULLSPACE_RCOND`` times the largest.
+
+    Parameters
+    ----------
+    in_plane
+        Per degree of freedom: it moves in the base plane (:data:`IN_PLANE_DOF_KINDS`).
+    stiffness
+        Spring stiffness per degree of freedom.
     """
-    out = ~in_plane
-    if not in_plane.any() or not out.any() or np.any(mass[np.ix_(in_plane, out)] != 0.0):
-        return None
-    rows_in = np.any(jac[:, in_plane] != 0.0, axis=1)
-    rows_out = np.any(jac[:, out] != 0.0, axis=1)
-    if np.any(rows_in & rows_out):
-        return None
-    blocks = [(np.where(in_plane)[0], np.where(rows_in)[0]), (np.where(out)[0], np.where(rows_out)[0])]
-    svs = [np.linalg.svd(jac[np.ix_(r, d)], compute_uv=False) if r.size else np.zeros(0) for d, r in blocks]
-    top = max((float(sv.max()) for sv in svs if sv.size), default=0.0)
-    for sv in svs:
-        if sv.size and np.sum(sv > NULLSPACE_RCOND * top) != np.sum(sv > NULLSPACE_RCOND * sv.max()):
+
+    def __init__(self, in_plane: np.ndarray, stiffness: np.ndarray) -> None:
+        self.in_plane = np.asarray(in_plane, bool)
+        self.stiffness = np.asarray(stiffness, float)
+        nv = self.in_plane.size
+        self.dofs = [np.flatnonzero(self.in_plane), np.flatnonzero(~self.in_plane)]
+        self.usable = all(d.size for d in self.dofs)
+        self._cross = np.ix_(self.dofs[0], self.dofs[1])
+        self._square = [np.ix_(d, d) for d in self.dofs]
+        self._k = [np.diag(self.stiffness[d]) for d in self.dofs]
+        self._whole = (np.arange(nv), np.diag(self.stiffness))
+
+    def blocks(self, mass: np.ndarray, jac: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]] | None:
+        """``[(dofs, M_block, K_block, J_block)]`` of the two decoupled problems, or ``None``."""
+        if not self.usable or np.any(mass[self._cross] != 0.0):
             return None
-    return blocks
+        rows = [np.any(jac[:, d] != 0.0, axis=1) for d in self.dofs]
+        if np.any(rows[0] & rows[1]):
+            return None
+        jacs = [jac[r][:, d] for r, d in zip(rows, self.dofs)]
+        svs = [np.linalg.svd(j, compute_uv=False) if j.size else np.zeros(0) for j in jacs]
+        top = max((float(sv[0]) for sv in svs if sv.size), default=0.0)
+        for sv in svs:
+            if sv.size and np.sum(sv > NULLSPACE_RCOND * top) != np.sum(sv > NULLSPACE_RCOND * sv[0]):
+                return None
+        return [(d, mass[sq], k, j) for d, sq, k, j in zip(self.dofs, self._square, self._k, jacs)]
+
+    def modes(self, mass: np.ndarray, jac: np.ndarray, n_modes: int) -> tuple[np.ndarray, np.ndarray]:
+        """Lowest ``n_modes`` constrained modes: frequencies (Hz) and in-plane strain-energy share (NaN-padded).
+
+        The eigenproblem is :func:`fpm_sim.linear.modal.reduced_eigenproblem`, on the two blocks when they are
+        exactly decoupled, else on the whole matrices. The passive hinges among the in-plane degrees of
+        freedom have no spring, so the energy share counts the springs of :data:`IN_PLANE_KINDS`.
+        """
+        nv = self.in_plane.size
+        problems = self.blocks(mass, jac) or [(self._whole[0], mass, self._whole[1], jac)]
+        w2_all, shapes = [], []
+        for dofs, m_b, k_b, j_b in problems:
+            z, _, _, w2, x = reduced_eigenproblem(m_b, k_b, j_b)
+            m = min(n_modes, w2.size)
+            w2_all.append(w2[:m])
+            v = np.zeros((nv, m))
+            v[dofs] = z @ x[:, :m]
+            shapes.append(v)
+        w2 = np.concatenate(w2_all)
+        order = np.argsort(w2, kind="stable")[:n_modes]
+        v = np.concatenate(shapes, axis=1)[:, order]
+        n = order.size
+        freq = np.full(n_modes, np.nan)
+        frac = np.full(n_modes, np.nan)
+        freq[:n] = np.sqrt(np.maximum(w2[order], 0.0)) / (2 * np.pi)
+        energy = self.stiffness[:, None] * v**2
+        tot = energy.sum(axis=0)
+        frac[:n] = np.where(tot > 0, energy[self.in_plane].sum(axis=0) / np.where(tot > 0, tot, 1.0), np.nan)
+        return freq, frac
 
 
-def _modes(
-    model: mujoco.MjModel, data: mujoco.MjData, stiffness: np.ndarray, in_plane: np.ndarray, n_modes: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """Lowest ``n_modes`` constrained modes after the position stage at ``qpos0``: frequencies, in-plane share.
-
-    ``in_plane`` marks the in-plane degrees of freedom (:data:`IN_PLANE_DOF_KINDS`; the passive hinges among
-    them have no spring, so the energy share counts the springs of :data:`IN_PLANE_KINDS`). The eigenproblem is
-    :func:`fpm_sim.linear.modal.reduced_eigenproblem`, on the in-plane and out-of-plane blocks separately
-    when they are exactly decoupled (:func:`_plane_blocks`).
-    """
-    mass, jac = mass_matrix(model, data), equality_jacobian(model, data)
-    blocks = plane_blocks(mass, jac, in_plane) or [(np.arange(model.nv), np.arange(jac.shape[0]))]
-    w2_all, shapes = [], []
-    for dofs, rows in blocks:
-        z, _, _, w2, x = reduced_eigenproblem(
-            mass[np.ix_(dofs, dofs)], np.diag(stiffness[dofs]), jac[np.ix_(rows, dofs)]
-        )
-        m = min(n_modes, w2.size)
-        w2_all.append(w2[:m])
-        v = np.zeros((model.nv, m))
-        v[dofs] = z @ x[:, :m]
-        shapes.append(v)
-    w2 = np.concatenate(w2_all)
-    v = np.concatenate(shapes, axis=1)
-    order = np.argsort(w2, kind="stable")[:n_modes]
-    n = order.size
-    freq = np.full(n_modes, np.nan)
-    frac = np.full(n_modes, np.nan)
-    freq[:n] = np.sqrt(np.maximum(w2[order], 0.0)) / (2 * np.pi)
-    energy = stiffness[:, None] * v[:, order] ** 2
-    tot = energy.sum(axis=0)
-    frac[:n] = np.where(tot > 0, energy[in_plane].sum(axis=0) / np.where(tot > 0, tot, 1.0), np.nan)
-    return freq, frac
+def plane_blocks(mass: np.ndarray, jac: np.ndarray, in_plane: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]] | None:
+    """``[(dofs, rows), (dofs, rows)]`` of the in-plane and out-of-plane problems if they are exactly decoupled
+    (see :class:`PlaneSplit`), else ``None``."""
+    split = PlaneSplit(in_plane, np.zeros(in_plane.size))
+    if split.blocks(mass, jac) is None:
+        return None
+    return [(d, np.flatnonzero(np.any(jac[:, d] != 0.0, axis=1))) for d in split.dofs]
 
 
 _POSE_MODELS: dict[str, PoseModel] = {}
@@ -327,19 +351,22 @@ def solve_poses(
     sing = many.singularity
     status = [_status(float(v), bool(r)) for v, r in zip(sing, many.reachable)]
     reposable = options.link_model in REPOSABLE_LINK_MODELS and not recompile
+    pm: PoseModel | None = None
     for i, pose in enumerate(poses):
         if status[i] in (STATUS_UNREACHABLE, STATUS_SINGULAR):
             continue
         asm = many.assembly(i, pose)
         if reposable:
-            freq[i], frac[i] = _pose_model(config, options, asm).solve(asm, n_modes)
+            pm = pm or _pose_model(config, options, asm)
+            freq[i], frac[i] = pm.solve(asm, n_modes)
         else:
             built = build_manipulator(config, pose, options, assembly=asm)
             data = mujoco.MjData(built.model)
             mujoco.mj_forward(built.model, data)
-            k = dof_stiffness(built.model)
-            inplane = np.array([kind in IN_PLANE_DOF_KINDS for kind in built.dof_kinds])
-            freq[i], frac[i] = _modes(built.model, data, k, inplane, n_modes)
+            split = PlaneSplit([kind in IN_PLANE_DOF_KINDS for kind in built.dof_kinds], dof_stiffness(built.model))
+            freq[i], frac[i] = split.modes(
+                mass_matrix(built.model, data), equality_jacobian(built.model, data), n_modes
+            )
     return PoseFrequencies(poses=poses, frequencies_hz=freq, in_plane=frac, singularity=sing, status=status)
 
 
