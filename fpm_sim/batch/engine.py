@@ -101,7 +101,7 @@ class EngineOptions:
         if self.workers is not None and self.workers < 1:
             raise EngineError(f"workers must be >= 1 (--workers), got {self.workers}")
         if self.chunk is not None and self.chunk < 1:
-            raise EngineError(f"chunk must be >= 1, got {self.chunk}")
+            raise EngineError(f"chunk must be >= 1 (--chunk-poses), got {self.chunk}")
         if self.resume and self.store is None:
             raise EngineError("resume needs a store folder (the --out of the interrupted run)")
         s = self.scheduler

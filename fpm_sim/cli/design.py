@@ -28,6 +28,12 @@ def add_engine_args(p: argparse.ArgumentParser, *, workers: bool = False) -> Non
         action="store_true",
         help="continue a killed run with the same --out: reuse the chunks it finished (in OUT.partial/)",
     )
+    g.add_argument(
+        "--chunk-poses",
+        type=int,
+        default=None,
+        help="poses per task (default: about four tasks per worker, 16-512; see docs/design.md, Scale on paper)",
+    )
     if workers:
         g.add_argument("--workers", type=int, default=None, help="local cluster processes (default: CPU count)")
 
@@ -43,6 +49,7 @@ def engine_options(args: argparse.Namespace, out: Path | None, *, progress: bool
     return EngineOptions(
         scheduler=getattr(args, "scheduler", None),
         workers=getattr(args, "workers", None),
+        chunk=getattr(args, "chunk_poses", None),
         store=chunk_store(out) if out is not None else None,
         resume=bool(getattr(args, "resume", False)),
         progress=progress and not getattr(args, "json", False),
