@@ -53,9 +53,10 @@ MIN_CHUNK = 16
 """Fewest poses per task (at ~1-3 ms per pose, below this the scheduler's per-task cost shows)."""
 MAX_CHUNK = 512
 """Most poses per task (keeps the progress bar moving and a killed run's loss small)."""
-LOCAL_CLUSTER_MIN_ITEMS = 2000
-"""Fewest poses for which the default engine starts a local cluster: starting one costs ~3 s, a pose ~2.5 ms,
-so on two workers the cluster pays off from about 2400 poses (docs/design.md, "Scale on paper")."""
+LOCAL_CLUSTER_MIN_ITEMS = 4000
+"""Fewest poses (grid points, unreachable ones included) for which the default engine starts a local cluster:
+starting one costs ~3.4 s and a computed pose ~2.5 ms, so on two workers the cluster pays off from about
+2700 computed poses, some 3500 grid points of a dense map (docs/design.md, "Scale on paper")."""
 
 
 class EngineError(FpmSimError):

@@ -21,7 +21,7 @@ def add_engine_args(p: argparse.ArgumentParser, *, workers: bool = False) -> Non
         default=None,
         help="where the pose loop runs: local (a Dask LocalCluster of --workers processes), serial (this process) "
         "or the address of a running scheduler, e.g. tcp://10.0.0.5:8786 (used unchanged); default: local for "
-        "large runs (2000 poses or more), else serial",
+        "runs of 4000 poses or more, else serial",
     )
     g.add_argument(
         "--resume",
