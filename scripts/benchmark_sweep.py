@@ -149,12 +149,42 @@ def _engine_overhead(n_tasks: int) -> tuple[float, float, float]:
     return t_start, t_many, t_one
 
 
+def _time_jax(cfg, poses, now, opts, n):  # noqa: ANN001, ANN202
+    """The batched JAX backend (issue 5) on the first n computed poses: its stages, against this loop."""
+    from fpm_sim.batch import jax_backend
+    from fpm_sim.batch.frequencies import BACKENDS
+
+    name = next((k for k, v in BACKENDS.items() if k != "cpu"), None)
+    if name is None:
+        print("  no JAX backend registered")
+        return
+    picks = [p for p, s in zip(poses, now.status) if s in ("ok", "near_singular")][:n]
+    for call in ("first", "second"):
+        t0 = time.perf_counter()
+        res = pose_frequencies(cfg, picks, backend=name, n_modes=3, options=opts)
+        wall = time.perf_counter() - t0
+        t = jax_backend.LAST_TIMINGS
+        print(
+            f"  JAX backend {name!r}, {len(picks)} poses, {call} call: {wall:.2f} s wall (build {t.build_s:.2f} s, "
+            f"compile {t.compile_s:.2f} s, run {t.run_s:.3f} s = {t.run_s / len(picks) * 1e3:.2f} ms per pose)"
+        )
+    t0 = time.process_time()
+    ref = solve_poses(cfg, picks, n_modes=3, options=opts)
+    t_cpu = time.process_time() - t0
+    rel = np.nanmax(np.abs(res.frequencies_hz / ref.frequencies_hz - 1))
+    print(
+        f"  this loop on the same poses: {t_cpu:.2f} s CPU ({t_cpu / len(picks) * 1e3:.2f} ms per pose); "
+        f"max rel diff {rel:.1e}"
+    )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--step-mm", type=float, default=10.0)
     ap.add_argument("--segments", type=int, default=6)
     ap.add_argument("--skip-dask", action="store_true", help="skip the two-process runs (pool and Dask cluster)")
     ap.add_argument("--full-poses", type=int, default=0, help="poses compared with the full analysis (slow)")
+    ap.add_argument("--mjx", type=int, default=0, help="also time the JAX backend on this many computed poses")
     ap.add_argument("--engine-tasks", type=int, default=2000, help="no-op tasks timing Dask's per-task cost (0: skip)")
     args = ap.parse_args()
     cfg = default_config()
@@ -204,6 +234,8 @@ def main() -> None:
         f"  statuses agree: {np.array_equal(np.isfinite(fb), np.isfinite(fn))};  max |f/f_before - 1| over f1..f3: "
         f"{rel.max():.2e} (f1: {np.nanmax(np.abs(fn[:, 0] / fb[:, 0] - 1)):.2e})"
     )
+    if args.mjx:
+        _time_jax(cfg, poses, now, opts, args.mjx)
     if args.engine_tasks:
         t_start, t_many, t_one = _engine_overhead(args.engine_tasks)
         print(
