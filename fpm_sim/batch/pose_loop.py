@@ -16,7 +16,7 @@ fraction of the cost (compiling was 70-80 % of the per-pose time). Chunks of pos
 
 This is exact for the linear model without prestress (straight, unstressed links at ``qpos0``); what
 it leaves out is the geometric stiffness of gravity's prestress, a small effect for motor axes along
-gravity (measured in ``docs/benchmarks.md`` and ``tests/test_fast_frequencies.py`` against the full
+gravity (measured in ``docs/benchmarks.md`` and ``tests/batch/test_fast_frequencies.py`` against the full
 analysis). Coarser links (default :data:`FAST_SEGMENTS`) cost a discretisation error that scales as
 ``1/n^2`` and is also measured there.
 
