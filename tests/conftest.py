@@ -71,11 +71,14 @@ def loopback_cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
             )
         )  # fmt: skip
         deadline = time.monotonic() + START_TIMEOUT_S
-        while not sched_file.exists():
+        address = None
+        while address is None:
             if time.monotonic() > deadline or procs[0].poll() is not None:
                 pytest.fail(f"dask scheduler did not start; log: {Path(tmp) / 'scheduler.log'}")
-            time.sleep(0.2)
-        address = json.loads(sched_file.read_text())["address"]
+            try:  # the file appears before it is complete
+                address = json.loads(sched_file.read_text())["address"]
+            except (FileNotFoundError, ValueError, KeyError):
+                time.sleep(0.2)
         for k in (1, 2):
             procs.append(
                 subprocess.Popen(
