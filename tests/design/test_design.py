@@ -1,4 +1,5 @@
 import csv
+import pickle
 
 import numpy as np
 import pytest
@@ -138,3 +139,38 @@ def test_bad_inputs_name_the_option(default_manip, tmp_path, capsys):
     code = main(["design", "--vary", "nope.field=1", "--out", str(tmp_path / "x")])
     assert code == 2 and "--vary nope.field" in capsys.readouterr().err
     assert moving_mass_kg(default_manip) > 0
+
+
+def test_resume_continues_a_killed_run_from_its_chunks(default_manip, tmp_path, capsys):
+    # A killed run leaves OUT.partial/ with the chunks it finished; --resume reuses them (the same numbers as
+    # a fresh run) and removes the folder at the end.
+    from fpm_sim.cli.design import chunk_store
+
+    args = ["design", "--vary", "section.thickness_m=0.02,0.03", "--grid", "paper", "--segments", "2",
+            "--scheduler", "serial", "--chunk-poses", "5"]  # fmt: skip
+    fresh = tmp_path / "fresh"
+    assert main([*args, "--out", str(fresh)]) == 0
+    out = tmp_path / "killed"
+    poses = [p.pose for p in study_poses()]
+    engine = EngineOptions(scheduler="serial", chunk=5, store=chunk_store(out))
+    design_study(
+        default_manip, poses=poses, vary={"section.thickness_m": [0.02, 0.03]}, options=fast_options(segments=2),
+        engine=engine,
+    )  # fmt: skip
+    chunks = sorted(chunk_store(out).glob("*.pkl"))
+    assert len(chunks) == 10
+    for path in chunks[::2]:  # the run "died" before these were written
+        path.unlink()
+    # mark one finished chunk (f1 doubled) to see that it is reused, not recomputed
+    with open(chunks[1], "rb") as fh:
+        marked = pickle.load(fh)
+    marked.frequencies_hz[:, 0] *= 2.0
+    with open(chunks[1], "wb") as fh:
+        pickle.dump(marked, fh)
+    assert main([*args, "--resume", "--out", str(out)]) == 0
+    assert not chunk_store(out).exists()
+    resumed, ref = _rows(out / "design.csv"), _rows(fresh / "design.csv")
+    changed = [(a, b) for a, b in zip(resumed, ref) if a != b]
+    assert len(changed) == sum(s in ("ok", "near_singular") for s in marked.status) > 0
+    for a, b in changed:
+        assert _f(a["f1_hz"]) == 2.0 * _f(b["f1_hz"]) and a["f2_hz"] == b["f2_hz"]
