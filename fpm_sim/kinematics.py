@@ -42,6 +42,8 @@ __all__ = [
     "SINGULAR_TOL",
     "NEAR_SINGULAR_WARN",
     "inverse_kinematics",
+    "Assemblies",
+    "assemble_many",
     "forward_kinematics",
     "jacobians",
     "singularity_measure",
@@ -167,13 +169,121 @@ def jacobians(g: Geometry, asm: Assembly) -> tuple[np.ndarray, np.ndarray]:
 
 def singularity_measure(g: Geometry, asm: Assembly) -> SingularityMeasure:
     """Serial and parallel singularity measures of an assembly (see module docstring)."""
-    serial_each = np.abs(_cross2(asm.proximal_dirs, asm.distal_dirs))
-    jx, _ = jacobians(g, asm)
-    jxn = jx.copy()
-    jxn[:, 2] /= _char_length(g)
-    s = np.linalg.svd(jxn, compute_uv=False)
-    parallel = float(s[-1] / s[0])
-    return SingularityMeasure(serial=float(serial_each.min()), parallel=parallel, worst_chain=int(serial_each.argmin()))
+    return assemble_many(g, asm.pose.x_m, asm.pose.y_m, asm.pose.phi_rad).assembly(0, asm.pose).singularity
+
+
+@dataclass(frozen=True)
+class Assemblies:
+    """Many poses assembled at once: arrays over a leading pose axis (see :func:`assemble_many`).
+
+    Attributes
+    ----------
+    x_m, y_m, phi_rad
+        ``(n,)`` the poses.
+    a
+        ``(3, 2)`` motor points (m).
+    b, c
+        ``(n, 3, 2)`` elbow and platform-joint points (m); ``b`` is NaN for a chain that cannot reach.
+    motor_angles_rad
+        ``(n, 3)``; NaN for a chain that cannot reach.
+    distance_m
+        ``(n, 3)`` motor-to-platform-joint distance of each chain.
+    reachable
+        ``(n,)`` every chain spans its distance.
+    serial, parallel
+        ``(n,)`` the two singularity measures (module docstring); NaN where unreachable.
+    det_jx
+        ``(n,)`` ``det(Jx)`` with the rotation column over the characteristic length (its sign flips across
+        a parallel singularity); NaN where unreachable.
+    """
+
+    x_m: np.ndarray
+    y_m: np.ndarray
+    phi_rad: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    c: np.ndarray
+    motor_angles_rad: np.ndarray
+    distance_m: np.ndarray
+    reachable: np.ndarray
+    serial: np.ndarray
+    parallel: np.ndarray
+    det_jx: np.ndarray
+
+    @property
+    def singularity(self) -> np.ndarray:
+        """``(n,)`` singularity measure ``min(serial, parallel)`` (NaN where unreachable)."""
+        return np.minimum(self.serial, self.parallel)
+
+    def assembly(self, k: int, pose: Pose | None = None) -> Assembly:
+        """Pose ``k`` as an :class:`Assembly` (it must be reachable); ``pose`` is recorded in it if given."""
+        if pose is None:
+            pose = Pose(float(self.x_m[k]), float(self.y_m[k]), float(self.phi_rad[k]))
+        serial_each = np.abs(_cross2(_unit(self.b[k] - self.a), _unit(self.c[k] - self.b[k])))
+        measure = SingularityMeasure(
+            serial=float(self.serial[k]), parallel=float(self.parallel[k]), worst_chain=int(serial_each.argmin())
+        )
+        return Assembly(
+            pose=pose,
+            a=self.a,
+            b=self.b[k],
+            c=self.c[k],
+            motor_angles_rad=self.motor_angles_rad[k],
+            singularity=measure,
+        )
+
+
+def _unit(d: np.ndarray) -> np.ndarray:
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def assemble_many(g: Geometry, x_m: np.ndarray, y_m: np.ndarray, phi_rad: np.ndarray | float) -> Assemblies:
+    """Inverse kinematics and singularity measures of many poses at once (vectorised; no checks, no warnings).
+
+    The same formulas as :func:`inverse_kinematics` (which calls this for one pose), for arrays of positions
+    (m) and rotations (rad) broadcast to one shape ``(n,)``.
+    """
+    x, y, phi = np.broadcast_arrays(*(np.atleast_1d(np.asarray(v, float)).ravel() for v in (x_m, y_m, phi_rad)))
+    a = base_points(g)
+    ang = np.asarray(g.platform_angles_rad)
+    local = g.platform_radius_m * np.stack([np.cos(ang), np.sin(ang)], axis=1)  # (3, 2), platform frame
+    cos_p, sin_p = np.cos(phi)[:, None], np.sin(phi)[:, None]
+    p = np.stack([x, y], axis=1)[:, None, :]
+    c = p + np.stack([local[:, 0] * cos_p - local[:, 1] * sin_p, local[:, 0] * sin_p + local[:, 1] * cos_p], axis=2)
+    r = c - p
+    l1, l2 = g.proximal_length_m, g.distal_length_m
+    d = c - a[None]
+    dist = np.hypot(d[..., 0], d[..., 1])
+    chain_ok = (abs(l1 - l2) <= dist) & (dist <= l1 + l2)
+    reachable = chain_ok.all(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cos_alpha = np.clip((l1**2 + dist**2 - l2**2) / (2.0 * l1 * dist), -1.0, 1.0)
+    q = np.arctan2(d[..., 1], d[..., 0]) + np.asarray(g.elbow_branch, float)[None, :] * np.arccos(cos_alpha)
+    q = np.where(chain_ok, q, np.nan)
+    b = a[None] + l1 * np.stack([np.cos(q), np.sin(q)], axis=2)
+    w = (b - a[None]) / l1
+    u = _unit(c - b)
+    serial = np.min(np.abs(_cross2(w, u)), axis=1)
+    jxn = np.concatenate([u, (_cross2(r, u) / _char_length(g))[..., None]], axis=2)
+    jxn = np.where(reachable[:, None, None], jxn, 0.0)
+    sv = np.linalg.svd(jxn, compute_uv=False)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        parallel = sv[:, -1] / sv[:, 0]
+    nan = np.full(x.shape, np.nan)
+    return Assemblies(
+        x_m=x,
+        y_m=y,
+        phi_rad=phi,
+        a=a,
+        b=b,
+        c=c,
+        motor_angles_rad=q,
+        distance_m=dist,
+        reachable=reachable,
+        serial=np.where(reachable, serial, nan),
+        parallel=np.where(reachable, parallel, nan),
+        det_jx=np.where(reachable, np.linalg.det(jxn), nan),
+    )
 
 
 def inverse_kinematics(
@@ -201,28 +311,19 @@ def inverse_kinematics(
     SingularPoseError
         When the singularity measure is below :data:`SINGULAR_TOL`.
     """
-    a = base_points(g)
-    c = platform_points(g, pose)
-    l1, l2 = g.proximal_length_m, g.distal_length_m
-    b = np.zeros((3, 2))
-    q = np.zeros(3)
-    for i in range(3):
-        d = c[i] - a[i]
-        dist = float(np.hypot(*d))
+    many = assemble_many(g, pose.x_m, pose.y_m, pose.phi_rad)
+    if not many.reachable[0]:
+        l1, l2 = g.proximal_length_m, g.distal_length_m
         lo, hi = abs(l1 - l2), l1 + l2
-        if not (lo <= dist <= hi):
-            raise UnreachablePoseError(
-                f"pose {pose.label()} is unreachable: chain {i} needs {dist * 1e3:.2f} mm from motor to "
-                f"platform joint but its links span {lo * 1e3:.2f}..{hi * 1e3:.2f} mm; move the pose towards "
-                f"the workspace centre or change geometry.proximal_length_m / distal_length_m"
-            )
-        cos_alpha = np.clip((l1**2 + dist**2 - l2**2) / (2.0 * l1 * dist), -1.0, 1.0)
-        q[i] = math.atan2(d[1], d[0]) + g.elbow_branch[i] * math.acos(cos_alpha)
-        b[i] = a[i] + l1 * np.array([math.cos(q[i]), math.sin(q[i])])
-    measure = SingularityMeasure(serial=0.0, parallel=0.0, worst_chain=0)
-    asm = Assembly(pose=pose, a=a, b=b, c=c, motor_angles_rad=q, singularity=measure)
-    measure = singularity_measure(g, asm)
-    asm = Assembly(pose=pose, a=a, b=b, c=c, motor_angles_rad=q, singularity=measure)
+        dist = many.distance_m[0]
+        i = int(np.argmax((dist < lo) | (dist > hi)))
+        raise UnreachablePoseError(
+            f"pose {pose.label()} is unreachable: chain {i} needs {dist[i] * 1e3:.2f} mm from motor to "
+            f"platform joint but its links span {lo * 1e3:.2f}..{hi * 1e3:.2f} mm; move the pose towards "
+            f"the workspace centre or change geometry.proximal_length_m / distal_length_m"
+        )
+    asm = many.assembly(0, pose)
+    measure = asm.singularity
     if check_singularity:
         if measure.value < SINGULAR_TOL:
             raise SingularPoseError(

@@ -1,5 +1,10 @@
 """Shared small fixtures. Importing fpm_sim first keeps BLAS single-threaded (see fpm_sim/__init__)."""
 
+import json
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -26,3 +31,66 @@ SYMMETRIC_CONFIG = Path(__file__).resolve().parent / "data" / "symmetric_3rrr.to
 def symmetric_manip() -> Manipulator:
     """A well-conditioned, three-fold symmetric 3RRR (the pre-identification default) for method tests."""
     return load_config(SYMMETRIC_CONFIG)
+
+
+# --------------------------------------------------------------------------------------------- Dask on loopback
+# A real cluster for the engine tests (tests/batch, tests/design): one scheduler and two single-threaded
+# workers started as subprocesses on 127.0.0.1, shared by the session and stopped at its end.
+START_TIMEOUT_S = 120.0
+"""Scheduler and worker start, including the workers' import of fpm_sim/MuJoCo on a loaded 2-core machine."""
+
+
+def _stop(procs: list[subprocess.Popen]) -> None:
+    for p in procs:
+        if p.poll() is None:
+            p.terminate()
+    for p in procs:
+        try:
+            p.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait(timeout=10)
+
+
+@pytest.fixture(scope="session")
+def loopback_cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    """Address (``tcp://127.0.0.1:PORT``) of a scheduler with two single-threaded workers; torn down after."""
+    from distributed import Client
+
+    tmp = tmp_path_factory.mktemp("dask")
+    sched_file = Path(tmp) / "scheduler.json"
+    dask_cli = [sys.executable, "-m", "dask"]
+    procs: list[subprocess.Popen] = []
+    logs = [open(Path(tmp) / f"{name}.log", "w") for name in ("scheduler", "worker0", "worker1")]  # noqa: SIM115
+    try:
+        procs.append(
+            subprocess.Popen(
+                [*dask_cli, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+                 "--scheduler-file", str(sched_file)],
+                stdout=logs[0], stderr=subprocess.STDOUT,
+            )
+        )  # fmt: skip
+        deadline = time.monotonic() + START_TIMEOUT_S
+        address = None
+        while address is None:
+            if time.monotonic() > deadline or procs[0].poll() is not None:
+                pytest.fail(f"dask scheduler did not start; log: {Path(tmp) / 'scheduler.log'}")
+            try:  # the file appears before it is complete
+                address = json.loads(sched_file.read_text())["address"]
+            except (FileNotFoundError, ValueError, KeyError):
+                time.sleep(0.2)
+        for k in (1, 2):
+            procs.append(
+                subprocess.Popen(
+                    [*dask_cli, "worker", address, "--nthreads", "1", "--nworkers", "1", "--no-dashboard",
+                     "--host", "127.0.0.1", "--name", f"w{k}"],
+                    stdout=logs[k], stderr=subprocess.STDOUT,
+                )
+            )  # fmt: skip
+        with Client(address, timeout="30s") as client:
+            client.wait_for_workers(2, timeout=START_TIMEOUT_S)
+        yield address
+    finally:
+        _stop(procs[::-1])
+        for fh in logs:
+            fh.close()

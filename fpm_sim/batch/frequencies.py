@@ -1,7 +1,8 @@
 """The pose loop's entry point: lowest frequencies at many poses, on a backend chosen by name.
 
-``cpu`` (:mod:`fpm_sim.batch.pose_loop`) builds one MuJoCo model per pose and solves the constrained
-eigenproblem with SciPy; ``mjx`` (:mod:`fpm_sim.batch.jax_backend`) evaluates MuJoCo's formulas in JAX
+``cpu`` (:mod:`fpm_sim.batch.pose_loop`) re-poses one compiled MuJoCo model per structure and solves the
+constrained eigenproblem with SciPy, in chunks on the engine (:mod:`fpm_sim.batch.engine`); ``mjx``
+(:mod:`fpm_sim.batch.jax_backend`) evaluates MuJoCo's formulas in JAX
 for all poses at once (JAX is imported only when that backend is called).
 """
 
@@ -12,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from fpm_sim.batch.engine import EngineOptions
 from fpm_sim.batch.pose_loop import PoseFrequencies, cpu_backend, fast_options
 from fpm_sim.config import Manipulator
 from fpm_sim.kinematics import Pose
@@ -49,6 +51,7 @@ def pose_frequencies(
     workers: int = 1,
     progress: bool = False,
     desc: str = "poses",
+    engine: EngineOptions | None = None,
 ) -> PoseFrequencies:
     """Lowest ``n_modes`` natural frequencies (Hz) at each pose, with status and mode character.
 
@@ -66,9 +69,12 @@ def pose_frequencies(
         Discretisation (default :func:`fast_options`); gravity is ignored by the ``cpu`` backend's
         solve (it uses spring stiffness only).
     workers
-        Processes for the ``cpu`` backend (poses are independent).
+        Processes for the ``cpu`` backend (poses are independent; one runs in this process).
     progress
         Show a tqdm progress bar.
+    engine
+        Where the ``cpu`` backend runs its chunks (Dask scheduler, chunk store for ``resume``; see
+        :class:`fpm_sim.batch.engine.EngineOptions`).
     """
     if backend not in BACKENDS:
         raise ValueError(f"unknown backend {backend!r} (--backend); available: {', '.join(sorted(BACKENDS))}")
@@ -77,8 +83,13 @@ def pose_frequencies(
     if workers < 1:
         raise ValueError(f"workers must be >= 1 (--workers), got {workers}")
     opts = options or fast_options()
+    extra: dict[str, Any] = {}
+    if engine is not None:
+        if backend != "cpu":
+            raise ValueError(f"the engine options (--scheduler, --resume) need --backend cpu, got {backend!r}")
+        extra["engine"] = engine
     return BACKENDS[backend](
-        config, poses, n_modes=n_modes, options=opts, workers=workers, progress=progress, desc=desc
+        config, poses, n_modes=n_modes, options=opts, workers=workers, progress=progress, desc=desc, **extra
     )
 
 
@@ -99,4 +110,3 @@ def first_frequencies(
     return pose_frequencies(
         config, poses, backend=backend, n_modes=n_modes, options=options, workers=workers, progress=progress
     ).frequencies_hz
-

@@ -5,51 +5,63 @@ gravity equilibrium, ``mjd_transitionFD``) costs seconds per pose. Here each pos
 constrained eigenproblem at the assembled configuration with gravity off:
 
 ``M`` from ``mj_fullM`` at ``qpos0``, ``K = diag(joint spring stiffness)``, the weld Jacobian ``J``
-from one ``mj_forward``; ``Z = null(J)``, ``Z'KZ x = w^2 Z'MZ x``.
+from the position stage; ``Z = null(J)``, ``Z'KZ x = w^2 Z'MZ x``
+(:func:`fpm_sim.linear.modal.reduced_eigenproblem`).
+
+The model is compiled once per structure and configuration (:class:`PoseModel`) and re-posed in place
+for every pose: nine body orientations and the welds' relative poses, set as the compiler sets them, so
+the result equals a per-pose compile bit for bit (``recompile=True`` of :func:`solve_poses`, tested) at a
+fraction of the cost (compiling was 70-80 % of the per-pose time). Chunks of poses run on the engine
+(:mod:`fpm_sim.batch.engine`: Dask, streamed to disk, resumable).
 
 This is exact for the linear model without prestress (straight, unstressed links at ``qpos0``); what
 it leaves out is the geometric stiffness of gravity's prestress, a small effect for motor axes along
-gravity (measured in ``docs/benchmarks.md`` and ``tests/test_fast_frequencies.py`` against the full
+gravity (measured in ``docs/benchmarks.md`` and ``tests/batch/test_fast_frequencies.py`` against the full
 analysis). Coarser links (default :data:`FAST_SEGMENTS`) cost a discretisation error that scales as
 ``1/n^2`` and is also measured there.
 
-:func:`first_frequencies` is the replaceable pose loop: ``backend="cpu"`` is this module; another
-backend (e.g. MJX on an accelerator) registers itself with :func:`register_backend` and receives the
-same arguments.
+:func:`fpm_sim.batch.frequencies.first_frequencies` is the replaceable pose loop: ``backend="cpu"`` is
+:func:`cpu_backend`; another backend registers itself with
+:func:`fpm_sim.batch.frequencies.register_backend` and receives the same arguments.
 """
 
 from __future__ import annotations
 
+import csv
+import dataclasses
 import math
-import warnings
 from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
-from multiprocessing import get_context
+from pathlib import Path
 
 import mujoco
 import numpy as np
-import scipy.linalg
 
+from fpm_sim.batch.engine import EngineOptions, chunk_size, run_chunks, split
 from fpm_sim.config import Manipulator
-from fpm_sim.kinematics import (
-    NEAR_SINGULAR_WARN,
-    NearSingularityWarning,
-    Pose,
-    SingularPoseError,
-    UnreachablePoseError,
-    inverse_kinematics,
-)
-from fpm_sim.linear.modal import NULLSPACE_RCOND, equality_jacobian, mass_matrix
+from fpm_sim.errors import FpmSimError
+from fpm_sim.kinematics import NEAR_SINGULAR_WARN, SINGULAR_TOL, Assembly, Pose, assemble_many
+from fpm_sim.linear.modal import NULLSPACE_RCOND, equality_jacobian, mass_matrix, reduced_eigenproblem
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import BuiltModel, ModelOptions, dof_stiffness
 
 __all__ = [
     "assemble_pose",
+    "pose_assembly",
+    "PoseModel",
+    "solve_poses",
+    "cpu_backend",
+    "merge",
+    "read_poses_csv",
+    "PosesFileError",
+    "REPOSABLE_LINK_MODELS",
     "FAST_SEGMENTS",
     "PoseFrequencies",
     "fast_options",
     "IN_PLANE_KINDS",
+    "IN_PLANE_DOF_KINDS",
+    "plane_blocks",
+    "PlaneSplit",
 ]
 
 FAST_SEGMENTS = 6
@@ -100,59 +112,280 @@ def fast_options(*, segments: int = FAST_SEGMENTS, axial: bool = False) -> Model
     return ModelOptions(segments=segments, axial=axial, gravity=False)
 
 
+def _status(singularity: float, reachable: bool) -> str:
+    if not reachable:
+        return STATUS_UNREACHABLE
+    if singularity < SINGULAR_TOL:
+        return STATUS_SINGULAR
+    return STATUS_NEAR if singularity < NEAR_SINGULAR_WARN else STATUS_OK
+
+
+def pose_assembly(config: Manipulator, pose: Pose) -> tuple[Assembly | None, float, str]:
+    """``(assembly or None, singularity measure, status)`` of one pose (no model built).
+
+    Unreachable and singular poses get no assembly (status :data:`STATUS_UNREACHABLE` /
+    :data:`STATUS_SINGULAR`); near-singular ones are assembled and marked :data:`STATUS_NEAR`.
+    """
+    many = assemble_many(config.geometry, pose.x_m, pose.y_m, pose.phi_rad)
+    singularity, status = float(many.singularity[0]), _status(float(many.singularity[0]), bool(many.reachable[0]))
+    if status in (STATUS_UNREACHABLE, STATUS_SINGULAR):
+        return None, singularity, status
+    return many.assembly(0, pose), singularity, status
+
+
 def assemble_pose(config: Manipulator, pose: Pose, options: ModelOptions) -> tuple[BuiltModel | None, float, str]:
     """``(built model or None, singularity measure, status)`` of one pose, for any backend.
 
-    Unreachable and singular poses get no model (status :data:`STATUS_UNREACHABLE` /
-    :data:`STATUS_SINGULAR`); near-singular ones are built and marked :data:`STATUS_NEAR`.
+    Compiles one model for the pose (:func:`fpm_sim.model.manipulator.build_manipulator`); see
+    :func:`pose_assembly` for the statuses.
     """
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", NearSingularityWarning)
-            asm = inverse_kinematics(config.geometry, pose)
-    except UnreachablePoseError:
-        return None, math.nan, STATUS_UNREACHABLE
-    except SingularPoseError:
-        asm = inverse_kinematics(config.geometry, pose, check_singularity=False)
-        return None, asm.singularity.value, STATUS_SINGULAR
-    built = build_manipulator(config, pose, options, assembly=asm)
-    status = STATUS_NEAR if asm.singularity.value < NEAR_SINGULAR_WARN else STATUS_OK
-    return built, asm.singularity.value, status
+    asm, singularity, status = pose_assembly(config, pose)
+    if asm is None:
+        return None, singularity, status
+    return build_manipulator(config, pose, options, assembly=asm), singularity, status
 
 
-def _solve_pose(
-    manip: Manipulator, pose: Pose, opts: ModelOptions, n_modes: int
-) -> tuple[np.ndarray, np.ndarray, float, str]:
-    nan = np.full(n_modes, np.nan)
-    built, singularity, status = assemble_pose(manip, pose, opts)
-    if built is None:
-        return nan, nan, singularity, status
-    model = built.model
-    data = mujoco.MjData(model)
-    mujoco.mj_forward(model, data)
-    mass = mass_matrix(model, data)
-    k = dof_stiffness(model)
-    jac = equality_jacobian(model, data)
-    z = scipy.linalg.null_space(jac, rcond=NULLSPACE_RCOND)
-    kr = z.T @ (k[:, None] * z)
-    mr = z.T @ mass @ z
-    n = min(n_modes, kr.shape[0])
-    w2, x = scipy.linalg.eigh(0.5 * (kr + kr.T), 0.5 * (mr + mr.T), subset_by_index=[0, n - 1])
-    freq = np.full(n_modes, np.nan)
-    freq[:n] = np.sqrt(np.maximum(w2, 0.0)) / (2 * np.pi)
-    inplane_mask = np.array([kind in IN_PLANE_KINDS for kind in built.dof_kinds])
-    frac = np.full(n_modes, np.nan)
-    for i in range(n):
-        v = z @ x[:, i]
-        e = k * v**2
-        tot = float(e.sum())
-        frac[i] = float(e[inplane_mask].sum()) / tot if tot > 0 else math.nan
-    return freq, frac, singularity, status
+def _pose_angles(asm: Assembly) -> list[tuple[str, float]]:
+    """``(body name, rotation about z)`` of every body whose frame depends on the pose.
+
+    The builder (:func:`fpm_sim.model.manipulator.build_manipulator`) places link ``proximal_i`` at the
+    motor point ``A_i`` (fixed) turned by the proximal angle, ``distal_i`` at the proximal link's end turned
+    by the elbow angle, and ``pin_i`` turned by ``phi - distal angle``; every other body sits at a fixed
+    offset in its parent's frame (``tests/batch/test_fast_frequencies.py`` checks this against a per-pose
+    compile).
+    """
+    out = []
+    for i in range(3):
+        a, b, c = asm.a[i], asm.b[i], asm.c[i]
+        ang_p = math.atan2(*(b - a)[::-1])
+        ang_d = math.atan2(*(c - b)[::-1])
+        out += [(f"proximal_{i}_b0", ang_p), (f"distal_{i}_b0", ang_d - ang_p), (f"pin_{i}", asm.pose.phi_rad - ang_d)]
+    return out
 
 
-def _solve_chunk(args: tuple[Manipulator, list[Pose], ModelOptions, int]) -> list[tuple]:
-    manip, poses, opts, n_modes = args
-    return [_solve_pose(manip, p, opts, n_modes) for p in poses]
+class PoseModel:
+    """One compiled manipulator model, re-posed in place for every pose (no recompile per pose).
+
+    The topology, masses, inertias and spring stiffnesses do not depend on the pose: only nine body
+    orientations do (:func:`_pose_angles`), and the welds' relative poses, which the compiler takes from
+    the bodies at ``qpos0``. The model is compiled once, at ``reference`` (an assembled pose of the same
+    configuration); :meth:`solve` sets the orientations, recomputes the weld relative poses as the
+    compiler does, runs the position stage (``mj_fwdPosition``: kinematics, mass matrix, constraint
+    Jacobian) and solves the constrained eigenproblem (:func:`fpm_sim.linear.modal.reduced_eigenproblem`).
+
+    Parameters
+    ----------
+    config
+        The manipulator.
+    options
+        Discretisation; ``link_model="segments"`` or ``"rigid"`` (the chain models).
+    reference
+        An assembled pose of ``config`` to compile at.
+    """
+
+    def __init__(self, config: Manipulator, options: ModelOptions, reference: Assembly) -> None:
+        if options.link_model not in REPOSABLE_LINK_MODELS:
+            raise ValueError(f"PoseModel needs link_model 'segments' or 'rigid', got {options.link_model!r}")
+        self.built = build_manipulator(config, reference.pose, options, assembly=reference)
+        self.model = self.built.model
+        self.data = mujoco.MjData(self.model)
+        self.stiffness = dof_stiffness(self.model)
+        self.in_plane = np.array([kind in IN_PLANE_DOF_KINDS for kind in self.built.dof_kinds])
+        self.split = PlaneSplit(self.in_plane, self.stiffness)
+        bid = self.model.body
+        self._body_ids = [bid(name).id for name, _ in _pose_angles(reference)]
+        weld = self.model.eq_type == mujoco.mjtEq.mjEQ_WELD
+        self._welds = np.where(weld)[0]
+
+    def set_pose(self, asm: Assembly) -> None:
+        """Re-pose the model at ``asm``: body orientations, then the welds' relative poses at ``qpos0``."""
+        m, d = self.model, self.data
+        for body, (_, ang) in zip(self._body_ids, _pose_angles(asm)):
+            m.body_quat[body] = (math.cos(ang / 2.0), 0.0, 0.0, math.sin(ang / 2.0))
+        d.qpos[:] = m.qpos0
+        mujoco.mj_kinematics(m, d)
+        inv = np.zeros(4)
+        for e in self._welds:  # relpose of body 2 in body 1 with mj_setConst's operations (eq_data[3:10])
+            b1, b2 = m.eq_obj1id[e], m.eq_obj2id[e]
+            mujoco.mju_mulMatTVec3(m.eq_data[e, 3:6], d.xmat[b1], d.xpos[b2] - d.xpos[b1])
+            mujoco.mju_negQuat(inv, d.xquat[b1])
+            mujoco.mju_mulQuat(m.eq_data[e, 6:10], inv, d.xquat[b2])
+
+    def solve(self, asm: Assembly, n_modes: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(frequencies_hz, in_plane)`` of the lowest ``n_modes`` modes at ``asm`` (NaN-padded)."""
+        self.set_pose(asm)
+        mujoco.mj_fwdPosition(self.model, self.data)
+        return self.split.modes(mass_matrix(self.model, self.data), equality_jacobian(self.model, self.data), n_modes)
+
+
+REPOSABLE_LINK_MODELS = ("segments", "rigid")
+"""Link models :class:`PoseModel` re-poses (chains of rigid bodies); the others compile one model per pose."""
+
+
+IN_PLANE_DOF_KINDS = IN_PLANE_KINDS + ("passive",)
+"""Degrees of freedom that move in the base plane (the z-hinges included); the rest move out of it."""
+
+
+class PlaneSplit:
+    """The in-plane / out-of-plane split of a model's eigenproblem (index arrays cached per model).
+
+    A planar manipulator whose parts are symmetric about the base plane has no mass and no constraint
+    coupling between in-plane and out-of-plane motion: ``M`` and the weld Jacobian are block-diagonal. Two
+    smaller eigenproblems then give the same modes at a third of the cost. :meth:`blocks` checks the exact
+    zeros at every pose and refuses the split (``None``) unless it keeps exactly the constraint directions
+    the whole problem keeps: the singular values of a block-diagonal ``J`` are those of its blocks, and
+    :func:`fpm_sim.linear.modal.reduced_eigenproblem` drops those below ``NULLSPACE_RCOND`` times the largest.
+
+    Parameters
+    ----------
+    in_plane
+        Per degree of freedom: it moves in the base plane (:data:`IN_PLANE_DOF_KINDS`).
+    stiffness
+        Spring stiffness per degree of freedom.
+    """
+
+    def __init__(self, in_plane: np.ndarray, stiffness: np.ndarray) -> None:
+        self.in_plane = np.asarray(in_plane, bool)
+        self.stiffness = np.asarray(stiffness, float)
+        nv = self.in_plane.size
+        self.dofs = [np.flatnonzero(self.in_plane), np.flatnonzero(~self.in_plane)]
+        self.usable = all(d.size for d in self.dofs)
+        self._cross = np.ix_(self.dofs[0], self.dofs[1])
+        self._square = [np.ix_(d, d) for d in self.dofs]
+        self._k = [np.diag(self.stiffness[d]) for d in self.dofs]
+        self._whole = (np.arange(nv), np.diag(self.stiffness))
+
+    def blocks(self, mass: np.ndarray, jac: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]] | None:
+        """``[(dofs, M_block, K_block, J_block)]`` of the two decoupled problems, or ``None``."""
+        if not self.usable or np.any(mass[self._cross] != 0.0):
+            return None
+        rows = [np.any(jac[:, d] != 0.0, axis=1) for d in self.dofs]
+        if np.any(rows[0] & rows[1]):
+            return None
+        jacs = [jac[r][:, d] for r, d in zip(rows, self.dofs)]
+        svs = [np.linalg.svd(j, compute_uv=False) if j.size else np.zeros(0) for j in jacs]
+        top = max((float(sv[0]) for sv in svs if sv.size), default=0.0)
+        for sv in svs:
+            if sv.size and np.sum(sv > NULLSPACE_RCOND * top) != np.sum(sv > NULLSPACE_RCOND * sv[0]):
+                return None
+        return [(d, mass[sq], k, j) for d, sq, k, j in zip(self.dofs, self._square, self._k, jacs)]
+
+    def modes(self, mass: np.ndarray, jac: np.ndarray, n_modes: int) -> tuple[np.ndarray, np.ndarray]:
+        """Lowest ``n_modes`` constrained modes: frequencies (Hz) and in-plane strain-energy share (NaN-padded).
+
+        The eigenproblem is :func:`fpm_sim.linear.modal.reduced_eigenproblem`, on the two blocks when they are
+        exactly decoupled, else on the whole matrices. The passive hinges among the in-plane degrees of
+        freedom have no spring, so the energy share counts the springs of :data:`IN_PLANE_KINDS`.
+        """
+        nv = self.in_plane.size
+        problems = self.blocks(mass, jac) or [(self._whole[0], mass, self._whole[1], jac)]
+        w2_all, shapes = [], []
+        for dofs, m_b, k_b, j_b in problems:
+            z, _, _, w2, x = reduced_eigenproblem(m_b, k_b, j_b)
+            m = min(n_modes, w2.size)
+            w2_all.append(w2[:m])
+            v = np.zeros((nv, m))
+            v[dofs] = z @ x[:, :m]
+            shapes.append(v)
+        w2 = np.concatenate(w2_all)
+        order = np.argsort(w2, kind="stable")[:n_modes]
+        v = np.concatenate(shapes, axis=1)[:, order]
+        n = order.size
+        freq = np.full(n_modes, np.nan)
+        frac = np.full(n_modes, np.nan)
+        freq[:n] = np.sqrt(np.maximum(w2[order], 0.0)) / (2 * np.pi)
+        energy = self.stiffness[:, None] * v**2
+        tot = energy.sum(axis=0)
+        frac[:n] = np.where(tot > 0, energy[self.in_plane].sum(axis=0) / np.where(tot > 0, tot, 1.0), np.nan)
+        return freq, frac
+
+
+def plane_blocks(mass: np.ndarray, jac: np.ndarray, in_plane: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]] | None:
+    """``[(dofs, rows), (dofs, rows)]`` of the in-plane and out-of-plane problems if they are exactly decoupled
+    (see :class:`PlaneSplit`), else ``None``."""
+    split = PlaneSplit(in_plane, np.zeros(in_plane.size))
+    if split.blocks(mass, jac) is None:
+        return None
+    return [(d, np.flatnonzero(np.any(jac[:, d] != 0.0, axis=1))) for d in split.dofs]
+
+
+_POSE_MODELS: dict[str, PoseModel] = {}
+"""Per-process cache of re-posable models by configuration and options (workers reuse them across chunks)."""
+
+
+def _pose_model(config: Manipulator, options: ModelOptions, reference: Assembly) -> PoseModel:
+    key = repr((config, options))
+    pm = _POSE_MODELS.get(key)
+    if pm is None:
+        if len(_POSE_MODELS) >= 8:
+            _POSE_MODELS.pop(next(iter(_POSE_MODELS)))
+        pm = _POSE_MODELS[key] = PoseModel(config, options, reference)
+    return pm
+
+
+def solve_poses(
+    config: Manipulator,
+    poses: Sequence[Pose],
+    *,
+    n_modes: int,
+    options: ModelOptions,
+    recompile: bool = False,
+) -> PoseFrequencies:
+    """Lowest ``n_modes`` frequencies at ``poses``, in this process (one chunk of the pose loop).
+
+    Parameters
+    ----------
+    config, poses, n_modes, options
+        As :func:`fpm_sim.batch.frequencies.pose_frequencies`.
+    recompile
+        Compile one model per pose (the reference path, several times slower) instead of re-posing one
+        compiled model (:class:`PoseModel`). Link models other than :data:`REPOSABLE_LINK_MODELS` always
+        recompile.
+    """
+    poses = list(poses)
+    freq = np.full((len(poses), n_modes), np.nan)
+    frac = np.full((len(poses), n_modes), np.nan)
+    if not poses:
+        return PoseFrequencies(poses=[], frequencies_hz=freq, in_plane=frac, singularity=np.zeros(0), status=[])
+    many = assemble_many(config.geometry, [p.x_m for p in poses], [p.y_m for p in poses], [p.phi_rad for p in poses])
+    sing = many.singularity
+    status = [_status(float(v), bool(r)) for v, r in zip(sing, many.reachable)]
+    reposable = options.link_model in REPOSABLE_LINK_MODELS and not recompile
+    pm: PoseModel | None = None
+    for i, pose in enumerate(poses):
+        if status[i] in (STATUS_UNREACHABLE, STATUS_SINGULAR):
+            continue
+        asm = many.assembly(i, pose)
+        if reposable:
+            pm = pm or _pose_model(config, options, asm)
+            freq[i], frac[i] = pm.solve(asm, n_modes)
+        else:
+            built = build_manipulator(config, pose, options, assembly=asm)
+            data = mujoco.MjData(built.model)
+            mujoco.mj_forward(built.model, data)
+            split = PlaneSplit([kind in IN_PLANE_DOF_KINDS for kind in built.dof_kinds], dof_stiffness(built.model))
+            freq[i], frac[i] = split.modes(
+                mass_matrix(built.model, data), equality_jacobian(built.model, data), n_modes
+            )
+    return PoseFrequencies(poses=poses, frequencies_hz=freq, in_plane=frac, singularity=sing, status=status)
+
+
+def _solve_chunk(poses: list[Pose], *, config: Manipulator, n_modes: int, options: ModelOptions) -> PoseFrequencies:
+    return solve_poses(config, poses, n_modes=n_modes, options=options)
+
+
+def merge(parts: Sequence[PoseFrequencies]) -> PoseFrequencies:
+    """One :class:`PoseFrequencies` from consecutive chunks (all with the same ``n_modes``)."""
+    parts = list(parts)
+    if not parts:
+        raise ValueError("merge: no chunks")
+    return PoseFrequencies(
+        poses=[p for part in parts for p in part.poses],
+        frequencies_hz=np.concatenate([part.frequencies_hz for part in parts]),
+        in_plane=np.concatenate([part.in_plane for part in parts]),
+        singularity=np.concatenate([part.singularity for part in parts]),
+        status=[s for part in parts for s in part.status],
+    )
 
 
 def cpu_backend(
@@ -164,33 +397,55 @@ def cpu_backend(
     workers: int,
     progress: bool,
     desc: str,
+    engine: EngineOptions | None = None,
 ) -> PoseFrequencies:
-    poses = list(poses)
-    results: list[tuple] = []
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
+    """The ``cpu`` backend: :func:`solve_poses` on chunks of poses, on the engine (:mod:`fpm_sim.batch.engine`).
 
-        bar = tqdm(total=len(poses), desc=desc, unit="pose")
-    if workers <= 1 or len(poses) < 2 * workers:
-        for p in poses:
-            results.append(_solve_pose(config, p, options, n_modes))
-            if bar is not None:
-                bar.update(1)
-    else:
-        chunk = max(1, min(16, len(poses) // (4 * workers)))
-        jobs = [(config, poses[i : i + chunk], options, n_modes) for i in range(0, len(poses), chunk)]
-        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("fork")) as ex:
-            for res in ex.map(_solve_chunk, jobs):
-                results.extend(res)
-                if bar is not None:
-                    bar.update(len(res))
-    if bar is not None:
-        bar.close()
-    return PoseFrequencies(
-        poses=poses,
-        frequencies_hz=np.array([r[0] for r in results]).reshape(len(poses), n_modes),
-        in_plane=np.array([r[1] for r in results]).reshape(len(poses), n_modes),
-        singularity=np.array([r[2] for r in results]),
-        status=[r[3] for r in results],
+    ``engine`` says where (default: a local cluster of ``workers`` processes; one worker runs here);
+    ``workers``, ``progress`` and ``desc`` fill its fields left unset.
+    """
+    poses = list(poses)
+    eng = engine or EngineOptions()
+    eng = dataclasses.replace(
+        eng,
+        workers=eng.workers or workers,
+        progress=eng.progress or progress,
+        desc=desc if eng.desc == "poses" else eng.desc,
     )
+    if not poses:
+        return solve_poses(config, poses, n_modes=n_modes, options=options)
+    size = eng.chunk or chunk_size(len(poses), eng.n_workers)
+    chunks = split(poses, size)
+    parts = run_chunks(
+        _solve_chunk,
+        chunks,
+        kwargs={"config": config, "n_modes": n_modes, "options": options},
+        weights=[len(c) for c in chunks],
+        options=eng,
+    )
+    return merge(parts)
+
+
+class PosesFileError(FpmSimError):
+    """A poses CSV file (``--poses``) is missing, empty or malformed."""
+
+
+def read_poses_csv(path: str | Path) -> list[Pose]:
+    """Poses from a CSV file with columns ``x_mm,y_mm,phi_rad`` (other columns are ignored)."""
+    p = Path(path)
+    if not p.is_file():
+        raise PosesFileError(f"--poses {p}: no such file")
+    with open(p, newline="") as fh:
+        reader = csv.DictReader(fh)
+        missing = {"x_mm", "y_mm", "phi_rad"} - set(reader.fieldnames or [])
+        if missing:
+            raise PosesFileError(
+                f"--poses {p}: missing column(s) {', '.join(sorted(missing))} (the header must hold x_mm,y_mm,phi_rad)"
+            )
+        try:
+            poses = [Pose.from_mm(float(r["x_mm"]), float(r["y_mm"]), float(r["phi_rad"])) for r in reader]
+        except (TypeError, ValueError):
+            raise PosesFileError(f"--poses {p}: x_mm, y_mm and phi_rad must be numbers on every row") from None
+    if not poses:
+        raise PosesFileError(f"--poses {p}: no rows after the header")
+    return poses

@@ -38,6 +38,7 @@ COMMAND_MODULES: list[str] = [
     "fpm_sim.cli.impact",
     "fpm_sim.cli.readability",
     "fpm_sim.cli.atlas",
+    "fpm_sim.cli.design",
 ]
 """Command modules beyond the core ones (each exposes ``register(subparsers)``)."""
 

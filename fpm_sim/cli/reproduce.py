@@ -7,6 +7,7 @@ from pathlib import Path
 
 from fpm_sim.batch.frequencies import BACKENDS
 from fpm_sim.batch.pose_loop import FAST_SEGMENTS, fast_options
+from fpm_sim.cli.design import add_engine_args, engine_options, finish_store
 from fpm_sim.cli.main import add_config_args, add_output_args, emit, load_manipulator
 from fpm_sim.study.poses import parse_reading
 from fpm_sim.study.reproduce import reproduce_study
@@ -61,9 +62,16 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         print(f"fpm-sim: error: {exc}", file=sys.stderr)
         return 2
     rep = reproduce_study(
-        manip, reading=reading, options=opts, backend=args.backend, workers=args.workers, progress=True
+        manip,
+        reading=reading,
+        options=opts,
+        backend=args.backend,
+        workers=args.workers,
+        progress=True,
+        engine=engine_options(args, args.out) if args.backend == "cpu" else None,
     )
     paths = rep.write(args.out)
+    finish_store(args.out)
     st = rep.stats()
     lines = [rep.config.name, f"reading {reading.name}", ""]
     lines.append(f"{'test':<22}{'measured':>10}{'COMSOL':>10}{'fpm-sim':>10}{'err %':>8}")
@@ -103,6 +111,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     add_config_args(p)
     add_study_args(p)
+    add_engine_args(p)
     p.add_argument("--out", type=Path, default=Path("out/reproduce"), help="output folder (default out/reproduce)")
     add_output_args(p)
     p.set_defaults(func=cmd_reproduce)

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from fpm_sim.batch.pose_loop import fast_options
+from fpm_sim.cli.design import add_engine_args, engine_options, finish_store
 from fpm_sim.cli.main import add_config_args, add_output_args, emit
 from fpm_sim.cli.reproduce import add_study_args, study_manipulator
 from fpm_sim.study.poses import parse_reading
@@ -22,8 +23,15 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         if args.workers < 1:
             raise ValueError(f"--workers must be >= 1, got {args.workers}")
         opts = fast_options(segments=args.segments, axial=args.axial)
+        poses = None
+        if args.poses is not None:
+            from fpm_sim.batch.pose_loop import read_poses_csv
+
+            poses, args.grid = read_poses_csv(args.poses), "poses"
         sw = sweep_workspace(
             manip,
+            poses=poses,
+            engine=engine_options(args, args.out) if args.backend == "cpu" else None,
             grid=args.grid,
             step_mm=args.step_mm,
             phi_rad=args.phi_rad,
@@ -37,6 +45,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         print(f"fpm-sim: error: {exc}", file=sys.stderr)
         return 2
     paths = sw.write(args.out)
+    finish_store(args.out)
     if args.grid == "paper":  # the reproduce command's poses.csv, from the same frequencies
         from fpm_sim.study.poses import study_poses
         from fpm_sim.study.reproduce import StudyReproduction
@@ -74,8 +83,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--grid", choices=("paper", "dense"), default="dense", help="dense grid or the study's poses")
     p.add_argument("--step-mm", type=float, default=10.0, help="dense grid spacing (mm, default 10)")
     p.add_argument("--phi-rad", type=float, default=0.0, help="platform rotation for the dense grid (rad)")
+    p.add_argument(
+        "--poses", type=Path, help="CSV of poses (x_mm,y_mm,phi_rad) instead of --grid; writes OUT/sweep_poses.csv"
+    )
     add_config_args(p)
     add_study_args(p)
+    add_engine_args(p)
     p.add_argument("--out", type=Path, default=Path("out/sweep"), help="output folder (default out/sweep)")
     add_output_args(p)
     p.set_defaults(func=cmd_sweep)

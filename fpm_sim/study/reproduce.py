@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 from scipy.stats import spearmanr
 
+from fpm_sim.batch.engine import EngineOptions
 from fpm_sim.batch.frequencies import pose_frequencies
 from fpm_sim.batch.pose_loop import PoseFrequencies
 from fpm_sim.config import Manipulator
@@ -415,6 +416,7 @@ def reproduce_study(
     progress: bool = False,
     subsystems: bool = True,
     readability: bool = True,
+    engine: EngineOptions | None = None,
 ) -> StudyReproduction:
     """Run the study's subsystem tests and its 25 poses on ``config``.
 
@@ -426,8 +428,9 @@ def reproduce_study(
         How the study's table maps to poses (default: rows are x, +0.2 rad).
     options
         Pose-loop discretisation (default :func:`fpm_sim.batch.pose_loop.fast_options`).
-    backend, workers, progress
-        Passed to :func:`fpm_sim.batch.pose_loop.pose_frequencies`.
+    backend, workers, progress, engine
+        Passed to :func:`fpm_sim.batch.frequencies.pose_frequencies` (``engine``: where the ``cpu`` backend's
+        chunks run, :class:`fpm_sim.batch.engine.EngineOptions`).
     subsystems
         Also solve the subsystem rigs (needs ``config.rig``).
     readability
@@ -448,6 +451,7 @@ def reproduce_study(
         workers=workers,
         progress=progress,
         desc="study poses",
+        engine=engine,
     )
     subs = subsystem_frequencies(config) if subsystems and config.rig is not None else []
     tables = []

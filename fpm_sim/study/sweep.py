@@ -15,16 +15,18 @@ from __future__ import annotations
 import csv
 import math
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from fpm_sim.batch.engine import EngineOptions
 from fpm_sim.batch.frequencies import pose_frequencies
 from fpm_sim.batch.pose_loop import PoseFrequencies
 from fpm_sim.config import Manipulator
-from fpm_sim.kinematics import Pose, UnreachablePoseError, inverse_kinematics
+from fpm_sim.kinematics import Pose, assemble_many
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.study.poses import TableReading, study_poses
 
@@ -52,15 +54,8 @@ def dense_grid(config: Manipulator, *, step_mm: float, phi_rad: float = 0.0) -> 
     ticks = np.arange(-n, n + 1) * step_mm
     if ticks.size > 401:
         raise ValueError(f"--step-mm {step_mm} gives {ticks.size} x {ticks.size} points; use a larger step")
-    reach = np.zeros((ticks.size, ticks.size), bool)
-    g = config.geometry
-    for iy, y in enumerate(ticks):
-        for ix, x in enumerate(ticks):
-            try:
-                inverse_kinematics(g, Pose.from_mm(x, y, phi_rad), check_singularity=False)
-                reach[iy, ix] = True
-            except UnreachablePoseError:
-                pass
+    xx, yy = np.meshgrid(ticks * 1e-3, ticks * 1e-3)
+    reach = assemble_many(config.geometry, xx.ravel(), yy.ravel(), phi_rad).reachable.reshape(xx.shape)
     if not reach.any():
         raise ValueError(f"no reachable position at phi = {phi_rad} rad with step {step_mm} mm (--phi-rad)")
     rows, cols = np.where(reach.any(axis=1))[0], np.where(reach.any(axis=0))[0]
@@ -72,30 +67,10 @@ def singularity_fields(
     config: Manipulator, x_mm: np.ndarray, y_mm: np.ndarray, phi_rad: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """``det(Jx)`` (rotation column over the characteristic length) and ``min_i |cross(w_i, u_i)|`` on the
-    grid ``y_mm x x_mm`` (NaN where unreachable); vectorised inverse kinematics, as in
-    :func:`fpm_sim.kinematics.inverse_kinematics`."""
-    g = config.geometry
-    l1, l2 = g.proximal_length_m, g.distal_length_m
+    grid ``y_mm x x_mm`` (NaN where unreachable), from :func:`fpm_sim.kinematics.assemble_many`."""
     xx, yy = np.meshgrid(np.asarray(x_mm, float) * 1e-3, np.asarray(y_mm, float) * 1e-3)
-    p = np.stack([xx.ravel(), yy.ravel()], axis=1)  # (n, 2)
-    base = np.asarray(g.base_angles_rad)
-    a = g.base_radius_m * np.stack([np.cos(base), np.sin(base)], axis=1)
-    ang = np.asarray(g.platform_angles_rad) + phi_rad
-    r = g.platform_radius_m * np.stack([np.cos(ang), np.sin(ang)], axis=1)  # (3, 2)
-    c = p[:, None, :] + r[None]
-    d = c - a[None]
-    dist = np.hypot(d[..., 0], d[..., 1])
-    reach = np.all((dist >= abs(l1 - l2)) & (dist <= l1 + l2), axis=1)
-    cos_alpha = np.clip((l1**2 + dist**2 - l2**2) / (2.0 * l1 * np.maximum(dist, 1e-300)), -1.0, 1.0)
-    q = np.arctan2(d[..., 1], d[..., 0]) + np.asarray(g.elbow_branch)[None, :] * np.arccos(cos_alpha)
-    w = np.stack([np.cos(q), np.sin(q)], axis=2)
-    u = (c - (a[None] + l1 * w)) / l2
-    cross = w[..., 0] * u[..., 1] - w[..., 1] * u[..., 0]
-    lc = max(g.platform_radius_m, l2 / 4.0)
-    jx = np.concatenate([u, ((r[None, :, 0] * u[..., 1] - r[None, :, 1] * u[..., 0]) / lc)[..., None]], axis=2)
-    det = np.where(reach, np.linalg.det(jx), np.nan).reshape(xx.shape)
-    ser = np.where(reach, np.min(np.abs(cross), axis=1), np.nan).reshape(xx.shape)
-    return det, ser
+    many = assemble_many(config.geometry, xx.ravel(), yy.ravel(), phi_rad)
+    return many.det_jx.reshape(xx.shape), many.serial.reshape(xx.shape)
 
 
 @dataclass
@@ -213,20 +188,38 @@ def sweep_workspace(
     step_mm: float = 10.0,
     phi_rad: float = 0.0,
     reading: TableReading | None = None,
+    poses: Sequence[Pose] | None = None,
     options: ModelOptions | None = None,
     backend: str = "cpu",
     workers: int = 2,
     progress: bool = False,
+    engine: EngineOptions | None = None,
 ) -> WorkspaceSweep:
-    """First three frequencies over the workspace (``grid="dense"``) or at the study's poses (``"paper"``)."""
-    if grid == "dense":
+    """First three frequencies over the workspace (``grid="dense"``), at the study's poses (``"paper"``) or at
+    given ``poses`` (``"poses"``; written to ``sweep_poses.csv``). ``engine`` says where the ``cpu`` backend
+    runs (:class:`fpm_sim.batch.engine.EngineOptions`)."""
+    if grid == "poses":
+        if not poses:
+            raise ValueError("grid='poses' needs poses (--poses FILE.csv with columns x_mm,y_mm,phi_rad)")
+        poses = list(poses)
+    elif poses is not None:
+        raise ValueError(f"poses are given: use grid='poses', not {grid!r} (--poses replaces --grid)")
+    elif grid == "dense":
         poses = dense_grid(config, step_mm=step_mm, phi_rad=phi_rad)
     elif grid == "paper":
         poses = [p.pose for p in study_poses(reading)]
         step_mm = 50.0
     else:
-        raise ValueError(f"--grid must be 'paper' or 'dense', got {grid!r}")
+        raise ValueError(f"--grid must be 'paper', 'dense' or 'poses', got {grid!r}")
     fr = pose_frequencies(
-        config, poses, backend=backend, n_modes=3, options=options, workers=workers, progress=progress, desc="sweep"
+        config,
+        poses,
+        backend=backend,
+        n_modes=3,
+        options=options,
+        workers=workers,
+        progress=progress,
+        desc="sweep",
+        engine=engine,
     )
     return WorkspaceSweep(config, grid, phi_rad, step_mm, fr)

@@ -45,3 +45,50 @@ def test_backends_are_replaceable(default_manip):
     assert calls == [1] and out.shape == (1, 1)
     with pytest.raises(ValueError, match="unknown backend"):
         first_frequencies(default_manip, [Pose(0, 0, 0)], backend="nope")
+
+
+HANDFUL = [
+    Pose.from_mm(0.0, 0.0, 0.0),
+    Pose.from_mm(-60.0, -50.0, 0.0),
+    Pose.from_mm(50.0, 70.0, 0.2),
+    Pose.from_mm(0.0, 70.0, 0.2),  # near-singular (measure 0.003): the most sensitive to round-off
+    Pose.from_mm(90.0, -100.0, -0.1),
+    Pose(0.9, 0.0, 0.0),  # unreachable
+]
+
+
+@pytest.mark.parametrize("thickness_m", [0.005, 0.03])
+def test_reposed_model_equals_the_per_pose_compile(default_manip, thickness_m):
+    # One compiled model re-posed in place must give what compiling a model per pose gives. The weld
+    # relative poses are set with mj_setConst's own operations, so the two agree bit for bit here; 1e-9
+    # relative leaves room for BLAS/LAPACK builds that round differently, far below any modelling effect.
+    from fpm_sim.batch.pose_loop import solve_poses
+
+    manip = default_manip.with_section(thickness_m=thickness_m)
+    opts = fast_options(segments=3, axial=True)
+    fast = solve_poses(manip, HANDFUL, n_modes=4, options=opts)
+    ref = solve_poses(manip, HANDFUL, n_modes=4, options=opts, recompile=True)
+    assert fast.status == ref.status
+    assert fast.status[-1] == "unreachable" and "near_singular" in fast.status
+    np.testing.assert_allclose(fast.frequencies_hz, ref.frequencies_hz, rtol=1e-9, equal_nan=True)
+    np.testing.assert_allclose(fast.in_plane, ref.in_plane, rtol=1e-9, atol=1e-12, equal_nan=True)
+    np.testing.assert_array_equal(fast.singularity, ref.singularity)
+
+
+def test_plane_split_equals_the_whole_eigenproblem(default_manip):
+    # The in-plane / out-of-plane split is exact when M and the weld Jacobian are block-diagonal; the
+    # frequencies must match one reduced_eigenproblem on the whole matrices (round-off: 1e-9 relative at a
+    # well-conditioned pose), and the mode-1 character must come out pure (share 0 or 1).
+    from fpm_sim.batch.pose_loop import PoseModel, plane_blocks, pose_assembly
+    from fpm_sim.linear.modal import equality_jacobian, mass_matrix, reduced_eigenproblem
+
+    opts = fast_options(segments=4)
+    for pose in HANDFUL[:3]:
+        asm, _, _ = pose_assembly(default_manip, pose)
+        pm = PoseModel(default_manip, opts, asm)
+        freq, share = pm.solve(asm, 6)
+        m, j = mass_matrix(pm.model, pm.data), equality_jacobian(pm.model, pm.data)
+        assert plane_blocks(m, j, pm.in_plane) is not None
+        _, _, _, w2, _ = reduced_eigenproblem(m, np.diag(pm.stiffness), j)
+        np.testing.assert_allclose(freq, np.sqrt(w2[:6]) / (2 * np.pi), rtol=1e-9)
+        assert np.all((np.abs(share) < 1e-12) | (np.abs(share - 1) < 1e-12))

@@ -1,0 +1,625 @@
+"""Design studies: the pose loop over every design x pose, as one xarray Dataset with a per-design summary.
+
+A design is the manipulator description with some dotted fields changed (``section.thickness_m``,
+``hardware.payload.mass_kg``, ``geometry.distal_length_m``, ...). :func:`design_study` runs the pose loop's
+chunks for all designs on the engine (:mod:`fpm_sim.batch.engine`: Dask, streamed to disk, resumable):
+every task is one design and one chunk of poses, and every worker compiles one model per design
+(:class:`fpm_sim.batch.pose_loop.PoseModel`) and re-poses it.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import itertools
+import math
+import time
+import warnings
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fpm_sim.batch.engine import EngineOptions, chunk_size, run_chunks, split
+from fpm_sim.batch.jax_backend import parameter_value, with_parameter
+from fpm_sim.batch.pose_loop import (
+    STATUS_UNREACHABLE,
+    PoseFrequencies,
+    fast_options,
+    merge,
+    read_poses_csv,
+    solve_poses,
+)
+from fpm_sim.config import Manipulator
+from fpm_sim.errors import FpmSimError, FpmSimWarning
+from fpm_sim.kinematics import Pose
+from fpm_sim.model.options import ModelOptions
+
+__all__ = [
+    "DesignError",
+    "DesignResult",
+    "design_study",
+    "parse_spec",
+    "parse_vary",
+    "factorial",
+    "read_designs_csv",
+    "read_poses_csv",
+    "apply_design",
+    "link_mass_kg",
+    "moving_mass_kg",
+    "COMPUTED",
+    "write_netcdf",
+]
+
+COMPUTED = ("ok", "near_singular")
+"""Statuses whose frequencies are computed."""
+
+
+class DesignError(FpmSimError):
+    """A design study was asked for something it cannot do (bad field, value, spec or file)."""
+
+
+# ----------------------------------------------------------------------------------------------- inputs
+
+
+def parse_spec(spec: str, *, name: str = "SPEC") -> list[float]:
+    """Values of ``a,b,c`` (a list) or ``start:stop:count`` (``count`` values from ``start`` to ``stop``)."""
+    text = spec.strip()
+    try:
+        if ":" in text:
+            parts = text.split(":")
+            if len(parts) != 3:
+                raise ValueError
+            start, stop, count = float(parts[0]), float(parts[1]), int(parts[2])
+            if count < 1:
+                raise ValueError
+            return [float(v) for v in np.linspace(start, stop, count)]
+        values = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise DesignError(
+            f"{name} {spec!r}: give a list a,b,c or a range start:stop:count (count an integer >= 1)"
+        ) from None
+    if not values:
+        raise DesignError(f"{name} {spec!r} is empty: give a list a,b,c or a range start:stop:count")
+    return values
+
+
+def _check_field(config: Manipulator, name: str) -> None:
+    try:
+        parameter_value(config, name)
+    except ValueError as exc:
+        raise DesignError(
+            f"--vary {name}: {exc}; fields are dotted paths of the description, e.g. section.thickness_m, "
+            "hardware.payload.mass_kg, geometry.distal_length_m (see `fpm-sim config`)"
+        ) from None
+
+
+def parse_vary(items: Sequence[str], config: Manipulator) -> dict[str, list[float]]:
+    """``["FIELD=SPEC", ...]`` (the ``--vary`` options) as ``{field: values}``, fields checked on ``config``."""
+    out: dict[str, list[float]] = {}
+    for item in items:
+        if "=" not in item:
+            raise DesignError(f"--vary {item!r}: write FIELD=SPEC, e.g. section.thickness_m=0.005:0.03:6")
+        name, spec = (s.strip() for s in item.split("=", 1))
+        _check_field(config, name)
+        if name in out:
+            raise DesignError(f"--vary {name} given twice; give all its values in one SPEC")
+        out[name] = parse_spec(spec, name=f"--vary {name}")
+    return out
+
+
+def factorial(vary: Mapping[str, Sequence[float]]) -> list[dict[str, float]]:
+    """Every combination of the values (the first field varies slowest)."""
+    names = list(vary)
+    return [dict(zip(names, combo)) for combo in itertools.product(*(vary[n] for n in names))]
+
+
+def read_designs_csv(path: str | Path, config: Manipulator) -> list[dict[str, float]]:
+    """Designs from a CSV file: one column per dotted field, one row per design."""
+    p = Path(path)
+    if not p.is_file():
+        raise DesignError(f"--designs {p}: no such file")
+    with open(p, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    if not rows:
+        raise DesignError(f"--designs {p}: no rows (write a header of dotted fields, then one design per row)")
+    for name in rows[0]:
+        _check_field(config, name)
+    try:
+        return [{k: float(v) for k, v in r.items()} for r in rows]
+    except (TypeError, ValueError):
+        raise DesignError(f"--designs {p}: every cell must be a number (SI units, as the field's name says)") from None
+
+
+def apply_design(config: Manipulator, values: Mapping[str, float]) -> Manipulator:
+    """``config`` with the dotted fields set (validated; a name that says what changed)."""
+    out = config
+    for name, v in values.items():
+        try:
+            out = with_parameter(out, name, float(v))
+        except ValueError as exc:
+            raise DesignError(f"design {dict(values)}: {name} = {v} is not valid ({exc})") from None
+    label = ", ".join(f"{k}={v:g}" for k, v in values.items())
+    return dataclasses.replace(out, name=f"{config.name} [{label}]") if label else out
+
+
+def link_mass_kg(config: Manipulator) -> float:
+    """Mass of the six links (kg): section area x density x link lengths."""
+    g = config.geometry
+    return 3.0 * (g.proximal_length_m + g.distal_length_m) * config.section.area_m2 * config.material.density_kg_m3
+
+
+def moving_mass_kg(config: Manipulator) -> float:
+    """Everything that moves with the platform or the links (kg): links, joint hardware, platform, payload
+    (the motor flanges turn in place and are left out)."""
+    hw = config.hardware
+    return (
+        link_mass_kg(config)
+        + 3.0 * (hw.elbow_joint.mass_kg + hw.platform_joint.mass_kg)
+        + hw.platform.mass_kg
+        + hw.payload.mass_kg
+    )
+
+
+# ----------------------------------------------------------------------------------------------- result
+
+
+@dataclass
+class DesignResult:
+    """Frequencies over designs x poses (:func:`design_study`).
+
+    Attributes
+    ----------
+    config
+        The base description.
+    fields
+        The varied dotted fields (SI units in their names).
+    designs
+        One ``{field: value}`` per design.
+    factorial
+        The designs are the full factorial of :attr:`levels`.
+    levels
+        ``{field: values}`` of a factorial study (in order), else each field's distinct values.
+    poses
+        The poses (shared by all designs).
+    frequencies_hz
+        ``(n_designs, n_poses, n_modes)``; NaN where not computed.
+    in_plane
+        ``(n_designs, n_poses)``: mode 1's share of strain energy in in-plane springs.
+    singularity
+        ``(n_designs, n_poses)`` singularity measure (NaN where unreachable).
+    status
+        ``(n_designs, n_poses)`` ``ok``, ``near_singular``, ``singular`` or ``unreachable``.
+    f_min_hz
+        Threshold of the workspace share in the summary (``None``: not computed).
+    link_mass_kg, moving_mass_kg
+        ``(n_designs,)``.
+    elapsed_s
+        Wall time of the study.
+    """
+
+    config: Manipulator
+    fields: list[str]
+    designs: list[dict[str, float]]
+    factorial: bool
+    levels: dict[str, list[float]]
+    poses: list[Pose]
+    frequencies_hz: np.ndarray
+    in_plane: np.ndarray
+    singularity: np.ndarray
+    status: np.ndarray
+    f_min_hz: float | None
+    link_mass_kg: np.ndarray
+    moving_mass_kg: np.ndarray
+    elapsed_s: float = 0.0
+    options: ModelOptions = field(default_factory=fast_options)
+
+    @property
+    def n_modes(self) -> int:
+        return int(self.frequencies_hz.shape[2])
+
+    def pose_frequencies(self, design: int) -> PoseFrequencies:
+        """Design ``design``'s result as the pose loop returns it."""
+        return PoseFrequencies(
+            poses=list(self.poses),
+            frequencies_hz=self.frequencies_hz[design],
+            in_plane=np.column_stack([self.in_plane[design]] + [np.full(len(self.poses), np.nan)] * (self.n_modes - 1)),
+            singularity=self.singularity[design],
+            status=list(self.status[design]),
+        )
+
+    def summary(self) -> list[dict[str, Any]]:
+        """Per design: min and mean f1 over the computed poses (``ok`` and ``near_singular``), min f1 over the
+        ``ok`` poses (away from singularities, where f1 does not dive to zero), the share of the reachable poses
+        with ``f1 >= f_min_hz`` (singular poses count as reachable and below), the weakest pose, counts, link
+        and moving mass."""
+        rows = []
+        for d, values in enumerate(self.designs):
+            st = self.status[d]
+            computed = np.isin(st, COMPUTED) & np.isfinite(self.frequencies_hz[d, :, 0])
+            reachable = st != STATUS_UNREACHABLE
+            f1 = self.frequencies_hz[d, computed, 0]
+            f1_ok = self.frequencies_hz[d, (st == "ok") & computed, 0]
+            share = math.nan
+            if self.f_min_hz is not None and reachable.any():
+                share = float(np.sum(f1 >= self.f_min_hz) / reachable.sum())
+            worst = int(np.flatnonzero(computed)[np.argmin(f1)]) if f1.size else None
+            row: dict[str, Any] = dict(values)
+            row.update(
+                {
+                    "min_f1_hz": float(f1.min()) if f1.size else math.nan,
+                    "mean_f1_hz": float(f1.mean()) if f1.size else math.nan,
+                    "min_f1_ok_hz": float(f1_ok.min()) if f1_ok.size else math.nan,
+                    "share_above_f_min": share,
+                    "computed_poses": int(computed.sum()),
+                    "reachable_poses": int(reachable.sum()),
+                    "weakest_x_mm": round(self.poses[worst].x_m * 1e3, 6) if worst is not None else math.nan,
+                    "weakest_y_mm": round(self.poses[worst].y_m * 1e3, 6) if worst is not None else math.nan,
+                    "link_mass_kg": float(self.link_mass_kg[d]),
+                    "moving_mass_kg": float(self.moving_mass_kg[d]),
+                }
+            )
+            rows.append(row)
+        return rows
+
+    def table(self) -> str:
+        """The summary as a text table."""
+        rows = self.summary()
+        share_head = f"share>={self.f_min_hz:g}Hz" if self.f_min_hz is not None else "share"
+        heads = [*self.fields, "min f1 Hz", "min f1 ok Hz", "mean f1 Hz", share_head, "poses", "links kg", "moving kg"]
+        width = [max(len(h), 12) for h in heads]
+        lines = ["  ".join(h.rjust(w) for h, w in zip(heads, width))]
+        for r in rows:
+            cells = [f"{r[f]:.6g}" for f in self.fields] + [
+                f"{r['min_f1_hz']:.2f}",
+                f"{r['min_f1_ok_hz']:.2f}",
+                f"{r['mean_f1_hz']:.2f}",
+                "-" if math.isnan(r["share_above_f_min"]) else f"{100 * r['share_above_f_min']:.1f} %",
+                f"{r['computed_poses']}/{len(self.poses)}",
+                f"{r['link_mass_kg']:.4f}",
+                f"{r['moving_mass_kg']:.4f}",
+            ]
+            lines.append("  ".join(c.rjust(w) for c, w in zip(cells, width)))
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: fields, designs, poses, summary, and the frequencies per design and pose."""
+        return {
+            "config": self.config.name,
+            "fields": list(self.fields),
+            "designs": [dict(d) for d in self.designs],
+            "factorial": self.factorial,
+            "f_min_hz": self.f_min_hz,
+            "n_modes": self.n_modes,
+            "poses_mm_rad": [[p.x_m * 1e3, p.y_m * 1e3, p.phi_rad] for p in self.poses],
+            "summary": self.summary(),
+            "frequencies_hz": np.where(np.isfinite(self.frequencies_hz), self.frequencies_hz, None).tolist(),
+            "status": self.status.tolist(),
+            "elapsed_s": self.elapsed_s,
+        }
+
+    # ------------------------------------------------------------------------------------------- dataset
+
+    @property
+    def dataset(self) -> Any:
+        """An :class:`xarray.Dataset`: dimensions each varied field (a factorial study) or ``design``
+        (a list of designs), ``pose`` and ``mode``; variables ``frequency_hz``, ``in_plane_mode1``,
+        ``singularity``, ``status``, ``link_mass_kg``, ``moving_mass_kg``; pose coordinates ``x_mm``,
+        ``y_mm``, ``phi_rad``."""
+        import xarray as xr
+
+        n_d, n_p, n_m = self.frequencies_hz.shape
+        coords: dict[str, Any] = {
+            "design": np.arange(n_d),
+            "pose": np.arange(n_p),
+            "mode": np.arange(1, n_m + 1),
+            "x_mm": ("pose", np.array([p.x_m * 1e3 for p in self.poses])),
+            "y_mm": ("pose", np.array([p.y_m * 1e3 for p in self.poses])),
+            "phi_rad": ("pose", np.array([p.phi_rad for p in self.poses])),
+        }
+        for f in self.fields:
+            coords[f] = ("design", np.array([d[f] for d in self.designs]))
+        ds = xr.Dataset(
+            {
+                "frequency_hz": (("design", "pose", "mode"), self.frequencies_hz),
+                "in_plane_mode1": (("design", "pose"), self.in_plane),
+                "singularity": (("design", "pose"), self.singularity),
+                "status": (("design", "pose"), self.status.astype(str)),
+                "link_mass_kg": ("design", self.link_mass_kg),
+                "moving_mass_kg": ("design", self.moving_mass_kg),
+            },
+            coords=coords,
+            attrs={
+                "config": self.config.name,
+                "f_min_hz": math.nan if self.f_min_hz is None else self.f_min_hz,
+                "segments": int(self.options.segments or 0),
+                "axial": int(self.options.axial),
+                "fields": ",".join(self.fields),
+            },
+        )
+        if self.factorial and self.fields:
+            if len(self.fields) == 1:
+                ds = ds.swap_dims({"design": self.fields[0]}).drop_vars("design")
+            else:
+                ds = ds.set_index(design=self.fields).unstack("design")
+            ds = ds.transpose(*self.fields, "pose", "mode")
+            for name in ("link_mass_kg", "moving_mass_kg"):
+                ds[name] = ds[name].transpose(*self.fields)
+        return ds
+
+    # ------------------------------------------------------------------------------------------- output
+
+    def tidy_rows(self) -> list[dict[str, Any]]:
+        """One row per design and pose: the varied fields, ``x_mm, y_mm, phi_rad, status, singularity,
+        f1_hz, ..., in_plane_mode1``."""
+        rows = []
+        for d, values in enumerate(self.designs):
+            for i, p in enumerate(self.poses):
+                row: dict[str, Any] = dict(values)
+                row.update(
+                    {
+                        "x_mm": round(p.x_m * 1e3, 6),
+                        "y_mm": round(p.y_m * 1e3, 6),
+                        "phi_rad": p.phi_rad,
+                        "status": str(self.status[d, i]),
+                        "singularity": float(self.singularity[d, i]),
+                    }
+                )
+                for k in range(self.n_modes):
+                    row[f"f{k + 1}_hz"] = float(self.frequencies_hz[d, i, k])
+                row["in_plane_mode1"] = float(self.in_plane[d, i])
+                rows.append(row)
+        return rows
+
+    def write(self, out_dir: str | Path, *, figures: bool = True) -> list[Path]:
+        """Write ``design.nc`` (h5netcdf), ``design.csv`` (tidy), ``summary.csv`` and the figures."""
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        paths = [out / "design.nc", out / "design.csv", out / "summary.csv"]
+        write_netcdf(self.dataset, paths[0])
+        _write_csv(paths[1], self.tidy_rows())
+        _write_csv(paths[2], self.summary())
+        if figures:
+            import matplotlib.pyplot as plt
+
+            for name, fig in (
+                ("design_min_f1.png", self.plot()),
+                ("design_maps.png", self.plot_maps()),
+                ("design_tradeoff.png", self.plot_tradeoff()),
+            ):
+                if fig is None:
+                    continue
+                fig.savefig(out / name, dpi=110)
+                plt.close(fig)
+                paths.append(out / name)
+        return paths
+
+    # ------------------------------------------------------------------------------------------- figures
+
+    def plot(self, ax: Any = None) -> Any:
+        """Minimum f1 over the workspace against each varied field (one panel per field, one line per value
+        of the other fields; solid: the ``ok`` poses, dotted: near-singular poses included); with ``ax`` only
+        the first field, on that axes. Returns the ``Figure``."""
+        import matplotlib.pyplot as plt
+
+        rows = self.summary()
+        fields = self.fields or ["design"]
+        if ax is None:
+            fig, axes = plt.subplots(1, len(fields), figsize=(5 * len(fields), 3.8), constrained_layout=True)
+            axes = np.atleast_1d(axes)
+        else:
+            fig, axes = ax.figure, np.array([ax])
+        for a, f in zip(axes, fields):
+            others = [o for o in self.fields if o != f]
+            groups: dict[tuple, list[dict[str, Any]]] = {}
+            for i, r in enumerate(rows):
+                groups.setdefault(tuple(r[o] for o in others), []).append({**r, "design": i})
+            for key, grp in groups.items():
+                grp = sorted(grp, key=lambda r: r[f])
+                label = ", ".join(f"{o}={v:g}" for o, v in zip(others, key)) or None
+                (line,) = a.plot([r[f] for r in grp], [r["min_f1_ok_hz"] for r in grp], "o-", label=label)
+                a.plot([r[f] for r in grp], [r["min_f1_hz"] for r in grp], ".:", color=line.get_color(), lw=0.8)
+            if self.f_min_hz is not None:
+                a.axhline(self.f_min_hz, color="red", ls="--", lw=1, label=f"f_min {self.f_min_hz:g} Hz")
+            a.set_xlabel(f)
+            a.set_ylabel("minimum f1 over the workspace (Hz)")
+            a.plot([], [], "k.:", lw=0.8, label="dotted: near-singular poses included")
+            a.grid(alpha=0.3)
+            if any(line.get_label() and not line.get_label().startswith("_") for line in a.get_lines()):
+                a.legend(fontsize=7)
+        fig.suptitle(f"{self.config.name}: weakest pose per design", fontsize=9)
+        return fig
+
+    def plot_maps(self, max_designs: int = 12) -> Any:
+        """Small multiples of the f1 map over the poses, one per design (the first ``max_designs``)."""
+        import matplotlib.pyplot as plt
+
+        n = min(len(self.designs), max_designs)
+        if n == 0:
+            return None
+        cols = min(n, 4)
+        rows_n = math.ceil(n / cols)
+        fig, axes = plt.subplots(
+            rows_n, cols, figsize=(3.2 * cols, 3.0 * rows_n), squeeze=False, constrained_layout=True
+        )
+        x = np.array([p.x_m * 1e3 for p in self.poses])
+        y = np.array([p.y_m * 1e3 for p in self.poses])
+        f1 = self.frequencies_hz[:n, :, 0]
+        vmin, vmax = (np.nanmin(f1), np.nanmax(f1)) if np.isfinite(f1).any() else (0.0, 1.0)
+        sc = None
+        for d in range(rows_n * cols):
+            a = axes.flat[d]
+            if d >= n:
+                a.axis("off")
+                continue
+            ok = np.isfinite(f1[d])
+            sc = a.scatter(x[ok], y[ok], c=f1[d, ok], s=max(4.0, 2000.0 / max(len(x), 1)), vmin=vmin, vmax=vmax)
+            a.scatter(x[~ok], y[~ok], marker="x", s=6, color="0.7")
+            a.set_title(", ".join(f"{k}={v:g}" for k, v in self.designs[d].items()) or "design", fontsize=7)
+            a.set_aspect("equal")
+            a.tick_params(labelsize=6)
+        if sc is not None:
+            fig.colorbar(sc, ax=axes, label="f1 (Hz)", shrink=0.8)
+        return fig
+
+    def plot_tradeoff(self) -> Any:
+        """Moving mass against the minimum f1, one point per design."""
+        import matplotlib.pyplot as plt
+
+        rows = self.summary()
+        fig, ax = plt.subplots(figsize=(5, 4), constrained_layout=True)
+        ax.scatter([r["moving_mass_kg"] for r in rows], [r["min_f1_hz"] for r in rows])
+        for r in rows:
+            ax.annotate(", ".join(f"{r[f]:g}" for f in self.fields), (r["moving_mass_kg"], r["min_f1_hz"]), fontsize=6)
+        if self.f_min_hz is not None:
+            ax.axhline(self.f_min_hz, color="red", ls="--", lw=1)
+        ax.set_xlabel("moving mass (kg)")
+        ax.set_ylabel("minimum f1 over the ok poses (Hz)")
+        ax.set_title(f"trade-off ({', '.join(self.fields)})", fontsize=8)
+        ax.grid(alpha=0.3)
+        return fig
+
+
+def write_netcdf(ds: Any, path: Path) -> str:
+    """Write ``ds`` with the ``h5netcdf`` engine (netCDF-4); without ``h5py`` (its writer) fall back to SciPy's
+    netCDF-3 writer with a warning. Returns the engine used."""
+    try:
+        import h5py  # noqa: F401
+    except ImportError:
+        warnings.warn(
+            f"h5py is not installed: {path} is written as netCDF-3 (scipy) instead of netCDF-4 (h5netcdf); "
+            "pip install h5py for the netCDF-4 file",
+            FpmSimWarning,
+            stacklevel=3,
+        )
+        ds.to_netcdf(path, engine="scipy")
+        return "scipy"
+    ds.to_netcdf(path, engine="h5netcdf")
+    return "h5netcdf"
+
+
+def _fmt(v: Any) -> Any:
+    if isinstance(v, float):
+        return "" if not math.isfinite(v) else repr(v)
+    return v
+
+
+def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
+    with open(path, "w", newline="") as fh:
+        if not rows:
+            return
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: _fmt(v) for k, v in r.items()})
+
+
+# ----------------------------------------------------------------------------------------------- the loop
+
+
+def _design_chunk(item: tuple[Manipulator, list[Pose]], *, n_modes: int, options: ModelOptions) -> PoseFrequencies:
+    config, poses = item
+    return solve_poses(config, poses, n_modes=n_modes, options=options)
+
+
+def design_study(
+    config: Manipulator,
+    *,
+    poses: Sequence[Pose],
+    vary: Mapping[str, Sequence[float]] | None = None,
+    designs: Sequence[Mapping[str, float]] | None = None,
+    n_modes: int = 3,
+    f_min_hz: float | None = None,
+    options: ModelOptions | None = None,
+    engine: EngineOptions | None = None,
+) -> DesignResult:
+    """Lowest ``n_modes`` frequencies for every design x pose.
+
+    Parameters
+    ----------
+    config
+        The base description.
+    poses
+        The poses (the same for every design; e.g. :func:`fpm_sim.study.sweep.dense_grid` or
+        :func:`fpm_sim.batch.pose_loop.read_poses_csv`). A design that moves the workspace marks the poses
+        it cannot reach.
+    vary
+        ``{dotted field: values}``: the full factorial (SI units, as the field names say).
+    designs
+        Instead of ``vary``: a list of ``{field: value}`` designs (e.g. :func:`read_designs_csv`).
+    n_modes
+        Modes per pose.
+    f_min_hz
+        Threshold of the summary's workspace share (Hz).
+    options
+        Discretisation (default :func:`fpm_sim.batch.pose_loop.fast_options`, as ``sweep``).
+    engine
+        Where the chunks run (default: a local Dask cluster sized to the machine; see
+        :class:`fpm_sim.batch.engine.EngineOptions`).
+
+    Raises
+    ------
+    DesignError
+        Unknown field, invalid value, both or neither of ``vary``/``designs``, no poses.
+    """
+    if (vary is None) == (designs is None):
+        raise DesignError("give either vary (--vary FIELD=SPEC) or designs (--designs FILE.csv), not both or neither")
+    if n_modes < 1:
+        raise DesignError(f"--n-modes must be >= 1, got {n_modes}")
+    if f_min_hz is not None and not f_min_hz >= 0:
+        raise DesignError(f"--f-min-hz must be >= 0, got {f_min_hz}")
+    poses = list(poses)
+    if not poses:
+        raise DesignError("no poses: give --grid or --poses")
+    if vary is not None:
+        levels = {k: [float(v) for v in vals] for k, vals in vary.items()}
+        for name, vals in levels.items():
+            _check_field(config, name)
+            if not vals:
+                raise DesignError(f"--vary {name}: no values")
+        design_list = factorial(levels)
+        is_factorial = True
+    else:
+        design_list = [{k: float(v) for k, v in d.items()} for d in designs or []]
+        if not design_list:
+            raise DesignError("--designs: no designs")
+        levels = {k: sorted({d[k] for d in design_list}) for k in design_list[0]}
+        is_factorial = False
+    fields = list(levels)
+    configs = [apply_design(config, d) for d in design_list]
+    opts = options or fast_options()
+    eng = engine or EngineOptions()
+    eng = dataclasses.replace(eng, desc="design x poses" if eng.desc == "poses" else eng.desc)
+    size = eng.chunk or chunk_size(len(poses) * len(configs), eng.n_workers)
+    pose_chunks = split(poses, size)
+    items = [(c, chunk) for c in configs for chunk in pose_chunks]
+    t0 = time.perf_counter()
+    parts = run_chunks(
+        _design_chunk,
+        items,
+        kwargs={"n_modes": n_modes, "options": opts},
+        weights=[len(chunk) for _, chunk in items],
+        options=eng,
+    )
+    elapsed = time.perf_counter() - t0
+    per = len(pose_chunks)
+    merged = [merge(parts[d * per : (d + 1) * per]) for d in range(len(configs))]
+    return DesignResult(
+        config=config,
+        fields=fields,
+        designs=design_list,
+        factorial=is_factorial,
+        levels=levels,
+        poses=poses,
+        frequencies_hz=np.stack([m.frequencies_hz for m in merged]),
+        in_plane=np.stack([m.in_plane[:, 0] for m in merged]),
+        singularity=np.stack([m.singularity for m in merged]),
+        status=np.array([m.status for m in merged], dtype=object),
+        f_min_hz=f_min_hz,
+        link_mass_kg=np.array([link_mass_kg(c) for c in configs]),
+        moving_mass_kg=np.array([moving_mass_kg(c) for c in configs]),
+        elapsed_s=elapsed,
+        options=opts,
+    )
