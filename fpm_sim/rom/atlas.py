@@ -55,7 +55,7 @@ from tqdm import tqdm
 from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose
-from fpm_sim.linear.modal import damping_matrix
+from fpm_sim.linear.modal import system_damping_matrix
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.rom.reduction import ModalSystem, ReducedModel, modal_system
@@ -563,7 +563,7 @@ def build_atlas(
         om = system.omega_rad_s[al.index]
         q = al.rotation
         lam = q.T @ np.diag(om**2) @ q
-        c_damp = damping_matrix(built.model)
+        c_damp = system_damping_matrix(built.model, system.qpos)
         xi = phi_a.T @ c_damp @ phi_a
         gamma = phi_a.T @ system.b_q
         cq_phi = system.c_q @ phi_a
