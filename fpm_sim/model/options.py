@@ -15,7 +15,10 @@ Every generated model shares these settings:
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import contextlib
+import math
+import warnings
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -23,7 +26,7 @@ import mujoco
 import numpy as np
 import scipy.linalg
 
-from fpm_sim.errors import FpmSimError
+from fpm_sim.errors import FpmSimError, FpmSimWarning
 from fpm_sim.model.parts import DEFAULT_RESOLUTION, check_link_model
 
 __all__ = [
@@ -42,6 +45,11 @@ __all__ = [
     "passive_stiffness_matrix",
     "tangent_jacobian",
     "passive_damping_matrix",
+    "MujocoWarning",
+    "route_mujoco_warnings",
+    "mujoco_messages",
+    "check_finite",
+    "check_count",
 ]
 
 DEFAULT_SEGMENTS = 12
@@ -273,6 +281,7 @@ def compile_model(spec: mujoco.MjSpec, *, timestep_s: float | None) -> mujoco.Mj
     TimestepError
         If an explicit ``timestep_s`` makes the stiffest spring unstable (``omega_max h > 2``).
     """
+    route_mujoco_warnings()
     model = spec.compile()
     w_max = highest_frequency_rad_s(model)
     if timestep_s is None:
@@ -289,3 +298,65 @@ def compile_model(spec: mujoco.MjSpec, *, timestep_s: float | None) -> mujoco.Mj
     for eq in spec.equalities:
         eq.solref = [2.0 * h, 1.0]
     return spec.compile()
+
+
+# ---------------------------------------------------------------------------------------------
+# MuJoCo's warnings and validation helpers
+
+
+class MujocoWarning(FpmSimWarning):
+    """A warning raised inside MuJoCo (e.g. "Nan, Inf or huge value in QACC": the simulation is unstable)."""
+
+
+def _emit_mujoco_warning(message: str) -> None:
+    warnings.warn(f"MuJoCo: {message.strip()}", MujocoWarning, stacklevel=2)
+
+
+def route_mujoco_warnings() -> None:
+    """Send MuJoCo's warnings to Python's ``warnings`` (:class:`MujocoWarning`) instead of ``MUJOCO_LOG.TXT``
+    in the working directory and the console (``mujoco.set_mju_user_warning``).
+
+    Called by :func:`compile_model`, so every fpm-sim model is covered; a handler the caller installed
+    first is kept. Inside :func:`mujoco_messages` the messages are collected instead.
+    """
+    if mujoco.get_mju_user_warning() is None:
+        mujoco.set_mju_user_warning(_emit_mujoco_warning)
+
+
+@contextlib.contextmanager
+def mujoco_messages() -> Iterator[list[str]]:
+    """Collect MuJoCo's warnings raised inside the ``with`` block into the yielded list (never written to a
+    file); the previous handler is restored on exit."""
+    previous = mujoco.get_mju_user_warning()
+    messages: list[str] = []
+    mujoco.set_mju_user_warning(messages.append)
+    try:
+        yield messages
+    finally:
+        mujoco.set_mju_user_warning(previous)
+
+
+def check_finite(name: str, value: Any, *, positive: bool = False) -> np.ndarray:
+    """``value`` as a float array, all finite (and ``> 0`` with ``positive``).
+
+    Raises :class:`FpmSimError` naming ``name`` otherwise."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise FpmSimError(f"{name} must be a number, got {value!r}") from None
+    if not np.all(np.isfinite(arr)):
+        raise FpmSimError(f"{name} must be finite, got {value!r}")
+    if positive and not np.all(arr > 0):
+        raise FpmSimError(f"{name} must be positive, got {value!r}")
+    return arr
+
+
+def check_count(name: str, value: Any, *, low: int = 1, high: int | None = None) -> int:
+    """``value`` as an integer in ``[low, high]``, else :class:`FpmSimError` naming ``name`` and the range."""
+    ok = isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+    if not ok and isinstance(value, float) and math.isfinite(value) and value.is_integer():
+        ok, value = True, int(value)
+    if not ok or value < low or (high is not None and value > high):
+        bound = f"[{low}, {high}]" if high is not None else f">= {low}"
+        raise FpmSimError(f"{name} must be an integer {bound}, got {value!r}")
+    return int(value)
