@@ -399,7 +399,7 @@ def system_damping_matrix(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray
     return damping_matrix(model)
 
 
-def check_n_modes(n_modes: int | None, available: int, *, name: str = "n_modes") -> None:
+def check_n_modes(n_modes: int | None, available: int, *, name: str = "n_modes (--n-modes)") -> None:
     """``n_modes`` must be ``None`` (all) or an integer in ``[1, available]`` (the model's degrees of freedom).
 
     Raises
@@ -408,7 +408,7 @@ def check_n_modes(n_modes: int | None, available: int, *, name: str = "n_modes")
         Naming ``name`` and the allowed range.
     """
     if n_modes is not None:
-        check_count(f"{name} (the model has {available} degrees of freedom)", n_modes, low=1, high=available)
+        check_count(name, n_modes, low=1, high=available, hint=" (the model's degrees of freedom)")
 
 
 @dataclass(frozen=True)
@@ -636,13 +636,17 @@ def modes_transition_fd(
         )
     lam, vec = np.linalg.eig(a)
     h = model.opt.timestep
-    s = np.log(lam.astype(complex)) / h
+    with np.errstate(divide="ignore", invalid="ignore"):  # lambda = 0: an infinitely damped state, s = -inf
+        s = np.log(lam.astype(complex)) / h
     k_dof = _energy_stiffness(model)
     dropped: dict[str, int] = {}
     modes: list[Mode] = []
     growing: list[str] = []
     for idx in np.argsort(np.abs(s)):
         si = s[idx]
+        if not np.isfinite(si):
+            dropped["non_oscillatory"] = dropped.get("non_oscillatory", 0) + 1
+            continue
         if si.imag <= 1e-9 * max(abs(si), 1.0):
             if si.imag < -1e-9 * max(abs(si), 1.0):
                 continue  # the conjugate of a kept mode

@@ -351,12 +351,12 @@ def check_finite(name: str, value: Any, *, positive: bool = False) -> np.ndarray
     return arr
 
 
-def check_count(name: str, value: Any, *, low: int = 1, high: int | None = None) -> int:
+def check_count(name: str, value: Any, *, low: int = 1, high: int | None = None, hint: str = "") -> int:
     """``value`` as an integer in ``[low, high]``, else :class:`FpmSimError` naming ``name`` and the range."""
     ok = isinstance(value, (int, np.integer)) and not isinstance(value, bool)
     if not ok and isinstance(value, float) and math.isfinite(value) and value.is_integer():
         ok, value = True, int(value)
     if not ok or value < low or (high is not None and value > high):
         bound = f"[{low}, {high}]" if high is not None else f">= {low}"
-        raise FpmSimError(f"{name} must be an integer {bound}, got {value!r}")
+        raise FpmSimError(f"{name} must be an integer {bound}{hint}, got {value!r}")
     return int(value)
