@@ -29,9 +29,10 @@ stiffness ~ measure^2) and must be reported, with a :class:`~fpm_sim.kinematics.
   kinematics accept (a pose refused below singularity measure 1e-3 keeps ``f1 >= ~2.5e-3 f_normal``)
   and far above the exact zeros of a floating rig's rigid-body motions;
 - ``constraint``: the shape violates the loop closure, ``|J v| / (|J|_2 |v|) > max_constraint_ratio``,
-  ``J`` in consistent units (:func:`constraint_rank`): motions of the soft weld itself (constraint
-  stabilisation), not of the structure. Physical modes measure ~1e-5 or less; constraint motions
-  ~0.1 to 1;
+  ``J`` with its rows in consistent units (:func:`constraint_rank`): motions of the soft weld itself
+  (constraint stabilisation), not of the structure. Measured: lightly damped physical modes up to
+  7.3e-4 (the flex chain rig's highest modes; the manipulator's ~1e-8), the welds' own motions from
+  2.9e-3 (segment chain rig) to 0.3; the default 1.5e-3 sits at their geometric mean;
 - ``overdamped``: damping ratio above ``max_damping_ratio``.
 
 An eigenvalue ``w^2 < -w2_tol`` (constrained method) or a growing mode (``transition_fd``: a damping
@@ -158,7 +159,7 @@ class ModeFilter:
     """
 
     rigid_fraction: float = RIGID_BODY_FRACTION
-    max_constraint_ratio: float = 1e-2
+    max_constraint_ratio: float = 1.5e-3
     max_damping_ratio: float = 0.5
 
     def __post_init__(self) -> None:
@@ -761,7 +762,15 @@ def reduced_eigenproblem(
     kr = 0.5 * (kr + kr.T)
     mr = z.T @ mass @ z
     mr = 0.5 * (mr + mr.T)
-    w2, x = scipy.linalg.eigh(kr, mr)
+    try:
+        w2, x = scipy.linalg.eigh(kr, mr)
+    except np.linalg.LinAlgError as e:
+        m = np.diag(mass)
+        raise FpmSimError(
+            f"the mass matrix is not positive definite to working precision (diagonal from {m.min():.3g} to "
+            f"{m.max():.3g} kg or kg m^2): masses span too many orders of magnitude; check hardware masses "
+            "(hardware.*.mass_kg), material.density_kg_m3 and the section"
+        ) from e
     return z, kr, mr, w2, x
 
 

@@ -529,8 +529,16 @@ def load_atlas(path: str | Path) -> ModalAtlas:
     p = Path(path)
     if p.suffix != ".npz":
         raise AtlasError(f"{str(p)!r}: expected an .npz atlas file")
-    raw = np.load(p, allow_pickle=False)
-    missing = [k for k in ("x_m", "node_lam") if k not in raw.files]
+    try:
+        raw = np.load(p, allow_pickle=False)
+    except (OSError, ValueError, EOFError) as e:
+        raise AtlasError(
+            f"{str(p)!r} is not a readable atlas file ({e}); give a file written by 'fpm-sim atlas build'"
+        ) from e
+    if not isinstance(raw, np.lib.npyio.NpzFile):
+        raise AtlasError(f"{str(p)!r} is not an atlas file (a single array, not an .npz archive)")
+    files = raw.files
+    missing = [k for k in ("x_m", "node_lam", *(f"node_{k}" for k in _NODE_KEYS)) if k not in files]
     if missing:
         raise AtlasError(f"{str(p)!r} is not an atlas file (missing {', '.join(missing)})")
     return ModalAtlas(
@@ -607,7 +615,7 @@ def build_atlas(
     accel_fraction
         Accelerometer position on the distal links (the reduced models' acceleration outputs).
     """
-    xs, ys, ps = _axis(x_m, "x_m"), _axis(y_m, "y_m"), _axis(phi_rad, "phi_rad")
+    xs, ys, ps = _axis(x_m, "x_m (--x-mm)"), _axis(y_m, "y_m (--y-mm)"), _axis(phi_rad, "phi_rad (--phi-rad)")
     shape = (len(xs), len(ys), len(ps))
     opts = options or ModelOptions(segments=6, axial=False)
     if root is None:

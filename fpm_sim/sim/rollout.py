@@ -47,7 +47,7 @@ from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose, forward_kinematics, inverse_kinematics
 from fpm_sim.linear.equilibrium import static_equilibrium
 from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import BuiltModel, ModelOptions, mujoco_messages
+from fpm_sim.model.options import BuiltModel, ModelOptions, check_finite, mujoco_messages
 from fpm_sim.rom.reduction import END_EFFECTOR_SITE, motor_dofs
 
 __all__ = [
@@ -90,21 +90,24 @@ def _divergence(model: mujoco.MjModel, data: mujoco.MjData, ee0: np.ndarray, mes
 
 
 def constant(*values: float) -> Profile:
-    """A constant load profile (switched on at ``t = 0``)."""
+    """A constant load profile (switched on at ``t = 0``); non-finite values are refused when applied."""
     v = np.array(values, float)
     return lambda t: v
 
 
 def step_at(t0_s: float, *values: float) -> Profile:
     """Zero before ``t0_s``, ``values`` from then on."""
-    v = np.array(values, float)
+    check_finite("t0_s (--load-start-s)", t0_s)
+    v = check_finite("step values", values)
     z = np.zeros_like(v)
     return lambda t: v if t >= t0_s else z
 
 
 def sine(freq_hz: float, *amplitudes: float) -> Profile:
-    """``amplitudes * sin(2 pi f t)``."""
-    a = np.array(amplitudes, float)
+    """``amplitudes * sin(2 pi f t)``; ``freq_hz`` finite and >= 0."""
+    if not check_finite("freq_hz (--load-freq-hz)", freq_hz) >= 0:
+        raise RolloutError(f"freq_hz (--load-freq-hz) must be >= 0 Hz, got {freq_hz!r}")
+    a = check_finite("sine amplitudes", amplitudes)
     return lambda t: a * math.sin(2.0 * math.pi * freq_hz * t)
 
 
