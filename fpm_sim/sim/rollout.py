@@ -89,6 +89,13 @@ def _divergence(model: mujoco.MjModel, data: mujoco.MjData, ee0: np.ndarray, mes
     return None
 
 
+def _finite(name: str, value: Any) -> np.ndarray:
+    try:
+        return check_finite(name, value)
+    except FpmSimError as e:
+        raise RolloutError(str(e)) from None
+
+
 def constant(*values: float) -> Profile:
     """A constant load profile (switched on at ``t = 0``); non-finite values are refused when applied."""
     v = np.array(values, float)
@@ -97,17 +104,17 @@ def constant(*values: float) -> Profile:
 
 def step_at(t0_s: float, *values: float) -> Profile:
     """Zero before ``t0_s``, ``values`` from then on."""
-    check_finite("t0_s (--load-start-s)", t0_s)
-    v = check_finite("step values", values)
+    _finite("t0_s (--load-start-s)", t0_s)
+    v = _finite("step values", values)
     z = np.zeros_like(v)
     return lambda t: v if t >= t0_s else z
 
 
 def sine(freq_hz: float, *amplitudes: float) -> Profile:
     """``amplitudes * sin(2 pi f t)``; ``freq_hz`` finite and >= 0."""
-    if not check_finite("freq_hz (--load-freq-hz)", freq_hz) >= 0:
+    if not _finite("freq_hz (--load-freq-hz)", freq_hz) >= 0:
         raise RolloutError(f"freq_hz (--load-freq-hz) must be >= 0 Hz, got {freq_hz!r}")
-    a = check_finite("sine amplitudes", amplitudes)
+    a = _finite("sine amplitudes", amplitudes)
     return lambda t: a * math.sin(2.0 * math.pi * freq_hz * t)
 
 

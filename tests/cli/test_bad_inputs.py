@@ -69,7 +69,11 @@ CASES: list[tuple[str, list[str], str]] = [
     ("rollout-duration-negative", ["rollout", "--duration-s", "-1", *S3], "duration"),
     ("rollout-duration-zero", ["rollout", "--duration-s", "0", *S3], "duration"),
     ("rollout-output-step-zero", ["rollout", "--output-step-s", "0", "--duration-s", "0.002", *S3], "output-step"),
-    ("rollout-load-freq-nan", ["rollout", "--load-profile", "sine", "--load-freq-hz", "nan", *S3], "load-freq"),
+    (
+        "rollout-load-freq-nan",
+        ["rollout", "--force-x-n", "1", "--load-profile", "sine", "--load-freq-hz", "nan", *S3],
+        "load-freq",
+    ),
     (
         "rollout-motor-torque-locked",
         ["rollout", "--motor-torque-nm", "1", "0", "0", "--duration-s", "0.002", *S3],
