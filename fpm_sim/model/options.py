@@ -282,8 +282,20 @@ def compile_model(spec: mujoco.MjSpec, *, timestep_s: float | None) -> mujoco.Mj
         If an explicit ``timestep_s`` makes the stiffest spring unstable (``omega_max h > 2``).
     """
     route_mujoco_warnings()
-    model = spec.compile()
-    w_max = highest_frequency_rad_s(model)
+    hint = (
+        "a size, mass or stiffness of the description is out of range for double precision; check section.*, "
+        "material.*, hardware.*.mass_kg and geometry.*"
+    )
+    try:
+        model = spec.compile()
+    except ValueError as e:
+        raise FpmSimError(f"MuJoCo cannot compile the model ({str(e).splitlines()[0]}): {hint}") from e
+    try:
+        w_max = highest_frequency_rad_s(model)
+    except (np.linalg.LinAlgError, ValueError) as e:
+        raise FpmSimError(f"the model's mass or stiffness matrix is not usable ({e}): {hint}") from e
+    if not math.isfinite(w_max):
+        raise FpmSimError(f"the model's highest natural frequency is not finite: {hint}")
     if timestep_s is None:
         h = TIMESTEP_MAX_S if w_max == 0.0 else min(TIMESTEP_MAX_S, TIMESTEP_SAFETY / w_max)
     else:
