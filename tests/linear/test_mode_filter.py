@@ -187,3 +187,17 @@ def test_straight_inextensible_chain_drops_its_structural_redundancy_silently(st
     # the axial row of a straight chain without axial springs: exactly redundant (ratio ~4e-17)
     assert rank.n_rows == 6 and rank.rank == 5
     assert rank.singular_values[-1] / rank.singular_values[0] < 1e-12
+
+
+@pytest.mark.parametrize(("segments", "warns"), [(1, True), (4, True), (5, False), (12, False)])
+def test_coarse_links_warn_about_resolution(steel_bar, segments, warns):
+    from fpm_sim.linear.modal import ResolutionWarning
+
+    built = build_rig(RigSetup("cantilever"), steel_bar, ModelOptions(segments=segments))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        modes_constrained(built, n_modes=1)
+    got = [w for w in caught if issubclass(w.category, ResolutionWarning)]
+    assert bool(got) == warns
+    if warns:
+        assert "segments" in str(got[0].message)
