@@ -235,3 +235,19 @@ def test_interpolated_frequencies_at_six_segments(symmetric_manip):
             direct = modal_system(build_manipulator(symmetric_manip, pose, opts)).frequencies_hz[:3]
             worst = max(worst, float(np.max(np.abs(at.query(pose).frequencies_hz[:3] / direct - 1.0))))
     assert worst < INTERP_TOL
+
+
+def test_files_that_are_not_atlases_are_refused(tmp_path):
+    fake = tmp_path / "fake.npz"
+    fake.write_bytes(b"not a zip archive")
+    with pytest.raises(AtlasError, match="not a readable atlas file"):
+        load_atlas(fake)
+    other = tmp_path / "other.npz"
+    np.savez(other, x_m=np.zeros(2))
+    with pytest.raises(AtlasError, match="missing node_lam"):
+        load_atlas(other)
+    single = tmp_path / "single.npz"
+    np.save(tmp_path / "single.npy", np.zeros(3))
+    (tmp_path / "single.npy").rename(single)
+    with pytest.raises(AtlasError, match="not an atlas file"):
+        load_atlas(single)
