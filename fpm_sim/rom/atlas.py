@@ -70,7 +70,7 @@ from fpm_sim.errors import FpmSimError, FpmSimWarning
 from fpm_sim.kinematics import Pose
 from fpm_sim.linear.modal import system_damping_matrix
 from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.options import ModelOptions, check_count
 from fpm_sim.rom.reduction import ModalSystem, ReducedModel, modal_system
 
 __all__ = [
@@ -616,6 +616,11 @@ def build_atlas(
         Accelerometer position on the distal links (the reduced models' acceleration outputs).
     """
     xs, ys, ps = _axis(x_m, "x_m (--x-mm)"), _axis(y_m, "y_m (--y-mm)"), _axis(phi_rad, "phi_rad (--phi-rad)")
+    try:
+        check_count("n_modes (--modes)", n_modes, low=1, high=200)
+        check_count("n_extra (--extra)", n_extra, low=0, high=200)
+    except FpmSimError as e:
+        raise AtlasError(str(e)) from None
     shape = (len(xs), len(ys), len(ps))
     opts = options or ModelOptions(segments=6, axial=False)
     if root is None:

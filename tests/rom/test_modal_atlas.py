@@ -166,6 +166,9 @@ def test_bad_grids_are_refused(symmetric_manip):
         build_atlas(symmetric_manip, x_m=[0.0, 0.0], y_m=[0.0], options=OPTS)
     with pytest.raises(AtlasError, match="root"):
         build_atlas(symmetric_manip, x_m=[0.0, 0.05], y_m=[0.0], options=OPTS, root=Pose(0.01, 0.0, 0.0))
+    for kwargs, name in (({"n_modes": 0}, "n_modes"), ({"n_modes": 2.5}, "n_modes"), ({"n_extra": -1}, "n_extra")):
+        with pytest.raises(AtlasError, match=name):
+            build_atlas(symmetric_manip, x_m=[0.0, 0.05], y_m=[0.0], options=OPTS, **kwargs)
 
 
 def test_rotation_axis_and_mixed_orders(symmetric_manip):
