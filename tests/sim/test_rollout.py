@@ -174,3 +174,18 @@ def test_bad_rollout_arguments_name_the_parameter(flexible, kwargs, match):
     manip, built, system = flexible
     with pytest.raises(RolloutError, match=match):
         rollout(built, manip, qpos=system.qpos, **kwargs)
+
+
+def test_load_profiles_are_validated():
+    from fpm_sim.sim.rollout import step_at
+
+    with pytest.raises(RolloutError, match="load-start-s"):
+        step_at(float("nan"), 1.0, 0.0, 0.0)
+    with pytest.raises(RolloutError, match="load-freq-hz"):
+        sine(-1.0, 1.0, 0.0, 0.0)
+    with pytest.raises(RolloutError, match="load-freq-hz"):
+        sine(float("inf"), 1.0, 0.0, 0.0)
+    with pytest.raises(RolloutError, match="amplitudes"):
+        sine(10.0, float("nan"), 0.0, 0.0)
+    assert np.allclose(step_at(0.5, 1.0, 2.0, 3.0)(0.6), [1.0, 2.0, 3.0])
+    assert np.allclose(step_at(0.5, 1.0, 2.0, 3.0)(0.4), 0.0)
