@@ -243,7 +243,6 @@ def modal_system(
     data = mujoco.MjData(model)
     q_eq = static_equilibrium(model, data) if qpos is None else np.asarray(qpos, float)
     stiff = stiffness_matrix(model, data, q_eq)  # leaves data at a perturbed state: reset below
-    change = stiff - stiffness_matrix(model, data, q_eq, eps=2e-7)  # finite-difference noise (modal.noise_w2)
     data.qpos[:] = q_eq
     data.qvel[:] = 0.0
     mujoco.mj_forward(model, data)
@@ -251,7 +250,9 @@ def modal_system(
     rank = constraint_rank(model, data)
     damp = system_damping_matrix(model, q_eq)
     z, kr, _, w2, x = reduced_eigenproblem(mass, stiff, rank.basis)  # the constrained method's own solve
-    tol = eigenvalue_tolerances(model, mass, z @ x, change, filt)
+    tol = eigenvalue_tolerances(  # finite-difference noise of K (modal.noise_w2), measured when a mode needs it
+        model, mass, z @ x, w2, lambda: stiff - stiffness_matrix(model, mujoco.MjData(model), q_eq, eps=2e-7), filt
+    )
     check_stable(w2, tol, what="the equilibrium of the model to reduce")
     w = np.sqrt(np.maximum(w2, 0.0))
     rigid = np.abs(w2) <= tol
