@@ -20,7 +20,8 @@ import math
 import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import Any
+from pathlib import Path
+from typing import IO, Any
 
 import mujoco
 import numpy as np
@@ -50,6 +51,7 @@ __all__ = [
     "mujoco_messages",
     "check_finite",
     "check_count",
+    "open_for_writing",
 ]
 
 DEFAULT_SEGMENTS = 12
@@ -372,3 +374,19 @@ def check_count(name: str, value: Any, *, low: int = 1, high: int | None = None,
         bound = f"[{low}, {high}]" if high is not None else f">= {low}"
         raise FpmSimError(f"{name} must be an integer {bound}{hint}, got {value!r}")
     return int(value)
+
+
+@contextlib.contextmanager
+def open_for_writing(
+    path: str | Path, *, parameter: str = "--out", error: type[FpmSimError] = FpmSimError
+) -> Iterator[IO[bytes]]:
+    """Open ``path`` for binary writing (parent folders created), turning a failure (read-only place, a folder
+    in the way, ...) into ``error`` naming the file and ``parameter`` instead of a library's own message."""
+    p = Path(path)
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+        handle = open(p, "wb")  # noqa: SIM115 - closed below
+    except OSError as e:
+        raise error(f"cannot write {str(p)!r} ({e.strerror or e}); choose a writable path for {parameter}") from e
+    with handle:
+        yield handle

@@ -70,7 +70,7 @@ from fpm_sim.errors import FpmSimError, FpmSimWarning
 from fpm_sim.kinematics import Pose
 from fpm_sim.linear.modal import system_damping_matrix
 from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import ModelOptions, check_count
+from fpm_sim.model.options import ModelOptions, check_count, open_for_writing
 from fpm_sim.rom.reduction import ModalSystem, ReducedModel, modal_system
 
 __all__ = [
@@ -506,9 +506,13 @@ class ModalAtlas:
         p = Path(path)
         if p.suffix != ".npz":
             raise AtlasError(f"atlas file {str(p)!r} must end in .npz")
-        p.parent.mkdir(parents=True, exist_ok=True)
+        with open_for_writing(p, error=AtlasError) as f:
+            self._write(f)
+        return p
+
+    def _write(self, f: Any) -> None:
         np.savez(
-            p,
+            f,
             x_m=self.x_m,
             y_m=self.y_m,
             phi_rad=self.phi_rad,
@@ -521,7 +525,6 @@ class ModalAtlas:
             parameters_json=np.array(json.dumps(self.parameters, default=float)),
             **{f"node_{k}": v for k, v in self.nodes.items()},
         )
-        return p
 
 
 def load_atlas(path: str | Path) -> ModalAtlas:

@@ -64,7 +64,7 @@ from fpm_sim.linear.modal import (
     stiffness_matrix,
     system_damping_matrix,
 )
-from fpm_sim.model.options import BuiltModel
+from fpm_sim.model.options import BuiltModel, open_for_writing
 from fpm_sim.results import to_jsonable
 
 __all__ = [
@@ -530,23 +530,23 @@ class ReducedModel:
         if p.suffix == ".mat":
             import scipy.io
 
-            p.parent.mkdir(parents=True, exist_ok=True)
             cellify = {
                 k: (v.tolist() if isinstance(v, np.ndarray) and v.dtype == object else v) for k, v in arrays.items()
             }
             for k, v in cellify.items():
                 if isinstance(v, list):
                     cellify[k] = np.array(v, dtype=object)
-            scipy.io.savemat(p, cellify, oned_as="column")
+            with open_for_writing(p, error=ReductionError) as f:
+                scipy.io.savemat(f, cellify, oned_as="column")
         elif p.suffix == ".npz":
-            p.parent.mkdir(parents=True, exist_ok=True)
-            np.savez(
-                p,
-                **{
-                    k: (v.astype(str) if isinstance(v, np.ndarray) and v.dtype == object else v)
-                    for k, v in arrays.items()
-                },
-            )
+            with open_for_writing(p, error=ReductionError) as f:
+                np.savez(
+                    f,
+                    **{
+                        k: (v.astype(str) if isinstance(v, np.ndarray) and v.dtype == object else v)
+                        for k, v in arrays.items()
+                    },
+                )
         else:
             raise ReductionError(f"output file {str(p)!r} must end in .mat or .npz (--out)")
         return p

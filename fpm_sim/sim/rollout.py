@@ -47,7 +47,7 @@ from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose, forward_kinematics, inverse_kinematics
 from fpm_sim.linear.equilibrium import static_equilibrium
 from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import BuiltModel, ModelOptions, check_finite, mujoco_messages
+from fpm_sim.model.options import BuiltModel, ModelOptions, check_finite, mujoco_messages, open_for_writing
 from fpm_sim.rom.reduction import END_EFFECTOR_SITE, motor_dofs
 
 __all__ = [
@@ -179,22 +179,22 @@ class RolloutResult:
     def save(self, path: str | Path) -> Path:
         """Write ``.csv`` (one column per signal) or ``.npz`` by suffix."""
         p = Path(path)
-        p.parent.mkdir(parents=True, exist_ok=True)
-        cols = self.columns()
-        if p.suffix == ".csv":
-            names = list(cols)
-            np.savetxt(
-                p,
-                np.column_stack([cols[n] for n in names]),
-                delimiter=",",
-                header=",".join(names),
-                comments="",
-                fmt="%.10g",
-            )
-        elif p.suffix == ".npz":
-            np.savez(p, **cols)
-        else:
+        if p.suffix not in (".csv", ".npz"):
             raise RolloutError(f"output file {str(p)!r} must end in .csv or .npz (--out)")
+        cols = self.columns()
+        with open_for_writing(p, error=RolloutError) as f:
+            if p.suffix == ".csv":
+                names = list(cols)
+                np.savetxt(
+                    f,
+                    np.column_stack([cols[n] for n in names]),
+                    delimiter=",",
+                    header=",".join(names),
+                    comments="",
+                    fmt="%.10g",
+                )
+            else:
+                np.savez(f, **cols)
         return p
 
     def plot(self, *, axes: Any = None) -> Any:
