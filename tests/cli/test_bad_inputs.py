@@ -87,6 +87,7 @@ CASES: list[tuple[str, list[str], str]] = [
     ("reduce-band-negative", ["reduce", "--band-hz", "-5", *S3], "band-hz"),
     ("reduce-error-bound", ["reduce", "--error-bound", "2", *S3], "error-bound"),
     ("reduce-two-selections", ["reduce", "--modes", "3", "--band-hz", "100", *S3], "modes|band-hz"),
+    ("reduce-out-is-a-folder", ["reduce", "--modes", "3", "--out", "{tmp}/taken.mat", *S3], "out|taken"),
     ("reduce-out-suffix", ["reduce", "--modes", "3", "--out", "{tmp}/rom.txt", *S3], "out|\\.txt"),
     # frf
     ("frf-band-reversed", ["frf", "--f-min-hz", "100", "--f-max-hz", "10", *S3], "f-m(in|ax)-hz"),
@@ -171,6 +172,7 @@ def _files(tmp: Path) -> None:
     assert neg != default
     (tmp / "neg.toml").write_text(neg)
     (tmp / "fake.npz").write_bytes(b"not a zip archive")
+    (tmp / "taken.mat").mkdir()  # a folder in the way of an output file
 
 
 @pytest.mark.parametrize(("argv", "names"), [c[1:] for c in CASES], ids=[c[0] for c in CASES])
