@@ -99,3 +99,4 @@ def first_frequencies(
     return pose_frequencies(
         config, poses, backend=backend, n_modes=n_modes, options=options, workers=workers, progress=progress
     ).frequencies_hz
+
