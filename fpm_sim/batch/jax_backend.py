@@ -24,6 +24,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import mujoco
 import numpy as np
 
 from fpm_sim.batch.pose_loop import (
@@ -34,9 +35,11 @@ from fpm_sim.batch.pose_loop import (
     fast_options,
 )
 from fpm_sim.config import Manipulator
+from fpm_sim.errors import FpmSimWarning
 from fpm_sim.kinematics import (
     Pose,
 )
+from fpm_sim.linear.modal import constraint_rank
 from fpm_sim.model.options import ModelOptions
 
 __all__ = [
@@ -50,9 +53,6 @@ __all__ = [
     "parameter_value",
     "with_parameter",
 ]
-
-NULLSPACE_RCOND = 1e-4
-"""Smallest accepted singular-value ratio of the weld Jacobian (as the ``cpu`` backend's null space)."""
 
 _COMPILED: dict[tuple, Any] = {}
 
@@ -123,8 +123,8 @@ def mjx_pose_frequencies(
     ``spawn`` workers re-import the caller's main module), and the solve of all poses is one vectorised
     JAX computation. The compiled function is cached per model structure, batch size and ``n_modes``;
     :data:`LAST_TIMINGS` holds the build / compile / run times. A pose whose weld Jacobian is
-    rank-deficient (singular-value ratio below :data:`NULLSPACE_RCOND`) is reported ``singular`` with
-    NaN frequencies and a warning.
+    rank-deficient in consistent units (:func:`fpm_sim.linear.modal.constraint_rank`, the one rank decision
+    of the package) is reported ``singular`` with NaN frequencies and a warning.
 
     Raises
     ------
@@ -170,14 +170,18 @@ def mjx_pose_frequencies(
         timings.build_s = time.perf_counter() - t0
         fn, timings.compile_s = _compiled_modes(structure, params, n)
         t1 = time.perf_counter()
-        w2, x, kdiag, ratio = (np.asarray(a) for a in fn({k: jnp.asarray(v) for k, v in params.items()}))
+        w2, x, kdiag, _sv_ratio = (np.asarray(a) for a in fn({k: jnp.asarray(v) for k, v in params.items()}))
         timings.run_s = time.perf_counter() - t1
         inplane = np.array([kind in IN_PLANE_KINDS for kind in built[ok[0]].dof_kinds])
         for r, i in enumerate(ok):
-            if ratio[r] < NULLSPACE_RCOND:
+            rank_data = mujoco.MjData(built[i].model)
+            mujoco.mj_forward(built[i].model, rank_data)
+            rank = constraint_rank(built[i].model, rank_data, warn=False)
+            if rank.deficient:
                 warnings.warn(
-                    f"pose {poses[i]}: weld Jacobian is rank-deficient (singular value ratio {ratio[r]:.1e}); "
-                    "reported singular (the cpu backend's null space takes the rank)",
+                    f"pose {poses[i]}: weld Jacobian is rank-deficient in consistent units (scaled singular "
+                    f"value ratio {rank.ratio:.1e}); reported singular",
+                    FpmSimWarning,
                     stacklevel=2,
                 )
                 status[i] = STATUS_SINGULAR

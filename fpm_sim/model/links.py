@@ -37,6 +37,7 @@ from fpm_sim.model.parts import LinkBuild, add_box_geom, box_part, check_link_mo
 
 __all__ = ["add_link"]
 
+
 def _add_spring(body: mujoco.MjsBody, name: str, kind: str, stiffness: float, beta: float) -> None:
     axis = {"bend_in": [0, 0, 1], "bend_out": [0, 1, 0], "twist": [1, 0, 0], "axial": [1, 0, 0]}[kind]
     jtype = mujoco.mjtJoint.mjJNT_SLIDE if kind == "axial" else mujoco.mjtJoint.mjJNT_HINGE
@@ -80,7 +81,6 @@ def add_link(
     """
     check_link_model(link_model, segments)
     if link_model in ("cable", "flex"):
-
         if spec is None:
             raise TypeError(f"add_link(link_model={link_model!r}) needs spec= (the MjSpec of parent)")
         common = dict(

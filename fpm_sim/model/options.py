@@ -15,15 +15,19 @@ Every generated model shares these settings:
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import contextlib
+import math
+import warnings
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import Any
+from pathlib import Path
+from typing import IO, Any
 
 import mujoco
 import numpy as np
 import scipy.linalg
 
-from fpm_sim.errors import FpmSimError
+from fpm_sim.errors import FpmSimError, FpmSimWarning
 from fpm_sim.model.parts import DEFAULT_RESOLUTION, check_link_model
 
 __all__ = [
@@ -42,6 +46,12 @@ __all__ = [
     "passive_stiffness_matrix",
     "tangent_jacobian",
     "passive_damping_matrix",
+    "MujocoWarning",
+    "route_mujoco_warnings",
+    "mujoco_messages",
+    "check_finite",
+    "check_count",
+    "open_for_writing",
 ]
 
 DEFAULT_SEGMENTS = 12
@@ -273,8 +283,21 @@ def compile_model(spec: mujoco.MjSpec, *, timestep_s: float | None) -> mujoco.Mj
     TimestepError
         If an explicit ``timestep_s`` makes the stiffest spring unstable (``omega_max h > 2``).
     """
-    model = spec.compile()
-    w_max = highest_frequency_rad_s(model)
+    route_mujoco_warnings()
+    hint = (
+        "a size, mass or stiffness of the description is out of range for double precision; check section.*, "
+        "material.*, hardware.*.mass_kg and geometry.*"
+    )
+    try:
+        model = spec.compile()
+    except ValueError as e:
+        raise FpmSimError(f"MuJoCo cannot compile the model ({str(e).splitlines()[0]}): {hint}") from e
+    try:
+        w_max = highest_frequency_rad_s(model)
+    except (np.linalg.LinAlgError, ValueError) as e:
+        raise FpmSimError(f"the model's mass or stiffness matrix is not usable ({e}): {hint}") from e
+    if not math.isfinite(w_max):
+        raise FpmSimError(f"the model's highest natural frequency is not finite: {hint}")
     if timestep_s is None:
         h = TIMESTEP_MAX_S if w_max == 0.0 else min(TIMESTEP_MAX_S, TIMESTEP_SAFETY / w_max)
     else:
@@ -289,3 +312,81 @@ def compile_model(spec: mujoco.MjSpec, *, timestep_s: float | None) -> mujoco.Mj
     for eq in spec.equalities:
         eq.solref = [2.0 * h, 1.0]
     return spec.compile()
+
+
+# ---------------------------------------------------------------------------------------------
+# MuJoCo's warnings and validation helpers
+
+
+class MujocoWarning(FpmSimWarning):
+    """A warning raised inside MuJoCo (e.g. "Nan, Inf or huge value in QACC": the simulation is unstable)."""
+
+
+def _emit_mujoco_warning(message: str) -> None:
+    warnings.warn(f"MuJoCo: {message.strip()}", MujocoWarning, stacklevel=2)
+
+
+def route_mujoco_warnings() -> None:
+    """Send MuJoCo's warnings to Python's ``warnings`` (:class:`MujocoWarning`) instead of ``MUJOCO_LOG.TXT``
+    in the working directory and the console (``mujoco.set_mju_user_warning``).
+
+    Called by :func:`compile_model`, so every fpm-sim model is covered; a handler the caller installed
+    first is kept. Inside :func:`mujoco_messages` the messages are collected instead.
+    """
+    if mujoco.get_mju_user_warning() is None:
+        mujoco.set_mju_user_warning(_emit_mujoco_warning)
+
+
+@contextlib.contextmanager
+def mujoco_messages() -> Iterator[list[str]]:
+    """Collect MuJoCo's warnings raised inside the ``with`` block into the yielded list (never written to a
+    file); the previous handler is restored on exit."""
+    previous = mujoco.get_mju_user_warning()
+    messages: list[str] = []
+    mujoco.set_mju_user_warning(messages.append)
+    try:
+        yield messages
+    finally:
+        mujoco.set_mju_user_warning(previous)
+
+
+def check_finite(name: str, value: Any, *, positive: bool = False) -> np.ndarray:
+    """``value`` as a float array, all finite (and ``> 0`` with ``positive``).
+
+    Raises :class:`FpmSimError` naming ``name`` otherwise."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise FpmSimError(f"{name} must be a number, got {value!r}") from None
+    if not np.all(np.isfinite(arr)):
+        raise FpmSimError(f"{name} must be finite, got {value!r}")
+    if positive and not np.all(arr > 0):
+        raise FpmSimError(f"{name} must be positive, got {value!r}")
+    return arr
+
+
+def check_count(name: str, value: Any, *, low: int = 1, high: int | None = None, hint: str = "") -> int:
+    """``value`` as an integer in ``[low, high]``, else :class:`FpmSimError` naming ``name`` and the range."""
+    ok = isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+    if not ok and isinstance(value, float) and math.isfinite(value) and value.is_integer():
+        ok, value = True, int(value)
+    if not ok or value < low or (high is not None and value > high):
+        bound = f"[{low}, {high}]" if high is not None else f">= {low}"
+        raise FpmSimError(f"{name} must be an integer {bound}{hint}, got {value!r}")
+    return int(value)
+
+
+@contextlib.contextmanager
+def open_for_writing(
+    path: str | Path, *, parameter: str = "--out", error: type[FpmSimError] = FpmSimError
+) -> Iterator[IO[bytes]]:
+    """Open ``path`` for binary writing (parent folders created), turning a failure (read-only place, a folder
+    in the way, ...) into ``error`` naming the file and ``parameter`` instead of a library's own message."""
+    p = Path(path)
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+        handle = open(p, "wb")  # noqa: SIM115 - closed below
+    except OSError as e:
+        raise error(f"cannot write {str(p)!r} ({e.strerror or e}); choose a writable path for {parameter}") from e
+    with handle:
+        yield handle

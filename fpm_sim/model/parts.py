@@ -166,9 +166,7 @@ def half_lump(lump: LumpedMass) -> LumpedMass:
     return LumpedMass(lump.mass_kg / 2.0, tuple(v / 2.0 for v in lump.inertia_kg_m2))
 
 
-def add_hinge(
-    body: mujoco.MjsBody, name: str, axis: list[float], stiffness: float = 0.0, damping: float = 0.0
-) -> None:
+def add_hinge(body: mujoco.MjsBody, name: str, axis: list[float], stiffness: float = 0.0, damping: float = 0.0) -> None:
     """A hinge about ``axis`` with stiffness (N m/rad) and damping (N m s/rad)."""
     j = body.add_joint(name=name, type=mujoco.mjtJoint.mjJNT_HINGE, axis=axis)
     j.stiffness = [stiffness, 0.0, 0.0]

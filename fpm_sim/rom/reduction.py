@@ -56,13 +56,15 @@ from fpm_sim.kinematics import Pose
 from fpm_sim.linear.equilibrium import static_equilibrium
 from fpm_sim.linear.modal import (
     ModeFilter,
-    damping_matrix,
-    equality_jacobian,
+    check_stable,
+    constraint_rank,
+    eigenvalue_tolerances,
     mass_matrix,
     reduced_eigenproblem,
     stiffness_matrix,
+    system_damping_matrix,
 )
-from fpm_sim.model.options import BuiltModel
+from fpm_sim.model.options import BuiltModel, open_for_writing
 from fpm_sim.results import to_jsonable
 
 __all__ = [
@@ -226,8 +228,13 @@ def modal_system(
         Position of the accelerometer on each distal link, as a fraction of its length from the
         elbow (nearest segment site).
     filt
-        ``filt.zero_freq_hz``: a mode below it (rigid-body motion, a mechanism) raises
-        :class:`ReductionError`, as no static correction exists then.
+        Rigid-body threshold (``filt.rigid_fraction``, as :mod:`fpm_sim.linear.modal`): a mode within it
+        (rigid-body motion, a mechanism) raises :class:`ReductionError`, as no static correction exists
+        then; a negative stiffness eigenvalue beyond it raises
+        :class:`~fpm_sim.linear.modal.UnstableModelError`.
+
+    The damping is the model's full viscous damping (:func:`~fpm_sim.linear.modal.system_damping_matrix`):
+    the joint dampers, or the differentiated passive forces of ``cable``/``flex`` links, as ``modes`` uses.
     """
     filt = filt or ModeFilter()
     model = built.model
@@ -240,22 +247,20 @@ def modal_system(
     data.qvel[:] = 0.0
     mujoco.mj_forward(model, data)
     mass = mass_matrix(model, data)
-    jac = equality_jacobian(model, data)
-    damp = damping_matrix(model)
-    z, kr, _, w2, x = reduced_eigenproblem(mass, stiff, jac)  # the constrained method's own solve
-    scale = max(float(np.max(np.abs(w2))), 1.0)
-    if np.any(w2 < -1e-9 * scale):
-        raise ReductionError(
-            "the equilibrium is unstable (negative stiffness eigenvalue): no reduced model; check gravity and "
-            "compliances"
-        )
+    rank = constraint_rank(model, data)
+    damp = system_damping_matrix(model, q_eq)
+    z, kr, _, w2, x = reduced_eigenproblem(mass, stiff, rank.basis)  # the constrained method's own solve
+    tol = eigenvalue_tolerances(  # finite-difference noise of K (modal.noise_w2), measured when a mode needs it
+        model, mass, z @ x, w2, lambda: stiff - stiffness_matrix(model, mujoco.MjData(model), q_eq, eps=2e-7), filt
+    )
+    check_stable(w2, tol, what="the equilibrium of the model to reduce")
     w = np.sqrt(np.maximum(w2, 0.0))
-    keep = w / (2 * np.pi) >= filt.zero_freq_hz
-    if np.any(~keep):
+    rigid = np.abs(w2) <= tol
+    if np.any(rigid):
         raise ReductionError(
-            f"{int(np.sum(~keep))} mode(s) below {filt.zero_freq_hz} Hz (a mechanism or rigid-body motion): a "
-            "static correction does not exist; lock or stiffen the motors (motors.mode = 'servo' with "
-            "servo_stiffness_nm_per_rad > 0)"
+            f"{int(np.sum(rigid))} mode(s) carry no strain energy (a mechanism or rigid-body motion, below "
+            f"{np.sqrt(float(np.max(tol[rigid]))) / (2 * np.pi):.2g} Hz): a static correction does not exist; lock or "
+            "stiffen the motors (motors.mode = 'servo' with servo_stiffness_nm_per_rad > 0)"
         )
     phi = z @ x
     xi = phi.T @ damp @ phi
@@ -525,23 +530,23 @@ class ReducedModel:
         if p.suffix == ".mat":
             import scipy.io
 
-            p.parent.mkdir(parents=True, exist_ok=True)
             cellify = {
                 k: (v.tolist() if isinstance(v, np.ndarray) and v.dtype == object else v) for k, v in arrays.items()
             }
             for k, v in cellify.items():
                 if isinstance(v, list):
                     cellify[k] = np.array(v, dtype=object)
-            scipy.io.savemat(p, cellify, oned_as="column")
+            with open_for_writing(p, error=ReductionError) as f:
+                scipy.io.savemat(f, cellify, oned_as="column")
         elif p.suffix == ".npz":
-            p.parent.mkdir(parents=True, exist_ok=True)
-            np.savez(
-                p,
-                **{
-                    k: (v.astype(str) if isinstance(v, np.ndarray) and v.dtype == object else v)
-                    for k, v in arrays.items()
-                },
-            )
+            with open_for_writing(p, error=ReductionError) as f:
+                np.savez(
+                    f,
+                    **{
+                        k: (v.astype(str) if isinstance(v, np.ndarray) and v.dtype == object else v)
+                        for k, v in arrays.items()
+                    },
+                )
         else:
             raise ReductionError(f"output file {str(p)!r} must end in .mat or .npz (--out)")
         return p

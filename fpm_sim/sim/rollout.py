@@ -18,6 +18,15 @@ Outputs per sample (``t = 0, dt, 2 dt, ...``): end-effector position ``(x, y)`` 
 its displacement from the equilibrium, the *deflection* (end-effector pose minus the rigid-link
 forward kinematics of the current motor angles: what link bending adds), motor angles, and the
 accelerations (world frame, m/s^2, gravity excluded) at chosen sites, e.g. ``distal_0_p2``.
+
+Divergence is an error (:class:`RolloutError`), never a result: every load value must be finite; after
+each output step the run stops when MuJoCo warned (its warning counters ``data.warning``: on "Nan, Inf
+or huge value in QACC" MuJoCo resets the state to ``qpos0``, which would otherwise read as zero
+displacement), when the state is not finite, or when the end effector has moved more than the model's
+size (``model.stat.extent``: a flexible manipulator that far from its equilibrium has left the linear,
+small-deflection regime the model is built for, i.e. its energy has grown without bound). MuJoCo's
+messages are collected (:func:`fpm_sim.model.options.mujoco_messages`), never written to
+``MUJOCO_LOG.TXT``.
 """
 
 from __future__ import annotations
@@ -38,7 +47,7 @@ from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose, forward_kinematics, inverse_kinematics
 from fpm_sim.linear.equilibrium import static_equilibrium
 from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import BuiltModel, ModelOptions
+from fpm_sim.model.options import BuiltModel, ModelOptions, check_finite, mujoco_messages, open_for_writing
 from fpm_sim.rom.reduction import END_EFFECTOR_SITE, motor_dofs
 
 __all__ = [
@@ -56,25 +65,56 @@ Profile = Callable[[float], Sequence[float]]
 
 
 class RolloutError(FpmSimError):
-    """Inconsistent rollout options (named in the message)."""
+    """Inconsistent rollout options (named in the message), or a diverging simulation."""
+
+
+_BAD_STATE = (
+    mujoco.mjtWarning.mjWARN_BADQACC,
+    mujoco.mjtWarning.mjWARN_BADQVEL,
+    mujoco.mjtWarning.mjWARN_BADQPOS,
+)
+
+
+def _divergence(model: mujoco.MjModel, data: mujoco.MjData, ee0: np.ndarray, messages: list[str]) -> str | None:
+    """Why the run has diverged (module docstring), or ``None``."""
+    bad = [int(w) for w in _BAD_STATE if data.warning[int(w)].number > 0]
+    if bad or messages:
+        what = messages[0].strip() if messages else "bad state warning"
+        return f"MuJoCo reported an unstable simulation ({what})"
+    if not (np.all(np.isfinite(data.qpos)) and np.all(np.isfinite(data.qvel))):
+        return "the state is no longer finite"
+    moved = float(np.linalg.norm(end_effector_pose(model, data)[:2] - ee0[:2]))
+    if moved > model.stat.extent:
+        return f"the end effector moved {moved:.3g} m, more than the model's size ({model.stat.extent:.3g} m)"
+    return None
+
+
+def _finite(name: str, value: Any) -> np.ndarray:
+    try:
+        return check_finite(name, value)
+    except FpmSimError as e:
+        raise RolloutError(str(e)) from None
 
 
 def constant(*values: float) -> Profile:
-    """A constant load profile (switched on at ``t = 0``)."""
+    """A constant load profile (switched on at ``t = 0``); non-finite values are refused when applied."""
     v = np.array(values, float)
     return lambda t: v
 
 
 def step_at(t0_s: float, *values: float) -> Profile:
     """Zero before ``t0_s``, ``values`` from then on."""
-    v = np.array(values, float)
+    _finite("t0_s (--load-start-s)", t0_s)
+    v = _finite("step values", values)
     z = np.zeros_like(v)
     return lambda t: v if t >= t0_s else z
 
 
 def sine(freq_hz: float, *amplitudes: float) -> Profile:
-    """``amplitudes * sin(2 pi f t)``."""
-    a = np.array(amplitudes, float)
+    """``amplitudes * sin(2 pi f t)``; ``freq_hz`` finite and >= 0."""
+    if not _finite("freq_hz (--load-freq-hz)", freq_hz) >= 0:
+        raise RolloutError(f"freq_hz (--load-freq-hz) must be >= 0 Hz, got {freq_hz!r}")
+    a = _finite("sine amplitudes", amplitudes)
     return lambda t: a * math.sin(2.0 * math.pi * freq_hz * t)
 
 
@@ -139,22 +179,22 @@ class RolloutResult:
     def save(self, path: str | Path) -> Path:
         """Write ``.csv`` (one column per signal) or ``.npz`` by suffix."""
         p = Path(path)
-        p.parent.mkdir(parents=True, exist_ok=True)
-        cols = self.columns()
-        if p.suffix == ".csv":
-            names = list(cols)
-            np.savetxt(
-                p,
-                np.column_stack([cols[n] for n in names]),
-                delimiter=",",
-                header=",".join(names),
-                comments="",
-                fmt="%.10g",
-            )
-        elif p.suffix == ".npz":
-            np.savez(p, **cols)
-        else:
+        if p.suffix not in (".csv", ".npz"):
             raise RolloutError(f"output file {str(p)!r} must end in .csv or .npz (--out)")
+        cols = self.columns()
+        with open_for_writing(p, error=RolloutError) as f:
+            if p.suffix == ".csv":
+                names = list(cols)
+                np.savetxt(
+                    f,
+                    np.column_stack([cols[n] for n in names]),
+                    delimiter=",",
+                    header=",".join(names),
+                    comments="",
+                    fmt="%.10g",
+                )
+            else:
+                np.savez(f, **cols)
         return p
 
     def plot(self, *, axes: Any = None) -> Any:
@@ -193,6 +233,13 @@ def aligned_options(manip: Manipulator, pose: Pose, options: ModelOptions, outpu
     h_auto = options.timestep_s or build_manipulator(manip, pose, options).timestep_s
     n = int(np.ceil(output_step_s / h_auto * (1 - 1e-12)))
     return dataclasses.replace(options, timestep_s=output_step_s / n)
+
+
+def _load(name: str, value: Sequence[float], t_s: float) -> np.ndarray:
+    v = np.asarray(value, float)
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        raise RolloutError(f"{name} must give 3 finite values, got {value!r} at t = {t_s:g} s")
+    return v
 
 
 def _platform_phi(data: mujoco.MjData, body_id: int) -> float:
@@ -242,9 +289,11 @@ def rollout(
         Show a tqdm progress bar.
     """
     model = built.model
-    if not (duration_s > 0 and math.isfinite(duration_s)):
-        raise RolloutError(f"duration_s must be positive, got {duration_s!r}")
+    if not (isinstance(duration_s, (int, float)) and duration_s > 0 and math.isfinite(duration_s)):
+        raise RolloutError(f"duration_s (--duration-s) must be a positive finite time, got {duration_s!r}")
     h = float(model.opt.timestep)
+    if not (isinstance(output_step_s, (int, float)) and math.isfinite(output_step_s)):
+        raise RolloutError(f"output_step_s must be a finite time, got {output_step_s!r}")
     if not (output_step_s >= h * (1 - 1e-9)):
         raise RolloutError(f"output_step_s ({output_step_s:g} s) must be at least the model timestep ({h:.3g} s)")
     n_sub = max(1, int(round(output_step_s / h)))
@@ -310,15 +359,15 @@ def rollout(
         data.xfrc_applied[bid] = 0.0
         data.qfrc_applied[:] = 0.0
         if ee_wrench is not None:
-            w = np.asarray(ee_wrench(tk), float)
+            w = _load("ee_wrench (--force-x-n, --force-y-n, --moment-z-nm)", ee_wrench(tk), tk)
             wrench[k] = w
             data.xfrc_applied[bid, 0:2] = w[0:2]
             data.xfrc_applied[bid, 5] = w[2]
         tau = np.zeros(3)
         if motor_torque is not None:
-            tau += np.asarray(motor_torque(tk), float)
+            tau += _load("motor_torque", motor_torque(tk), tk)
         if motor_reference is not None:
-            tau += k_servo * np.asarray(motor_reference(tk), float)
+            tau += k_servo * _load("motor_reference", motor_reference(tk), tk)
         if mdofs:
             torque[k] = tau
             data.qfrc_applied[mdofs] = tau
@@ -330,20 +379,27 @@ def rollout(
         bar = tqdm(total=n_out, desc="rollout", unit="sample", leave=False)
     start = time.perf_counter()
     # sample k holds the state at t_k and the loads applied from t_k on (accelerations include them)
-    for k in range(n_out + 1):
-        apply_loads(k)
-        if acc_ids:
-            mujoco.mj_forward(model, data)
-        else:
-            mujoco.mj_kinematics(model, data)
-        record(k)
-        if k == n_out:
-            break
-        mujoco.mj_step(model, data, nstep=n_sub)
-        if not np.all(np.isfinite(data.qpos)):
-            raise RolloutError(f"the simulation diverged at t = {data.time:.4g} s; reduce timestep_s or the loads")
-        if bar is not None:
-            bar.update(1)
+    with mujoco_messages() as messages:
+        for k in range(n_out + 1):
+            apply_loads(k)
+            if acc_ids:
+                mujoco.mj_forward(model, data)
+            else:
+                mujoco.mj_kinematics(model, data)
+            record(k)
+            if k == n_out:
+                break
+            mujoco.mj_step(model, data, nstep=n_sub)
+            why = _divergence(model, data, ee0, messages)
+            if why is not None:
+                if bar is not None:
+                    bar.close()
+                raise RolloutError(
+                    f"the simulation diverged at t = {t[k + 1]:.4g} s: {why}; reduce the loads (--force-x-n, "
+                    "--force-y-n, --moment-z-nm, motor torques) or the timestep (timestep_s)"
+                )
+            if bar is not None:
+                bar.update(1)
     wall = time.perf_counter() - start
     if bar is not None:
         bar.close()

@@ -16,8 +16,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
 from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose
 from fpm_sim.study.tables import comsol_table
@@ -90,8 +88,3 @@ def study_poses(reading: TableReading | None = None) -> list[StudyPose]:
     """The 25 study poses under ``reading`` (default: rows are x, +0.2 rad), in the table's order."""
     rd = reading or TableReading()
     return [StudyPose(c.row_mm, c.col_mm, rd.pose(c.row_mm, c.col_mm), c.comsol_hz) for c in comsol_table()]
-
-
-def comsol_values(poses: list[StudyPose]) -> np.ndarray:
-    """COMSOL's frequencies of ``poses`` (NaN where the study gives none)."""
-    return np.array([p.comsol_hz for p in poses])

@@ -33,7 +33,11 @@ def test_workers_give_the_same_numbers(default_manip):
     np.testing.assert_array_equal(a, b)
 
 
-def test_backends_are_replaceable(default_manip):
+def test_backends_are_replaceable(default_manip, monkeypatch):
+    from fpm_sim.batch import frequencies
+
+    # a private copy of the registry for this test: the fake backend must not outlive it
+    monkeypatch.setattr(frequencies, "BACKENDS", dict(frequencies.BACKENDS))
     calls = []
 
     def fake(config, poses, **kw):

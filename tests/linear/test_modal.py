@@ -24,12 +24,14 @@ def home(default_manip):
 @pytest.mark.parametrize("pose", POSES[1:], ids=lambda p: p.label())
 def test_methods_agree_on_the_manipulator(default_manip, pose):
     cmp = compare_methods(build_manipulator(default_manip, pose, ModelOptions(segments=6)), n_modes=6)
-    # 0.5 %: the issue's target; measured differences are ~1e-5 (weld softness, (omega h)^2)
-    assert np.all(np.abs(cmp.relative_differences(6)) < 0.005)
+    # measured 1.6e-5 and 1.7e-5 (the issue's target is 0.5 %): the weld's softness and the step map's
+    # (omega h)^2 / 24; 1e-4 is 6x the measured, far below what a wrong stiffness or mass term moves
+    assert np.all(np.abs(cmp.relative_differences(6)) < 1e-4)
 
 
 def test_home_methods_agree(home):
-    assert np.all(np.abs(home.relative_differences(6)) < 0.005)
+    # measured 6.0e-6 over the first six modes at 12 segments; 5e-5 keeps an 8x margin
+    assert np.all(np.abs(home.relative_differences(6)) < 5e-5)
 
 
 def test_home_has_six_lightly_damped_physical_modes_and_no_spurious_ones(home):
@@ -39,7 +41,8 @@ def test_home_has_six_lightly_damped_physical_modes_and_no_spurious_ones(home):
     # no spurious modes: the transitionFD list and the constraint-free eigen-solve list match one to one
     # over the whole reported band (a spurious constraint mode would appear in the first only)
     assert len(fd.modes) == len(con.modes) == 12
-    assert np.allclose(fd.frequencies_hz, con.frequencies_hz, rtol=5e-3)
+    # measured 2.0e-4 worst over 12 modes (up to ~400 Hz, where (omega h)^2 / 24 grows); 1e-3 is 5x that
+    assert np.allclose(fd.frequencies_hz, con.frequencies_hz, rtol=1e-3)
     # every kept mode respects the loop closure
     assert max(m.constraint_ratio for m in fd.modes) < 1e-3
     # what was dropped is accounted for: the soft welds' own motions are classified, not reported

@@ -124,3 +124,68 @@ def test_bad_input(flexible):
         rollout(built, manip, duration_s=-1.0)
     with pytest.raises(RolloutError, match="output_step_s"):
         rollout(built, manip, duration_s=0.001, output_step_s=1e-9)
+
+
+@pytest.mark.parametrize("force_n", [1e9, float("inf"), float("nan")], ids=["1e9", "inf", "nan"])
+def test_diverging_or_non_finite_load_is_an_error_not_zeros(flexible, force_n, tmp_path, monkeypatch):
+    """1e9 N made MuJoCo reset the state to qpos0 (a CSV of zero displacement, exit 0); inf and nan too."""
+    monkeypatch.chdir(tmp_path)
+    manip, built, system = flexible
+    with pytest.raises(RolloutError, match="diverged|finite"):
+        rollout(built, manip, duration_s=0.002, ee_wrench=constant(force_n, 0.0, 0.0), qpos=system.qpos)
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()  # MuJoCo's warning went to the error, not a file
+
+
+def test_mujoco_warnings_never_write_a_log_file(tmp_path, monkeypatch):
+    from fpm_sim.model.options import MujocoWarning, mujoco_messages, route_mujoco_warnings
+
+    monkeypatch.chdir(tmp_path)
+    model = mujoco.MjModel.from_xml_string(
+        '<mujoco><worldbody><body><joint/><geom size=".1"/></body></worldbody></mujoco>'
+    )
+    data = mujoco.MjData(model)
+    data.qfrc_applied[:] = np.nan
+    with mujoco_messages() as messages:
+        mujoco.mj_step(model, data)
+    assert messages and "QACC" in messages[0]
+    previous = mujoco.get_mju_user_warning()
+    try:
+        mujoco.set_mju_user_warning(None)
+        route_mujoco_warnings()
+        data = mujoco.MjData(model)  # MuJoCo reports each warning kind once per MjData
+        data.qfrc_applied[:] = np.nan
+        with pytest.warns(MujocoWarning, match="unstable"):
+            mujoco.mj_step(model, data)
+    finally:
+        mujoco.set_mju_user_warning(previous)
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"duration_s": -1.0}, "duration_s"),
+        ({"duration_s": float("inf")}, "duration_s"),
+        ({"duration_s": 0.001, "output_step_s": float("nan")}, "output_step_s"),
+        ({"duration_s": 0.001, "ee_wrench": lambda t: (1.0, 2.0)}, "ee_wrench"),
+    ],
+)
+def test_bad_rollout_arguments_name_the_parameter(flexible, kwargs, match):
+    manip, built, system = flexible
+    with pytest.raises(RolloutError, match=match):
+        rollout(built, manip, qpos=system.qpos, **kwargs)
+
+
+def test_load_profiles_are_validated():
+    from fpm_sim.sim.rollout import step_at
+
+    with pytest.raises(RolloutError, match="load-start-s"):
+        step_at(float("nan"), 1.0, 0.0, 0.0)
+    with pytest.raises(RolloutError, match="load-freq-hz"):
+        sine(-1.0, 1.0, 0.0, 0.0)
+    with pytest.raises(RolloutError, match="load-freq-hz"):
+        sine(float("inf"), 1.0, 0.0, 0.0)
+    with pytest.raises(RolloutError, match="amplitudes"):
+        sine(10.0, float("nan"), 0.0, 0.0)
+    assert np.allclose(step_at(0.5, 1.0, 2.0, 3.0)(0.6), [1.0, 2.0, 3.0])
+    assert np.allclose(step_at(0.5, 1.0, 2.0, 3.0)(0.4), 0.0)

@@ -14,11 +14,12 @@ from fpm_sim.model.options import ModelOptions
 from fpm_sim.rom.reduction import modal_system
 from fpm_sim.sim.impact import ImpactRecord, ImpactSetup, h1_estimate, point_acceleration, virtual_impact_test
 
-FIRST_PEAK_TOL = 0.02
-"""The issue's target: the first FRF peak within 2 % of the modal f1. Sources of difference: the FFT line
-spacing after zero padding (0.125 Hz at 8 s, refined by a parabola), the accelerance peak sitting at
-f1 / sqrt(1 - 2 zeta^2) (+0.01 % at 1 %), the neighbouring modes' skirts, the implicit integrator
-((omega h)^2 / 3 ~ 1e-6) and the soft welds (~1e-4). Measured -0.1 to -0.25 %."""
+FIRST_PEAK_TOL = 0.005
+"""The first FRF peak against the modal f1 (the issue's target is 2 %). Sources of difference: the FFT line
+spacing after zero padding (0.125 Hz at 8 s, refined by a parabola: up to ~0.2 % at 60-80 Hz), the
+accelerance peak sitting at f1 / sqrt(1 - 2 zeta^2) (+0.01 % at 1 %), the neighbouring modes' skirts, the
+implicit integrator ((omega h)^2 / 3 ~ 1e-6) and the soft welds (~1e-4). Measured -0.1 to -0.25 %: 0.5 % is
+2x the worst measured, what the line spacing alone can move."""
 
 
 def test_first_peak_matches_modal_f1_with_noise(symmetric_manip):
