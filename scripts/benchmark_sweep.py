@@ -39,7 +39,15 @@ from fpm_sim.config import default_config
 from fpm_sim.kinematics import Pose
 from fpm_sim.linear.analysis import manipulator_modes
 from fpm_sim.linear.equilibrium import EquilibriumError
-from fpm_sim.linear.modal import NULLSPACE_RCOND, equality_jacobian, mass_matrix, reduced_eigenproblem
+from fpm_sim.linear.modal import (
+    NULLSPACE_RCOND,
+    equality_jacobian,
+    mass_matrix,
+    model_length_m,
+    reduced_eigenproblem,
+    scaled_null_space,
+    unit_scales,
+)
 from fpm_sim.model.options import dof_stiffness
 from fpm_sim.study.sweep import dense_grid
 
@@ -105,21 +113,22 @@ def _floor(cfg, poses, opts):  # noqa: ANN001, ANN202
         pm.set_pose(asm)
         mujoco.mj_fwdPosition(pm.model, pm.data)
         m, j = mass_matrix(pm.model, pm.data), equality_jacobian(pm.model, pm.data)
+        rs, cs = unit_scales(pm.model, pm.data, model_length_m(pm.model))
         blocks = plane_blocks(m, j, pm.in_plane) or [(np.arange(m.shape[0]), np.arange(j.shape[0]))]
-        sub = [(m[np.ix_(d, d)], np.diag(pm.stiffness[d]), j[np.ix_(r, d)]) for d, r in blocks]
-        mats.append((m, np.diag(pm.stiffness), j, sub))
+        sub = [(m[np.ix_(d, d)], np.diag(pm.stiffness[d]), j[np.ix_(r, d)], rs[r], cs[d]) for d, r in blocks]
+        mats.append((m, np.diag(pm.stiffness), j, rs, cs, sub))
     t0 = time.process_time()
-    for _, _, _, sub in mats:
-        for m, k, j in sub:
-            reduced_eigenproblem(m, k, j)
+    for *_, sub in mats:
+        for m, k, j, rs, cs in sub:
+            reduced_eigenproblem(m, k, scaled_null_space(j, rs, cs)[2])
     t_blocks = time.process_time() - t0
     t0 = time.process_time()
-    for m, k, j, _ in mats:
-        reduced_eigenproblem(m, k, j)
+    for m, k, j, rs, cs, _ in mats:
+        reduced_eigenproblem(m, k, scaled_null_space(j, rs, cs)[2])
     t_full = time.process_time() - t0
     t0 = time.process_time()
-    for m, k, j, _ in mats:
-        z = scipy.linalg.null_space(j, rcond=NULLSPACE_RCOND)
+    for m, k, j, rs, cs, _ in mats:
+        z = scaled_null_space(j, rs, cs)[2]
         kr, mr = z.T @ k @ z, z.T @ m @ z
         scipy.linalg.eigh(0.5 * (kr + kr.T), 0.5 * (mr + mr.T), subset_by_index=[0, 2])
     return t_blocks, t_full, time.process_time() - t0, len(mats)

@@ -30,6 +30,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import math
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,9 +40,17 @@ import numpy as np
 
 from fpm_sim.batch.engine import EngineOptions, chunk_size, run_chunks, split
 from fpm_sim.config import Manipulator
-from fpm_sim.errors import FpmSimError
+from fpm_sim.errors import FpmSimError, FpmSimWarning
 from fpm_sim.kinematics import NEAR_SINGULAR_WARN, SINGULAR_TOL, Assembly, Pose, assemble_many
-from fpm_sim.linear.modal import NULLSPACE_RCOND, equality_jacobian, mass_matrix, reduced_eigenproblem
+from fpm_sim.linear.modal import (
+    NULLSPACE_RCOND,
+    equality_jacobian,
+    mass_matrix,
+    model_length_m,
+    reduced_eigenproblem,
+    scaled_null_space,
+    unit_scales,
+)
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import BuiltModel, ModelOptions, dof_stiffness
 
@@ -196,6 +205,7 @@ class PoseModel:
         self._body_ids = [bid(name).id for name, _ in _pose_angles(reference)]
         weld = self.model.eq_type == mujoco.mjtEq.mjEQ_WELD
         self._welds = np.where(weld)[0]
+        self.scales: tuple[np.ndarray, np.ndarray] | None = None
 
     def set_pose(self, asm: Assembly) -> None:
         """Re-pose the model at ``asm``: body orientations, then the welds' relative poses at ``qpos0``."""
@@ -211,11 +221,15 @@ class PoseModel:
             mujoco.mju_negQuat(inv, d.xquat[b1])
             mujoco.mju_mulQuat(m.eq_data[e, 6:10], inv, d.xquat[b2])
 
-    def solve(self, asm: Assembly, n_modes: int) -> tuple[np.ndarray, np.ndarray]:
-        """``(frequencies_hz, in_plane)`` of the lowest ``n_modes`` modes at ``asm`` (NaN-padded)."""
+    def solve(self, asm: Assembly, n_modes: int) -> tuple[np.ndarray, np.ndarray, bool]:
+        """``(frequencies_hz, in_plane, deficient)`` of the lowest ``n_modes`` modes at ``asm`` (see
+        :meth:`PlaneSplit.modes`)."""
         self.set_pose(asm)
         mujoco.mj_fwdPosition(self.model, self.data)
-        return self.split.modes(mass_matrix(self.model, self.data), equality_jacobian(self.model, self.data), n_modes)
+        if self.scales is None:  # structural: which rows are weld rotations, which dofs translate
+            self.scales = unit_scales(self.model, self.data, model_length_m(self.model))
+        jac = equality_jacobian(self.model, self.data)
+        return self.split.modes(mass_matrix(self.model, self.data), jac, n_modes, scales=self.scales)
 
 
 REPOSABLE_LINK_MODELS = ("segments", "rigid")
@@ -255,22 +269,35 @@ class PlaneSplit:
         self._k = [np.diag(self.stiffness[d]) for d in self.dofs]
         self._whole = (np.arange(nv), np.diag(self.stiffness))
 
-    def blocks(self, mass: np.ndarray, jac: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]] | None:
-        """``[(dofs, M_block, K_block, J_block)]`` of the two decoupled problems, or ``None``."""
+    def blocks(
+        self, mass: np.ndarray, jac: np.ndarray, scales: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]] | None:
+        """``[(dofs, M_block, K_block, J_block, (row_scale, col_scale))]`` of the two decoupled problems, or
+        ``None``. ``scales`` are :func:`fpm_sim.linear.modal.unit_scales` (default: none, unit factors)."""
         if not self.usable or np.any(mass[self._cross] != 0.0):
             return None
         rows = [np.any(jac[:, d] != 0.0, axis=1) for d in self.dofs]
         if np.any(rows[0] & rows[1]):
             return None
-        jacs = [jac[r][:, d] for r, d in zip(rows, self.dofs)]
-        svs = [np.linalg.svd(j, compute_uv=False) if j.size else np.zeros(0) for j in jacs]
+        row_scale, col_scale = scales or (np.ones(jac.shape[0]), np.ones(jac.shape[1]))
+        parts = [(r, d, (row_scale[r], col_scale[d])) for r, d in zip(rows, self.dofs)]
+        jacs = [jac[r][:, d] for r, d, _ in parts]
+        scaled = [s[0][:, None] * j * s[1][None, :] for j, (_, _, s) in zip(jacs, parts)]
+        svs = [np.linalg.svd(j, compute_uv=False) if j.size else np.zeros(0) for j in scaled]
         top = max((float(sv[0]) for sv in svs if sv.size), default=0.0)
         for sv in svs:
             if sv.size and np.sum(sv > NULLSPACE_RCOND * top) != np.sum(sv > NULLSPACE_RCOND * sv[0]):
                 return None
-        return [(d, mass[sq], k, j) for d, sq, k, j in zip(self.dofs, self._square, self._k, jacs)]
+        return [(d, mass[sq], k, j, s) for (_, d, s), sq, k, j in zip(parts, self._square, self._k, jacs)]
 
-    def modes(self, mass: np.ndarray, jac: np.ndarray, n_modes: int) -> tuple[np.ndarray, np.ndarray]:
+    def modes(
+        self,
+        mass: np.ndarray,
+        jac: np.ndarray,
+        n_modes: int,
+        *,
+        scales: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, bool]:
         """Lowest ``n_modes`` constrained modes: frequencies (Hz) and in-plane strain-energy share (NaN-padded).
 
         The eigenproblem is :func:`fpm_sim.linear.modal.reduced_eigenproblem`, on the two blocks when they are
@@ -278,10 +305,14 @@ class PlaneSplit:
         freedom have no spring, so the energy share counts the springs of :data:`IN_PLANE_KINDS`.
         """
         nv = self.in_plane.size
-        problems = self.blocks(mass, jac) or [(self._whole[0], mass, self._whole[1], jac)]
+        whole_scales = scales or (np.ones(jac.shape[0]), np.ones(nv))
+        problems = self.blocks(mass, jac, scales) or [(self._whole[0], mass, self._whole[1], jac, whole_scales)]
         w2_all, shapes = [], []
-        for dofs, m_b, k_b, j_b in problems:
-            z, _, _, w2, x = reduced_eigenproblem(m_b, k_b, j_b)
+        deficient = False
+        for dofs, m_b, k_b, j_b, (rs, cs) in problems:
+            rank, _, basis = scaled_null_space(j_b, rs, cs)
+            deficient = deficient or rank < j_b.shape[0]
+            z, _, _, w2, x = reduced_eigenproblem(m_b, k_b, basis)
             m = min(n_modes, w2.size)
             w2_all.append(w2[:m])
             v = np.zeros((nv, m))
@@ -297,7 +328,7 @@ class PlaneSplit:
         energy = self.stiffness[:, None] * v**2
         tot = energy.sum(axis=0)
         frac[:n] = np.where(tot > 0, energy[self.in_plane].sum(axis=0) / np.where(tot > 0, tot, 1.0), np.nan)
-        return freq, frac
+        return freq, frac, deficient
 
 
 def plane_blocks(mass: np.ndarray, jac: np.ndarray, in_plane: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]] | None:
@@ -358,15 +389,25 @@ def solve_poses(
         asm = many.assembly(i, pose)
         if reposable:
             pm = pm or _pose_model(config, options, asm)
-            freq[i], frac[i] = pm.solve(asm, n_modes)
+            f, s, deficient = pm.solve(asm, n_modes)
         else:
             built = build_manipulator(config, pose, options, assembly=asm)
             data = mujoco.MjData(built.model)
             mujoco.mj_forward(built.model, data)
             split = PlaneSplit([kind in IN_PLANE_DOF_KINDS for kind in built.dof_kinds], dof_stiffness(built.model))
-            freq[i], frac[i] = split.modes(
-                mass_matrix(built.model, data), equality_jacobian(built.model, data), n_modes
+            scales = unit_scales(built.model, data, model_length_m(built.model))
+            f, s, deficient = split.modes(
+                mass_matrix(built.model, data), equality_jacobian(built.model, data), n_modes, scales=scales
             )
+        if deficient:  # the one rank decision (consistent units) says a loop direction is lost: singular
+            warnings.warn(
+                f"pose {pose}: weld Jacobian is rank-deficient in consistent units; reported singular",
+                FpmSimWarning,
+                stacklevel=2,
+            )
+            status[i] = STATUS_SINGULAR
+            continue
+        freq[i], frac[i] = f, s
     return PoseFrequencies(poses=poses, frequencies_hz=freq, in_plane=frac, singularity=sing, status=status)
 
 

@@ -42,7 +42,7 @@ threshold) is never clipped to zero: :class:`UnstableModelError` is raised, nami
 Constraint rank (:func:`constraint_rank`): the weld Jacobian's rows mix metres (position rows) and
 radians (rotation rows) and its columns radians (hinges) and metres (slides). Its rank is decided on
 ``R J C`` with the position rows divided and the translational columns multiplied by the model's
-characteristic length ``L = model.stat.extent`` (m), so both become dimensionless; the same decision
+characteristic length ``L`` (m, :func:`model_length_m`), so both become dimensionless; the same decision
 serves the ``cpu`` and the ``mjx`` pose-loop backends.
 
 Timestep: the step map (semi-implicit Euler on the springs) raises an undamped mode's frequency by
@@ -77,6 +77,9 @@ from fpm_sim.model.options import (
 )
 
 __all__ = [
+    "model_length_m",
+    "scaled_null_space",
+    "unit_scales",
     "Mode",
     "ModeFilter",
     "ModalResult",
@@ -469,8 +472,26 @@ class ConstraintRank:
         return float(sv[self.n_rows - 1] / sv[0])
 
 
-def _unit_scales(model: mujoco.MjModel, data: mujoco.MjData, length_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """Row and column factors that make the equality Jacobian dimensionless (see :func:`constraint_rank`)."""
+def model_length_m(model: mujoco.MjModel) -> float:
+    """The characteristic length (m) that makes the weld Jacobian dimensionless.
+
+    The largest offset of a body in its parent's frame: a structural length (the links' pieces, the base
+    radius), identical at every pose of a re-posed model and of a model compiled per pose, so the rank
+    decision and its round-off do not depend on which pose a model was compiled at (``model.stat.extent``
+    does). 1 m for a model without offsets.
+    """
+    if model.nbody < 2:
+        return 1.0
+    length = float(np.max(np.linalg.norm(model.body_pos[1:], axis=1)))
+    return length if length > 0 else 1.0
+
+
+def unit_scales(model: mujoco.MjModel, data: mujoco.MjData, length_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Row and column factors that make the equality Jacobian dimensionless (see :func:`constraint_rank`).
+
+    They depend on the model's structure only (which rows are weld rotations, which dofs translate), so a
+    pose loop that re-poses one compiled model computes them once.
+    """
     rows = np.flatnonzero(np.asarray(data.efc_type[: data.nefc]) == mujoco.mjtConstraint.mjCNSTR_EQUALITY)
     row_scale = np.full(rows.size, 1.0 / length_m)
     eq_ids = np.asarray(data.efc_id[: data.nefc])[rows]
@@ -494,6 +515,30 @@ def _unit_scales(model: mujoco.MjModel, data: mujoco.MjData, length_m: float) ->
     return row_scale, col_scale
 
 
+def scaled_null_space(
+    jac: np.ndarray, row_scale: np.ndarray, col_scale: np.ndarray, *, rcond: float = NULLSPACE_RCOND,
+    top: float | None = None,
+) -> tuple[int, np.ndarray, np.ndarray]:
+    """``(rank, singular_values, basis)`` of ``jac`` decided on the dimensionless ``R J C`` (:func:`unit_scales`).
+
+    A direction counts when its scaled singular value exceeds ``rcond`` times ``top`` (default: the largest
+    of this matrix; a block of a block-diagonal Jacobian passes the whole matrix's largest). ``basis`` is an
+    orthonormal basis of the admissible motions in the model's coordinates.
+    """
+    nv = jac.shape[1]
+    if jac.shape[0] == 0:
+        return 0, np.zeros(0), np.eye(nv)
+    scaled = row_scale[:, None] * jac * col_scale[None, :]
+    _, sv, vt = np.linalg.svd(scaled, full_matrices=True)
+    ref = float(sv[0]) if top is None else top
+    rank = int(np.sum(sv > rcond * ref)) if ref > 0 else 0
+    # null space of R J C is N~; that of J is C N~ (C invertible, diagonal): re-orthonormalise
+    basis = col_scale[:, None] * vt[rank:].T
+    if basis.shape[1]:
+        basis = np.linalg.qr(basis)[0]
+    return rank, sv, basis
+
+
 def constraint_rank(
     model: mujoco.MjModel, data: mujoco.MjData, *, rcond: float = NULLSPACE_RCOND, warn: bool = True
 ) -> ConstraintRank:
@@ -503,7 +548,7 @@ def constraint_rank(
     velocities (rad/s for hinges, m/s for slides) to constraint rates (m/s for weld positions and
     connects, rad/s times the weld's ``torquescale`` for weld rotations). Its rank is decided on the
     dimensionless ``R J C``: position rows divided by ``L``, rotation rows by ``torquescale``,
-    translational columns multiplied by ``L``, with ``L = model.stat.extent`` (m, the model's size);
+    translational columns multiplied by ``L`` (:func:`model_length_m`, m);
     a direction counts when its singular value exceeds ``rcond`` times the largest. This is the one
     rank decision of the package: the ``cpu`` path (:func:`reduced_eigenproblem`) and the ``mjx``
     backend both use it.
@@ -514,17 +559,11 @@ def constraint_rank(
     is issued (``warn``).
     """
     jac = equality_jacobian(model, data)
-    length = float(model.stat.extent) if model.stat.extent > 0 else 1.0
+    length = model_length_m(model)
     if jac.shape[0] == 0:
         return ConstraintRank(0, 0, np.zeros(0), np.eye(model.nv), length)
-    row_scale, col_scale = _unit_scales(model, data, length)
-    scaled = row_scale[:, None] * jac * col_scale[None, :]
-    _, sv, vt = np.linalg.svd(scaled, full_matrices=True)
-    rank = int(np.sum(sv > rcond * sv[0])) if sv[0] > 0 else 0
-    # null space of R J C is N~; that of J is C N~ (C invertible, diagonal): re-orthonormalise
-    basis = col_scale[:, None] * vt[rank:].T
-    if basis.shape[1]:
-        basis = np.linalg.qr(basis)[0]
+    row_scale, col_scale = unit_scales(model, data, length)
+    rank, sv, basis = scaled_null_space(jac, row_scale, col_scale, rcond=rcond)
     out = ConstraintRank(jac.shape[0], rank, sv, basis, length)
     if warn and out.deficient:
         weak = sv[rank : jac.shape[0]] / sv[0]
@@ -725,7 +764,7 @@ def _scaled_jacobian(model: mujoco.MjModel, data: mujoco.MjData, length_m: float
     jac = equality_jacobian(model, data)
     if jac.shape[0] == 0:
         return jac
-    row_scale, _ = _unit_scales(model, data, length_m)
+    row_scale, _ = unit_scales(model, data, length_m)
     return row_scale[:, None] * jac
 
 
