@@ -41,8 +41,9 @@ from fpm_sim.kinematics import (
     inverse_kinematics,
 )
 from fpm_sim.linear.modal import NULLSPACE_RCOND, equality_jacobian, mass_matrix
+from fpm_sim.linear.threads import blas_threads
 from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import BuiltModel, ModelOptions, dof_stiffness
+from fpm_sim.model.options import BuiltModel, ModelOptions, dof_stiffness, resolve_segments
 
 __all__ = [
     "assemble_pose",
@@ -52,8 +53,9 @@ __all__ = [
     "IN_PLANE_KINDS",
 ]
 
-FAST_SEGMENTS = 6
-"""Spring locations per link of the fast path (the cantilever's first mode is +0.6 % at n = 6)."""
+FAST_SEGMENTS = resolve_segments()
+"""Spring locations per link of the pose loop: the shared default (:data:`fpm_sim.model.options.DEFAULT_FIDELITY`),
+so that a sweep and ``modes`` agree at a pose."""
 
 IN_PLANE_KINDS = ("bend_in", "axial", "motor", "clamp")
 """Spring kinds whose strain energy counts as in-plane (the rest: bend_out, twist, tilt)."""
@@ -152,7 +154,8 @@ def _solve_pose(
 
 def _solve_chunk(args: tuple[Manipulator, list[Pose], ModelOptions, int]) -> list[tuple]:
     manip, poses, opts, n_modes = args
-    return [_solve_pose(manip, p, opts, n_modes) for p in poses]
+    with blas_threads():  # one BLAS thread around the dense solves (fpm_sim.linear.threads)
+        return [_solve_pose(manip, p, opts, n_modes) for p in poses]
 
 
 def cpu_backend(
@@ -174,7 +177,7 @@ def cpu_backend(
         bar = tqdm(total=len(poses), desc=desc, unit="pose")
     if workers <= 1 or len(poses) < 2 * workers:
         for p in poses:
-            results.append(_solve_pose(config, p, options, n_modes))
+            results.extend(_solve_chunk((config, [p], options, n_modes)))
             if bar is not None:
                 bar.update(1)
     else:

@@ -189,17 +189,34 @@ class ModalResult:
             lines.append(f"{i:>4}  {m.frequency_hz:>11.3f}  {m.damping_ratio:>8.4f}  {char:<30}")
         return "\n".join(lines)
 
-    def plot(self, index: int = 0, *, ax: Any = None, scale_m: float = 0.03) -> Any:
-        """Draw mode ``index`` in 3D over the equilibrium shape (matplotlib).
+    def plot(self, ax: Any = None, *, index: int | None = None, n_modes: int = 1, scale_m: float = 0.03) -> Any:
+        """Draw mode shapes in 3D over the equilibrium shape (matplotlib); returns the ``Figure``.
 
-        The largest point displacement is drawn ``scale_m`` long; out-of-plane modes show along z.
-        Pass a 3D axes (``projection="3d"``) as ``ax`` or get a new figure.
+        Parameters
+        ----------
+        ax
+            A 3D axes (``projection="3d"``) to draw mode ``index`` (default 0) on; ``None`` makes a new
+            figure with the first ``n_modes`` modes side by side (or mode ``index`` alone).
+        index
+            The mode to draw (0-based).
+        n_modes
+            Modes drawn on a new figure when ``index`` is not given.
+        scale_m
+            Drawn length of the largest point displacement (m); out-of-plane modes show along z.
         """
         import matplotlib.pyplot as plt
 
-        if ax is None:
-            fig = plt.figure(figsize=(5, 5))
-            ax = fig.add_subplot(projection="3d")
+        if ax is not None:
+            self._plot_mode(ax, 0 if index is None else index, scale_m)
+            return ax.figure
+        indices = [index] if index is not None else list(range(max(1, min(n_modes, len(self.modes)))))
+        fig = plt.figure(figsize=(4.5 * len(indices), 4.5))
+        for k, i in enumerate(indices):
+            self._plot_mode(fig.add_subplot(1, len(indices), k + 1, projection="3d"), i, scale_m)
+        fig.tight_layout()
+        return fig
+
+    def _plot_mode(self, ax: Any, index: int, scale_m: float) -> None:
         pos = self.point_positions()
         disp = self.point_displacements(index)
         peak = max(float(np.max(np.linalg.norm(d, axis=1))) for d in disp.values()) or 1.0
@@ -220,7 +237,6 @@ class ModalResult:
         ax.set_zlim(-span / 2, span / 2)
         m = self.modes[index]
         ax.set_title(f"mode {index + 1}: {m.frequency_hz:.2f} Hz, {m.dominant}")
-        return ax
 
 
 # ---------------------------------------------------------------------------------------------

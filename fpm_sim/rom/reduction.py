@@ -62,6 +62,7 @@ from fpm_sim.linear.modal import (
     reduced_eigenproblem,
     stiffness_matrix,
 )
+from fpm_sim.linear.threads import blas_threads
 from fpm_sim.model.options import BuiltModel
 from fpm_sim.results import to_jsonable
 
@@ -242,7 +243,8 @@ def modal_system(
     mass = mass_matrix(model, data)
     jac = equality_jacobian(model, data)
     damp = damping_matrix(model)
-    z, kr, _, w2, x = reduced_eigenproblem(mass, stiff, jac)  # the constrained method's own solve
+    with blas_threads():  # one BLAS thread around the dense solve (fpm_sim.linear.threads)
+        z, kr, _, w2, x = reduced_eigenproblem(mass, stiff, jac)  # the constrained method's own solve
     scale = max(float(np.max(np.abs(w2))), 1.0)
     if np.any(w2 < -1e-9 * scale):
         raise ReductionError(

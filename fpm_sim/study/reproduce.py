@@ -184,9 +184,6 @@ class StudyReproduction:
 
     def plot_heatmaps(self) -> Any:
         """Figure: our f1, COMSOL's, and their difference (%) over the grid (x, y under the reading)."""
-        import matplotlib
-
-        matplotlib.use("Agg", force=False)
         import matplotlib.pyplot as plt
 
         fig, axes = plt.subplots(1, 3, figsize=(14, 4.4), constrained_layout=True)
@@ -217,9 +214,6 @@ class StudyReproduction:
 
     def plot_subsystems(self) -> Any:
         """Figure: subsystem first frequencies, measured vs COMSOL vs fpm-sim."""
-        import matplotlib
-
-        matplotlib.use("Agg", force=False)
         import matplotlib.pyplot as plt
 
         fig, axes = plt.subplots(1, 2, figsize=(11, 4), constrained_layout=True)

@@ -24,6 +24,7 @@ import numpy as np
 from fpm_sim.batch.frequencies import pose_frequencies
 from fpm_sim.batch.pose_loop import PoseFrequencies
 from fpm_sim.config import Manipulator
+from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose, UnreachablePoseError, inverse_kinematics
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.study.poses import TableReading, study_poses
@@ -46,12 +47,12 @@ def dense_grid(config: Manipulator, *, step_mm: float, phi_rad: float = 0.0) -> 
     point is returned (reachable or not).
     """
     if not step_mm > 0:
-        raise ValueError(f"--step-mm must be > 0, got {step_mm}")
+        raise FpmSimError(f"--step-mm must be > 0, got {step_mm}")
     half = _reach_half_width(config)
     n = int(math.floor(half * 1e3 / step_mm))
     ticks = np.arange(-n, n + 1) * step_mm
     if ticks.size > 401:
-        raise ValueError(f"--step-mm {step_mm} gives {ticks.size} x {ticks.size} points; use a larger step")
+        raise FpmSimError(f"--step-mm {step_mm} gives {ticks.size} x {ticks.size} points; use a larger step")
     reach = np.zeros((ticks.size, ticks.size), bool)
     g = config.geometry
     for iy, y in enumerate(ticks):
@@ -62,7 +63,7 @@ def dense_grid(config: Manipulator, *, step_mm: float, phi_rad: float = 0.0) -> 
             except UnreachablePoseError:
                 pass
     if not reach.any():
-        raise ValueError(f"no reachable position at phi = {phi_rad} rad with step {step_mm} mm (--phi-rad)")
+        raise FpmSimError(f"no reachable position at phi = {phi_rad} rad with step {step_mm} mm (--phi-rad)")
     rows, cols = np.where(reach.any(axis=1))[0], np.where(reach.any(axis=0))[0]
     ys, xs = ticks[rows.min() : rows.max() + 1], ticks[cols.min() : cols.max() + 1]
     return [Pose.from_mm(float(x), float(y), phi_rad) for y in ys for x in xs]
@@ -145,9 +146,6 @@ class WorkspaceSweep:
 
     def plot(self) -> Any:
         """Heatmap of f1 with unreachable/singular points marked and the singularity loci drawn."""
-        import matplotlib
-
-        matplotlib.use("Agg", force=False)
         import matplotlib.pyplot as plt
 
         rows = self.rows()
