@@ -79,18 +79,14 @@ def point_of(args: argparse.Namespace, prefix: str, fallback: Any = None) -> Any
 
 
 def cmd_frf(args: argparse.Namespace) -> int:
-    import numpy as np
-
+    from fpm_sim.api import frf_grid
     from fpm_sim.frf import LinkPoint, modal_frf
     from fpm_sim.model.manipulator import build_manipulator
     from fpm_sim.model.options import warn_if_coarse
     from fpm_sim.outputs import atomic_file
     from fpm_sim.rom.reduction import modal_system
 
-    if not (0.0 <= args.f_min_hz < args.f_max_hz) or args.df_hz <= 0:
-        raise CliError("need 0 <= --f-min-hz < --f-max-hz and --df-hz > 0; fix the frequency band")
-    if (args.f_max_hz - args.f_min_hz) / args.df_hz > 1e6:
-        raise CliError("--f-max-hz, --f-min-hz, --df-hz give more than 1e6 frequencies; use a larger --df-hz")
+    frf_grid(args.f_min_hz, args.f_max_hz, args.df_hz, [])  # checks the band before any computation
     check_output_file(args.csv, "--csv", (".csv",))
     check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
     if args.link_model == "rigid":
@@ -106,12 +102,7 @@ def cmd_frf(args: argparse.Namespace) -> int:
     exc.check(built)
     resp.check(built)
     system = modal_system(built)
-    freq = np.arange(args.f_min_hz, args.f_max_hz + args.df_hz / 2, args.df_hz)
-    freq = np.unique(
-        np.concatenate(
-            [freq, system.frequencies_hz[(system.frequencies_hz >= freq[0]) & (system.frequencies_hz <= freq[-1])]]
-        )
-    )
+    freq = frf_grid(args.f_min_hz, args.f_max_hz, args.df_hz, system.frequencies_hz)
     frf = modal_frf(
         system,
         excitation=exc,
@@ -131,20 +122,11 @@ def cmd_frf(args: argparse.Namespace) -> int:
     payload["parameters"] = built.parameters
     payload["csv"] = str(args.csv) if args.csv else None
     payload["plot"] = str(args.plot) if args.plot else None
-    peaks = frf.peaks()
     lines = [
-        f"{frf.quantity} ({frf.unit}) from {frf.excitation} to {frf.response}, pose {pose_of(args).label()}, "
-        f"{len(freq)} frequencies {freq[0]:g}..{freq[-1]:g} Hz, damping "
+        f"pose {pose_of(args).label()}, damping "
         + ("model" if args.damping_ratio is None else f"{args.damping_ratio:g} (all modes)"),
-        f"{'mode':>4}  {'freq (Hz)':>10}  {'damping':>8}  {'residue (1/kg)':>15}",
+        frf.table(),
     ]
-    for i, (f, z, r) in enumerate(zip(frf.modal_freq_hz, frf.damping_ratios, frf.residues)):
-        if f > freq[-1]:
-            break
-        lines.append(f"{i + 1:>4}  {f:>10.3f}  {z:>8.4f}  {r:>15.4e}")
-    lines.append(f"{'peak':>4}  {'freq (Hz)':>10}  {'|H|':>10}  {'prominence (dB)':>15}")
-    for i, p in enumerate(peaks, 1):
-        lines.append(f"{i:>4}  {p.freq_hz:>10.3f}  {p.magnitude:>10.4g}  {p.prominence_db:>15.1f}")
     lines.append(resolution_line(opts))
     lines += [f"wrote {f}" for f in (args.csv, args.plot) if f]
     emit(args, payload, "\n".join(lines))

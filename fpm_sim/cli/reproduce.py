@@ -89,29 +89,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     )
     with atomic_dir(out, overwrite=args.overwrite) as tmp:
         paths = [out / p.name for p in rep.write(tmp)]
-    st = rep.stats()
-    lines = [rep.config.name, f"reading {reading.name}", ""]
-    lines.append(f"{'test':<22}{'measured':>10}{'COMSOL':>10}{'fpm-sim':>10}{'err %':>8}")
-    for s in rep.subsystems:
-        lines.append(
-            f"{s.test.label:<22}{s.test.experimental_hz:>10g}{s.test.comsol_hz:>10g}{s.ours_hz:>10.2f}{s.error_pct:>+8.2f}"
-        )
-    lines.append("")
-    lines.append(f"{'row':>5}{'col':>6}{'x':>7}{'y':>7}{'phi':>6}{'f1 Hz':>9}{'COMSOL':>9}{'diff %':>8}")
-    for row in rep.rows():
-        c = row["comsol_hz"]
-        d = f"{100 * (row['f1_hz'] / c - 1):+8.1f}" if c == c else f"{'-':>8}"
-        cs = f"{c:9.2f}" if c == c else f"{'-':>9}"
-        lines.append(
-            f"{row['row_mm']:>5g}{row['col_mm']:>6g}{row['x_mm']:>7g}{row['y_mm']:>7g}{row['phi_rad']:>6.1f}"
-            f"{row['f1_hz']:>9.2f}{cs}{d}"
-        )
-    if st.get("n"):
-        lines.append(
-            f"\nvs COMSOL ({st['n']} poses): mean |err| {st['mean_abs_pct']:.2f} %, "
-            f"median {st['median_abs_pct']:.2f} %, "
-            f"max {st['max_abs_pct']:.2f} %, Spearman {st['spearman']:.3f}"
-        )
+    lines = [rep.table()]
     lines.append(resolution_line(opts))
     lines.append("wrote " + ", ".join(str(p) for p in paths))
     payload = with_resolution(rep.to_dict(), opts)

@@ -121,31 +121,10 @@ def cmd_rollout(args: argparse.Namespace) -> int:
             res.save(tmp)
     if args.plot:
         save_figure(args.plot, res.plot)
-    import numpy as np
-
-    d = res.ee_disp
-    payload = {
-        "parameters": res.parameters,
-        "n_samples": len(res.t_s),
-        "n_steps": res.n_steps,
-        "wall_s": res.wall_s,
-        "final_disp": {"x_m": d[-1, 0], "y_m": d[-1, 1], "phi_rad": d[-1, 2]},
-        "peak_abs_disp": {k: float(np.max(np.abs(d[:, i]))) for i, k in enumerate(("x_m", "y_m", "phi_rad"))},
-        "peak_abs_accel_m_s2": {s: float(np.max(np.linalg.norm(a, axis=1))) for s, a in res.accel.items()},
-        "out": str(args.out) if args.out else None,
-        "plot": str(args.plot) if args.plot else None,
-    }
-    lines = [
-        f"rollout {res.parameters['duration_s']:.4g} s: {res.n_steps} steps of {built.timestep_s:.3g} s "
-        f"(nv = {built.model.nv}), {len(res.t_s)} samples, wall {res.wall_s:.2f} s",
-        f"{'signal':<22} {'final':>12} {'peak |.|':>12}",
-    ]
-    for i, (k, unit, sc) in enumerate((("disp x", "mm", 1e3), ("disp y", "mm", 1e3), ("disp phi", "mrad", 1e3))):
-        lines.append(f"{k + ' (' + unit + ')':<22} {d[-1, i] * sc:>12.5f} {np.max(np.abs(d[:, i])) * sc:>12.5f}")
-    for s, a in res.accel.items():
-        lines.append(
-            f"{'acc ' + s + ' (m/s2)':<22} {np.linalg.norm(a[-1]):>12.4g} {np.max(np.linalg.norm(a, axis=1)):>12.4g}"
-        )
+    payload = res.to_dict()
+    payload["out"] = str(args.out) if args.out else None
+    payload["plot"] = str(args.plot) if args.plot else None
+    lines = [res.table()]
     lines.append(resolution_line(opts))
     for f in (args.out, args.plot):
         if f:

@@ -163,6 +163,9 @@ class ModalResult:
         return {link: np.array([data.site(s).xpos.copy() for s in sites]) for link, sites in self.built.links.items()}
 
     def to_dict(self, n_modes: int | None = None) -> dict[str, Any]:
+        """JSON-ready modes (frequency Hz, damping ratio, character), what was dropped, the resolution."""
+        from fpm_sim.model.options import resolution_of_parameters
+
         modes = self.modes[:n_modes] if n_modes else self.modes
         return {
             "method": self.method,
@@ -176,6 +179,7 @@ class ModalResult:
                 for m in modes
             ],
             "dropped": dict(self.dropped),
+            "resolution": resolution_of_parameters(self.built.parameters),
             "parameters": self.built.parameters,
         }
 

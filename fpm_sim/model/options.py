@@ -42,6 +42,7 @@ __all__ = [
     "discretisation_error",
     "resolution_summary",
     "resolution_label",
+    "resolution_of_parameters",
     "warn_if_coarse",
     "BuiltModel",
     "TimestepError",
@@ -145,6 +146,21 @@ def resolution_summary(options: ModelOptions) -> dict[str, Any]:
         "segments": n,
         "fidelity": options.fidelity,
         "f1_error_estimate": discretisation_error(n, options.link_model),
+    }
+
+
+def resolution_of_parameters(parameters: dict[str, Any]) -> dict[str, Any]:
+    """:func:`resolution_summary` from a built model's ``parameters`` (its ``options`` entry); ``{}`` if absent."""
+    o = parameters.get("options") if isinstance(parameters, dict) else None
+    if not isinstance(o, dict) or "segments" not in o:
+        return {}
+    lm = o.get("link_model", "segments")
+    n = int(o.get("segments") or 1)
+    return {
+        "link_model": lm,
+        "segments": n,
+        "fidelity": o.get("fidelity"),
+        "f1_error_estimate": discretisation_error(n, lm),
     }
 
 

@@ -464,6 +464,8 @@ class ReducedModel:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (no matrices)."""
+        from fpm_sim.model.options import resolution_of_parameters
+
         return {
             "pose": dataclasses.asdict(self.pose),
             "n_modes": self.n_modes,
@@ -472,6 +474,7 @@ class ReducedModel:
             "inputs": [f"{n} ({u})" for n, u in zip(self.input_names, self.input_units)],
             "outputs": [f"{n} ({u})" for n, u in zip(self.output_names, self.output_units)],
             "static_correction": self.static_correction,
+            "resolution": resolution_of_parameters(self.parameters),
             "parameters": self.parameters,
         }
 
@@ -492,9 +495,9 @@ class ReducedModel:
             name="fpm_rom",
         )
 
-    def plot(self, input_name: str = "force_x", *, duration_s: float = 0.2, ax: Any = None) -> Any:
-        """Step response of the displacement outputs to ``input_name`` (matplotlib)."""
-        return self.step_response(input_name, duration_s=duration_s).plot(ax=ax)
+    def plot(self, ax: Any = None, *, input_name: str = "force_x", duration_s: float = 0.2) -> Any:
+        """Step response of the displacement outputs to ``input_name`` over ``duration_s`` (s); the ``Figure``."""
+        return self.step_response(input_name, duration_s=duration_s).plot(ax=ax).figure
 
     # -- files -------------------------------------------------------------------------------
 

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from fpm_sim.batch.frequencies import pose_frequencies
-from fpm_sim.batch.pose_loop import PoseFrequencies
+from fpm_sim.batch.pose_loop import PoseFrequencies, fast_options
 from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose, UnreachablePoseError, inverse_kinematics
@@ -108,6 +108,8 @@ class WorkspaceSweep:
     phi_rad: float
     step_mm: float
     frequencies: PoseFrequencies
+    options: ModelOptions | None = None
+    """The pose loop's model options (resolution), when known."""
 
     def rows(self) -> list[dict[str, Any]]:
         fr = self.frequencies
@@ -144,14 +146,44 @@ class WorkspaceSweep:
                     ["" if isinstance(r[c], float) and not math.isfinite(r[c]) else r[c] for c in SWEEP_CSV_COLUMNS]
                 )
 
-    def plot(self) -> Any:
-        """Heatmap of f1 with unreachable/singular points marked and the singularity loci drawn."""
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: grid, status counts, one row per point (x, y mm; phi rad; f1..f3 Hz), resolution."""
+        from fpm_sim.model.options import resolution_summary
+
+        return {
+            "config": self.config.name,
+            "grid": self.grid,
+            "step_mm": self.step_mm,
+            "phi_rad": self.phi_rad,
+            "counts": self.counts(),
+            "rows": self.rows(),
+            "resolution": resolution_summary(self.options) if self.options is not None else {},
+        }
+
+    def table(self) -> str:
+        """Counts by status and the f1 range (Hz)."""
+        f1 = self.frequencies.f1_hz
+        ok = f1[np.isfinite(f1)]
+        lines = [
+            f"{self.config.name}: grid {self.grid}, {len(f1)} points ("
+            + ", ".join(f"{k} {v}" for k, v in sorted(self.counts().items()))
+            + ")"
+        ]
+        if ok.size:
+            lines.append(f"f1 range: {ok.min():.2f} .. {ok.max():.2f} Hz")
+        return "\n".join(lines)
+
+    def plot(self, ax: Any = None) -> Any:
+        """Heatmap of f1 with unreachable/singular points marked and the singularity loci drawn; the ``Figure``."""
         import matplotlib.pyplot as plt
 
         rows = self.rows()
         xs = np.array(sorted({r["x_mm"] for r in rows}))
         ys = np.array(sorted({r["y_mm"] for r in rows}))
-        fig, ax = plt.subplots(figsize=(7, 6), constrained_layout=True)
+        if ax is None:
+            fig, ax = plt.subplots(figsize=(7, 6), constrained_layout=True)
+        else:
+            fig = ax.figure
         if self.grid == "dense":
             z = np.full((len(ys), len(xs)), np.nan)
             for r in rows:
@@ -223,8 +255,9 @@ def sweep_workspace(
         poses = [p.pose for p in study_poses(reading)]
         step_mm = 50.0
     else:
-        raise ValueError(f"--grid must be 'paper' or 'dense', got {grid!r}")
+        raise FpmSimError(f"--grid must be 'paper' or 'dense', got {grid!r}")
+    opts = options or fast_options()
     fr = pose_frequencies(
-        config, poses, backend=backend, n_modes=3, options=options, workers=workers, progress=progress, desc="sweep"
+        config, poses, backend=backend, n_modes=3, options=opts, workers=workers, progress=progress, desc="sweep"
     )
-    return WorkspaceSweep(config, grid, phi_rad, step_mm, fr)
+    return WorkspaceSweep(config, grid, phi_rad, step_mm, fr, opts)
