@@ -21,10 +21,11 @@ import traceback
 import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from fpm_sim import __version__
 from fpm_sim.cli.common import (
+    CliError,
     add_config_args,
     add_model_args,
     add_output_args,
@@ -286,9 +287,17 @@ def _add_analysis_args(p: argparse.ArgumentParser) -> None:
     )
 
 
+class _Parser(argparse.ArgumentParser):
+    """Usage errors become :class:`CliError` (one ``error:`` line and exit 2 from :func:`main`, like every
+    other user error) instead of argparse's own exit."""
+
+    def error(self, message: str) -> NoReturn:
+        raise CliError(f"{message} ({self.prog}); see '{self.prog} --help'")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``fpm-sim`` parser with every sub-command."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="fpm-sim",
         description="Natural frequencies, modes and reduced models of flexible planar 3RRR manipulators (MuJoCo).",
     )
