@@ -111,7 +111,11 @@ def _result_payload(result: ModalResult | ModalComparison, n_modes: int) -> tupl
 
 def _header(built: BuiltModel, title: str) -> str:
     p = built.parameters
-    return f"{title}\n  nv = {p['nv']}, timestep = {p['timestep_s']:.3g} s, link model = {p['options']['link_model']}"
+    o = p["options"]
+    return (
+        f"{title}\n  nv = {p['nv']}, timestep = {p['timestep_s']:.3g} s, link model = {o['link_model']}"
+        + (f" ({o['segments']} segments)" if o["link_model"] != "rigid" else "")
+    )
 
 
 def _n_modes_note(result: ModalResult | ModalComparison, n_modes: int) -> str:
