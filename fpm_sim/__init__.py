@@ -54,3 +54,29 @@ def __getattr__(name: str) -> Any:
 
 def __dir__() -> list[str]:
     return sorted(__all__)
+
+
+def _public_frf_over_the_submodule() -> None:
+    """``fs.frf`` is the API function although ``fpm_sim/frf.py`` is a submodule of the same name.
+
+    Importing a submodule sets it as an attribute of its package; a property on the package's module
+    class keeps the function there (the submodule stays importable by ``from fpm_sim.frf import ...``).
+    """
+    import sys
+    import types
+
+    class _Package(types.ModuleType):
+        @property
+        def frf(self) -> Any:
+            from fpm_sim.api import frf
+
+            return frf
+
+        @frf.setter
+        def frf(self, module: Any) -> None:
+            self.__dict__["_frf_module"] = module
+
+    sys.modules[__name__].__class__ = _Package
+
+
+_public_frf_over_the_submodule()
