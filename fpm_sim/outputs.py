@@ -24,6 +24,13 @@ class OutputError(FpmSimError):
     """An output path that cannot be written (or would replace another run's results)."""
 
 
+def _default_mode(mode: int) -> int:
+    """``mode`` less the process umask: what a plain ``mkdir``/``open`` would have created."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return mode & ~mask
+
+
 def _parent(path: Path) -> Path:
     parent = path.parent if str(path.parent) else Path(".")
     try:
@@ -59,6 +66,7 @@ def atomic_dir(target: str | Path, *, overwrite: bool = False) -> Iterator[Path]
         raise OutputError(f"{target} is a file, not a folder; choose a folder name")
     parent = _parent(target)
     tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=parent))
+    os.chmod(tmp, _default_mode(0o777))  # mkdtemp makes it private (0700)
     try:
         yield tmp
         if target.exists():
@@ -85,6 +93,7 @@ def atomic_file(target: str | Path) -> Iterator[Path]:
     fd, name = tempfile.mkstemp(prefix=f".{target.stem}.tmp-", suffix=target.suffix, dir=parent)
     os.close(fd)
     tmp = Path(name)
+    os.chmod(tmp, _default_mode(0o666))  # mkstemp makes it private (0600)
     try:
         yield tmp
         os.replace(tmp, target)

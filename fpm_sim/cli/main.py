@@ -24,23 +24,28 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
 from fpm_sim import __version__
-from fpm_sim.cli.common import (
-    CliError,
-    add_config_args,
-    add_model_args,
-    add_output_args,
-    add_pose_args,
-    check_output_file,
-    count_arg,
-    emit,
-    load_manipulator,
-    mm,
-    model_options,
-    pose_of,
-    resolution_line,
-    with_resolution,
-)
-from fpm_sim.errors import FpmSimError
+
+try:  # Ctrl-C while the modules load (a second or so): one line and 130, as at any later moment
+    from fpm_sim.cli.common import (
+        CliError,
+        add_config_args,
+        add_model_args,
+        add_output_args,
+        add_pose_args,
+        check_output_file,
+        count_arg,
+        emit,
+        load_manipulator,
+        mm,
+        model_options,
+        pose_of,
+        resolution_line,
+        with_resolution,
+    )
+    from fpm_sim.errors import FpmSimError
+except KeyboardInterrupt:
+    sys.stderr.write("interrupted (Ctrl-C)\n")
+    raise SystemExit(130) from None
 
 if TYPE_CHECKING:
     from fpm_sim.config import Manipulator
