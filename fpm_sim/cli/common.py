@@ -24,16 +24,16 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from fpm_sim.errors import FpmSimError
-from fpm_sim.model.options import DEFAULT_FIDELITY, FIDELITIES, ModelOptions, resolution_label, resolution_summary
-from fpm_sim.model.parts import LINK_MODELS
-from fpm_sim.results import to_jsonable
 
 if TYPE_CHECKING:
     from fpm_sim.config import Manipulator
     from fpm_sim.kinematics import Pose
+    from fpm_sim.model.options import ModelOptions
 
 __all__ = [
     "CliError",
+    "FIDELITY_CHOICES",
+    "LINK_MODEL_CHOICES",
     "MAX_MODES",
     "add_config_args",
     "add_model_args",
@@ -52,6 +52,14 @@ __all__ = [
     "mm",
     "read_input_file",
 ]
+
+FIDELITY_CHOICES = ("fast", "standard", "fine")
+""":data:`fpm_sim.model.options.FIDELITIES` (a test checks they agree), listed here so that building the
+parser imports neither MuJoCo nor SciPy (``fpm-sim --help`` starts in a tenth of a second)."""
+DEFAULT_FIDELITY = "standard"
+""":data:`fpm_sim.model.options.DEFAULT_FIDELITY` (checked by a test)."""
+LINK_MODEL_CHOICES = ("segments", "rigid", "cable", "flex")
+""":data:`fpm_sim.model.parts.LINK_MODELS` (checked by a test)."""
 
 MAX_MODES = 200
 """Upper bound of ``--n-modes``/``--modes`` (the models have a few hundred degrees of freedom)."""
@@ -94,7 +102,7 @@ def add_resolution_args(p: argparse.ArgumentParser | Any, *, axial: bool) -> Non
     """``--fidelity``, ``--segments`` and ``--axial/--no-axial`` (default ``axial``)."""
     p.add_argument(
         "--fidelity",
-        choices=FIDELITIES,
+        choices=FIDELITY_CHOICES,
         default=None,
         help=f"model resolution preset: fast (8 segments per link), standard (12), fine (24); default "
         f"{DEFAULT_FIDELITY}, the same in every command",
@@ -121,7 +129,7 @@ def add_model_args(p: argparse.ArgumentParser, *, axial: bool = True) -> None:
     g.add_argument(
         "--link-model",
         default="segments",
-        help=f"link model: {', '.join(LINK_MODELS)} (default segments; see docs/link_models.md)",
+        help=f"link model: {', '.join(LINK_MODEL_CHOICES)} (default segments; see docs/link_models.md)",
     )
     add_resolution_args(g, axial=axial)
     g.add_argument(
@@ -183,6 +191,8 @@ def load_manipulator(args: argparse.Namespace) -> Manipulator:
 
 def model_options(args: argparse.Namespace, **overrides: Any) -> ModelOptions:
     """:class:`ModelOptions` from the model/resolution options present in ``args`` (``overrides`` win)."""
+    from fpm_sim.model.options import ModelOptions
+
     kw: dict[str, Any] = {
         "link_model": getattr(args, "link_model", "segments"),
         "segments": getattr(args, "segments", None),
@@ -216,18 +226,24 @@ def pose_of(args: argparse.Namespace) -> Pose:
 
 def with_resolution(payload: dict[str, Any], options: ModelOptions) -> dict[str, Any]:
     """Add the ``resolution`` entry (segments, fidelity, f1 error estimate) to a JSON payload."""
+    from fpm_sim.model.options import resolution_summary
+
     payload["resolution"] = resolution_summary(options)
     return payload
 
 
 def resolution_line(options: ModelOptions) -> str:
     """The resolution line every table ends with."""
+    from fpm_sim.model.options import resolution_label
+
     return "resolution: " + resolution_label(options)
 
 
 def emit(args: argparse.Namespace, payload: dict[str, Any], text: str) -> None:
     """Print ``payload`` as JSON with ``--json``, else ``text``."""
     if getattr(args, "json", False):
+        from fpm_sim.results import to_jsonable
+
         print(json.dumps(to_jsonable(payload), indent=2))
     else:
         print(text)
@@ -289,8 +305,6 @@ def read_input_file(path: Path, option: str, loader: Any, what: str) -> Any:
 
     ``what`` says what the file should be (e.g. ``"an atlas written by 'fpm-sim atlas build'"``).
     """
-    import zipfile
-
     path = Path(path)
     if path.is_dir():
         raise CliError(f"{option} {path} is a folder; give {what}")
@@ -300,5 +314,5 @@ def read_input_file(path: Path, option: str, loader: Any, what: str) -> Any:
         return loader(path)
     except FpmSimError:
         raise
-    except (OSError, ValueError, KeyError, IndexError, TypeError, EOFError, zipfile.BadZipFile) as exc:
+    except Exception as exc:  # any reader failure (zip, MAT, missing key) is this file's problem: name it
         raise CliError(f"{option} {path} cannot be read ({type(exc).__name__}: {exc}); give {what}") from exc
