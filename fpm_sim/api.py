@@ -58,10 +58,15 @@ def model_options(
         Section rotary inertia (Rayleigh beam).
     timestep_s
         Simulation step (s); ``None``: automatic.
-    """
-    from fpm_sim.model.options import ModelOptions
 
-    return ModelOptions(
+    Warns
+    -----
+    fpm_sim.model.options.ResolutionWarning
+        When the estimated discretisation error of the first frequency passes 1 %.
+    """
+    from fpm_sim.model.options import ModelOptions, warn_if_coarse
+
+    opts = ModelOptions(
         link_model=link_model,
         segments=segments,
         fidelity=None if segments is not None else fidelity,
@@ -70,6 +75,8 @@ def model_options(
         rotary_inertia=rotary_inertia,
         timestep_s=timestep_s,
     )
+    warn_if_coarse(opts, stacklevel=3)
+    return opts
 
 
 def _config(config: Manipulator | None) -> Manipulator:

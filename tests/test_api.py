@@ -118,3 +118,10 @@ def test_public_entry_points_load_no_jax_matplotlib_dm_control():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_coarse_resolution_warns():
+    from fpm_sim.model.options import ResolutionWarning
+
+    with pytest.warns(ResolutionWarning, match="41 %"):  # 0.41 / 1^2; measured +54 % on f1
+        fs.modes(segments=1, n_modes=1)
