@@ -162,7 +162,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     q = sp.add_parser("query", help="interpolated reduced model at a pose")
     q.add_argument("atlas", type=Path, help="atlas file from 'atlas build'")
     q.add_argument("--method", choices=("auto", "linear", "cubic"), default="auto", help="interpolation (default auto)")
-    q.add_argument("--direct", action="store_true", help="compare with a direct computation at the pose")
+    q.add_argument(
+        "--direct",
+        action=argparse.BooleanOptionalAction,
+        default=False,
+        help="compare with a direct computation at the pose (default off)",
+    )
     q.add_argument("--out", type=Path, help="export the reduced model (.mat or .npz)")
     add_pose_args(q)
     add_config_args(q)

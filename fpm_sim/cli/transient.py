@@ -98,7 +98,12 @@ def register(sub: argparse._SubParsersAction) -> None:
             f"{STUDY_OUTPUT_STEP_S * 1e3:g} ms output step, {STUDY_FORCE_N:g} N (assumed magnitude)."
         ),
     )
-    p.add_argument("--study", action="store_true", help="the study's setup (pose (0,0), 5 mm links, locked motors)")
+    p.add_argument(
+        "--study",
+        action=argparse.BooleanOptionalAction,
+        default=False,
+        help="the study's setup (pose (0,0), 5 mm links, locked motors; default off)",
+    )
     p.add_argument("--out", type=Path, help="write transient.csv, transient.png and summary.json/.txt to this folder")
     add_overwrite_arg(p)
     p.add_argument(
