@@ -100,7 +100,10 @@ class LinkPoint:
         if self.link != "platform" and self.link not in built.links:
             raise FrfError(f"unknown link {self.link!r}; choose one of platform, {', '.join(sorted(built.links))}")
         if not (0.0 <= self.fraction <= 1.0) or not math.isfinite(self.fraction):
-            raise FrfError(f"fraction must lie in [0, 1] (position along {self.link}), got {self.fraction!r}")
+            raise FrfError(
+                f"fraction must lie in [0, 1] (position along {self.link}; --input-fraction or --output-fraction on "
+                f"the command line), got {self.fraction!r}"
+            )
         if self.axis not in AXES:
             raise FrfError(f"axis must be one of {', '.join(AXES)}, got {self.axis!r}")
         if self.link == "platform" and self.axis in ("normal", "along"):
@@ -344,10 +347,34 @@ class FrequencyResponse:
             "residues_per_kg": self.residues[:n_peaks].tolist(),
         }
 
-    def plot(self, *, axes: Any = None, label: str | None = None, modal_lines: bool = True) -> Any:
-        """Magnitude (dB) and phase against frequency (matplotlib); returns the two axes."""
+    def table(self, *, n_peaks: int = 10) -> str:
+        """The modes in the band (frequency Hz, damping ratio, modal constant 1/kg) and the FRF's peaks."""
+        f_top = float(self.freq_hz[-1])
+        lines = [
+            f"{self.quantity} ({self.unit}) from {self.excitation} to {self.response}, "
+            f"{len(self.freq_hz)} frequencies {self.freq_hz[0]:g}..{f_top:g} Hz"
+        ]
+        if self.modal_freq_hz.size:
+            lines.append(f"{'mode':>4}  {'freq (Hz)':>10}  {'damping':>8}  {'residue (1/kg)':>15}")
+            for i, (f, z, r) in enumerate(zip(self.modal_freq_hz, self.damping_ratios, self.residues)):
+                if f > f_top:
+                    break
+                lines.append(f"{i + 1:>4}  {f:>10.3f}  {z:>8.4f}  {r:>15.4e}")
+        lines.append(f"{'peak':>4}  {'freq (Hz)':>10}  {'|H|':>10}  {'prominence (dB)':>15}")
+        for i, p in enumerate(self.peaks()[:n_peaks], 1):
+            lines.append(f"{i:>4}  {p.freq_hz:>10.3f}  {p.magnitude:>10.4g}  {p.prominence_db:>15.1f}")
+        return "\n".join(lines)
+
+    def plot(
+        self, ax: Any = None, *, axes: Any = None, label: str | None = None, modal_lines: bool = True
+    ) -> Any:
+        """Magnitude (dB) and phase against frequency; returns the ``Figure``.
+
+        ``ax`` (or ``axes``): two axes (magnitude, phase) to draw on; default a new figure.
+        """
         import matplotlib.pyplot as plt
 
+        axes = ax if ax is not None else axes
         if axes is None:
             _, axes = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True, gridspec_kw={"height_ratios": [2, 1]})
         ax, axp = axes
@@ -363,7 +390,7 @@ class FrequencyResponse:
         axp.set_xlabel("frequency (Hz)")
         if label:
             ax.legend(fontsize=8)
-        return axes
+        return ax.figure
 
 
 def _damping(system: ModalSystem, damping_ratio: float | Sequence[float] | None) -> np.ndarray:

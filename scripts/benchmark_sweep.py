@@ -43,7 +43,6 @@ from fpm_sim.linear.modal import (
     NULLSPACE_RCOND,
     equality_jacobian,
     mass_matrix,
-    model_length_m,
     reduced_eigenproblem,
     scaled_null_space,
     unit_scales,
@@ -101,7 +100,7 @@ def _before(cfg, poses, opts, workers):  # noqa: ANN001, ANN202 - the old cpu ba
 def _floor(cfg, poses, opts):  # noqa: ANN001, ANN202
     """Seconds of the eigen-solves alone: as the pose loop runs them (in-plane and out-of-plane blocks),
     on the whole matrices (one reduced_eigenproblem per pose), and the whole matrices' lowest three only."""
-    from fpm_sim.batch.pose_loop import PoseModel, plane_blocks, pose_assembly
+    from fpm_sim.batch.pose_loop import PoseModel, plane_blocks, pose_assembly, structural_length_m
 
     mats = []
     pm = None
@@ -113,7 +112,7 @@ def _floor(cfg, poses, opts):  # noqa: ANN001, ANN202
         pm.set_pose(asm)
         mujoco.mj_fwdPosition(pm.model, pm.data)
         m, j = mass_matrix(pm.model, pm.data), equality_jacobian(pm.model, pm.data)
-        rs, cs = unit_scales(pm.model, pm.data, model_length_m(pm.model))
+        rs, cs = unit_scales(pm.model, pm.data, structural_length_m(pm.model))
         blocks = plane_blocks(m, j, pm.in_plane) or [(np.arange(m.shape[0]), np.arange(j.shape[0]))]
         sub = [(m[np.ix_(d, d)], np.diag(pm.stiffness[d]), j[np.ix_(r, d)], rs[r], cs[d]) for d, r in blocks]
         mats.append((m, np.diag(pm.stiffness), j, rs, cs, sub))

@@ -1,4 +1,5 @@
-"""Shared small fixtures. Importing fpm_sim first keeps BLAS single-threaded (see fpm_sim/__init__)."""
+"""Shared small fixtures. The whole session runs with BLAS limited as around fpm_sim's own eigen-solves
+(fpm_sim.linear.threads: one thread unless the environment sets a count), since tests solve too."""
 
 import json
 import subprocess
@@ -9,8 +10,15 @@ from pathlib import Path
 
 import pytest
 
-import fpm_sim  # noqa: F401
 from fpm_sim.config import Manipulator, Material, RigConfig, Section, default_config, load_config
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _blas_threads_for_the_session():
+    from fpm_sim.linear.threads import blas_threads
+
+    with blas_threads():
+        yield
 
 
 @pytest.fixture(scope="session")

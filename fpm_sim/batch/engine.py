@@ -47,6 +47,7 @@ __all__ = [
     "MIN_CHUNK",
     "MAX_CHUNK",
     "LOCAL_CLUSTER_MIN_ITEMS",
+    "chunk_store",
 ]
 
 MIN_CHUNK = 16
@@ -118,6 +119,12 @@ class EngineOptions:
     @property
     def remote(self) -> bool:
         return self.scheduler is not None and "://" in self.scheduler
+
+
+def chunk_store(out: str | Path) -> Path:
+    """Folder of a run's finished chunks, beside its output ``out`` (removed when the run completes)."""
+    out = Path(out)
+    return out.parent / f"{out.name}.partial"
 
 
 def chunk_size(n_items: int, n_workers: int) -> int:

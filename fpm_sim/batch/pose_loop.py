@@ -46,13 +46,13 @@ from fpm_sim.linear.modal import (
     NULLSPACE_RCOND,
     equality_jacobian,
     mass_matrix,
-    model_length_m,
     reduced_eigenproblem,
     scaled_null_space,
     unit_scales,
 )
+from fpm_sim.linear.threads import blas_threads
 from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import BuiltModel, ModelOptions, dof_stiffness
+from fpm_sim.model.options import BuiltModel, ModelOptions, dof_stiffness, resolve_segments
 
 __all__ = [
     "assemble_pose",
@@ -73,8 +73,9 @@ __all__ = [
     "PlaneSplit",
 ]
 
-FAST_SEGMENTS = 6
-"""Spring locations per link of the fast path (the cantilever's first mode is +0.6 % at n = 6)."""
+FAST_SEGMENTS = resolve_segments()
+"""Spring locations per link of the pose loop: the shared default (:data:`fpm_sim.model.options.DEFAULT_FIDELITY`),
+so that a sweep and ``modes`` agree at a pose."""
 
 IN_PLANE_KINDS = ("bend_in", "axial", "motor", "clamp")
 """Spring kinds whose strain energy counts as in-plane (the rest: bend_out, twist, tilt)."""
@@ -227,9 +228,25 @@ class PoseModel:
         self.set_pose(asm)
         mujoco.mj_fwdPosition(self.model, self.data)
         if self.scales is None:  # structural: which rows are weld rotations, which dofs translate
-            self.scales = unit_scales(self.model, self.data, model_length_m(self.model))
+            self.scales = unit_scales(self.model, self.data, structural_length_m(self.model))
         jac = equality_jacobian(self.model, self.data)
         return self.split.modes(mass_matrix(self.model, self.data), jac, n_modes, scales=self.scales)
+
+
+def structural_length_m(model: mujoco.MjModel) -> float:
+    """The length (m) that makes the weld Jacobian dimensionless in the pose loop: the largest offset of a body
+    in its parent's frame (the link pieces, the base radius).
+
+    It is structural: the same at every pose of a re-posed model and of a model compiled per pose, so the
+    loop's results do not depend on which pose a worker compiled its model at (``model.stat.extent``, the
+    length :func:`fpm_sim.linear.modal.constraint_rank` uses, does). The rank decision itself is the same
+    function (:func:`fpm_sim.linear.modal.scaled_null_space`); its threshold is far from both lengths'
+    scaled singular values (0.14-0.17 vs 1e-4).
+    """
+    if model.nbody < 2:
+        return 1.0
+    length = float(np.max(np.linalg.norm(model.body_pos[1:], axis=1)))
+    return length if length > 0 else 1.0
 
 
 REPOSABLE_LINK_MODELS = ("segments", "rigid")
@@ -383,31 +400,32 @@ def solve_poses(
     status = [_status(float(v), bool(r)) for v, r in zip(sing, many.reachable)]
     reposable = options.link_model in REPOSABLE_LINK_MODELS and not recompile
     pm: PoseModel | None = None
-    for i, pose in enumerate(poses):
-        if status[i] in (STATUS_UNREACHABLE, STATUS_SINGULAR):
-            continue
-        asm = many.assembly(i, pose)
-        if reposable:
-            pm = pm or _pose_model(config, options, asm)
-            f, s, deficient = pm.solve(asm, n_modes)
-        else:
-            built = build_manipulator(config, pose, options, assembly=asm)
-            data = mujoco.MjData(built.model)
-            mujoco.mj_forward(built.model, data)
-            split = PlaneSplit([kind in IN_PLANE_DOF_KINDS for kind in built.dof_kinds], dof_stiffness(built.model))
-            scales = unit_scales(built.model, data, model_length_m(built.model))
-            f, s, deficient = split.modes(
-                mass_matrix(built.model, data), equality_jacobian(built.model, data), n_modes, scales=scales
-            )
-        if deficient:  # the one rank decision (consistent units) says a loop direction is lost: singular
-            warnings.warn(
-                f"pose {pose}: weld Jacobian is rank-deficient in consistent units; reported singular",
-                FpmSimWarning,
-                stacklevel=2,
-            )
-            status[i] = STATUS_SINGULAR
-            continue
-        freq[i], frac[i] = f, s
+    with blas_threads():  # one BLAS thread around the dense solves (fpm_sim.linear.threads)
+        for i, pose in enumerate(poses):
+            if status[i] in (STATUS_UNREACHABLE, STATUS_SINGULAR):
+                continue
+            asm = many.assembly(i, pose)
+            if reposable:
+                pm = pm or _pose_model(config, options, asm)
+                f, s, deficient = pm.solve(asm, n_modes)
+            else:
+                built = build_manipulator(config, pose, options, assembly=asm)
+                data = mujoco.MjData(built.model)
+                mujoco.mj_forward(built.model, data)
+                split = PlaneSplit([kind in IN_PLANE_DOF_KINDS for kind in built.dof_kinds], dof_stiffness(built.model))
+                scales = unit_scales(built.model, data, structural_length_m(built.model))
+                f, s, deficient = split.modes(
+                    mass_matrix(built.model, data), equality_jacobian(built.model, data), n_modes, scales=scales
+                )
+            if deficient:  # the one rank decision (consistent units) says a loop direction is lost: singular
+                warnings.warn(
+                    f"pose {pose}: weld Jacobian is rank-deficient in consistent units; reported singular",
+                    FpmSimWarning,
+                    stacklevel=2,
+                )
+                status[i] = STATUS_SINGULAR
+                continue
+            freq[i], frac[i] = f, s
     return PoseFrequencies(poses=poses, frequencies_hz=freq, in_plane=frac, singularity=sing, status=status)
 
 

@@ -5,39 +5,55 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-import numpy as np
-
-from fpm_sim.cli.frf import frf_user_errors, save_figure
-from fpm_sim.cli.main import add_config_args, add_output_args, add_pose_args, emit, load_manipulator, pose_of
-from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import ModelOptions
-from fpm_sim.rom.atlas import AtlasError, build_atlas, load_atlas, mac_matrix
-from fpm_sim.rom.reduction import modal_system
+from fpm_sim.cli.common import (
+    add_config_args,
+    add_output_args,
+    add_pose_args,
+    add_resolution_args,
+    check_output_file,
+    count_arg,
+    emit,
+    load_manipulator,
+    model_options,
+    pose_of,
+    read_input_file,
+    resolution_line,
+    with_resolution,
+)
+from fpm_sim.cli.main import PLOT_SUFFIXES, save_figure
 
 __all__ = ["register"]
 
 PAPER_GRID_MM = [-100.0, -50.0, 0.0, 50.0, 100.0]
 
 
-@frf_user_errors
 def cmd_atlas_build(args: argparse.Namespace) -> int:
-    if args.out.suffix != ".npz":
-        raise AtlasError(f"--out {args.out} must end in .npz")
+    import numpy as np
+
+    from fpm_sim.model.options import warn_if_coarse
+    from fpm_sim.outputs import atomic_file
+    from fpm_sim.rom.atlas import build_atlas
+
+    check_output_file(args.out, "--out", (".npz",))
+    check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
+    opts = model_options(args)
+    warn_if_coarse(opts)
     manip = load_manipulator(args)
     atlas = build_atlas(
         manip,
         x_m=[v * 1e-3 for v in args.x_mm],
         y_m=[v * 1e-3 for v in args.y_mm],
         phi_rad=args.phi_rad,
-        options=ModelOptions(segments=args.segments, axial=args.axial),
+        options=opts,
         n_modes=args.modes,
         n_extra=args.extra,
         progress=not args.json,
     )
-    atlas.save(args.out)
+    with atomic_file(args.out) as tmp:
+        atlas.save(tmp)
     if args.plot:
-        save_figure(args.plot, lambda: atlas.plot())
-    payload = atlas.to_dict()
+        save_figure(args.plot, atlas.plot)
+    payload = with_resolution(atlas.to_dict(), opts)
     payload["out"] = str(args.out)
     weak = atlas.weak_links()
     text = (
@@ -48,6 +64,8 @@ def cmd_atlas_build(args: argparse.Namespace) -> int:
         "per-label frequency is unreliable there)"
         + f"\n{len(weak)} weak links (aligned basis MAC with the parent pose below 0.8: interpolated models unreliable "
         f"there); lowest aligned MAC {float(atlas.nodes['mac_aligned'].min()):.3f}"
+        + "\n"
+        + resolution_line(opts)
         + f"\nwrote {args.out}"
         + (f"\nwrote {args.plot}" if args.plot else "")
     )
@@ -55,16 +73,29 @@ def cmd_atlas_build(args: argparse.Namespace) -> int:
     return 0
 
 
-@frf_user_errors
 def cmd_atlas_query(args: argparse.Namespace) -> int:
-    if not args.atlas.exists():
-        raise AtlasError(f"atlas file {args.atlas} not found; build one with 'fpm-sim atlas build --out FILE.npz'")
-    atlas = load_atlas(args.atlas)
+    import numpy as np
+
+    from fpm_sim.model.manipulator import build_manipulator
+    from fpm_sim.model.options import ModelOptions
+    from fpm_sim.outputs import atomic_file
+    from fpm_sim.rom.atlas import AtlasError, load_atlas, mac_matrix
+    from fpm_sim.rom.reduction import modal_system
+
+    check_output_file(args.out, "--out", (".mat", ".npz"))
     pose = pose_of(args)
+    atlas = read_input_file(
+        args.atlas, "atlas", load_atlas, "an atlas written by 'fpm-sim atlas build --out FILE.npz'"
+    )
     rom = atlas.query(pose, method=args.method)
     if args.out:
-        rom.save(args.out)
-    payload = rom.to_dict()
+        with atomic_file(args.out) as tmp:
+            rom.save(tmp)
+    o = atlas.parameters.get("options", {})
+    opts = ModelOptions(
+        **{k: o[k] for k in ("link_model", "segments", "axial", "rotary_inertia", "gravity", "timestep_s") if k in o}
+    )
+    payload = with_resolution(rom.to_dict(), opts)
     payload["atlas"] = str(args.atlas)
     lines = [f"interpolated reduced model at {pose.label()} from {args.atlas} ({args.method}):"]
     if args.direct:
@@ -74,10 +105,6 @@ def cmd_atlas_query(args: argparse.Namespace) -> int:
                 f"the atlas was built for config {atlas.parameters.get('config')!r}, not {manip.name!r}; "
                 "pass its --config"
             )
-        o = atlas.parameters["options"]
-        opts = ModelOptions(
-            **{k: o[k] for k in ("link_model", "segments", "axial", "rotary_inertia", "gravity", "timestep_s")}
-        )
         system = modal_system(build_manipulator(manip, pose, opts))
         # each interpolated mode against the direct mode of the most similar shape (MAC), which need not
         # be the same sorted position: the atlas keeps the tracked modes, not always the lowest ones
@@ -100,6 +127,7 @@ def cmd_atlas_query(args: argparse.Namespace) -> int:
             )
     else:
         lines.append(rom.table())
+    lines.append(resolution_line(opts) + " (the atlas's)")
     if args.out:
         lines.append(f"wrote {args.out}")
     emit(args, payload, "\n".join(lines))
@@ -121,10 +149,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--x-mm", type=float, nargs="+", default=PAPER_GRID_MM, help="grid x values (mm)")
     b.add_argument("--y-mm", type=float, nargs="+", default=PAPER_GRID_MM, help="grid y values (mm)")
     b.add_argument("--phi-rad", type=float, nargs="+", default=[0.0], help="grid rotations (rad, default 0)")
-    b.add_argument("--modes", type=int, default=6, help="tracked modes (default 6)")
-    b.add_argument("--extra", type=int, default=4, help="extra candidate modes per pose (default 4)")
-    b.add_argument("--segments", type=int, default=6, help="spring locations per link (default 6)")
-    b.add_argument("--axial", action="store_true", help="axial springs")
+    b.add_argument("--modes", type=count_arg("--modes"), default=6, help="tracked modes (default 6)")
+    b.add_argument(
+        "--extra", type=count_arg("--extra", low=0), default=4, help="extra candidate modes per pose (default 4)"
+    )
+    add_resolution_args(b, axial=False)
     b.add_argument("--out", type=Path, required=True, help="atlas file (.npz)")
     b.add_argument("--plot", type=Path, help="tracked f1..f3 over the grid (.png, .pdf, .svg)")
     add_config_args(b)
@@ -133,7 +162,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     q = sp.add_parser("query", help="interpolated reduced model at a pose")
     q.add_argument("atlas", type=Path, help="atlas file from 'atlas build'")
     q.add_argument("--method", choices=("auto", "linear", "cubic"), default="auto", help="interpolation (default auto)")
-    q.add_argument("--direct", action="store_true", help="compare with a direct computation at the pose")
+    q.add_argument(
+        "--direct",
+        action=argparse.BooleanOptionalAction,
+        default=False,
+        help="compare with a direct computation at the pose (default off)",
+    )
     q.add_argument("--out", type=Path, help="export the reduced model (.mat or .npz)")
     add_pose_args(q)
     add_config_args(q)

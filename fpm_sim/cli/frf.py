@@ -3,48 +3,45 @@
 from __future__ import annotations
 
 import argparse
-import functools
-import sys
-from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
-import numpy as np
-
-from fpm_sim.cli.main import (
+from fpm_sim.cli.common import (
+    CliError,
     add_config_args,
     add_model_args,
     add_output_args,
     add_pose_args,
+    check_output_file,
+    count_arg,
     emit,
     load_manipulator,
     model_options,
     pose_of,
+    resolution_line,
+    with_resolution,
 )
-from fpm_sim.frf import AXES, QUANTITIES, FrfError, LinkPoint, modal_frf
-from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.rom.atlas import AtlasError
-from fpm_sim.rom.reduction import ReductionError, modal_system
+from fpm_sim.cli.main import PLOT_SUFFIXES, save_figure
 
-__all__ = ["register", "frf_user_errors", "add_point_args", "point_of", "save_figure"]
+__all__ = ["register", "add_point_args", "point_of", "save_figure", "LinkPointDefault"]
 
-
-def frf_user_errors(func: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
-    """Report these features' user errors like the core ones: a message on stderr and exit status 2."""
-
-    @functools.wraps(func)
-    def wrapped(args: argparse.Namespace) -> int:
-        try:
-            return func(args)
-        except (FrfError, AtlasError, ReductionError) as exc:
-            print(f"fpm-sim: error: {exc}", file=sys.stderr)
-            return 2
-
-    return wrapped
+AXES = ("normal", "along", "z", "x", "y")
+"""Directions of a link point (checked against :data:`fpm_sim.frf.AXES` by the tests; listed here so that
+building the parser stays light)."""
+QUANTITIES = ("receptance", "mobility", "accelerance")
+"""FRF kinds (checked against :data:`fpm_sim.frf.QUANTITIES` by the tests)."""
 
 
-def add_point_args(p: argparse.ArgumentParser, prefix: str, what: str, default: LinkPoint | None) -> None:
+class LinkPointDefault:
+    """A link point's defaults for the parser (link, fraction 0..1, axis), without importing :mod:`fpm_sim.frf`."""
+
+    def __init__(self, link: str = "distal_0", fraction: float = 0.5, axis: str = "z") -> None:
+        self.link, self.fraction, self.axis = link, fraction, axis
+
+
+def add_point_args(p: argparse.ArgumentParser, prefix: str, what: str, default: Any) -> None:
     g = p.add_argument_group(what)
-    d = default or LinkPoint()
+    d = default or LinkPointDefault()
     same = default is None
     g.add_argument(
         f"--{prefix}-link",
@@ -66,7 +63,9 @@ def add_point_args(p: argparse.ArgumentParser, prefix: str, what: str, default: 
     )
 
 
-def point_of(args: argparse.Namespace, prefix: str, fallback: LinkPoint | None = None) -> LinkPoint:
+def point_of(args: argparse.Namespace, prefix: str, fallback: Any = None) -> Any:
+    from fpm_sim.frf import LinkPoint
+
     key = prefix.replace("-", "_")
     fb = fallback or LinkPoint()
     link = getattr(args, f"{key}_link")
@@ -79,45 +78,31 @@ def point_of(args: argparse.Namespace, prefix: str, fallback: LinkPoint | None =
     )
 
 
-def save_figure(path: Path, draw: Callable[[], object]) -> None:
-    if path.suffix not in (".png", ".pdf", ".svg"):
-        raise FrfError(f"--plot {path} must end in .png, .pdf or .svg")
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    axes = draw()
-    fig = np.atleast_1d(axes)[0].figure
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-
-
-@frf_user_errors
 def cmd_frf(args: argparse.Namespace) -> int:
-    if not (0.0 <= args.f_min_hz < args.f_max_hz) or args.df_hz <= 0:
-        raise FrfError("need 0 <= --f-min-hz < --f-max-hz and --df-hz > 0")
-    if args.csv is not None and args.csv.suffix != ".csv":
-        raise FrfError(f"--csv {args.csv} must end in .csv")
+    from fpm_sim.api import frf_grid
+    from fpm_sim.frf import LinkPoint, modal_frf
+    from fpm_sim.model.manipulator import build_manipulator
+    from fpm_sim.model.options import warn_if_coarse
+    from fpm_sim.outputs import atomic_file
+    from fpm_sim.rom.reduction import modal_system
+
+    frf_grid(args.f_min_hz, args.f_max_hz, args.df_hz, [])  # checks the band before any computation
+    check_output_file(args.csv, "--csv", (".csv",))
+    check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
     if args.link_model == "rigid":
-        raise FrfError(
+        raise CliError(
             "an FRF needs flexible links: with rigid links and locked motors nothing moves; use --link-model segments"
         )
     manip = load_manipulator(args)
-    built = build_manipulator(manip, pose_of(args), model_options(args))
+    opts = model_options(args)
+    warn_if_coarse(opts)
+    built = build_manipulator(manip, pose_of(args), opts)
     exc = point_of(args, "input", LinkPoint("distal_0", 0.5, "z"))
     resp = point_of(args, "output", exc)
     exc.check(built)
     resp.check(built)
     system = modal_system(built)
-    freq = np.arange(args.f_min_hz, args.f_max_hz + args.df_hz / 2, args.df_hz)
-    freq = np.unique(
-        np.concatenate(
-            [freq, system.frequencies_hz[(system.frequencies_hz >= freq[0]) & (system.frequencies_hz <= freq[-1])]]
-        )
-    )
+    freq = frf_grid(args.f_min_hz, args.f_max_hz, args.df_hz, system.frequencies_hz)
     frf = modal_frf(
         system,
         excitation=exc,
@@ -128,28 +113,21 @@ def cmd_frf(args: argparse.Namespace) -> int:
         n_modes=args.n_modes,
     )
     if args.csv:
-        frf.save_csv(args.csv)
+        with atomic_file(args.csv) as tmp:
+            frf.save_csv(tmp)
     if args.plot:
-        save_figure(args.plot, lambda: frf.plot())
-    payload = frf.to_dict()
+        save_figure(args.plot, frf.plot)
+    payload = with_resolution(frf.to_dict(), opts)
     payload["damping"] = "model" if args.damping_ratio is None else args.damping_ratio
     payload["parameters"] = built.parameters
     payload["csv"] = str(args.csv) if args.csv else None
     payload["plot"] = str(args.plot) if args.plot else None
-    peaks = frf.peaks()
     lines = [
-        f"{frf.quantity} ({frf.unit}) from {frf.excitation} to {frf.response}, pose {pose_of(args).label()}, "
-        f"{len(freq)} frequencies {freq[0]:g}..{freq[-1]:g} Hz, damping "
+        f"pose {pose_of(args).label()}, damping "
         + ("model" if args.damping_ratio is None else f"{args.damping_ratio:g} (all modes)"),
-        f"{'mode':>4}  {'freq (Hz)':>10}  {'damping':>8}  {'residue (1/kg)':>15}",
+        frf.table(),
     ]
-    for i, (f, z, r) in enumerate(zip(frf.modal_freq_hz, frf.damping_ratios, frf.residues)):
-        if f > freq[-1]:
-            break
-        lines.append(f"{i + 1:>4}  {f:>10.3f}  {z:>8.4f}  {r:>15.4e}")
-    lines.append(f"{'peak':>4}  {'freq (Hz)':>10}  {'|H|':>10}  {'prominence (dB)':>15}")
-    for i, p in enumerate(peaks, 1):
-        lines.append(f"{i:>4}  {p.freq_hz:>10.3f}  {p.magnitude:>10.4g}  {p.prominence_db:>15.1f}")
+    lines.append(resolution_line(opts))
     lines += [f"wrote {f}" for f in (args.csv, args.plot) if f]
     emit(args, payload, "\n".join(lines))
     return 0
@@ -165,7 +143,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             "--damping-ratio for every mode (e.g. a value identified from a measured FRF)."
         ),
     )
-    add_point_args(p, "input", "force input (default distal_0 mid-span, z)", LinkPoint("distal_0", 0.5, "z"))
+    add_point_args(p, "input", "force input (default distal_0 mid-span, z)", LinkPointDefault("distal_0", 0.5, "z"))
     add_point_args(p, "output", "response (default: the input point and axis, a driving-point FRF)", None)
     p.add_argument(
         "--quantity", choices=tuple(QUANTITIES), default="accelerance", help="FRF kind (default accelerance)"
@@ -174,7 +152,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--f-max-hz", type=float, default=500.0, help="highest frequency (Hz, default 500)")
     p.add_argument("--df-hz", type=float, default=0.1, help="frequency step (Hz, default 0.1)")
     p.add_argument("--damping-ratio", type=float, help="modal damping ratio for every mode (default: the model's)")
-    p.add_argument("--n-modes", type=int, help="sum over the lowest N modes only (default all)")
+    p.add_argument("--n-modes", type=count_arg("--n-modes"), help="sum over the lowest N modes only (default all)")
     p.add_argument("--csv", type=Path, help="write the FRF (re, im, magnitude, dB, phase) to this CSV")
     p.add_argument("--plot", type=Path, help="magnitude/phase plot (.png, .pdf, .svg)")
     add_pose_args(p)

@@ -5,28 +5,46 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from fpm_sim.cli.frf import add_point_args, frf_user_errors, point_of, save_figure
-from fpm_sim.cli.main import add_config_args, add_output_args, add_pose_args, emit, load_manipulator, pose_of
-from fpm_sim.frf import FrfError
-from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import ModelOptions
-from fpm_sim.sim.impact import PEAK_FORCE_N, PULSE_S, STUDY_IMPACT_POINT, ImpactSetup, virtual_impact_test
+from fpm_sim.cli.common import (
+    CliError,
+    add_config_args,
+    add_output_args,
+    add_pose_args,
+    add_resolution_args,
+    check_output_file,
+    emit,
+    load_manipulator,
+    model_options,
+    pose_of,
+    resolution_line,
+    with_resolution,
+)
+from fpm_sim.cli.frf import LinkPointDefault, add_point_args, point_of
+from fpm_sim.cli.main import PLOT_SUFFIXES, save_figure
 
 __all__ = ["register"]
 
-DEFAULT_SEGMENTS = 4
-"""Coarse default: the rollout's automatic timestep scales with the stiffest spring (about 5 us at 4
-segments without axial springs, 0.6 us at the default 12 with them)."""
+STUDY_POINT = LinkPointDefault("distal_0", 0.5, "z")
+"""The parser's default hammer point: :data:`fpm_sim.sim.impact.STUDY_IMPACT_POINT` (a test checks they agree)."""
+PULSE_MS = 1.0
+"""Default half-sine pulse (ms): :data:`fpm_sim.sim.impact.PULSE_S` (checked by a test)."""
+PEAK_FORCE_N = 20.0
+"""Default peak force (N): :data:`fpm_sim.sim.impact.PEAK_FORCE_N` (checked by a test)."""
 
 
-@frf_user_errors
 def cmd_impact(args: argparse.Namespace) -> int:
-    if args.segments < 2:
-        raise FrfError(f"--segments must be >= 2 for flexible links, got {args.segments}")
-    if args.csv is not None and args.csv.suffix != ".csv":
-        raise FrfError(f"--csv {args.csv} must end in .csv")
+    from fpm_sim.model.manipulator import build_manipulator
+    from fpm_sim.model.options import warn_if_coarse
+    from fpm_sim.outputs import atomic_file
+    from fpm_sim.sim.impact import STUDY_IMPACT_POINT, ImpactSetup, virtual_impact_test
+
+    check_output_file(args.csv, "--csv", (".csv",))
+    check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
+    opts = model_options(args)
+    if opts.segments < 2:
+        raise CliError(f"--segments must be >= 2 for flexible links, got {opts.segments}")
+    warn_if_coarse(opts)
     manip = load_manipulator(args)
-    opts = ModelOptions(segments=args.segments, axial=args.axial, gravity=not args.no_gravity)
     built = build_manipulator(manip, pose_of(args), opts)
     hit = point_of(args, "impact", STUDY_IMPACT_POINT)
     acc = point_of(args, "accel", hit)
@@ -43,16 +61,19 @@ def cmd_impact(args: argparse.Namespace) -> int:
     )
     res = virtual_impact_test(built, setup, progress=not args.json)
     if args.csv:
-        res.frf.save_csv(args.csv)
+        with atomic_file(args.csv) as tmp:
+            res.frf.save_csv(tmp)
     if args.plot:
-        save_figure(args.plot, lambda: res.plot())
-    payload = res.to_dict()
+        save_figure(args.plot, res.plot)
+    payload = with_resolution(res.to_dict(), opts)
     payload["csv"] = str(args.csv) if args.csv else None
     payload["plot"] = str(args.plot) if args.plot else None
     text = (
-        f"pose {pose_of(args).label()}, {args.segments} segments, axial {args.axial}, nv {built.model.nv}, "
+        f"pose {pose_of(args).label()}, {opts.segments} segments, axial {opts.axial}, nv {built.model.nv}, "
         f"timestep {built.timestep_s:.3g} s\n"
         + res.table()
+        + "\n"
+        + resolution_line(opts)
         + "".join(f"\nwrote {f}" for f in (args.csv, args.plot) if f)
     )
     emit(args, payload, text)
@@ -64,27 +85,26 @@ def register(sub: argparse._SubParsersAction) -> None:
         "impact",
         help="virtual impact-hammer test: nonlinear rollouts, H1 FRF averaged over impacts, first peak vs modal f1",
         description=(
-            f"Half-sine hammer pulses ({PULSE_S * 1e3:g} ms, {PEAK_FORCE_N:g} N peak by default) on the full nonlinear "
+            f"Half-sine hammer pulses ({PULSE_MS:g} ms, {PEAK_FORCE_N:g} N peak by default) on the full nonlinear "
             "model from its static equilibrium; accelerometer signal with optional noise; H1 FRF averaged over the "
             "impacts (exponential window, zero padding); the first frequency by peak picking, compared with the "
             "modal f1 of the same model. Default point (assumed for the study): mid-span of chain 0's distal link, "
             "axis z (out of plane), hammer along the accelerometer axis."
         ),
     )
-    add_point_args(p, "impact", "hammer", STUDY_IMPACT_POINT)
+    add_point_args(p, "impact", "hammer", STUDY_POINT)
     add_point_args(p, "accel", "accelerometer (default: the hammer point and axis)", None)
     p.add_argument("--impacts", type=int, default=3, help="impacts averaged (default 3, as the study)")
-    p.add_argument("--pulse-ms", type=float, default=PULSE_S * 1e3, help="half-sine pulse length (ms)")
+    p.add_argument("--pulse-ms", type=float, default=PULSE_MS, help="half-sine pulse length (ms)")
     p.add_argument("--peak-force-n", type=float, default=PEAK_FORCE_N, help="peak hammer force (N)")
     p.add_argument("--record-s", type=float, default=0.5, help="record length per impact (s, default 0.5)")
     p.add_argument("--noise-m-s2", type=float, default=0.0, help="accelerometer noise standard deviation (m/s^2)")
     p.add_argument("--seed", type=int, default=0, help="random seed (force spread, noise)")
     p.add_argument("--f-max-hz", type=float, default=1000.0, help="top of the band searched for peaks (Hz)")
+    add_resolution_args(p, axial=False)
     p.add_argument(
-        "--segments", type=int, default=DEFAULT_SEGMENTS, help=f"spring locations per link (default {DEFAULT_SEGMENTS})"
+        "--gravity", action=argparse.BooleanOptionalAction, default=True, help="gravity along the motor axes"
     )
-    p.add_argument("--axial", action="store_true", help="axial springs (much smaller timestep; slow)")
-    p.add_argument("--no-gravity", action="store_true", help="switch gravity off")
     p.add_argument("--csv", type=Path, help="write the H1 FRF and coherence to this CSV")
     p.add_argument("--plot", type=Path, help="H1 magnitude/phase/coherence plot (.png, .pdf, .svg)")
     add_pose_args(p)

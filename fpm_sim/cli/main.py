@@ -1,32 +1,59 @@
 """``fpm-sim`` command line. Each sub-command prints a table, or JSON with ``--json``.
 
 Commands live in modules that expose ``register(subparsers)``; :data:`COMMAND_MODULES` lists them.
+Options shared by every command are in :mod:`fpm_sim.cli.common`. Errors are handled in ONE place,
+:func:`main`: :class:`fpm_sim.errors.FpmSimError` -> exit 2 with one ``error: ...`` line, Ctrl-C -> exit 130
+with one line, a closed pipe -> quiet, anything else -> its traceback and a line saying it is a bug.
+Warnings print as one ``warning: ...`` line.
+
+Heavy modules (MuJoCo models, SciPy, matplotlib) are imported inside the commands, so that
+``fpm-sim --help`` and ``fpm-sim config`` start quickly (``scripts/benchmark_startup.py``).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
-import json
+import os
 import sys
+import traceback
 import warnings
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from fpm_sim import __version__
-from fpm_sim.config import ConfigError, Manipulator, default_config, default_config_text, load_config
-from fpm_sim.kinematics import Pose, SingularPoseError, UnreachablePoseError
-from fpm_sim.linear.analysis import ModalComparison, analyse
-from fpm_sim.linear.modal import ModalResult
-from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import BuiltModel, ModelOptions, TimestepError
-from fpm_sim.model.parts import DEFAULT_RESOLUTION, LINK_MODELS, LinkModelError
-from fpm_sim.model.rigs import RIGS, RigError, RigSetup, build_rig, rig_piece
-from fpm_sim.results import to_jsonable
 
-__all__ = ["main", "COMMAND_MODULES"]
+try:  # Ctrl-C while the modules load (a second or so): one line and 130, as at any later moment
+    from fpm_sim.cli.common import (
+        CliError,
+        add_config_args,
+        add_model_args,
+        add_output_args,
+        add_pose_args,
+        check_output_file,
+        count_arg,
+        emit,
+        load_manipulator,
+        mm,
+        model_options,
+        pose_of,
+        resolution_line,
+        with_resolution,
+    )
+    from fpm_sim.errors import FpmSimError
+except KeyboardInterrupt:
+    sys.stderr.write("interrupted (Ctrl-C)\n")
+    raise SystemExit(130) from None
+
+if TYPE_CHECKING:
+    from fpm_sim.config import Manipulator
+    from fpm_sim.linear.analysis import ModalComparison
+    from fpm_sim.linear.modal import ModalResult
+    from fpm_sim.model.options import BuiltModel
+
+__all__ = ["main", "build_parser", "COMMAND_MODULES", "save_figure"]
 
 COMMAND_MODULES: list[str] = [
     "fpm_sim.cli.reproduce",
@@ -42,83 +69,34 @@ COMMAND_MODULES: list[str] = [
 ]
 """Command modules beyond the core ones (each exposes ``register(subparsers)``)."""
 
-_USER_ERRORS = (
-    ConfigError,
-    UnreachablePoseError,
-    SingularPoseError,
-    LinkModelError,
-    RigError,
-    TimestepError,
-    FileNotFoundError,
-)
+RIGS = ("free-free", "cantilever", "chain")
+"""The subsystem rigs (checked against :data:`fpm_sim.model.rigs.RIGS` by the tests; listed here so that
+building the parser does not import MuJoCo)."""
+
+PLOT_SUFFIXES = (".png", ".pdf", ".svg")
 
 
-# ---------------------------------------------------------------------------------------------
-# shared option groups
+def save_figure(path: Path, draw: Callable[[], Any]) -> None:
+    """Draw with the non-interactive Agg backend (selected here, in the CLI only) and save atomically."""
+    import matplotlib
 
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+    from matplotlib.figure import Figure
 
-def add_config_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--config", type=Path, help="manipulator TOML file (default: the embedded study prototype)")
+    from fpm_sim.outputs import atomic_file
 
-
-def add_model_args(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("model")
-    g.add_argument(
-        "--link-model",
-        default="segments",
-        help=f"link model: {', '.join(LINK_MODELS)} (default segments; see docs/link_models.md)",
-    )
-    g.add_argument(
-        "--segments",
-        type=int,
-        default=None,
-        help=f"resolution per link: spring locations (segments), elastic joints (cable) or flex edges (flex); "
-        f"default per model {DEFAULT_RESOLUTION}",
-    )
-    g.add_argument("--no-axial", action="store_true", help="inextensible links (no axial springs; faster)")
-    g.add_argument("--rotary-inertia", action="store_true", help="include section rotary inertia (Rayleigh beam)")
-    g.add_argument("--no-gravity", action="store_true", help="switch gravity (along the motor axes) off")
-    g.add_argument("--timestep-s", type=float, default=None, help="simulation step (default: automatic)")
-
-
-def add_pose_args(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("pose")
-    g.add_argument("--x-mm", type=float, default=0.0, help="end-effector x (mm)")
-    g.add_argument("--y-mm", type=float, default=0.0, help="end-effector y (mm)")
-    g.add_argument("--phi-rad", type=float, default=0.0, help="end-effector rotation (rad)")
-
-
-def add_output_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--json", action="store_true", help="print JSON instead of a table")
-
-
-def load_manipulator(args: argparse.Namespace) -> Manipulator:
-    return load_config(args.config) if getattr(args, "config", None) else default_config()
-
-
-def model_options(args: argparse.Namespace) -> ModelOptions:
-    return ModelOptions(
-        link_model=args.link_model,
-        segments=args.segments,
-        axial=not args.no_axial,
-        rotary_inertia=args.rotary_inertia,
-        gravity=not args.no_gravity,
-        timestep_s=args.timestep_s,
-    )
-
-
-def pose_of(args: argparse.Namespace) -> Pose:
-    return Pose.from_mm(args.x_mm, args.y_mm, args.phi_rad)
-
-
-def emit(args: argparse.Namespace, payload: dict[str, Any], text: str) -> None:
-    if args.json:
-        print(json.dumps(to_jsonable(payload), indent=2))
-    else:
-        print(text)
+    obj = draw()
+    fig = obj if isinstance(obj, Figure) else np.atleast_1d(obj)[0].figure
+    with atomic_file(path) as tmp:
+        fig.savefig(tmp, dpi=120)
+    plt.close(fig)
 
 
 def _result_payload(result: ModalResult | ModalComparison, n_modes: int) -> tuple[dict[str, Any], str]:
+    from fpm_sim.linear.analysis import ModalComparison
+
     if isinstance(result, ModalComparison):
         a, b = result.transition_fd, result.constrained
         payload = a.to_dict(n_modes)
@@ -139,10 +117,17 @@ def _result_payload(result: ModalResult | ModalComparison, n_modes: int) -> tupl
 
 def _header(built: BuiltModel, title: str) -> str:
     p = built.parameters
+    o = p["options"]
     return (
-        f"{title}\n  nv = {p['nv']}, timestep = {p['timestep_s']:.3g} s, link model = {p['options']['link_model']}"
-        + (f" ({p['options']['segments']} segments)" if p["options"]["link_model"] != "rigid" else "")
+        f"{title}\n  nv = {p['nv']}, timestep = {p['timestep_s']:.3g} s, link model = {o['link_model']}"
+        + (f" ({o['segments']} segments)" if o["link_model"] != "rigid" else "")
     )
+
+
+def _n_modes_note(result: ModalResult | ModalComparison, n_modes: int) -> str:
+    primary = getattr(result, "transition_fd", result)
+    n = len(primary.modes)
+    return f"\nnote: {n} physical modes found, fewer than --n-modes {n_modes}" if n < n_modes else ""
 
 
 # ---------------------------------------------------------------------------------------------
@@ -151,7 +136,9 @@ def _header(built: BuiltModel, title: str) -> str:
 
 def _shapes_and_plot(args: argparse.Namespace, result: ModalResult | ModalComparison, payload: dict[str, Any]) -> str:
     """Add Cartesian mode shapes to the payload (``--shapes``) and save a figure (``--plot``)."""
-    primary = result.transition_fd if isinstance(result, ModalComparison) else result
+    import numpy as np
+
+    primary = getattr(result, "transition_fd", result)
     note = ""
     if args.shapes:
         n = min(args.n_modes, len(primary.modes))
@@ -161,67 +148,84 @@ def _shapes_and_plot(args: argparse.Namespace, result: ModalResult | ModalCompar
             mode_payload["points_displacement"] = {k: (v / peak).tolist() for k, v in disp.items()}
         payload["points_position_m"] = {k: v.tolist() for k, v in primary.point_positions().items()}
     if args.plot:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        n = min(args.n_modes, len(primary.modes), 6)
-        fig = plt.figure(figsize=(4.5 * n, 4.5))
-        for i in range(n):
-            primary.plot(i, ax=fig.add_subplot(1, n, i + 1, projection="3d"))
-        fig.tight_layout()
-        fig.savefig(args.plot, dpi=120)
-        plt.close(fig)
+        save_figure(args.plot, lambda: primary.plot(n_modes=min(args.n_modes, 6)))
         note = f"\nmode shapes plotted to {args.plot}"
     return note
 
 
 def cmd_modes(args: argparse.Namespace) -> int:
+    from fpm_sim.linear.analysis import analyse
+    from fpm_sim.model.manipulator import build_manipulator
+    from fpm_sim.model.options import warn_if_coarse
+
+    check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
     manip = load_manipulator(args)
     pose = pose_of(args)
-    built = build_manipulator(manip, pose, model_options(args))
+    opts = model_options(args)
+    warn_if_coarse(opts)
+    built = build_manipulator(manip, pose, opts)
     result = analyse(built, args.method, args.n_modes)
     payload, table = _result_payload(result, args.n_modes)
     payload["config"] = manip.name
     payload["manipulator"] = manip.to_dict()
+    with_resolution(payload, opts)
     note = _shapes_and_plot(args, result, payload)
-    text = _header(built, f"{manip.name}\n  pose {pose.label()}") + "\n" + table + note
+    text = (
+        _header(built, f"{manip.name}\n  pose {pose.label()}")
+        + "\n"
+        + table
+        + _n_modes_note(result, args.n_modes)
+        + "\n"
+        + resolution_line(opts)
+        + note
+    )
     emit(args, payload, text)
     return 0
 
 
-def _rig_setup(args: argparse.Namespace, manip: Manipulator) -> RigSetup:
+def _rig_setup(args: argparse.Namespace) -> Any:
+    from fpm_sim.model.rigs import RigSetup
+
     return RigSetup(args.rig, angle_deg=args.angle_deg, damping_beta_s=args.damping_beta_s)
 
 
-def _rig_piece(args: argparse.Namespace, manip: Manipulator):  # noqa: ANN202
+def _rig_piece(args: argparse.Namespace, manip: Manipulator) -> Any:
+    from fpm_sim.model.rigs import rig_piece
+
     return rig_piece(
         manip,
-        length_m=args.length_m,
-        thickness_m=args.thickness_m,
-        height_m=args.height_m,
+        length_m=mm(args.length_mm),
+        thickness_m=mm(args.thickness_mm),
+        height_m=mm(args.height_mm),
         young_pa=args.young_pa,
         poisson=args.poisson,
         density_kg_m3=args.density_kg_m3,
-        clamped_length_m=args.clamped_length_m,
+        clamped_length_m=mm(args.clamped_length_mm),
     )
 
 
 def cmd_rig(args: argparse.Namespace) -> int:
+    from fpm_sim.linear.analysis import analyse
+    from fpm_sim.model.options import warn_if_coarse
+    from fpm_sim.model.rigs import build_rig
+
     manip = load_manipulator(args)
-    built = build_rig(
-        _rig_setup(args, manip), _rig_piece(args, manip), model_options(args), compliance=manip.compliance
-    )
+    opts = model_options(args)
+    warn_if_coarse(opts)
+    built = build_rig(_rig_setup(args), _rig_piece(args, manip), opts, compliance=manip.compliance)
     result = analyse(built, args.method, args.n_modes)
     payload, table = _result_payload(result, args.n_modes)
+    with_resolution(payload, opts)
     title = f"rig {args.rig}" + (f" (hinge angle {args.angle_deg:g} deg)" if args.rig == "chain" else "")
-    emit(args, payload, _header(built, title) + "\n" + table)
+    text = _header(built, title) + "\n" + table + _n_modes_note(result, args.n_modes) + "\n" + resolution_line(opts)
+    emit(args, payload, text)
     return 0
 
 
 def cmd_config(args: argparse.Namespace) -> int:
     """Print the embedded default description (a template), or a file's values with their provenance."""
+    from fpm_sim.config import default_config_text
+
     if args.json:
         emit(args, load_manipulator(args).to_dict(), "")
     elif args.config:
@@ -236,18 +240,24 @@ def cmd_config(args: argparse.Namespace) -> int:
 
 
 def cmd_export_mjcf(args: argparse.Namespace) -> int:
+    from fpm_sim.model.manipulator import build_manipulator
+    from fpm_sim.model.rigs import build_rig
+    from fpm_sim.outputs import atomic_file
+
+    check_output_file(args.out, "--out", (".xml",))
     manip = load_manipulator(args)
     opts = model_options(args)
     if args.what == "manipulator":
         built = build_manipulator(manip, pose_of(args), opts)
     else:
         args.rig = args.what
-        built = build_rig(_rig_setup(args, manip), _rig_piece(args, manip), opts, compliance=manip.compliance)
+        built = build_rig(_rig_setup(args), _rig_piece(args, manip), opts, compliance=manip.compliance)
     xml = built.to_xml()
     if args.out:
-        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.out).write_text(xml)
+        with atomic_file(args.out) as tmp:
+            tmp.write_text(xml)
     payload = {"what": args.what, "out": str(args.out) if args.out else None, "parameters": built.parameters}
+    with_resolution(payload, opts)
     if args.json:
         emit(args, payload, "")
     elif args.out:
@@ -259,13 +269,13 @@ def cmd_export_mjcf(args: argparse.Namespace) -> int:
 
 def _add_rig_overrides(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("test piece overrides (default: the config's [rig] table)")
-    g.add_argument("--length-m", type=float)
-    g.add_argument("--thickness-m", type=float, help="in-plane thickness")
-    g.add_argument("--height-m", type=float, help="out-of-plane height")
-    g.add_argument("--young-pa", type=float)
-    g.add_argument("--poisson", type=float)
-    g.add_argument("--density-kg-m3", type=float)
-    g.add_argument("--clamped-length-m", type=float, help="length held in each clamp")
+    g.add_argument("--length-mm", type=float, help="test piece length (mm)")
+    g.add_argument("--thickness-mm", type=float, help="in-plane thickness (mm)")
+    g.add_argument("--height-mm", type=float, help="out-of-plane height (mm)")
+    g.add_argument("--young-pa", type=float, help="Young's modulus (Pa)")
+    g.add_argument("--poisson", type=float, help="Poisson's ratio")
+    g.add_argument("--density-kg-m3", type=float, help="density (kg/m^3)")
+    g.add_argument("--clamped-length-mm", type=float, help="length held in each clamp (mm)")
     p.add_argument("--angle-deg", type=float, default=180.0, help="chain hinge interior angle (180 = straight)")
     p.add_argument(
         "--damping-beta-s",
@@ -276,7 +286,9 @@ def _add_rig_overrides(p: argparse.ArgumentParser) -> None:
 
 
 def _add_analysis_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--n-modes", type=int, default=8, help="number of physical modes to report")
+    p.add_argument(
+        "--n-modes", type=count_arg("--n-modes"), default=8, help="number of physical modes to report (1..200)"
+    )
     p.add_argument(
         "--method",
         choices=("transition_fd", "constrained", "both"),
@@ -285,8 +297,17 @@ def _add_analysis_args(p: argparse.ArgumentParser) -> None:
     )
 
 
+class _Parser(argparse.ArgumentParser):
+    """Usage errors become :class:`CliError` (one ``error:`` line and exit 2 from :func:`main`, like every
+    other user error) instead of argparse's own exit."""
+
+    def error(self, message: str) -> NoReturn:
+        raise CliError(f"{message} ({self.prog}); see '{self.prog} --help'")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    """The ``fpm-sim`` parser with every sub-command."""
+    parser = _Parser(
         prog="fpm-sim",
         description="Natural frequencies, modes and reduced models of flexible planar 3RRR manipulators (MuJoCo).",
     )
@@ -298,8 +319,13 @@ def build_parser() -> argparse.ArgumentParser:
     add_config_args(p)
     add_model_args(p)
     _add_analysis_args(p)
-    p.add_argument("--shapes", action="store_true", help="with --json: Cartesian mode shapes of points along each link")
-    p.add_argument("--plot", type=Path, help="save the first mode shapes (base-plane view) to this image file")
+    p.add_argument(
+        "--shapes",
+        action=argparse.BooleanOptionalAction,
+        default=False,
+        help="with --json: Cartesian mode shapes of points along each link",
+    )
+    p.add_argument("--plot", type=Path, help="save the first mode shapes (3D view) to this image (.png, .pdf, .svg)")
     add_output_args(p)
     p.set_defaults(func=cmd_modes)
 
@@ -319,7 +345,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("export-mjcf", help="write the generated MJCF of the manipulator at a pose, or of a rig")
     p.add_argument("what", choices=("manipulator", *RIGS))
-    p.add_argument("--out", type=Path, help="output file (default: stdout)")
+    p.add_argument("--out", type=Path, help="output file (.xml; default: stdout)")
     add_pose_args(p)
     _add_rig_overrides(p)
     add_config_args(p)
@@ -332,16 +358,63 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+# ---------------------------------------------------------------------------------------------
+# the one error path
+
+
+def _one_line_warning(
+    message: Warning | str, category: type[Warning], filename: str, lineno: int, file: Any = None, line: Any = None
+) -> None:
+    text = str(message).replace("\n", " ")
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("default")
-            return int(args.func(args))
-    except _USER_ERRORS as exc:
-        print(f"fpm-sim: error: {exc}", file=sys.stderr)
-        return 2
+        print(f"warning: {text}", file=sys.stderr if file is None else file)
+    except (OSError, ValueError):  # stderr closed: nothing to say it on
+        pass
+
+
+@contextlib.contextmanager
+def _cli_warnings() -> Iterator[None]:
+    """Warnings as one ``warning: ...`` line, without source lines; restored on exit (in-process callers)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("default")
+        warnings.showwarning = _one_line_warning
+        yield
+
+
+def _quiet_stdout() -> None:
+    """After a closed pipe: point stdout at /dev/null so that the interpreter's final flush stays quiet."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):  # not a real file (an in-process caller's capture)
+        pass
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run ``fpm-sim`` with ``argv``; returns the exit status (0, 2 user error, 130 interrupted, 1 bug)."""
+    with _cli_warnings():
+        try:
+            args = build_parser().parse_args(argv)
+            code = int(args.func(args))
+            sys.stdout.flush()  # a closed pipe shows here, inside the handlers below
+            return code
+        except FpmSimError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt:
+            print("interrupted (Ctrl-C); unfinished outputs were not written", file=sys.stderr)
+            return 130
+        except BrokenPipeError:  # e.g. `fpm-sim config | head`: the reader has what it wanted
+            _quiet_stdout()
+            return 0
+        except Exception:
+            traceback.print_exc()
+            print(
+                "this is a bug in fpm-sim, not a problem with your input: please report it with the command line "
+                "and the traceback above",
+                file=sys.stderr,
+            )
+            return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

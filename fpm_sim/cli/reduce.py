@@ -5,42 +5,51 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from fpm_sim.cli.main import (
+from fpm_sim.cli.common import (
+    CliError,
     add_config_args,
     add_model_args,
     add_output_args,
     add_pose_args,
+    check_output_file,
+    count_arg,
     emit,
     load_manipulator,
     model_options,
     pose_of,
+    resolution_line,
+    with_resolution,
 )
-from fpm_sim.cli.rollout import add_motor_args, apply_motor_args, user_errors
-from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.rom.reduction import ReductionError, reduce_model
+from fpm_sim.cli.rollout import add_motor_args, apply_motor_args
 
 __all__ = ["register"]
 
 
-@user_errors
 def cmd_reduce(args: argparse.Namespace) -> int:
-    if args.out is not None and args.out.suffix not in (".mat", ".npz"):
-        raise ReductionError(f"--out {args.out} must end in .mat or .npz")
-    if args.modes is not None and args.modes < 1:
-        raise ReductionError(f"--modes must be at least 1, got {args.modes}")
+    from fpm_sim.model.manipulator import build_manipulator
+    from fpm_sim.model.options import warn_if_coarse
+    from fpm_sim.outputs import atomic_file
+    from fpm_sim.rom.reduction import reduce_model
+
+    check_output_file(args.out, "--out", (".mat", ".npz"))
+    if args.accel_fraction is not None and not 0.0 <= args.accel_fraction <= 1.0:
+        raise CliError(f"--accel-fraction must be in 0..1 (from the elbow), got {args.accel_fraction}")
+    opts = model_options(args)
+    warn_if_coarse(opts)
     manip = apply_motor_args(load_manipulator(args), args)
-    built = build_manipulator(manip, pose_of(args), model_options(args))
+    built = build_manipulator(manip, pose_of(args), opts)
     rom = reduce_model(
         built,
         n_modes=args.modes,
         band_hz=args.band_hz,
         error_bound=args.error_bound,
-        static_correction=not args.no_static_correction,
+        static_correction=args.static_correction,
         accel_fraction=args.accel_fraction,
     )
     if args.out:
-        rom.save(args.out)
-    payload = rom.to_dict()
+        with atomic_file(args.out) as tmp:
+            rom.save(tmp)
+    payload = with_resolution(rom.to_dict(), opts)
     payload["out"] = str(args.out) if args.out else None
     control_note = ""
     try:
@@ -61,6 +70,8 @@ def cmd_reduce(args: argparse.Namespace) -> int:
         f"outputs: {', '.join(f'{n} ({u})' for n, u in zip(rom.output_names, rom.output_units))}\n"
         + rom.table()
         + control_note
+        + "\n"
+        + resolution_line(opts)
         + (f"\nwrote {args.out}" if args.out else "")
     )
     emit(args, payload, text)
@@ -79,11 +90,16 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
     )
     g = p.add_mutually_exclusive_group(required=True)
-    g.add_argument("--modes", type=int, help="number of modes kept")
+    g.add_argument("--modes", type=count_arg("--modes"), help="number of modes kept (1..200)")
     g.add_argument("--band-hz", type=float, help="keep every mode up to this frequency (Hz)")
     g.add_argument("--error-bound", type=float, help="fewest modes with relative static truncation error <= this")
     p.add_argument("--out", type=Path, help="output file, .mat (MATLAB) or .npz")
-    p.add_argument("--no-static-correction", action="store_true", help="no feedthrough for the truncated modes")
+    p.add_argument(
+        "--static-correction",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="feedthrough for the truncated modes (default on)",
+    )
     p.add_argument(
         "--accel-fraction", type=float, default=0.5, help="accelerometer position on each distal link (0..1 from elbow)"
     )

@@ -3,53 +3,37 @@
 from __future__ import annotations
 
 import argparse
-import functools
-import sys
-from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
-import numpy as np
-
-from fpm_sim.cli.main import (
+from fpm_sim.cli.common import (
+    CliError,
     add_config_args,
     add_model_args,
     add_output_args,
     add_pose_args,
+    check_output_file,
     emit,
     load_manipulator,
+    mm,
     model_options,
     pose_of,
+    resolution_line,
+    with_resolution,
 )
-from fpm_sim.config import Manipulator, Motors
-from fpm_sim.linear.equilibrium import EquilibriumError
-from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.rom.reduction import ReductionError, accel_site_names
-from fpm_sim.sim.rollout import RolloutError, aligned_options, constant, rollout, sine, step_at
+from fpm_sim.cli.main import PLOT_SUFFIXES, save_figure
 
-__all__ = ["register", "user_errors", "add_motor_args", "apply_motor_args"]
+__all__ = ["register", "add_motor_args", "apply_motor_args", "equilibrium_hint"]
 
 
-def user_errors(func: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
-    """Report this feature's user errors like the core ones: a message on stderr and exit status 2."""
-
-    @functools.wraps(func)
-    def wrapped(args: argparse.Namespace) -> int:
-        try:
-            return func(args)
-        except (RolloutError, ReductionError) as exc:
-            print(f"fpm-sim: error: {exc}", file=sys.stderr)
-            return 2
-        except EquilibriumError as exc:
-            hint = (
-                "; thin links with axial springs can stall the equilibrium solver (measured for 5 mm links): "
-                "try --no-axial"
-                if not getattr(args, "no_axial", True)
-                else ""
-            )
-            print(f"fpm-sim: error: {exc}{hint}", file=sys.stderr)
-            return 2
-
-    return wrapped
+def equilibrium_hint(exc: Exception, args: argparse.Namespace) -> str:
+    """The fix to suggest when the static equilibrium fails (thin links with axial springs stall it)."""
+    if getattr(args, "axial", False):
+        return (
+            f"{exc}; thin links with axial springs can stall the equilibrium solver (measured for 5 mm links): "
+            "try --no-axial"
+        )
+    return str(exc)
 
 
 def add_motor_args(p: argparse.ArgumentParser) -> None:
@@ -59,12 +43,14 @@ def add_motor_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--servo-damping-nms-per-rad", type=float, default=0.0, help="servo damping (with --motors servo)")
 
 
-def apply_motor_args(manip: Manipulator, args: argparse.Namespace) -> Manipulator:
+def apply_motor_args(manip: Any, args: argparse.Namespace) -> Any:
     """``manip`` with servo motors if ``--motors servo`` (locked motors have no joint to drive)."""
+    from fpm_sim.config import Motors
+
     if args.motors != "servo":
         return manip
     if not args.servo_stiffness_nm_per_rad or args.servo_stiffness_nm_per_rad <= 0:
-        raise RolloutError("--motors servo needs --servo-stiffness-nm-per-rad > 0")
+        raise CliError("--motors servo needs --servo-stiffness-nm-per-rad > 0; give the servo stiffness (N m/rad)")
     return manip.replace(
         motors=Motors(
             mode="servo",
@@ -74,31 +60,41 @@ def apply_motor_args(manip: Manipulator, args: argparse.Namespace) -> Manipulato
     )
 
 
-def _profile(kind: str, values: list[float], t0_s: float, freq_hz: float):  # noqa: ANN202
+def _profile(kind: str, values: list[float], t0_s: float, freq_hz: float) -> Any:
+    from fpm_sim.sim.rollout import constant, sine, step_at
+
     if kind == "constant":
         return constant(*values)
     if kind == "step":
         return step_at(t0_s, *values)
     if kind == "sine":
         return sine(freq_hz, *values)
-    raise RolloutError(f"--load-profile must be constant, step or sine, got {kind!r}")
+    raise CliError(f"--load-profile must be constant, step or sine, got {kind!r}")
 
 
-@user_errors
 def cmd_rollout(args: argparse.Namespace) -> int:
+    from fpm_sim.linear.equilibrium import EquilibriumError
+    from fpm_sim.model.manipulator import build_manipulator
+    from fpm_sim.model.options import warn_if_coarse
+    from fpm_sim.outputs import atomic_file
+    from fpm_sim.rom.reduction import accel_site_names
+    from fpm_sim.sim.rollout import aligned_options, rollout
+
+    check_output_file(args.out, "--out", (".csv", ".npz"))
+    check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
     manip = load_manipulator(args)
-    if args.thickness_m is not None:
-        manip = manip.with_section(thickness_m=args.thickness_m)
+    if args.thickness_mm is not None:
+        if not args.thickness_mm > 0:
+            raise CliError(f"--thickness-mm must be > 0, got {args.thickness_mm}")
+        manip = manip.with_section(thickness_m=mm(args.thickness_mm))
     manip = apply_motor_args(manip, args)
-    if args.out is not None and args.out.suffix not in (".csv", ".npz"):
-        raise RolloutError(f"--out {args.out} must end in .csv or .npz")
-    if args.plot is not None and args.plot.suffix not in (".png", ".pdf", ".svg"):
-        raise RolloutError(f"--plot {args.plot} must end in .png, .pdf or .svg")
     pose = pose_of(args)
     if not args.output_step_s > 0:
-        raise RolloutError(f"--output-step-s must be positive, got {args.output_step_s!r}")
+        raise CliError(f"--output-step-s must be positive, got {args.output_step_s!r}")
+    opts = model_options(args)
+    warn_if_coarse(opts)
     # timestep rounded down so that the output step is a whole number of steps
-    built = build_manipulator(manip, pose, aligned_options(manip, pose, model_options(args), args.output_step_s))
+    built = build_manipulator(manip, pose, aligned_options(manip, pose, opts, args.output_step_s))
     wrench = [args.force_x_n, args.force_y_n, args.moment_z_nm]
     ee = _profile(args.load_profile, wrench, args.load_start_s, args.load_freq_hz) if any(wrench) else None
     torque = (
@@ -107,55 +103,33 @@ def cmd_rollout(args: argparse.Namespace) -> int:
         else None
     )
     sites = accel_site_names(built, args.accel_fraction) if args.accel_fraction is not None else []
-    res = rollout(
-        built,
-        manip,
-        duration_s=args.duration_s,
-        output_step_s=args.output_step_s,
-        ee_wrench=ee,
-        motor_torque=torque,
-        accel_sites=sites,
-        progress=not args.json,
-    )
-    if args.out:
-        res.save(args.out)
-    if args.plot:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        axes = res.plot()
-        axes[0].figure.tight_layout()
-        axes[0].figure.savefig(args.plot, dpi=120)
-        plt.close(axes[0].figure)
-    d = res.ee_disp
-    payload = {
-        "parameters": res.parameters,
-        "n_samples": len(res.t_s),
-        "n_steps": res.n_steps,
-        "wall_s": res.wall_s,
-        "final_disp": {"x_m": d[-1, 0], "y_m": d[-1, 1], "phi_rad": d[-1, 2]},
-        "peak_abs_disp": {k: float(np.max(np.abs(d[:, i]))) for i, k in enumerate(("x_m", "y_m", "phi_rad"))},
-        "peak_abs_accel_m_s2": {s: float(np.max(np.linalg.norm(a, axis=1))) for s, a in res.accel.items()},
-        "out": str(args.out) if args.out else None,
-        "plot": str(args.plot) if args.plot else None,
-    }
-    lines = [
-        f"rollout {res.parameters['duration_s']:.4g} s: {res.n_steps} steps of {built.timestep_s:.3g} s "
-        f"(nv = {built.model.nv}), {len(res.t_s)} samples, wall {res.wall_s:.2f} s",
-        f"{'signal':<22} {'final':>12} {'peak |.|':>12}",
-    ]
-    for i, (k, unit, sc) in enumerate((("disp x", "mm", 1e3), ("disp y", "mm", 1e3), ("disp phi", "mrad", 1e3))):
-        lines.append(f"{k + ' (' + unit + ')':<22} {d[-1, i] * sc:>12.5f} {np.max(np.abs(d[:, i])) * sc:>12.5f}")
-    for s, a in res.accel.items():
-        lines.append(
-            f"{'acc ' + s + ' (m/s2)':<22} {np.linalg.norm(a[-1]):>12.4g} {np.max(np.linalg.norm(a, axis=1)):>12.4g}"
+    try:
+        res = rollout(
+            built,
+            manip,
+            duration_s=args.duration_s,
+            output_step_s=args.output_step_s,
+            ee_wrench=ee,
+            motor_torque=torque,
+            accel_sites=sites,
+            progress=not args.json,
         )
+    except EquilibriumError as exc:
+        raise EquilibriumError(equilibrium_hint(exc, args)) from exc
+    if args.out:
+        with atomic_file(args.out) as tmp:
+            res.save(tmp)
+    if args.plot:
+        save_figure(args.plot, res.plot)
+    payload = res.to_dict()
+    payload["out"] = str(args.out) if args.out else None
+    payload["plot"] = str(args.plot) if args.plot else None
+    lines = [res.table()]
+    lines.append(resolution_line(opts))
     for f in (args.out, args.plot):
         if f:
             lines.append(f"wrote {f}")
-    emit(args, payload, "\n".join(lines))
+    emit(args, with_resolution(payload, opts), "\n".join(lines))
     return 0
 
 
@@ -165,8 +139,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="headless nonlinear simulation from the static equilibrium under end-effector and motor loads",
         description=(
             "Steps the full MuJoCo model from its static equilibrium under gravity. Loads are held over each "
-            "output step. The default resolution (12 segments, axial springs) needs ~1 us steps: for long "
-            "rollouts use e.g. --segments 6 --no-axial. Motor torques need --motors servo (locked motors have no "
+            "output step. The default resolution (fidelity standard: 12 segments, axial springs) needs ~1 us steps: "
+            "for long rollouts use e.g. --fidelity fast --no-axial. Motor torques need --motors servo (locked motors "
+            "have no "
             "joint). Writes a CSV/NPZ of end-effector pose, displacement, deflection (pose minus rigid-link "
             "kinematics), motor angles, loads and accelerations, and a plot."
         ),
@@ -181,7 +156,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--load-start-s", type=float, default=0.0, help="step time (s) for --load-profile step")
     p.add_argument("--load-freq-hz", type=float, default=10.0, help="frequency (Hz) for --load-profile sine")
     add_motor_args(p)
-    p.add_argument("--thickness-m", type=float, help="link in-plane thickness override (m)")
+    p.add_argument("--thickness-mm", type=float, help="link in-plane thickness override (mm)")
     p.add_argument(
         "--accel-fraction", type=float, default=0.5, help="record accelerations on each distal link at this fraction"
     )

@@ -7,9 +7,11 @@ from dataclasses import dataclass
 import mujoco
 
 from fpm_sim.config import Manipulator, RigConfig, default_config
+from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose
 from fpm_sim.linear.equilibrium import static_equilibrium
 from fpm_sim.linear.modal import Method, ModalResult, modes_constrained, modes_transition_fd
+from fpm_sim.linear.threads import blas_threads
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import BuiltModel, ModelOptions
 from fpm_sim.model.rigs import RigSetup, build_rig, rig_piece
@@ -34,17 +36,18 @@ class ModalComparison:
 def analyse(built: BuiltModel, method: Method | str, n_modes: int | None) -> ModalResult | ModalComparison:
     """Modes of ``built`` by ``"transition_fd"``, ``"constrained"`` or ``"both"``, with the static
     equilibrium solved once (floating models are linearised at ``qpos0`` by each method)."""
+    if method not in ("transition_fd", "constrained", "both"):
+        raise FpmSimError(f"unknown method {method!r} (--method); choose 'transition_fd', 'constrained' or 'both'")
     qpos = None if built.floating else static_equilibrium(built.model, mujoco.MjData(built.model))
-    if method == "transition_fd":
-        return modes_transition_fd(built, n_modes=n_modes, qpos=qpos)
-    if method == "constrained":
-        return modes_constrained(built, n_modes=n_modes, qpos=qpos)
-    if method == "both":
+    with blas_threads():  # one BLAS thread around the dense eigen-solves (fpm_sim.linear.threads)
+        if method == "transition_fd":
+            return modes_transition_fd(built, n_modes=n_modes, qpos=qpos)
+        if method == "constrained":
+            return modes_constrained(built, n_modes=n_modes, qpos=qpos)
         return ModalComparison(
             modes_transition_fd(built, n_modes=n_modes, qpos=qpos),
             modes_constrained(built, n_modes=n_modes, qpos=qpos),
         )
-    raise ValueError(f"unknown method {method!r}; choose 'transition_fd', 'constrained' or 'both'")
 
 
 def compare_methods(built: BuiltModel, *, n_modes: int | None = 10) -> ModalComparison:

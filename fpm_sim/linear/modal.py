@@ -42,7 +42,7 @@ threshold) is never clipped to zero: :class:`UnstableModelError` is raised, nami
 Constraint rank (:func:`constraint_rank`): the weld Jacobian's rows mix metres (position rows) and
 radians (rotation rows) and its columns radians (hinges) and metres (slides). Its rank is decided on
 ``R J C`` with the position rows divided and the translational columns multiplied by the model's
-characteristic length ``L`` (m, :func:`model_length_m`), so both become dimensionless; the same decision
+characteristic length ``L = model.stat.extent`` (m), so both become dimensionless; the same decision
 serves the ``cpu`` and the ``mjx`` pose-loop backends.
 
 Timestep: the step map (semi-implicit Euler on the springs) raises an undamped mode's frequency by
@@ -86,9 +86,6 @@ __all__ = [
     "TimestepWarning",
     "UnstableModelError",
     "RedundantConstraintWarning",
-    "ResolutionWarning",
-    "RESOLUTION_COEFF",
-    "RESOLUTION_WARN",
     "OMEGA_H_WARN",
     "RIGID_BODY_FRACTION",
     "FD_NOISE_MARGIN",
@@ -130,14 +127,6 @@ FD_NOISE_MARGIN = 10.0
 stiffness at two steps, the mode ``x_i`` M-normalised), times this margin (measured: 1.6e-4 rad^2/s^2 at
 ``w^2 = 11`` near the singular pose (83 mm, 4.5 mm, 0), where an entrywise worst-case bound gives 6e3)."""
 
-RESOLUTION_COEFF = 0.23
-"""Relative first-frequency error of a ``segments``/``cable`` link with ``n`` spring locations: ``0.23 / n^2``
-(the cantilever's first mode is +0.16 % at n = 12 and +0.6 % at n = 6; the law underestimates very coarse
-links: +54 % measured on the manipulator's f1 at n = 1 against 23 % estimated)."""
-
-RESOLUTION_WARN = 0.01
-"""Estimated discretisation error above which a :class:`ResolutionWarning` is issued (n < 5)."""
-
 NEGATIVE_DAMPING_TOL = 1e-6
 """A ``transition_fd`` mode with a damping ratio below ``-NEGATIVE_DAMPING_TOL`` grows: the free-free
 bar's modes measure ``|zeta| ~ 3e-13`` of round-off."""
@@ -152,10 +141,6 @@ class TimestepWarning(FpmSimWarning):
 class RedundantConstraintWarning(FpmSimWarning):
     """A loop-closure direction is nearly redundant (scaled singular value below :data:`NULLSPACE_RCOND`)
     and was not imposed: the pose is close to a constraint singularity."""
-
-
-class ResolutionWarning(FpmSimWarning):
-    """The link discretisation is estimated to put more than :data:`RESOLUTION_WARN` error on the frequencies."""
 
 
 class UnstableModelError(FpmSimError):
@@ -265,6 +250,9 @@ class ModalResult:
         return {link: np.array([data.site(s).xpos.copy() for s in sites]) for link, sites in self.built.links.items()}
 
     def to_dict(self, n_modes: int | None = None) -> dict[str, Any]:
+        """JSON-ready modes (frequency Hz, damping ratio, character), what was dropped, the resolution."""
+        from fpm_sim.model.options import resolution_of_parameters
+
         modes = self.modes[:n_modes] if n_modes else self.modes
         return {
             "method": self.method,
@@ -278,6 +266,7 @@ class ModalResult:
                 for m in modes
             ],
             "dropped": dict(self.dropped),
+            "resolution": resolution_of_parameters(self.built.parameters),
             "parameters": self.built.parameters,
         }
 
@@ -291,17 +280,34 @@ class ModalResult:
             lines.append(f"{i:>4}  {m.frequency_hz:>11.3f}  {m.damping_ratio:>8.4f}  {char:<30}")
         return "\n".join(lines)
 
-    def plot(self, index: int = 0, *, ax: Any = None, scale_m: float = 0.03) -> Any:
-        """Draw mode ``index`` in 3D over the equilibrium shape (matplotlib).
+    def plot(self, ax: Any = None, *, index: int | None = None, n_modes: int = 1, scale_m: float = 0.03) -> Any:
+        """Draw mode shapes in 3D over the equilibrium shape (matplotlib); returns the ``Figure``.
 
-        The largest point displacement is drawn ``scale_m`` long; out-of-plane modes show along z.
-        Pass a 3D axes (``projection="3d"``) as ``ax`` or get a new figure.
+        Parameters
+        ----------
+        ax
+            A 3D axes (``projection="3d"``) to draw mode ``index`` (default 0) on; ``None`` makes a new
+            figure with the first ``n_modes`` modes side by side (or mode ``index`` alone).
+        index
+            The mode to draw (0-based).
+        n_modes
+            Modes drawn on a new figure when ``index`` is not given.
+        scale_m
+            Drawn length of the largest point displacement (m); out-of-plane modes show along z.
         """
         import matplotlib.pyplot as plt
 
-        if ax is None:
-            fig = plt.figure(figsize=(5, 5))
-            ax = fig.add_subplot(projection="3d")
+        if ax is not None:
+            self._plot_mode(ax, 0 if index is None else index, scale_m)
+            return ax.figure
+        indices = [index] if index is not None else list(range(max(1, min(n_modes, len(self.modes)))))
+        fig = plt.figure(figsize=(4.5 * len(indices), 4.5))
+        for k, i in enumerate(indices):
+            self._plot_mode(fig.add_subplot(1, len(indices), k + 1, projection="3d"), i, scale_m)
+        fig.tight_layout()
+        return fig
+
+    def _plot_mode(self, ax: Any, index: int, scale_m: float) -> None:
         pos = self.point_positions()
         disp = self.point_displacements(index)
         peak = max(float(np.max(np.linalg.norm(d, axis=1))) for d in disp.values()) or 1.0
@@ -322,7 +328,6 @@ class ModalResult:
         ax.set_zlim(-span / 2, span / 2)
         m = self.modes[index]
         ax.set_title(f"mode {index + 1}: {m.frequency_hz:.2f} Hz, {m.dominant}")
-        return ax
 
 
 # ---------------------------------------------------------------------------------------------
@@ -473,17 +478,8 @@ class ConstraintRank:
 
 
 def model_length_m(model: mujoco.MjModel) -> float:
-    """The characteristic length (m) that makes the weld Jacobian dimensionless.
-
-    The largest offset of a body in its parent's frame: a structural length (the links' pieces, the base
-    radius), identical at every pose of a re-posed model and of a model compiled per pose, so the rank
-    decision and its round-off do not depend on which pose a model was compiled at (``model.stat.extent``
-    does). 1 m for a model without offsets.
-    """
-    if model.nbody < 2:
-        return 1.0
-    length = float(np.max(np.linalg.norm(model.body_pos[1:], axis=1)))
-    return length if length > 0 else 1.0
+    """The characteristic length (m) that makes the weld Jacobian dimensionless: ``model.stat.extent``."""
+    return float(model.stat.extent) if model.stat.extent > 0 else 1.0
 
 
 def unit_scales(model: mujoco.MjModel, data: mujoco.MjData, length_m: float) -> tuple[np.ndarray, np.ndarray]:
@@ -548,7 +544,7 @@ def constraint_rank(
     velocities (rad/s for hinges, m/s for slides) to constraint rates (m/s for weld positions and
     connects, rad/s times the weld's ``torquescale`` for weld rotations). Its rank is decided on the
     dimensionless ``R J C``: position rows divided by ``L``, rotation rows by ``torquescale``,
-    translational columns multiplied by ``L`` (:func:`model_length_m`, m);
+    translational columns multiplied by ``L``, with ``L = model.stat.extent`` (m, the model's size);
     a direction counts when its singular value exceeds ``rcond`` times the largest. This is the one
     rank decision of the package: the ``cpu`` path (:func:`reduced_eigenproblem`) and the ``mjx``
     backend both use it.
@@ -616,10 +612,6 @@ def _classify(w2: float, w2_tol: float, zeta: float, ratio: float, filt: ModeFil
     return None
 
 
-def _min_segments() -> int:
-    return math.ceil(math.sqrt(RESOLUTION_COEFF / RESOLUTION_WARN))
-
-
 def _finish(result: ModalResult, n_modes: int | None, *, stacklevel: int) -> ModalResult:
     """Truncate to ``n_modes``, say when fewer physical modes exist, and warn about a near-singular pose."""
     if n_modes is not None:
@@ -631,18 +623,6 @@ def _finish(result: ModalResult, n_modes: int | None, *, stacklevel: int) -> Mod
                 stacklevel=stacklevel,
             )
         result.modes = result.modes[:n_modes]
-    opts = result.built.parameters.get("options") or {}
-    n_seg = opts.get("segments")
-    if opts.get("link_model") in ("segments", "cable") and isinstance(n_seg, int) and n_seg > 0:
-        estimate = RESOLUTION_COEFF / n_seg**2
-        if estimate > RESOLUTION_WARN:
-            warnings.warn(
-                f"segments={n_seg} per link: the frequencies carry an estimated discretisation error of "
-                f"{estimate:.0%} or more (~{RESOLUTION_COEFF:g} / n^2); use --segments {_min_segments()} or more "
-                "for 1 %",
-                ResolutionWarning,
-                stacklevel=stacklevel,
-            )
     measure = result.built.parameters.get("singularity_measure")
     if result.modes and isinstance(measure, (int, float)) and measure < NEAR_SINGULAR_WARN:
         m1 = result.modes[0]

@@ -608,7 +608,7 @@ def build_atlas(
     Parameters
     ----------
     options
-        Model options shared by every pose (default: 6 segments, inextensible links).
+        Model options shared by every pose (default: the shared default resolution, inextensible links).
     n_modes
         Tracked (and kept) modes.
     n_extra
@@ -625,7 +625,7 @@ def build_atlas(
     except FpmSimError as e:
         raise AtlasError(str(e)) from None
     shape = (len(xs), len(ys), len(ps))
-    opts = options or ModelOptions(segments=6, axial=False)
+    opts = options or ModelOptions(axial=False)  # the shared default resolution (model.options)
     if root is None:
         ridx = tuple(int(np.argmin(np.abs(a - np.median(a)))) for a in (xs, ys, ps))
     else:

@@ -64,6 +64,7 @@ from fpm_sim.linear.modal import (
     stiffness_matrix,
     system_damping_matrix,
 )
+from fpm_sim.linear.threads import blas_threads
 from fpm_sim.model.options import BuiltModel, open_for_writing
 from fpm_sim.results import to_jsonable
 
@@ -249,7 +250,8 @@ def modal_system(
     mass = mass_matrix(model, data)
     rank = constraint_rank(model, data)
     damp = system_damping_matrix(model, q_eq)
-    z, kr, _, w2, x = reduced_eigenproblem(mass, stiff, rank.basis)  # the constrained method's own solve
+    with blas_threads():  # one BLAS thread around the dense solve (fpm_sim.linear.threads)
+        z, kr, _, w2, x = reduced_eigenproblem(mass, stiff, rank.basis)  # the constrained method's own solve
     tol = eigenvalue_tolerances(  # finite-difference noise of K (modal.noise_w2), measured when a mode needs it
         model, mass, z @ x, w2, lambda: stiff - stiffness_matrix(model, mujoco.MjData(model), q_eq, eps=2e-7), filt
     )
@@ -467,6 +469,8 @@ class ReducedModel:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (no matrices)."""
+        from fpm_sim.model.options import resolution_of_parameters
+
         return {
             "pose": dataclasses.asdict(self.pose),
             "n_modes": self.n_modes,
@@ -475,6 +479,7 @@ class ReducedModel:
             "inputs": [f"{n} ({u})" for n, u in zip(self.input_names, self.input_units)],
             "outputs": [f"{n} ({u})" for n, u in zip(self.output_names, self.output_units)],
             "static_correction": self.static_correction,
+            "resolution": resolution_of_parameters(self.parameters),
             "parameters": self.parameters,
         }
 
@@ -495,9 +500,9 @@ class ReducedModel:
             name="fpm_rom",
         )
 
-    def plot(self, input_name: str = "force_x", *, duration_s: float = 0.2, ax: Any = None) -> Any:
-        """Step response of the displacement outputs to ``input_name`` (matplotlib)."""
-        return self.step_response(input_name, duration_s=duration_s).plot(ax=ax)
+    def plot(self, ax: Any = None, *, input_name: str = "force_x", duration_s: float = 0.2) -> Any:
+        """Step response of the displacement outputs to ``input_name`` over ``duration_s`` (s); the ``Figure``."""
+        return self.step_response(input_name, duration_s=duration_s).plot(ax=ax).figure
 
     # -- files -------------------------------------------------------------------------------
 

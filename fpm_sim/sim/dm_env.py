@@ -35,18 +35,13 @@ Episodes (the task: regulation under link vibration)
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import os
+from typing import TYPE_CHECKING, Any
 
-# Headless by default: no OpenGL context is looked for unless the user picked a backend (MUJOCO_GL=egl,
-# osmesa or glfw set before this import). Only effective if dm_control was not imported earlier.
-os.environ.setdefault("MUJOCO_GL", "disable")
-
-import mujoco  # noqa: E402
-import numpy as np  # noqa: E402
-from dm_control import mujoco as dm_mujoco  # noqa: E402
-from dm_control.rl import control  # noqa: E402
-from dm_env import specs  # noqa: E402
+import mujoco
+import numpy as np
 
 from fpm_sim.config import Manipulator, Motors, default_config
 from fpm_sim.kinematics import Pose
@@ -55,8 +50,13 @@ from fpm_sim.model.options import ModelOptions
 from fpm_sim.rom.reduction import END_EFFECTOR_SITE, accel_site_names, modal_system
 from fpm_sim.sim.rollout import aligned_options
 
+if TYPE_CHECKING:
+    from dm_control import mujoco as dm_mujoco
+    from dm_control.rl import control
+    from dm_env import specs
+
 __all__ = [
-    "FlexibleRegulation",
+    "FlexibleRegulation",  # noqa: F822  (defined on first use, module __getattr__)
     "regulation_env",
     "DEFAULT_SERVO_STIFFNESS_NM_PER_RAD",
     "DEFAULT_SERVO_DAMPING_NMS_PER_RAD",
@@ -120,96 +120,126 @@ def _yaw(quat: np.ndarray) -> float:
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
-class FlexibleRegulation(control.Task):
-    """End-effector regulation under link vibration (see module docstring).
+def _headless_dm_control() -> tuple[Any, Any, Any]:
+    """Import dm_control headless: ``MUJOCO_GL=disable`` unless the user chose a backend (egl, osmesa, glfw).
 
-    Parameters
-    ----------
-    q_eq
-        Static equilibrium (target state), generalised coordinates.
-    flex_b
-        ``G B_q`` restricted to the end-effector forces ``(nv, 2)``: static shape per unit force.
-    max_torque_nm
-        Action bound (N m).
-    disturbance_force_n
-        Largest initial static force (N).
-    reward_scale_m
-        Error at which the reward falls to ``1/e`` (m).
-    random
-        Seed or ``np.random.RandomState``.
+    Done when an environment is created, not on import; only effective if dm_control was not imported before.
     """
+    if not os.environ.get("MUJOCO_GL"):
+        os.environ["MUJOCO_GL"] = "disable"
+    from dm_control import mujoco as dm_mujoco
+    from dm_control.rl import control
+    from dm_env import specs
 
-    def __init__(
-        self,
-        *,
-        q_eq: np.ndarray,
-        flex_b: np.ndarray,
-        max_torque_nm: float,
-        disturbance_force_n: float,
-        reward_scale_m: float,
-        random: int | np.random.RandomState | None = None,
-    ) -> None:
-        self._q_eq = np.asarray(q_eq, float)
-        self._flex_b = np.asarray(flex_b, float)
-        self._max_torque = float(max_torque_nm)
-        self._dist_force = float(disturbance_force_n)
-        self._scale = float(reward_scale_m)
-        self._random = random if isinstance(random, np.random.RandomState) else np.random.RandomState(random)
-        self._target: np.ndarray | None = None
-        self.initial_force_n = np.zeros(2)
+    return dm_mujoco, control, specs
 
-    @property
-    def random(self) -> np.random.RandomState:
-        return self._random
 
-    def initialize_episode(self, physics: dm_mujoco.Physics) -> None:
-        if self._target is None:
-            self.set_target(physics)
-        mag = self._dist_force * math.sqrt(self._random.uniform())
-        ang = self._random.uniform(0.0, 2.0 * math.pi)
-        self.initial_force_n = mag * np.array([math.cos(ang), math.sin(ang)])
-        physics.data.qpos[:] = self._q_eq + self._flex_b @ self.initial_force_n
-        physics.data.qvel[:] = 0.0
-        physics.data.ctrl[:] = 0.0
+@functools.cache
+def _task_class() -> type:
+    """:class:`FlexibleRegulation`, defined on first use (it derives from dm_control's ``Task``)."""
+    dm_mujoco, control, specs = _headless_dm_control()
 
-    def set_target(self, physics: dm_mujoco.Physics) -> None:
-        """Put ``physics`` at rest at the equilibrium and take its end-effector pose as the target."""
-        with physics.reset_context():
-            physics.data.qpos[:] = self._q_eq
+    class FlexibleRegulation(control.Task):
+        """End-effector regulation under link vibration (see module docstring).
+
+        Parameters
+        ----------
+        q_eq
+            Static equilibrium (target state), generalised coordinates.
+        flex_b
+            ``G B_q`` restricted to the end-effector forces ``(nv, 2)``: static shape per unit force.
+        max_torque_nm
+            Action bound (N m).
+        disturbance_force_n
+            Largest initial static force (N).
+        reward_scale_m
+            Error at which the reward falls to ``1/e`` (m).
+        random
+            Seed or ``np.random.RandomState``.
+        """
+
+        def __init__(
+            self,
+            *,
+            q_eq: np.ndarray,
+            flex_b: np.ndarray,
+            max_torque_nm: float,
+            disturbance_force_n: float,
+            reward_scale_m: float,
+            random: int | np.random.RandomState | None = None,
+        ) -> None:
+            self._q_eq = np.asarray(q_eq, float)
+            self._flex_b = np.asarray(flex_b, float)
+            self._max_torque = float(max_torque_nm)
+            self._dist_force = float(disturbance_force_n)
+            self._scale = float(reward_scale_m)
+            self._random = random if isinstance(random, np.random.RandomState) else np.random.RandomState(random)
+            self._target: np.ndarray | None = None
+            self.initial_force_n = np.zeros(2)
+
+        @property
+        def random(self) -> np.random.RandomState:
+            return self._random
+
+        def initialize_episode(self, physics: dm_mujoco.Physics) -> None:
+            if self._target is None:
+                self.set_target(physics)
+            mag = self._dist_force * math.sqrt(self._random.uniform())
+            ang = self._random.uniform(0.0, 2.0 * math.pi)
+            self.initial_force_n = mag * np.array([math.cos(ang), math.sin(ang)])
+            physics.data.qpos[:] = self._q_eq + self._flex_b @ self.initial_force_n
             physics.data.qvel[:] = 0.0
-        self._target = self._ee(physics)
+            physics.data.ctrl[:] = 0.0
 
-    def _ee(self, physics: dm_mujoco.Physics) -> np.ndarray:
-        sd = physics.named.data.sensordata
-        pos = np.asarray(sd["ee_pos"])
-        return np.array([pos[0], pos[1], _yaw(np.asarray(sd["ee_quat"]))])
+        def set_target(self, physics: dm_mujoco.Physics) -> None:
+            """Put ``physics`` at rest at the equilibrium and take its end-effector pose as the target."""
+            with physics.reset_context():
+                physics.data.qpos[:] = self._q_eq
+                physics.data.qvel[:] = 0.0
+            self._target = self._ee(physics)
 
-    def action_spec(self, physics: dm_mujoco.Physics) -> specs.BoundedArray:
-        return specs.BoundedArray(
-            shape=(3,), dtype=np.float64, minimum=-self._max_torque, maximum=self._max_torque, name="motor_torque_nm"
-        )
+        def _ee(self, physics: dm_mujoco.Physics) -> np.ndarray:
+            sd = physics.named.data.sensordata
+            pos = np.asarray(sd["ee_pos"])
+            return np.array([pos[0], pos[1], _yaw(np.asarray(sd["ee_quat"]))])
 
-    def before_step(self, action: np.ndarray, physics: dm_mujoco.Physics) -> None:
-        physics.set_control(np.clip(np.asarray(action, float), -self._max_torque, self._max_torque))
+        def action_spec(self, physics: dm_mujoco.Physics) -> specs.BoundedArray:
+            return specs.BoundedArray(
+                shape=(3,),
+                dtype=np.float64,
+                minimum=-self._max_torque,
+                maximum=self._max_torque,
+                name="motor_torque_nm",
+            )
 
-    def get_observation(self, physics: dm_mujoco.Physics) -> dict[str, np.ndarray]:
-        sd = physics.named.data.sensordata
-        assert self._target is not None
-        err = self._ee(physics) - self._target
-        err[2] = (err[2] + math.pi) % (2 * math.pi) - math.pi
-        lin, ang = np.asarray(sd["ee_linvel"]), np.asarray(sd["ee_angvel"])
-        return {
-            "ee_disp": err,
-            "ee_vel": np.array([lin[0], lin[1], ang[2]]),
-            "motor_angle": np.array([float(sd[f"motor_{i}_pos"][0]) for i in range(3)]),
-            "motor_velocity": np.array([float(sd[f"motor_{i}_vel"][0]) for i in range(3)]),
-            "link_accel": np.array([float(sd[f"accel_{i}"][1]) for i in range(3)]),
-        }
+        def before_step(self, action: np.ndarray, physics: dm_mujoco.Physics) -> None:
+            physics.set_control(np.clip(np.asarray(action, float), -self._max_torque, self._max_torque))
 
-    def get_reward(self, physics: dm_mujoco.Physics) -> float:
-        assert self._target is not None
-        e = self._ee(physics)[:2] - self._target[:2]
-        return float(math.exp(-float(e @ e) / self._scale**2))
+        def get_observation(self, physics: dm_mujoco.Physics) -> dict[str, np.ndarray]:
+            sd = physics.named.data.sensordata
+            assert self._target is not None
+            err = self._ee(physics) - self._target
+            err[2] = (err[2] + math.pi) % (2 * math.pi) - math.pi
+            lin, ang = np.asarray(sd["ee_linvel"]), np.asarray(sd["ee_angvel"])
+            return {
+                "ee_disp": err,
+                "ee_vel": np.array([lin[0], lin[1], ang[2]]),
+                "motor_angle": np.array([float(sd[f"motor_{i}_pos"][0]) for i in range(3)]),
+                "motor_velocity": np.array([float(sd[f"motor_{i}_vel"][0]) for i in range(3)]),
+                "link_accel": np.array([float(sd[f"accel_{i}"][1]) for i in range(3)]),
+            }
+
+        def get_reward(self, physics: dm_mujoco.Physics) -> float:
+            assert self._target is not None
+            e = self._ee(physics)[:2] - self._target[:2]
+            return float(math.exp(-float(e @ e) / self._scale**2))
+    return FlexibleRegulation
+
+
+def __getattr__(name: str) -> Any:
+    if name == "FlexibleRegulation":
+        return _task_class()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def regulation_env(
@@ -262,6 +292,7 @@ def regulation_env(
             raise ValueError(f"{name} must be positive and finite, got {v!r}")
     if not disturbance_force_n >= 0:
         raise ValueError(f"disturbance_force_n must be >= 0, got {disturbance_force_n!r}")
+    dm_mujoco, control, _ = _headless_dm_control()
     opts = aligned_options(manip, pose, ModelOptions(segments=segments, axial=axial), control_timestep_s)
     built = build_manipulator(manip, pose, opts)
     system = modal_system(built)
@@ -271,7 +302,7 @@ def regulation_env(
     physics.model.opt.timestep = built.model.opt.timestep
     if physics.model.nv != built.model.nv:  # pragma: no cover - a guard on the MJCF round trip
         raise RuntimeError("the environment's MJCF does not reproduce the generated model")
-    task = FlexibleRegulation(
+    task = _task_class()(
         q_eq=system.qpos,
         flex_b=system.flexibility @ system.b_q[:, :2],
         max_torque_nm=max_torque_nm,

@@ -197,10 +197,48 @@ class RolloutResult:
                 np.savez(f, **cols)
         return p
 
-    def plot(self, *, axes: Any = None) -> Any:
-        """End-effector displacement, deflection and accelerations against time (matplotlib)."""
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary: final and peak end-effector displacement (m, rad), peak accelerations, resolution."""
+        from fpm_sim.model.options import resolution_of_parameters
+
+        d = self.ee_disp
+        return {
+            "parameters": self.parameters,
+            "resolution": resolution_of_parameters(self.parameters),
+            "n_samples": len(self.t_s),
+            "n_steps": self.n_steps,
+            "wall_s": self.wall_s,
+            "final_disp": {"x_m": d[-1, 0], "y_m": d[-1, 1], "phi_rad": d[-1, 2]},
+            "peak_abs_disp": {k: float(np.max(np.abs(d[:, i]))) for i, k in enumerate(("x_m", "y_m", "phi_rad"))},
+            "peak_abs_accel_m_s2": {s: float(np.max(np.linalg.norm(a, axis=1))) for s, a in self.accel.items()},
+        }
+
+    def table(self) -> str:
+        """Final and peak values of the end-effector displacement (mm, mrad) and accelerations (m/s^2)."""
+        d = self.ee_disp
+        p = self.parameters
+        lines = [
+            f"rollout {p.get('duration_s', self.t_s[-1]):.4g} s: {self.n_steps} steps of "
+            f"{p.get('timestep_s', 0):.3g} s (nv = {p.get('nv', '?')}), {len(self.t_s)} samples, "
+            f"wall {self.wall_s:.2f} s",
+            f"{'signal':<22} {'final':>12} {'peak |.|':>12}",
+        ]
+        for i, (k, unit) in enumerate((("disp x", "mm"), ("disp y", "mm"), ("disp phi", "mrad"))):
+            peak = np.max(np.abs(d[:, i]))
+            lines.append(f"{k + ' (' + unit + ')':<22} {d[-1, i] * 1e3:>12.5f} {peak * 1e3:>12.5f}")
+        for s, a in self.accel.items():
+            peak = np.max(np.linalg.norm(a, axis=1))
+            lines.append(f"{'acc ' + s + ' (m/s2)':<22} {np.linalg.norm(a[-1]):>12.4g} {peak:>12.4g}")
+        return "\n".join(lines)
+
+    def plot(self, ax: Any = None, *, axes: Any = None) -> Any:
+        """End-effector displacement, deflection and accelerations against time; returns the ``Figure``.
+
+        ``ax`` (or ``axes``): a sequence of 2 (3 with accelerations) axes to draw on; default a new figure.
+        """
         import matplotlib.pyplot as plt
 
+        axes = ax if ax is not None else axes
         n_ax = 3 if self.accel else 2
         if axes is None:
             _, axes = plt.subplots(n_ax, 1, figsize=(8, 2.6 * n_ax), sharex=True)
@@ -224,7 +262,9 @@ class RolloutResult:
             ax.set_ylabel("|in-plane acc| (m/s^2)")
             ax.legend(loc="upper left", fontsize=8)
         axes[-1].set_xlabel("t (s)")
-        return axes
+        fig = axes[0].figure
+        fig.tight_layout()
+        return fig
 
 
 def aligned_options(manip: Manipulator, pose: Pose, options: ModelOptions, output_step_s: float) -> ModelOptions:

@@ -143,10 +143,14 @@ class StudyReproduction:
         return out
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: poses with f1..f3 (Hz) and COMSOL's value, statistics, subsystem tests, resolution."""
+        from fpm_sim.model.options import resolution_summary
+
         return {
             "config": self.config.name,
             "reading": self.reading.name,
             "options": {"segments": self.options.segments, "axial": self.options.axial},
+            "resolution": resolution_summary(self.options),
             "poses": self.rows(),
             "status": self.frequencies.status,
             "in_plane_fraction_mode1": self.frequencies.in_plane[:, 0].tolist(),
@@ -183,14 +187,43 @@ class StudyReproduction:
             z[iy, ix] = v
         return xs, xs, z
 
-    def plot_heatmaps(self) -> Any:
-        """Figure: our f1, COMSOL's, and their difference (%) over the grid (x, y under the reading)."""
-        import matplotlib
+    def table(self) -> str:
+        """Subsystem tests and the poses' first frequency (Hz) against COMSOL's, with the error statistics."""
+        lines = [self.config.name, f"reading {self.reading.name}", ""]
+        lines.append(f"{'test':<22}{'measured':>10}{'COMSOL':>10}{'fpm-sim':>10}{'err %':>8}")
+        for s in self.subsystems:
+            t = s.test
+            lines.append(f"{t.label:<22}{t.experimental_hz:>10g}{t.comsol_hz:>10g}{s.ours_hz:>10.2f}{s.error_pct:>+8.2f}")
+        lines.append("")
+        lines.append(f"{'row':>5}{'col':>6}{'x':>7}{'y':>7}{'phi':>6}{'f1 Hz':>9}{'COMSOL':>9}{'diff %':>8}")
+        for row in self.rows():
+            c = row["comsol_hz"]
+            d = f"{100 * (row['f1_hz'] / c - 1):+8.1f}" if c == c else f"{'-':>8}"
+            cs = f"{c:9.2f}" if c == c else f"{'-':>9}"
+            lines.append(
+                f"{row['row_mm']:>5g}{row['col_mm']:>6g}{row['x_mm']:>7g}{row['y_mm']:>7g}{row['phi_rad']:>6.1f}"
+                f"{row['f1_hz']:>9.2f}{cs}{d}"
+            )
+        st = self.stats()
+        if st.get("n"):
+            lines.append(
+                f"\nvs COMSOL ({st['n']} poses): mean |err| {st['mean_abs_pct']:.2f} %, "
+                f"median {st['median_abs_pct']:.2f} %, max {st['max_abs_pct']:.2f} %, Spearman {st['spearman']:.3f}"
+            )
+        return "\n".join(lines)
 
-        matplotlib.use("Agg", force=False)
+    def plot(self, ax: Any = None) -> Any:
+        """The f1 heatmaps (ours, COMSOL's, difference); the ``Figure``. ``ax``: three axes to draw on."""
+        return self.plot_heatmaps(ax)
+
+    def plot_heatmaps(self, axes: Any = None) -> Any:
+        """Figure: our f1, COMSOL's, and their difference (%) over the grid (x, y under the reading)."""
         import matplotlib.pyplot as plt
 
-        fig, axes = plt.subplots(1, 3, figsize=(14, 4.4), constrained_layout=True)
+        if axes is None:
+            fig, axes = plt.subplots(1, 3, figsize=(14, 4.4), constrained_layout=True)
+        else:
+            fig = axes[0].figure
         diff = 100.0 * (self.f1_hz / self.comsol_hz - 1.0)
         lo = float(np.nanmin([np.nanmin(self.f1_hz), np.nanmin(self.comsol_hz)]))
         hi = float(np.nanmax([np.nanmax(self.f1_hz), np.nanmax(self.comsol_hz)]))
@@ -218,9 +251,6 @@ class StudyReproduction:
 
     def plot_subsystems(self) -> Any:
         """Figure: subsystem first frequencies, measured vs COMSOL vs fpm-sim."""
-        import matplotlib
-
-        matplotlib.use("Agg", force=False)
         import matplotlib.pyplot as plt
 
         fig, axes = plt.subplots(1, 2, figsize=(11, 4), constrained_layout=True)

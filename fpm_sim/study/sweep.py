@@ -24,8 +24,9 @@ import numpy as np
 
 from fpm_sim.batch.engine import EngineOptions
 from fpm_sim.batch.frequencies import pose_frequencies
-from fpm_sim.batch.pose_loop import PoseFrequencies
+from fpm_sim.batch.pose_loop import PoseFrequencies, fast_options
 from fpm_sim.config import Manipulator
+from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose, assemble_many
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.study.poses import TableReading, study_poses
@@ -48,16 +49,16 @@ def dense_grid(config: Manipulator, *, step_mm: float, phi_rad: float = 0.0) -> 
     point is returned (reachable or not).
     """
     if not step_mm > 0:
-        raise ValueError(f"--step-mm must be > 0, got {step_mm}")
+        raise FpmSimError(f"--step-mm must be > 0, got {step_mm}")
     half = _reach_half_width(config)
     n = int(math.floor(half * 1e3 / step_mm))
     ticks = np.arange(-n, n + 1) * step_mm
     if ticks.size > 401:
-        raise ValueError(f"--step-mm {step_mm} gives {ticks.size} x {ticks.size} points; use a larger step")
+        raise FpmSimError(f"--step-mm {step_mm} gives {ticks.size} x {ticks.size} points; use a larger step")
     xx, yy = np.meshgrid(ticks * 1e-3, ticks * 1e-3)
     reach = assemble_many(config.geometry, xx.ravel(), yy.ravel(), phi_rad).reachable.reshape(xx.shape)
     if not reach.any():
-        raise ValueError(f"no reachable position at phi = {phi_rad} rad with step {step_mm} mm (--phi-rad)")
+        raise FpmSimError(f"no reachable position at phi = {phi_rad} rad with step {step_mm} mm (--phi-rad)")
     rows, cols = np.where(reach.any(axis=1))[0], np.where(reach.any(axis=0))[0]
     ys, xs = ticks[rows.min() : rows.max() + 1], ticks[cols.min() : cols.max() + 1]
     return [Pose.from_mm(float(x), float(y), phi_rad) for y in ys for x in xs]
@@ -82,6 +83,8 @@ class WorkspaceSweep:
     phi_rad: float
     step_mm: float
     frequencies: PoseFrequencies
+    options: ModelOptions | None = None
+    """The pose loop's model options (resolution), when known."""
 
     def rows(self) -> list[dict[str, Any]]:
         fr = self.frequencies
@@ -118,17 +121,44 @@ class WorkspaceSweep:
                     ["" if isinstance(r[c], float) and not math.isfinite(r[c]) else r[c] for c in SWEEP_CSV_COLUMNS]
                 )
 
-    def plot(self) -> Any:
-        """Heatmap of f1 with unreachable/singular points marked and the singularity loci drawn."""
-        import matplotlib
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: grid, status counts, one row per point (x, y mm; phi rad; f1..f3 Hz), resolution."""
+        from fpm_sim.model.options import resolution_summary
 
-        matplotlib.use("Agg", force=False)
+        return {
+            "config": self.config.name,
+            "grid": self.grid,
+            "step_mm": self.step_mm,
+            "phi_rad": self.phi_rad,
+            "counts": self.counts(),
+            "rows": self.rows(),
+            "resolution": resolution_summary(self.options) if self.options is not None else {},
+        }
+
+    def table(self) -> str:
+        """Counts by status and the f1 range (Hz)."""
+        f1 = self.frequencies.f1_hz
+        ok = f1[np.isfinite(f1)]
+        lines = [
+            f"{self.config.name}: grid {self.grid}, {len(f1)} points ("
+            + ", ".join(f"{k} {v}" for k, v in sorted(self.counts().items()))
+            + ")"
+        ]
+        if ok.size:
+            lines.append(f"f1 range: {ok.min():.2f} .. {ok.max():.2f} Hz")
+        return "\n".join(lines)
+
+    def plot(self, ax: Any = None) -> Any:
+        """Heatmap of f1 with unreachable/singular points marked and the singularity loci drawn; the ``Figure``."""
         import matplotlib.pyplot as plt
 
         rows = self.rows()
         xs = np.array(sorted({r["x_mm"] for r in rows}))
         ys = np.array(sorted({r["y_mm"] for r in rows}))
-        fig, ax = plt.subplots(figsize=(7, 6), constrained_layout=True)
+        if ax is None:
+            fig, ax = plt.subplots(figsize=(7, 6), constrained_layout=True)
+        else:
+            fig = ax.figure
         if self.grid == "dense":
             z = np.full((len(ys), len(xs)), np.nan)
             for r in rows:
@@ -200,26 +230,27 @@ def sweep_workspace(
     runs (:class:`fpm_sim.batch.engine.EngineOptions`)."""
     if grid == "poses":
         if not poses:
-            raise ValueError("grid='poses' needs poses (--poses FILE.csv with columns x_mm,y_mm,phi_rad)")
+            raise FpmSimError("grid='poses' needs poses (--poses FILE.csv with columns x_mm,y_mm,phi_rad)")
         poses = list(poses)
     elif poses is not None:
-        raise ValueError(f"poses are given: use grid='poses', not {grid!r} (--poses replaces --grid)")
+        raise FpmSimError(f"poses are given: use grid='poses', not {grid!r} (--poses replaces --grid)")
     elif grid == "dense":
         poses = dense_grid(config, step_mm=step_mm, phi_rad=phi_rad)
     elif grid == "paper":
         poses = [p.pose for p in study_poses(reading)]
         step_mm = 50.0
     else:
-        raise ValueError(f"--grid must be 'paper', 'dense' or 'poses', got {grid!r}")
+        raise FpmSimError(f"--grid must be 'paper', 'dense' or 'poses', got {grid!r}")
+    opts = options or fast_options()
     fr = pose_frequencies(
         config,
         poses,
         backend=backend,
         n_modes=3,
-        options=options,
+        options=opts,
         workers=workers,
         progress=progress,
         desc="sweep",
         engine=engine,
     )
-    return WorkspaceSweep(config, grid, phi_rad, step_mm, fr)
+    return WorkspaceSweep(config, grid, phi_rad, step_mm, fr, opts)

@@ -207,9 +207,6 @@ class TransientResult:
             for c in self.cases:
                 for t, a, b in zip(c.t_s, c.disp_full_m, c.disp_rom_m):
                     f.write(f"{t:.6g},{c.axis},{a:.10g},{b:.10g}\n")
-        import matplotlib
-
-        matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
         axes = self.plot()

@@ -53,13 +53,13 @@ CASES: list[tuple[str, list[str], str]] = [
     ("modes-config-negative-thickness", ["modes", "--config", "{tmp}/neg.toml"], "thickness"),
     ("modes-x-text", ["modes", "--x-mm", "abc"], "x-mm"),
     # subsystem rigs
-    ("rig-length-negative", ["rig", "cantilever", "--length-m", "-1", *S3], "length"),
-    ("rig-thickness-zero", ["rig", "cantilever", "--thickness-m", "0", *S3], "thickness"),
+    ("rig-length-negative", ["rig", "cantilever", "--length-mm", "-1000", *S3], "length"),
+    ("rig-thickness-zero", ["rig", "cantilever", "--thickness-mm", "0", *S3], "thickness"),
     ("rig-chain-angle", ["rig", "chain", "--angle-deg", "5", *S3], "angle-deg"),
     ("rig-young-negative", ["rig", "free-free", "--young-pa", "-5", *S3], "young"),
     ("rig-poisson", ["rig", "cantilever", "--poisson", "0.7", *S3], "poisson"),
     ("rig-density-zero", ["rig", "cantilever", "--density-kg-m3", "0", *S3], "density"),
-    ("rig-clamped-too-long", ["rig", "cantilever", "--clamped-length-m", "1", *S3], "clamped"),
+    ("rig-clamped-too-long", ["rig", "cantilever", "--clamped-length-mm", "1000", *S3], "clamped"),
     ("rig-n-modes-zero", ["rig", "cantilever", "--n-modes", "0", *S3], "n-modes"),
     ("rig-unknown", ["rig", "bogus"], "rig|bogus"),
     # rollout
@@ -116,22 +116,8 @@ CASES: list[tuple[str, list[str], str]] = [
     ("export-mjcf-segments", ["export-mjcf", "manipulator", "--segments", "0", "--out", "{tmp}/m.xml"], "segments"),
 ]
 
-_A = "CLI error plumbing (helper A's branch: every FpmSimError -> exit 2 with one 'error:' line)"
-_POSE = "pose check outside helper C's files (kinematics / CLI pose options): nan/inf reported as 'unreachable'"
-XFAIL = {
-    # failing on branch h-c for reasons owned elsewhere; the integrator removes each entry once merged
-    "modes-n-modes-negative": _A,
-    "modes-n-modes-zero": _A,
-    "modes-n-modes-huge": _A,
-    "rig-n-modes-zero": _A,
-    "modes-config-is-a-folder": _A,
-    "modes-x-nan": _POSE,
-    "modes-y-inf": _POSE,
-    "modes-phi-nan": _POSE,
-    "modes-phi-out-of-range": "phi wrapped silently (kinematics.Pose, not helper C's file)",
-    "frf-fraction": "fpm_sim/frf.py names 'fraction', not --input-fraction (not helper C's file)",
-}
-"""Cases that fail on branch h-c only for reasons owned by other helpers (see the report)."""
+XFAIL: dict[str, str] = {}
+"""Cases expected to fail, with the reason (none at present)."""
 
 
 class _TimedOut(Exception):

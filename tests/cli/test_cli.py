@@ -51,8 +51,8 @@ def test_rig_json(capsys):
         "--n-modes",
         "2",
         "--json",
-        "--thickness-m",
-        "0.012",
+        "--thickness-mm",
+        "12",
     )
     assert code == 0
     data = json.loads(out)
@@ -86,7 +86,7 @@ def test_export_mjcf(tmp_path, capsys):
         (["modes", "--x-mm", "600"], "unreachable"),
         (["modes", "--segments", "0"], "--segments"),
         (["rig", "chain", "--angle-deg", "300"], "--angle-deg"),
-        (["rig", "cantilever", "--clamped-length-m", "1.0"], "rig.clamped_length_m"),
+        (["rig", "cantilever", "--clamped-length-mm", "1000"], "rig.clamped_length_m"),
         (["rig", "cantilever", "--poisson", "0.7"], "rig.material.poisson"),
         (["modes", "--config", "/nonexistent.toml"], "not found"),
     ],

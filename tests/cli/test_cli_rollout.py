@@ -13,7 +13,7 @@ def run(capsys, *argv):
     return code, out.out, out.err
 
 
-BASE = ["rollout", "--segments", "3", "--no-axial", "--thickness-m", "0.005", "--duration-s", "0.003"]
+BASE = ["rollout", "--segments", "3", "--no-axial", "--thickness-mm", "5", "--duration-s", "0.003"]
 
 
 def test_rollout_csv_and_plot(capsys, tmp_path):

@@ -144,7 +144,7 @@ def test_bad_inputs_name_the_option(default_manip, tmp_path, capsys):
 def test_resume_continues_a_killed_run_from_its_chunks(default_manip, tmp_path, capsys):
     # A killed run leaves OUT.partial/ with the chunks it finished; --resume reuses them (the same numbers as
     # a fresh run) and removes the folder at the end.
-    from fpm_sim.cli.design import chunk_store
+    from fpm_sim.batch.engine import chunk_store
 
     args = ["design", "--vary", "section.thickness_m=0.02,0.03", "--grid", "paper", "--segments", "2",
             "--scheduler", "serial", "--chunk-poses", "5"]  # fmt: skip

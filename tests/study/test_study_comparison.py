@@ -41,7 +41,7 @@ def test_reproduce_writes_csv_report_and_figures(tmp_path, capsys):
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["reproduce", "--reading", "q+"], "x+, x-"),
+        (["reproduce", "--reading", "q+"], "--reading"),
         (["reproduce", "--thickness-mm", "-5"], "--thickness-mm"),
         (["sweep", "--step-mm", "0"], "--step-mm"),
         (["reproduce", "--backend", "gpu-dream"], "--backend"),

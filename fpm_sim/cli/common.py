@@ -1,0 +1,377 @@
+"""Options and helpers shared by every ``fpm-sim`` command: one name for one thing.
+
+Conventions (see ``fpm-sim --help``):
+
+- the description is ``--config`` (a TOML file; default: the embedded study prototype);
+- the resolution is ``--fidelity {fast,standard,fine}`` or ``--segments N`` (overrides), defined once in
+  :mod:`fpm_sim.model.options`; every command defaults to the same fidelity, hence the same model;
+- lengths in millimetres with ``_mm`` names (SI inside), booleans as ``--x/--no-x`` pairs;
+- ``--out`` is the output file or folder, ``--json`` prints JSON, ``--backend``/``--workers`` drive pose loops;
+- every output path is checked before any computation starts (:func:`check_output_file`,
+  :func:`check_output_dir`), and written atomically (:mod:`fpm_sim.outputs`).
+
+Errors: raise :class:`fpm_sim.errors.FpmSimError` (or a subclass); ``fpm_sim.cli.main.main`` maps it to exit
+code 2 with one ``error: ...`` line. No command catches errors itself.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from fpm_sim.errors import FpmSimError
+
+if TYPE_CHECKING:
+    from fpm_sim.config import Manipulator
+    from fpm_sim.kinematics import Pose
+    from fpm_sim.model.options import ModelOptions
+
+__all__ = [
+    "CliError",
+    "FIDELITY_CHOICES",
+    "LINK_MODEL_CHOICES",
+    "MAX_MODES",
+    "add_config_args",
+    "add_model_args",
+    "add_resolution_args",
+    "add_pose_args",
+    "add_output_args",
+    "add_overwrite_arg",
+    "load_manipulator",
+    "model_options",
+    "pose_of",
+    "emit",
+    "with_resolution",
+    "count_arg",
+    "check_output_file",
+    "check_output_dir",
+    "mm",
+    "read_input_file",
+    "add_engine_args",
+    "engine_options",
+    "finish_store",
+]
+
+FIDELITY_CHOICES = ("fast", "standard", "fine")
+""":data:`fpm_sim.model.options.FIDELITIES` (a test checks they agree), listed here so that building the
+parser imports neither MuJoCo nor SciPy (``fpm-sim --help`` starts in a tenth of a second)."""
+DEFAULT_FIDELITY = "standard"
+""":data:`fpm_sim.model.options.DEFAULT_FIDELITY` (checked by a test)."""
+LINK_MODEL_CHOICES = ("segments", "rigid", "cable", "flex")
+""":data:`fpm_sim.model.parts.LINK_MODELS` (checked by a test)."""
+
+MAX_MODES = 200
+"""Upper bound of ``--n-modes``/``--modes`` (the models have a few hundred degrees of freedom)."""
+
+
+class CliError(FpmSimError):
+    """A command-line value that cannot work (the message names the option and the fix)."""
+
+
+def mm(value_mm: float | None) -> float | None:
+    """Millimetres (command line) to metres (inside), keeping ``None``."""
+    return None if value_mm is None else value_mm * 1e-3
+
+
+def count_arg(name: str, *, low: int = 1, high: int = MAX_MODES) -> Any:
+    """An ``argparse`` type for a bounded count: ``low <= N <= high``, with a message naming ``name``."""
+
+    def parse(text: str) -> int:
+        try:
+            n = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a whole number, got {text!r}") from None
+        if not low <= n <= high:
+            raise argparse.ArgumentTypeError(f"{name} must be in {low}..{high}, got {n}")
+        return n
+
+    return parse
+
+
+# ---------------------------------------------------------------------------------------------
+# option groups
+
+
+def add_config_args(p: argparse.ArgumentParser) -> None:
+    """``--config FILE``."""
+    p.add_argument("--config", type=Path, help="manipulator TOML file (default: the embedded study prototype)")
+
+
+def add_resolution_args(p: argparse.ArgumentParser | Any, *, axial: bool) -> None:
+    """``--fidelity``, ``--segments`` and ``--axial/--no-axial`` (default ``axial``)."""
+    p.add_argument(
+        "--fidelity",
+        choices=FIDELITY_CHOICES,
+        default=None,
+        help=f"model resolution preset: fast (8 segments per link), standard (12), fine (24); default "
+        f"{DEFAULT_FIDELITY}, the same in every command",
+    )
+    p.add_argument(
+        "--segments",
+        type=int,
+        default=None,
+        help="resolution per link, overrides --fidelity: spring locations (segments), elastic joints (cable) or "
+        "flex edges (flex)",
+    )
+    p.add_argument(
+        "--axial",
+        action=argparse.BooleanOptionalAction,
+        default=axial,
+        help="axial springs (extensible links); without them the links are inextensible: faster, in-plane "
+        f"frequencies within 0.1 %% (default {'on' if axial else 'off'})",
+    )
+
+
+def add_model_args(p: argparse.ArgumentParser, *, axial: bool = True) -> None:
+    """The model group: link model, resolution, axial springs, rotary inertia, gravity, timestep."""
+    g = p.add_argument_group("model")
+    g.add_argument(
+        "--link-model",
+        default="segments",
+        help=f"link model: {', '.join(LINK_MODEL_CHOICES)} (default segments; see docs/link_models.md)",
+    )
+    add_resolution_args(g, axial=axial)
+    g.add_argument(
+        "--rotary-inertia",
+        action=argparse.BooleanOptionalAction,
+        default=False,
+        help="include section rotary inertia (Rayleigh beam; default off)",
+    )
+    g.add_argument(
+        "--gravity",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="gravity along the motor axes (default on)",
+    )
+    g.add_argument("--timestep-s", type=float, default=None, help="simulation step (s; default: automatic)")
+
+
+def add_pose_args(p: argparse.ArgumentParser) -> None:
+    """``--x-mm``, ``--y-mm``, ``--phi-rad``."""
+    g = p.add_argument_group("pose")
+    g.add_argument("--x-mm", type=float, default=0.0, help="end-effector x (mm)")
+    g.add_argument("--y-mm", type=float, default=0.0, help="end-effector y (mm)")
+    g.add_argument("--phi-rad", type=float, default=0.0, help="end-effector rotation (rad, within -pi..pi)")
+
+
+def add_output_args(p: argparse.ArgumentParser) -> None:
+    """``--json``."""
+    p.add_argument(
+        "--json", action=argparse.BooleanOptionalAction, default=False, help="print JSON instead of a table"
+    )
+
+
+def add_overwrite_arg(p: argparse.ArgumentParser) -> None:
+    """``--overwrite``: replace an existing output folder of another run."""
+    p.add_argument(
+        "--overwrite",
+        action=argparse.BooleanOptionalAction,
+        default=False,
+        help="replace an existing output folder (default: refuse)",
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# from arguments to library objects
+
+
+def load_manipulator(args: argparse.Namespace) -> Manipulator:
+    """The description of ``--config`` (checked to be a readable file), or the embedded default."""
+    from fpm_sim.config import default_config, load_config
+
+    path = getattr(args, "config", None)
+    if not path:
+        return default_config()
+    path = Path(path)
+    if path.is_dir():
+        raise CliError(f"--config {path} is a folder, not a file; give a TOML description (see 'fpm-sim config')")
+    if not path.exists():
+        raise CliError(f"--config {path}: file not found; check the path (fpm-sim config prints a template)")
+    return load_config(path)
+
+
+def model_options(args: argparse.Namespace, **overrides: Any) -> ModelOptions:
+    """:class:`ModelOptions` from the model/resolution options present in ``args`` (``overrides`` win)."""
+    from fpm_sim.model.options import ModelOptions
+
+    kw: dict[str, Any] = {
+        "link_model": getattr(args, "link_model", "segments"),
+        "segments": getattr(args, "segments", None),
+        "fidelity": getattr(args, "fidelity", None),
+        "axial": getattr(args, "axial", True),
+        "rotary_inertia": getattr(args, "rotary_inertia", False),
+        "gravity": getattr(args, "gravity", True),
+        "timestep_s": getattr(args, "timestep_s", None),
+    }
+    kw.update(overrides)
+    if kw["segments"] is not None:
+        kw["fidelity"] = None
+    return ModelOptions(**kw)
+
+
+def pose_of(args: argparse.Namespace) -> Pose:
+    """The pose of ``--x-mm``, ``--y-mm``, ``--phi-rad``; a rotation beyond pi is refused, not wrapped."""
+    from fpm_sim.kinematics import Pose
+
+    for name in ("x_mm", "y_mm", "phi_rad"):
+        v = getattr(args, name)
+        if not math.isfinite(v):
+            raise CliError(f"--{name.replace('_', '-')} must be a finite number, got {v!r}")
+    if abs(args.phi_rad) > math.pi:
+        raise CliError(
+            f"--phi-rad {args.phi_rad:g} is outside -pi..pi (it would be wrapped to "
+            f"{math.remainder(args.phi_rad, 2 * math.pi):.4g} rad); give the rotation in radians within -pi..pi"
+        )
+    return Pose.from_mm(args.x_mm, args.y_mm, args.phi_rad)
+
+
+def with_resolution(payload: dict[str, Any], options: ModelOptions) -> dict[str, Any]:
+    """Add the ``resolution`` entry (segments, fidelity, f1 error estimate) to a JSON payload."""
+    from fpm_sim.model.options import resolution_summary
+
+    payload["resolution"] = resolution_summary(options)
+    return payload
+
+
+def resolution_line(options: ModelOptions) -> str:
+    """The resolution line every table ends with."""
+    from fpm_sim.model.options import resolution_label
+
+    return "resolution: " + resolution_label(options)
+
+
+def emit(args: argparse.Namespace, payload: dict[str, Any], text: str) -> None:
+    """Print ``payload`` as JSON with ``--json``, else ``text``."""
+    if getattr(args, "json", False):
+        from fpm_sim.results import to_jsonable
+
+        print(json.dumps(to_jsonable(payload), indent=2))
+    else:
+        print(text)
+
+
+# ---------------------------------------------------------------------------------------------
+# output paths, checked before any computation
+
+
+def _creatable_dir(path: Path, option: str) -> None:
+    """Raise unless ``path`` is an existing writable folder or can be created (nearest existing parent writable)."""
+    probe = path
+    while not probe.exists():
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if probe.exists() and not probe.is_dir():
+        raise CliError(f"{option} {path}: {probe} is a file, not a folder; choose another path")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise CliError(f"{option} {path}: folder {probe} is not writable; choose a writable location")
+
+
+def check_output_file(path: Path | None, option: str, suffixes: tuple[str, ...] = ()) -> None:
+    """Check an output file path before computing: suffix, not a folder, parent creatable and writable.
+
+    Raises :class:`CliError` naming ``option``.
+    """
+    if path is None:
+        return
+    path = Path(path)
+    if suffixes and path.suffix.lower() not in suffixes:
+        raise CliError(f"{option} {path} must end in {' or '.join(suffixes)}; rename the file")
+    if path.is_dir():
+        ends = " or ".join(suffixes) or "a suffix"
+        raise CliError(f"{option} {path} is a folder; give a file name (ending in {ends})")
+    if path.exists() and not os.access(path, os.W_OK):
+        raise CliError(f"{option} {path} exists and is not writable; choose another file")
+    _creatable_dir(path.parent if str(path.parent) else Path("."), option)
+
+
+def check_output_dir(path: Path, option: str, *, overwrite: bool, marker: str | None = None) -> None:
+    """Check an output folder before computing: not a file, creatable, and not another run's folder.
+
+    An existing non-empty folder is refused unless ``overwrite`` (it is then replaced atomically on success).
+    """
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise CliError(f"{option} {path} is an existing file, not a folder; choose a folder name")
+    if path.is_dir() and any(path.iterdir()) and not overwrite:
+        raise CliError(
+            f"{option} {path} already holds another run's results; pass --overwrite to replace it, or choose "
+            "another folder"
+        )
+    _creatable_dir(path, option)
+
+
+def read_input_file(path: Path, option: str, loader: Any, what: str) -> Any:
+    """``loader(path)``, with a missing, unreadable or malformed file reported as :class:`CliError` naming it.
+
+    ``what`` says what the file should be (e.g. ``"an atlas written by 'fpm-sim atlas build'"``).
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise CliError(f"{option} {path} is a folder; give {what}")
+    if not path.exists():
+        raise CliError(f"{option} {path}: file not found; give {what}")
+    try:
+        return loader(path)
+    except FpmSimError:
+        raise
+    except Exception as exc:  # any reader failure (zip, MAT, missing key) is this file's problem: name it
+        raise CliError(f"{option} {path} cannot be read ({type(exc).__name__}: {exc}); give {what}") from exc
+
+
+# --------------------------------------------------------------------------------------------- the Dask engine
+
+
+def add_engine_args(p: argparse.ArgumentParser, *, workers: bool = False) -> None:
+    """``--scheduler``, ``--resume``, ``--chunk-poses`` (and ``--workers`` when the command has none yet)."""
+    g = p.add_argument_group("engine (Dask)")
+    g.add_argument(
+        "--scheduler",
+        default=None,
+        help="where the pose loop runs: local (a Dask LocalCluster of --workers processes), serial (this process) "
+        "or the address of a running scheduler, e.g. tcp://10.0.0.5:8786 (used unchanged); default: local for "
+        "runs of 4000 poses or more, else serial",
+    )
+    g.add_argument(
+        "--resume",
+        action=argparse.BooleanOptionalAction,
+        default=False,
+        help="continue a killed run with the same --out: reuse the chunks it finished (in OUT.partial/)",
+    )
+    g.add_argument(
+        "--chunk-poses",
+        type=int,
+        default=None,
+        help="poses per task (default: about four tasks per worker, 16-512; see docs/design.md, Scale on paper)",
+    )
+    if workers:
+        g.add_argument("--workers", type=int, default=None, help="local cluster processes (default: CPU count)")
+
+
+def engine_options(args: argparse.Namespace, out: Path | None) -> Any:
+    """The :class:`fpm_sim.batch.engine.EngineOptions` of ``--scheduler``, ``--workers``, ``--chunk-poses`` and
+    ``--resume``; finished chunks stream to ``OUT.partial/`` (:func:`fpm_sim.batch.engine.chunk_store`)."""
+    from fpm_sim.batch.engine import EngineOptions, chunk_store
+
+    return EngineOptions(
+        scheduler=getattr(args, "scheduler", None),
+        workers=getattr(args, "workers", None),
+        chunk=getattr(args, "chunk_poses", None),
+        store=chunk_store(out) if out is not None else None,
+        resume=bool(getattr(args, "resume", False)),
+        progress=not getattr(args, "json", False),
+    )
+
+
+def finish_store(out: Path | None) -> None:
+    """Remove the chunk folder of ``out`` after a complete run."""
+    import shutil
+
+    from fpm_sim.batch.engine import chunk_store
+
+    if out is not None and chunk_store(out).exists():
+        shutil.rmtree(chunk_store(out), ignore_errors=True)

@@ -1,0 +1,102 @@
+"""Atomic results: a run's files appear complete, or not at all.
+
+:func:`atomic_dir` hands the writer a temporary sibling folder (same parent, hence the same file system)
+and renames it into place when the ``with`` block ends without an exception; :func:`atomic_file` does
+the same for one file (write to a temporary sibling, then :func:`os.replace`). An interrupted run (an
+exception, Ctrl-C) leaves only what was there before; the temporary is removed.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from fpm_sim.errors import FpmSimError
+
+__all__ = ["OutputError", "atomic_dir", "atomic_file"]
+
+
+class OutputError(FpmSimError):
+    """An output path that cannot be written (or would replace another run's results)."""
+
+
+def _default_mode(mode: int) -> int:
+    """``mode`` less the process umask: what a plain ``mkdir``/``open`` would have created."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return mode & ~mask
+
+
+def _parent(path: Path) -> Path:
+    parent = path.parent if str(path.parent) else Path(".")
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError) as exc:
+        msg = f"cannot create folder {parent} for {path}: a file is in the way; choose another path"
+        raise OutputError(msg) from exc
+    except PermissionError as exc:
+        msg = f"cannot create folder {parent} for {path}: permission denied; choose a writable place"
+        raise OutputError(msg) from exc
+    return parent
+
+
+@contextmanager
+def atomic_dir(target: str | Path, *, overwrite: bool = False) -> Iterator[Path]:
+    """Write a folder of results atomically.
+
+    Parameters
+    ----------
+    target
+        The folder the results end up in.
+    overwrite
+        Replace ``target`` if it exists and is not empty; otherwise that raises :class:`OutputError`
+        (checked again at the end: the results are never mixed with another run's).
+
+    Yields
+    ------
+    Path
+        A temporary, empty sibling folder to write into; renamed to ``target`` on success.
+    """
+    target = Path(target)
+    if target.exists() and not target.is_dir():
+        raise OutputError(f"{target} is a file, not a folder; choose a folder name")
+    parent = _parent(target)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=parent))
+    os.chmod(tmp, _default_mode(0o777))  # mkdtemp makes it private (0700)
+    try:
+        yield tmp
+        if target.exists():
+            if any(target.iterdir()) and not overwrite:
+                raise OutputError(f"{target} already holds another run's results; pass --overwrite to replace it")
+            old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old-", dir=parent))
+            os.replace(target, old / "run")  # move the old run aside, then the new one in
+            os.replace(tmp, target)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, target)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+@contextmanager
+def atomic_file(target: str | Path) -> Iterator[Path]:
+    """Write one file atomically: yields a temporary sibling path (same suffix), moved to ``target`` on success."""
+    target = Path(target)
+    if target.is_dir():
+        raise OutputError(f"{target} is a folder; give a file name")
+    parent = _parent(target)
+    fd, name = tempfile.mkstemp(prefix=f".{target.stem}.tmp-", suffix=target.suffix, dir=parent)
+    os.close(fd)
+    tmp = Path(name)
+    os.chmod(tmp, _default_mode(0o666))  # mkstemp makes it private (0600)
+    try:
+        yield tmp
+        os.replace(tmp, target)
+    finally:
+        if tmp.exists():
+            tmp.unlink()

@@ -1,0 +1,102 @@
+"""Ctrl-C at any moment of ``fpm-sim reproduce`` leaves the output folder absent or complete and consistent.
+
+The run writes into a temporary sibling folder renamed into place on success (fpm_sim.outputs), so an
+interrupt before the rename leaves nothing (or the previous run's folder, untouched), after it the whole
+new run. Interrupts at 1, 3 and 6 s (the issue's moments; at --segments 3 the run takes about 5 s of CPU,
+18 s of wall time on the shared 2-core machine) and near the end of a measured full run, where the files
+are being written.
+"""
+
+from __future__ import annotations
+
+import csv
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+FILES = {"poses.csv", "report.md", "heatmaps.png", "subsystems.png"}
+READING_LINE = {"x+": "row=x,phi=+0.2", "y-": "row=y,phi=-0.2"}
+
+
+def command(out: Path, reading: str, *extra: str) -> list[str]:
+    return [sys.executable, "-m", "fpm_sim.cli.main", "reproduce", "--segments", "3", "--workers", "1",
+            "--reading", reading, "--out", str(out), "--json", *extra]
+
+
+def run_and_interrupt(argv: list[str], after_s: float) -> subprocess.CompletedProcess:
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(after_s)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    return subprocess.CompletedProcess(argv, proc.returncode, out, err)
+
+
+def check_folder(out: Path) -> str | None:
+    """``None`` if ``out`` is absent, else the reading of the complete, self-consistent run it holds."""
+    if not out.exists():
+        return None
+    assert {p.name for p in out.iterdir()} == FILES, sorted(p.name for p in out.iterdir())
+    report = (out / "report.md").read_text()
+    (reading,) = [r for r, line in READING_LINE.items() if f"Table reading: **{line}**" in report]
+    with open(out / "poses.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 25
+    # the report's pose table shows the CSV's own poses and first frequencies (2 decimals)
+    table = re.findall(r"^\| (-?\d+) \| (-?\d+) \| (-?[\d.]+) \| (-?[\d.]+) \| [+-][\d.]+ \| ([\d.]+) \|", report, re.M)
+    assert len(table) == 25
+    for row, (r_mm, c_mm, x_mm, y_mm, f1) in zip(rows, table):
+        assert float(row["row_mm"]) == float(r_mm) and float(row["col_mm"]) == float(c_mm)
+        assert float(row["x_mm"]) == pytest.approx(float(x_mm)) and float(row["y_mm"]) == pytest.approx(float(y_mm))
+        assert f"{float(row['f1_hz']):.2f}" == f1
+    return reading
+
+
+def check_interrupted(res: subprocess.CompletedProcess) -> None:
+    if res.returncode == 0:  # finished before the signal: fine, the folder must then be complete
+        return
+    # 130, or killed by SIGINT (-2) when the interrupt landed inside an extension's own eval during the
+    # imports (CPython then re-raises the signal at exit); a shell shows 130 for both
+    assert res.returncode in (130, -signal.SIGINT), res.stderr
+    assert "Traceback" not in res.stderr
+    assert res.stderr.strip().splitlines()[-1].startswith("interrupted")
+
+
+@pytest.mark.slow
+def test_interrupted_reproduce_leaves_nothing_or_a_complete_run(tmp_path):
+    first = tmp_path / "first"
+    t0 = time.perf_counter()
+    done = subprocess.run(command(first, "x+"), capture_output=True, text=True)
+    full_s = time.perf_counter() - t0
+    assert done.returncode == 0, done.stderr
+    assert check_folder(first) == "x+"
+    # a new folder, interrupted at several moments: absent or complete
+    for k, after_s in enumerate((1.0, 3.0, 6.0, 0.9 * full_s)):
+        out = tmp_path / f"new{k}"
+        res = run_and_interrupt(command(out, "x+"), after_s)
+        check_interrupted(res)
+        reading = check_folder(out)
+        assert reading in (None, "x+")
+        assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")], "temporary folder left behind"
+    # replacing another run's folder: the old run (x+) or the whole new one (y-), never a mix
+    for after_s in (3.0, 0.9 * full_s):
+        res = run_and_interrupt(command(first, "y-", "--overwrite"), after_s)
+        check_interrupted(res)
+        assert check_folder(first) in ("x+", "y-")
+        assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")], "temporary folder left behind"
+
+
+def test_existing_folder_of_another_run_is_refused(tmp_path, capsys):
+    from fpm_sim.cli.main import main
+
+    out = tmp_path / "r"
+    out.mkdir()
+    (out / "report.md").write_text("another run\n")
+    assert main(["reproduce", "--segments", "3", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "--overwrite" in err and "--out" in err
+    assert (out / "report.md").read_text() == "another run\n"
