@@ -18,7 +18,7 @@ import pytest
 
 from fpm_sim.cli.main import main
 
-AGREEMENT = 1e-3  # the issue's target; measured spread 1.0e-6 (method and gravity), see module docstring
+AGREEMENT = 1e-5  # measured spread 1.0e-6 (method, gravity, axial springs) times a margin of 10; the issue asks 1e-3
 
 
 def run_json(capsys, *argv: str) -> dict:
