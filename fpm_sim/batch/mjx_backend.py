@@ -1,0 +1,243 @@
+"""The ``mjx`` pose-loop backend: MJX's own pipeline, batched over poses (JAX and MJX imported lazily).
+
+``pose_frequencies(config, poses, backend="mjx")`` builds the per-pose MuJoCo models on the CPU (as the
+other backends do), puts each on the device with ``mjx.put_model``, stacks the array leaves of the
+resulting ``mjx.Model`` pytrees along a leading pose axis (``jax.tree_util``; the static fields, which
+hold the topology, must be equal for all poses) and runs one ``jit``-compiled ``jax.vmap`` over poses of
+
+* ``M``: the joint-space mass matrix from MJX (``mjx.fwd_position``: ``crb``/``factor_m``, then
+  ``mjx.full_m``);
+* ``J``: the weld rows of MJX's constraint Jacobian (``efc_J``, equality rows first, from
+  ``mjx.fwd_position``'s ``make_constraint``);
+* ``K = -d(qfrc_smooth)/dq`` at the assembled pose (``qpos0``, zero velocity), by ``jax.jacfwd`` of the
+  smooth generalised force that ``mjx.forward`` computes (:func:`smooth_force`: its position, velocity,
+  actuation and acceleration stages, without the constraint solve, which ``qfrc_smooth`` does not
+  depend on). With gravity off and the springs at rest this is the spring stiffness; the derivative is
+  taken in the tangent space, which for hinge and slide joints is ``qpos`` itself (other joints are
+  refused);
+
+then the constrained eigenproblem ``Z'KZ x = w^2 Z'MZ x``, ``Z = null(J)``, by the ``jax`` backend's
+solver (:func:`fpm_sim.batch.jax_linearisation.reduced_modes`). The three backends (``cpu``, ``jax``,
+``mjx``) solve the same discrete eigenproblem and agree to round-off (``tests/batch/test_mjx_pipeline.py``).
+
+Cost: MJX walks the kinematic tree level by level, so its XLA compile grows with the chain depth
+(``scripts/benchmark_backends.py``, ``docs/benchmarks.md``); on a CPU the ``jax`` backend compiles faster.
+With a GPU, this is the path to measure.
+
+The two-link chain rig is refused (:func:`check_mjx_model`): ``jit(mjx.kinematics)`` of its model runs for
+minutes per call on the CPU (``docs/mjx_chain_rig.md``, ``scripts/repro_mjx_chain_rig.py``).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from fpm_sim.batch.jax_backend import (
+    BackendTimings,
+    CompileCache,
+    TimedPoseFrequencies,
+    assemble_poses,
+    check_options,
+    frequencies_from_modes,
+    x64,
+)
+from fpm_sim.batch.pose_loop import fast_options
+from fpm_sim.config import Manipulator
+from fpm_sim.errors import FpmSimError
+from fpm_sim.kinematics import Pose
+from fpm_sim.model.options import BuiltModel, ModelOptions
+
+__all__ = [
+    "MjxModelError",
+    "check_mjx_model",
+    "mjx_linearisation",
+    "mjx_pose_frequencies",
+    "smooth_force",
+    "stack_models",
+]
+
+_MODES_CACHE = CompileCache()
+
+
+class MjxModelError(FpmSimError):
+    """A model the ``mjx`` backend does not handle (joint types, a known MJX pathology)."""
+
+
+def check_mjx_model(built: BuiltModel) -> None:
+    """Refuse models the ``mjx`` backend cannot linearise, or that MJX cannot run in reasonable time.
+
+    Raises
+    ------
+    MjxModelError
+        For the two-link chain rig (MJX runs its kinematics for minutes per call on the CPU; see
+        ``docs/mjx_chain_rig.md``), for joints other than hinges and slides (the tangent space would
+        differ from ``qpos``), and for models with flexes (not in MJX's JAX implementation).
+    """
+    model = built.model
+    if built.name == "chain":
+        raise MjxModelError(
+            "the chain rig is kept off MJX: jit(mjx.kinematics) of its model runs for minutes per call "
+            "on the CPU (docs/mjx_chain_rig.md); use the cpu path (fpm-sim rig chain without --backend mjx)"
+        )
+    if model.nflex:
+        raise MjxModelError("the mjx backend does not handle flex links; use link_model='segments'")
+    hinge_slide = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
+    if model.nq != model.nv or not np.all(np.isin(model.jnt_type, hinge_slide)):
+        raise MjxModelError(
+            "the mjx backend differentiates in qpos, which is the tangent space only for hinge and slide joints; "
+            "this model has ball or free joints (use the cpu path)"
+        )
+
+
+def stack_models(models: Sequence[mujoco.MjModel]) -> Any:
+    """``mjx.put_model`` of each model, array leaves stacked along a new leading axis (one ``mjx.Model``).
+
+    Call inside :func:`fpm_sim.batch.jax_backend.x64` (float64). The static fields (topology, joint
+    types, option flags) must be equal for all models.
+
+    Raises
+    ------
+    MjxModelError
+        If the models differ in structure.
+    """
+    import jax
+    import jax.numpy as jnp
+    from mujoco import mjx
+
+    put = [mjx.put_model(m) for m in models]
+    treedef = jax.tree_util.tree_structure(put[0])
+    for i, mx in enumerate(put[1:], start=1):
+        if jax.tree_util.tree_structure(mx) != treedef:
+            raise MjxModelError(f"model {i}: its structure (static MJX fields) differs from the first model's")
+    return jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *put)
+
+
+def smooth_force(mx: Any, qpos: Any) -> Any:
+    """``qfrc_smooth`` (N m or N per dof) of MJX at ``qpos``, zero velocity, no controls.
+
+    The stages of ``mjx.forward`` before its constraint solve (``fwd_position``, ``fwd_velocity``,
+    ``fwd_actuation``, ``fwd_acceleration``): ``qfrc_passive - qfrc_bias + qfrc_actuator + qfrc_applied``.
+    """
+    from mujoco import mjx
+
+    d = mjx.make_data(mx).replace(qpos=qpos)
+    d = mjx.fwd_position(mx, d)
+    d = mjx.fwd_velocity(mx, d)
+    d = mjx.fwd_actuation(mx, d)
+    d = mjx.fwd_acceleration(mx, d)
+    return d.qfrc_smooth
+
+
+def linearise_one(mx: Any) -> tuple[Any, Any, Any]:
+    """``(M, K, J)`` of one ``mjx.Model`` at its ``qpos0`` (traceable; ``vmap`` it over stacked models).
+
+    ``M`` ``(nv, nv)`` from ``mjx.full_m``; ``K = -d(qfrc_smooth)/dq`` ``(nv, nv)`` by ``jax.jacfwd`` of
+    :func:`smooth_force`; ``J`` ``(ne, nv)``: the equality rows of MJX's constraint Jacobian (MJX puts
+    equality rows first; ``ne`` is static).
+    """
+    import jax
+    from mujoco import mjx
+
+    d = mjx.fwd_position(mx, mjx.make_data(mx))
+    mass = mjx.full_m(mx, d)
+    stiff = -jax.jacfwd(lambda q: smooth_force(mx, q))(mx.qpos0)
+    impl = d._impl  # MJX keeps the constraint rows in its backend-specific part of Data
+    jac = impl.efc_J[: impl.ne]
+    return mass, stiff, jac
+
+
+def mjx_linearisation(built: BuiltModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(M, K, J)`` of one built model at ``qpos0`` through MJX (float64, numpy); see :func:`linearise_one`.
+
+    Raises
+    ------
+    MjxModelError
+        See :func:`check_mjx_model`.
+    """
+    check_mjx_model(built)
+    with x64():
+        import jax
+        from mujoco import mjx
+
+        mx = mjx.put_model(built.model)
+        out = jax.jit(linearise_one)(mx)
+        return tuple(np.asarray(a) for a in out)  # type: ignore[return-value]
+
+
+def _compiled_modes(stacked: Any, n_modes: int) -> tuple[Any, float]:
+    """The compiled batched MJX linearisation and eigen-solve, and its compile time (0 if cached)."""
+    import jax
+    import jax.numpy as jnp
+
+    from fpm_sim.batch import jax_linearisation as jl
+
+    leaves, treedef = jax.tree_util.tree_flatten(stacked)
+    key = (treedef, tuple(leaf.shape for leaf in leaves), n_modes)
+
+    def make() -> Any:
+        def one(mx: Any) -> tuple[Any, ...]:
+            mass, stiff, jac = linearise_one(mx)
+            w2, x, ratio = jl.reduced_modes(mass, stiff, jac, n_modes)
+            return w2, x, jnp.diag(stiff), ratio
+
+        return jax.jit(jax.vmap(one)).lower(stacked).compile()
+
+    return _MODES_CACHE.get(key, make)
+
+
+def mjx_pose_frequencies(
+    config: Manipulator,
+    poses: Sequence[Pose],
+    *,
+    n_modes: int = 3,
+    options: ModelOptions | None = None,
+    workers: int = 1,
+    progress: bool = False,
+    desc: str = "poses",
+) -> TimedPoseFrequencies:
+    """Lowest ``n_modes`` frequencies (Hz) at each pose through MJX's pipeline, all poses in one ``vmap``.
+
+    Same arguments and result as :func:`fpm_sim.batch.jax_backend.jax_pose_frequencies` (timings in
+    ``result.timings``; ``workers`` is ignored). The compiled function is kept per MJX model structure,
+    batch size and ``n_modes`` (a bounded cache).
+
+    Raises
+    ------
+    FpmSimError
+        ``options.gravity`` is on, the link model is not ``segments``, or the poses' models differ in
+        structure (:class:`MjxModelError`).
+    """
+    del workers
+    opts = options or fast_options()
+    check_options(opts, "mjx")
+    t0 = time.perf_counter()
+    assembled = assemble_poses(config, poses, opts, progress=progress, desc=desc)
+    ok = assembled.ok
+    timings = BackendTimings(poses=len(ok))
+    if not ok:
+        timings.build_s = time.perf_counter() - t0
+        empty = np.zeros((0, n_modes))
+        return frequencies_from_modes(
+            assembled, empty, np.zeros((0, 0, n_modes)), empty, np.zeros(0), n_modes=n_modes, timings=timings
+        )
+    built = [assembled.built[i] for i in ok]
+    for b in built:
+        assert b is not None
+        check_mjx_model(b)
+    first = built[0].model  # type: ignore[union-attr]
+    n = min(n_modes, first.nv - 6 * first.neq)
+    with x64():
+        import jax
+
+        stacked = stack_models([b.model for b in built])  # type: ignore[union-attr]
+        timings.build_s = time.perf_counter() - t0
+        fn, timings.compile_s = _compiled_modes(stacked, n)
+        t1 = time.perf_counter()
+        out = [np.asarray(a) for a in jax.block_until_ready(fn(stacked))]
+        timings.run_s = time.perf_counter() - t1
+    return frequencies_from_modes(assembled, *out, n_modes=n_modes, timings=timings)
