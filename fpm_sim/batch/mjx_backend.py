@@ -24,8 +24,9 @@ Cost: MJX walks the kinematic tree level by level, so its XLA compile grows with
 (``scripts/benchmark_backends.py``, ``docs/benchmarks.md``); on a CPU the ``jax`` backend compiles faster.
 With a GPU, this is the path to measure.
 
-The two-link chain rig is refused (:func:`check_mjx_model`): ``jit(mjx.kinematics)`` of its model runs for
-minutes per call on the CPU (``docs/mjx_chain_rig.md``, ``scripts/repro_mjx_chain_rig.py``).
+The rigs are refused (:func:`check_mjx_model`): their kinematic tree is one serial chain, and
+``jit(mjx.kinematics)`` of the two-link chain rig runs for minutes per call on the CPU (XLA:CPU's code for
+a tree level of one body; ``docs/mjx_chain_rig.md``, ``scripts/repro_mjx_chain_rig.py``).
 """
 
 from __future__ import annotations
@@ -54,7 +55,9 @@ from fpm_sim.model.options import BuiltModel, ModelOptions
 
 __all__ = [
     "MjxModelError",
+    "SERIAL_DOF_LIMIT",
     "check_mjx_model",
+    "serial_dofs",
     "mjx_linearisation",
     "mjx_pose_frequencies",
     "smooth_force",
@@ -62,6 +65,16 @@ __all__ = [
 ]
 
 _MODES_CACHE = CompileCache()
+
+SERIAL_DOF_LIMIT = 9
+"""Most degrees of freedom accepted in the serial part of the kinematic tree (levels holding one body).
+
+MJX's tree scan processes the bodies of one tree level together; where a level holds a single body, XLA:CPU
+(jax 0.10.2, its fusion emitters) turns the chain into code whose every call takes seconds to minutes
+although it does ~1e4 flops (``docs/mjx_chain_rig.md``). Measured with ``scripts/repro_mjx_chain_rig.py``,
+3-hinge bodies in series: 9 dofs 10-20 ms per ``mjx.kinematics`` call, 12 dofs 1.4 s, 12 dofs and a
+jointless tip 4-5 s; the chain rig at 2 segments (17 dofs) 81-324 s. The same chain twice side by side
+(two bodies per level, as the manipulator's three legs) runs in 1-5 ms."""
 
 
 class MjxModelError(FpmSimError):
@@ -74,16 +87,13 @@ def check_mjx_model(built: BuiltModel) -> None:
     Raises
     ------
     MjxModelError
-        For the two-link chain rig (MJX runs its kinematics for minutes per call on the CPU; see
-        ``docs/mjx_chain_rig.md``), for joints other than hinges and slides (the tangent space would
-        differ from ``qpos``), and for models with flexes (not in MJX's JAX implementation).
+        For a kinematic tree whose serial part (levels with one body) holds more than
+        :data:`SERIAL_DOF_LIMIT` dofs, as the rigs' single chains do (MJX's compiled kinematics then runs
+        for seconds to minutes per call on the CPU; ``docs/mjx_chain_rig.md``), for joints other than
+        hinges and slides (the tangent space would differ from ``qpos``), and for models with flexes (not
+        in MJX's JAX implementation).
     """
     model = built.model
-    if built.name == "chain":
-        raise MjxModelError(
-            "the chain rig is kept off MJX: jit(mjx.kinematics) of its model runs for minutes per call "
-            "on the CPU (docs/mjx_chain_rig.md); use the cpu path (fpm-sim rig chain without --backend mjx)"
-        )
     if model.nflex:
         raise MjxModelError("the mjx backend does not handle flex links; use link_model='segments'")
     hinge_slide = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
@@ -92,6 +102,25 @@ def check_mjx_model(built: BuiltModel) -> None:
             "the mjx backend differentiates in qpos, which is the tangent space only for hinge and slide joints; "
             "this model has ball or free joints (use the cpu path)"
         )
+    serial = serial_dofs(model)
+    if serial > SERIAL_DOF_LIMIT:
+        what = "the chain rig" if built.name == "chain" else f"the {built.name} model"
+        raise MjxModelError(
+            f"{what} is kept off MJX: its kinematic tree is a serial chain of {serial} dofs (more than "
+            f"{SERIAL_DOF_LIMIT}), for which jit(mjx.kinematics) runs for seconds to minutes per call on the CPU "
+            "(docs/mjx_chain_rig.md); use the cpu path (no --backend mjx)"
+        )
+
+
+def serial_dofs(model: mujoco.MjModel) -> int:
+    """Degrees of freedom of the bodies that are alone on their level of the kinematic tree."""
+    depth = np.zeros(model.nbody, dtype=int)
+    for b in range(1, model.nbody):
+        depth[b] = depth[model.body_parentid[b]] + 1
+    per_level = np.bincount(depth)
+    alone = per_level[depth] == 1
+    alone[0] = False
+    return int(np.asarray(model.body_dofnum)[alone].sum())
 
 
 def stack_models(models: Sequence[mujoco.MjModel]) -> Any:
