@@ -57,6 +57,7 @@ __all__ = [
     "MjxModelError",
     "SERIAL_DOF_LIMIT",
     "check_mjx_model",
+    "import_mjx",
     "serial_dofs",
     "mjx_linearisation",
     "mjx_pose_frequencies",
@@ -79,6 +80,19 @@ jointless tip 4-5 s; the chain rig at 2 segments (17 dofs) 81-324 s. The same ch
 
 class MjxModelError(FpmSimError):
     """A model the ``mjx`` backend does not handle (joint types, a known MJX pathology)."""
+
+
+def import_mjx() -> Any:
+    """``mujoco.mjx``, imported with its start-up notice on stdout (``Failed to import warp: ...``, printed
+    when the optional Warp GPU backend is absent) kept out of the caller's stdout (e.g. ``--json`` output)."""
+    import contextlib
+    import io
+    import sys
+
+    if "mujoco.mjx" not in sys.modules:
+        with contextlib.redirect_stdout(io.StringIO()):
+            from mujoco import mjx  # noqa: F401
+    return sys.modules["mujoco.mjx"]
 
 
 def check_mjx_model(built: BuiltModel) -> None:
@@ -136,7 +150,8 @@ def stack_models(models: Sequence[mujoco.MjModel]) -> Any:
     """
     import jax
     import jax.numpy as jnp
-    from mujoco import mjx
+
+    mjx = import_mjx()
 
     put = [mjx.put_model(m) for m in models]
     treedef = jax.tree_util.tree_structure(put[0])
@@ -152,7 +167,7 @@ def smooth_force(mx: Any, qpos: Any) -> Any:
     The stages of ``mjx.forward`` before its constraint solve (``fwd_position``, ``fwd_velocity``,
     ``fwd_actuation``, ``fwd_acceleration``): ``qfrc_passive - qfrc_bias + qfrc_actuator + qfrc_applied``.
     """
-    from mujoco import mjx
+    mjx = import_mjx()
 
     d = mjx.make_data(mx).replace(qpos=qpos)
     d = mjx.fwd_position(mx, d)
@@ -170,7 +185,8 @@ def linearise_one(mx: Any) -> tuple[Any, Any, Any]:
     equality rows first; ``ne`` is static).
     """
     import jax
-    from mujoco import mjx
+
+    mjx = import_mjx()
 
     d = mjx.fwd_position(mx, mjx.make_data(mx))
     mass = mjx.full_m(mx, d)
@@ -191,7 +207,8 @@ def mjx_linearisation(built: BuiltModel) -> tuple[np.ndarray, np.ndarray, np.nda
     check_mjx_model(built)
     with x64():
         import jax
-        from mujoco import mjx
+
+        mjx = import_mjx()
 
         mx = mjx.put_model(built.model)
         out = jax.jit(linearise_one)(mx)
