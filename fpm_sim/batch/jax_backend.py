@@ -54,6 +54,8 @@ __all__ = [
     "TimedPoseFrequencies",
     "AssembledPoses",
     "assemble_poses",
+    "BatchSolver",
+    "batched_pose_frequencies",
     "check_options",
     "frequencies_from_modes",
     "jax_pose_frequencies",
@@ -333,8 +335,58 @@ def jax_pose_frequencies(
         model is not ``segments``, or the poses' models differ in structure.
     """
     del workers
+    return batched_pose_frequencies(
+        config, poses, backend="jax", solve=_solve_jax, n_modes=n_modes, options=options, progress=progress, desc=desc
+    )
+
+
+def _solve_jax(built: list[BuiltModel], n_modes: int, timings: BackendTimings, t0: float) -> tuple[np.ndarray, ...]:
+    import jax.numpy as jnp
+
+    from fpm_sim.batch import jax_linearisation as jl
+
+    models = [b.model for b in built]
+    structure = jl.structure_of(models[0])
+    for i, m in enumerate(models[1:], start=1):
+        if not jl.structure_of(m).same_as(structure):
+            raise FpmSimError(f"pose {i} of the computed poses: model structure differs from the first pose's")
+    params = jl.stack_params([jl.params_of(m) for m in models])
+    n = min(n_modes, structure.nv - len(structure.weld_b1) * 6)
+    timings.build_s = time.perf_counter() - t0
+    fn, timings.compile_s = _compiled_modes(structure, params, n)
+    t1 = time.perf_counter()
+    out = tuple(np.asarray(a) for a in fn({k: jnp.asarray(v) for k, v in params.items()}))
+    timings.run_s = time.perf_counter() - t1
+    return out
+
+
+BatchSolver = Callable[[list[BuiltModel], int, BackendTimings, float], tuple[np.ndarray, ...]]
+"""``solve(built, n_modes, timings, t0) -> (w2, shapes, k_diag, sv_ratio)`` for the computed poses (see
+:func:`frequencies_from_modes`); it runs inside :func:`x64` and fills ``timings`` (``build_s`` counted
+from ``t0``, ``compile_s``, ``run_s``)."""
+
+
+def batched_pose_frequencies(
+    config: Manipulator,
+    poses: Sequence[Pose],
+    *,
+    backend: str,
+    solve: BatchSolver,
+    n_modes: int,
+    options: ModelOptions | None,
+    progress: bool = False,
+    desc: str = "poses",
+) -> TimedPoseFrequencies:
+    """The common frame of the batched backends: check the options, build every pose's model, ``solve``
+    the computed poses at once (inside :func:`x64`), and assemble the result.
+
+    Raises
+    ------
+    FpmSimError
+        Options the batched backends do not linearise (:func:`check_options`) or models not at rest.
+    """
     opts = options or fast_options()
-    check_options(opts, "jax")
+    check_options(opts, backend)
     t0 = time.perf_counter()
     assembled = assemble_poses(config, poses, opts, progress=progress, desc=desc)
     ok = assembled.ok
@@ -345,23 +397,9 @@ def jax_pose_frequencies(
         return frequencies_from_modes(
             assembled, empty, np.zeros((0, 0, n_modes)), empty, np.zeros(0), n_modes=n_modes, timings=timings
         )
+    built = [b for b in assembled.built if b is not None]
     with x64():
-        import jax.numpy as jnp
-
-        from fpm_sim.batch import jax_linearisation as jl
-
-        models = [assembled.built[i].model for i in ok]  # type: ignore[union-attr]
-        structure = jl.structure_of(models[0])
-        for i, m in zip(ok[1:], models[1:]):
-            if not jl.structure_of(m).same_as(structure):
-                raise FpmSimError(f"pose {assembled.poses[i]}: model structure differs from the first pose's")
-        params = jl.stack_params([jl.params_of(m) for m in models])
-        n = min(n_modes, structure.nv - len(structure.weld_b1) * 6)
-        timings.build_s = time.perf_counter() - t0
-        fn, timings.compile_s = _compiled_modes(structure, params, n)
-        t1 = time.perf_counter()
-        out = [np.asarray(a) for a in fn({k: jnp.asarray(v) for k, v in params.items()})]
-        timings.run_s = time.perf_counter() - t1
+        out = solve(built, n_modes, timings, t0)
     return frequencies_from_modes(assembled, *out, n_modes=n_modes, timings=timings)
 
 

@@ -42,12 +42,9 @@ from fpm_sim.batch.jax_backend import (
     BackendTimings,
     CompileCache,
     TimedPoseFrequencies,
-    assemble_poses,
-    check_options,
-    frequencies_from_modes,
+    batched_pose_frequencies,
     x64,
 )
-from fpm_sim.batch.pose_loop import fast_options
 from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose
@@ -259,31 +256,22 @@ def mjx_pose_frequencies(
         structure (:class:`MjxModelError`).
     """
     del workers
-    opts = options or fast_options()
-    check_options(opts, "mjx")
-    t0 = time.perf_counter()
-    assembled = assemble_poses(config, poses, opts, progress=progress, desc=desc)
-    ok = assembled.ok
-    timings = BackendTimings(poses=len(ok))
-    if not ok:
-        timings.build_s = time.perf_counter() - t0
-        empty = np.zeros((0, n_modes))
-        return frequencies_from_modes(
-            assembled, empty, np.zeros((0, 0, n_modes)), empty, np.zeros(0), n_modes=n_modes, timings=timings
-        )
-    built = [assembled.built[i] for i in ok]
-    for b in built:
-        assert b is not None
-        check_mjx_model(b)
-    first = built[0].model  # type: ignore[union-attr]
-    n = min(n_modes, first.nv - 6 * first.neq)
-    with x64():
-        import jax
+    return batched_pose_frequencies(
+        config, poses, backend="mjx", solve=_solve_mjx, n_modes=n_modes, options=options, progress=progress, desc=desc
+    )
 
-        stacked = stack_models([b.model for b in built])  # type: ignore[union-attr]
-        timings.build_s = time.perf_counter() - t0
-        fn, timings.compile_s = _compiled_modes(stacked, n)
-        t1 = time.perf_counter()
-        out = [np.asarray(a) for a in jax.block_until_ready(fn(stacked))]
-        timings.run_s = time.perf_counter() - t1
-    return frequencies_from_modes(assembled, *out, n_modes=n_modes, timings=timings)
+
+def _solve_mjx(built: list[BuiltModel], n_modes: int, timings: BackendTimings, t0: float) -> tuple[np.ndarray, ...]:
+    import jax
+
+    for b in built:
+        check_mjx_model(b)
+    first = built[0].model
+    n = min(n_modes, first.nv - 6 * first.neq)
+    stacked = stack_models([b.model for b in built])
+    timings.build_s = time.perf_counter() - t0
+    fn, timings.compile_s = _compiled_modes(stacked, n)
+    t1 = time.perf_counter()
+    out = tuple(np.asarray(a) for a in jax.block_until_ready(fn(stacked)))
+    timings.run_s = time.perf_counter() - t1
+    return out
