@@ -1,9 +1,11 @@
 """The pose loop's entry point: lowest frequencies at many poses, on a backend chosen by name.
 
 ``cpu`` (:mod:`fpm_sim.batch.pose_loop`) re-poses one compiled MuJoCo model per structure and solves the
-constrained eigenproblem with SciPy, in chunks on the engine (:mod:`fpm_sim.batch.engine`); ``mjx``
-(:mod:`fpm_sim.batch.jax_backend`) evaluates MuJoCo's formulas in JAX
-for all poses at once (JAX is imported only when that backend is called).
+constrained eigenproblem with SciPy, in chunks on the engine (:mod:`fpm_sim.batch.engine`); ``jax``
+(:mod:`fpm_sim.batch.jax_backend`) evaluates MuJoCo's formulas, written in JAX, for all poses at once;
+``mjx`` (:mod:`fpm_sim.batch.mjx_backend`) runs MJX's own pipeline (``mjx.put_model`` per pose, ``vmap`` of
+``jacfwd`` of its smooth forces). All three solve the same eigenproblem. JAX and MJX are imported only when
+their backend is called.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import numpy as np
 from fpm_sim.batch.engine import EngineOptions
 from fpm_sim.batch.pose_loop import PoseFrequencies, cpu_backend, fast_options
 from fpm_sim.config import Manipulator
+from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose
 from fpm_sim.model.options import ModelOptions
 
@@ -23,13 +26,19 @@ __all__ = ["BACKENDS", "first_frequencies", "pose_frequencies", "register_backen
 
 
 def _jax_backend(config: Manipulator, poses: Sequence[Pose], **kwargs: Any) -> PoseFrequencies:
-    from fpm_sim.batch.jax_backend import mjx_pose_frequencies
+    from fpm_sim.batch.jax_backend import jax_pose_frequencies
+
+    return jax_pose_frequencies(config, poses, **kwargs)
+
+
+def _mjx_backend(config: Manipulator, poses: Sequence[Pose], **kwargs: Any) -> PoseFrequencies:
+    from fpm_sim.batch.mjx_backend import mjx_pose_frequencies
 
     return mjx_pose_frequencies(config, poses, **kwargs)
 
 
 Backend = Callable[..., PoseFrequencies]
-BACKENDS: dict[str, Backend] = {"cpu": cpu_backend, "mjx": _jax_backend}
+BACKENDS: dict[str, Backend] = {"cpu": cpu_backend, "jax": _jax_backend, "mjx": _mjx_backend}
 """Pose-loop backends by name; see :func:`register_backend`."""
 
 
@@ -62,7 +71,9 @@ def pose_frequencies(
     poses
         End-effector poses (m, m, rad).
     backend
-        Name in :data:`BACKENDS` (``"cpu"``: constrained eigen-solve, gravity off).
+        Name in :data:`BACKENDS`: ``"cpu"`` (SciPy per pose, ``workers`` processes), ``"jax"`` (MuJoCo's
+        formulas in JAX, all poses batched) or ``"mjx"`` (MJX's pipeline, all poses batched); all solve the
+        constrained eigenproblem with gravity off and agree to round-off.
     n_modes
         Modes per pose.
     options
@@ -77,11 +88,11 @@ def pose_frequencies(
         :class:`fpm_sim.batch.engine.EngineOptions`).
     """
     if backend not in BACKENDS:
-        raise ValueError(f"unknown backend {backend!r} (--backend); available: {', '.join(sorted(BACKENDS))}")
+        raise FpmSimError(f"unknown backend {backend!r} (--backend); available: {', '.join(sorted(BACKENDS))}")
     if n_modes < 1:
-        raise ValueError(f"n_modes must be >= 1, got {n_modes}")
+        raise FpmSimError(f"n_modes must be >= 1, got {n_modes}")
     if workers < 1:
-        raise ValueError(f"workers must be >= 1 (--workers), got {workers}")
+        raise FpmSimError(f"workers must be >= 1 (--workers), got {workers}")
     opts = options or fast_options()
     extra: dict[str, Any] = {}
     if engine is not None:

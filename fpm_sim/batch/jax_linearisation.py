@@ -1,4 +1,4 @@
-"""Batched, differentiable constrained linearisation of the per-pose MuJoCo models in JAX (the ``mjx`` backend).
+"""Batched, differentiable constrained linearisation of the per-pose MuJoCo models in JAX (the ``jax`` backend).
 
 What it computes, for a model of bodies joined by hinge and slide joints (springs in
 ``jnt_stiffness``), closed by body ``weld`` equalities, at ``q = qpos0`` with zero velocity:
@@ -11,41 +11,35 @@ What it computes, for a model of bodies joined by hinge and slide joints (spring
 * ``J``: the weld rows of ``efc_J`` (MuJoCo's formula, including the quaternion correction of the
   rotational rows and ``torquescale``);
 
-then ``Z = null(J)``, ``Z'KZ x = w^2 Z'MZ x`` for the lowest modes, batched over poses.
+then ``Z = null(J)``, ``Z'KZ x = w^2 Z'MZ x`` for the lowest modes, batched over poses
+(:func:`reduced_modes`, also the eigen-solve of the ``mjx`` backend, :mod:`fpm_sim.batch.mjx_backend`).
 
-Why not MJX's own pipeline (``mjx.kinematics``/``crb``/``rne`` under ``jax.jacfwd``): its tree scans
-unroll one stage per tree depth level, and a segment chain has one level per body. On the 2-core
-reference CPU, XLA compile of ``jit(mjx.kinematics)`` alone took 8-14 s for 4 bodies, 124 s for 6 and
-103 s for 10; ``jit(jacfwd(...))`` of the smooth terms of a 25-dof chain compiled for 5 min 51 s and
-then ran for minutes without returning (``docs/benchmarks.md``, issue 5). Here the same formulas are
-written over the model's arrays with one ``lax.scan`` over bodies, so compile time barely grows with
-the segment count. The per-pose models share one structure (topology), which is static; their array
-fields (:data:`PARAM_FIELDS`) are stacked along a leading pose axis and ``vmap``-ped.
+Why its own formulas and not MJX's pipeline (``mjx.kinematics``/``crb``/``rne``, the ``mjx`` backend):
+MJX's tree scans unroll one stage per tree depth level, and a segment chain has one level per body, so
+its XLA compile grows with the segment count (the batched solve of the 25 study poses at 6 segments per
+link compiled in 186 s through MJX against 10.6 s here, one run of ``scripts/benchmark_backends.py`` on
+the shared 2-core reference CPU). Here the same formulas are written over the model's arrays with one ``lax.scan`` over
+bodies, so compile time barely grows with the segment count. The per-pose models share one structure
+(topology), which is static; their array fields (:data:`PARAM_FIELDS`) are stacked along a leading pose
+axis and ``vmap``-ped.
 
-Importing this module imports JAX and enables float64 (``jax_enable_x64``); the rest of fpm_sim does not
-import it (the backend registration in :mod:`fpm_sim.batch.jax_backend` imports it on first use). With the
-environment variable ``FPM_SIM_JAX_CACHE_DIR`` set, JAX's persistent compilation cache is used there:
-measured on the 25 study poses, a second process's compile step took 2.5 s instead of 5.2 s (tracing and
-lowering remain).
+Importing this module imports JAX but changes none of its settings. The functions need float64 to
+agree with MuJoCo: call them inside ``jax.enable_x64(True)`` (or :func:`fpm_sim.batch.jax_backend.x64`),
+as the backends do.
 """
 
 from __future__ import annotations
 
-import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
 
-jax.config.update("jax_enable_x64", True)
-if os.environ.get("FPM_SIM_JAX_CACHE_DIR"):  # opt-in persistent XLA cache: later processes skip the compile
-    jax.config.update("jax_compilation_cache_dir", os.environ["FPM_SIM_JAX_CACHE_DIR"])
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
-
-import jax.numpy as jnp  # noqa: E402
-import mujoco  # noqa: E402
-import numpy as np  # noqa: E402
+from fpm_sim.errors import FpmSimError
 
 __all__ = [
     "PARAM_FIELDS",
@@ -128,21 +122,21 @@ def structure_of(model: mujoco.MjModel) -> Structure:
 
     Raises
     ------
-    ValueError
+    FpmSimError
         If the model has joints other than hinges and slides, equalities other than body welds,
         tendons, actuators with dofs, or a non-trivial qpos/qvel mapping.
     """
     jt = np.asarray(model.jnt_type)
     if np.any((jt != _HINGE) & (jt != _SLIDE)):
-        raise ValueError("the mjx backend handles hinge and slide joints only (no free or ball joints)")
+        raise FpmSimError("the jax backend handles hinge and slide joints only (no free or ball joints)")
     if model.nq != model.nv or not np.array_equal(model.jnt_dofadr, np.arange(model.njnt)):
-        raise ValueError("the mjx backend needs one dof per joint in joint order")
+        raise FpmSimError("the jax backend needs one dof per joint in joint order")
     if np.any(model.eq_type != int(mujoco.mjtEq.mjEQ_WELD)) or np.any(
         model.eq_objtype != int(mujoco.mjtObj.mjOBJ_BODY)
     ):
-        raise ValueError("the mjx backend handles body weld equalities only")
+        raise FpmSimError("the jax backend handles body weld equalities only")
     if model.ntendon:
-        raise ValueError("the mjx backend does not handle tendons")
+        raise FpmSimError("the jax backend does not handle tendons")
     maxj = max(1, int(model.body_jntnum.max()))
     body_jnt = -np.ones((model.nbody, maxj), dtype=int)
     for b in range(model.nbody):
@@ -355,7 +349,7 @@ def linearise(
 
     With ``geometric`` the constraint-force term ``-d(J' lam)/dq`` (``lam`` fixed, least-squares solution
     of ``J' lam = -f``) is added; it vanishes at an unstressed pose (gravity off, springs at rest), which
-    is the ``mjx`` backend's case, and costs ``nv`` tangents through the kinematics otherwise.
+    is the ``jax`` backend's case, and costs ``nv`` tangents through the kinematics otherwise.
     """
 
     def force(qq: jax.Array) -> jax.Array:

@@ -42,8 +42,10 @@ def add_study_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--backend",
         default="cpu",
-        help="pose-loop backend: cpu (scipy per pose, --workers processes) or a batched JAX backend (all poses in "
-        "one computation; compiles once, seconds); default cpu",
+        choices=("cpu", "jax", "mjx"),
+        help="pose-loop backend: cpu (SciPy, one compiled model re-posed per pose, on the engine), jax (MuJoCo's "
+        "formulas in JAX, all poses batched; compiles once, ~10 s) or mjx (MJX's own pipeline, batched; compiles "
+        "for minutes on a CPU; the path to measure on a GPU); default cpu",
     )
     add_overwrite_arg(p)
 
