@@ -141,18 +141,18 @@ def _cross2(u: np.ndarray, v: np.ndarray) -> np.ndarray:
 def base_points(g: Geometry) -> np.ndarray:
     """Motor axis points A_i (3 x 2, m)."""
     ang = np.asarray(g.base_angles_rad)
-    return g.base_radius_m * np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    return np.asarray(g.base_radius_per_chain)[:, None] * np.stack([np.cos(ang), np.sin(ang)], axis=1)
 
 
 def platform_points(g: Geometry, pose: Pose) -> np.ndarray:
     """Platform joint points C_i in the world (3 x 2, m)."""
     ang = np.asarray(g.platform_angles_rad)
-    local = g.platform_radius_m * np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    local = np.asarray(g.platform_radius_per_chain)[:, None] * np.stack([np.cos(ang), np.sin(ang)], axis=1)
     return np.array([pose.x_m, pose.y_m]) + local @ _rot(pose.phi_rad).T
 
 
 def _char_length(g: Geometry) -> float:
-    return max(g.platform_radius_m, g.distal_length_m / 4.0)
+    return max(max(g.platform_radius_per_chain), float(np.mean(g.distal_length_per_chain)) / 4.0)
 
 
 def jacobians(g: Geometry, asm: Assembly) -> tuple[np.ndarray, np.ndarray]:
@@ -161,7 +161,7 @@ def jacobians(g: Geometry, asm: Assembly) -> tuple[np.ndarray, np.ndarray]:
     w = asm.proximal_dirs
     r = asm.c - np.array([asm.pose.x_m, asm.pose.y_m])
     jx = np.column_stack([u, _cross2(r, u)])
-    jq = np.diag(g.proximal_length_m * _cross2(w, u))
+    jq = np.diag(np.asarray(g.proximal_length_per_chain) * _cross2(w, u))
     return jx, jq
 
 
@@ -203,10 +203,10 @@ def inverse_kinematics(
     """
     a = base_points(g)
     c = platform_points(g, pose)
-    l1, l2 = g.proximal_length_m, g.distal_length_m
     b = np.zeros((3, 2))
     q = np.zeros(3)
     for i in range(3):
+        l1, l2 = g.proximal_length_per_chain[i], g.distal_length_per_chain[i]
         d = c[i] - a[i]
         dist = float(np.hypot(*d))
         lo, hi = abs(l1 - l2), l1 + l2
@@ -259,22 +259,22 @@ def forward_kinematics(
     """
     q = np.asarray(motor_angles_rad, dtype=float)
     a = base_points(g)
-    b = a + g.proximal_length_m * np.stack([np.cos(q), np.sin(q)], axis=1)
+    b = a + np.asarray(g.proximal_length_per_chain)[:, None] * np.stack([np.cos(q), np.sin(q)], axis=1)
     ang = np.asarray(g.platform_angles_rad)
-    local = g.platform_radius_m * np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    local = np.asarray(g.platform_radius_per_chain)[:, None] * np.stack([np.cos(ang), np.sin(ang)], axis=1)
     x = guess.as_array().astype(float)
     for _ in range(max_iter):
         rot = _rot(x[2])
         r = local @ rot.T
         c = x[:2] + r
         d = c - b
-        f = np.sum(d * d, axis=1) - g.distal_length_m**2
+        f = np.sum(d * d, axis=1) - np.asarray(g.distal_length_per_chain) ** 2
         jac = 2.0 * np.column_stack([d, _cross2(r, d)])
         try:
             step = np.linalg.solve(jac, -f)
         except np.linalg.LinAlgError as exc:
             raise SingularPoseError("forward kinematics hit a parallel singularity") from exc
         x += step
-        if np.max(np.abs(step[:2])) < tol_m and abs(step[2]) * max(g.platform_radius_m, 1e-3) < tol_m:
+        if np.max(np.abs(step[:2])) < tol_m and abs(step[2]) * max(max(g.platform_radius_per_chain), 1e-3) < tol_m:
             return Pose(float(x[0]), float(x[1]), float(x[2]))
     raise UnreachablePoseError(f"forward kinematics did not converge from guess {guess.label()}")

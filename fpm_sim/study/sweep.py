@@ -36,7 +36,13 @@ SWEEP_CSV_COLUMNS = ("x_mm", "y_mm", "phi_rad", "f1_hz", "f2_hz", "f3_hz", "in_p
 def _reach_half_width(config: Manipulator) -> float:
     """Half-width (m) of a square centred on the base centre that holds every reachable position."""
     g = config.geometry
-    return g.proximal_length_m + g.distal_length_m + g.platform_radius_m - g.base_radius_m / 2.0 + 1e-9
+    return (
+        max(g.proximal_length_per_chain)
+        + max(g.distal_length_per_chain)
+        + max(g.platform_radius_per_chain)
+        - min(g.base_radius_per_chain) / 2.0
+        + 1e-9
+    )
 
 
 def dense_grid(config: Manipulator, *, step_mm: float, phi_rad: float = 0.0) -> list[Pose]:
@@ -75,13 +81,13 @@ def singularity_fields(
     grid ``y_mm x x_mm`` (NaN where unreachable); vectorised inverse kinematics, as in
     :func:`fpm_sim.kinematics.inverse_kinematics`."""
     g = config.geometry
-    l1, l2 = g.proximal_length_m, g.distal_length_m
+    l1, l2 = np.asarray(g.proximal_length_per_chain), np.asarray(g.distal_length_per_chain)  # per chain
     xx, yy = np.meshgrid(np.asarray(x_mm, float) * 1e-3, np.asarray(y_mm, float) * 1e-3)
     p = np.stack([xx.ravel(), yy.ravel()], axis=1)  # (n, 2)
     base = np.asarray(g.base_angles_rad)
-    a = g.base_radius_m * np.stack([np.cos(base), np.sin(base)], axis=1)
+    a = np.asarray(g.base_radius_per_chain)[:, None] * np.stack([np.cos(base), np.sin(base)], axis=1)
     ang = np.asarray(g.platform_angles_rad) + phi_rad
-    r = g.platform_radius_m * np.stack([np.cos(ang), np.sin(ang)], axis=1)  # (3, 2)
+    r = np.asarray(g.platform_radius_per_chain)[:, None] * np.stack([np.cos(ang), np.sin(ang)], axis=1)  # (3, 2)
     c = p[:, None, :] + r[None]
     d = c - a[None]
     dist = np.hypot(d[..., 0], d[..., 1])
@@ -89,9 +95,9 @@ def singularity_fields(
     cos_alpha = np.clip((l1**2 + dist**2 - l2**2) / (2.0 * l1 * np.maximum(dist, 1e-300)), -1.0, 1.0)
     q = np.arctan2(d[..., 1], d[..., 0]) + np.asarray(g.elbow_branch)[None, :] * np.arccos(cos_alpha)
     w = np.stack([np.cos(q), np.sin(q)], axis=2)
-    u = (c - (a[None] + l1 * w)) / l2
+    u = (c - (a[None] + l1[None, :, None] * w)) / l2[None, :, None]
     cross = w[..., 0] * u[..., 1] - w[..., 1] * u[..., 0]
-    lc = max(g.platform_radius_m, l2 / 4.0)
+    lc = max(max(g.platform_radius_per_chain), float(np.mean(l2)) / 4.0)
     jx = np.concatenate([u, ((r[None, :, 0] * u[..., 1] - r[None, :, 1] * u[..., 0]) / lc)[..., None]], axis=2)
     det = np.where(reach, np.linalg.det(jx), np.nan).reshape(xx.shape)
     ser = np.where(reach, np.min(np.abs(cross), axis=1), np.nan).reshape(xx.shape)
