@@ -44,6 +44,11 @@ def cmd_impact(args: argparse.Namespace) -> int:
     res = virtual_impact_test(built, setup, progress=not args.json)
     if args.csv:
         res.frf.save_csv(args.csv)
+    if args.uff:
+        from fpm_sim.sim.impact import write_uff58
+
+        pose = pose_of(args)
+        write_uff58(res.frf, args.uff, pose_mm_rad=(pose.x_m * 1e3, pose.y_m * 1e3, pose.phi_rad))
     if args.plot:
         save_figure(args.plot, lambda: res.plot())
     payload = res.to_dict()
@@ -53,7 +58,7 @@ def cmd_impact(args: argparse.Namespace) -> int:
         f"pose {pose_of(args).label()}, {args.segments} segments, axial {args.axial}, nv {built.model.nv}, "
         f"timestep {built.timestep_s:.3g} s\n"
         + res.table()
-        + "".join(f"\nwrote {f}" for f in (args.csv, args.plot) if f)
+        + "".join(f"\nwrote {f}" for f in (args.csv, args.uff, args.plot) if f)
     )
     emit(args, payload, text)
     return 0
@@ -86,6 +91,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--axial", action="store_true", help="axial springs (much smaller timestep; slow)")
     p.add_argument("--no-gravity", action="store_true", help="switch gravity off")
     p.add_argument("--csv", type=Path, help="write the H1 FRF and coherence to this CSV")
+    p.add_argument("--uff", type=Path, help="write the H1 FRF as a Universal File type-58 record (for fpm-sim ema)")
     p.add_argument("--plot", type=Path, help="H1 magnitude/phase/coherence plot (.png, .pdf, .svg)")
     add_pose_args(p)
     add_config_args(p)

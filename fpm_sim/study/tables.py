@@ -29,6 +29,7 @@ __all__ = [
     "mesh_convergence",
     "STUDY_COMSOL_VS_EXPERIMENT",
     "read_data_csv",
+    "parse_subsystem_rows",
 ]
 
 STUDY_COMSOL_VS_EXPERIMENT = {
@@ -79,17 +80,27 @@ def _num(s: str) -> float:
 
 def subsystem_tests() -> list[SubsystemTest]:
     """The five subsystem tests in the study's order (link free-free, cantilever, chain 60/90/180 deg)."""
+    return parse_subsystem_rows(read_data_csv("subsystems.csv"))
+
+
+def parse_subsystem_rows(rows: list[dict[str, str]]) -> list[SubsystemTest]:
+    """Subsystem tests from CSV rows ``rig,setting,experimental_hz[,comsol_hz]`` (see ``subsystems.csv``)."""
     out = []
-    for row in read_data_csv("subsystems.csv"):
+    for row in rows:
         setting = row["setting"].strip()
         if row["rig"] == "link":
+            if setting not in ("free-free", "cantilever"):
+                raise ValueError(f"link test setting {setting!r}: use free-free or cantilever")
             rig, angle = setting, 180.0
             label = f"link {setting}"
-        else:
+        elif row["rig"] == "chain":
             rig = "chain"
             angle = float(setting.split("angle")[1].split("deg")[0])
             label = f"chain {angle:g} deg"
-        out.append(SubsystemTest(rig, angle, float(row["experimental_hz"]), float(row["comsol_hz"]), label))
+        else:
+            raise ValueError(f"rig {row['rig']!r}: use link or chain")
+        comsol = _num(row.get("comsol_hz") or "")
+        out.append(SubsystemTest(rig, angle, float(row["experimental_hz"]), comsol, label))
     return out
 
 
