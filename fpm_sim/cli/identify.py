@@ -132,8 +132,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sigma-pct", type=float, default=DEFAULT_SIGMA_PCT, help="default relative std (%%) of a "
                    f"measured frequency (default {DEFAULT_SIGMA_PCT:g})")
     p.add_argument("--subsystem-sigma-pct", type=float, default=1.0, help="relative std (%%) of a rig test (default 1)")
-    p.add_argument("--global", dest="global_method", default="surrogate-de", choices=GLOBAL_METHODS,
-                   help="global exploration before the local refinement (default surrogate-de; see docs/identification.md)")
+    p.add_argument("--global", dest="global_method", default="hybrid", choices=GLOBAL_METHODS,
+                   help="global exploration before the local refinement (default hybrid; see docs/identification.md)")
     p.add_argument("--starts", type=int, default=24, help="multistart: Latin-hypercube points (default 24)")
     p.add_argument("--refine", type=int, default=2, help="best global candidates refined locally (default 2)")
     p.add_argument("--max-nfev", type=int, default=30, help="local least squares: max residual evaluations (default 30)")

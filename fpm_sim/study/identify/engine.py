@@ -10,10 +10,11 @@ in-plane and an out-of-plane mode near a crossing does not swap the match.
 Search (:func:`identify`):
 
 1. global exploration: ``"multistart"`` (a Latin hypercube of ``n_starts`` points inside the bounds
-   plus the start, each scored with the full model; the best ``n_refine`` are refined) or
-   ``"surrogate-de"`` (differential evolution of the geometry on the in-plane surrogate,
-   :mod:`fpm_sim.study.inplane_surrogate`, scale-free, for every elbow-branch class; its best are
-   refined). Both are seeded (``seed``): the same seed gives the same result.
+   plus the start, each scored with the full model), ``"surrogate-de"`` (differential evolution of the
+   geometry on the in-plane surrogate, :mod:`fpm_sim.study.inplane_surrogate`, scale-free, for every
+   elbow-branch class, each class's best scored with the full model) or ``"hybrid"`` (both candidate
+   lists together; the default). The best ``n_refine`` candidates are refined. All seeded (``seed``):
+   the same seed gives the same result.
 2. local refinement: bounded least squares (:func:`scipy.optimize.least_squares`, trust-region
    reflective) on the full segment model; its Jacobian is by forward finite differences in
    parameters normalised to their bounds (step ``1e-3`` of the bound width). The model's
@@ -63,7 +64,7 @@ __all__ = [
     "IN_PLANE_THRESHOLD",
 ]
 
-GLOBAL_METHODS = ("multistart", "surrogate-de", "none")
+GLOBAL_METHODS = ("hybrid", "multistart", "surrogate-de", "none")
 IN_PLANE_THRESHOLD = 0.5
 """A mode is ``in_plane`` when more than this fraction of its strain energy is in in-plane springs."""
 PENALTY_SIGMAS = 30.0
@@ -82,7 +83,7 @@ class IdentifyOptions:
     """Search settings. ``segments``: spring locations per link of the model fitted."""
 
     segments: int = 4
-    global_method: str = "multistart"
+    global_method: str = "hybrid"
     n_starts: int = 24
     n_refine: int = 3
     seed: int = 0
@@ -208,20 +209,26 @@ class _Objective:
         return (np.asarray(x, float) - self.lo) / self.width
 
     def predictions(self, x: np.ndarray) -> np.ndarray:
-        key = np.asarray(x, float).tobytes()
-        if key in self._cache:
-            return self._cache[key]
-        self.nfev += 1
+        """Observations then rig tests. The two blocks are cached apart: a finite-difference step in a rig
+        parameter re-solves only the rigs, one in a manipulator parameter only the poses."""
+        x = np.asarray(x, float)
         n = len(self.obs) + len(self.problem.subsystem_tests)
         try:
             cfg = self.ps.apply(x)
         except (ConfigError, ValueError):
             return np.full(n, np.nan)
-        f_obs = predict_observations(cfg, self.obs, options=self.opts.model_options(), workers=self.opts.workers)
-        f_sub = _subsystem_predictions(cfg, self.problem.subsystem_tests, self.opts.subsystem_segments)
-        out = np.concatenate([f_obs, f_sub])
-        if len(self._cache) < 4096:
-            self._cache[key] = out
+        key_m = b"m" + x[self.man_idx].tobytes()
+        key_s = b"s" + x[self.sub_idx].tobytes()
+        if key_m not in self._cache:
+            self.nfev += 1
+            self._cache[key_m] = predict_observations(
+                cfg, self.obs, options=self.opts.model_options(), workers=self.opts.workers
+            )
+        if key_s not in self._cache:
+            self._cache[key_s] = _subsystem_predictions(cfg, self.problem.subsystem_tests, self.opts.subsystem_segments)
+        out = np.concatenate([self._cache[key_m], self._cache[key_s]])
+        if len(self._cache) > 8192:
+            self._cache.clear()
         return out
 
     def residuals(self, z: np.ndarray) -> np.ndarray:
@@ -339,6 +346,15 @@ def _surrogate_starts(obj: _Objective, opts: IdentifyOptions) -> list[tuple[np.n
     return [(z, note, br) for z, note, br, _ in out]
 
 
+def _with_branch(problem: Problem, branch: tuple[int, int, int]) -> Problem:
+    import dataclasses
+
+    ps = problem.parameters
+    start = ps.start.replace(geometry=dataclasses.replace(ps.start.geometry, elbow_branch=branch))
+    return Problem(ParameterSet(start, ps.parameters), problem.observations, problem.subsystem_tests,
+                   problem.subsystem_sigma_pct)
+
+
 def identify(problem: Problem, *, options: IdentifyOptions | None = None, progress: bool = False) -> Identification:
     """Fit ``problem`` (see module docstring). Returns the optimum with its uncertainty and history."""
     import dataclasses
@@ -363,30 +379,30 @@ def identify(problem: Problem, *, options: IdentifyOptions | None = None, progre
     c0 = obj.cost(z_start)
     log("start", c0)
     starts: list[tuple[np.ndarray, str, Any]] = []
-    if opts.global_method == "multistart":
+    scored: list[tuple[float, np.ndarray, str, Any]] = [(c0, z_start, "start description", None)]
+    if opts.global_method in ("multistart", "hybrid"):
         pts = _lhs(opts.n_starts, len(ps.parameters), opts.seed)
-        scored = [(c0, z_start, "start description")]
         for k, z in enumerate(pts):
-            scored.append((obj.cost(z), z, f"latin-hypercube point {k}"))
-        scored.sort(key=lambda t: t[0])
-        log("global multistart", scored[0][0], f"{len(pts)} points scored with the full model")
-        starts = [(z, note, None) for _, z, note in scored[: opts.n_refine]]
-    elif opts.global_method == "surrogate-de":
-        found = _surrogate_starts(obj, opts)
-        log("global surrogate-de", obj.cost(found[0][0]), found[0][1])
-        starts = found[: opts.n_refine]
-    else:
+            scored.append((obj.cost(z), z, f"latin-hypercube point {k}", None))
+        log("global latin hypercube", min(t[0] for t in scored), f"{len(pts)} points scored with the full model")
+    geometry_free = any(p.group in ("geometry", "geometry-per-chain") for p in ps.parameters)
+    if opts.global_method == "surrogate-de" or (opts.global_method == "hybrid" and geometry_free):
+        for z, note, branch in _surrogate_starts(obj, opts):
+            ob = _Objective(_with_branch(problem, branch), opts)
+            scored.append((ob.cost(z), z, note, branch))
+            obj.nfev += ob.nfev
+        log("global surrogate-de", min(t[0] for t in scored), "best geometry of each elbow-branch class, scored with "
+            "the full model")
+    scored.sort(key=lambda t: t[0])
+    starts = [(z, note, branch) for _, z, note, branch in scored[: max(1, opts.n_refine)]]
+    if opts.global_method == "none":
         starts = [(z_start, "start description", None)]
 
     best = None
     candidates = []
     for z, note, branch in starts:
         if branch is not None:
-            problem_b = Problem(
-                ParameterSet(ps.start.replace(geometry=dataclasses.replace(ps.start.geometry, elbow_branch=branch)),
-                             ps.parameters),
-                problem.observations, problem.subsystem_tests, problem.subsystem_sigma_pct,
-            )
+            problem_b = _with_branch(problem, branch)
             ob = _Objective(problem_b, opts)
             ob.nfev = obj.nfev
         else:
