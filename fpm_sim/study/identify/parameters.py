@@ -79,8 +79,8 @@ def _set_geometry(cfg: Manipulator, **changes: object) -> Manipulator:
 
 
 def _mean_setter(field_name: str, per_chain: tuple[float, float, float]) -> Callable[[Manipulator, float], Manipulator]:
-    mean0 = float(np.mean(per_chain))
     sym = len(set(per_chain)) == 1
+    mean0 = per_chain[0] if sym else float(np.mean(per_chain))
 
     def set_(cfg: Manipulator, v: float) -> Manipulator:
         value: float | tuple = v if sym else tuple(x + (v - mean0) for x in per_chain)
@@ -113,7 +113,7 @@ def _geometry(cfg: Manipulator) -> list[FreeParameter]:
     out = []
     for f in ("base_radius_m", "platform_radius_m", "proximal_length_m", "distal_length_m"):
         per = getattr(g, f"{f[:-2]}_per_chain")
-        m = float(np.mean(per))
+        m = per[0] if len(set(per)) == 1 else float(np.mean(per))
         out.append(FreeParameter(f"geometry.{f}", m, 0.6 * m, 1.6 * m, _mean_setter(f, per), "geometry"))
     out.append(
         FreeParameter(
