@@ -72,6 +72,7 @@ def build_manipulator(
         segments=opts.segments,
         axial=opts.axial,
         rotary_inertia=opts.rotary_inertia,
+        shear=opts.shear,
         damping_beta_s=beta,
         spec=spec,
     )

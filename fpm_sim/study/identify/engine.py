@@ -337,7 +337,7 @@ def _surrogate_starts(obj: _Objective, opts: IdentifyOptions) -> list[tuple[np.n
             return float(np.sum(d**2))
 
         sol = differential_evolution(
-            cost, [(0.0, 1.0)] * len(gi), seed=opts.seed, maxiter=150, popsize=15, tol=1e-8, polish=False
+            cost, [(0.0, 1.0)] * len(gi), seed=opts.seed, maxiter=80, popsize=12, tol=1e-7, polish=False
         )
         z = z0.copy()
         z[gi] = sol.x
