@@ -135,21 +135,30 @@ def timoshenko_beam_hz(
     ei, rho_a, rho_i, kga = _bending(section, material, plane)
     h = length_m / elements
     phi = 12.0 * ei / (kga * h * h) if shear else 0.0
-    ke = ei / ((1.0 + phi) * h**3) * np.array(
-        [
-            [12.0, 6 * h, -12.0, 6 * h],
-            [6 * h, (4 + phi) * h * h, -6 * h, (2 - phi) * h * h],
-            [-12.0, -6 * h, 12.0, -6 * h],
-            [6 * h, (2 - phi) * h * h, -6 * h, (4 + phi) * h * h],
-        ]
+    ke = (
+        ei
+        / ((1.0 + phi) * h**3)
+        * np.array(
+            [
+                [12.0, 6 * h, -12.0, 6 * h],
+                [6 * h, (4 + phi) * h * h, -6 * h, (2 - phi) * h * h],
+                [-12.0, -6 * h, 12.0, -6 * h],
+                [6 * h, (2 - phi) * h * h, -6 * h, (4 + phi) * h * h],
+            ]
+        )
     )
-    me = rho_a * h / 420.0 * np.array(
-        [
-            [156.0, 22 * h, 54.0, -13 * h],
-            [22 * h, 4 * h * h, 13 * h, -3 * h * h],
-            [54.0, 13 * h, 156.0, -22 * h],
-            [-13 * h, -3 * h * h, -22 * h, 4 * h * h],
-        ]
+    me = (
+        rho_a
+        * h
+        / 420.0
+        * np.array(
+            [
+                [156.0, 22 * h, 54.0, -13 * h],
+                [22 * h, 4 * h * h, 13 * h, -3 * h * h],
+                [54.0, 13 * h, 156.0, -22 * h],
+                [-13 * h, -3 * h * h, -22 * h, 4 * h * h],
+            ]
+        )
     )
     if rotary_inertia:
         me = me + np.diag([0.0, rho_i * h / 2.0, 0.0, rho_i * h / 2.0])

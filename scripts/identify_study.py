@@ -72,6 +72,7 @@ def main() -> int:
     ap.add_argument("--global", dest="global_method", default="hybrid")
     ap.add_argument("--max-nfev", type=int, default=40)
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--timoshenko", action="store_true", help="links as Timoshenko beams")
     ap.add_argument("--quick", action="store_true", help="tiny budgets (a smoke run, not a result)")
     args = ap.parse_args()
     args.out.parent.mkdir(parents=True, exist_ok=True)
@@ -80,21 +81,34 @@ def main() -> int:
     data = resources.files("fpm_sim.data")
     cmd = [
         "identify",
-        "--config", str(start),
-        "--measured", f"{data / 'measured_table4_train.csv'},sigma_pct=2",
-        "--measured", f"{data / 'comsol_table5.csv'},sigma_pct=7",
-        "--subsystems", str(data / "subsystems.csv"),
-        "--reading", "x+",
-        "--free", args.free,
-        "--global", args.global_method,
-        "--seed", str(args.seed),
-        "--folds", str(args.folds),
-        "--max-nfev", str(3 if args.quick else args.max_nfev),
-        "--starts", str(4 if args.quick else 24),
-        "--workers", str(args.workers),
-        "--out", str(args.out),
+        "--config",
+        str(start),
+        "--measured",
+        f"{data / 'measured_table4_train.csv'},sigma_pct=2",
+        "--measured",
+        f"{data / 'comsol_table5.csv'},sigma_pct=7",
+        "--subsystems",
+        str(data / "subsystems.csv"),
+        "--reading",
+        "x+",
+        "--free",
+        args.free,
+        "--global",
+        args.global_method,
+        "--seed",
+        str(args.seed),
+        "--folds",
+        str(args.folds),
+        "--max-nfev",
+        str(3 if args.quick else args.max_nfev),
+        "--starts",
+        str(4 if args.quick else 24),
+        "--workers",
+        str(args.workers),
+        "--out",
+        str(args.out),
         "--overwrite",
-    ]
+    ] + (["--timoshenko"] if args.timoshenko else [])
     print("fpm-sim " + " ".join(shlex.quote(c) for c in cmd), flush=True)
     sys.argv = ["fpm-sim", *cmd]
     return cli_main(cmd)

@@ -81,8 +81,9 @@ def test_segment_chain_with_shear_and_rotary_inertia_converges_to_timoshenko():
     from fpm_sim.model.options import ModelOptions
 
     cfg = default_config()
-    rig = dataclasses.replace(cfg.rig, length_m=DEEP["length_m"], clamped_length_m=0.0, section=DEEP["section"],
-                              material=DEEP["material"])
+    rig = dataclasses.replace(
+        cfg.rig, length_m=DEEP["length_m"], clamped_length_m=0.0, section=DEEP["section"], material=DEEP["material"]
+    )
     cfg = cfg.replace(rig=rig, material=DEEP["material"])
     ref = timoshenko_beam_hz("cantilever", n_modes=1, **DEEP)[0]
     eb = euler_bernoulli_hz("cantilever", **DEEP)[0]

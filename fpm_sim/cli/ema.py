@@ -35,8 +35,13 @@ def cmd_ema(args: argparse.Namespace) -> int:
                         )
                     frf.pose_mm_rad = (float(given[0]), float(given[1]), float(given[2] or 0.0))
                 estimates.append(
-                    estimate_modes(frf, f_lower_hz=args.f_lower_hz, f_upper_hz=args.f_upper_hz, n_modes=args.n_modes,
-                                   pol_order=args.pol_order)
+                    estimate_modes(
+                        frf,
+                        f_lower_hz=args.f_lower_hz,
+                        f_upper_hz=args.f_upper_hz,
+                        n_modes=args.n_modes,
+                        pol_order=args.pol_order,
+                    )
                 )
         tmp = args.out.parent / f".{args.out.name}.tmp-{os.getpid()}"
         tmp.mkdir(parents=True, exist_ok=True)
@@ -55,8 +60,11 @@ def cmd_ema(args: argparse.Namespace) -> int:
     except (FpmSimError, ValueError) as exc:
         print(f"fpm-sim: error: {exc}", file=sys.stderr)
         return 2
-    lines = [f"{e.source} at {e.pose_mm_rad}: " + ", ".join(f"{f:.3f} Hz ({100 * z:.2f} %)" for f, z in
-                                                             zip(e.freq_hz, e.damping)) for e in estimates]
+    lines = [
+        f"{e.source} at {e.pose_mm_rad}: "
+        + ", ".join(f"{f:.3f} Hz ({100 * z:.2f} %)" for f, z in zip(e.freq_hz, e.damping))
+        for e in estimates
+    ]
     lines.append(f"wrote {args.out / 'modes.csv'} (give it to fpm-sim identify --measured)")
     emit(args, {"estimates": [e.to_dict() for e in estimates], "csv": str(args.out / "modes.csv")}, "\n".join(lines))
     return 0

@@ -74,6 +74,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
             seed=args.seed,
             max_nfev=args.max_nfev,
             workers=args.workers,
+            timoshenko=args.timoshenko,
         )
         problem = Problem(ps, observations, tests, subsystem_sigma_pct=args.subsystem_sigma_pct)
         result = identify(problem, options=opts, progress=not args.quiet)
@@ -90,8 +91,10 @@ def cmd_identify(args: argparse.Namespace) -> int:
         print(f"fpm-sim: error: {exc}", file=sys.stderr)
         return 2
     summ = summary(result, cv)
-    lines = [f"identified {len(result.names)} parameters in {result.seconds:.0f} s (cost {result.cost:.4g}, "
-             f"chi2/dof {result.chi2_per_dof:.3g})"]
+    lines = [
+        f"identified {len(result.names)} parameters in {result.seconds:.0f} s (cost {result.cost:.4g}, "
+        f"chi2/dof {result.chi2_per_dof:.3g})"
+    ]
     for n, v, s in zip(result.names, result.values, result.std):
         lines.append(f"  {n:<42} {v:>12.5g} +- {s:.3g}" + ("  (at bound)" if n in result.at_bound else ""))
     for src, st in summ.items():
@@ -118,8 +121,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--measured",
         action="append",
         metavar="FILE[,sigma_pct=P][,reading=R]",
-        help=f"measured frequencies (repeatable); sigma_pct: relative std of its values where no sigma_hz column "
-        f"(default --sigma-pct); reading: for row_mm,col_mm files",
+        help="measured frequencies (repeatable); sigma_pct: relative std of its values where no sigma_hz column "
+        "(default --sigma-pct); reading: for row_mm,col_mm files",
     )
     p.add_argument("--subsystems", type=Path, help="rig tests CSV (rig,setting,experimental_hz), frees the rig group")
     add_config_args(p)
@@ -129,19 +132,31 @@ def register(sub: argparse._SubParsersAction) -> None:
         help=f"comma-separated parameter groups: {', '.join(GROUPS)} (default geometry,hardware)",
     )
     p.add_argument("--reading", default=None, help="how to read row_mm,col_mm files: x+, x-, y+ or y-")
-    p.add_argument("--sigma-pct", type=float, default=DEFAULT_SIGMA_PCT, help="default relative std (%%) of a "
-                   f"measured frequency (default {DEFAULT_SIGMA_PCT:g})")
+    p.add_argument(
+        "--sigma-pct",
+        type=float,
+        default=DEFAULT_SIGMA_PCT,
+        help=f"default relative std (%%) of a measured frequency (default {DEFAULT_SIGMA_PCT:g})",
+    )
     p.add_argument("--subsystem-sigma-pct", type=float, default=1.0, help="relative std (%%) of a rig test (default 1)")
-    p.add_argument("--global", dest="global_method", default="hybrid", choices=GLOBAL_METHODS,
-                   help="global exploration before the local refinement (default hybrid; see docs/identification.md)")
+    p.add_argument(
+        "--global",
+        dest="global_method",
+        default="hybrid",
+        choices=GLOBAL_METHODS,
+        help="global exploration before the local refinement (default hybrid; see docs/identification.md)",
+    )
     p.add_argument("--starts", type=int, default=24, help="multistart: Latin-hypercube points (default 24)")
     p.add_argument("--refine", type=int, default=2, help="best global candidates refined locally (default 2)")
-    p.add_argument("--max-nfev", type=int, default=30, help="local least squares: max residual evaluations (default 30)")
+    p.add_argument(
+        "--max-nfev", type=int, default=30, help="local least squares: max residual evaluations (default 30)"
+    )
     p.add_argument("--folds", type=int, default=0, help="k-fold cross-validation over poses (0 = none)")
     p.add_argument("--cv-max-nfev", type=int, default=10, help="per-fold refit budget (default 10)")
     p.add_argument("--seed", type=int, default=0, help="seed of the global search and the folds (default 0)")
     p.add_argument("--segments", type=int, default=4, help="spring locations per link of the fitted model (default 4)")
     p.add_argument("--workers", type=int, default=1, help="processes for the pose loop (default 1)")
+    p.add_argument("--timoshenko", action="store_true", help="links as Timoshenko beams (shear + rotary inertia)")
     p.add_argument("--out", type=Path, required=True, help="output folder (written atomically)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing results folder")
     p.add_argument("--quiet", action="store_true", help="no progress lines")

@@ -294,7 +294,9 @@ class _Reader:
         v = self.get(table, path, key)
         if isinstance(v, (list, tuple)):
             if len(v) != 3 or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in v):
-                raise ConfigError(f"field '{path}.{key}' must be a number or a list of 3 numbers (per chain), got {v!r}")
+                raise ConfigError(
+                    f"field '{path}.{key}' must be a number or a list of 3 numbers (per chain), got {v!r}"
+                )
             return tuple(float(x) for x in v)
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             raise ConfigError(f"field '{path}.{key}' must be a number or a list of 3 numbers (per chain), got {v!r}")
@@ -520,7 +522,9 @@ def config_to_toml(m: Manipulator, *, header: str = "", default_source: str = "u
     lines.append(entry("geometry", "elbow_branch", list(g.elbow_branch)))
 
     def section(path: str, sec: Section) -> None:
-        lines.extend(["", f"[{path}]", entry(path, "thickness_m", sec.thickness_m), entry(path, "height_m", sec.height_m)])
+        lines.extend(
+            ["", f"[{path}]", entry(path, "thickness_m", sec.thickness_m), entry(path, "height_m", sec.height_m)]
+        )
 
     def material(path: str, mat: Material) -> None:
         lines.extend(["", f"[{path}]"])

@@ -60,7 +60,8 @@ def inplane_first_frequencies(config: Manipulator, poses: Sequence[Pose]) -> np.
     base = np.asarray(g.base_angles_rad)
     a = np.asarray(g.base_radius_per_chain)[:, None] * np.stack([np.cos(base), np.sin(base)], axis=1)  # (3, 2)
     ang = np.asarray(g.platform_angles_rad)[None, :] + xyphi[:, 2:3]  # (n, 3)
-    r = np.asarray(g.platform_radius_per_chain)[None, :, None] * np.stack([np.cos(ang), np.sin(ang)], axis=2)  # (n, 3, 2)
+    r_p = np.asarray(g.platform_radius_per_chain)[None, :, None]
+    r = r_p * np.stack([np.cos(ang), np.sin(ang)], axis=2)  # (n, 3, 2)
     c = xyphi[:, None, :2] + r
     d = c - a[None]
     dist = np.hypot(d[..., 0], d[..., 1])

@@ -46,7 +46,17 @@ __all__ = [
 ]
 
 POSES_CSV_COLUMNS = (
-    "row_mm", "col_mm", "x_mm", "y_mm", "phi_rad", "f1_hz", "f2_hz", "f3_hz", "comsol_hz", "measured_hz", "withheld",
+    "row_mm",
+    "col_mm",
+    "x_mm",
+    "y_mm",
+    "phi_rad",
+    "f1_hz",
+    "f2_hz",
+    "f3_hz",
+    "comsol_hz",
+    "measured_hz",
+    "withheld",
 )
 DEFAULT_IDENTIFICATION = "default_identification.json"
 """Packaged summary of the identification that produced the embedded default (its cross-validated errors)."""
@@ -209,7 +219,9 @@ class StudyReproduction:
             "stats_vs_comsol": self.stats() if self.comparable else None,
             "stats_vs_measured": self.stats_vs_measured() if self.comparable else None,
             "withheld_predictions": [
-                {"row_mm": r["row_mm"], "col_mm": r["col_mm"], "f1_hz": r["f1_hz"]} for r in self.rows() if r["withheld"]
+                {"row_mm": r["row_mm"], "col_mm": r["col_mm"], "f1_hz": r["f1_hz"]}
+                for r in self.rows()
+                if r["withheld"]
             ],
             "subsystems": [
                 {
@@ -394,9 +406,9 @@ class StudyReproduction:
                         f"{st['spearman']:.3f} |"
                     )
             lines += [
-                f"| COMSOL vs measured (the study's own, 18 poses) | 18 | - | {ref['max_abs_hz']} | {ref['mean_abs_hz']} "
-                f"| {ref['median_abs_hz']} | - | {ref['max_abs_pct']} | {ref['mean_abs_pct']} | {ref['median_abs_pct']} "
-                "| - |",
+                f"| COMSOL vs measured (the study's own, 18 poses) | 18 | - | {ref['max_abs_hz']} "
+                f"| {ref['mean_abs_hz']} | {ref['median_abs_hz']} | - | {ref['max_abs_pct']} | {ref['mean_abs_pct']} "
+                f"| {ref['median_abs_pct']} | - |",
                 "",
             ]
             summ = self.identification_summary()

@@ -27,14 +27,18 @@ from fpm_sim.study.identify import (
 from fpm_sim.study.poses import parse_reading
 
 SEG = 2
-POSES = [Pose.from_mm(x, y, p) for x, y, p in [(0, 0, 0.2), (50, -50, 0), (-50, 50, 0), (50, 50, 0), (-50, -50, 0),
-                                                (0, -50, 0)]]
+POSES = [
+    Pose.from_mm(x, y, p)
+    for x, y, p in [(0, 0, 0.2), (50, -50, 0), (-50, 50, 0), (50, 50, 0), (-50, -50, 0), (0, -50, 0)]
+]
 
 
 def _with_platform_mass(cfg, m):
     hw = cfg.hardware
     r = m / hw.platform.mass_kg
-    return cfg.replace(hardware=dataclasses.replace(hw, platform=LumpedMass(m, tuple(v * r for v in hw.platform.inertia_kg_m2))))
+    return cfg.replace(
+        hardware=dataclasses.replace(hw, platform=LumpedMass(m, tuple(v * r for v in hw.platform.inertia_kg_m2)))
+    )
 
 
 def test_fold_assignment_partitions_the_poses():
@@ -101,8 +105,11 @@ def test_labelled_matching_picks_the_kind_not_the_rank():
     frac = pf.in_plane[0]
     first_in = pf.frequencies_hz[0][frac > 0.5][0]
     first_out = pf.frequencies_hz[0][frac <= 0.5][0]
-    obs = [Observation(pose, 1, 1.0, 1.0, "in_plane", "x"), Observation(pose, 1, 1.0, 1.0, "out_of_plane", "x"),
-           Observation(pose, 1, 1.0, 1.0, None, "x")]
+    obs = [
+        Observation(pose, 1, 1.0, 1.0, "in_plane", "x"),
+        Observation(pose, 1, 1.0, 1.0, "out_of_plane", "x"),
+        Observation(pose, 1, 1.0, 1.0, None, "x"),
+    ]
     got = predict_observations(cfg, obs, options=fast_options(segments=SEG))
     # the solves ask for 5 and 6 eigenpairs: LAPACK's subset solve differs at ~1e-12 relative
     assert got[0] == pytest.approx(first_in, rel=1e-9) and got[1] == pytest.approx(first_out, rel=1e-9)
@@ -136,15 +143,41 @@ def test_cli_identify_writes_a_complete_folder_usable_with_config(tmp_path):
     obs = [Observation(p, 1, 1.0, 1.0, None, "x") for p in POSES[:4]]
     f = predict_observations(truth, obs, options=fast_options(segments=SEG))
     csv = tmp_path / "meas.csv"
-    csv.write_text("x_mm,y_mm,phi_rad,f1_hz\n" + "".join(
-        f"{o.pose.x_m * 1e3:g},{o.pose.y_m * 1e3:g},{o.pose.phi_rad:g},{v:.6f}\n" for o, v in zip(obs, f)))
+    csv.write_text(
+        "x_mm,y_mm,phi_rad,f1_hz\n"
+        + "".join(f"{o.pose.x_m * 1e3:g},{o.pose.y_m * 1e3:g},{o.pose.phi_rad:g},{v:.6f}\n" for o, v in zip(obs, f))
+    )
     out = tmp_path / "id"
-    rc = main(["identify", "--measured", f"{csv},sigma_pct=1", "--free", "hardware", "--global", "none",
-               "--segments", str(SEG), "--folds", "2", "--cv-max-nfev", "3", "--max-nfev", "20", "--quiet",
-               "--out", str(out)])
+    rc = main(
+        [
+            "identify",
+            "--measured",
+            f"{csv},sigma_pct=1",
+            "--free",
+            "hardware",
+            "--global",
+            "none",
+            "--segments",
+            str(SEG),
+            "--folds",
+            "2",
+            "--cv-max-nfev",
+            "3",
+            "--max-nfev",
+            "20",
+            "--quiet",
+            "--out",
+            str(out),
+        ]
+    )
     assert rc == 0
-    assert {p.name for p in out.iterdir()} >= {"config.toml", "identify.json", "report.md", "measured_vs_predicted.png",
-                                               "residuals_workspace.png"}
+    assert {p.name for p in out.iterdir()} >= {
+        "config.toml",
+        "identify.json",
+        "report.md",
+        "measured_vs_predicted.png",
+        "residuals_workspace.png",
+    }
     cfg = load_config(out / "config.toml")
     src = cfg.provenance["hardware.platform.mass_kg"]
     assert src.startswith("identified: meas.csv") and "+-" in src

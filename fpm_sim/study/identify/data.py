@@ -68,9 +68,8 @@ class Observation:
 
     def describe(self) -> str:
         kind = f" {self.label}" if self.label else ""
-        return (
-            f"{self.source} ({self.pose.x_m * 1e3:g}, {self.pose.y_m * 1e3:g}, {self.pose.phi_rad:g}) f{self.mode}{kind}"
-        )
+        where = f"({self.pose.x_m * 1e3:g}, {self.pose.y_m * 1e3:g}, {self.pose.phi_rad:g})"
+        return f"{self.source} {where} f{self.mode}{kind}"
 
 
 @dataclass
@@ -161,7 +160,9 @@ def read_measured_csv(
         return ds
     if {"row_mm", "col_mm"} <= cols:
         if reading is None:
-            raise DataError(f"{p} uses the study's row_mm,col_mm labels: say how to read them with --reading x+|x-|y+|y-")
+            raise DataError(
+                f"{p} uses the study's row_mm,col_mm labels: say how to read them with --reading x+|x-|y+|y-"
+            )
         fcol = next((c for c in ("experimental_hz", "comsol_hz", "f1_hz") if c in cols), None)
         if fcol is None:
             raise DataError(f"{p}: no frequency column; expected experimental_hz, comsol_hz or f1_hz")
@@ -171,11 +172,11 @@ def read_measured_csv(
                 continue
             f = _float(v, p, i, fcol)
             rm, cm = _float(r["row_mm"], p, i, "row_mm"), _float(r["col_mm"], p, i, "col_mm")
-            ds.observations.append(
-                Observation(reading.pose(rm, cm), 1, f, f * sigma_pct / 100.0, None, p.name, rm, cm)
-            )
+            ds.observations.append(Observation(reading.pose(rm, cm), 1, f, f * sigma_pct / 100.0, None, p.name, rm, cm))
         return ds
-    raise DataError(f"{p}: columns {sorted(cols)} not understood; expected x_mm,y_mm,phi_rad,f1_hz,... or row_mm,col_mm")
+    raise DataError(
+        f"{p}: columns {sorted(cols)} not understood; expected x_mm,y_mm,phi_rad,f1_hz,... or row_mm,col_mm"
+    )
 
 
 def read_subsystems_csv(path: str | Path) -> list[SubsystemTest]:

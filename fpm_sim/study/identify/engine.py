@@ -90,8 +90,12 @@ class IdentifyOptions:
     max_nfev: int = 40
     workers: int = 1
     subsystem_segments: int = 8
+    timoshenko: bool = False
+    """Links as Timoshenko beams (shear springs and section rotary inertia, :class:`ModelOptions`)."""
 
     def model_options(self) -> ModelOptions:
+        if self.timoshenko:
+            return ModelOptions(segments=self.segments, axial=False, gravity=False, shear=True, rotary_inertia=True)
         return fast_options(segments=self.segments)
 
 
@@ -285,7 +289,13 @@ class Identification:
             "chi2_per_dof": self.chi2_per_dof,
             "dof": self.dof,
             "residuals": [
-                {"data": lab, "measured_hz": float(m), "predicted_hz": float(f), "sigma_hz": float(s), "error_pct": float(e)}
+                {
+                    "data": lab,
+                    "measured_hz": float(m),
+                    "predicted_hz": float(f),
+                    "sigma_hz": float(s),
+                    "error_pct": float(e),
+                }
                 for lab, m, f, s, e in zip(p.labels, self.measured, self.predicted, p.sigma, self.residual_pct)
             ],
             "history": [vars(h) for h in self.history],
@@ -309,9 +319,7 @@ def _surrogate_starts(obj: _Objective, opts: IdentifyOptions) -> list[tuple[np.n
     gi = [i for i, p in enumerate(ps.parameters) if p.group in ("geometry", "geometry-per-chain")]
     if not gi:
         raise IdentificationError("--global surrogate-de needs the geometry group free (--free geometry)")
-    first = [
-        k for k, o in enumerate(obj.obs) if o.mode == 1 and o.label in (None, "in_plane")
-    ]
+    first = [k for k, o in enumerate(obj.obs) if o.mode == 1 and o.label in (None, "in_plane")]
     poses = [obj.obs[k].pose for k in first]
     logf = np.log([obj.obs[k].freq_hz for k in first])
     w = 1.0 / np.array([obj.obs[k].sigma_hz / obj.obs[k].freq_hz for k in first])
@@ -351,13 +359,13 @@ def _with_branch(problem: Problem, branch: tuple[int, int, int]) -> Problem:
 
     ps = problem.parameters
     start = ps.start.replace(geometry=dataclasses.replace(ps.start.geometry, elbow_branch=branch))
-    return Problem(ParameterSet(start, ps.parameters), problem.observations, problem.subsystem_tests,
-                   problem.subsystem_sigma_pct)
+    return Problem(
+        ParameterSet(start, ps.parameters), problem.observations, problem.subsystem_tests, problem.subsystem_sigma_pct
+    )
 
 
 def identify(problem: Problem, *, options: IdentifyOptions | None = None, progress: bool = False) -> Identification:
     """Fit ``problem`` (see module docstring). Returns the optimum with its uncertainty and history."""
-    import dataclasses
 
     opts = options or IdentifyOptions()
     if opts.global_method not in GLOBAL_METHODS:
@@ -372,8 +380,10 @@ def identify(problem: Problem, *, options: IdentifyOptions | None = None, progre
     def log(stage: str, cost: float, note: str = "") -> None:
         history.append(SearchStep(stage, obj.nfev, cost, time.time() - t_start, note))
         if progress:
-            print(f"[identify] {stage}: cost {cost:.4g} ({obj.nfev} evaluations, {time.time() - t_start:.0f} s) {note}",
-                  flush=True)
+            print(
+                f"[identify] {stage}: cost {cost:.4g} ({obj.nfev} evaluations, {time.time() - t_start:.0f} s) {note}",
+                flush=True,
+            )
 
     z_start = obj.z(ps.x0)
     c0 = obj.cost(z_start)
@@ -391,8 +401,11 @@ def identify(problem: Problem, *, options: IdentifyOptions | None = None, progre
             ob = _Objective(_with_branch(problem, branch), opts)
             scored.append((ob.cost(z), z, note, branch))
             obj.nfev += ob.nfev
-        log("global surrogate-de", min(t[0] for t in scored), "best geometry of each elbow-branch class, scored with "
-            "the full model")
+        log(
+            "global surrogate-de",
+            min(t[0] for t in scored),
+            "best geometry of each elbow-branch class, scored with the full model",
+        )
     scored.sort(key=lambda t: t[0])
     starts = [(z, note, branch) for _, z, note, branch in scored[: max(1, opts.n_refine)]]
     if opts.global_method == "none":
@@ -408,7 +421,12 @@ def identify(problem: Problem, *, options: IdentifyOptions | None = None, progre
         else:
             problem_b, ob = problem, obj
         sol = least_squares(
-            ob.residuals, np.clip(z, 0, 1), bounds=(0.0, 1.0), method="trf", diff_step=1e-3, max_nfev=opts.max_nfev,
+            ob.residuals,
+            np.clip(z, 0, 1),
+            bounds=(0.0, 1.0),
+            method="trf",
+            diff_step=1e-3,
+            max_nfev=opts.max_nfev,
             x_scale=1.0,
         )
         obj.nfev = max(obj.nfev, ob.nfev)
@@ -519,8 +537,10 @@ def cross_validate(
         f = predict_observations(cfg, test, options=opts.model_options(), workers=opts.workers)
         pred[~train] = f
         if progress:
-            print(f"[identify] fold {k + 1}/{folds}: {len(test)} held-out observations ({time.time() - t0:.0f} s)",
-                  flush=True)
+            print(
+                f"[identify] fold {k + 1}/{folds}: {len(test)} held-out observations ({time.time() - t0:.0f} s)",
+                flush=True,
+            )
     return CrossValidation(
         folds=folds,
         fold_of_pose=fold.tolist(),

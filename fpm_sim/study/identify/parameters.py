@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fpm_sim.config import ConfigError, Geometry, LumpedMass, Manipulator
+from fpm_sim.config import ConfigError, LumpedMass, Manipulator
 from fpm_sim.errors import FpmSimError
 
 __all__ = ["GROUPS", "FreeParameter", "ParameterSet", "parameter_set", "ParameterError"]
@@ -117,7 +117,11 @@ def _geometry(cfg: Manipulator) -> list[FreeParameter]:
         out.append(FreeParameter(f"geometry.{f}", m, 0.6 * m, 1.6 * m, _mean_setter(f, per), "geometry"))
     out.append(
         FreeParameter(
-            "geometry.base_rotation_deg", 0.0, -60.0, 60.0, _angle_setter("base_angles_rad", g.base_angles_rad, range(3)),
+            "geometry.base_rotation_deg",
+            0.0,
+            -60.0,
+            60.0,
+            _angle_setter("base_angles_rad", g.base_angles_rad, range(3)),
             "geometry",
         )
     )
@@ -140,7 +144,9 @@ def _geometry_per_chain(cfg: Manipulator) -> list[FreeParameter]:
     for i in range(3):
         for f in ("base_radius_m", "proximal_length_m", "distal_length_m", "platform_radius_m"):
             v = getattr(g, f"{f[:-2]}_per_chain")[i]
-            out.append(FreeParameter(f"geometry.{f}[{i}]", v, 0.8 * v, 1.25 * v, _chain_setter(f, i), "geometry-per-chain"))
+            out.append(
+                FreeParameter(f"geometry.{f}[{i}]", v, 0.8 * v, 1.25 * v, _chain_setter(f, i), "geometry-per-chain")
+            )
         out.append(
             FreeParameter(
                 f"geometry.base_angle_deg[{i}]",
@@ -213,7 +219,7 @@ def _rig(cfg: Manipulator) -> list[FreeParameter]:
         raise ParameterError("--free rig needs a [rig] table in the start description (--config)")
 
     def setter(**kw_of_value: Callable[[float], dict]) -> Callable:
-        (attr, build), = kw_of_value.items()
+        ((attr, build),) = kw_of_value.items()
 
         def set_(c: Manipulator, v: float) -> Manipulator:
             assert c.rig is not None
@@ -319,5 +325,7 @@ def parameter_set(start: Manipulator, groups: Sequence[str]) -> ParameterSet:
     try:
         ParameterSet(start, params).apply([p.start for p in params])
     except ConfigError as exc:
-        raise ParameterError(f"the start description is not valid with the free parameters at their start: {exc}") from exc
+        raise ParameterError(
+            f"the start description is not valid with the free parameters at their start: {exc}"
+        ) from exc
     return ParameterSet(start, params)

@@ -160,8 +160,14 @@ def render_report(
     ]
     for n, row in zip(result.names, result.correlation):
         lines.append(f"{n:<40}" + " ".join(f"{c:+.2f}" for c in row))
-    lines += ["```", "", "## Residuals", "", "| data | measured Hz | sigma Hz | model Hz | error % | CV model Hz |",
-              "|---|---|---|---|---|---|"]
+    lines += [
+        "```",
+        "",
+        "## Residuals",
+        "",
+        "| data | measured Hz | sigma Hz | model Hz | error % | CV model Hz |",
+        "|---|---|---|---|---|---|",
+    ]
     n_obs = len(p.observations)
     for j, (lab, m, s, f) in enumerate(zip(p.labels, result.measured, p.sigma, result.predicted)):
         cvp = f"{cv.predicted[j]:.2f}" if cv is not None and j < n_obs else ""
@@ -170,7 +176,10 @@ def render_report(
     for h in result.history:
         lines.append(f"| {h.stage} | {h.evaluations} | {h.cost:.4g} | {h.seconds:.0f} | {h.note} |")
     if result.candidates:
-        lines += ["", "Local refinements: " + "; ".join(f"from {c['from']}: cost {c['cost']:.4g}" for c in result.candidates)]
+        lines += [
+            "",
+            "Local refinements: " + "; ".join(f"from {c['from']}: cost {c['cost']:.4g}" for c in result.candidates),
+        ]
     if extra:
         lines += ["", extra]
     lines += ["", "Figures: `measured_vs_predicted.png`, `residuals_workspace.png`."]
@@ -266,7 +275,9 @@ def write_identification(
     if extra_json:
         doc.update(extra_json)
     (tmp / "identify.json").write_text(json.dumps(to_jsonable(doc), indent=1))
-    (tmp / "report.md").write_text(render_report(result, cv, command=command, data_files=data_files, extra=extra_report))
+    (tmp / "report.md").write_text(
+        render_report(result, cv, command=command, data_files=data_files, extra=extra_report)
+    )
     if figures:
         plot_figures(result, cv, tmp)
     old = None
