@@ -118,6 +118,7 @@ def timoshenko_beam_hz(
     elements: int = 100,
     shear: bool = True,
     rotary_inertia: bool = True,
+    hub_length_m: float = 0.0,
 ) -> np.ndarray:
     """Bending frequencies (Hz) of a uniform Timoshenko beam by finite elements (reference solution).
 
@@ -126,14 +127,19 @@ def timoshenko_beam_hz(
     rotary inertia ``rho I h / 2`` lumped at the nodes. Converges to the continuum Timoshenko beam as
     ``1/elements^2`` (checked against :func:`timoshenko_simply_supported_hz` in the tests); ``shear`` and
     ``rotary_inertia`` switch the two corrections off (both off: Euler-Bernoulli).
-    ``boundary``: ``"cantilever"``, ``"free-free"`` or ``"pinned-pinned"``.
+    ``boundary``: ``"cantilever"``, ``"free-free"`` or ``"pinned-pinned"``. ``hub_length_m``: a rigid
+    piece of the same section at each end (the elastic span is ``length_m - 2 hub_length_m``), its mass
+    and inertia added as a rigid body at the end node it is fixed to (a clamped hub does not move).
     """
     import scipy.linalg
 
     if boundary not in ("cantilever", "free-free", "pinned-pinned"):
         raise ValueError(f"boundary must be cantilever, free-free or pinned-pinned, got {boundary!r}")
     ei, rho_a, rho_i, kga = _bending(section, material, plane)
-    h = length_m / elements
+    span = length_m - 2.0 * hub_length_m
+    if not span > 0:
+        raise ValueError(f"hub_length_m {hub_length_m} leaves no elastic span on a {length_m} m beam")
+    h = span / elements
     phi = 12.0 * ei / (kga * h * h) if shear else 0.0
     ke = (
         ei
@@ -169,6 +175,12 @@ def timoshenko_beam_hz(
         s = slice(2 * e, 2 * e + 4)
         k[s, s] += ke
         m[s, s] += me
+    if hub_length_m > 0:
+        mh = rho_a * hub_length_m
+        j_end = mh * hub_length_m**2 / 3.0 + (rho_i * hub_length_m if rotary_inertia else 0.0)
+        for node, sign in ((0, -1.0), (elements, 1.0)):  # centre of mass half a hub beyond the end
+            d = [2 * node, 2 * node + 1]
+            m[np.ix_(d, d)] += np.array([[mh, sign * mh * hub_length_m / 2.0], [sign * mh * hub_length_m / 2.0, j_end]])
     fixed = {"cantilever": [0, 1], "free-free": [], "pinned-pinned": [0, n - 2]}[boundary]
     keep = [i for i in range(n) if i not in fixed]
     k, m = k[np.ix_(keep, keep)], m[np.ix_(keep, keep)]

@@ -66,6 +66,9 @@ class Geometry:
     platform_radius_m: float | tuple[float, float, float]
     platform_angles_rad: tuple[float, float, float]
     elbow_branch: tuple[int, int, int] = (1, 1, 1)
+    hub_length_m: float = 0.0
+    """Rigid length at each end of every link (joint hardware, clamped bosses): the flexible span is the
+    joint-to-joint length minus twice this. 0 (default): flexible from joint to joint."""
 
     @staticmethod
     def _three(v: float | tuple[float, ...]) -> tuple[float, float, float]:
@@ -369,6 +372,7 @@ def parse_config(data: dict[str, Any], *, source: str = "user") -> Manipulator:
             "platform_radius_m",
             "platform_angles_deg",
             "elbow_branch",
+            "hub_length_m",
         },
     )
     branch = r.get(g, "geometry", "elbow_branch", [1, 1, 1])
@@ -382,6 +386,7 @@ def parse_config(data: dict[str, Any], *, source: str = "user") -> Manipulator:
         platform_radius_m=r.number_or_triple(g, "geometry", "platform_radius_m"),
         platform_angles_rad=tuple(math.radians(a) for a in r.triple(g, "geometry", "platform_angles_deg")),
         elbow_branch=tuple(int(b) for b in branch),
+        hub_length_m=r.number(g, "geometry", "hub_length_m", 0.0),
     )
     s = r.table(data, "", "section")
     _check_keys(s, "section", {"thickness_m", "height_m"})
@@ -520,6 +525,8 @@ def config_to_toml(m: Manipulator, *, header: str = "", default_source: str = "u
     lines.append(entry("geometry", "platform_radius_m", _compact(g.platform_radius_m)))
     lines.append(entry("geometry", "platform_angles_deg", deg(g.platform_angles_rad)))
     lines.append(entry("geometry", "elbow_branch", list(g.elbow_branch)))
+    if g.hub_length_m:
+        lines.append(entry("geometry", "hub_length_m", g.hub_length_m))
 
     def section(path: str, sec: Section) -> None:
         lines.extend(
@@ -605,6 +612,13 @@ def validate(m: Manipulator) -> None:
             for j in range(i + 1, 3):
                 if math.dist(pts[i], pts[j]) < 1e-6:
                     raise ConfigError(f"field 'geometry.{name}': chains {i} and {j} share an angle")
+    _nonneg(g.hub_length_m, "geometry.hub_length_m")
+    shortest = min(g.proximal_length_per_chain + g.distal_length_per_chain)
+    if 2.0 * g.hub_length_m >= shortest:
+        raise ConfigError(
+            f"field 'geometry.hub_length_m' ({g.hub_length_m} m) leaves no flexible span: twice it must be shorter "
+            f"than the shortest link ({shortest} m)"
+        )
     if max(g.platform_radius_per_chain) >= min(g.base_radius_per_chain):
         raise ConfigError(
             f"field 'geometry.platform_radius_m' ({g.platform_radius_m} m) must be smaller than "

@@ -81,6 +81,7 @@ def add_link(
     axial: bool = True,
     rotary_inertia: bool = False,
     shear: bool = False,
+    hub_length_m: float = 0.0,
     damping_beta_s: float = 0.0,
     start_lumps: tuple[LumpedMass, ...] = (),
     end_lumps: tuple[LumpedMass, ...] = (),
@@ -99,6 +100,10 @@ def add_link(
     ``kappa``, :func:`fpm_sim.beam_theory.shear_coefficient_rectangle`): with ``rotary_inertia`` the
     chain then converges to a Timoshenko beam (tested against :func:`fpm_sim.beam_theory.timoshenko_beam_hz`).
 
+    ``hub_length_m`` (``segments`` and ``rigid`` only): a rigid length at each end; the springs are
+    spread over the flexible span ``length_m - 2 hub_length_m`` only (pieces ``hub + l/2, l, ..., l,
+    l/2 + hub`` with ``l`` the span over ``segments``); mass stays uniform along the whole link.
+
     ``spec`` (the spec ``parent`` belongs to) is needed by ``cable`` and ``flex``. ``free_start``
     and ``free_end`` say that nothing holds the link's start (the caller gives the chain models a
     free joint; ``flex`` then starts on a free vertex and ``build.first`` is that vertex's body) or
@@ -106,6 +111,12 @@ def add_link(
     models ignore both.
     """
     check_link_model(link_model, segments)
+    if hub_length_m and link_model in ("cable", "flex"):
+        raise LinkModelError(
+            f"rigid hubs (geometry.hub_length_m) exist only for link_model 'segments' or 'rigid', not {link_model!r}"
+        )
+    if not 0.0 <= 2.0 * hub_length_m < length_m:
+        raise LinkModelError(f"hub_length_m {hub_length_m} m leaves no flexible span on a {length_m} m link")
     if shear and link_model != "segments":
         raise LinkModelError(f"shear springs exist only for link_model 'segments', not {link_model!r}")
     if link_model in ("cable", "flex"):
@@ -131,8 +142,8 @@ def add_link(
     if link_model == "rigid":
         lengths = [length_m]
     else:
-        l_seg = length_m / segments
-        lengths = [l_seg / 2.0] + [l_seg] * (segments - 1) + [l_seg / 2.0]
+        l_seg = (length_m - 2.0 * hub_length_m) / segments
+        lengths = [hub_length_m + l_seg / 2.0] + [l_seg] * (segments - 1) + [l_seg / 2.0 + hub_length_m]
     sec, mat = section, material
     k = {
         "bend_in": mat.young_pa * sec.i_inplane_m4,
@@ -149,7 +160,7 @@ def add_link(
             body = body.add_body(name=f"{name}_b0", pos=list(pos), quat=quat_z(angle_rad))
         else:
             body = body.add_body(name=f"{name}_b{j}", pos=[lengths[j - 1], 0.0, 0.0])
-            l_spring = length_m / segments
+            l_spring = (length_m - 2.0 * hub_length_m) / segments
             kinds = ["bend_in", "bend_out", "twist"] + (["axial"] if axial else [])
             kinds += ["shear_in", "shear_out"] if shear else []
             for kind in kinds:

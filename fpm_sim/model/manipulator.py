@@ -73,6 +73,7 @@ def build_manipulator(
         axial=opts.axial,
         rotary_inertia=opts.rotary_inertia,
         shear=opts.shear,
+        hub_length_m=g.hub_length_m,
         damping_beta_s=beta,
         spec=spec,
     )

@@ -12,6 +12,8 @@ Groups (:data:`GROUPS`):
 ``geometry-per-chain``
     Per chain: base radius, motor angle, proximal length, distal length, platform radius,
     platform-joint angle (18 parameters). Bounds: lengths 0.8-1.25 x the start, angles +-15 deg.
+``hubs``
+    The rigid length at each link end, ``geometry.hub_length_m`` (m), 0 .. 0.3 x the shortest link.
 ``hardware``
     Platform mass (its inertia scaled with it), elbow-joint mass, platform-joint mass (kg; inertias
     scaled with the masses). Bounds 0.05-4 x the start (platform: 0.05-10 kg where the start is 0).
@@ -42,7 +44,7 @@ from fpm_sim.errors import FpmSimError
 
 __all__ = ["GROUPS", "FreeParameter", "ParameterSet", "parameter_set", "ParameterError"]
 
-GROUPS = ("geometry", "geometry-per-chain", "hardware", "section", "compliance", "rig")
+GROUPS = ("geometry", "geometry-per-chain", "hubs", "hardware", "section", "compliance", "rig")
 """Groups ``--free`` accepts."""
 
 LOG_STIFF_BOUNDS = (2.0, 7.0)
@@ -170,6 +172,16 @@ def _geometry_per_chain(cfg: Manipulator) -> list[FreeParameter]:
     return out
 
 
+def _hubs(cfg: Manipulator) -> list[FreeParameter]:
+    g = cfg.geometry
+    hi = 0.3 * min(g.proximal_length_per_chain + g.distal_length_per_chain)
+
+    def set_(c: Manipulator, v: float) -> Manipulator:
+        return _set_geometry(c, hub_length_m=v)
+
+    return [FreeParameter("geometry.hub_length_m", g.hub_length_m, 0.0, hi, set_, "hubs")]
+
+
 def _lump_setter(name: str) -> Callable[[Manipulator, float], Manipulator]:
     def set_(cfg: Manipulator, v: float) -> Manipulator:
         hw = cfg.hardware
@@ -264,6 +276,7 @@ def _rig(cfg: Manipulator) -> list[FreeParameter]:
 _BUILDERS = {
     "geometry": _geometry,
     "geometry-per-chain": _geometry_per_chain,
+    "hubs": _hubs,
     "hardware": _hardware,
     "section": _section,
     "compliance": _compliance,
