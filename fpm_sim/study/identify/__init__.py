@@ -24,6 +24,7 @@ from fpm_sim.study.identify.engine import (
     fold_assignment,
     identify,
     predict_observations,
+    predict_with_std,
 )
 from fpm_sim.study.identify.parameters import GROUPS, ParameterError, ParameterSet, parameter_set
 
@@ -43,6 +44,7 @@ __all__ = [
     "fold_assignment",
     "identify",
     "predict_observations",
+    "predict_with_std",
     "GROUPS",
     "ParameterError",
     "ParameterSet",

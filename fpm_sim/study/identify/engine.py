@@ -60,6 +60,7 @@ __all__ = [
     "identify",
     "cross_validate",
     "predict_observations",
+    "predict_with_std",
     "GLOBAL_METHODS",
     "IN_PLANE_THRESHOLD",
 ]
@@ -470,6 +471,28 @@ def identify(problem: Problem, *, options: IdentifyOptions | None = None, progre
         jacobian=jx,
         candidates=candidates,
     )
+
+
+def predict_with_std(
+    result: Identification, observations: Sequence[Observation], *, rel_step: float = 1e-3
+) -> tuple[np.ndarray, np.ndarray]:
+    """Predicted frequencies (Hz) for ``observations`` and their standard deviations from the parameters'
+    covariance (delta method: ``sqrt(g' C g)`` with ``g`` the forward-difference gradient of each
+    prediction, step ``rel_step`` of each parameter's bound width)."""
+    ps = result.problem.parameters
+    opts = result.options.model_options()
+    f0 = predict_observations(result.config, observations, options=opts, workers=result.options.workers)
+    cov = np.outer(result.std, result.std) * np.nan_to_num(result.correlation)
+    grads = []
+    for i, p in enumerate(ps.parameters):
+        h = rel_step * (p.upper - p.lower)
+        x = result.values.copy()
+        x[i] = x[i] + h if x[i] + h <= p.upper else x[i] - h
+        step = x[i] - result.values[i]
+        f = predict_observations(ps.apply(x), observations, options=opts, workers=result.options.workers)
+        grads.append((f - f0) / step)
+    g = np.array(grads).T  # (n_obs, n_params)
+    return f0, np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", g, cov, g), 0.0))
 
 
 @dataclass
