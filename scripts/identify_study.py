@@ -47,16 +47,26 @@ def install(folder: Path) -> None:
 
     from fpm_sim.config import load_config
 
+    import re
+
     cfg = load_config(folder / "config.toml")
     doc = json.loads((folder / "identify.json").read_text())
+    doc["command"] = re.sub(r"\S*/fpm_sim/data/", "fpm_sim/data/", doc["command"])
     prov = {}
     for k, v in cfg.provenance.items():
         if v.startswith(ALLOWED):
             prov[k] = v
-        elif v.startswith("user: "):
+        elif v.startswith("user: ") or v in ("unknown", "start description"):
             prov[k] = "assumed: library default value (not used by the locked-motor modal tests)"
         else:
             prov[k] = v
+    if cfg.geometry.elbow_branch != nominal_start().geometry.elbow_branch and prov.get(
+        "geometry.elbow_branch", ""
+    ).startswith("assumed: nominal"):  # outputs written before the report recorded the search's branch choice
+        prov["geometry.elbow_branch"] = (
+            "identified: the elbow-branch class of the best global-search candidate (surrogate differential "
+            "evolution over the classes, scored with the full model)"
+        )
     for k, v in list(prov.items()):
         if not v.startswith(ALLOWED):
             prov[k] = "assumed: " + v

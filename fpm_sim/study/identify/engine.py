@@ -264,6 +264,8 @@ class Identification:
     config: Manipulator
     jacobian: np.ndarray
     candidates: list[dict[str, Any]] = field(default_factory=list)
+    start_elbow_branch: tuple[int, int, int] | None = None
+    """The start description's elbow branches (the global search may pick another class)."""
 
     @property
     def names(self) -> list[str]:
@@ -470,6 +472,7 @@ def identify(problem: Problem, *, options: IdentifyOptions | None = None, progre
         config=cfg,
         jacobian=jx,
         candidates=candidates,
+        start_elbow_branch=ps.start.geometry.elbow_branch,
     )
 
 

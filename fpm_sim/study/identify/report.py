@@ -66,7 +66,8 @@ def identified_config(result: Identification, *, data_note: str, method_note: st
             prov[key.replace("mass_kg", "inertia_kg_m2")] = "identified: scaled with the identified mass"
         if key == "rig.chain_hinge.mass_kg":
             prov["rig.chain_hinge.inertia_kg_m2"] = "identified: scaled with the identified mass"
-    if result.problem.parameters.start.geometry.elbow_branch != cfg.geometry.elbow_branch:
+    start_branch = result.start_elbow_branch or result.problem.parameters.start.geometry.elbow_branch
+    if start_branch != cfg.geometry.elbow_branch:
         prov["geometry.elbow_branch"] = f"identified: {data_note}, the elbow-branch class of the best global-search fit"
     return cfg.replace(provenance=prov)
 
