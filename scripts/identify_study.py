@@ -44,10 +44,9 @@ Identified by: {command}"""
 def install(folder: Path) -> None:
     """Make ``folder`` (an identify output) the embedded default and its cross-validation summary."""
     import json
+    import re
 
     from fpm_sim.config import load_config
-
-    import re
 
     cfg = load_config(folder / "config.toml")
     doc = json.loads((folder / "identify.json").read_text())
