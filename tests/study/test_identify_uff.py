@@ -86,3 +86,27 @@ def test_simulate_uff_ema_identify_recovers_the_platform_mass(tmp_path):
     # the modal system's stiffness (finite differences of MuJoCo's forces) and the pose loop's spring stiffness
     assert abs(res.values[0] - 3.0) < 0.01 * 3.0
     assert np.max(np.abs(res.residual_pct)) < 0.05
+
+
+def test_cli_ema_writes_the_csv_identify_reads(tmp_path):
+    from fpm_sim.cli.main import main
+
+    f = np.arange(0.0, 300.0, 0.25)
+    w = 2 * np.pi * f
+    h = -(w**2) / ((2 * np.pi * 55.0) ** 2 - w**2 + 2j * 0.01 * 2 * np.pi * 55.0 * w)
+    uff = write_uff58(
+        FrequencyResponse(f, h, "accelerance", "m/s^2/N", "hammer", "accel"),
+        tmp_path / "a.uff",
+        pose_mm_rad=(50.0, 0.0, 0.2),
+    )
+    out = tmp_path / "ema"
+    assert (
+        main(["ema", str(uff), "--f-lower-hz", "10", "--f-upper-hz", "200", "--n-modes", "1", "--out", str(out)]) == 0
+    )
+    (o,) = read_measured_csv(out / "modes.csv").observations
+    assert o.freq_hz == pytest.approx(55.0, rel=1e-5)
+    assert (o.pose.x_m, o.pose.phi_rad) == (0.05, 0.2)
+    # a file without a pose and no --x-mm/--y-mm: refused with the fix named
+    csv = tmp_path / "frf.csv"
+    FrequencyResponse(f, h, "accelerance", "m/s^2/N", "hammer", "accel").save_csv(csv)
+    assert main(["ema", str(csv), "--out", str(tmp_path / "e2")]) == 2
