@@ -2,11 +2,12 @@
 
     nice python scripts/identify_study.py --out out/identify_study [--seed 0] [--folds 4] [--quick]
 
-1. writes a *nominal* start description (``OUT/nominal_start.toml``): the embedded default's
-   materials, sections and rig pieces, but a generic symmetric geometry (base radius 160 mm, platform
+1. writes a *nominal* start description (``OUT_nominal_start.toml``): the study's stated values (links
+   30 mm in-plane, test pieces 10 mm), steel, a generic symmetric geometry (base radius 160 mm, platform
    radius 80 mm, links 160 mm, motors at 90/210/330 deg, platform joints at the same angles, elbows
-   +1) and round hardware masses; no value of the shipped geometry is used, so the result does not
-   depend on a hand-given start point;
+   +1), square 10 mm sections, round hardware masses (0.5 kg joints, 2 kg platform) and a 228 mm test
+   piece clamped over 30 mm; no identified value is used, so the result does not depend on a
+   hand-given start point;
 2. runs ``fpm-sim identify`` on the data the study has (the packaged copies of its tables):
    ``measured_table4_train.csv`` (12 measured poses, sigma 2 %), ``comsol_table5.csv`` (18 COMSOL poses,
    sigma 7 %: COMSOL is a model with the real drawings, 5.84 % mean |error| against the measurements,
@@ -83,6 +84,9 @@ def install(folder: Path) -> None:
 
 
 def nominal_start():  # noqa: ANN201
+    """A nominal description: the study's stated values, generic assumptions, nothing identified."""
+    from fpm_sim.config import RigConfig, Section
+
     cfg = default_config()
     ang = tuple(math.radians(a) for a in (90.0, 210.0, 330.0))
     geo = Geometry(0.16, ang, 0.16, 0.16, 0.08, ang, (1, 1, 1))
@@ -93,24 +97,28 @@ def nominal_start():  # noqa: ANN201
         elbow_joint=hinge,
         platform_joint=hinge,
     )
+    rig = RigConfig(
+        length_m=0.228, section=Section(0.010, 0.010), material=cfg.material, clamped_length_m=0.03, chain_hinge=hinge
+    )
     prov = dict(cfg.provenance)
-    for k in (
-        "geometry.base_radius_m",
-        "geometry.base_angles_deg",
-        "geometry.proximal_length_m",
-        "geometry.distal_length_m",
-        "geometry.platform_radius_m",
-        "geometry.platform_angles_deg",
-        "geometry.elbow_branch",
-        "hardware.platform.mass_kg",
-        "hardware.platform.inertia_kg_m2",
-        "hardware.elbow_joint.mass_kg",
-        "hardware.elbow_joint.inertia_kg_m2",
-        "hardware.platform_joint.mass_kg",
-        "hardware.platform_joint.inertia_kg_m2",
-    ):
-        prov[k] = NOMINAL_NOTE
-    return cfg.replace(geometry=geo, hardware=hw, provenance=prov, name="nominal start (scripts/identify_study.py)")
+    for k in list(prov):
+        if k.startswith(("geometry.", "hardware.platform", "hardware.elbow_joint", "rig.")) or k == "section.height_m":
+            prov[k] = NOMINAL_NOTE
+    prov["section.thickness_m"] = "study: the manipulator's links were 30 mm (read as in-plane)"
+    prov["compliance.passive_joint_tilt_nm_per_rad"] = "assumed: rigid (the study's COMSOL hinges are ideal)"
+    prov["compliance.motor_clamp_nm_per_rad"] = "study: motors modelled as rigid connectors (locked)"
+    prov["compliance.base_clamp_nm_per_rad"] = (
+        "assumed: rigid; not separable from rig.clamped_length_m with one cantilever frequency"
+    )
+    prov["rig.section.thickness_m"] = "study: test pieces 10 mm thick"
+    return cfg.replace(
+        geometry=geo,
+        hardware=hw,
+        section=Section(0.030, 0.010),
+        rig=rig,
+        provenance=prov,
+        name="nominal start (scripts/identify_study.py)",
+    )
 
 
 def main() -> int:
