@@ -39,6 +39,7 @@ The study gives no dimensions, materials or masses (see docs/study.md). Every va
 from: "study" (stated in the chapter), "assumed: <why>", or "identified: <data, method>; value +- one standard
 deviation" (fpm-sim identify, run from a nominal start by scripts/identify_study.py; docs/identification.md).
 SI units; angles in degrees in this file.
+Reproduce: nice python scripts/identify_study.py --out out/identify_study --seed 0 --folds 4 --max-nfev 40 --refine 4
 Identified by: {command}"""
 
 
@@ -130,6 +131,7 @@ def main() -> int:
     ap.add_argument("--global", dest="global_method", default="hybrid")
     ap.add_argument("--max-nfev", type=int, default=40)
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--refine", type=int, default=4, help="global candidates refined locally")
     ap.add_argument("--timoshenko", action="store_true", help="links as Timoshenko beams")
     ap.add_argument("--quick", action="store_true", help="tiny budgets (a smoke run, not a result)")
     ap.add_argument("--install", type=Path, help="make this identify output folder the embedded default, and stop")
@@ -167,6 +169,8 @@ def main() -> int:
         str(4 if args.quick else 24),
         "--workers",
         str(args.workers),
+        "--refine",
+        str(args.refine),
         "--out",
         str(args.out),
         "--overwrite",

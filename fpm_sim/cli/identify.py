@@ -147,7 +147,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="global exploration before the local refinement (default hybrid; see docs/identification.md)",
     )
     p.add_argument("--starts", type=int, default=24, help="multistart: Latin-hypercube points (default 24)")
-    p.add_argument("--refine", type=int, default=2, help="best global candidates refined locally (default 2)")
+    p.add_argument("--refine", type=int, default=4, help="best global candidates refined locally (default 4)")
     p.add_argument(
         "--max-nfev", type=int, default=30, help="local least squares: max residual evaluations (default 30)"
     )

@@ -598,14 +598,19 @@ def reproduce_study(
     )
     subs = subsystem_frequencies(config) if subsystems and config.rig is not None else []
     tables = []
+    notes = []
     if readability:
+        from fpm_sim.errors import FpmSimError
         from fpm_sim.frf import LinkPoint
         from fpm_sim.study.readability import readability_table
 
         for axis in ("z", "normal"):
-            tables.append(
-                readability_table(
-                    config, options=opts, poses=poses, point=LinkPoint("distal_0", 0.5, axis), progress=progress
+            try:
+                tables.append(
+                    readability_table(
+                        config, options=opts, poses=poses, point=LinkPoint("distal_0", 0.5, axis), progress=progress
+                    )
                 )
-            )
-    return StudyReproduction(config, rd, poses, freqs, subs, opts, readability=tables)
+            except FpmSimError as exc:  # e.g. a study pose at a singularity of this geometry (a mechanism mode)
+                notes.append(f"mode-1 readability along {axis!r} not tabulated: {exc}")
+    return StudyReproduction(config, rd, poses, freqs, subs, opts, notes=notes, readability=tables)

@@ -86,7 +86,7 @@ class IdentifyOptions:
     segments: int = 4
     global_method: str = "hybrid"
     n_starts: int = 24
-    n_refine: int = 3
+    n_refine: int = 4
     seed: int = 0
     max_nfev: int = 40
     workers: int = 1
