@@ -71,7 +71,19 @@ def install(folder: Path) -> None:
     for k, v in list(prov.items()):
         if not v.startswith(ALLOWED):
             prov[k] = "assumed: " + v
+    # A lump whose inertia sits exactly on the triangle inequality (a flat disc: A + B = C) can fail it once
+    # the MJCF export rounds the numbers; widen A and B by 1e-6 relative (frequency change < 1e-6).
+    hw = cfg.hardware
+    for f in dataclasses.fields(hw):
+        lump = getattr(hw, f.name)
+        a, b, c = lump.inertia_kg_m2
+        if c > 0 and a + b <= c * (1 + 1e-9):
+            lump = LumpedMass(lump.mass_kg, (a * (1 + 1e-6), b * (1 + 1e-6), c))
+            hw = dataclasses.replace(hw, **{f.name: lump})
+            key = f"hardware.{f.name}.inertia_kg_m2"
+            prov[key] = prov.get(key, "identified") + "; x and y widened by 1e-6 relative (MJCF rounding)"
     cfg = cfg.replace(
+        hardware=hw,
         provenance=prov,
         name="EESC-USP 3RRR (study prototype; identified by fpm-sim identify from the study's subsystem tests, "
         "12 measured poses and COMSOL table)",
