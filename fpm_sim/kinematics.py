@@ -143,18 +143,18 @@ def _cross2(u: np.ndarray, v: np.ndarray) -> np.ndarray:
 def base_points(g: Geometry) -> np.ndarray:
     """Motor axis points A_i (3 x 2, m)."""
     ang = np.asarray(g.base_angles_rad)
-    return g.base_radius_m * np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    return np.asarray(g.base_radius_per_chain)[:, None] * np.stack([np.cos(ang), np.sin(ang)], axis=1)
 
 
 def platform_points(g: Geometry, pose: Pose) -> np.ndarray:
     """Platform joint points C_i in the world (3 x 2, m)."""
     ang = np.asarray(g.platform_angles_rad)
-    local = g.platform_radius_m * np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    local = np.asarray(g.platform_radius_per_chain)[:, None] * np.stack([np.cos(ang), np.sin(ang)], axis=1)
     return np.array([pose.x_m, pose.y_m]) + local @ _rot(pose.phi_rad).T
 
 
 def _char_length(g: Geometry) -> float:
-    return max(g.platform_radius_m, g.distal_length_m / 4.0)
+    return max(max(g.platform_radius_per_chain), float(np.mean(g.distal_length_per_chain)) / 4.0)
 
 
 def jacobians(g: Geometry, asm: Assembly) -> tuple[np.ndarray, np.ndarray]:
@@ -163,7 +163,7 @@ def jacobians(g: Geometry, asm: Assembly) -> tuple[np.ndarray, np.ndarray]:
     w = asm.proximal_dirs
     r = asm.c - np.array([asm.pose.x_m, asm.pose.y_m])
     jx = np.column_stack([u, _cross2(r, u)])
-    jq = np.diag(g.proximal_length_m * _cross2(w, u))
+    jq = np.diag(np.asarray(g.proximal_length_per_chain) * _cross2(w, u))
     return jx, jq
 
 
@@ -246,12 +246,13 @@ def assemble_many(g: Geometry, x_m: np.ndarray, y_m: np.ndarray, phi_rad: np.nda
     x, y, phi = np.broadcast_arrays(*(np.atleast_1d(np.asarray(v, float)).ravel() for v in (x_m, y_m, phi_rad)))
     a = base_points(g)
     ang = np.asarray(g.platform_angles_rad)
-    local = g.platform_radius_m * np.stack([np.cos(ang), np.sin(ang)], axis=1)  # (3, 2), platform frame
+    local = np.asarray(g.platform_radius_per_chain)[:, None] * np.stack([np.cos(ang), np.sin(ang)], axis=1)  # (3, 2)
     cos_p, sin_p = np.cos(phi)[:, None], np.sin(phi)[:, None]
     p = np.stack([x, y], axis=1)[:, None, :]
     c = p + np.stack([local[:, 0] * cos_p - local[:, 1] * sin_p, local[:, 0] * sin_p + local[:, 1] * cos_p], axis=2)
     r = c - p
-    l1, l2 = g.proximal_length_m, g.distal_length_m
+    l1 = np.asarray(g.proximal_length_per_chain)[None, :]  # (1, 3): per chain
+    l2 = np.asarray(g.distal_length_per_chain)[None, :]
     d = c - a[None]
     dist = np.hypot(d[..., 0], d[..., 1])
     chain_ok = (abs(l1 - l2) <= dist) & (dist <= l1 + l2)
@@ -260,8 +261,8 @@ def assemble_many(g: Geometry, x_m: np.ndarray, y_m: np.ndarray, phi_rad: np.nda
         cos_alpha = np.clip((l1**2 + dist**2 - l2**2) / (2.0 * l1 * dist), -1.0, 1.0)
     q = np.arctan2(d[..., 1], d[..., 0]) + np.asarray(g.elbow_branch, float)[None, :] * np.arccos(cos_alpha)
     q = np.where(chain_ok, q, np.nan)
-    b = a[None] + l1 * np.stack([np.cos(q), np.sin(q)], axis=2)
-    w = (b - a[None]) / l1
+    b = a[None] + l1[..., None] * np.stack([np.cos(q), np.sin(q)], axis=2)
+    w = (b - a[None]) / l1[..., None]
     u = _unit(c - b)
     serial = np.min(np.abs(_cross2(w, u)), axis=1)
     jxn = np.concatenate([u, (_cross2(r, u) / _char_length(g))[..., None]], axis=2)
@@ -313,13 +314,13 @@ def inverse_kinematics(
     """
     many = assemble_many(g, pose.x_m, pose.y_m, pose.phi_rad)
     if not many.reachable[0]:
-        l1, l2 = g.proximal_length_m, g.distal_length_m
+        l1, l2 = np.asarray(g.proximal_length_per_chain), np.asarray(g.distal_length_per_chain)
         lo, hi = abs(l1 - l2), l1 + l2
         dist = many.distance_m[0]
         i = int(np.argmax((dist < lo) | (dist > hi)))
         raise UnreachablePoseError(
             f"pose {pose.label()} is unreachable: chain {i} needs {dist[i] * 1e3:.2f} mm from motor to "
-            f"platform joint but its links span {lo * 1e3:.2f}..{hi * 1e3:.2f} mm; move the pose towards "
+            f"platform joint but its links span {lo[i] * 1e3:.2f}..{hi[i] * 1e3:.2f} mm; move the pose towards "
             f"the workspace centre or change geometry.proximal_length_m / distal_length_m"
         )
     asm = many.assembly(0, pose)
@@ -360,22 +361,22 @@ def forward_kinematics(
     """
     q = np.asarray(motor_angles_rad, dtype=float)
     a = base_points(g)
-    b = a + g.proximal_length_m * np.stack([np.cos(q), np.sin(q)], axis=1)
+    b = a + np.asarray(g.proximal_length_per_chain)[:, None] * np.stack([np.cos(q), np.sin(q)], axis=1)
     ang = np.asarray(g.platform_angles_rad)
-    local = g.platform_radius_m * np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    local = np.asarray(g.platform_radius_per_chain)[:, None] * np.stack([np.cos(ang), np.sin(ang)], axis=1)
     x = guess.as_array().astype(float)
     for _ in range(max_iter):
         rot = _rot(x[2])
         r = local @ rot.T
         c = x[:2] + r
         d = c - b
-        f = np.sum(d * d, axis=1) - g.distal_length_m**2
+        f = np.sum(d * d, axis=1) - np.asarray(g.distal_length_per_chain) ** 2
         jac = 2.0 * np.column_stack([d, _cross2(r, d)])
         try:
             step = np.linalg.solve(jac, -f)
         except np.linalg.LinAlgError as exc:
             raise SingularPoseError("forward kinematics hit a parallel singularity") from exc
         x += step
-        if np.max(np.abs(step[:2])) < tol_m and abs(step[2]) * max(g.platform_radius_m, 1e-3) < tol_m:
+        if np.max(np.abs(step[:2])) < tol_m and abs(step[2]) * max(max(g.platform_radius_per_chain), 1e-3) < tol_m:
             return Pose(float(x[0]), float(x[1]), float(x[2]))
     raise UnreachablePoseError(f"forward kinematics did not converge from guess {guess.label()}")

@@ -40,6 +40,7 @@ def cmd_impact(args: argparse.Namespace) -> int:
 
     check_output_file(args.csv, "--csv", (".csv",))
     check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
+    check_output_file(args.uff, "--uff", (".uff", ".unv"))
     opts = model_options(args)
     if opts.segments < 2:
         raise CliError(f"--segments must be >= 2 for flexible links, got {opts.segments}")
@@ -63,6 +64,12 @@ def cmd_impact(args: argparse.Namespace) -> int:
     if args.csv:
         with atomic_file(args.csv) as tmp:
             res.frf.save_csv(tmp)
+    if args.uff:
+        from fpm_sim.sim.impact import write_uff58
+
+        pose = pose_of(args)
+        with atomic_file(args.uff) as tmp:
+            write_uff58(res.frf, tmp, pose_mm_rad=(pose.x_m * 1e3, pose.y_m * 1e3, pose.phi_rad))
     if args.plot:
         save_figure(args.plot, res.plot)
     payload = with_resolution(res.to_dict(), opts)
@@ -74,7 +81,7 @@ def cmd_impact(args: argparse.Namespace) -> int:
         + res.table()
         + "\n"
         + resolution_line(opts)
-        + "".join(f"\nwrote {f}" for f in (args.csv, args.plot) if f)
+        + "".join(f"\nwrote {f}" for f in (args.csv, args.uff, args.plot) if f)
     )
     emit(args, payload, text)
     return 0
@@ -106,6 +113,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--gravity", action=argparse.BooleanOptionalAction, default=True, help="gravity along the motor axes"
     )
     p.add_argument("--csv", type=Path, help="write the H1 FRF and coherence to this CSV")
+    p.add_argument("--uff", type=Path, help="write the H1 FRF as a Universal File type-58 record (for fpm-sim ema)")
     p.add_argument("--plot", type=Path, help="H1 magnitude/phase/coherence plot (.png, .pdf, .svg)")
     add_pose_args(p)
     add_config_args(p)

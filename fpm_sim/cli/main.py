@@ -66,6 +66,8 @@ COMMAND_MODULES: list[str] = [
     "fpm_sim.cli.readability",
     "fpm_sim.cli.atlas",
     "fpm_sim.cli.design",
+    "fpm_sim.cli.identify",
+    "fpm_sim.cli.ema",
 ]
 """Command modules beyond the core ones (each exposes ``register(subparsers)``)."""
 

@@ -36,6 +36,7 @@ __all__ = [
     "load_config",
     "default_config",
     "DEFAULT_CONFIG_NAME",
+    "config_to_toml",
 ]
 
 DEFAULT_CONFIG_NAME = "default_3rrr.toml"
@@ -52,15 +53,60 @@ class Geometry:
     Chain ``i`` runs from the motor axis ``A_i`` on the base circle through the elbow ``B_i`` to the
     platform joint ``C_i``. ``elbow_branch[i]`` (+1 or -1) selects which of the two inverse-kinematics
     solutions the chain takes: +1 puts the elbow to the left of the line ``A_i -> C_i``.
+
+    Per-chain geometry: each of the radii and link lengths is either one number (all three chains)
+    or a tuple of three (chain 0, 1, 2). Code that needs the per-chain values reads the ``*_per_chain``
+    properties (always three floats); :meth:`is_symmetric_in_lengths` says whether all chains agree.
     """
 
-    base_radius_m: float
+    base_radius_m: float | tuple[float, float, float]
     base_angles_rad: tuple[float, float, float]
-    proximal_length_m: float
-    distal_length_m: float
-    platform_radius_m: float
+    proximal_length_m: float | tuple[float, float, float]
+    distal_length_m: float | tuple[float, float, float]
+    platform_radius_m: float | tuple[float, float, float]
     platform_angles_rad: tuple[float, float, float]
     elbow_branch: tuple[int, int, int] = (1, 1, 1)
+    hub_length_m: float = 0.0
+    """Rigid length at each end of every link (joint hardware, clamped bosses): the flexible span is the
+    joint-to-joint length minus twice this. 0 (default): flexible from joint to joint."""
+
+    @staticmethod
+    def _three(v: float | tuple[float, ...]) -> tuple[float, float, float]:
+        if isinstance(v, (tuple, list)):
+            return (float(v[0]), float(v[1]), float(v[2]))
+        return (float(v), float(v), float(v))
+
+    @property
+    def base_radius_per_chain(self) -> tuple[float, float, float]:
+        """Motor-axis radius of each chain (m)."""
+        return self._three(self.base_radius_m)
+
+    @property
+    def platform_radius_per_chain(self) -> tuple[float, float, float]:
+        """Platform-joint radius of each chain on the platform (m)."""
+        return self._three(self.platform_radius_m)
+
+    @property
+    def proximal_length_per_chain(self) -> tuple[float, float, float]:
+        """Joint-to-joint length of each proximal link (m)."""
+        return self._three(self.proximal_length_m)
+
+    @property
+    def distal_length_per_chain(self) -> tuple[float, float, float]:
+        """Joint-to-joint length of each distal link (m)."""
+        return self._three(self.distal_length_m)
+
+    def is_symmetric_in_lengths(self) -> bool:
+        """True when every radius and link length is the same for the three chains."""
+        return all(
+            len(set(t)) == 1
+            for t in (
+                self.base_radius_per_chain,
+                self.platform_radius_per_chain,
+                self.proximal_length_per_chain,
+                self.distal_length_per_chain,
+            )
+        )
 
 
 @dataclass(frozen=True)
@@ -246,6 +292,19 @@ class _Reader:
             raise ConfigError(f"field '{path}.{key}' must be a number, got {v!r}")
         return float(v)
 
+    def number_or_triple(self, table: dict[str, Any], path: str, key: str) -> float | tuple:
+        """One number (all chains) or a list of three (one per chain)."""
+        v = self.get(table, path, key)
+        if isinstance(v, (list, tuple)):
+            if len(v) != 3 or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in v):
+                raise ConfigError(
+                    f"field '{path}.{key}' must be a number or a list of 3 numbers (per chain), got {v!r}"
+                )
+            return tuple(float(x) for x in v)
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise ConfigError(f"field '{path}.{key}' must be a number or a list of 3 numbers (per chain), got {v!r}")
+        return float(v)
+
     def triple(self, table: dict[str, Any], path: str, key: str, default: Any = dataclasses.MISSING) -> tuple:
         v = self.get(table, path, key, default)
         if not isinstance(v, (list, tuple)) or len(v) != 3:
@@ -313,19 +372,21 @@ def parse_config(data: dict[str, Any], *, source: str = "user") -> Manipulator:
             "platform_radius_m",
             "platform_angles_deg",
             "elbow_branch",
+            "hub_length_m",
         },
     )
     branch = r.get(g, "geometry", "elbow_branch", [1, 1, 1])
     if not isinstance(branch, (list, tuple)) or len(branch) != 3 or any(b not in (1, -1) for b in branch):
         raise ConfigError(f"field 'geometry.elbow_branch' must be three values each +1 or -1, got {branch!r}")
     geometry = Geometry(
-        base_radius_m=r.number(g, "geometry", "base_radius_m"),
+        base_radius_m=r.number_or_triple(g, "geometry", "base_radius_m"),
         base_angles_rad=tuple(math.radians(a) for a in r.triple(g, "geometry", "base_angles_deg")),
-        proximal_length_m=r.number(g, "geometry", "proximal_length_m"),
-        distal_length_m=r.number(g, "geometry", "distal_length_m"),
-        platform_radius_m=r.number(g, "geometry", "platform_radius_m"),
+        proximal_length_m=r.number_or_triple(g, "geometry", "proximal_length_m"),
+        distal_length_m=r.number_or_triple(g, "geometry", "distal_length_m"),
+        platform_radius_m=r.number_or_triple(g, "geometry", "platform_radius_m"),
         platform_angles_rad=tuple(math.radians(a) for a in r.triple(g, "geometry", "platform_angles_deg")),
         elbow_branch=tuple(int(b) for b in branch),
+        hub_length_m=r.number(g, "geometry", "hub_length_m", 0.0),
     )
     s = r.table(data, "", "section")
     _check_keys(s, "section", {"thickness_m", "height_m"})
@@ -409,6 +470,98 @@ def default_config_text() -> str:
 
 
 # ---------------------------------------------------------------------------------------------
+# writing
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        if math.isinf(v):
+            return "inf" if v > 0 else "-inf"
+        if math.isnan(v):
+            return "nan"
+        return repr(v)
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    raise TypeError(f"cannot write {v!r} to TOML")
+
+
+def _compact(v: Any) -> Any:
+    """A per-chain triple whose entries agree is written as one number."""
+    if isinstance(v, tuple) and len(v) == 3 and not isinstance(v[0], int) and len(set(v)) == 1:
+        return v[0]
+    return v
+
+
+def config_to_toml(m: Manipulator, *, header: str = "", default_source: str = "unknown") -> str:
+    """The description as TOML text that :func:`load_config` reads back to an equal :class:`Manipulator`.
+
+    Every value is written as ``{ value = ..., source = ... }`` with its provenance
+    (``m.provenance``; ``default_source`` where none is recorded). Angles in degrees, rounded to
+    1e-9 deg; other floats written exactly (``repr``).
+    """
+    prov = m.provenance
+    lines: list[str] = [f"# {ln}" if ln else "#" for ln in header.splitlines()] if header else []
+    lines.append(f"name = {_toml_value(m.name)}")
+
+    def entry(path: str, key: str, value: Any) -> str:
+        src = prov.get(f"{path}.{key}", default_source)
+        return f"{key} = {{ value = {_toml_value(value)}, source = {_toml_value(src)} }}"
+
+    def deg(t: tuple[float, ...]) -> list[float]:
+        return [round(math.degrees(a), 9) for a in t]
+
+    g = m.geometry
+    lines += ["", "[geometry]"]
+    lines.append(entry("geometry", "base_radius_m", _compact(g.base_radius_m)))
+    lines.append(entry("geometry", "base_angles_deg", deg(g.base_angles_rad)))
+    lines.append(entry("geometry", "proximal_length_m", _compact(g.proximal_length_m)))
+    lines.append(entry("geometry", "distal_length_m", _compact(g.distal_length_m)))
+    lines.append(entry("geometry", "platform_radius_m", _compact(g.platform_radius_m)))
+    lines.append(entry("geometry", "platform_angles_deg", deg(g.platform_angles_rad)))
+    lines.append(entry("geometry", "elbow_branch", list(g.elbow_branch)))
+    if g.hub_length_m:
+        lines.append(entry("geometry", "hub_length_m", g.hub_length_m))
+
+    def section(path: str, sec: Section) -> None:
+        lines.extend(
+            ["", f"[{path}]", entry(path, "thickness_m", sec.thickness_m), entry(path, "height_m", sec.height_m)]
+        )
+
+    def material(path: str, mat: Material) -> None:
+        lines.extend(["", f"[{path}]"])
+        for f in dataclasses.fields(Material):
+            lines.append(entry(path, f.name, getattr(mat, f.name)))
+
+    def lump(path: str, lm: LumpedMass) -> None:
+        lines.extend(
+            ["", f"[{path}]", entry(path, "mass_kg", lm.mass_kg), entry(path, "inertia_kg_m2", list(lm.inertia_kg_m2))]
+        )
+
+    section("section", m.section)
+    material("material", m.material)
+    for f in dataclasses.fields(Hardware):
+        lump(f"hardware.{f.name}", getattr(m.hardware, f.name))
+    for tname, obj in (("compliance", m.compliance), ("motors", m.motors), ("damping", m.damping)):
+        lines.extend(["", f"[{tname}]"])
+        for f in dataclasses.fields(obj):
+            lines.append(entry(tname, f.name, getattr(obj, f.name)))
+    if m.rig is not None:
+        lines.extend(["", "[rig]", entry("rig", "length_m", m.rig.length_m)])
+        lines.append(entry("rig", "clamped_length_m", m.rig.clamped_length_m))
+        section("rig.section", m.rig.section)
+        if m.rig.material != m.material:
+            material("rig.material", m.rig.material)
+        lump("rig.chain_hinge", m.rig.chain_hinge)
+    return "\n".join(lines) + "\n"
+
+
+# ---------------------------------------------------------------------------------------------
 # validation
 
 
@@ -444,17 +597,29 @@ def _validate_section_material(sec: Section, mat: Material, prefix: str) -> None
 def validate(m: Manipulator) -> None:
     """Check a description for values no physical manipulator can have. Raises :class:`ConfigError`."""
     g = m.geometry
-    _positive(g.base_radius_m, "geometry.base_radius_m")
-    _positive(g.proximal_length_m, "geometry.proximal_length_m")
-    _positive(g.distal_length_m, "geometry.distal_length_m")
-    _nonneg(g.platform_radius_m, "geometry.platform_radius_m")
+    for i in range(3):
+        sfx = f"[{i}]" if isinstance(g.base_radius_m, tuple) else ""
+        _positive(g.base_radius_per_chain[i], f"geometry.base_radius_m{sfx}")
+        sfx = f"[{i}]" if isinstance(g.proximal_length_m, tuple) else ""
+        _positive(g.proximal_length_per_chain[i], f"geometry.proximal_length_m{sfx}")
+        sfx = f"[{i}]" if isinstance(g.distal_length_m, tuple) else ""
+        _positive(g.distal_length_per_chain[i], f"geometry.distal_length_m{sfx}")
+        sfx = f"[{i}]" if isinstance(g.platform_radius_m, tuple) else ""
+        _nonneg(g.platform_radius_per_chain[i], f"geometry.platform_radius_m{sfx}")
     for name, angles in (("base_angles_deg", g.base_angles_rad), ("platform_angles_deg", g.platform_angles_rad)):
         pts = [(math.cos(a), math.sin(a)) for a in angles]
         for i in range(3):
             for j in range(i + 1, 3):
                 if math.dist(pts[i], pts[j]) < 1e-6:
                     raise ConfigError(f"field 'geometry.{name}': chains {i} and {j} share an angle")
-    if g.platform_radius_m >= g.base_radius_m:
+    _nonneg(g.hub_length_m, "geometry.hub_length_m")
+    shortest = min(g.proximal_length_per_chain + g.distal_length_per_chain)
+    if 2.0 * g.hub_length_m >= shortest:
+        raise ConfigError(
+            f"field 'geometry.hub_length_m' ({g.hub_length_m} m) leaves no flexible span: twice it must be shorter "
+            f"than the shortest link ({shortest} m)"
+        )
+    if max(g.platform_radius_per_chain) >= min(g.base_radius_per_chain):
         raise ConfigError(
             f"field 'geometry.platform_radius_m' ({g.platform_radius_m} m) must be smaller than "
             f"'geometry.base_radius_m' ({g.base_radius_m} m)"

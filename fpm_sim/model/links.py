@@ -12,6 +12,8 @@ bend_in    z       E * I_in / l      bending in the base plane (I_in = h t^3 / 1
 bend_out   y       E * I_out / l     bending out of the base plane (I_out = t h^3 / 12)
 twist      x       G * J / l         torsion (Saint-Venant J of the rectangle)
 axial      x       E * A / l         optional slide: axial stretch
+shear_in   y       kappa G A / l     optional slide: shear in the base plane (Timoshenko)
+shear_out  z       kappa G A / l     optional slide: shear out of the base plane
 =========  ======  ===============  ============================================
 
 Each spring gets damping ``beta * k`` (``Damping.stiffness_proportional_s``). Masses and inertias of
@@ -31,16 +33,34 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
+from fpm_sim.beam_theory import shear_coefficient_rectangle
 from fpm_sim.config import LumpedMass, Material, Section
 from fpm_sim.model.deformable_links import add_cable_link, add_flex_link
-from fpm_sim.model.parts import LinkBuild, add_box_geom, box_part, check_link_model, lump_part, quat_z, set_inertial
+from fpm_sim.model.parts import (
+    LinkBuild,
+    LinkModelError,
+    add_box_geom,
+    box_part,
+    check_link_model,
+    lump_part,
+    quat_z,
+    set_inertial,
+)
 
 __all__ = ["add_link"]
 
 
 def _add_spring(body: mujoco.MjsBody, name: str, kind: str, stiffness: float, beta: float) -> None:
-    axis = {"bend_in": [0, 0, 1], "bend_out": [0, 1, 0], "twist": [1, 0, 0], "axial": [1, 0, 0]}[kind]
-    jtype = mujoco.mjtJoint.mjJNT_SLIDE if kind == "axial" else mujoco.mjtJoint.mjJNT_HINGE
+    axis = {
+        "bend_in": [0, 0, 1],
+        "bend_out": [0, 1, 0],
+        "twist": [1, 0, 0],
+        "axial": [1, 0, 0],
+        "shear_in": [0, 1, 0],
+        "shear_out": [0, 0, 1],
+    }[kind]
+    slide = kind in ("axial", "shear_in", "shear_out")
+    jtype = mujoco.mjtJoint.mjJNT_SLIDE if slide else mujoco.mjtJoint.mjJNT_HINGE
     j = body.add_joint(name=name, type=jtype, axis=axis)
     j.stiffness = [stiffness, 0.0, 0.0]
     j.springref = 0.0
@@ -60,6 +80,8 @@ def add_link(
     segments: int = 12,
     axial: bool = True,
     rotary_inertia: bool = False,
+    shear: bool = False,
+    hub_length_m: float = 0.0,
     damping_beta_s: float = 0.0,
     start_lumps: tuple[LumpedMass, ...] = (),
     end_lumps: tuple[LumpedMass, ...] = (),
@@ -73,6 +95,15 @@ def add_link(
     The first body's frame sits at the link start with x along the link; the caller adds the joint
     connecting it to ``parent`` (none = clamped). Lumped masses are placed at the link's start and end.
 
+    ``shear`` (``segments`` only) adds two slide springs at each spring location, across the link in
+    the plane (``shear_in``) and out of it (``shear_out``), of stiffness ``kappa G A / l`` (Cowper's
+    ``kappa``, :func:`fpm_sim.beam_theory.shear_coefficient_rectangle`): with ``rotary_inertia`` the
+    chain then converges to a Timoshenko beam (tested against :func:`fpm_sim.beam_theory.timoshenko_beam_hz`).
+
+    ``hub_length_m`` (``segments`` and ``rigid`` only): a rigid length at each end; the springs are
+    spread over the flexible span ``length_m - 2 hub_length_m`` only (pieces ``hub + l/2, l, ..., l,
+    l/2 + hub`` with ``l`` the span over ``segments``); mass stays uniform along the whole link.
+
     ``spec`` (the spec ``parent`` belongs to) is needed by ``cable`` and ``flex``. ``free_start``
     and ``free_end`` say that nothing holds the link's start (the caller gives the chain models a
     free joint; ``flex`` then starts on a free vertex and ``build.first`` is that vertex's body) or
@@ -80,6 +111,14 @@ def add_link(
     models ignore both.
     """
     check_link_model(link_model, segments)
+    if hub_length_m and link_model in ("cable", "flex"):
+        raise LinkModelError(
+            f"rigid hubs (geometry.hub_length_m) exist only for link_model 'segments' or 'rigid', not {link_model!r}"
+        )
+    if not 0.0 <= 2.0 * hub_length_m < length_m:
+        raise LinkModelError(f"hub_length_m {hub_length_m} m leaves no flexible span on a {length_m} m link")
+    if shear and link_model != "segments":
+        raise LinkModelError(f"shear springs exist only for link_model 'segments', not {link_model!r}")
     if link_model in ("cable", "flex"):
         if spec is None:
             raise TypeError(f"add_link(link_model={link_model!r}) needs spec= (the MjSpec of parent)")
@@ -103,14 +142,16 @@ def add_link(
     if link_model == "rigid":
         lengths = [length_m]
     else:
-        l_seg = length_m / segments
-        lengths = [l_seg / 2.0] + [l_seg] * (segments - 1) + [l_seg / 2.0]
+        l_seg = (length_m - 2.0 * hub_length_m) / segments
+        lengths = [hub_length_m + l_seg / 2.0] + [l_seg] * (segments - 1) + [l_seg / 2.0 + hub_length_m]
     sec, mat = section, material
     k = {
         "bend_in": mat.young_pa * sec.i_inplane_m4,
         "bend_out": mat.young_pa * sec.i_outofplane_m4,
         "twist": mat.shear_pa * sec.torsion_constant_m4,
         "axial": mat.young_pa * sec.area_m2,
+        "shear_in": shear_coefficient_rectangle(mat.poisson) * mat.shear_pa * sec.area_m2,
+        "shear_out": shear_coefficient_rectangle(mat.poisson) * mat.shear_pa * sec.area_m2,
     }
     build = LinkBuild(name=name, bodies=[], piece_lengths_m=lengths)
     body = parent
@@ -119,8 +160,9 @@ def add_link(
             body = body.add_body(name=f"{name}_b0", pos=list(pos), quat=quat_z(angle_rad))
         else:
             body = body.add_body(name=f"{name}_b{j}", pos=[lengths[j - 1], 0.0, 0.0])
-            l_spring = length_m / segments
+            l_spring = (length_m - 2.0 * hub_length_m) / segments
             kinds = ["bend_in", "bend_out", "twist"] + (["axial"] if axial else [])
+            kinds += ["shear_in", "shear_out"] if shear else []
             for kind in kinds:
                 jn = f"{name}_s{j}_{kind}"
                 _add_spring(body, jn, kind, k[kind] / l_spring, damping_beta_s)

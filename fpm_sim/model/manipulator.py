@@ -72,6 +72,8 @@ def build_manipulator(
         segments=opts.segments,
         axial=opts.axial,
         rotary_inertia=opts.rotary_inertia,
+        shear=opts.shear,
+        hub_length_m=g.hub_length_m,
         damping_beta_s=beta,
         spec=spec,
     )
@@ -85,7 +87,7 @@ def build_manipulator(
             name=f"proximal_{i}",
             pos=np.array([a[0], a[1], 0.0]),
             angle_rad=ang_p,
-            length_m=g.proximal_length_m,
+            length_m=g.proximal_length_per_chain[i],
             start_lumps=(hw.motor_flange,),
             end_lumps=(half_lump(hw.elbow_joint),),
             rgba=(0.25, 0.45, 0.8, 1.0),
@@ -104,7 +106,7 @@ def build_manipulator(
             name=f"distal_{i}",
             pos=np.array([prox.last_length_m, 0.0, 0.0]),
             angle_rad=ang_d - ang_p,
-            length_m=g.distal_length_m,
+            length_m=g.distal_length_per_chain[i],
             start_lumps=(half_lump(hw.elbow_joint),),
             rgba=(0.85, 0.45, 0.2, 1.0),
             **link_kw,
@@ -123,15 +125,16 @@ def build_manipulator(
         pins.append(pin)
 
     ang0 = g.platform_angles_rad[0]
+    r_p0 = g.platform_radius_per_chain[0]
     platform = pins[0].add_body(
         name="platform",
-        pos=[-g.platform_radius_m * math.cos(ang0), -g.platform_radius_m * math.sin(ang0), 0.0],
+        pos=[-r_p0 * math.cos(ang0), -r_p0 * math.sin(ang0), 0.0],
     )
     set_inertial(platform, [lump_part(hw.platform, np.zeros(3)), lump_part(hw.payload, np.zeros(3))])
     platform.add_geom(
         name="platform_g",
         type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-        size=[max(g.platform_radius_m, 0.01), 0.005, 0],
+        size=[max(max(g.platform_radius_per_chain), 0.01), 0.005, 0],
         rgba=[0.3, 0.7, 0.3, 1.0],
         contype=0,
         conaffinity=0,

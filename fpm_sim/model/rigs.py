@@ -85,6 +85,7 @@ def build_rig(
         segments=opts.segments,
         axial=opts.axial,
         rotary_inertia=opts.rotary_inertia,
+        shear=opts.shear,
         damping_beta_s=setup.damping_beta_s,
         spec=spec,
     )

@@ -41,6 +41,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 from typing import Any
 
 import mujoco
@@ -68,6 +69,8 @@ __all__ = [
     "virtual_impact_test",
     "h1_estimate",
     "point_acceleration",
+    "write_uff58",
+    "UFF_POSE_TAG",
 ]
 
 PULSE_S = 1e-3
@@ -456,3 +459,59 @@ def virtual_impact_test(
         setup=setup,
         parameters={**built.parameters, "sample_s": dt, "steps_per_sample": n_sub},
     )
+
+
+UFF_POSE_TAG = "fpm-sim pose"
+"""Prefix of the UFF 58 ``id4`` record that carries the pose (``fpm-sim pose x_mm=.. y_mm=.. phi_rad=..``)."""
+
+
+def write_uff58(
+    frf: FrequencyResponse,
+    path: str | Path,
+    *,
+    pose_mm_rad: tuple[float, float, float] | None = None,
+    response_node: int = 1,
+    reference_node: int = 1,
+    response_dir: int = 3,
+    reference_dir: int = 3,
+    description: str = "fpm-sim virtual impact test",
+) -> Path:
+    """Write an FRF as a Universal File Format type-58 record (ASCII) with :mod:`pyuff`.
+
+    Function type 4 (FRF), complex ordinate, even abscissa spacing (``frf.freq_hz`` must be evenly
+    spaced), SI units as they are (accelerance m/s^2/N). ``pose_mm_rad`` (x_mm, y_mm, phi_rad) is
+    written into ``id4`` so that :func:`fpm_sim.study.identify.ema.read_frfs` knows where the test was;
+    directions follow UFF (1 = x, 2 = y, 3 = z; negative for the opposite sense). Overwrites ``path``.
+    """
+    import pyuff
+
+    p = Path(path)
+    f = np.asarray(frf.freq_hz, float)
+    if f.size < 2 or not np.allclose(np.diff(f), f[1] - f[0], rtol=1e-6, atol=1e-9):
+        raise FrfError(f"UFF 58 needs an evenly spaced frequency axis; {p} not written")
+    if p.exists():
+        p.unlink()
+    id4 = "NONE" if pose_mm_rad is None else (
+        f"{UFF_POSE_TAG} x_mm={pose_mm_rad[0]:.6g} y_mm={pose_mm_rad[1]:.6g} phi_rad={pose_mm_rad[2]:.6g}"
+    )
+    ds = pyuff.prepare_58(
+        binary=0,
+        id1=description[:80],
+        id2=f"{frf.quantity} ({frf.unit})"[:80],
+        id3=f"excitation {frf.excitation}, response {frf.response}"[:80],
+        id4=id4[:80],
+        id5="NONE",
+        func_type=4,
+        rsp_node=response_node,
+        rsp_dir=response_dir,
+        ref_node=reference_node,
+        ref_dir=reference_dir,
+        data=np.asarray(frf.h, complex),
+        x=f,
+        abscissa_spacing=1,
+        abscissa_spec_data_type=18,
+        ordinate_spec_data_type=12,
+        orddenom_spec_data_type=13,
+    )
+    pyuff.UFF(str(p)).write_sets(ds, mode="overwrite")
+    return p

@@ -65,13 +65,19 @@ class Parameter:
 
 @dataclass
 class FitResult:
-    """Outcome of :func:`fit`."""
+    """Outcome of :func:`fit`.
+
+    ``sensitivity`` holds ``d ln f / d ln theta`` for every parameter (as computed: the Jacobian times
+    ``theta / f``), angles included.
+    """
 
     parameters: list[Parameter]
     values: np.ndarray
     std: np.ndarray
     correlation: np.ndarray
-    sensitivity: np.ndarray  # (n_data, n_params) d ln f / d ln theta (d ln f / d theta for angles)
+    sensitivity: np.ndarray
+    """``(n_data, n_params)`` relative sensitivities ``d ln f / d ln theta`` for every parameter, angles
+    included (an angle's entry is ``theta * d ln f / d theta`` with theta in the parameter's own unit)."""
     labels: list[str]
     data: np.ndarray
     predicted: np.ndarray

@@ -44,11 +44,12 @@ def inplane_first_frequencies(config: Manipulator, poses: Sequence[Pose]) -> np.
     """
     g = config.geometry
     sec, mat, hw = config.section, config.material, config.hardware
-    l1, l2 = g.proximal_length_m, g.distal_length_m
+    l1 = np.asarray(g.proximal_length_per_chain)[None, :]  # (1, 3): per chain
+    l2 = np.asarray(g.distal_length_per_chain)[None, :]
     k_c = 3.0 * mat.young_pa * sec.i_inplane_m4 / l1**3
     lin_mass = mat.density_kg_m3 * sec.area_m2
-    m_elbow = CANTILEVER_TIP_MASS_FRACTION * lin_mass * l1 + hw.elbow_joint.mass_kg
-    m_dist = lin_mass * l2
+    m_elbow = (CANTILEVER_TIP_MASS_FRACTION * lin_mass * l1 + hw.elbow_joint.mass_kg)[0]  # (3,)
+    m_dist = (lin_mass * l2)[0]  # (3,)
     m_pin = hw.platform_joint.mass_kg
     m_plat = hw.platform.mass_kg + hw.payload.mass_kg
     i_plat = hw.platform.inertia_kg_m2[2] + hw.payload.inertia_kg_m2[2]
@@ -57,9 +58,10 @@ def inplane_first_frequencies(config: Manipulator, poses: Sequence[Pose]) -> np.
         return np.zeros(0)
     xyphi = np.array([[p.x_m, p.y_m, p.phi_rad] for p in poses])
     base = np.asarray(g.base_angles_rad)
-    a = g.base_radius_m * np.stack([np.cos(base), np.sin(base)], axis=1)  # (3, 2)
+    a = np.asarray(g.base_radius_per_chain)[:, None] * np.stack([np.cos(base), np.sin(base)], axis=1)  # (3, 2)
     ang = np.asarray(g.platform_angles_rad)[None, :] + xyphi[:, 2:3]  # (n, 3)
-    r = g.platform_radius_m * np.stack([np.cos(ang), np.sin(ang)], axis=2)  # (n, 3, 2)
+    r_p = np.asarray(g.platform_radius_per_chain)[None, :, None]
+    r = r_p * np.stack([np.cos(ang), np.sin(ang)], axis=2)  # (n, 3, 2)
     c = xyphi[:, None, :2] + r
     d = c - a[None]
     dist = np.hypot(d[..., 0], d[..., 1])
@@ -67,8 +69,8 @@ def inplane_first_frequencies(config: Manipulator, poses: Sequence[Pose]) -> np.
     cos_alpha = np.clip((l1**2 + dist**2 - l2**2) / (2.0 * l1 * np.maximum(dist, 1e-300)), -1.0, 1.0)
     q = np.arctan2(d[..., 1], d[..., 0]) + np.asarray(g.elbow_branch)[None, :] * np.arccos(cos_alpha)
     w = np.stack([np.cos(q), np.sin(q)], axis=2)  # (n, 3, 2)
-    b = a[None] + l1 * w
-    u = (c - b) / l2
+    b = a[None] + l1[..., None] * w
+    u = (c - b) / l2[..., None]
     cross = w[..., 0] * u[..., 1] - w[..., 1] * u[..., 0]
     ok = reach & np.all(np.abs(cross) > 1e-9, axis=1)
     cross = np.where(np.abs(cross) > 1e-9, cross, 1.0)
@@ -83,12 +85,14 @@ def inplane_first_frequencies(config: Manipulator, poses: Sequence[Pose]) -> np.
     nrm = np.stack([-w[..., 1], w[..., 0]], axis=2)
     tb = nrm[..., :, None] * (jx / cross[..., None])[..., None, :]  # (n, 3, 2, 3)
     cc = np.einsum("nijk,nijl->nkl", tc, tc)
-    bb = np.einsum("nijk,nijl->nkl", tb, tb)
-    bc = np.einsum("nijk,nijl->nkl", tb, tc)
+    cc_d = np.einsum("nijk,nijl,i->nkl", tc, tc, m_dist / 6.0)
+    bb_e = np.einsum("nijk,nijl,i->nkl", tb, tb, m_elbow)
+    bb_d = np.einsum("nijk,nijl,i->nkl", tb, tb, m_dist / 6.0)
+    bc_d = np.einsum("nijk,nijl,i->nkl", tb, tc, m_dist / 6.0)
     mass = np.zeros((n, 3, 3))
     mass[:, 0, 0] = mass[:, 1, 1] = m_plat
     mass[:, 2, 2] = i_plat
-    mass += m_pin * cc + m_elbow * bb + m_dist / 6.0 * (bb + 0.5 * (bc + np.swapaxes(bc, 1, 2)) + cc)
+    mass += m_pin * cc + bb_e + bb_d + 0.5 * (bc_d + np.swapaxes(bc_d, 1, 2)) + cc_d
     out = np.full(n, np.nan)
     if np.any(ok):
         w2 = np.linalg.eigvals(np.linalg.solve(mass[ok], stiff[ok])).real.min(axis=1)

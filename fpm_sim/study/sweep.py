@@ -39,7 +39,13 @@ SWEEP_CSV_COLUMNS = ("x_mm", "y_mm", "phi_rad", "f1_hz", "f2_hz", "f3_hz", "in_p
 def _reach_half_width(config: Manipulator) -> float:
     """Half-width (m) of a square centred on the base centre that holds every reachable position."""
     g = config.geometry
-    return g.proximal_length_m + g.distal_length_m + g.platform_radius_m - g.base_radius_m / 2.0 + 1e-9
+    return (
+        max(g.proximal_length_per_chain)
+        + max(g.distal_length_per_chain)
+        + max(g.platform_radius_per_chain)
+        - min(g.base_radius_per_chain) / 2.0
+        + 1e-9
+    )
 
 
 def dense_grid(config: Manipulator, *, step_mm: float, phi_rad: float = 0.0) -> list[Pose]:

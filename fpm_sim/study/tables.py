@@ -29,7 +29,15 @@ __all__ = [
     "mesh_convergence",
     "STUDY_COMSOL_VS_EXPERIMENT",
     "read_data_csv",
+    "parse_subsystem_rows",
+    "MeasuredPoint",
+    "measured_table",
+    "withheld_cells",
+    "STUDY_THICKNESS_M",
 ]
+
+STUDY_THICKNESS_M = 0.030
+"""The in-plane thickness of the study's manipulator links (m): its COMSOL and measured tables are for these."""
 
 STUDY_COMSOL_VS_EXPERIMENT = {
     "max_abs_hz": 6.96,
@@ -79,17 +87,27 @@ def _num(s: str) -> float:
 
 def subsystem_tests() -> list[SubsystemTest]:
     """The five subsystem tests in the study's order (link free-free, cantilever, chain 60/90/180 deg)."""
+    return parse_subsystem_rows(read_data_csv("subsystems.csv"))
+
+
+def parse_subsystem_rows(rows: list[dict[str, str]]) -> list[SubsystemTest]:
+    """Subsystem tests from CSV rows ``rig,setting,experimental_hz[,comsol_hz]`` (see ``subsystems.csv``)."""
     out = []
-    for row in read_data_csv("subsystems.csv"):
+    for row in rows:
         setting = row["setting"].strip()
         if row["rig"] == "link":
+            if setting not in ("free-free", "cantilever"):
+                raise ValueError(f"link test setting {setting!r}: use free-free or cantilever")
             rig, angle = setting, 180.0
             label = f"link {setting}"
-        else:
+        elif row["rig"] == "chain":
             rig = "chain"
             angle = float(setting.split("angle")[1].split("deg")[0])
             label = f"chain {angle:g} deg"
-        out.append(SubsystemTest(rig, angle, float(row["experimental_hz"]), float(row["comsol_hz"]), label))
+        else:
+            raise ValueError(f"rig {row['rig']!r}: use link or chain")
+        comsol = _num(row.get("comsol_hz") or "")
+        out.append(SubsystemTest(rig, angle, float(row["experimental_hz"]), comsol, label))
     return out
 
 
@@ -104,3 +122,34 @@ def comsol_table() -> list[ComsolPoint]:
 def mesh_convergence() -> list[dict[str, str]]:
     """The study's mesh convergence rows (strings as in the file; empty = not given)."""
     return read_data_csv("mesh_convergence.csv")
+
+
+@dataclass(frozen=True)
+class MeasuredPoint:
+    """One cell of the study's measured Table 4 as packaged: labels (mm), frequency (NaN if unreadable)."""
+
+    row_mm: float
+    col_mm: float
+    measured_hz: float
+    readable: bool
+
+
+def measured_table() -> list[MeasuredPoint]:
+    """The packaged measured table (``measured_table4_train.csv``): 12 readable poses and the 7 unreadable.
+
+    The study's 6 other readable poses were withheld from the project (see the file's header): they are
+    not here, and :func:`withheld_cells` names where they are.
+    """
+    out = []
+    for r in read_data_csv("measured_table4_train.csv"):
+        v = r["experimental_hz"].strip()
+        readable = v.lower() != "unreadable"
+        out.append(MeasuredPoint(float(r["row_mm"]), float(r["col_mm"]), float(v) if readable else math.nan, readable))
+    return out
+
+
+def withheld_cells() -> list[tuple[float, float]]:
+    """``(row_mm, col_mm)`` of the study's readable poses whose measurement was withheld: those with a COMSOL
+    value (readable in the study) that the packaged measured table does not hold."""
+    known = {(m.row_mm, m.col_mm) for m in measured_table()}
+    return [(c.row_mm, c.col_mm) for c in comsol_table() if c.has_value and (c.row_mm, c.col_mm) not in known]

@@ -54,18 +54,18 @@ POSES = [Pose.from_mm(x, y, phi) for x in (-60, 0, 50) for y in (-50, 0, 70) for
 ]
 
 
-def test_loopback_cluster_gives_the_same_numbers_as_the_local_run(default_manip, loopback_cluster, tmp_path):
+def test_loopback_cluster_gives_the_same_numbers_as_the_local_run(reference_manip, loopback_cluster, tmp_path):
     opts = fast_options(segments=2)
-    local = pose_frequencies(default_manip, POSES, n_modes=3, options=opts, workers=1)
+    local = pose_frequencies(reference_manip, POSES, n_modes=3, options=opts, workers=1)
     engine = EngineOptions(scheduler=loopback_cluster, chunk=4, store=tmp_path / "chunks")
-    remote = pose_frequencies(default_manip, POSES, n_modes=3, options=opts, engine=engine)
+    remote = pose_frequencies(reference_manip, POSES, n_modes=3, options=opts, engine=engine)
     assert remote.status == local.status and "unreachable" in remote.status
     np.testing.assert_array_equal(remote.frequencies_hz, local.frequencies_hz)
     np.testing.assert_array_equal(remote.in_plane, local.in_plane)
     assert len(list((tmp_path / "chunks").glob("*.pkl"))) == 5  # 19 poses in chunks of 4, streamed to disk
 
 
-def test_unreachable_scheduler_is_a_clear_error(default_manip):
+def test_unreachable_scheduler_is_a_clear_error(reference_manip):
     engine = EngineOptions(scheduler="tcp://127.0.0.1:9", chunk=1, connect_timeout_s=2.0)
     with pytest.raises(EngineError, match="--scheduler"):
-        pose_frequencies(default_manip, POSES[:2], n_modes=1, options=fast_options(segments=2), engine=engine)
+        pose_frequencies(reference_manip, POSES[:2], n_modes=1, options=fast_options(segments=2), engine=engine)

@@ -8,32 +8,32 @@ from fpm_sim.linear.analysis import manipulator_modes
 from fpm_sim.model.options import ModelOptions
 
 
-def test_fast_path_matches_full_analysis_at_same_resolution(default_manip):
+def test_fast_path_matches_full_analysis_at_same_resolution(reference_manip):
     # Same links (4 segments, axial springs): the fast path leaves out only gravity's prestress
     # (motor axes along gravity: the in-plane structure carries no gravity load to first order) and
     # uses the constrained eigen-solve instead of transitionFD (0.05 % apart, ENGINE_NOTES).
     pose = Pose.from_mm(30.0, -20.0, 0.1)
-    fast = first_frequencies(default_manip, [pose], n_modes=3, options=fast_options(segments=4, axial=True))[0]
-    full = manipulator_modes(pose, config=default_manip, options=ModelOptions(segments=4), n_modes=3).frequencies_hz
+    fast = first_frequencies(reference_manip, [pose], n_modes=3, options=fast_options(segments=4, axial=True))[0]
+    full = manipulator_modes(pose, config=reference_manip, options=ModelOptions(segments=4), n_modes=3).frequencies_hz
     assert fast == pytest.approx(full, rel=5e-3)
 
 
-def test_status_marks_unreachable_and_singular(default_manip):
+def test_status_marks_unreachable_and_singular(reference_manip):
     poses = [Pose(0.0, 0.0, 0.0), Pose(0.9, 0.0, 0.0)]
-    res = pose_frequencies(default_manip, poses, n_modes=2, options=fast_options(segments=2))
+    res = pose_frequencies(reference_manip, poses, n_modes=2, options=fast_options(segments=2))
     assert res.status == ["ok", "unreachable"]
     assert np.isfinite(res.frequencies_hz[0]).all() and np.isnan(res.frequencies_hz[1]).all()
 
 
-def test_workers_give_the_same_numbers(default_manip):
+def test_workers_give_the_same_numbers(reference_manip):
     poses = [Pose.from_mm(x, y, 0.0) for x in (-40, 0, 40) for y in (-40, 40)]
     opts = fast_options(segments=2)
-    a = first_frequencies(default_manip, poses, options=opts, workers=1)
-    b = first_frequencies(default_manip, poses, options=opts, workers=2)
+    a = first_frequencies(reference_manip, poses, options=opts, workers=1)
+    b = first_frequencies(reference_manip, poses, options=opts, workers=2)
     np.testing.assert_array_equal(a, b)
 
 
-def test_backends_are_replaceable(default_manip, monkeypatch):
+def test_backends_are_replaceable(reference_manip, monkeypatch):
     from fpm_sim.batch import frequencies
 
     # a private copy of the registry for this test: the fake backend must not outlive it
@@ -45,10 +45,10 @@ def test_backends_are_replaceable(default_manip, monkeypatch):
         return pose_frequencies(config, poses, n_modes=kw["n_modes"], options=kw["options"])
 
     register_backend("fake-test", fake)
-    out = first_frequencies(default_manip, [Pose(0, 0, 0)], backend="fake-test", options=fast_options(segments=2))
+    out = first_frequencies(reference_manip, [Pose(0, 0, 0)], backend="fake-test", options=fast_options(segments=2))
     assert calls == [1] and out.shape == (1, 1)
     with pytest.raises(ValueError, match="unknown backend"):
-        first_frequencies(default_manip, [Pose(0, 0, 0)], backend="nope")
+        first_frequencies(reference_manip, [Pose(0, 0, 0)], backend="nope")
 
 
 HANDFUL = [
@@ -62,13 +62,13 @@ HANDFUL = [
 
 
 @pytest.mark.parametrize("thickness_m", [0.005, 0.03])
-def test_reposed_model_equals_the_per_pose_compile(default_manip, thickness_m):
+def test_reposed_model_equals_the_per_pose_compile(reference_manip, thickness_m):
     # One compiled model re-posed in place must give what compiling a model per pose gives. The weld
     # relative poses are set with mj_setConst's own operations, so the two agree bit for bit here; 1e-9
     # relative leaves room for BLAS/LAPACK builds that round differently, far below any modelling effect.
     from fpm_sim.batch.pose_loop import solve_poses
 
-    manip = default_manip.with_section(thickness_m=thickness_m)
+    manip = reference_manip.with_section(thickness_m=thickness_m)
     opts = fast_options(segments=3, axial=True)
     fast = solve_poses(manip, HANDFUL, n_modes=4, options=opts)
     ref = solve_poses(manip, HANDFUL, n_modes=4, options=opts, recompile=True)
@@ -79,7 +79,7 @@ def test_reposed_model_equals_the_per_pose_compile(default_manip, thickness_m):
     np.testing.assert_array_equal(fast.singularity, ref.singularity)
 
 
-def test_plane_split_equals_the_whole_eigenproblem(default_manip):
+def test_plane_split_equals_the_whole_eigenproblem(reference_manip):
     # The in-plane / out-of-plane split is exact when M and the weld Jacobian are block-diagonal; the
     # frequencies must match one reduced_eigenproblem on the whole matrices (round-off: 1e-9 relative at a
     # well-conditioned pose), and the mode-1 character must come out pure (share 0 or 1).
@@ -88,8 +88,8 @@ def test_plane_split_equals_the_whole_eigenproblem(default_manip):
 
     opts = fast_options(segments=4)
     for pose in HANDFUL[:3]:
-        asm, _, _ = pose_assembly(default_manip, pose)
-        pm = PoseModel(default_manip, opts, asm)
+        asm, _, _ = pose_assembly(reference_manip, pose)
+        pm = PoseModel(reference_manip, opts, asm)
         freq, share, deficient = pm.solve(asm, 6)
         assert not deficient
         m, j = mass_matrix(pm.model, pm.data), equality_jacobian(pm.model, pm.data)

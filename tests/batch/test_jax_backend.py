@@ -75,8 +75,8 @@ def test_compile_cache_is_bounded_and_least_recently_used():
     assert len(cache) == 2
 
 
-def test_jax_backend_matches_cpu_backend_at_the_25_study_poses():
-    config = default_config()
+def test_jax_backend_matches_cpu_backend_at_the_25_study_poses(reference_manip):
+    config = reference_manip  # the geometry the tolerance was measured on (conftest)
     poses = [p.pose for p in study_poses()]
     opts = fast_options(segments=2)
     cpu = pose_frequencies(config, poses, backend="cpu", n_modes=6, options=opts)

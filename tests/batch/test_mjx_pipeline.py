@@ -16,8 +16,8 @@ from fpm_sim.model.options import ModelOptions
 from fpm_sim.study.poses import study_poses
 
 
-def test_mjx_backend_matches_jax_and_cpu_backends_at_the_25_study_poses():
-    config = default_config()
+def test_mjx_backend_matches_jax_and_cpu_backends_at_the_25_study_poses(reference_manip):
+    config = reference_manip  # the geometry the tolerance was measured on (conftest)
     poses = [p.pose for p in study_poses()]
     opts = fast_options(segments=2)
     cpu = pose_frequencies(config, poses, backend="cpu", n_modes=6, options=opts)

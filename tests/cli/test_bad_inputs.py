@@ -154,7 +154,7 @@ def _files(tmp: Path) -> None:
 
     (tmp / "bad.toml").write_text("this is [not toml")
     default = files("fpm_sim.data").joinpath("default_3rrr.toml").read_text()
-    neg = re.sub(r"thickness_m = \{ value = 0\.030", "thickness_m = { value = -0.030", default, count=1)
+    neg = re.sub(r"(thickness_m = \{ value = )(\d)", r"\1-\2", default, count=1)  # the first link thickness, negated
     assert neg != default
     (tmp / "neg.toml").write_text(neg)
     (tmp / "fake.npz").write_bytes(b"not a zip archive")

@@ -33,6 +33,12 @@ def test_parser_mirrors_agree_with_the_library():
 
     frf = importlib.import_module("fpm_sim.frf")  # `from fpm_sim import frf` is the public function fs.frf
 
+    from fpm_sim.cli import identify as cli_identify
+    from fpm_sim.study import identify as study_identify
+
+    assert cli_identify.GROUPS == tuple(study_identify.GROUPS)
+    assert cli_identify.GLOBAL_METHODS == tuple(study_identify.GLOBAL_METHODS)
+    assert cli_identify.DEFAULT_SIGMA_PCT == study_identify.DEFAULT_SIGMA_PCT
     assert common.FIDELITY_CHOICES == options.FIDELITIES
     assert common.DEFAULT_FIDELITY == options.DEFAULT_FIDELITY
     assert common.LINK_MODEL_CHOICES == parts.LINK_MODELS

@@ -27,10 +27,10 @@ NEAR_SINGULAR = Pose(0.083, 0.0045, 0.0)  # the issue's pose: singularity measur
 
 
 @pytest.fixture(scope="module")
-def near_singular(default_manip):
+def near_singular(reference_manip):  # the geometry whose singular pose NEAR_SINGULAR is
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", NearSingularityWarning)
-        return build_manipulator(default_manip, NEAR_SINGULAR, ModelOptions(segments=6))
+        return build_manipulator(reference_manip, NEAR_SINGULAR, ModelOptions(segments=6))
 
 
 @pytest.mark.parametrize("method", [modes_transition_fd, modes_constrained], ids=["transition_fd", "constrained"])
@@ -58,9 +58,12 @@ def test_both_methods_agree_on_the_near_singular_mode(near_singular):
 
 
 def test_cli_modes_reports_the_near_singular_first_mode(capsys):
+    from conftest import REFERENCE_CONFIG  # the description whose singular pose this is
+
     from fpm_sim.cli.main import main
 
-    rc = main(["modes", "--x-mm", "83", "--y-mm", "4.5", "--phi-rad", "0", "--n-modes", "2", "--json"])
+    argv = ["modes", "--x-mm", "83", "--y-mm", "4.5", "--phi-rad", "0", "--n-modes", "2", "--json"]
+    rc = main([*argv, "--config", str(REFERENCE_CONFIG)])
     assert rc in (0, None)
     import json
 

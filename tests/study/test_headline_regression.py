@@ -1,5 +1,5 @@
 """Regression of the headline numbers as shipped (the embedded default description, `fpm-sim reproduce`'s
-pose loop and subsystem rigs): the subsystems within 0.2 % of the measurements, and the 25-pose error
+pose loop and subsystem rigs): the subsystems within 0.3 % of the measurements, and the 25-pose error
 statistics against the study's COMSOL table.
 
 What moves these numbers, and so the tolerances: the pose loop (gravity off, at ``qpos0``) has no iterative
@@ -19,32 +19,33 @@ from fpm_sim.study.reproduce import reproduce_study
 
 SHIPPED_F1_HZ = np.array(
     [
-        49.6777324466, 37.9316816712, 46.4557048236, 34.7706179527, 54.0706666051,
-        49.6986748062, 47.4690316349, 61.9903831646, 55.1317623785, 49.3824704805,
-        35.5158217353, 66.4805257005, 53.5515602741, 56.8047496557, 36.0794228611,
-        25.8127074897, 24.5762688302, 23.4779428402, 30.2574897621, 33.6197305132,
-        49.9553902988, 41.4501166531, 49.0420142166, 40.3946908861, 42.1897985694,
+        44.1261505028, 46.8012345673, 48.0869503352, 48.6696645381, 47.1939615010,
+        47.2058182493, 51.9440791296, 55.2494473082, 61.2046471036, 52.8016464083,
+        49.9614403539, 57.5684411623, 62.8528767239, 57.4042250946, 38.6032588422,
+        53.5260649939, 63.0661216893, 56.0394160850, 34.5715487411, 11.7027491057,
+        59.8745570795, 54.5567831220, 25.3998945002, 0.4397288154, 34.5721078462,
     ]
 )  # fmt: skip
-"""f1 at the 25 study poses (default reading: rows are x, +0.2 rad; 6 segments, gravity off), measured
-2026-12-01 on the description shipped at cf32cb4."""
+"""f1 at the 25 study poses (default reading: rows are x, +0.2 rad; the default resolution, 12 segments,
+gravity off), measured 2026-12-01 on the default re-identified by issue 12 (``fpm-sim identify``). The pose
+at 0.44 Hz sits next to a parallel singularity of the identified geometry (docs/identification.md)."""
 
 SHIPPED_STATS = {
     "n": 18,
-    "mean_abs_pct": 13.717638396848034,
-    "median_abs_pct": 11.242736336777389,
-    "max_abs_pct": 34.55558450455701,
-    "min_abs_pct": 1.2106858902846471,
-    "mean_signed_pct": -3.340320659755376,
-    "spearman": 0.7275541795665634,
+    "mean_abs_pct": 16.18371195183777,
+    "median_abs_pct": 8.266617123033196,
+    "max_abs_pct": 84.087842129403,
+    "min_abs_pct": 0.6449745010365296,
+    "mean_signed_pct": -0.39992258144514836,
+    "spearman": 0.7440660474716203,
 }
 
 SHIPPED_SUBSYSTEMS_HZ = {
-    ("free-free", 180.0): 984.5962828667715,
-    ("cantilever", 180.0): 220.94225170148147,
-    ("chain", 60.0): 79.07134769327544,
-    ("chain", 90.0): 87.82731577226735,
-    ("chain", 180.0): 80.9827551051705,
+    ("free-free", 180.0): 985.0503313395697,
+    ("cantilever", 180.0): 220.56036759379938,
+    ("chain", 60.0): 78.99482403162676,
+    ("chain", 90.0): 87.74260283473338,
+    ("chain", 180.0): 80.9133424910521,
 }
 
 
@@ -53,11 +54,12 @@ def shipped():
     return reproduce_study(default_config(), readability=False)
 
 
-def test_subsystems_within_the_headline_0p2_percent(shipped):
+def test_subsystems_within_the_headline_0p3_percent(shipped):
     assert len(shipped.subsystems) == 5
     for s in shipped.subsystems:
-        # the headline: every subsystem within 0.2 % of the experiment (measured -0.196 % .. +0.090 %)
-        assert abs(s.error_pct) < 0.2, (s.test.rig, s.test.angle_deg, s.error_pct)
+        # the headline: every subsystem within 0.3 % of the experiment (measured -0.292 % .. +0.005 % at the
+        # default 12 segments; the identification fitted them at 4 segments to 0.05 %, docs/identification.md)
+        assert abs(s.error_pct) < 0.3, (s.test.rig, s.test.angle_deg, s.error_pct)
         assert s.ours_hz == pytest.approx(SHIPPED_SUBSYSTEMS_HZ[(s.test.rig, s.test.angle_deg)], rel=1e-7)
 
 

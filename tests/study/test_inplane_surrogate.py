@@ -1,17 +1,31 @@
+import math
+
 import numpy as np
 
 from fpm_sim.batch.frequencies import pose_frequencies
 from fpm_sim.batch.pose_loop import fast_options
-from fpm_sim.config import Section
+from fpm_sim.config import Geometry, Section
 from fpm_sim.kinematics import Pose
 from fpm_sim.study.inplane_surrogate import inplane_first_frequencies
+
+# The geometry these tests measured their numbers on (the embedded default before the identify re-run):
+# the tests are about kinematics and the surrogate, not about whichever geometry the default holds now.
+REFERENCE_GEOMETRY = Geometry(
+    0.1526,
+    tuple(math.radians(a) for a in (150.8546, -89.1454, 30.8546)),
+    0.1515,
+    0.1535,
+    0.0874,
+    tuple(math.radians(a) for a in (-178.6021, -58.6021, 61.3979)),
+    (-1, -1, -1),
+)
 
 
 def test_inplane_surrogate_tracks_the_segment_model(default_manip):
     # Thin in-plane links make mode 1 in-plane; the surrogate's single cantilever shape and rigid
     # distal links put it ~13 % high (measured), nearly uniformly: its pose-to-pose ratio is what the
     # geometry screening uses, so the test bounds the spread of the ratio, not its level.
-    cfg = default_manip.replace(section=Section(0.010, 0.030))
+    cfg = default_manip.replace(section=Section(0.010, 0.030), geometry=REFERENCE_GEOMETRY)
     poses = [Pose.from_mm(x, y, 0.0) for x in (-100, 0, 100) for y in (-100, 0, 100)]
     seg = pose_frequencies(cfg, poses, n_modes=1, options=fast_options(segments=4))
     assert np.all(seg.in_plane[:, 0] > 0.95)

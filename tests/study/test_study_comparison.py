@@ -17,8 +17,42 @@ def test_error_stats_in_the_studys_form():
 
 
 def test_reproduce_writes_csv_report_and_figures(tmp_path, capsys):
+    # a fixed description (the default before its identify re-run), so that the reading's mechanics are
+    # tested on a geometry whose study poses are all away from singularities under every reading
+    import re
+
+    from fpm_sim.config import config_to_toml, default_config
+
+    text = config_to_toml(default_config())
+    for key, value in (
+        ("base_radius_m", "0.1526"),
+        ("base_angles_deg", "[150.8546, -89.1454, 30.8546]"),
+        ("proximal_length_m", "0.1515"),
+        ("distal_length_m", "0.1535"),
+        ("platform_radius_m", "0.0874"),
+        ("platform_angles_deg", "[-178.6021, -58.6021, 61.3979]"),
+        ("elbow_branch", "[-1, -1, -1]"),
+    ):
+        text = re.sub(rf"^{key} = .*$", f"{key} = {value}", text, flags=re.M)
+    cfg = tmp_path / "ref.toml"
+    cfg.write_text(text)
     out = tmp_path / "rep"
-    code = main(["reproduce", "--segments", "2", "--workers", "1", "--out", str(out), "--reading", "y-", "--json"])
+    code = main(
+        [
+            "reproduce",
+            "--config",
+            str(cfg),
+            "--segments",
+            "2",
+            "--workers",
+            "1",
+            "--out",
+            str(out),
+            "--reading",
+            "y-",
+            "--json",
+        ]
+    )
     assert code == 0
     payload = json.loads(capsys.readouterr().out)
     assert payload["reading"] == "row=y,phi=-0.2"

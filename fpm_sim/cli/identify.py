@@ -1,0 +1,170 @@
+"""``fpm-sim identify``: model updating from measured natural frequencies (and rig tests)."""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from pathlib import Path
+
+from fpm_sim.cli.common import CliError, add_config_args, add_output_args, add_overwrite_arg, emit, load_manipulator
+
+__all__ = ["register", "cmd_identify", "parse_measured_arg"]
+
+GROUPS = ("geometry", "geometry-per-chain", "hubs", "hardware", "section", "compliance", "rig")
+""":data:`fpm_sim.study.identify.GROUPS`, listed here so that building the parser imports neither MuJoCo nor
+SciPy (a test checks they agree)."""
+GLOBAL_METHODS = ("hybrid", "multistart", "surrogate-de", "none")
+""":data:`fpm_sim.study.identify.GLOBAL_METHODS` (checked by a test)."""
+DEFAULT_SIGMA_PCT = 2.0
+""":data:`fpm_sim.study.identify.DEFAULT_SIGMA_PCT` (checked by a test)."""
+
+
+def parse_measured_arg(text: str) -> tuple[Path, dict[str, str]]:
+    """``FILE[,sigma_pct=P][,reading=x+]`` -> path and options."""
+    parts = text.split(",")
+    opts: dict[str, str] = {}
+    for kv in parts[1:]:
+        if "=" not in kv:
+            raise CliError(f"--measured {text!r}: options after the file are key=value (sigma_pct=P, reading=x+)")
+        k, v = kv.split("=", 1)
+        if k not in ("sigma_pct", "reading"):
+            raise CliError(f"--measured {text!r}: unknown option {k!r}; use sigma_pct= or reading=")
+        opts[k] = v
+    return Path(parts[0]), opts
+
+
+def cmd_identify(args: argparse.Namespace) -> int:
+    from fpm_sim.study.identify import (
+        IdentifyOptions,
+        Problem,
+        cross_validate,
+        identify,
+        parameter_set,
+        read_measured_csv,
+        read_subsystems_csv,
+    )
+    from fpm_sim.study.identify.report import check_output, summary, write_identification
+    from fpm_sim.study.poses import parse_reading
+
+    check_output(args.out, overwrite=args.overwrite)
+    start = load_manipulator(args)
+    groups = [g.strip() for g in args.free.split(",") if g.strip()]
+    if args.subsystems and "rig" not in groups:
+        groups.append("rig")
+    datasets = []
+    for m in args.measured or []:
+        path, opts = parse_measured_arg(m)
+        rd_text = opts.get("reading", args.reading)
+        reading = parse_reading(rd_text) if rd_text else None
+        sigma = float(opts.get("sigma_pct", args.sigma_pct))
+        datasets.append(read_measured_csv(path, reading=reading, sigma_pct=sigma))
+    tests = read_subsystems_csv(args.subsystems) if args.subsystems else []
+    observations = [o for ds in datasets for o in ds.observations]
+    if not observations and not tests:
+        raise CliError("no data: give --measured FILE.csv (repeatable) and/or --subsystems FILE.csv")
+    ps = parameter_set(start, groups)
+    if any(p.subsystem for p in ps.parameters) and not tests:
+        raise CliError("--free rig needs --subsystems FILE.csv (the rig parameters are seen only by rig tests)")
+    if args.workers < 1:
+        raise CliError(f"--workers must be >= 1, got {args.workers}")
+    if args.segments < 1:
+        raise CliError(f"--segments must be >= 1, got {args.segments}")
+    opts = IdentifyOptions(
+        segments=args.segments,
+        global_method=args.global_method,
+        n_starts=args.starts,
+        n_refine=args.refine,
+        seed=args.seed,
+        max_nfev=args.max_nfev,
+        workers=args.workers,
+        timoshenko=args.timoshenko,
+    )
+    problem = Problem(ps, observations, tests, subsystem_sigma_pct=args.subsystem_sigma_pct)
+    result = identify(problem, options=opts, progress=not args.quiet)
+    cv = None
+    if args.folds:
+        cv = cross_validate(result, folds=args.folds, max_nfev=args.cv_max_nfev, progress=not args.quiet)
+    files = [ds.source + f" (sigma {ds.sigma_pct:g} % where not given)" for ds in datasets]
+    if tests:
+        files.append(f"{Path(args.subsystems).name} (rig tests, sigma {args.subsystem_sigma_pct:g} %)")
+    command = "fpm-sim " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    data_note = ", ".join([ds.source for ds in datasets] + ([Path(args.subsystems).name] if tests else []))
+    write_identification(args.out, result, cv, command=command, data_files=files, data_note=data_note)
+    summ = summary(result, cv)
+    lines = [
+        f"identified {len(result.names)} parameters in {result.seconds:.0f} s (cost {result.cost:.4g}, "
+        f"chi2/dof {result.chi2_per_dof:.3g})"
+    ]
+    for n, v, s in zip(result.names, result.values, result.std):
+        lines.append(f"  {n:<42} {v:>12.5g} +- {s:.3g}" + ("  (at bound)" if n in result.at_bound else ""))
+    for src, st in summ.items():
+        i, c = st["in_sample"], st.get("cross_validated")
+        lines.append(
+            f"  {src}: in-sample mean |err| {i.get('mean_abs_pct', float('nan')):.2f} %"
+            + (f", {args.folds}-fold CV {c.get('mean_abs_pct', float('nan')):.2f} %" if c else "")
+        )
+    lines.append(f"  wrote {args.out}/config.toml, identify.json, report.md, figures")
+    emit(args, {"summary": summ, "result": result.to_dict(), "out": str(args.out)}, "\n".join(lines))
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "identify",
+        help="identify the manipulator from measured natural frequencies (model updating)",
+        description="Fits the free parameter groups of a description to measured natural frequencies (CSV "
+        "x_mm,y_mm,phi_rad,f1_hz,...[,sigma_hz][,mode] or the study's row_mm,col_mm form with --reading) and rig "
+        "tests; global search then bounded least squares; writes OUT/config.toml (usable with --config), "
+        "OUT/identify.json, OUT/report.md and figures. Only the data named here is used.",
+    )
+    p.add_argument(
+        "--measured",
+        action="append",
+        metavar="FILE[,sigma_pct=P][,reading=R]",
+        help="measured frequencies (repeatable); sigma_pct: relative std of its values where no sigma_hz column "
+        "(default --sigma-pct); reading: for row_mm,col_mm files",
+    )
+    p.add_argument("--subsystems", type=Path, help="rig tests CSV (rig,setting,experimental_hz), frees the rig group")
+    add_config_args(p)
+    p.add_argument(
+        "--free",
+        default="geometry,hardware",
+        help=f"comma-separated parameter groups: {', '.join(GROUPS)} (default geometry,hardware)",
+    )
+    p.add_argument("--reading", default=None, help="how to read row_mm,col_mm files: x+, x-, y+ or y-")
+    p.add_argument(
+        "--sigma-pct",
+        type=float,
+        default=DEFAULT_SIGMA_PCT,
+        help=f"default relative std (%%) of a measured frequency (default {DEFAULT_SIGMA_PCT:g})",
+    )
+    p.add_argument("--subsystem-sigma-pct", type=float, default=1.0, help="relative std (%%) of a rig test (default 1)")
+    p.add_argument(
+        "--global",
+        dest="global_method",
+        default="hybrid",
+        choices=GLOBAL_METHODS,
+        help="global exploration before the local refinement (default hybrid; see docs/identification.md)",
+    )
+    p.add_argument("--starts", type=int, default=24, help="multistart: Latin-hypercube points (default 24)")
+    p.add_argument("--refine", type=int, default=4, help="best global candidates refined locally (default 4)")
+    p.add_argument(
+        "--max-nfev", type=int, default=30, help="local least squares: max residual evaluations (default 30)"
+    )
+    p.add_argument("--folds", type=int, default=0, help="k-fold cross-validation over poses (0 = none)")
+    p.add_argument("--cv-max-nfev", type=int, default=10, help="per-fold refit budget (default 10)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the global search and the folds (default 0)")
+    p.add_argument("--segments", type=int, default=4, help="spring locations per link of the fitted model (default 4)")
+    p.add_argument("--workers", type=int, default=1, help="processes for the pose loop (default 1)")
+    p.add_argument(
+        "--timoshenko",
+        action=argparse.BooleanOptionalAction,
+        default=False,
+        help="links as Timoshenko beams (shear + rotary inertia)",
+    )
+    p.add_argument("--out", type=Path, required=True, help="output folder (written atomically)")
+    add_overwrite_arg(p)
+    p.add_argument("--quiet", action=argparse.BooleanOptionalAction, default=False, help="no progress lines")
+    add_output_args(p)
+    p.set_defaults(func=cmd_identify)

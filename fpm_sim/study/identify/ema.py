@@ -1,0 +1,165 @@
+"""Experimental modal analysis of measured FRFs: natural frequencies and damping for ``identify``.
+
+FRFs come from Universal File Format type-58 files (:mod:`pyuff`; ``.uff`` / ``.unv``) or from the CSV
+that ``fpm-sim frf`` / ``fpm-sim impact --csv`` write (``freq_hz`` and ``re_*``, ``im_*`` columns).
+Poles are estimated with sdypy-EMA (:class:`sdypy.EMA.Model`): the least-squares complex-frequency
+method (LSCF) at model orders up to ``pol_order``; the physical poles are the *stable* ones
+(frequency within ``fn_tol`` and damping within ``xi_tol`` between consecutive orders, the
+stabilisation chart's criterion, :meth:`sdypy.EMA.Model.select_closest_poles`) nearest the FRF's
+peaks (:func:`fpm_sim.frf.pick_peaks`), so no chart has to be clicked.
+
+The pose of a test comes from the UFF record's ``id4`` (``fpm-sim pose x_mm=.. y_mm=.. phi_rad=..``,
+written by ``fpm-sim impact --uff``) or is given by the caller.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from fpm_sim.errors import FpmSimError
+from fpm_sim.frf import pick_peaks
+
+__all__ = ["EmaError", "MeasuredFrf", "ModalEstimate", "read_frfs", "estimate_modes", "write_modes_csv"]
+
+
+class EmaError(FpmSimError):
+    """An FRF file cannot be read or analysed; the message names the file."""
+
+
+@dataclass
+class MeasuredFrf:
+    """One FRF with where it was measured (``pose_mm_rad`` None when the file does not say)."""
+
+    freq_hz: np.ndarray
+    h: np.ndarray
+    source: str
+    pose_mm_rad: tuple[float, float, float] | None
+
+
+@dataclass
+class ModalEstimate:
+    """Natural frequencies (Hz) and damping ratios estimated from one FRF."""
+
+    source: str
+    pose_mm_rad: tuple[float, float, float] | None
+    freq_hz: np.ndarray
+    damping: np.ndarray
+    mode_label: str | None = None
+    """``in_plane`` / ``out_of_plane`` when the test says which kind of mode it sees (e.g. an accelerometer
+    along the motor axes sees only out-of-plane modes of a planar structure); written to the ``mode`` column."""
+
+    def to_dict(self) -> dict:
+        return {
+            "mode_label": self.mode_label,
+            "source": self.source,
+            "pose_mm_rad": self.pose_mm_rad,
+            "freq_hz": self.freq_hz.tolist(),
+            "damping": self.damping.tolist(),
+        }
+
+
+_POSE_RE = re.compile(r"x_mm=([-+0-9.eE]+)\s+y_mm=([-+0-9.eE]+)\s+phi_rad=([-+0-9.eE]+)")
+
+
+def read_frfs(path: str | Path) -> list[MeasuredFrf]:
+    """FRFs of a UFF 58 file (every type-58 record) or of an FRF CSV."""
+    p = Path(path)
+    if not p.is_file():
+        raise EmaError(f"FRF file not found: {p}")
+    if p.suffix.lower() == ".csv":
+        lines = [ln for ln in p.read_text().splitlines() if ln.strip() and not ln.startswith("#")]
+        rows = list(csv.DictReader(io.StringIO("\n".join(lines))))
+        if not rows:
+            raise EmaError(f"{p}: no rows")
+        re_col = next((c for c in rows[0] if c.startswith("re_")), None)
+        im_col = next((c for c in rows[0] if c.startswith("im_")), None)
+        if "freq_hz" not in rows[0] or re_col is None or im_col is None:
+            raise EmaError(f"{p}: an FRF CSV needs freq_hz, re_<unit> and im_<unit> columns")
+        f = np.array([float(r["freq_hz"]) for r in rows])
+        h = np.array([float(r[re_col]) + 1j * float(r[im_col]) for r in rows])
+        return [MeasuredFrf(f, h, p.name, None)]
+    import pyuff
+
+    try:
+        uff = pyuff.UFF(str(p))
+        types = list(uff.get_set_types())
+    except Exception as exc:  # pyuff raises bare Exceptions on malformed files
+        raise EmaError(f"{p}: not a readable Universal File ({exc})") from exc
+    out = []
+    for i, t in enumerate(types):
+        if int(t) != 58:
+            continue
+        d = uff.read_sets(i)
+        m = _POSE_RE.search(str(d.get("id4", "")))
+        pose = (float(m.group(1)), float(m.group(2)), float(m.group(3))) if m else None
+        out.append(MeasuredFrf(np.asarray(d["x"], float), np.asarray(d["data"], complex), f"{p.name}#{i}", pose))
+    if not out:
+        raise EmaError(f"{p}: no type-58 (function) record")
+    return out
+
+
+def estimate_modes(
+    frf: MeasuredFrf,
+    *,
+    f_lower_hz: float,
+    f_upper_hz: float,
+    n_modes: int = 3,
+    pol_order: int = 40,
+    fn_tol: float = 0.001,
+    xi_tol: float = 0.05,
+    min_prominence_db: float = 3.0,
+) -> ModalEstimate:
+    """LSCF poles (sdypy-EMA) at the ``n_modes`` lowest FRF peaks in ``[f_lower_hz, f_upper_hz]``."""
+    import contextlib
+
+    from sdypy import EMA
+
+    band = (frf.freq_hz >= f_lower_hz) & (frf.freq_hz <= f_upper_hz)
+    if band.sum() < 10:
+        raise EmaError(f"{frf.source}: fewer than 10 frequency lines in {f_lower_hz}..{f_upper_hz} Hz")
+    peaks = pick_peaks(frf.freq_hz[band], np.abs(frf.h[band]), min_prominence_db=min_prominence_db)
+    approx = sorted(pk.freq_hz for pk in peaks)[:n_modes]
+    if not approx:
+        raise EmaError(f"{frf.source}: no FRF peak in {f_lower_hz}..{f_upper_hz} Hz")
+    model = EMA.Model(
+        frf=frf.h[None, :],
+        freq=frf.freq_hz,
+        lower=f_lower_hz,
+        upper=f_upper_hz,
+        pol_order_high=pol_order,
+        frf_form="accelerance",
+    )
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        model.get_poles(method="lscf", show_progress=False)
+        model.select_closest_poles(approx, f_window=max(2.0, 0.05 * min(approx)), fn_temp=fn_tol, xi_temp=xi_tol)
+    fn = np.asarray(model.nat_freq, float)
+    xi = np.asarray(model.nat_xi, float)
+    order = np.argsort(fn)
+    return ModalEstimate(frf.source, frf.pose_mm_rad, fn[order], xi[order])
+
+
+def write_modes_csv(estimates: Sequence[ModalEstimate], path: str | Path, *, header: str = "") -> Path:
+    """The CSV ``fpm-sim identify --measured`` reads: ``x_mm,y_mm,phi_rad,f1_hz..,zeta1..,mode,source``."""
+    p = Path(path)
+    n = max(len(e.freq_hz) for e in estimates)
+    cols = ["x_mm", "y_mm", "phi_rad"] + [f"f{k + 1}_hz" for k in range(n)] + [f"zeta{k + 1}" for k in range(n)]
+    cols += ["mode", "source"]
+    with open(p, "w", newline="") as fh:
+        for ln in header.splitlines():
+            fh.write(f"# {ln}\n")
+        w = csv.writer(fh)
+        w.writerow(cols)
+        for e in estimates:
+            if e.pose_mm_rad is None:
+                raise EmaError(f"{e.source}: the pose of this FRF is unknown; give it (--x-mm/--y-mm/--phi-rad)")
+            f = [f"{v:.6g}" for v in e.freq_hz] + [""] * (n - len(e.freq_hz))
+            z = [f"{v:.5g}" for v in e.damping] + [""] * (n - len(e.damping))
+            w.writerow([f"{v:.6g}" for v in e.pose_mm_rad] + f + z + [e.mode_label or "", e.source])
+    return p

@@ -1,0 +1,578 @@
+"""Model updating: a global search, a local least-squares refinement, uncertainty and cross-validation.
+
+Cost: ``sum(r_i^2)`` with ``r_i = (f_model,i - f_measured,i) / sigma_i`` over every observation
+(poses x modes of every ``--measured`` file) and every rig test, each with its own standard deviation.
+Mode matching: an unlabelled ``fK`` is the model's K-th lowest mode at that pose; a labelled one
+(``in_plane`` / ``out_of_plane``) is the K-th lowest of that kind, the kind decided by the mode's
+strain-energy split (in-plane springs vs the rest), so sorted order is not assumed and a swap of an
+in-plane and an out-of-plane mode near a crossing does not swap the match.
+
+Search (:func:`identify`):
+
+1. global exploration: ``"multistart"`` (a Latin hypercube of ``n_starts`` points inside the bounds
+   plus the start, each scored with the full model), ``"surrogate-de"`` (differential evolution of the
+   geometry on the in-plane surrogate, :mod:`fpm_sim.study.inplane_surrogate`, scale-free, for every
+   elbow-branch class, each class's best scored with the full model) or ``"hybrid"`` (both candidate
+   lists together; the default). The best ``n_refine`` candidates are refined. All seeded (``seed``):
+   the same seed gives the same result.
+2. local refinement: bounded least squares (:func:`scipy.optimize.least_squares`, trust-region
+   reflective) on the full segment model; its Jacobian is by forward finite differences in
+   parameters normalised to their bounds (step ``1e-3`` of the bound width). The model's
+   geometry enters through MjSpec compilation, which is not differentiable, so the gradients are
+   finite differences, not exact (stated in the report).
+3. uncertainty: the Gauss-Newton covariance ``s^2 (J'J)^+`` at the optimum with
+   ``s^2 = chi^2 / dof`` (the residuals' own scale: model error included, never below what the
+   stated sigmas imply when ``chi^2/dof > 1``; with ``chi^2/dof < 1`` the stated sigmas, ``s^2 = 1``).
+4. k-fold cross-validation over poses (:func:`cross_validate`): all observations at a held-out pose,
+   from every file, leave together; each fold is refitted from the full-data optimum and predicts
+   its held-out poses.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.stats import qmc
+
+from fpm_sim.batch.frequencies import pose_frequencies
+from fpm_sim.batch.pose_loop import fast_options
+from fpm_sim.config import ConfigError, Manipulator
+from fpm_sim.errors import FpmSimError
+from fpm_sim.kinematics import NearSingularityWarning, Pose
+from fpm_sim.model.options import ModelOptions
+from fpm_sim.study.identify.data import Observation
+from fpm_sim.study.identify.parameters import ParameterSet
+from fpm_sim.study.tables import SubsystemTest
+
+__all__ = [
+    "IdentifyOptions",
+    "Problem",
+    "SearchStep",
+    "Identification",
+    "CrossValidation",
+    "identify",
+    "cross_validate",
+    "predict_observations",
+    "predict_with_std",
+    "GLOBAL_METHODS",
+    "IN_PLANE_THRESHOLD",
+]
+
+GLOBAL_METHODS = ("hybrid", "multistart", "surrogate-de", "none")
+IN_PLANE_THRESHOLD = 0.5
+"""A mode is ``in_plane`` when more than this fraction of its strain energy is in in-plane springs."""
+PENALTY_SIGMAS = 30.0
+"""Residual (in sigmas) of an observation the model cannot give (unreachable or singular pose, too few
+modes of the asked kind): large, finite, so that the search moves away from it."""
+MODE_MARGIN = 4
+"""Modes computed beyond the highest one asked for, so that labelled matching finds its kind."""
+
+
+class IdentificationError(FpmSimError):
+    """The identification cannot run as asked (no data, no free parameter, a start that cannot assemble)."""
+
+
+@dataclass(frozen=True)
+class IdentifyOptions:
+    """Search settings. ``segments``: spring locations per link of the model fitted."""
+
+    segments: int = 4
+    global_method: str = "hybrid"
+    n_starts: int = 24
+    n_refine: int = 4
+    seed: int = 0
+    max_nfev: int = 40
+    workers: int = 1
+    subsystem_segments: int = 8
+    timoshenko: bool = False
+    """Links as Timoshenko beams (shear springs and section rotary inertia, :class:`ModelOptions`)."""
+
+    def model_options(self) -> ModelOptions:
+        if self.timoshenko:
+            return ModelOptions(segments=self.segments, axial=False, gravity=False, shear=True, rotary_inertia=True)
+        return fast_options(segments=self.segments)
+
+
+@dataclass
+class Problem:
+    """What is fitted: the free parameters, the observations, the rig tests."""
+
+    parameters: ParameterSet
+    observations: list[Observation]
+    subsystem_tests: list[SubsystemTest] = field(default_factory=list)
+    subsystem_sigma_pct: float = 1.0
+
+    @property
+    def measured(self) -> np.ndarray:
+        return np.array([o.freq_hz for o in self.observations] + [t.experimental_hz for t in self.subsystem_tests])
+
+    @property
+    def sigma(self) -> np.ndarray:
+        return np.array(
+            [o.sigma_hz for o in self.observations]
+            + [t.experimental_hz * self.subsystem_sigma_pct / 100.0 for t in self.subsystem_tests]
+        )
+
+    @property
+    def labels(self) -> list[str]:
+        return [o.describe() for o in self.observations] + [f"rig {t.label}" for t in self.subsystem_tests]
+
+
+def _unique_poses(obs: Sequence[Observation]) -> tuple[list[Pose], list[int]]:
+    keys: dict[tuple, int] = {}
+    poses: list[Pose] = []
+    index = []
+    for o in obs:
+        k = (round(o.pose.x_m, 9), round(o.pose.y_m, 9), round(o.pose.phi_rad, 9))
+        if k not in keys:
+            keys[k] = len(poses)
+            poses.append(o.pose)
+        index.append(keys[k])
+    return poses, index
+
+
+def predict_observations(
+    config: Manipulator,
+    observations: Sequence[Observation],
+    *,
+    options: ModelOptions | None = None,
+    workers: int = 1,
+) -> np.ndarray:
+    """The model's frequency (Hz) for each observation (mode matching as in the module docstring);
+    NaN where the model cannot give it."""
+    if not observations:
+        return np.zeros(0)
+    poses, index = _unique_poses(observations)
+    labelled = any(o.label for o in observations)
+    n_modes = max(o.mode for o in observations) + (MODE_MARGIN if labelled else 0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NearSingularityWarning)
+        pf = pose_frequencies(config, poses, n_modes=n_modes, options=options or fast_options(), workers=workers)
+    out = np.full(len(observations), np.nan)
+    for j, (o, ip) in enumerate(zip(observations, index)):
+        f = pf.frequencies_hz[ip]
+        if o.label is None:
+            out[j] = f[o.mode - 1]
+            continue
+        frac = pf.in_plane[ip]
+        want = frac > IN_PLANE_THRESHOLD if o.label == "in_plane" else frac <= IN_PLANE_THRESHOLD
+        cand = f[want & np.isfinite(f)]
+        if len(cand) >= o.mode:
+            out[j] = cand[o.mode - 1]
+    return out
+
+
+def _subsystem_predictions(config: Manipulator, tests: Sequence[SubsystemTest], segments: int) -> np.ndarray:
+    if not tests:
+        return np.zeros(0)
+    from fpm_sim.study.reproduce import subsystem_frequencies
+
+    return np.array([r.ours_hz for r in subsystem_frequencies(config, segments=segments, tests=list(tests))])
+
+
+@dataclass
+class SearchStep:
+    """One entry of the search history."""
+
+    stage: str
+    evaluations: int
+    cost: float
+    seconds: float
+    note: str = ""
+
+
+class _Objective:
+    """Residual function in normalised parameters ``z in [0, 1]``, counting evaluations."""
+
+    def __init__(self, problem: Problem, opts: IdentifyOptions, obs_mask: np.ndarray | None = None) -> None:
+        self.problem = problem
+        self.opts = opts
+        self.ps = problem.parameters
+        self.lo, self.hi = self.ps.lower, self.ps.upper
+        self.width = np.where(self.hi > self.lo, self.hi - self.lo, 1.0)
+        n_obs = len(problem.observations)
+        self.obs_mask = np.ones(n_obs, bool) if obs_mask is None else obs_mask
+        self.obs = [o for o, k in zip(problem.observations, self.obs_mask) if k]
+        self.measured = np.concatenate([problem.measured[:n_obs][self.obs_mask], problem.measured[n_obs:]])
+        self.sigma = np.concatenate([problem.sigma[:n_obs][self.obs_mask], problem.sigma[n_obs:]])
+        self.sub_idx = self.ps.subset(True)
+        self.man_idx = self.ps.subset(False)
+        self.nfev = 0
+        self._cache: dict[bytes, np.ndarray] = {}
+
+    def x(self, z: np.ndarray) -> np.ndarray:
+        return self.lo + np.clip(z, 0.0, 1.0) * self.width
+
+    def z(self, x: np.ndarray) -> np.ndarray:
+        return (np.asarray(x, float) - self.lo) / self.width
+
+    def predictions(self, x: np.ndarray) -> np.ndarray:
+        """Observations then rig tests. The two blocks are cached apart: a finite-difference step in a rig
+        parameter re-solves only the rigs, one in a manipulator parameter only the poses."""
+        x = np.asarray(x, float)
+        n = len(self.obs) + len(self.problem.subsystem_tests)
+        try:
+            cfg = self.ps.apply(x)
+        except (ConfigError, ValueError):
+            return np.full(n, np.nan)
+        key_m = b"m" + x[self.man_idx].tobytes()
+        key_s = b"s" + x[self.sub_idx].tobytes()
+        if key_m not in self._cache:
+            self.nfev += 1
+            self._cache[key_m] = predict_observations(
+                cfg, self.obs, options=self.opts.model_options(), workers=self.opts.workers
+            )
+        if key_s not in self._cache:
+            self._cache[key_s] = _subsystem_predictions(cfg, self.problem.subsystem_tests, self.opts.subsystem_segments)
+        out = np.concatenate([self._cache[key_m], self._cache[key_s]])
+        if len(self._cache) > 8192:
+            self._cache.clear()
+        return out
+
+    def residuals(self, z: np.ndarray) -> np.ndarray:
+        f = self.predictions(self.x(z))
+        r = (f - self.measured) / self.sigma
+        return np.where(np.isfinite(r), r, PENALTY_SIGMAS)
+
+    def cost(self, z: np.ndarray) -> float:
+        return float(np.sum(self.residuals(z) ** 2))
+
+
+@dataclass
+class Identification:
+    """The result of :func:`identify`."""
+
+    problem: Problem
+    values: np.ndarray
+    std: np.ndarray
+    correlation: np.ndarray
+    predicted: np.ndarray
+    cost: float
+    chi2_per_dof: float
+    dof: int
+    at_bound: list[str]
+    history: list[SearchStep]
+    options: IdentifyOptions
+    seconds: float
+    config: Manipulator
+    jacobian: np.ndarray
+    candidates: list[dict[str, Any]] = field(default_factory=list)
+    start_elbow_branch: tuple[int, int, int] | None = None
+    """The start description's elbow branches (the global search may pick another class)."""
+
+    @property
+    def names(self) -> list[str]:
+        return self.problem.parameters.names
+
+    @property
+    def measured(self) -> np.ndarray:
+        return self.problem.measured
+
+    @property
+    def residual_pct(self) -> np.ndarray:
+        return 100.0 * (self.predicted / self.measured - 1.0)
+
+    def to_dict(self) -> dict[str, Any]:
+        p = self.problem
+        return {
+            "parameters": {
+                n: {"value": float(v), "std": float(s), "start": float(fp.start), "bounds": [fp.lower, fp.upper]}
+                for n, v, s, fp in zip(self.names, self.values, self.std, p.parameters.parameters)
+            },
+            "correlation": self.correlation.tolist(),
+            "at_bound": self.at_bound,
+            "cost": self.cost,
+            "chi2_per_dof": self.chi2_per_dof,
+            "dof": self.dof,
+            "residuals": [
+                {
+                    "data": lab,
+                    "measured_hz": float(m),
+                    "predicted_hz": float(f),
+                    "sigma_hz": float(s),
+                    "error_pct": float(e),
+                }
+                for lab, m, f, s, e in zip(p.labels, self.measured, self.predicted, p.sigma, self.residual_pct)
+            ],
+            "history": [vars(h) for h in self.history],
+            "candidates": self.candidates,
+            "options": vars(self.options),
+            "seconds": self.seconds,
+        }
+
+
+def _lhs(n: int, d: int, seed: int) -> np.ndarray:
+    return qmc.LatinHypercube(d=d, seed=seed).random(n)
+
+
+def _surrogate_starts(obj: _Objective, opts: IdentifyOptions) -> list[tuple[np.ndarray, str]]:
+    """Differential evolution of the ``geometry`` group on the in-plane surrogate, per elbow-branch class."""
+    from scipy.optimize import differential_evolution
+
+    from fpm_sim.study.inplane_surrogate import inplane_first_frequencies
+
+    ps = obj.ps
+    gi = [i for i, p in enumerate(ps.parameters) if p.group in ("geometry", "geometry-per-chain")]
+    if not gi:
+        raise IdentificationError("--global surrogate-de needs the geometry group free (--free geometry)")
+    first = [k for k, o in enumerate(obj.obs) if o.mode == 1 and o.label in (None, "in_plane")]
+    poses = [obj.obs[k].pose for k in first]
+    logf = np.log([obj.obs[k].freq_hz for k in first])
+    w = 1.0 / np.array([obj.obs[k].sigma_hz / obj.obs[k].freq_hz for k in first])
+    z0 = obj.z(ps.x0)
+    out = []
+    for branch in ((1, 1, 1), (-1, -1, -1), (1, 1, -1), (1, -1, -1), (-1, -1, 1), (-1, 1, 1)):
+        base = ps.start.replace(geometry=__import__("dataclasses").replace(ps.start.geometry, elbow_branch=branch))
+
+        def cost(zg: np.ndarray, base: Manipulator = base) -> float:
+            z = z0.copy()
+            z[gi] = zg
+            try:
+                cfg = ps.apply(obj.x(z), base=base)
+            except (ConfigError, ValueError):
+                return 1e6
+            f = inplane_first_frequencies(cfg, poses)
+            ok = np.isfinite(f) & (f > 0)
+            if not ok.any():
+                return 1e6
+            d = np.log(np.where(ok, f, 1.0)) - logf
+            d = d - np.average(d[ok], weights=w[ok] ** 2)  # scale-free: the level comes from the masses
+            d = np.where(ok, d * w, PENALTY_SIGMAS)
+            return float(np.sum(d**2))
+
+        sol = differential_evolution(
+            cost, [(0.0, 1.0)] * len(gi), seed=opts.seed, maxiter=80, popsize=12, tol=1e-7, polish=False
+        )
+        z = z0.copy()
+        z[gi] = sol.x
+        out.append((z, f"surrogate-de branch {branch}: surrogate cost {sol.fun:.3g}", branch, sol.fun))
+    out.sort(key=lambda t: t[3])
+    return [(z, note, br) for z, note, br, _ in out]
+
+
+def _with_branch(problem: Problem, branch: tuple[int, int, int]) -> Problem:
+    import dataclasses
+
+    ps = problem.parameters
+    start = ps.start.replace(geometry=dataclasses.replace(ps.start.geometry, elbow_branch=branch))
+    return Problem(
+        ParameterSet(start, ps.parameters), problem.observations, problem.subsystem_tests, problem.subsystem_sigma_pct
+    )
+
+
+def identify(problem: Problem, *, options: IdentifyOptions | None = None, progress: bool = False) -> Identification:
+    """Fit ``problem`` (see module docstring). Returns the optimum with its uncertainty and history."""
+
+    opts = options or IdentifyOptions()
+    if opts.global_method not in GLOBAL_METHODS:
+        raise IdentificationError(f"--global {opts.global_method!r}: choose from {', '.join(GLOBAL_METHODS)}")
+    if not problem.observations and not problem.subsystem_tests:
+        raise IdentificationError("no data: give --measured FILE.csv and/or --subsystems FILE.csv")
+    t_start = time.time()
+    history: list[SearchStep] = []
+    ps = problem.parameters
+    obj = _Objective(problem, opts)
+
+    def log(stage: str, cost: float, note: str = "") -> None:
+        history.append(SearchStep(stage, obj.nfev, cost, time.time() - t_start, note))
+        if progress:
+            print(
+                f"[identify] {stage}: cost {cost:.4g} ({obj.nfev} evaluations, {time.time() - t_start:.0f} s) {note}",
+                flush=True,
+            )
+
+    z_start = obj.z(ps.x0)
+    c0 = obj.cost(z_start)
+    log("start", c0)
+    starts: list[tuple[np.ndarray, str, Any]] = []
+    scored: list[tuple[float, np.ndarray, str, Any]] = [(c0, z_start, "start description", None)]
+    if opts.global_method in ("multistart", "hybrid"):
+        pts = _lhs(opts.n_starts, len(ps.parameters), opts.seed)
+        for k, z in enumerate(pts):
+            scored.append((obj.cost(z), z, f"latin-hypercube point {k}", None))
+        log("global latin hypercube", min(t[0] for t in scored), f"{len(pts)} points scored with the full model")
+    geometry_free = any(p.group in ("geometry", "geometry-per-chain") for p in ps.parameters)
+    if opts.global_method == "surrogate-de" or (opts.global_method == "hybrid" and geometry_free):
+        for z, note, branch in _surrogate_starts(obj, opts):
+            ob = _Objective(_with_branch(problem, branch), opts)
+            scored.append((ob.cost(z), z, note, branch))
+            obj.nfev += ob.nfev
+        log(
+            "global surrogate-de",
+            min(t[0] for t in scored),
+            "best geometry of each elbow-branch class, scored with the full model",
+        )
+    scored.sort(key=lambda t: t[0])
+    starts = [(z, note, branch) for _, z, note, branch in scored[: max(1, opts.n_refine)]]
+    if opts.global_method == "none":
+        starts = [(z_start, "start description", None)]
+
+    best = None
+    candidates = []
+    for z, note, branch in starts:
+        if branch is not None:
+            problem_b = _with_branch(problem, branch)
+            ob = _Objective(problem_b, opts)
+            ob.nfev = obj.nfev
+        else:
+            problem_b, ob = problem, obj
+        sol = least_squares(
+            ob.residuals,
+            np.clip(z, 0, 1),
+            bounds=(0.0, 1.0),
+            method="trf",
+            diff_step=1e-3,
+            max_nfev=opts.max_nfev,
+            x_scale=1.0,
+        )
+        obj.nfev = max(obj.nfev, ob.nfev)
+        c = float(np.sum(sol.fun**2))
+        candidates.append({"from": note, "cost": c, "values": ob.x(sol.x).tolist(), "success": bool(sol.success)})
+        log("local least squares", c, f"from {note}")
+        if best is None or c < best[0]:
+            best = (c, sol, problem_b, ob)
+    assert best is not None
+    cost, sol, problem_b, ob = best
+    x = ob.x(sol.x)
+    jz = sol.jac
+    jx = jz / ob.width[None, :]
+    n, k = len(sol.fun), len(x)
+    dof = max(n - k, 0)
+    chi2 = float(np.sum(sol.fun**2))
+    chi2_dof = chi2 / dof if dof > 0 else math.nan
+    s2 = max(chi2_dof, 1.0) if dof > 0 else 1.0
+    cov = s2 * np.linalg.pinv(jx.T @ jx)
+    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(std, std)
+    eps = 1e-6
+    at_bound = [p.name for p, zi in zip(ps.parameters, sol.x) if zi < eps or zi > 1 - eps]
+    cfg = problem_b.parameters.apply(x)
+    predicted = ob.predictions(x)
+    return Identification(
+        problem=problem_b,
+        values=x,
+        std=std,
+        correlation=corr,
+        predicted=predicted,
+        cost=cost,
+        chi2_per_dof=chi2_dof,
+        dof=dof,
+        at_bound=at_bound,
+        history=history,
+        options=opts,
+        seconds=time.time() - t_start,
+        config=cfg,
+        jacobian=jx,
+        candidates=candidates,
+        start_elbow_branch=ps.start.geometry.elbow_branch,
+    )
+
+
+def predict_with_std(
+    result: Identification, observations: Sequence[Observation], *, rel_step: float = 1e-3
+) -> tuple[np.ndarray, np.ndarray]:
+    """Predicted frequencies (Hz) for ``observations`` and their standard deviations from the parameters'
+    covariance (delta method: ``sqrt(g' C g)`` with ``g`` the forward-difference gradient of each
+    prediction, step ``rel_step`` of each parameter's bound width)."""
+    ps = result.problem.parameters
+    opts = result.options.model_options()
+    f0 = predict_observations(result.config, observations, options=opts, workers=result.options.workers)
+    cov = np.outer(result.std, result.std) * np.nan_to_num(result.correlation)
+    grads = []
+    for i, p in enumerate(ps.parameters):
+        h = rel_step * (p.upper - p.lower)
+        x = result.values.copy()
+        x[i] = x[i] + h if x[i] + h <= p.upper else x[i] - h
+        step = x[i] - result.values[i]
+        f = predict_observations(ps.apply(x), observations, options=opts, workers=result.options.workers)
+        grads.append((f - f0) / step)
+    g = np.array(grads).T  # (n_obs, n_params)
+    return f0, np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", g, cov, g), 0.0))
+
+
+@dataclass
+class CrossValidation:
+    """k-fold cross-validated predictions: for each observation, the prediction of the fit that did not see its pose."""
+
+    folds: int
+    fold_of_pose: list[int]
+    predicted: np.ndarray
+    measured: np.ndarray
+    sources: list[str]
+    labels: list[str]
+    seconds: float
+
+    def error_pct(self) -> np.ndarray:
+        return 100.0 * (self.predicted / self.measured - 1.0)
+
+    def mean_abs_pct(self, source: str | None = None) -> float:
+        e = self.error_pct()
+        m = np.array([source is None or s == source for s in self.sources]) & np.isfinite(e)
+        return float(np.mean(np.abs(e[m]))) if m.any() else math.nan
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "folds": self.folds,
+            "fold_of_pose": self.fold_of_pose,
+            "predictions": [
+                {"data": lab, "source": s, "measured_hz": float(m), "cv_predicted_hz": float(p)}
+                for lab, s, m, p in zip(self.labels, self.sources, self.measured, self.predicted)
+            ],
+            "mean_abs_pct": {s: self.mean_abs_pct(s) for s in sorted(set(self.sources))},
+            "seconds": self.seconds,
+        }
+
+
+def fold_assignment(n_poses: int, folds: int, seed: int) -> np.ndarray:
+    """Fold (0 .. folds-1) of each of ``n_poses`` poses: a seeded permutation dealt round-robin."""
+    if not 2 <= folds <= n_poses:
+        raise IdentificationError(f"--folds must be between 2 and the number of poses ({n_poses}), got {folds}")
+    perm = np.random.default_rng(seed).permutation(n_poses)
+    out = np.empty(n_poses, int)
+    out[perm] = np.arange(n_poses) % folds
+    return out
+
+
+def cross_validate(
+    result: Identification, *, folds: int, max_nfev: int = 12, progress: bool = False
+) -> CrossValidation:
+    """k-fold cross-validation over poses, each fold refitted from ``result``'s optimum (see module docstring)."""
+    t0 = time.time()
+    problem = result.problem
+    obs = problem.observations
+    poses, index = _unique_poses(obs)
+    fold = fold_assignment(len(poses), folds, result.options.seed)
+    pred = np.full(len(obs), np.nan)
+    opts = result.options
+    z_best = None
+    for k in range(folds):
+        train = np.array([fold[i] != k for i in index])
+        ob = _Objective(problem, opts, obs_mask=train)
+        z_best = ob.z(result.values)
+        sol = least_squares(ob.residuals, z_best, bounds=(0.0, 1.0), method="trf", diff_step=1e-3, max_nfev=max_nfev)
+        cfg = problem.parameters.apply(ob.x(sol.x))
+        test = [o for o, t in zip(obs, train) if not t]
+        f = predict_observations(cfg, test, options=opts.model_options(), workers=opts.workers)
+        pred[~train] = f
+        if progress:
+            print(
+                f"[identify] fold {k + 1}/{folds}: {len(test)} held-out observations ({time.time() - t0:.0f} s)",
+                flush=True,
+            )
+    return CrossValidation(
+        folds=folds,
+        fold_of_pose=fold.tolist(),
+        predicted=pred,
+        measured=np.array([o.freq_hz for o in obs]),
+        sources=[o.source for o in obs],
+        labels=[o.describe() for o in obs],
+        seconds=time.time() - t0,
+    )

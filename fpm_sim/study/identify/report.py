@@ -1,0 +1,291 @@
+"""Writing an identification: ``config.toml``, ``identify.json``, ``report.md`` and figures, atomically.
+
+The folder is written as a temporary sibling and renamed into place when complete, so a reader never
+sees a mix of two runs or a half-written one (an interrupted run leaves only the temporary folder,
+named ``.<out>.tmp-<pid>``, which is removed on the next run into the same place).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.stats import spearmanr
+
+from fpm_sim.config import Manipulator, config_to_toml
+from fpm_sim.errors import FpmSimError
+from fpm_sim.results import to_jsonable
+from fpm_sim.study.identify.engine import CrossValidation, Identification
+
+__all__ = ["provenance_key", "identified_config", "write_identification", "render_report", "OutputError"]
+
+
+class OutputError(FpmSimError):
+    """The output folder cannot be written (exists without ``--overwrite``, or not writable)."""
+
+
+def provenance_key(name: str) -> str:
+    """The description field (dotted, as in the TOML) that a free parameter sets."""
+    n = name.split("[")[0]
+    mapping = {
+        "geometry.base_rotation_deg": "geometry.base_angles_deg",
+        "geometry.platform_rotation_deg": "geometry.platform_angles_deg",
+        "geometry.base_angle_deg": "geometry.base_angles_deg",
+        "geometry.platform_angle_deg": "geometry.platform_angles_deg",
+    }
+    if n in mapping:
+        return mapping[n]
+    if n.startswith("compliance.log10_"):
+        return "compliance." + n[len("compliance.log10_") :]
+    return n
+
+
+def _fmt(v: float) -> str:
+    return f"{v:.4g}"
+
+
+def identified_config(result: Identification, *, data_note: str, method_note: str) -> Manipulator:
+    """``result.config`` with each identified field's provenance ``identified: <data, method>; value +- std``."""
+    cfg = result.config
+    prov = dict(cfg.provenance)
+    by_key: dict[str, list[str]] = {}
+    for name, v, s in zip(result.names, result.values, result.std):
+        unit = "log10(N m/rad)" if "log10_" in name else name.rsplit("_", 1)[-1].split("[")[0]
+        by_key.setdefault(provenance_key(name), []).append(f"{name} = {_fmt(v)} +- {_fmt(s)} {unit}")
+    for key, parts in by_key.items():
+        at_bound = [n for n in result.at_bound if provenance_key(n) == key]
+        note = f" (at its bound: {', '.join(at_bound)}; the std is then not a confidence interval)" if at_bound else ""
+        prov[key] = f"identified: {data_note}, {method_note}; " + "; ".join(parts) + note
+        if key.startswith("hardware.") and key.endswith(".mass_kg"):
+            prov[key.replace("mass_kg", "inertia_kg_m2")] = "identified: scaled with the identified mass"
+        if key == "rig.chain_hinge.mass_kg":
+            prov["rig.chain_hinge.inertia_kg_m2"] = "identified: scaled with the identified mass"
+    start_branch = result.start_elbow_branch or result.problem.parameters.start.geometry.elbow_branch
+    if start_branch != cfg.geometry.elbow_branch:
+        prov["geometry.elbow_branch"] = f"identified: {data_note}, the elbow-branch class of the best global-search fit"
+    return cfg.replace(provenance=prov)
+
+
+def _stats(pred: np.ndarray, meas: np.ndarray) -> dict[str, float]:
+    ok = np.isfinite(pred) & np.isfinite(meas)
+    if not ok.any():
+        return {"n": 0}
+    e = 100.0 * (pred[ok] / meas[ok] - 1.0)
+    rho = float(spearmanr(pred[ok], meas[ok]).statistic) if ok.sum() > 2 else math.nan
+    return {
+        "n": int(ok.sum()),
+        "mean_abs_pct": float(np.mean(np.abs(e))),
+        "median_abs_pct": float(np.median(np.abs(e))),
+        "max_abs_pct": float(np.max(np.abs(e))),
+        "rms_pct": float(np.sqrt(np.mean(e**2))),
+        "spearman": rho,
+    }
+
+
+def summary(result: Identification, cv: CrossValidation | None) -> dict[str, Any]:
+    """In-sample and cross-validated error statistics per data source."""
+    p = result.problem
+    n_obs = len(p.observations)
+    sources = [o.source for o in p.observations]
+    out: dict[str, Any] = {}
+    for s in sorted(set(sources)):
+        m = np.array([x == s for x in sources])
+        out[s] = {"in_sample": _stats(result.predicted[:n_obs][m], result.measured[:n_obs][m])}
+        if cv is not None:
+            out[s]["cross_validated"] = _stats(cv.predicted[m], cv.measured[m])
+    if p.subsystem_tests:
+        out["subsystems"] = {"in_sample": _stats(result.predicted[n_obs:], result.measured[n_obs:])}
+    return out
+
+
+def render_report(
+    result: Identification,
+    cv: CrossValidation | None,
+    *,
+    command: str,
+    data_files: Sequence[str],
+    extra: str = "",
+) -> str:
+    """The Markdown report."""
+    p = result.problem
+    lines = [
+        "# fpm-sim identify",
+        "",
+        f"Command: `{command}`",
+        "",
+        f"Data: {', '.join(data_files)}. Free parameters: {len(result.names)}; observations: "
+        f"{len(result.measured)}; residual degrees of freedom {result.dof}; chi^2/dof {result.chi2_per_dof:.3g}.",
+        "",
+        f"Search: global `{result.options.global_method}` (seed {result.options.seed}), then bounded least squares "
+        f"(trust-region reflective, forward finite-difference Jacobian in bound-normalised parameters: the model's "
+        f"geometry enters through MjSpec compilation, which is not differentiable); {result.options.segments} spring "
+        f"locations per link. {result.history[-1].evaluations} model evaluations, {result.seconds:.0f} s.",
+        "",
+        "## Error statistics",
+        "",
+        "| data | n | in-sample mean abs % | in-sample max % | Spearman | CV mean abs % | CV max % | CV Spearman |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for s, st in summary(result, cv).items():
+        i = st["in_sample"]
+        c = st.get("cross_validated", {})
+        lines.append(
+            f"| {s} | {i.get('n', 0)} | {i.get('mean_abs_pct', math.nan):.2f} | {i.get('max_abs_pct', math.nan):.2f} | "
+            f"{i.get('spearman', math.nan):.3f} | {c.get('mean_abs_pct', math.nan):.2f} | "
+            f"{c.get('max_abs_pct', math.nan):.2f} | {c.get('spearman', math.nan):.3f} |"
+        )
+    if cv is not None:
+        lines += [
+            "",
+            f"Cross-validation: {cv.folds}-fold over poses (every observation at a held-out pose, from every file, "
+            f"left out together; each fold refitted from the full-data optimum); {cv.seconds:.0f} s.",
+        ]
+    lines += ["", "## Parameters", "", "| parameter | start | value | std | bounds |", "|---|---|---|---|---|"]
+    for fp, v, s in zip(p.parameters.parameters, result.values, result.std):
+        flag = " (at bound)" if fp.name in result.at_bound else ""
+        lines.append(f"| {fp.name} | {fp.start:.5g} | {v:.5g}{flag} | {s:.3g} | [{fp.lower:.4g}, {fp.upper:.4g}] |")
+    lines += [
+        "",
+        "Standard deviations: Gauss-Newton covariance s^2 (J'J)^+ with s^2 = max(chi^2/dof, 1) (the residuals' own "
+        "scale when the stated sigmas are too small). A parameter at its bound has no confidence interval.",
+        "",
+        "Correlations (rows and columns in the parameter order):",
+        "",
+        "```",
+    ]
+    for n, row in zip(result.names, result.correlation):
+        lines.append(f"{n:<40}" + " ".join(f"{c:+.2f}" for c in row))
+    lines += [
+        "```",
+        "",
+        "## Residuals",
+        "",
+        "| data | measured Hz | sigma Hz | model Hz | error % | CV model Hz |",
+        "|---|---|---|---|---|---|",
+    ]
+    n_obs = len(p.observations)
+    for j, (lab, m, s, f) in enumerate(zip(p.labels, result.measured, p.sigma, result.predicted)):
+        cvp = f"{cv.predicted[j]:.2f}" if cv is not None and j < n_obs else ""
+        lines.append(f"| {lab} | {m:.2f} | {s:.2f} | {f:.2f} | {100 * (f / m - 1):+.2f} | {cvp} |")
+    lines += ["", "## Search history", "", "| stage | evaluations | cost | seconds | note |", "|---|---|---|---|---|"]
+    for h in result.history:
+        lines.append(f"| {h.stage} | {h.evaluations} | {h.cost:.4g} | {h.seconds:.0f} | {h.note} |")
+    if result.candidates:
+        lines += [
+            "",
+            "Local refinements: " + "; ".join(f"from {c['from']}: cost {c['cost']:.4g}" for c in result.candidates),
+        ]
+    if extra:
+        lines += ["", extra]
+    lines += ["", "Figures: `measured_vs_predicted.png`, `residuals_workspace.png`."]
+    return "\n".join(lines) + "\n"
+
+
+def plot_figures(result: Identification, cv: CrossValidation | None, folder: Path) -> None:
+    """``measured_vs_predicted.png`` and ``residuals_workspace.png``."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    p = result.problem
+    n_obs = len(p.observations)
+    meas, pred = result.measured[:n_obs], result.predicted[:n_obs]
+    sources = [o.source for o in p.observations]
+    fig, ax = plt.subplots(figsize=(5.5, 5), constrained_layout=True)
+    for s in sorted(set(sources)):
+        m = np.array([x == s for x in sources])
+        ax.errorbar(meas[m], pred[m], xerr=p.sigma[:n_obs][m], fmt="o", label=f"{s} (in-sample)", alpha=0.8)
+        if cv is not None:
+            ax.plot(meas[m], cv.predicted[m], "x", label=f"{s} (cross-validated)")
+    lim = [np.nanmin(meas) * 0.9, np.nanmax(meas) * 1.1]
+    ax.plot(lim, lim, "k--", lw=0.8)
+    ax.set_xlabel("measured (Hz)")
+    ax.set_ylabel("model (Hz)")
+    ax.legend(fontsize=7)
+    fig.savefig(folder / "measured_vs_predicted.png", dpi=120)
+    plt.close(fig)
+    fig, ax = plt.subplots(figsize=(6, 5), constrained_layout=True)
+    x = np.array([o.pose.x_m * 1e3 for o in p.observations])
+    y = np.array([o.pose.y_m * 1e3 for o in p.observations])
+    e = 100.0 * (pred / meas - 1.0)
+    lim_e = float(np.nanmax(np.abs(e))) if np.any(np.isfinite(e)) else 1.0
+    sc = ax.scatter(x, y, c=e, cmap="RdBu_r", vmin=-lim_e, vmax=lim_e, s=120, edgecolors="k")
+    fig.colorbar(sc, ax=ax, label="model / measured - 1 (%), in-sample")
+    ax.set_xlabel("x (mm)")
+    ax.set_ylabel("y (mm)")
+    ax.set_aspect("equal")
+    fig.savefig(folder / "residuals_workspace.png", dpi=120)
+    plt.close(fig)
+
+
+def check_output(out: Path, *, overwrite: bool) -> None:
+    """Refuse before any computation when ``out`` cannot be written."""
+    if out.exists() and not out.is_dir():
+        raise OutputError(f"--out {out} is a file; give a folder")
+    if out.exists() and any(out.iterdir()) and not overwrite:
+        raise OutputError(f"--out {out} already holds results; give another folder or --overwrite")
+    parent = out.resolve().parent
+    if not parent.exists():
+        raise OutputError(f"--out {out}: the parent folder {parent} does not exist")
+    if not os.access(parent, os.W_OK):
+        raise OutputError(f"--out {out}: the folder {parent} is not writable; choose another --out")
+
+
+def write_identification(
+    out: Path,
+    result: Identification,
+    cv: CrossValidation | None,
+    *,
+    command: str,
+    data_files: Sequence[str],
+    data_note: str,
+    header: str = "",
+    extra_report: str = "",
+    extra_json: dict[str, Any] | None = None,
+    figures: bool = True,
+) -> Manipulator:
+    """Write the folder atomically (see module docstring); returns the identified description."""
+    out = Path(out)
+    tmp = out.parent / f".{out.name}.tmp-{os.getpid()}"
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir(parents=True)
+    method_note = (
+        f"fpm-sim identify ({result.options.global_method} global search, seed {result.options.seed}, then bounded "
+        f"least squares, {result.options.segments} segments/link)"
+    )
+    cfg = identified_config(result, data_note=data_note, method_note=method_note)
+    hdr = header or (
+        f"fpm-sim identify: {command}\nEvery 'identified' value: +- one standard deviation (Gauss-Newton)."
+    )
+    (tmp / "config.toml").write_text(config_to_toml(cfg, header=hdr, default_source="start description"))
+    doc = {
+        "command": command,
+        "data": list(data_files),
+        "result": result.to_dict(),
+        "cross_validation": cv.to_dict() if cv is not None else None,
+        "summary": summary(result, cv),
+    }
+    if extra_json:
+        doc.update(extra_json)
+    (tmp / "identify.json").write_text(json.dumps(to_jsonable(doc), indent=1))
+    (tmp / "report.md").write_text(
+        render_report(result, cv, command=command, data_files=data_files, extra=extra_report)
+    )
+    if figures:
+        plot_figures(result, cv, tmp)
+    old = None
+    if out.exists():
+        old = out.parent / f".{out.name}.old-{os.getpid()}"
+        out.rename(old)
+    tmp.rename(out)
+    if old is not None:
+        shutil.rmtree(old)
+    return cfg
