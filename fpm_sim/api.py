@@ -27,7 +27,7 @@ if TYPE_CHECKING:
     from fpm_sim.study.reproduce import StudyReproduction
     from fpm_sim.study.sweep import WorkspaceSweep
 
-__all__ = ["modes", "rig_modes", "sweep", "reduce", "frf", "frf_grid", "rollout", "reproduce", "model_options"]
+__all__ = ["frf", "frf_grid", "model_options", "modes", "reduce", "reproduce", "rig_modes", "rollout", "sweep"]
 
 
 def model_options(
@@ -289,7 +289,8 @@ def reduce(
 
 def frf_grid(f_min_hz: float, f_max_hz: float, df_hz: float, modal_freq_hz: Sequence[float]) -> object:
     """A frequency grid (Hz) from ``f_min_hz`` to ``f_max_hz`` by ``df_hz``, plus the natural frequencies
-    inside it (so that every resonance peak is sampled at its top)."""
+    inside it (so that every resonance peak is sampled at its top).
+    """
     import numpy as np
 
     from fpm_sim.frf import FrfError

@@ -46,7 +46,7 @@ from fpm_sim.study.reproduce import error_stats
 from fpm_sim.study.tables import subsystem_tests
 
 
-def rotation_evidence(cfg, reading) -> dict:  # noqa: ANN001
+def rotation_evidence(cfg, reading) -> dict:
     """Singularity measure at the poses written (x, 0): phi = 0, +0.2, -0.2."""
     out = {}
     for p in study_poses(reading):

@@ -12,8 +12,8 @@ import pytest
 
 matplotlib.use("Agg")  # the tests' choice; the library never selects a backend
 
-import fpm_sim as fs  # noqa: E402
-from fpm_sim.frf import LinkPoint  # noqa: E402
+import fpm_sim as fs
+from fpm_sim.frf import LinkPoint
 
 SEG = 3  # a tiny model: 3 spring locations per link
 

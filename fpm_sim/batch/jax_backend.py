@@ -51,23 +51,23 @@ from fpm_sim.linear.modal import constraint_rank
 from fpm_sim.model.options import BuiltModel, ModelOptions
 
 __all__ = [
-    "BackendTimings",
-    "CompileCache",
-    "TimedPoseFrequencies",
+    "GRADIENT_PARAMETERS",
     "AssembledPoses",
-    "assemble_poses",
+    "BackendTimings",
     "BatchSolver",
+    "CompileCache",
+    "FrequencyGradients",
+    "TimedPoseFrequencies",
+    "assemble_poses",
     "batched_pose_frequencies",
     "check_options",
     "frequencies_from_modes",
-    "jax_pose_frequencies",
-    "x64",
-    "FrequencyGradients",
-    "GRADIENT_PARAMETERS",
     "frequency_gradients",
-    "pose_frequency_gradients",
+    "jax_pose_frequencies",
     "parameter_value",
+    "pose_frequency_gradients",
     "with_parameter",
+    "x64",
 ]
 
 COMPILE_CACHE_SIZE = 8

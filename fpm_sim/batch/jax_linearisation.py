@@ -44,14 +44,14 @@ from fpm_sim.errors import FpmSimError
 __all__ = [
     "PARAM_FIELDS",
     "Structure",
-    "structure_of",
-    "params_of",
-    "stack_params",
-    "smooth_terms",
-    "linearise",
-    "reduced_modes",
     "batched_modes",
+    "linearise",
     "modal_sensitivity",
+    "params_of",
+    "reduced_modes",
+    "smooth_terms",
+    "stack_params",
+    "structure_of",
 ]
 
 PARAM_FIELDS = (

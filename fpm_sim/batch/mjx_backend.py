@@ -51,13 +51,13 @@ from fpm_sim.kinematics import Pose
 from fpm_sim.model.options import BuiltModel, ModelOptions
 
 __all__ = [
-    "MjxModelError",
     "SERIAL_DOF_LIMIT",
+    "MjxModelError",
     "check_mjx_model",
     "import_mjx",
-    "serial_dofs",
     "mjx_linearisation",
     "mjx_pose_frequencies",
+    "serial_dofs",
     "smooth_force",
     "stack_models",
 ]

@@ -55,22 +55,22 @@ from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import BuiltModel, ModelOptions, dof_stiffness, resolve_segments
 
 __all__ = [
-    "assemble_pose",
-    "pose_assembly",
-    "PoseModel",
-    "solve_poses",
-    "cpu_backend",
-    "merge",
-    "read_poses_csv",
-    "PosesFileError",
-    "REPOSABLE_LINK_MODELS",
     "FAST_SEGMENTS",
-    "PoseFrequencies",
-    "fast_options",
-    "IN_PLANE_KINDS",
     "IN_PLANE_DOF_KINDS",
-    "plane_blocks",
+    "IN_PLANE_KINDS",
+    "REPOSABLE_LINK_MODELS",
     "PlaneSplit",
+    "PoseFrequencies",
+    "PoseModel",
+    "PosesFileError",
+    "assemble_pose",
+    "cpu_backend",
+    "fast_options",
+    "merge",
+    "plane_blocks",
+    "pose_assembly",
+    "read_poses_csv",
+    "solve_poses",
 ]
 
 FAST_SEGMENTS = resolve_segments()

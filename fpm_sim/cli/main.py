@@ -53,7 +53,7 @@ if TYPE_CHECKING:
     from fpm_sim.linear.modal import ModalResult
     from fpm_sim.model.options import BuiltModel
 
-__all__ = ["main", "build_parser", "COMMAND_MODULES", "save_figure"]
+__all__ = ["COMMAND_MODULES", "build_parser", "main", "save_figure"]
 
 COMMAND_MODULES: list[str] = [
     "fpm_sim.cli.reproduce",

@@ -38,18 +38,18 @@ from fpm_sim.kinematics import Pose
 from fpm_sim.model.options import ModelOptions
 
 __all__ = [
+    "COMPUTED",
     "DesignError",
     "DesignResult",
-    "design_study",
-    "parse_spec",
-    "parse_vary",
-    "factorial",
-    "read_designs_csv",
-    "read_poses_csv",
     "apply_design",
+    "design_study",
+    "factorial",
     "link_mass_kg",
     "moving_mass_kg",
-    "COMPUTED",
+    "parse_spec",
+    "parse_vary",
+    "read_designs_csv",
+    "read_poses_csv",
     "write_netcdf",
 ]
 

@@ -26,7 +26,7 @@ import numpy as np
 from fpm_sim.errors import FpmSimError
 from fpm_sim.model.options import tangent_jacobian
 
-__all__ = ["EquilibriumError", "static_equilibrium", "applied_forces", "force_jacobian"]
+__all__ = ["EquilibriumError", "applied_forces", "force_jacobian", "static_equilibrium"]
 
 
 class EquilibriumError(FpmSimError, RuntimeError):

@@ -74,18 +74,18 @@ from fpm_sim.model.options import ModelOptions, check_count, open_for_writing
 from fpm_sim.rom.reduction import ModalSystem, ReducedModel, modal_system
 
 __all__ = [
-    "AtlasError",
-    "mac_matrix",
+    "ATLAS_ERROR_WARN",
+    "BASIS_MAC_WARN",
+    "MAC_WARN",
     "Alignment",
-    "align_modes",
-    "track_modes",
+    "AtlasAccuracyWarning",
+    "AtlasError",
     "ModalAtlas",
+    "align_modes",
     "build_atlas",
     "load_atlas",
-    "MAC_WARN",
-    "BASIS_MAC_WARN",
-    "ATLAS_ERROR_WARN",
-    "AtlasAccuracyWarning",
+    "mac_matrix",
+    "track_modes",
 ]
 
 MAC_WARN = 0.5

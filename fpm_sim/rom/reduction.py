@@ -69,17 +69,17 @@ from fpm_sim.model.options import BuiltModel, open_for_writing
 from fpm_sim.results import to_jsonable
 
 __all__ = [
+    "END_EFFECTOR_SITE",
+    "ModalSystem",
     "ReducedModel",
     "ReductionError",
-    "ModalSystem",
     "StepResponse",
+    "accel_site_names",
+    "load_reduced_model",
     "modal_system",
+    "motor_dofs",
     "reduce_model",
     "static_truncation_error",
-    "END_EFFECTOR_SITE",
-    "load_reduced_model",
-    "motor_dofs",
-    "accel_site_names",
 ]
 
 END_EFFECTOR_SITE = "platform_center"

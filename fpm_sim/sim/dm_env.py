@@ -56,11 +56,11 @@ if TYPE_CHECKING:
     from dm_env import specs
 
 __all__ = [
+    "DEFAULT_SERVO_DAMPING_NMS_PER_RAD",
+    "DEFAULT_SERVO_STIFFNESS_NM_PER_RAD",
+    "OBSERVATION_KEYS",
     "FlexibleRegulation",  # noqa: F822  (defined on first use, module __getattr__)
     "regulation_env",
-    "DEFAULT_SERVO_STIFFNESS_NM_PER_RAD",
-    "DEFAULT_SERVO_DAMPING_NMS_PER_RAD",
-    "OBSERVATION_KEYS",
 ]
 
 DEFAULT_SERVO_STIFFNESS_NM_PER_RAD = 500.0

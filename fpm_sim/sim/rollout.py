@@ -51,14 +51,14 @@ from fpm_sim.model.options import BuiltModel, ModelOptions, check_finite, mujoco
 from fpm_sim.rom.reduction import END_EFFECTOR_SITE, motor_dofs
 
 __all__ = [
-    "aligned_options",
     "RolloutError",
     "RolloutResult",
-    "rollout",
+    "aligned_options",
     "constant",
-    "step_at",
-    "sine",
     "end_effector_pose",
+    "rollout",
+    "sine",
+    "step_at",
 ]
 
 Profile = Callable[[float], Sequence[float]]

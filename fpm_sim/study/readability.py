@@ -50,15 +50,15 @@ from fpm_sim.sim.impact import STUDY_IMPACT_POINT
 from fpm_sim.study.poses import ROTATION_RAD, TableReading, study_poses
 
 __all__ = [
-    "READABLE_PROMINENCE_DB",
     "READABLE_HEIGHT_DB",
+    "READABLE_PROMINENCE_DB",
     "Mode1Readability",
-    "mode1_readability",
     "ReadabilityRow",
     "ReadabilityTable",
-    "readability_table",
     "auc",
     "auc_p_value",
+    "mode1_readability",
+    "readability_table",
 ]
 
 READABLE_PROMINENCE_DB = 6.0

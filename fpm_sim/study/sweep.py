@@ -31,7 +31,7 @@ from fpm_sim.kinematics import Pose, assemble_many
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.study.poses import TableReading, study_poses
 
-__all__ = ["WorkspaceSweep", "sweep_workspace", "dense_grid", "singularity_fields", "SWEEP_CSV_COLUMNS"]
+__all__ = ["SWEEP_CSV_COLUMNS", "WorkspaceSweep", "dense_grid", "singularity_fields", "sweep_workspace"]
 
 SWEEP_CSV_COLUMNS = ("x_mm", "y_mm", "phi_rad", "f1_hz", "f2_hz", "f3_hz", "in_plane_mode1", "singularity", "status")
 
