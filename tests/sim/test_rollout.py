@@ -30,7 +30,8 @@ def flexible(symmetric_manip):
 def test_timestep_is_aligned_to_the_output_step(flexible):
     _, built, _ = flexible
     n = 1e-4 / built.timestep_s
-    assert abs(n - round(n)) < 1e-9 and built.timestep_s <= build_manipulator(
+    assert abs(n - round(n)) < 1e-9
+    assert built.timestep_s <= build_manipulator(
         flexible[0], POSE, ModelOptions(segments=3, axial=False)
     ).timestep_s * (1 + 1e-12)
 
@@ -147,7 +148,8 @@ def test_mujoco_warnings_never_write_a_log_file(tmp_path, monkeypatch):
     data.qfrc_applied[:] = np.nan
     with mujoco_messages() as messages:
         mujoco.mj_step(model, data)
-    assert messages and "QACC" in messages[0]
+    assert messages
+    assert "QACC" in messages[0]
     previous = mujoco.get_mju_user_warning()
     try:
         mujoco.set_mju_user_warning(None)
