@@ -40,7 +40,7 @@ def model_options(
     rotary_inertia: bool = False,
     timestep_s: float | None = None,
 ) -> ModelOptions:
-    """The model options of every entry point (see :class:`fpm_sim.model.options.ModelOptions`).
+    """Build the model options of every entry point (see :class:`fpm_sim.model.options.ModelOptions`).
 
     Parameters
     ----------
@@ -288,8 +288,9 @@ def reduce(
 
 
 def frf_grid(f_min_hz: float, f_max_hz: float, df_hz: float, modal_freq_hz: Sequence[float]) -> object:
-    """A frequency grid (Hz) from ``f_min_hz`` to ``f_max_hz`` by ``df_hz``, plus the natural frequencies
-    inside it (so that every resonance peak is sampled at its top).
+    """Make a frequency grid (Hz) from ``f_min_hz`` to ``f_max_hz`` by ``df_hz``, plus the natural frequencies.
+
+    The natural frequencies inside the band are added so that every resonance peak is sampled at its top.
     """
     import numpy as np
 
@@ -447,7 +448,7 @@ def reproduce(
     readability: bool = True,
     progress: bool = False,
 ) -> StudyReproduction:
-    """The study's subsystem tests and its 25 poses against COMSOL.
+    """Reproduce the study's subsystem tests and its 25 poses against COMSOL.
 
     Parameters
     ----------

@@ -149,7 +149,7 @@ def main() -> None:
 
     # 5: refinement: level (platform mass) first, then geometry and level ----------------------
     best = screens[0] if args.start else min(screens, key=lambda s: s.rms_log)
-    rd = [r for r in READINGS if r.name == best.reading][0]
+    rd = next(r for r in READINGS if r.name == best.reading)
     sp = study_poses(rd)
     poses, comsol = [p.pose for p in sp], [p.comsol_hz for p in sp]
     opts = fast_options(segments=4)

@@ -253,7 +253,7 @@ REPOSABLE_LINK_MODELS = ("segments", "rigid")
 """Link models :class:`PoseModel` re-poses (chains of rigid bodies); the others compile one model per pose."""
 
 
-IN_PLANE_DOF_KINDS = IN_PLANE_KINDS + ("passive",)
+IN_PLANE_DOF_KINDS = (*IN_PLANE_KINDS, "passive")
 """Degrees of freedom that move in the base plane (the z-hinges included); the rest move out of it."""
 
 

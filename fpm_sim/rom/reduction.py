@@ -446,7 +446,7 @@ class ReducedModel:
     def step_response(self, input_name: str, *, duration_s: float = 0.2, dt_s: float = 1e-4) -> StepResponse:
         """Response to a unit step (1 N or 1 N m) on ``input_name`` from rest at the equilibrium."""
         j = self.input_index(input_name)
-        t = np.arange(int(round(duration_s / dt_s)) + 1) * dt_s
+        t = np.arange(round(duration_s / dt_s) + 1) * dt_s
         u = np.zeros((len(t), len(self.input_names)))
         u[:, j] = 1.0
         return StepResponse(t, self.simulate(t, u), input_name, list(self.output_names), list(self.output_units))

@@ -137,7 +137,7 @@ def _headless_dm_control() -> tuple[Any, Any, Any]:
 @functools.cache
 def _task_class() -> type:
     """:class:`FlexibleRegulation`, defined on first use (it derives from dm_control's ``Task``)."""
-    dm_mujoco, control, specs = _headless_dm_control()
+    _dm_mujoco, control, specs = _headless_dm_control()
 
     class FlexibleRegulation(control.Task):
         """End-effector regulation under link vibration (see module docstring).

@@ -336,9 +336,9 @@ def rollout(
         raise RolloutError(f"output_step_s must be a finite time, got {output_step_s!r}")
     if not (output_step_s >= h * (1 - 1e-9)):
         raise RolloutError(f"output_step_s ({output_step_s:g} s) must be at least the model timestep ({h:.3g} s)")
-    n_sub = max(1, int(round(output_step_s / h)))
+    n_sub = max(1, round(output_step_s / h))
     dt_out = n_sub * h
-    n_out = int(round(duration_s / dt_out))
+    n_out = round(duration_s / dt_out)
     mdofs = motor_dofs(model)
     if (motor_torque is not None or motor_reference is not None) and len(mdofs) != 3:
         raise RolloutError(

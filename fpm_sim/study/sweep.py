@@ -51,7 +51,7 @@ def dense_grid(config: Manipulator, *, step_mm: float, phi_rad: float = 0.0) -> 
     if not step_mm > 0:
         raise FpmSimError(f"--step-mm must be > 0, got {step_mm}")
     half = _reach_half_width(config)
-    n = int(math.floor(half * 1e3 / step_mm))
+    n = math.floor(half * 1e3 / step_mm)
     ticks = np.arange(-n, n + 1) * step_mm
     if ticks.size > 401:
         raise FpmSimError(f"--step-mm {step_mm} gives {ticks.size} x {ticks.size} points; use a larger step")

@@ -80,7 +80,7 @@ def test_config_template_round_trips(tmp_path, capsys):
 
 def test_export_mjcf(tmp_path, capsys):
     out_file = tmp_path / "m.xml"
-    code, out, _ = run(capsys, "export-mjcf", "manipulator", "--segments", "2", "--out", str(out_file))
+    code, _out, _ = run(capsys, "export-mjcf", "manipulator", "--segments", "2", "--out", str(out_file))
     assert code == 0
     assert out_file.read_text().startswith("<mujoco")
 

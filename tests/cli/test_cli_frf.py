@@ -46,7 +46,7 @@ def test_frf_table_with_user_damping(capsys):
 
 
 @pytest.mark.parametrize(
-    "argv, match",
+    ("argv", "match"),
     [
         (["--input-link", "distal_5"], "unknown link"),
         (["--input-fraction", "2"], "fraction"),

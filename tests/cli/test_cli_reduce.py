@@ -66,7 +66,7 @@ def test_reduce_servo_motors_add_torque_inputs(capsys):
 
 
 @pytest.mark.parametrize(
-    "argv, match",
+    ("argv", "match"),
     [
         (["--modes", "0"], "--modes"),
         (["--modes", "2", "--out", "rom.txt"], ".mat or .npz"),

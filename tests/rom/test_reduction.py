@@ -56,7 +56,7 @@ def _full_linear_step(built, system, input_col, duration_s):
 
     eps = 1e-3
     b = (step(system.b_q[:, input_col] * eps) - step(np.zeros(nv))) / eps
-    n = int(round(duration_s / model.opt.timestep))
+    n = round(duration_s / model.opt.timestep)
     x = np.zeros(2 * nv)
     ys = np.empty((n + 1, 3))
     for k in range(n + 1):

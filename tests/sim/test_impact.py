@@ -109,7 +109,7 @@ def test_point_acceleration_is_rigid_body_kinematics(symmetric_manip):
     data = mujoco.MjData(model)
     pt = LinkPoint("distal_1", 0.37, "z")
     mujoco.mj_forward(model, data)
-    bid, p, e = locate(built, data, pt)
+    bid, p, _e = locate(built, data, pt)
     mujoco.mj_applyFT(model, data, np.array([0.0, 0.0, 3.0]), np.zeros(3), p, bid, data.qfrc_applied)
     mujoco.mj_forward(model, data)
     mujoco.mj_rnePostConstraint(model, data)
