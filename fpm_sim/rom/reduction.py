@@ -547,6 +547,7 @@ class ReducedModel:
             with open_for_writing(p, error=ReductionError) as f:
                 np.savez(
                     f,
+                    allow_pickle=True,  # named (its default): else mypy matches the unpacked arrays to it
                     **{
                         k: (v.astype(str) if isinstance(v, np.ndarray) and v.dtype == object else v)
                         for k, v in arrays.items()

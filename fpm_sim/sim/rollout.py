@@ -41,6 +41,7 @@ from typing import Any
 
 import mujoco
 import numpy as np
+from numpy.typing import ArrayLike
 
 from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError
@@ -61,7 +62,8 @@ __all__ = [
     "step_at",
 ]
 
-Profile = Callable[[float], Sequence[float]]
+Profile = Callable[[float], ArrayLike]
+"""A load as a function of time (s): three numbers, a sequence or an array (see the module docstring)."""
 
 
 class RolloutError(FpmSimError):
@@ -194,7 +196,7 @@ class RolloutResult:
                     fmt="%.10g",
                 )
             else:
-                np.savez(f, **cols)
+                np.savez(f, allow_pickle=True, **cols)  # named (its default): else mypy matches the columns to it
         return p
 
     def to_dict(self) -> dict[str, Any]:
@@ -275,7 +277,7 @@ def aligned_options(manip: Manipulator, pose: Pose, options: ModelOptions, outpu
     return dataclasses.replace(options, timestep_s=output_step_s / n)
 
 
-def _load(name: str, value: Sequence[float], t_s: float) -> np.ndarray:
+def _load(name: str, value: ArrayLike, t_s: float) -> np.ndarray:
     v = np.asarray(value, float)
     if v.shape != (3,) or not np.all(np.isfinite(v)):
         raise RolloutError(f"{name} must give 3 finite values, got {value!r} at t = {t_s:g} s")
