@@ -17,6 +17,9 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import ArrayLike
+
     from fpm_sim.config import Manipulator, RigConfig
     from fpm_sim.frf import FrequencyResponse, LinkPoint
     from fpm_sim.kinematics import Pose
@@ -287,7 +290,7 @@ def reduce(
     )
 
 
-def frf_grid(f_min_hz: float, f_max_hz: float, df_hz: float, modal_freq_hz: Sequence[float]) -> object:
+def frf_grid(f_min_hz: float, f_max_hz: float, df_hz: float, modal_freq_hz: ArrayLike) -> np.ndarray:
     """Make a frequency grid (Hz) from ``f_min_hz`` to ``f_max_hz`` by ``df_hz``, plus the natural frequencies.
 
     The natural frequencies inside the band are added so that every resonance peak is sampled at its top.
@@ -365,7 +368,7 @@ def frf(
         system,
         excitation=exc,
         response=resp,
-        freq_hz=frf_grid(f_min_hz, f_max_hz, df_hz, system.frequencies_hz),  # type: ignore[arg-type]
+        freq_hz=frf_grid(f_min_hz, f_max_hz, df_hz, system.frequencies_hz),
         quantity=quantity,
         damping_ratio=damping_ratio,
         n_modes=n_modes,

@@ -403,7 +403,7 @@ def batched_modes(
     ``k_diag`` is the diagonal of ``K`` (spring energy of the mode character).
     """
 
-    def one(p: dict[str, jax.Array]) -> tuple[jax.Array, ...]:
+    def one(p: dict[str, jax.Array]) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
         mass, stiff, jac = linearise(s, p, p["qpos0"], geometric=geometric)
         w2, x, ratio = reduced_modes(mass, stiff, jac, n_modes)
         return w2, x, jnp.diag(stiff), ratio

@@ -199,7 +199,7 @@ class Mode:
 
     @property
     def dominant(self) -> str:
-        return max(self.character, key=self.character.get) if self.character else "-"
+        return max(self.character, key=self.character.__getitem__) if self.character else "-"
 
 
 @dataclass

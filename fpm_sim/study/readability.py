@@ -350,7 +350,7 @@ def _dominant(system: ModalSystem) -> str:
     kinds = np.array(system.built.dof_kinds)
     shares = {kd: float(e[kinds == kd].sum()) for kd in set(kinds)}
     tot = sum(shares.values()) or 1.0
-    kd = max(shares, key=shares.get)
+    kd = max(shares, key=shares.__getitem__)
     return f"{kd} {shares[kd] / tot:.0%}"
 
 
