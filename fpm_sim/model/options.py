@@ -302,7 +302,8 @@ class BuiltModel:
         return float(self.model.opt.timestep)
 
     def to_xml(self) -> str:
-        return self.spec.to_xml()
+        xml: str = self.spec.to_xml()
+        return xml
 
 
 def new_spec(model_name: str, *, gravity: bool) -> mujoco.MjSpec:
@@ -381,10 +382,12 @@ def passive_stiffness_matrix(model: mujoco.MjModel, qpos: np.ndarray | None = No
         data.qpos[:] = q
         data.qvel[:] = 0.0
         mujoco.mj_forward(model, data)
-        return data.qfrc_passive.copy()
+        force: np.ndarray = data.qfrc_passive.copy()
+        return force
 
     k = -tangent_jacobian(model, q0, passive, eps)
-    return 0.5 * (k + k.T)
+    sym: np.ndarray = 0.5 * (k + k.T)
+    return sym
 
 
 def passive_damping_matrix(model: mujoco.MjModel, qpos: np.ndarray, eps: float = 1e-6) -> np.ndarray:
