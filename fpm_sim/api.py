@@ -17,6 +17,9 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import ArrayLike
+
     from fpm_sim.config import Manipulator, RigConfig
     from fpm_sim.frf import FrequencyResponse, LinkPoint
     from fpm_sim.kinematics import Pose
@@ -27,7 +30,7 @@ if TYPE_CHECKING:
     from fpm_sim.study.reproduce import StudyReproduction
     from fpm_sim.study.sweep import WorkspaceSweep
 
-__all__ = ["modes", "rig_modes", "sweep", "reduce", "frf", "frf_grid", "rollout", "reproduce", "model_options"]
+__all__ = ["frf", "frf_grid", "model_options", "modes", "reduce", "reproduce", "rig_modes", "rollout", "sweep"]
 
 
 def model_options(
@@ -40,7 +43,7 @@ def model_options(
     rotary_inertia: bool = False,
     timestep_s: float | None = None,
 ) -> ModelOptions:
-    """The model options of every entry point (see :class:`fpm_sim.model.options.ModelOptions`).
+    """Build the model options of every entry point (see :class:`fpm_sim.model.options.ModelOptions`).
 
     Parameters
     ----------
@@ -287,9 +290,11 @@ def reduce(
     )
 
 
-def frf_grid(f_min_hz: float, f_max_hz: float, df_hz: float, modal_freq_hz: Sequence[float]) -> object:
-    """A frequency grid (Hz) from ``f_min_hz`` to ``f_max_hz`` by ``df_hz``, plus the natural frequencies
-    inside it (so that every resonance peak is sampled at its top)."""
+def frf_grid(f_min_hz: float, f_max_hz: float, df_hz: float, modal_freq_hz: ArrayLike) -> np.ndarray:
+    """Make a frequency grid (Hz) from ``f_min_hz`` to ``f_max_hz`` by ``df_hz``, plus the natural frequencies.
+
+    The natural frequencies inside the band are added so that every resonance peak is sampled at its top.
+    """
     import numpy as np
 
     from fpm_sim.frf import FrfError
@@ -363,7 +368,7 @@ def frf(
         system,
         excitation=exc,
         response=resp,
-        freq_hz=frf_grid(f_min_hz, f_max_hz, df_hz, system.frequencies_hz),  # type: ignore[arg-type]
+        freq_hz=frf_grid(f_min_hz, f_max_hz, df_hz, system.frequencies_hz),
         quantity=quantity,
         damping_ratio=damping_ratio,
         n_modes=n_modes,
@@ -446,7 +451,7 @@ def reproduce(
     readability: bool = True,
     progress: bool = False,
 ) -> StudyReproduction:
-    """The study's subsystem tests and its 25 poses against COMSOL.
+    """Reproduce the study's subsystem tests and its 25 poses against COMSOL.
 
     Parameters
     ----------

@@ -12,8 +12,8 @@ __all__ = [
     "BETA_L",
     "euler_bernoulli_hz",
     "shear_coefficient_rectangle",
-    "timoshenko_simply_supported_hz",
     "timoshenko_beam_hz",
+    "timoshenko_simply_supported_hz",
 ]
 
 BETA_L: dict[str, tuple[float, ...]] = {

@@ -47,17 +47,17 @@ from fpm_sim.rom.reduction import ModalSystem
 __all__ = [
     "AXES",
     "QUANTITIES",
+    "FrequencyResponse",
     "FrfError",
     "LinkPoint",
     "MaterialPoint",
-    "material_point",
-    "locate",
     "Peak",
-    "FrequencyResponse",
-    "point_row",
+    "half_power_damping",
+    "locate",
+    "material_point",
     "modal_frf",
     "pick_peaks",
-    "half_power_damping",
+    "point_row",
 ]
 
 AXES = ("normal", "along", "z", "x", "y")
@@ -337,7 +337,7 @@ class FrequencyResponse:
             "response": self.response,
             "f_min_hz": float(self.freq_hz[0]),
             "f_max_hz": float(self.freq_hz[-1]),
-            "n_freq": int(len(self.freq_hz)),
+            "n_freq": len(self.freq_hz),
             "peaks": [
                 {"freq_hz": p.freq_hz, "magnitude": p.magnitude, "prominence_db": p.prominence_db}
                 for p in self.peaks()[:n_peaks]

@@ -33,22 +33,22 @@ from fpm_sim.config import Geometry
 from fpm_sim.errors import FpmSimError, FpmSimWarning
 
 __all__ = [
-    "Pose",
+    "NEAR_SINGULAR_WARN",
+    "SINGULAR_TOL",
+    "Assemblies",
     "Assembly",
+    "NearSingularityWarning",
+    "Pose",
+    "SingularPoseError",
     "SingularityMeasure",
     "UnreachablePoseError",
-    "SingularPoseError",
-    "NearSingularityWarning",
-    "SINGULAR_TOL",
-    "NEAR_SINGULAR_WARN",
-    "inverse_kinematics",
-    "Assemblies",
     "assemble_many",
-    "forward_kinematics",
-    "jacobians",
-    "singularity_measure",
     "base_points",
+    "forward_kinematics",
+    "inverse_kinematics",
+    "jacobians",
     "platform_points",
+    "singularity_measure",
 ]
 
 SINGULAR_TOL = 1e-3

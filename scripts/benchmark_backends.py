@@ -38,7 +38,7 @@ from fpm_sim.study.sweep import dense_grid
 BATCHED = ("jax", "mjx")
 
 
-def reachable_poses(config, n: int) -> list:  # noqa: ANN001
+def reachable_poses(config, n: int) -> list:
     """``n`` reachable, non-singular poses spread evenly over a 5 mm dense grid (phi = 0)."""
     ok = []
     for p in dense_grid(config, step_mm=5.0):
@@ -53,14 +53,14 @@ def reachable_poses(config, n: int) -> list:  # noqa: ANN001
     return [ok[i] for i in idx]
 
 
-def timed(config, poses, **kwargs):  # noqa: ANN001, ANN003, ANN201
+def timed(config, poses, **kwargs):
     """``pose_frequencies(config, poses, **kwargs)`` and its wall time (s)."""
     t0 = time.perf_counter()
     out = pose_frequencies(config, poses, **kwargs)
     return out, time.perf_counter() - t0
 
 
-def gradient_lines(config, opts, study, cpu_study, n_modes: int) -> None:  # noqa: ANN001
+def gradient_lines(config, opts, study, cpu_study, n_modes: int) -> None:
     """Time the JAX frequency gradients against central differences of the cpu path; print two lines."""
     kw = {"n_modes": n_modes, "options": opts}
     grad_names = ["section.thickness_m", "material.young_pa", "hardware.platform.mass_kg"]

@@ -51,7 +51,7 @@ from fpm_sim.model.options import dof_stiffness
 from fpm_sim.study.sweep import dense_grid
 
 
-def _before_solve_pose(manip, pose, opts, n_modes):  # noqa: ANN001, ANN202 - verbatim baseline (cf32cb4)
+def _before_solve_pose(manip, pose, opts, n_modes):
     nan = np.full(n_modes, np.nan)
     built, singularity, status = assemble_pose(manip, pose, opts)
     if built is None:
@@ -79,12 +79,12 @@ def _before_solve_pose(manip, pose, opts, n_modes):  # noqa: ANN001, ANN202 - ve
     return freq, frac, singularity, status
 
 
-def _before_chunk(args):  # noqa: ANN001, ANN202
+def _before_chunk(args):
     manip, poses, opts, n_modes = args
     return [_before_solve_pose(manip, p, opts, n_modes) for p in poses]
 
 
-def _before(cfg, poses, opts, workers):  # noqa: ANN001, ANN202 - the old cpu backend's loop
+def _before(cfg, poses, opts, workers):
     if workers <= 1:
         res = [_before_solve_pose(cfg, p, opts, 3) for p in poses]
     else:
@@ -97,7 +97,7 @@ def _before(cfg, poses, opts, workers):  # noqa: ANN001, ANN202 - the old cpu ba
     return np.array([r[0] for r in res])
 
 
-def _floor(cfg, poses, opts):  # noqa: ANN001, ANN202
+def _floor(cfg, poses, opts):
     """Seconds of the eigen-solves alone: as the pose loop runs them (in-plane and out-of-plane blocks),
     on the whole matrices (one reduced_eigenproblem per pose), and the whole matrices' lowest three only."""
     from fpm_sim.batch.pose_loop import PoseModel, plane_blocks, pose_assembly, structural_length_m
@@ -157,7 +157,7 @@ def _engine_overhead(n_tasks: int) -> tuple[float, float, float]:
     return t_start, t_many, t_one
 
 
-def _time_jax(cfg, poses, now, opts, n):  # noqa: ANN001, ANN202
+def _time_jax(cfg, poses, now, opts, n):
     """The batched JAX backend (issue 5) on the first n computed poses: its stages, against this loop."""
     from fpm_sim.batch import jax_backend
     from fpm_sim.batch.frequencies import BACKENDS

@@ -96,7 +96,7 @@ def install(folder: Path) -> None:
     print(f"installed {folder / 'config.toml'} as {target}")
 
 
-def nominal_start():  # noqa: ANN201
+def nominal_start():
     """A nominal description: the study's stated values, generic assumptions, nothing identified."""
     from fpm_sim.config import RigConfig, Section
 

@@ -78,7 +78,7 @@ def loopback_cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     sched_file = Path(tmp) / "scheduler.json"
     dask_cli = [sys.executable, "-m", "dask"]
     procs: list[subprocess.Popen] = []
-    logs = [open(Path(tmp) / f"{name}.log", "w") for name in ("scheduler", "worker0", "worker1")]  # noqa: SIM115
+    logs = [open(Path(tmp) / f"{name}.log", "w") for name in ("scheduler", "worker0", "worker1")]
     try:
         procs.append(
             subprocess.Popen(

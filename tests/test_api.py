@@ -12,8 +12,8 @@ import pytest
 
 matplotlib.use("Agg")  # the tests' choice; the library never selects a backend
 
-import fpm_sim as fs  # noqa: E402
-from fpm_sim.frf import LinkPoint  # noqa: E402
+import fpm_sim as fs
+from fpm_sim.frf import LinkPoint
 
 SEG = 3  # a tiny model: 3 spring locations per link
 
@@ -25,7 +25,8 @@ def check_result(result, *, expect_resolution: bool = True) -> dict:
     d = result.to_dict()
     json.dumps(d)  # JSON-ready
     text = result.table()
-    assert isinstance(text, str) and text.strip()
+    assert isinstance(text, str)
+    assert text.strip()
     fig = result.plot()
     assert isinstance(fig, Figure)
     import matplotlib.pyplot as plt
@@ -49,7 +50,8 @@ def test_modes_and_rig_modes():
     pose = fs.Pose.from_mm(20, -10, 0.05)
     r = fs.modes(cfg, pose, segments=SEG, n_modes=3)
     d = check_result(r)
-    assert len(d["modes"]) == 3 and r.frequencies_hz[0] > 0
+    assert len(d["modes"]) == 3
+    assert r.frequencies_hz[0] > 0
     # the same model through the library's own builder gives the same frequencies
     from fpm_sim.linear.analysis import analyse
     from fpm_sim.model.manipulator import build_manipulator

@@ -45,7 +45,8 @@ size_float = st.one_of(
 
 def _sane(freq_hz: np.ndarray) -> None:
     assert freq_hz.size > 0
-    assert np.all(np.isfinite(freq_hz)) and np.all(freq_hz > 0)
+    assert np.all(np.isfinite(freq_hz))
+    assert np.all(freq_hz > 0)
     assert np.all(np.diff(freq_hz) >= -1e-9 * freq_hz[1:])  # ascending
 
 
@@ -159,13 +160,15 @@ def test_validation_helpers(value):
     except FpmSimError as e:
         assert "widgets" in str(e)
     else:
-        assert 1 <= n <= 100 and not isinstance(value, (bool, str))
+        assert 1 <= n <= 100
+        assert not isinstance(value, (bool, str))
     try:
         arr = check_finite("force_n", value, positive=True)
     except FpmSimError as e:
         assert "force_n" in str(e)
     else:
-        assert np.all(np.isfinite(arr)) and np.all(arr > 0)
+        assert np.all(np.isfinite(arr))
+        assert np.all(arr > 0)
 
 
 @settings(max_examples=8, deadline=None, derandomize=True)

@@ -39,15 +39,15 @@ from typing import Any
 from fpm_sim.errors import FpmSimError
 
 __all__ = [
-    "EngineOptions",
-    "EngineError",
-    "run_chunks",
-    "chunk_size",
-    "split",
-    "MIN_CHUNK",
-    "MAX_CHUNK",
     "LOCAL_CLUSTER_MIN_ITEMS",
+    "MAX_CHUNK",
+    "MIN_CHUNK",
+    "EngineError",
+    "EngineOptions",
+    "chunk_size",
     "chunk_store",
+    "run_chunks",
+    "split",
 ]
 
 MIN_CHUNK = 16
@@ -284,6 +284,6 @@ def _dashboard(client: Any) -> str | None:
     """The dashboard address, or ``None`` if the scheduler serves none."""
     try:
         services = client.scheduler_info().get("services", {})
-    except Exception:  # noqa: BLE001 - informational only
+    except Exception:  # informational only: no dashboard address is not an error
         return None
     return client.dashboard_link if "dashboard" in services else None

@@ -51,23 +51,23 @@ from fpm_sim.linear.modal import constraint_rank
 from fpm_sim.model.options import BuiltModel, ModelOptions
 
 __all__ = [
-    "BackendTimings",
-    "CompileCache",
-    "TimedPoseFrequencies",
+    "GRADIENT_PARAMETERS",
     "AssembledPoses",
-    "assemble_poses",
+    "BackendTimings",
     "BatchSolver",
+    "CompileCache",
+    "FrequencyGradients",
+    "TimedPoseFrequencies",
+    "assemble_poses",
     "batched_pose_frequencies",
     "check_options",
     "frequencies_from_modes",
-    "jax_pose_frequencies",
-    "x64",
-    "FrequencyGradients",
-    "GRADIENT_PARAMETERS",
     "frequency_gradients",
-    "pose_frequency_gradients",
+    "jax_pose_frequencies",
     "parameter_value",
+    "pose_frequency_gradients",
     "with_parameter",
+    "x64",
 ]
 
 COMPILE_CACHE_SIZE = 8
@@ -126,7 +126,8 @@ def x64() -> Iterator[None]:
     import jax
 
     cache_dir = os.environ.get("FPM_SIM_JAX_CACHE_DIR")
-    if cache_dir and not jax.config.jax_compilation_cache_dir:  # opt-in, never over the caller's own choice
+    # opt-in, never over the caller's own choice; jax's Config stub does not declare its options as attributes
+    if cache_dir and not jax.config.jax_compilation_cache_dir:  # type: ignore[attr-defined]
         jax.config.update("jax_compilation_cache_dir", cache_dir)
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
     with jax.enable_x64(True):

@@ -44,14 +44,14 @@ from fpm_sim.errors import FpmSimError
 __all__ = [
     "PARAM_FIELDS",
     "Structure",
-    "structure_of",
-    "params_of",
-    "stack_params",
-    "smooth_terms",
-    "linearise",
-    "reduced_modes",
     "batched_modes",
+    "linearise",
     "modal_sensitivity",
+    "params_of",
+    "reduced_modes",
+    "smooth_terms",
+    "stack_params",
+    "structure_of",
 ]
 
 PARAM_FIELDS = (
@@ -403,7 +403,7 @@ def batched_modes(
     ``k_diag`` is the diagonal of ``K`` (spring energy of the mode character).
     """
 
-    def one(p: dict[str, jax.Array]) -> tuple[jax.Array, ...]:
+    def one(p: dict[str, jax.Array]) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
         mass, stiff, jac = linearise(s, p, p["qpos0"], geometric=geometric)
         w2, x, ratio = reduced_modes(mass, stiff, jac, n_modes)
         return w2, x, jnp.diag(stiff), ratio

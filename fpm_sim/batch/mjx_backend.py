@@ -51,13 +51,13 @@ from fpm_sim.kinematics import Pose
 from fpm_sim.model.options import BuiltModel, ModelOptions
 
 __all__ = [
-    "MjxModelError",
     "SERIAL_DOF_LIMIT",
+    "MjxModelError",
     "check_mjx_model",
     "import_mjx",
-    "serial_dofs",
     "mjx_linearisation",
     "mjx_pose_frequencies",
+    "serial_dofs",
     "smooth_force",
     "stack_models",
 ]
@@ -153,7 +153,7 @@ def stack_models(models: Sequence[mujoco.MjModel]) -> Any:
     put = [mjx.put_model(m) for m in models]
     treedef = jax.tree_util.tree_structure(put[0])
     for i, mx in enumerate(put[1:], start=1):
-        if jax.tree_util.tree_structure(mx) != treedef:
+        if jax.tree_util.tree_structure(mx) != treedef:  # type: ignore[operator]  # jaxlib stub: PyTreeDef unresolved
             raise MjxModelError(f"model {i}: its structure (static MJX fields) differs from the first model's")
     return jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *put)
 

@@ -37,6 +37,7 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
+from numpy.typing import ArrayLike
 
 from fpm_sim.batch.engine import EngineOptions, chunk_size, run_chunks, split
 from fpm_sim.config import Manipulator
@@ -55,22 +56,22 @@ from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import BuiltModel, ModelOptions, dof_stiffness, resolve_segments
 
 __all__ = [
-    "assemble_pose",
-    "pose_assembly",
-    "PoseModel",
-    "solve_poses",
-    "cpu_backend",
-    "merge",
-    "read_poses_csv",
-    "PosesFileError",
-    "REPOSABLE_LINK_MODELS",
     "FAST_SEGMENTS",
-    "PoseFrequencies",
-    "fast_options",
-    "IN_PLANE_KINDS",
     "IN_PLANE_DOF_KINDS",
-    "plane_blocks",
+    "IN_PLANE_KINDS",
+    "REPOSABLE_LINK_MODELS",
     "PlaneSplit",
+    "PoseFrequencies",
+    "PoseModel",
+    "PosesFileError",
+    "assemble_pose",
+    "cpu_backend",
+    "fast_options",
+    "merge",
+    "plane_blocks",
+    "pose_assembly",
+    "read_poses_csv",
+    "solve_poses",
 ]
 
 FAST_SEGMENTS = resolve_segments()
@@ -136,7 +137,8 @@ def pose_assembly(config: Manipulator, pose: Pose) -> tuple[Assembly | None, flo
     Unreachable and singular poses get no assembly (status :data:`STATUS_UNREACHABLE` /
     :data:`STATUS_SINGULAR`); near-singular ones are assembled and marked :data:`STATUS_NEAR`.
     """
-    many = assemble_many(config.geometry, pose.x_m, pose.y_m, pose.phi_rad)
+    # assemble_many broadcasts array-likes; its annotation says ndarray until kinematics.py takes ArrayLike
+    many = assemble_many(config.geometry, pose.x_m, pose.y_m, pose.phi_rad)  # type: ignore[arg-type]
     singularity, status = float(many.singularity[0]), _status(float(many.singularity[0]), bool(many.reachable[0]))
     if status in (STATUS_UNREACHABLE, STATUS_SINGULAR):
         return None, singularity, status
@@ -253,7 +255,7 @@ REPOSABLE_LINK_MODELS = ("segments", "rigid")
 """Link models :class:`PoseModel` re-poses (chains of rigid bodies); the others compile one model per pose."""
 
 
-IN_PLANE_DOF_KINDS = IN_PLANE_KINDS + ("passive",)
+IN_PLANE_DOF_KINDS = (*IN_PLANE_KINDS, "passive")
 """Degrees of freedom that move in the base plane (the z-hinges included); the rest move out of it."""
 
 
@@ -275,7 +277,7 @@ class PlaneSplit:
         Spring stiffness per degree of freedom.
     """
 
-    def __init__(self, in_plane: np.ndarray, stiffness: np.ndarray) -> None:
+    def __init__(self, in_plane: ArrayLike, stiffness: ArrayLike) -> None:
         self.in_plane = np.asarray(in_plane, bool)
         self.stiffness = np.asarray(stiffness, float)
         nv = self.in_plane.size
@@ -395,7 +397,8 @@ def solve_poses(
     frac = np.full((len(poses), n_modes), np.nan)
     if not poses:
         return PoseFrequencies(poses=[], frequencies_hz=freq, in_plane=frac, singularity=np.zeros(0), status=[])
-    many = assemble_many(config.geometry, [p.x_m for p in poses], [p.y_m for p in poses], [p.phi_rad for p in poses])
+    xs, ys, phis = [p.x_m for p in poses], [p.y_m for p in poses], [p.phi_rad for p in poses]
+    many = assemble_many(config.geometry, xs, ys, phis)  # type: ignore[arg-type]  # array-likes, as above
     sing = many.singularity
     status = [_status(float(v), bool(r)) for v, r in zip(sing, many.reachable)]
     reposable = options.link_model in REPOSABLE_LINK_MODELS and not recompile

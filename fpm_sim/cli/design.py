@@ -24,7 +24,7 @@ from fpm_sim.cli.common import (
     with_resolution,
 )
 
-__all__ = ["register", "cmd_design"]
+__all__ = ["cmd_design", "register"]
 
 READINGS = ("x+", "x-", "y+", "y-")
 

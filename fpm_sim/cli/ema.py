@@ -9,7 +9,7 @@ from pathlib import Path
 
 from fpm_sim.cli.common import CliError, add_output_args, add_overwrite_arg, emit
 
-__all__ = ["register", "cmd_ema"]
+__all__ = ["cmd_ema", "register"]
 
 
 def cmd_ema(args: argparse.Namespace) -> int:

@@ -23,7 +23,7 @@ from fpm_sim.cli.common import (
 )
 from fpm_sim.cli.main import PLOT_SUFFIXES, save_figure
 
-__all__ = ["register", "add_point_args", "point_of", "save_figure", "LinkPointDefault"]
+__all__ = ["LinkPointDefault", "add_point_args", "point_of", "register", "save_figure"]
 
 AXES = ("normal", "along", "z", "x", "y")
 """Directions of a link point (checked against :data:`fpm_sim.frf.AXES` by the tests; listed here so that

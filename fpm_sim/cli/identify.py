@@ -9,7 +9,7 @@ from pathlib import Path
 
 from fpm_sim.cli.common import CliError, add_config_args, add_output_args, add_overwrite_arg, emit, load_manipulator
 
-__all__ = ["register", "cmd_identify", "parse_measured_arg"]
+__all__ = ["cmd_identify", "parse_measured_arg", "register"]
 
 GROUPS = ("geometry", "geometry-per-chain", "hubs", "hardware", "section", "compliance", "rig")
 """:data:`fpm_sim.study.identify.GROUPS`, listed here so that building the parser imports neither MuJoCo nor

@@ -53,7 +53,7 @@ if TYPE_CHECKING:
     from fpm_sim.linear.modal import ModalResult
     from fpm_sim.model.options import BuiltModel
 
-__all__ = ["main", "build_parser", "COMMAND_MODULES", "save_figure"]
+__all__ = ["COMMAND_MODULES", "build_parser", "main", "save_figure"]
 
 COMMAND_MODULES: list[str] = [
     "fpm_sim.cli.reproduce",
@@ -126,8 +126,15 @@ def _header(built: BuiltModel, title: str) -> str:
     )
 
 
+def _primary(result: ModalResult | ModalComparison) -> ModalResult:
+    """The transitionFD result of a comparison (``--method both``), else the result itself."""
+    from fpm_sim.linear.analysis import ModalComparison
+
+    return result.transition_fd if isinstance(result, ModalComparison) else result
+
+
 def _n_modes_note(result: ModalResult | ModalComparison, n_modes: int) -> str:
-    primary = getattr(result, "transition_fd", result)
+    primary = _primary(result)
     n = len(primary.modes)
     return f"\nnote: {n} physical modes found, fewer than --n-modes {n_modes}" if n < n_modes else ""
 
@@ -140,7 +147,7 @@ def _shapes_and_plot(args: argparse.Namespace, result: ModalResult | ModalCompar
     """Add Cartesian mode shapes to the payload (``--shapes``) and save a figure (``--plot``)."""
     import numpy as np
 
-    primary = getattr(result, "transition_fd", result)
+    primary = _primary(result)
     note = ""
     if args.shapes:
         n = min(args.n_modes, len(primary.modes))

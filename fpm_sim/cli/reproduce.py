@@ -23,7 +23,7 @@ from fpm_sim.cli.common import (
     with_resolution,
 )
 
-__all__ = ["register", "cmd_reproduce", "add_study_args", "study_manipulator", "study_options", "default_out"]
+__all__ = ["add_study_args", "cmd_reproduce", "default_out", "register", "study_manipulator", "study_options"]
 
 READINGS = ("x+", "x-", "y+", "y-")
 

@@ -23,7 +23,7 @@ from fpm_sim.cli.common import (
 )
 from fpm_sim.cli.main import PLOT_SUFFIXES, save_figure
 
-__all__ = ["register", "add_motor_args", "apply_motor_args", "equilibrium_hint"]
+__all__ = ["add_motor_args", "apply_motor_args", "equilibrium_hint", "register"]
 
 
 def equilibrium_hint(exc: Exception, args: argparse.Namespace) -> str:

@@ -18,7 +18,7 @@ from fpm_sim.cli.common import (
 )
 from fpm_sim.cli.reproduce import add_study_args, default_out, study_manipulator, study_options
 
-__all__ = ["register", "cmd_sweep"]
+__all__ = ["cmd_sweep", "register"]
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:

@@ -38,13 +38,14 @@ DEFAULT_BAND_HZ = 500.0
 def cmd_transient(args: argparse.Namespace) -> int:
     from fpm_sim.cli.rollout import equilibrium_hint
     from fpm_sim.linear.equilibrium import EquilibriumError
-    from fpm_sim.model.options import warn_if_coarse
+    from fpm_sim.model.options import resolve_segments, warn_if_coarse
     from fpm_sim.outputs import atomic_dir
     from fpm_sim.study.transient import STUDY_POSE, STUDY_THICKNESS_M, study_transient
 
     if args.out is not None:
         check_output_dir(args.out, "--out", overwrite=args.overwrite)
     manip = load_manipulator(args)
+    thickness: float | None
     if args.study:
         if manip.motors.mode != "locked":
             raise CliError("--study needs motors.mode = 'locked' (the study's motors were locked); check --config")
@@ -57,8 +58,9 @@ def cmd_transient(args: argparse.Namespace) -> int:
         if not getattr(args, name) > 0:
             raise CliError(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)!r}")
     opts = model_options(args)
-    if opts.segments < 2:
-        raise CliError(f"--segments must be >= 2 for a flexible transient, got {opts.segments}")
+    segments = resolve_segments(segments=opts.segments, link_model=opts.link_model)  # ModelOptions resolved it
+    if segments < 2:
+        raise CliError(f"--segments must be >= 2 for a flexible transient, got {segments}")
     warn_if_coarse(opts)
     try:
         res = study_transient(
@@ -68,7 +70,7 @@ def cmd_transient(args: argparse.Namespace) -> int:
             force_n=args.force_n,
             duration_s=args.duration_s,
             output_step_s=args.output_step_s,
-            segments=opts.segments,
+            segments=segments,
             axial=opts.axial,
             band_hz=None if args.modes else args.band_hz,
             n_modes=args.modes,

@@ -22,21 +22,21 @@ from typing import Any
 from fpm_sim.errors import FpmSimError
 
 __all__ = [
-    "ConfigError",
-    "Geometry",
-    "Section",
-    "Material",
-    "LumpedMass",
-    "Hardware",
-    "Compliance",
-    "Motors",
-    "Damping",
-    "RigConfig",
-    "Manipulator",
-    "load_config",
-    "default_config",
     "DEFAULT_CONFIG_NAME",
+    "Compliance",
+    "ConfigError",
+    "Damping",
+    "Geometry",
+    "Hardware",
+    "LumpedMass",
+    "Manipulator",
+    "Material",
+    "Motors",
+    "RigConfig",
+    "Section",
     "config_to_toml",
+    "default_config",
+    "load_config",
 ]
 
 DEFAULT_CONFIG_NAME = "default_3rrr.toml"

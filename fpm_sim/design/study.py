@@ -38,18 +38,18 @@ from fpm_sim.kinematics import Pose
 from fpm_sim.model.options import ModelOptions
 
 __all__ = [
+    "COMPUTED",
     "DesignError",
     "DesignResult",
-    "design_study",
-    "parse_spec",
-    "parse_vary",
-    "factorial",
-    "read_designs_csv",
-    "read_poses_csv",
     "apply_design",
+    "design_study",
+    "factorial",
     "link_mass_kg",
     "moving_mass_kg",
-    "COMPUTED",
+    "parse_spec",
+    "parse_vary",
+    "read_designs_csv",
+    "read_poses_csv",
     "write_netcdf",
 ]
 
@@ -295,7 +295,7 @@ class DesignResult:
             "n_modes": self.n_modes,
             "poses_mm_rad": [[p.x_m * 1e3, p.y_m * 1e3, p.phi_rad] for p in self.poses],
             "summary": self.summary(),
-            "frequencies_hz": np.where(np.isfinite(self.frequencies_hz), self.frequencies_hz, None).tolist(),
+            "frequencies_hz": np.where(np.isfinite(self.frequencies_hz), self.frequencies_hz, np.array(None)).tolist(),
             "status": self.status.tolist(),
             "elapsed_s": self.elapsed_s,
         }

@@ -16,7 +16,7 @@ from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import BuiltModel, ModelOptions
 from fpm_sim.model.rigs import RigSetup, build_rig, rig_piece
 
-__all__ = ["ModalComparison", "analyse", "manipulator_modes", "rig_modes", "compare_methods"]
+__all__ = ["ModalComparison", "analyse", "compare_methods", "manipulator_modes", "rig_modes"]
 
 
 @dataclass

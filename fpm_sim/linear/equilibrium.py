@@ -26,7 +26,7 @@ import numpy as np
 from fpm_sim.errors import FpmSimError
 from fpm_sim.model.options import tangent_jacobian
 
-__all__ = ["EquilibriumError", "static_equilibrium", "applied_forces", "force_jacobian"]
+__all__ = ["EquilibriumError", "applied_forces", "force_jacobian", "static_equilibrium"]
 
 
 class EquilibriumError(FpmSimError, RuntimeError):
@@ -48,7 +48,8 @@ def applied_forces(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray)
     """``qfrc_smooth`` at ``qpos``, zero velocity: springs, gravity, ``qfrc_applied``,
     ``xfrc_applied`` and actuator forces (from ``data.ctrl``) — everything but the constraints."""
     _smooth(model, data, qpos)
-    return data.qfrc_smooth.copy()
+    force: np.ndarray = data.qfrc_smooth.copy()
+    return force
 
 
 def force_jacobian(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray, eps: float = 1e-7) -> np.ndarray:
@@ -105,7 +106,7 @@ def static_equilibrium(
         If a floating model carries loads, or the iteration does not converge.
     """
     data = data if data is not None else mujoco.MjData(model)
-    q = model.qpos0.copy()
+    q: np.ndarray = model.qpos0.copy()
     f, r, jac = _constraints(model, data, q)
     scale = float(np.max(np.abs(f))) if f.size else 0.0
     if scale < 1e-12 and (r.size == 0 or np.max(np.abs(r)) < pos_tol_m):

@@ -77,33 +77,33 @@ from fpm_sim.model.options import (
 )
 
 __all__ = [
-    "model_length_m",
-    "scaled_null_space",
-    "unit_scales",
-    "Mode",
-    "ModeFilter",
-    "ModalResult",
-    "TimestepWarning",
-    "UnstableModelError",
-    "RedundantConstraintWarning",
-    "OMEGA_H_WARN",
-    "RIGID_BODY_FRACTION",
     "FD_NOISE_MARGIN",
     "NEGATIVE_DAMPING_TOL",
+    "OMEGA_H_WARN",
+    "RIGID_BODY_FRACTION",
     "ConstraintRank",
-    "constraint_rank",
-    "reference_frequency_hz",
-    "noise_w2",
-    "system_damping_matrix",
-    "modes_transition_fd",
-    "modes_constrained",
-    "equality_jacobian",
-    "reduced_eigenproblem",
-    "eigenvalue_tolerances",
-    "check_stable",
+    "ModalResult",
+    "Mode",
+    "ModeFilter",
+    "RedundantConstraintWarning",
+    "TimestepWarning",
+    "UnstableModelError",
     "check_n_modes",
+    "check_stable",
+    "constraint_rank",
+    "eigenvalue_tolerances",
+    "equality_jacobian",
     "mass_matrix",
+    "model_length_m",
+    "modes_constrained",
+    "modes_transition_fd",
+    "noise_w2",
+    "reduced_eigenproblem",
+    "reference_frequency_hz",
+    "scaled_null_space",
     "stiffness_matrix",
+    "system_damping_matrix",
+    "unit_scales",
 ]
 
 OMEGA_H_WARN = 0.3
@@ -199,7 +199,7 @@ class Mode:
 
     @property
     def dominant(self) -> str:
-        return max(self.character, key=self.character.get) if self.character else "-"
+        return max(self.character, key=self.character.__getitem__) if self.character else "-"
 
 
 @dataclass
@@ -344,7 +344,8 @@ def equality_jacobian(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
     """Rows of the (dense) constraint Jacobian that belong to equality constraints, after a forward pass."""
     rows = np.asarray(data.efc_type[: data.nefc]) == mujoco.mjtConstraint.mjCNSTR_EQUALITY
     jac = np.asarray(data.efc_J[: data.nefc * model.nv]).reshape(data.nefc, model.nv)
-    return jac[rows].copy()
+    eq_rows: np.ndarray = jac[rows].copy()
+    return eq_rows
 
 
 def mass_matrix(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
@@ -370,13 +371,14 @@ def stiffness_matrix(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarra
         data.qvel[:] = 0.0
         mujoco.mj_fwdPosition(model, data)
         mujoco.mj_fwdVelocity(model, data)
-        f = data.qfrc_passive - data.qfrc_bias
+        f: np.ndarray = data.qfrc_passive - data.qfrc_bias
         if lam.size:
             f = f + equality_jacobian(model, data).T @ lam
         return f
 
     k = -tangent_jacobian(model, qpos, force, eps)
-    return 0.5 * (k + k.T)
+    sym: np.ndarray = 0.5 * (k + k.T)
+    return sym
 
 
 def damping_matrix(model: mujoco.MjModel) -> np.ndarray:
@@ -412,7 +414,8 @@ def _real_shape(v: np.ndarray) -> np.ndarray:
     if abs(v[k]) == 0.0:
         return np.real(v)
     r = np.real(v * np.conj(v[k]) / abs(v[k]))
-    return r / r[k]
+    normalised: np.ndarray = r / r[k]
+    return normalised
 
 
 def system_damping_matrix(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
@@ -745,7 +748,8 @@ def _scaled_jacobian(model: mujoco.MjModel, data: mujoco.MjData, length_m: float
     if jac.shape[0] == 0:
         return jac
     row_scale, _ = unit_scales(model, data, length_m)
-    return row_scale[:, None] * jac
+    scaled: np.ndarray = row_scale[:, None] * jac
+    return scaled
 
 
 def modes_constrained(
@@ -777,7 +781,8 @@ def modes_constrained(
     stiff = stiffness_matrix(model, data, q_eq)
 
     def change() -> np.ndarray:  # the finite differences' noise, measured only when a mode needs it
-        return stiff - stiffness_matrix(model, mujoco.MjData(model), q_eq, eps=2e-7)
+        diff: np.ndarray = stiff - stiffness_matrix(model, mujoco.MjData(model), q_eq, eps=2e-7)
+        return diff
 
     damp = system_damping_matrix(model, q_eq)
     return _solve_reduced(built, q_eq, mass, stiff, change, damp, rank.basis, n_modes, filt)
@@ -794,7 +799,8 @@ def _constrained_floating(built: BuiltModel, q0: np.ndarray, n_modes: int | None
     stiff = passive_stiffness_matrix(model, q0) if internal else np.diag(dof_stiffness(model))
 
     def noise() -> np.ndarray:
-        return stiff - passive_stiffness_matrix(model, q0, eps=2e-7)
+        diff: np.ndarray = stiff - passive_stiffness_matrix(model, q0, eps=2e-7)
+        return diff
 
     change = noise if internal else None  # joint springs alone: an exact diagonal, no noise
     damp = system_damping_matrix(model, q0)

@@ -134,7 +134,7 @@ def add_cable_link(
     start_lumps: tuple[LumpedMass, ...],
     end_lumps: tuple[LumpedMass, ...],
     rgba: tuple[float, float, float, float],
-):
+) -> LinkBuild:
     """Add a cable-plugin link (see module docstring); arguments as :func:`fpm_sim.model.links.add_link`."""
     _check_engine("cable")
     n = segments
@@ -187,7 +187,7 @@ def add_cable_link(
     return build
 
 
-def _cable_plugin(spec: mujoco.MjSpec, name: str, material: Material):
+def _cable_plugin(spec: mujoco.MjSpec, name: str, material: Material) -> mujoco.MjsPlugin:
     spec.activate_plugin(CABLE_PLUGIN)
     plugin = spec.add_plugin(name=f"{name}_cable", plugin_name=CABLE_PLUGIN, active=True)
     # bend = Young's modulus E, twist = shear modulus G (the plugin's only material attributes)
@@ -227,7 +227,7 @@ def add_flex_link(
     rgba: tuple[float, float, float, float],
     free_start: bool,
     free_end: bool,
-):
+) -> LinkBuild:
     """Add a 1D-flex link (see module docstring); arguments as :func:`fpm_sim.model.links.add_link`.
 
     Warns
@@ -371,7 +371,7 @@ def add_flex_link(
     return build
 
 
-def _set_parts(body: mujoco.MjsBody, parts) -> None:
+def _set_parts(body: mujoco.MjsBody, parts: list[tuple[float, np.ndarray, np.ndarray]]) -> None:
     mass = sum(p[0] for p in parts)
     if mass <= 0.0:
         raise ValueError(f"body {body.name!r} has no mass")

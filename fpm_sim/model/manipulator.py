@@ -30,7 +30,7 @@ from fpm_sim.model.links import add_link
 from fpm_sim.model.options import BuiltModel, ModelOptions, add_weld, compile_model, new_spec
 from fpm_sim.model.parts import add_compliance_springs, add_hinge, half_lump, lump_part, quat_z, set_inertial
 
-__all__ = ["build_manipulator", "MIN_PIN_MASS_KG"]
+__all__ = ["MIN_PIN_MASS_KG", "build_manipulator"]
 
 MIN_PIN_MASS_KG = 1e-4
 

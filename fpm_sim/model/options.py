@@ -31,40 +31,40 @@ from fpm_sim.errors import FpmSimError, FpmSimWarning
 from fpm_sim.model.parts import DEFAULT_RESOLUTION, check_link_model
 
 __all__ = [
-    "ModelOptions",
-    "DEFAULT_SEGMENTS",
-    "FIDELITIES",
     "DEFAULT_FIDELITY",
-    "FIDELITY_SCALE",
-    "FIDELITY_RESOLUTION",
+    "DEFAULT_SEGMENTS",
     "DISCRETISATION_COEFF",
+    "FIDELITIES",
+    "FIDELITY_RESOLUTION",
+    "FIDELITY_SCALE",
     "RESOLUTION_WARN",
-    "ResolutionWarning",
-    "resolve_segments",
-    "discretisation_error",
-    "resolution_summary",
-    "resolution_label",
-    "resolution_of_parameters",
-    "warn_if_coarse",
-    "BuiltModel",
-    "TimestepError",
     "TIMESTEP_MAX_S",
     "TIMESTEP_SAFETY",
-    "new_spec",
-    "compile_model",
-    "highest_frequency_rad_s",
     "WELD_SOLIMP",
+    "BuiltModel",
+    "ModelOptions",
+    "MujocoWarning",
+    "ResolutionWarning",
+    "TimestepError",
+    "check_count",
+    "check_finite",
+    "compile_model",
+    "discretisation_error",
     "dof_stiffness",
     "has_internal_elasticity",
-    "passive_stiffness_matrix",
-    "tangent_jacobian",
-    "passive_damping_matrix",
-    "MujocoWarning",
-    "route_mujoco_warnings",
+    "highest_frequency_rad_s",
     "mujoco_messages",
-    "check_finite",
-    "check_count",
+    "new_spec",
     "open_for_writing",
+    "passive_damping_matrix",
+    "passive_stiffness_matrix",
+    "resolution_label",
+    "resolution_of_parameters",
+    "resolution_summary",
+    "resolve_segments",
+    "route_mujoco_warnings",
+    "tangent_jacobian",
+    "warn_if_coarse",
 ]
 
 DEFAULT_SEGMENTS = DEFAULT_RESOLUTION["segments"]
@@ -307,7 +307,8 @@ class BuiltModel:
         return float(self.model.opt.timestep)
 
     def to_xml(self) -> str:
-        return self.spec.to_xml()
+        xml: str = self.spec.to_xml()
+        return xml
 
 
 def new_spec(model_name: str, *, gravity: bool) -> mujoco.MjSpec:
@@ -386,10 +387,12 @@ def passive_stiffness_matrix(model: mujoco.MjModel, qpos: np.ndarray | None = No
         data.qpos[:] = q
         data.qvel[:] = 0.0
         mujoco.mj_forward(model, data)
-        return data.qfrc_passive.copy()
+        force: np.ndarray = data.qfrc_passive.copy()
+        return force
 
     k = -tangent_jacobian(model, q0, passive, eps)
-    return 0.5 * (k + k.T)
+    sym: np.ndarray = 0.5 * (k + k.T)
+    return sym
 
 
 def passive_damping_matrix(model: mujoco.MjModel, qpos: np.ndarray, eps: float = 1e-6) -> np.ndarray:
@@ -542,7 +545,7 @@ def open_for_writing(
     p = Path(path)
     try:
         p.parent.mkdir(parents=True, exist_ok=True)
-        handle = open(p, "wb")  # noqa: SIM115 - closed below
+        handle = open(p, "wb")  # closed below
     except OSError as e:
         raise error(f"cannot write {str(p)!r} ({e.strerror or e}); choose a writable path for {parameter}") from e
     with handle:

@@ -4,7 +4,9 @@ pieces with exact inertia, lumped hardware, and the handles of a built link."""
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import cast
 
 import mujoco
 import numpy as np
@@ -22,9 +24,9 @@ __all__ = [
     "add_box_geom",
     "add_compliance_springs",
     "add_hinge",
-    "half_lump",
     "box_part",
     "check_link_model",
+    "half_lump",
     "lump_part",
     "quat_z",
     "set_inertial",
@@ -47,7 +49,7 @@ class LinkModelError(FpmSimError):
     """Unknown link model, or a resolution the model cannot take."""
 
 
-def check_link_model(link_model: str, segments: int) -> None:
+def check_link_model(link_model: str, segments: int | None) -> None:
     """Raise :class:`LinkModelError` for an unknown model or an impossible resolution."""
     if link_model not in LINK_MODELS:
         raise LinkModelError(
@@ -98,8 +100,8 @@ def _combined_inertia(
     parts: list[tuple[float, np.ndarray, np.ndarray]],
 ) -> tuple[float, np.ndarray, np.ndarray]:
     """Mass, centre and 3x3 inertia about the centre of point-bodies ``(mass, pos, inertia_about_own_com)``."""
-    mass = sum(p[0] for p in parts)
-    com = sum(p[0] * p[1] for p in parts) / mass
+    mass = sum((p[0] for p in parts), 0.0)
+    com = sum((p[0] * p[1] for p in parts), np.zeros(3)) / mass
     inertia = np.zeros((3, 3))
     for m, pos, i_own in parts:
         r = pos - com
@@ -163,10 +165,13 @@ def add_box_geom(
 
 def half_lump(lump: LumpedMass) -> LumpedMass:
     """Half of a lumped mass (a joint's hardware shared by the two links it connects)."""
-    return LumpedMass(lump.mass_kg / 2.0, tuple(v / 2.0 for v in lump.inertia_kg_m2))
+    half = cast("tuple[float, float, float]", tuple(v / 2.0 for v in lump.inertia_kg_m2))
+    return LumpedMass(lump.mass_kg / 2.0, half)
 
 
-def add_hinge(body: mujoco.MjsBody, name: str, axis: list[float], stiffness: float = 0.0, damping: float = 0.0) -> None:
+def add_hinge(
+    body: mujoco.MjsBody, name: str, axis: Sequence[float], stiffness: float = 0.0, damping: float = 0.0
+) -> None:
     """A hinge about ``axis`` with stiffness (N m/rad) and damping (N m s/rad)."""
     j = body.add_joint(name=name, type=mujoco.mjtJoint.mjJNT_HINGE, axis=axis)
     j.stiffness = [stiffness, 0.0, 0.0]

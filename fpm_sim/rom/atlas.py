@@ -54,7 +54,7 @@ import json
 import math
 import warnings
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -74,18 +74,18 @@ from fpm_sim.model.options import ModelOptions, check_count, open_for_writing
 from fpm_sim.rom.reduction import ModalSystem, ReducedModel, modal_system
 
 __all__ = [
-    "AtlasError",
-    "mac_matrix",
+    "ATLAS_ERROR_WARN",
+    "BASIS_MAC_WARN",
+    "MAC_WARN",
     "Alignment",
-    "align_modes",
-    "track_modes",
+    "AtlasAccuracyWarning",
+    "AtlasError",
     "ModalAtlas",
+    "align_modes",
     "build_atlas",
     "load_atlas",
-    "MAC_WARN",
-    "BASIS_MAC_WARN",
-    "ATLAS_ERROR_WARN",
-    "AtlasAccuracyWarning",
+    "mac_matrix",
+    "track_modes",
 ]
 
 MAC_WARN = 0.5
@@ -333,7 +333,7 @@ class ModalAtlas:
                 f_pred = np.sqrt(np.maximum(np.linalg.eigvalsh(pred), 0.0))
                 f_node = np.take(freq, i, axis=axis)
                 e = np.abs(f_pred / np.where(f_node > 0, f_node, np.inf) - 1.0)
-                index = [slice(None)] * 3
+                index: list[slice | int] = [slice(None)] * 3
                 index[axis] = i
                 err[tuple(index)] = np.fmax(err[tuple(index)], e)
         return err
@@ -513,6 +513,7 @@ class ModalAtlas:
     def _write(self, f: Any) -> None:
         np.savez(
             f,
+            allow_pickle=True,  # named (its default): else mypy matches the unpacked nodes to it
             x_m=self.x_m,
             y_m=self.y_m,
             phi_rad=self.phi_rad,
@@ -553,10 +554,16 @@ def load_atlas(path: str | Path) -> ModalAtlas:
         input_units=[str(s) for s in raw["input_units"]],
         output_names=[str(s) for s in raw["output_names"]],
         output_units=[str(s) for s in raw["output_units"]],
-        root=tuple(int(i) for i in raw["root"]),
+        root=_grid_index(raw["root"]),
         parents=raw["parents"],
         parameters=json.loads(str(raw["parameters_json"])),
     )
+
+
+def _grid_index(values: Iterable[Any]) -> tuple[int, int, int]:
+    """A node's ``(i_x, i_y, i_phi)`` from three integers (a file's array or a generator)."""
+    i, j, k = values
+    return (int(i), int(j), int(k))
 
 
 def _bfs_tree(shape: tuple[int, int, int], root: tuple[int, int, int]) -> tuple[list[int], list[int]]:
@@ -579,7 +586,7 @@ def _bfs_tree(shape: tuple[int, int, int], root: tuple[int, int, int]) -> tuple[
                     if parent[g] == -2:
                         parent[g] = f
                         order.append(g)
-                        queue.append(tuple(nb))
+                        queue.append((nb[0], nb[1], nb[2]))
     return order, parent
 
 
@@ -627,9 +634,11 @@ def build_atlas(
     shape = (len(xs), len(ys), len(ps))
     opts = options or ModelOptions(axial=False)  # the shared default resolution (model.options)
     if root is None:
-        ridx = tuple(int(np.argmin(np.abs(a - np.median(a)))) for a in (xs, ys, ps))
+        ridx = _grid_index(int(np.argmin(np.abs(a - np.median(a)))) for a in (xs, ys, ps))
     else:
-        ridx = tuple(int(np.argmin(np.abs(a - v))) for a, v in zip((xs, ys, ps), (root.x_m, root.y_m, root.phi_rad)))
+        ridx = _grid_index(
+            int(np.argmin(np.abs(a - v))) for a, v in zip((xs, ys, ps), (root.x_m, root.y_m, root.phi_rad))
+        )
         for a, v, i in zip((xs, ys, ps), (root.x_m, root.y_m, root.phi_rad), ridx):
             if not math.isclose(float(a[i]), v, abs_tol=1e-9):
                 raise AtlasError(f"the root pose {root.label()} is not a grid node")

@@ -69,17 +69,17 @@ from fpm_sim.model.options import BuiltModel, open_for_writing
 from fpm_sim.results import to_jsonable
 
 __all__ = [
+    "END_EFFECTOR_SITE",
+    "ModalSystem",
     "ReducedModel",
     "ReductionError",
-    "ModalSystem",
     "StepResponse",
+    "accel_site_names",
+    "load_reduced_model",
     "modal_system",
+    "motor_dofs",
     "reduce_model",
     "static_truncation_error",
-    "END_EFFECTOR_SITE",
-    "load_reduced_model",
-    "motor_dofs",
-    "accel_site_names",
 ]
 
 END_EFFECTOR_SITE = "platform_center"
@@ -446,7 +446,7 @@ class ReducedModel:
     def step_response(self, input_name: str, *, duration_s: float = 0.2, dt_s: float = 1e-4) -> StepResponse:
         """Response to a unit step (1 N or 1 N m) on ``input_name`` from rest at the equilibrium."""
         j = self.input_index(input_name)
-        t = np.arange(int(round(duration_s / dt_s)) + 1) * dt_s
+        t = np.arange(round(duration_s / dt_s) + 1) * dt_s
         u = np.zeros((len(t), len(self.input_names)))
         u[:, j] = 1.0
         return StepResponse(t, self.simulate(t, u), input_name, list(self.output_names), list(self.output_units))
@@ -547,6 +547,7 @@ class ReducedModel:
             with open_for_writing(p, error=ReductionError) as f:
                 np.savez(
                     f,
+                    allow_pickle=True,  # named (its default): else mypy matches the unpacked arrays to it
                     **{
                         k: (v.astype(str) if isinstance(v, np.ndarray) and v.dtype == object else v)
                         for k, v in arrays.items()

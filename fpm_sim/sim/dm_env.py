@@ -56,11 +56,11 @@ if TYPE_CHECKING:
     from dm_env import specs
 
 __all__ = [
+    "DEFAULT_SERVO_DAMPING_NMS_PER_RAD",
+    "DEFAULT_SERVO_STIFFNESS_NM_PER_RAD",
+    "OBSERVATION_KEYS",
     "FlexibleRegulation",  # noqa: F822  (defined on first use, module __getattr__)
     "regulation_env",
-    "DEFAULT_SERVO_STIFFNESS_NM_PER_RAD",
-    "DEFAULT_SERVO_DAMPING_NMS_PER_RAD",
-    "OBSERVATION_KEYS",
 ]
 
 DEFAULT_SERVO_STIFFNESS_NM_PER_RAD = 500.0
@@ -137,9 +137,10 @@ def _headless_dm_control() -> tuple[Any, Any, Any]:
 @functools.cache
 def _task_class() -> type:
     """:class:`FlexibleRegulation`, defined on first use (it derives from dm_control's ``Task``)."""
-    dm_mujoco, control, specs = _headless_dm_control()
+    _, rl_control, dm_specs = _headless_dm_control()
+    task_base: Any = rl_control.Task  # dm_control ships no types: the base class is Any to mypy
 
-    class FlexibleRegulation(control.Task):
+    class FlexibleRegulation(task_base):
         """End-effector regulation under link vibration (see module docstring).
 
         Parameters
@@ -204,7 +205,7 @@ def _task_class() -> type:
             return np.array([pos[0], pos[1], _yaw(np.asarray(sd["ee_quat"]))])
 
         def action_spec(self, physics: dm_mujoco.Physics) -> specs.BoundedArray:
-            return specs.BoundedArray(
+            return dm_specs.BoundedArray(
                 shape=(3,),
                 dtype=np.float64,
                 minimum=-self._max_torque,
@@ -312,7 +313,7 @@ def regulation_env(
     )
     task.set_target(physics)
     env = control.Environment(physics, task, time_limit=time_limit_s, control_timestep=control_timestep_s)
-    env.parameters = {  # type: ignore[attr-defined]
+    env.parameters = {
         **built.parameters,
         "motors": dataclasses.asdict(manip.motors),
         "control_timestep_s": control_timestep_s,

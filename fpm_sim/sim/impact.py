@@ -60,17 +60,17 @@ from fpm_sim.model.options import BuiltModel
 from fpm_sim.rom.reduction import ModalSystem, modal_system
 
 __all__ = [
-    "PULSE_S",
     "PEAK_FORCE_N",
+    "PULSE_S",
     "STUDY_IMPACT_POINT",
-    "ImpactSetup",
+    "UFF_POSE_TAG",
     "ImpactRecord",
+    "ImpactSetup",
     "ImpactTestResult",
-    "virtual_impact_test",
     "h1_estimate",
     "point_acceleration",
+    "virtual_impact_test",
     "write_uff58",
-    "UFF_POSE_TAG",
 ]
 
 PULSE_S = 1e-3
@@ -207,7 +207,7 @@ def _one_impact(
     accel = np.zeros(n_samples)
     res6 = np.zeros(6)
     torque0 = np.zeros(3)
-    n_pulse_steps = int(math.ceil(setup.pulse_s / h)) + 1
+    n_pulse_steps = math.ceil(setup.pulse_s / h) + 1
     hammer = material_point(built, setup.impact)
     sensor = material_point(built, setup.accelerometer)
     start = time.perf_counter()
@@ -409,9 +409,9 @@ def virtual_impact_test(
     setup.accelerometer.check(built)
     model = built.model
     h = float(model.opt.timestep)
-    n_sub = max(1, int(round(setup.sample_s / h)))
+    n_sub = max(1, round(setup.sample_s / h))
     dt = n_sub * h
-    n_samples = int(round(setup.record_s / dt)) + 1
+    n_samples = round(setup.record_s / dt) + 1
     q_eq = static_equilibrium(model, mujoco.MjData(model)) if system is None else system.qpos
     system = system or modal_system(built, qpos=q_eq)
     rng = np.random.default_rng(setup.seed)

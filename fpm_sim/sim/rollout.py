@@ -41,6 +41,7 @@ from typing import Any
 
 import mujoco
 import numpy as np
+from numpy.typing import ArrayLike
 
 from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError
@@ -51,17 +52,18 @@ from fpm_sim.model.options import BuiltModel, ModelOptions, check_finite, mujoco
 from fpm_sim.rom.reduction import END_EFFECTOR_SITE, motor_dofs
 
 __all__ = [
-    "aligned_options",
     "RolloutError",
     "RolloutResult",
-    "rollout",
+    "aligned_options",
     "constant",
-    "step_at",
-    "sine",
     "end_effector_pose",
+    "rollout",
+    "sine",
+    "step_at",
 ]
 
-Profile = Callable[[float], Sequence[float]]
+Profile = Callable[[float], ArrayLike]
+"""A load as a function of time (s): three numbers, a sequence or an array (see the module docstring)."""
 
 
 class RolloutError(FpmSimError):
@@ -194,7 +196,7 @@ class RolloutResult:
                     fmt="%.10g",
                 )
             else:
-                np.savez(f, **cols)
+                np.savez(f, allow_pickle=True, **cols)  # named (its default): else mypy matches the columns to it
         return p
 
     def to_dict(self) -> dict[str, Any]:
@@ -275,7 +277,7 @@ def aligned_options(manip: Manipulator, pose: Pose, options: ModelOptions, outpu
     return dataclasses.replace(options, timestep_s=output_step_s / n)
 
 
-def _load(name: str, value: Sequence[float], t_s: float) -> np.ndarray:
+def _load(name: str, value: ArrayLike, t_s: float) -> np.ndarray:
     v = np.asarray(value, float)
     if v.shape != (3,) or not np.all(np.isfinite(v)):
         raise RolloutError(f"{name} must give 3 finite values, got {value!r} at t = {t_s:g} s")
@@ -336,9 +338,9 @@ def rollout(
         raise RolloutError(f"output_step_s must be a finite time, got {output_step_s!r}")
     if not (output_step_s >= h * (1 - 1e-9)):
         raise RolloutError(f"output_step_s ({output_step_s:g} s) must be at least the model timestep ({h:.3g} s)")
-    n_sub = max(1, int(round(output_step_s / h)))
+    n_sub = max(1, round(output_step_s / h))
     dt_out = n_sub * h
-    n_out = int(round(duration_s / dt_out))
+    n_out = round(duration_s / dt_out)
     mdofs = motor_dofs(model)
     if (motor_torque is not None or motor_reference is not None) and len(mdofs) != 3:
         raise RolloutError(

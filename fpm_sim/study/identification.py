@@ -37,15 +37,15 @@ from fpm_sim.study.reproduce import subsystem_frequencies
 from fpm_sim.study.tables import SubsystemTest, subsystem_tests
 
 __all__ = [
-    "Parameter",
-    "FitResult",
-    "fit",
     "ASSUMED_MEASUREMENT_REL_STD",
-    "identify_link",
-    "identify_chain",
-    "identify_manipulator",
-    "geometry_from",
     "GEOMETRY_PARAMETERS",
+    "FitResult",
+    "Parameter",
+    "fit",
+    "geometry_from",
+    "identify_chain",
+    "identify_link",
+    "identify_manipulator",
 ]
 
 ASSUMED_MEASUREMENT_REL_STD = 0.01

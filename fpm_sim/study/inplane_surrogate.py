@@ -30,7 +30,7 @@ import numpy as np
 from fpm_sim.config import Manipulator
 from fpm_sim.kinematics import Pose
 
-__all__ = ["inplane_first_frequencies", "CANTILEVER_TIP_MASS_FRACTION"]
+__all__ = ["CANTILEVER_TIP_MASS_FRACTION", "inplane_first_frequencies"]
 
 CANTILEVER_TIP_MASS_FRACTION = 33.0 / 140.0
 """Rayleigh's effective tip mass of a cantilever with the static deflection shape."""

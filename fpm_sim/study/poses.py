@@ -21,13 +21,13 @@ from fpm_sim.kinematics import Pose
 from fpm_sim.study.tables import comsol_table
 
 __all__ = [
-    "TableReading",
-    "StudyPose",
-    "READINGS",
     "GRID_MM",
+    "READINGS",
     "ROTATION_RAD",
-    "study_poses",
+    "StudyPose",
+    "TableReading",
     "parse_reading",
+    "study_poses",
 ]
 
 GRID_MM = (-100.0, -50.0, 0.0, 50.0, 100.0)

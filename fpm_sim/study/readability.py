@@ -50,15 +50,15 @@ from fpm_sim.sim.impact import STUDY_IMPACT_POINT
 from fpm_sim.study.poses import ROTATION_RAD, TableReading, study_poses
 
 __all__ = [
-    "READABLE_PROMINENCE_DB",
     "READABLE_HEIGHT_DB",
+    "READABLE_PROMINENCE_DB",
     "Mode1Readability",
-    "mode1_readability",
     "ReadabilityRow",
     "ReadabilityTable",
-    "readability_table",
     "auc",
     "auc_p_value",
+    "mode1_readability",
+    "readability_table",
 ]
 
 READABLE_PROMINENCE_DB = 6.0
@@ -350,7 +350,7 @@ def _dominant(system: ModalSystem) -> str:
     kinds = np.array(system.built.dof_kinds)
     shares = {kd: float(e[kinds == kd].sum()) for kd in set(kinds)}
     tot = sum(shares.values()) or 1.0
-    kd = max(shares, key=shares.get)
+    kd = max(shares, key=shares.__getitem__)
     return f"{kd} {shares[kd] / tot:.0%}"
 
 

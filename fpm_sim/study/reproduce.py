@@ -38,12 +38,12 @@ from fpm_sim.study.tables import (
 
 __all__ = [
     "POSES_CSV_COLUMNS",
-    "SubsystemResult",
-    "StudyReproduction",
-    "error_stats",
-    "subsystem_frequencies",
-    "reproduce_study",
     "SUBSYSTEM_SEGMENTS",
+    "StudyReproduction",
+    "SubsystemResult",
+    "error_stats",
+    "reproduce_study",
+    "subsystem_frequencies",
 ]
 
 POSES_CSV_COLUMNS = (

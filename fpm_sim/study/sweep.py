@@ -31,7 +31,7 @@ from fpm_sim.kinematics import Pose, assemble_many
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.study.poses import TableReading, study_poses
 
-__all__ = ["WorkspaceSweep", "sweep_workspace", "dense_grid", "singularity_fields", "SWEEP_CSV_COLUMNS"]
+__all__ = ["SWEEP_CSV_COLUMNS", "WorkspaceSweep", "dense_grid", "singularity_fields", "sweep_workspace"]
 
 SWEEP_CSV_COLUMNS = ("x_mm", "y_mm", "phi_rad", "f1_hz", "f2_hz", "f3_hz", "in_plane_mode1", "singularity", "status")
 
@@ -57,7 +57,7 @@ def dense_grid(config: Manipulator, *, step_mm: float, phi_rad: float = 0.0) -> 
     if not step_mm > 0:
         raise FpmSimError(f"--step-mm must be > 0, got {step_mm}")
     half = _reach_half_width(config)
-    n = int(math.floor(half * 1e3 / step_mm))
+    n = math.floor(half * 1e3 / step_mm)
     ticks = np.arange(-n, n + 1) * step_mm
     if ticks.size > 401:
         raise FpmSimError(f"--step-mm {step_mm} gives {ticks.size} x {ticks.size} points; use a larger step")

@@ -22,18 +22,18 @@ from dataclasses import dataclass
 from importlib import resources
 
 __all__ = [
-    "SubsystemTest",
-    "ComsolPoint",
-    "subsystem_tests",
-    "comsol_table",
-    "mesh_convergence",
     "STUDY_COMSOL_VS_EXPERIMENT",
-    "read_data_csv",
-    "parse_subsystem_rows",
-    "MeasuredPoint",
-    "measured_table",
-    "withheld_cells",
     "STUDY_THICKNESS_M",
+    "ComsolPoint",
+    "MeasuredPoint",
+    "SubsystemTest",
+    "comsol_table",
+    "measured_table",
+    "mesh_convergence",
+    "parse_subsystem_rows",
+    "read_data_csv",
+    "subsystem_tests",
+    "withheld_cells",
 ]
 
 STUDY_THICKNESS_M = 0.030

@@ -37,15 +37,15 @@ from fpm_sim.rom.reduction import ReducedModel, reduce_model
 from fpm_sim.sim.rollout import aligned_options, constant, rollout
 
 __all__ = [
-    "STUDY_FORCE_N",
-    "STUDY_THICKNESS_M",
     "STUDY_DURATION_S",
-    "STUDY_OUTPUT_STEP_S",
+    "STUDY_FORCE_N",
     "STUDY_FULL_MODEL_WALL_S",
+    "STUDY_OUTPUT_STEP_S",
+    "STUDY_THICKNESS_M",
     "TransientCase",
     "TransientResult",
-    "study_transient",
     "nrms_error",
+    "study_transient",
 ]
 
 STUDY_FORCE_N = 10.0

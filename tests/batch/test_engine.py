@@ -28,7 +28,8 @@ def test_resume_recomputes_only_the_missing_chunks(tmp_path):
     log.mkdir()
     opts = EngineOptions(scheduler="serial", store=store)
     assert run_chunks(_square_and_log, [1, 2, 3, 4], kwargs={"log_dir": str(log)}, options=opts) == [1, 4, 9, 16]
-    assert len(list(log.iterdir())) == 4 and len(list(store.glob("*.pkl"))) == 4
+    assert len(list(log.iterdir())) == 4
+    assert len(list(store.glob("*.pkl"))) == 4
     # a killed run: two chunks never written
     for path in sorted(store.glob("*.pkl"))[:2]:
         path.unlink()
@@ -59,7 +60,8 @@ def test_loopback_cluster_gives_the_same_numbers_as_the_local_run(reference_mani
     local = pose_frequencies(reference_manip, POSES, n_modes=3, options=opts, workers=1)
     engine = EngineOptions(scheduler=loopback_cluster, chunk=4, store=tmp_path / "chunks")
     remote = pose_frequencies(reference_manip, POSES, n_modes=3, options=opts, engine=engine)
-    assert remote.status == local.status and "unreachable" in remote.status
+    assert remote.status == local.status
+    assert "unreachable" in remote.status
     np.testing.assert_array_equal(remote.frequencies_hz, local.frequencies_hz)
     np.testing.assert_array_equal(remote.in_plane, local.in_plane)
     assert len(list((tmp_path / "chunks").glob("*.pkl"))) == 5  # 19 poses in chunks of 4, streamed to disk

@@ -22,7 +22,8 @@ def test_status_marks_unreachable_and_singular(reference_manip):
     poses = [Pose(0.0, 0.0, 0.0), Pose(0.9, 0.0, 0.0)]
     res = pose_frequencies(reference_manip, poses, n_modes=2, options=fast_options(segments=2))
     assert res.status == ["ok", "unreachable"]
-    assert np.isfinite(res.frequencies_hz[0]).all() and np.isnan(res.frequencies_hz[1]).all()
+    assert np.isfinite(res.frequencies_hz[0]).all()
+    assert np.isnan(res.frequencies_hz[1]).all()
 
 
 def test_workers_give_the_same_numbers(reference_manip):
@@ -46,7 +47,8 @@ def test_backends_are_replaceable(reference_manip, monkeypatch):
 
     register_backend("fake-test", fake)
     out = first_frequencies(reference_manip, [Pose(0, 0, 0)], backend="fake-test", options=fast_options(segments=2))
-    assert calls == [1] and out.shape == (1, 1)
+    assert calls == [1]
+    assert out.shape == (1, 1)
     with pytest.raises(ValueError, match="unknown backend"):
         first_frequencies(reference_manip, [Pose(0, 0, 0)], backend="nope")
 
@@ -73,7 +75,8 @@ def test_reposed_model_equals_the_per_pose_compile(reference_manip, thickness_m)
     fast = solve_poses(manip, HANDFUL, n_modes=4, options=opts)
     ref = solve_poses(manip, HANDFUL, n_modes=4, options=opts, recompile=True)
     assert fast.status == ref.status
-    assert fast.status[-1] == "unreachable" and "near_singular" in fast.status
+    assert fast.status[-1] == "unreachable"
+    assert "near_singular" in fast.status
     np.testing.assert_allclose(fast.frequencies_hz, ref.frequencies_hz, rtol=1e-9, equal_nan=True)
     np.testing.assert_allclose(fast.in_plane, ref.in_plane, rtol=1e-9, atol=1e-12, equal_nan=True)
     np.testing.assert_array_equal(fast.singularity, ref.singularity)

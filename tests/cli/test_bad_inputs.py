@@ -128,7 +128,7 @@ def _run(argv: list[str]) -> tuple[int | None, str]:
     """``(exit code, stdout + stderr)``; an escaping exception is a traceback (exit code None)."""
     out, err = io.StringIO(), io.StringIO()
 
-    def alarm(signum, frame):  # noqa: ARG001
+    def alarm(signum, frame):
         raise _TimedOut
 
     previous = signal.signal(signal.SIGALRM, alarm)
@@ -141,7 +141,7 @@ def _run(argv: list[str]) -> tuple[int | None, str]:
                 code = e.code if isinstance(e.code, int) else (0 if e.code is None else 2)
             except _TimedOut:
                 return None, f"still running after {TIME_LIMIT_S} s: computed instead of refusing"
-            except BaseException:  # noqa: BLE001 - a traceback is what the battery looks for
+            except BaseException:  # a traceback is what the battery looks for
                 return None, "Traceback (most recent call last):\n" + traceback.format_exc()
     finally:
         signal.alarm(0)

@@ -16,7 +16,8 @@ def test_modes_json(capsys):
     assert code == 0
     data = json.loads(out)
     freqs = [m["frequency_hz"] for m in data["modes"]]
-    assert len(freqs) == 4 and freqs == sorted(freqs)
+    assert len(freqs) == 4
+    assert freqs == sorted(freqs)
     assert all("damping_ratio" in m for m in data["modes"])
     assert data["parameters"]["pose"] == {"x_m": 0.02, "y_m": -0.01, "phi_rad": 0.0}
     assert data["parameters"]["options"]["segments"] == 3
@@ -25,7 +26,8 @@ def test_modes_json(capsys):
 def test_modes_shapes_and_plot(capsys, tmp_path):
     png = tmp_path / "m.png"
     code, out, _ = run(capsys, "modes", "--segments", "2", "--n-modes", "2", "--json", "--shapes", "--plot", str(png))
-    assert code == 0 and png.stat().st_size > 1000
+    assert code == 0
+    assert png.stat().st_size > 1000
     data = json.loads(out)
     pts = data["modes"][0]["points_displacement"]
     assert len(pts["distal_1"]) == 4  # 2 segments -> 3 pieces -> 4 points
@@ -36,7 +38,8 @@ def test_modes_shapes_and_plot(capsys, tmp_path):
 def test_modes_table_both_methods(capsys):
     code, out, _ = run(capsys, "modes", "--segments", "3", "--n-modes", "3", "--method", "both")
     assert code == 0
-    assert "transitionFD" in out and "constrained" in out
+    assert "transitionFD" in out
+    assert "constrained" in out
 
 
 def test_rig_json(capsys):
@@ -66,7 +69,9 @@ def test_config_template_round_trips(tmp_path, capsys):
     path = tmp_path / "c.toml"
     path.write_text(out)
     code, out, _ = run(capsys, "config", "--config", str(path))
-    assert code == 0 and "geometry.base_radius_m" in out and "assumed:" in out
+    assert code == 0
+    assert "geometry.base_radius_m" in out
+    assert "assumed:" in out
     code, out, _ = run(capsys, "config", "--json")
     data = json.loads(out)
     assert data["compliance"]["motor_clamp_nm_per_rad"] == "inf"
@@ -75,8 +80,9 @@ def test_config_template_round_trips(tmp_path, capsys):
 
 def test_export_mjcf(tmp_path, capsys):
     out_file = tmp_path / "m.xml"
-    code, out, _ = run(capsys, "export-mjcf", "manipulator", "--segments", "2", "--out", str(out_file))
-    assert code == 0 and out_file.read_text().startswith("<mujoco")
+    code, _out, _ = run(capsys, "export-mjcf", "manipulator", "--segments", "2", "--out", str(out_file))
+    assert code == 0
+    assert out_file.read_text().startswith("<mujoco")
 
 
 @pytest.mark.parametrize(

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -43,11 +44,13 @@ def test_parser_mirrors_agree_with_the_library():
     assert common.DEFAULT_FIDELITY == options.DEFAULT_FIDELITY
     assert common.LINK_MODEL_CHOICES == parts.LINK_MODELS
     assert tuple(cli_main.RIGS) == tuple(rigs.RIGS)
-    assert cli_frf.AXES == frf.AXES and cli_frf.QUANTITIES == tuple(frf.QUANTITIES)
+    assert cli_frf.AXES == frf.AXES
+    assert cli_frf.QUANTITIES == tuple(frf.QUANTITIES)
     p = sim_impact.STUDY_IMPACT_POINT
     q = impact.STUDY_POINT
     assert (q.link, q.fraction, q.axis) == (p.link, p.fraction, p.axis)
-    assert impact.PULSE_MS == sim_impact.PULSE_S * 1e3 and impact.PEAK_FORCE_N == sim_impact.PEAK_FORCE_N
+    assert impact.PULSE_MS == sim_impact.PULSE_S * 1e3
+    assert impact.PEAK_FORCE_N == sim_impact.PEAK_FORCE_N
     for name in ("STUDY_FORCE_N", "STUDY_DURATION_S", "STUDY_OUTPUT_STEP_S", "DEFAULT_BAND_HZ"):
         assert getattr(transient, name) == getattr(study_transient, name), name
 
@@ -75,19 +78,27 @@ def test_closed_pipe_is_quiet():
 def test_user_error_is_one_line(capsys):
     code, _, err = run(capsys, "modes", "--segments", "0")
     assert code == 2
-    assert err.startswith("error: ") and err.count("\n") == 1 and "--segments" in err
+    assert err.startswith("error: ")
+    assert err.count("\n") == 1
+    assert "--segments" in err
 
 
 def test_usage_error_is_one_line(capsys):
     code, _, err = run(capsys, "modes", "--n-modes", "-2")
-    assert code == 2 and err.count("\n") == 1 and "--n-modes" in err and "1..200" in err
+    assert code == 2
+    assert err.count("\n") == 1
+    assert "--n-modes" in err
+    assert "1..200" in err
     code, _, err = run(capsys, "modes", "--n-modes", "10000")
-    assert code == 2 and "--n-modes" in err
+    assert code == 2
+    assert "--n-modes" in err
 
 
 def test_phi_beyond_pi_is_refused_not_wrapped(capsys):
     code, _, err = run(capsys, "modes", "--phi-rad", "100", "--segments", "2")
-    assert code == 2 and "--phi-rad" in err and "wrapped" in err
+    assert code == 2
+    assert "--phi-rad" in err
+    assert "wrapped" in err
 
 
 def test_coarse_resolution_warns_in_one_line(capsys):
@@ -95,11 +106,15 @@ def test_coarse_resolution_warns_in_one_line(capsys):
     code, out, err = run(capsys, "modes", "--segments", "1", "--n-modes", "1")
     assert code == 0
     lines = [line for line in err.splitlines() if line.startswith("warning:")]
-    assert len(lines) == 1 and "--segments" in lines[0] and "41 %" in lines[0]
-    assert "warnings.warn" not in err and ".py:" not in err  # no source lines
+    assert len(lines) == 1
+    assert "--segments" in lines[0]
+    assert "41 %" in lines[0]
+    assert "warnings.warn" not in err
+    assert ".py:" not in err  # no source lines
     assert "estimated f1 discretisation error 41 %" in out
     code, _, err = run(capsys, "modes", "--segments", "8", "--n-modes", "1")
-    assert code == 0 and "warning:" not in err  # 0.64 %: below the 1 % threshold
+    assert code == 0
+    assert "warning:" not in err  # 0.64 %: below the 1 % threshold
 
 
 @pytest.mark.parametrize(
@@ -124,7 +139,8 @@ def test_outputs_checked_before_computing(capsys, tmp_path, argv, option):
     argv = [a.format(dir=tmp_path, file=f) for a in argv]
     code, _, err = run(capsys, *argv, "--segments", "2")
     assert code == 2, err
-    assert err.startswith("error: ") and option in err
+    assert err.startswith("error: ")
+    assert option in err
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders")
@@ -136,14 +152,20 @@ def test_read_only_output_folder_named(capsys, tmp_path):
         code, _, err = run(capsys, "reduce", "--modes", "2", "--segments", "2", "--out", str(ro / "rom.mat"))
     finally:
         ro.chmod(0o700)
-    assert code == 2 and "not writable" in err and "--out" in err
+    assert code == 2
+    assert "not writable" in err
+    assert "--out" in err
 
 
 def test_config_folder_or_missing_file(capsys, tmp_path):
     code, _, err = run(capsys, "modes", "--config", str(tmp_path))
-    assert code == 2 and "--config" in err and "folder" in err
+    assert code == 2
+    assert "--config" in err
+    assert "folder" in err
     code, _, err = run(capsys, "config", "--config", str(tmp_path / "nope.toml"))
-    assert code == 2 and "--config" in err and "not found" in err
+    assert code == 2
+    assert "--config" in err
+    assert "not found" in err
 
 
 @pytest.mark.parametrize("content", [b"not a zip file", b"PK\x03\x04garbage"])
@@ -151,7 +173,9 @@ def test_fake_atlas_file_named(capsys, tmp_path, content):
     fake = tmp_path / "atlas.npz"
     fake.write_bytes(content)
     code, _, err = run(capsys, "atlas", "query", str(fake))
-    assert code == 2 and str(fake) in err and "atlas build" in err
+    assert code == 2
+    assert str(fake) in err
+    assert "atlas build" in err
     assert "Traceback" not in err
 
 
@@ -163,13 +187,17 @@ def test_unexpected_error_is_reported_as_a_bug(capsys, monkeypatch):
 
     monkeypatch.setattr(cli_main, "cmd_config", boom)
     code, _, err = run(capsys, "config")
-    assert code == 1 and "Traceback" in err and "RuntimeError: internal" in err and "bug in fpm-sim" in err
+    assert code == 1
+    assert "Traceback" in err
+    assert "RuntimeError: internal" in err
+    assert "bug in fpm-sim" in err
 
 
 def test_written_files_appear_atomically(capsys, tmp_path):
     out = tmp_path / "sub" / "m.xml"
     code, _, _ = run(capsys, "export-mjcf", "manipulator", "--segments", "2", "--out", str(out))
-    assert code == 0 and out.read_text().startswith("<mujoco")
+    assert code == 0
+    assert out.read_text().startswith("<mujoco")
     assert sorted(p.name for p in out.parent.iterdir()) == ["m.xml"]  # no temporary left beside it
     assert (out.stat().st_mode & 0o777) == (0o666 & ~_umask())
 
@@ -188,6 +216,6 @@ def test_bad_mat_file_for_a_reduced_model(tmp_path):
 
     bad = tmp_path / "rom.mat"
     bad.write_bytes(b"MATLAB? no")
-    with pytest.raises(FpmSimError, match="rom.mat"):
+    with pytest.raises(FpmSimError, match=re.escape("rom.mat")):
         read_input_file(bad, "--rom", load_reduced_model, "a model written by 'fpm-sim reduce --out FILE.mat'")
     assert Path(bad).exists()

@@ -25,11 +25,13 @@ def test_frf_json_csv_and_plot(capsys, tmp_path):
     )  # fmt: skip
     assert code == 0
     d = json.loads(text)
-    assert d["excitation"] == "distal_0@0.5/z" and d["response"] == "distal_0@0.5/z"
+    assert d["excitation"] == "distal_0@0.5/z"
+    assert d["response"] == "distal_0@0.5/z"
     # the first FRF peak is the first mode (driving point, 1 % damping)
     assert d["peaks"][0]["freq_hz"] == pytest.approx(d["modal_freq_hz"][0], rel=1e-3)
     raw = np.loadtxt(csv, delimiter=",", skiprows=2)
-    assert raw.shape[1] == 6 and raw[-1, 0] == pytest.approx(300.0)
+    assert raw.shape[1] == 6
+    assert raw[-1, 0] == pytest.approx(300.0)
     assert png.stat().st_size > 1000
 
 
@@ -39,11 +41,12 @@ def test_frf_table_with_user_damping(capsys):
         "--output-axis", "z", "--quantity", "mobility",
     )  # fmt: skip
     assert code == 0
-    assert "mobility (m/s/N) from distal_0@0.5/z to distal_2@0.5/z" in text and "0.0300" in text
+    assert "mobility (m/s/N) from distal_0@0.5/z to distal_2@0.5/z" in text
+    assert "0.0300" in text
 
 
 @pytest.mark.parametrize(
-    "argv, match",
+    ("argv", "match"),
     [
         (["--input-link", "distal_5"], "unknown link"),
         (["--input-fraction", "2"], "fraction"),
@@ -55,7 +58,8 @@ def test_frf_table_with_user_damping(capsys):
 )
 def test_frf_errors(capsys, argv, match):
     code, _, err = run(capsys, "frf", "--segments", "3", "--no-axial", *argv)
-    assert code == 2 and match in err
+    assert code == 2
+    assert match in err
 
 
 def test_impact_json(capsys, tmp_path):
@@ -66,7 +70,8 @@ def test_impact_json(capsys, tmp_path):
     assert code == 0
     d = json.loads(text)
     assert {"first_peak_hz", "modal_f1_hz", "relative_error"} <= d.keys()
-    assert len(d["impacts"]) == 2 and d["setup"]["impact"] == "distal_0@0.5/z"
+    assert len(d["impacts"]) == 2
+    assert d["setup"]["impact"] == "distal_0@0.5/z"
     # a 0.1 s record still puts the first peak within 2 % (the line spacing comes from the zero padding)
     assert abs(d["relative_error"]) < 0.02
     assert "coherence" in csv.read_text().splitlines()[1]
@@ -74,9 +79,11 @@ def test_impact_json(capsys, tmp_path):
 
 def test_impact_errors(capsys):
     code, _, err = run(capsys, "impact", "--segments", "3", "--impacts", "0")
-    assert code == 2 and "n_impacts" in err
+    assert code == 2
+    assert "n_impacts" in err
     code, _, err = run(capsys, "impact", "--segments", "1")
-    assert code == 2 and "--segments" in err
+    assert code == 2
+    assert "--segments" in err
 
 
 def test_readability_markdown(capsys, tmp_path):
@@ -86,7 +93,8 @@ def test_readability_markdown(capsys, tmp_path):
     )  # fmt: skip
     assert code == 0
     d = json.loads(text)
-    assert len(d["rows"]) == 25 and sum(r["study_unreadable"] for r in d["rows"]) == 7
+    assert len(d["rows"]) == 25
+    assert sum(r["study_unreadable"] for r in d["rows"]) == 7
     assert len(d["agreement"]) == 3
     assert md.read_text().count("\n| (") == 25
     assert png.stat().st_size > 1000
@@ -98,7 +106,10 @@ def test_atlas_build_and_query(capsys, tmp_path):
         capsys, "atlas", "build", "--segments", "3", "--x-mm", "-50", "0", "50", "--y-mm", "0", "50",
         "--modes", "4", "--out", str(atlas), "--plot", str(png),
     )  # fmt: skip
-    assert code == 0 and "mode 4" in text and atlas.exists() and "weak links" in text
+    assert code == 0
+    assert "mode 4" in text
+    assert atlas.exists()
+    assert "weak links" in text
     assert png.stat().st_size > 1000
     code, text, _ = run(
         capsys, "atlas", "query", str(atlas), "--x-mm", "25", "--y-mm", "25", "--direct", "--out", str(rom), "--json",
@@ -109,19 +120,23 @@ def test_atlas_build_and_query(capsys, tmp_path):
     # Mode 4 changes character between these grid poses (the build reports weak links there), so it is not
     # held to that
     assert np.max(np.abs(d["relative_difference"][:3])) < 0.02
-    assert d["direct_mode_index"][:3] == [1, 2, 3] and min(d["mac"][:3]) > 0.99
+    assert d["direct_mode_index"][:3] == [1, 2, 3]
+    assert min(d["mac"][:3]) > 0.99
     assert load_reduced_model(rom).n_modes == 4
 
 
 def test_atlas_errors(capsys, tmp_path):
     code, _, err = run(capsys, "atlas", "query", str(tmp_path / "none.npz"))
-    assert code == 2 and "not found" in err
+    assert code == 2
+    assert "not found" in err
     code, _, err = run(capsys, "atlas", "build", "--segments", "3", "--out", str(tmp_path / "a.txt"))
-    assert code == 2 and ".npz" in err
+    assert code == 2
+    assert ".npz" in err
     code, _, err = run(
         capsys, "atlas", "build", "--segments", "3", "--x-mm", "0", "--y-mm", "0", "--modes", "2",
         "--out", str(tmp_path / "a.npz"),
     )  # fmt: skip
     assert code == 0
     code, _, err = run(capsys, "atlas", "query", str(tmp_path / "a.npz"), "--x-mm", "10")
-    assert code == 2 and "single value" in err
+    assert code == 2
+    assert "single value" in err

@@ -25,7 +25,8 @@ def test_reduce_mat_round_trip(capsys, tmp_path):
     code, text, _ = run(capsys, "reduce", *args, "--modes", "6", "--out", str(out), "--json")
     assert code == 0
     payload = json.loads(text)
-    assert payload["n_modes"] == 6 and payload["pose"] == {"x_m": 0.05, "y_m": -0.05, "phi_rad": 0.1}
+    assert payload["n_modes"] == 6
+    assert payload["pose"] == {"x_m": 0.05, "y_m": -0.05, "phi_rad": 0.1}
     back = load_reduced_model(out)
     # the same reduction through the API gives the same matrices as the file holds
     built = build_manipulator(default_config(), Pose(0.05, -0.05, 0.1), ModelOptions(segments=3, axial=False))
@@ -40,7 +41,9 @@ def test_reduce_mat_round_trip(capsys, tmp_path):
 def test_reduce_table_and_band(capsys):
     code, text, _ = run(capsys, "reduce", "--segments", "3", "--no-axial", "--band-hz", "300")
     assert code == 0
-    assert "freq (Hz)" in text and "force_x (N)" in text and "acc_distal_0 (m/s^2)" in text
+    assert "freq (Hz)" in text
+    assert "force_x (N)" in text
+    assert "acc_distal_0 (m/s^2)" in text
 
 
 def test_reduce_servo_motors_add_torque_inputs(capsys):
@@ -63,7 +66,7 @@ def test_reduce_servo_motors_add_torque_inputs(capsys):
 
 
 @pytest.mark.parametrize(
-    "argv, match",
+    ("argv", "match"),
     [
         (["--modes", "0"], "--modes"),
         (["--modes", "2", "--out", "rom.txt"], ".mat or .npz"),
@@ -73,4 +76,5 @@ def test_reduce_servo_motors_add_torque_inputs(capsys):
 )
 def test_reduce_errors(capsys, argv, match):
     code, _, err = run(capsys, "reduce", "--segments", "3", "--no-axial", *argv)
-    assert code == 2 and match in err
+    assert code == 2
+    assert match in err

@@ -51,7 +51,8 @@ def test_defaults_agree_on_f1(capsys, tmp_path):
     assert spread < AGREEMENT, f1
     # every result states the same resolution and its error estimate (0.41 / 12^2 = 0.28 %)
     for name, r in res.items():
-        assert r["segments"] == 12 and r["link_model"] == "segments", (name, r)
+        assert r["segments"] == 12, (name, r)
+        assert r["link_model"] == "segments", (name, r)
         assert r["f1_error_estimate"] == pytest.approx(0.41 / 144), (name, r)
 
 

@@ -50,8 +50,10 @@ def check_folder(out: Path) -> str | None:
     table = re.findall(r"^\| (-?\d+) \| (-?\d+) \| (-?[\d.]+) \| (-?[\d.]+) \| [+-][\d.]+ \| ([\d.]+) \|", report, re.M)
     assert len(table) == 25
     for row, (r_mm, c_mm, x_mm, y_mm, f1) in zip(rows, table):
-        assert float(row["row_mm"]) == float(r_mm) and float(row["col_mm"]) == float(c_mm)
-        assert float(row["x_mm"]) == pytest.approx(float(x_mm)) and float(row["y_mm"]) == pytest.approx(float(y_mm))
+        assert float(row["row_mm"]) == float(r_mm)
+        assert float(row["col_mm"]) == float(c_mm)
+        assert float(row["x_mm"]) == pytest.approx(float(x_mm))
+        assert float(row["y_mm"]) == pytest.approx(float(y_mm))
         assert f"{float(row['f1_hz']):.2f}" == f1
     return reading
 
@@ -65,7 +67,8 @@ def check_interrupted(res: subprocess.CompletedProcess) -> None:
     assert "Traceback" not in res.stderr
     if res.returncode == 130:  # one line says so; one-line warnings of the run may precede or follow it
         lines = [ln for ln in res.stderr.strip().splitlines() if not ln.startswith("warning:")]
-        assert lines and lines[-1].startswith("interrupted"), res.stderr
+        assert lines, res.stderr
+        assert lines[-1].startswith("interrupted"), res.stderr
 
 
 @pytest.mark.slow
@@ -100,5 +103,6 @@ def test_existing_folder_of_another_run_is_refused(tmp_path, capsys):
     (out / "report.md").write_text("another run\n")
     assert main(["reproduce", "--segments", "3", "--out", str(out)]) == 2
     err = capsys.readouterr().err
-    assert "--overwrite" in err and "--out" in err
+    assert "--overwrite" in err
+    assert "--out" in err
     assert (out / "report.md").read_text() == "another run\n"

@@ -90,11 +90,11 @@ def test_invalid_values_name_the_field(tmp_path, old, new, field):
 
 
 def test_elbow_branch_and_motor_mode_checked(tmp_path):
-    with pytest.raises(ConfigError, match="geometry.elbow_branch"):
+    with pytest.raises(ConfigError, match=r"geometry\.elbow_branch"):
         load_config(_write(tmp_path, BASE.replace("[section]", "elbow_branch = [1, 0, 1]\n[section]")))
-    with pytest.raises(ConfigError, match="motors.mode"):
+    with pytest.raises(ConfigError, match=r"motors\.mode"):
         load_config(_write(tmp_path, BASE + '\n[motors]\nmode = "spinning"\n'))
-    with pytest.raises(ConfigError, match="motors.servo_stiffness_nm_per_rad"):
+    with pytest.raises(ConfigError, match=r"motors\.servo_stiffness_nm_per_rad"):
         load_config(_write(tmp_path, BASE + '\n[motors]\nmode = "servo"\n'))
 
 

@@ -46,7 +46,7 @@ def test_per_chain_bad_entry_names_its_index():
         r"proximal_length_m = \{ value = [0-9.e-]+", "proximal_length_m = { value = [0.15, 0.15]", config_to_toml(cfg)
     )
     assert "[0.15, 0.15]" in text
-    with pytest.raises(ConfigError, match="proximal_length_m.*list of 3"):
+    with pytest.raises(ConfigError, match=r"proximal_length_m.*list of 3"):
         parse_config(tomllib.loads(text))
 
 

@@ -73,7 +73,8 @@ def test_cli_modes_reports_the_near_singular_first_mode(capsys):
     out = json.loads(captured.out)
     f1 = out["modes"][0]["frequency_hz"]
     assert 0.3 < f1 < 1.0, f1  # was 68.9 Hz: the physical first mode had been dropped as "zero"
-    assert "zero" not in out["dropped"] and "rigid_body" not in out["dropped"]
+    assert "zero" not in out["dropped"]
+    assert "rigid_body" not in out["dropped"]
 
 
 def test_free_free_rig_drops_exactly_its_six_rigid_body_modes(steel_bar):
@@ -159,7 +160,9 @@ def test_manipulator_welds_have_full_rank_in_consistent_units(default_manip, pos
         warnings.simplefilter("ignore", NearSingularityWarning)
         built = build_manipulator(default_manip, pose, ModelOptions(segments=3, gravity=False))
     rank, jac = _rank_at(built)
-    assert rank.n_rows == 12 and rank.rank == 12 and not rank.deficient
+    assert rank.n_rows == 12
+    assert rank.rank == 12
+    assert not rank.deficient
     # measured 0.14..0.17: the scaled rows are well conditioned; the basis spans exactly null(J)
     assert rank.ratio > 0.05
     assert rank.basis.shape == (built.model.nv, built.model.nv - 12)
@@ -187,7 +190,8 @@ def test_straight_inextensible_chain_drops_its_structural_redundancy_silently(st
         warnings.simplefilter("error", RedundantConstraintWarning)
         rank, _ = _rank_at(built)
     # the axial row of a straight chain without axial springs: exactly redundant (ratio ~4e-17)
-    assert rank.n_rows == 6 and rank.rank == 5
+    assert rank.n_rows == 6
+    assert rank.rank == 5
     assert rank.singular_values[-1] / rank.singular_values[0] < 1e-12
 
 

@@ -179,9 +179,9 @@ def test_flex_gap_on_the_manipulator_is_its_missing_torsion_and_section(default_
         flex = build_manipulator(default_manip, pose, ModelOptions(link_model="flex", segments=4, gravity=False))
     # without torsion stiffness the pieces' twist inertia leaves local twist modes; a flex has no
     # twist freedom, so modes whose strain energy is mostly twist are not compared
-    f_lim = [
+    f_lim = next(
         md.frequency_hz for md in modes_constrained(limited, n_modes=None).modes if md.character.get("twist", 0) < 0.5
-    ][0]
+    )
     f_flex = modes_constrained(flex, n_modes=1).frequencies_hz[0]
     # two discretisations of the same continuum at n = 4 (rigid pieces vs lumped vertices): measured
     # 0.12 % apart (0.003 % at n = 6); the unexplained gap would be 34 %
@@ -204,8 +204,8 @@ def test_flex_damping_acts_along_the_current_curvature_only(steel_bar):
                 ModelOptions(link_model="flex", segments=6, gravity=gravity),
             )
         modes = modes_transition_fd(built, n_modes=2).modes
-        out = [m for m in modes if m.dominant == "flex_out"][0]
-        inp = [m for m in modes if m.dominant == "flex_in"][0]
+        out = next(m for m in modes if m.dominant == "flex_out")
+        inp = next(m for m in modes if m.dominant == "flex_in")
         # stiffness-proportional damping gives zeta = beta omega / 2 exactly; the discrete map's error,
         # of order (omega h)^2 ~ 1e-5 here, stays far below 1e-3
         assert out.damping_ratio == pytest.approx(5e-5 * 2 * np.pi * out.frequency_hz / 2, rel=1e-3)

@@ -52,7 +52,8 @@ def test_compliances_and_servo_add_joints(default_manip):
 
     stiff = default_manip.replace(compliance=Compliance(passive_joint_tilt_nm_per_rad=5e3, motor_clamp_nm_per_rad=1e4))
     b = build_manipulator(stiff, POSE, ModelOptions(segments=2))
-    assert b.dof_kinds.count("tilt") == 12 and b.dof_kinds.count("clamp") == 3
+    assert b.dof_kinds.count("tilt") == 12
+    assert b.dof_kinds.count("clamp") == 3
     servo = default_manip.replace(motors=Motors(mode="servo", servo_stiffness_nm_per_rad=300.0))
     b = build_manipulator(servo, POSE, ModelOptions(segments=2))
     assert b.dof_kinds.count("motor") == 3

@@ -32,7 +32,8 @@ def test_mac_matrix():
     rng = np.random.default_rng(0)
     a = rng.normal(size=(20, 3))
     m = mac_matrix(a, np.column_stack([-2.0 * a[:, 1], a[:, 0]]))
-    assert m[1, 0] == pytest.approx(1.0) and m[0, 1] == pytest.approx(1.0)  # scale and sign do not matter
+    assert m[1, 0] == pytest.approx(1.0)  # scale and sign do not matter
+    assert m[0, 1] == pytest.approx(1.0)
     q, _ = np.linalg.qr(a)
     assert mac_matrix(q[:, :1], q[:, 1:2])[0, 0] == pytest.approx(0.0, abs=1e-20)
 
@@ -71,8 +72,10 @@ def test_tracking_keeps_labels_through_a_crossing(symmetric_manip):
     al = track_modes(systems, n_modes=4, n_extra=4)
     share = np.array([[_out_of_plane_share(s, s.phi[:, i]) for i in a.index] for s, a in zip(systems, al)])
     # the sweep does contain crossings: label 1 (out of plane) ends as the 2nd mode, label 4 (in plane) as the 1st
-    assert al[0].index[0] == 0 and al[-1].index[0] == 1
-    assert al[0].index[3] == 3 and al[-1].index[3] == 0
+    assert al[0].index[0] == 0
+    assert al[-1].index[0] == 1
+    assert al[0].index[3] == 3
+    assert al[-1].index[3] == 0
     # every label keeps its character along the sweep (a wrong swap would flip the share to ~0 or ~1)
     start = share[0] > 0.5
     assert np.all((share > 0.5) == start)
@@ -80,7 +83,8 @@ def test_tracking_keeps_labels_through_a_crossing(symmetric_manip):
     assert min(a.mac.min() for a in al[1:]) > 0.9
     # negative control: labelling by sorted order changes character at the crossing
     naive = np.array([_out_of_plane_share(s, s.phi[:, 0]) for s in systems])
-    assert naive[0] > 0.5 and naive[-1] < 0.5
+    assert naive[0] > 0.5
+    assert naive[-1] < 0.5
 
 
 @pytest.fixture(scope="module")

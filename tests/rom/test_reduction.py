@@ -56,7 +56,7 @@ def _full_linear_step(built, system, input_col, duration_s):
 
     eps = 1e-3
     b = (step(system.b_q[:, input_col] * eps) - step(np.zeros(nv))) / eps
-    n = int(round(duration_s / model.opt.timestep))
+    n = round(duration_s / model.opt.timestep)
     x = np.zeros(2 * nv)
     ys = np.empty((n + 1, 3))
     for k in range(n + 1):
@@ -171,9 +171,12 @@ def test_file_round_trip(rom, tmp_path, suffix):
     back = load_reduced_model(path)
     for name in ("a", "b", "c", "d", "frequencies_hz", "damping_ratios", "modal_masses", "mode_shapes", "qpos"):
         assert np.array_equal(getattr(back, name), getattr(rom, name)), name
-    assert back.input_names == rom.input_names and back.output_names == rom.output_names
-    assert back.input_units == rom.input_units and back.output_units == rom.output_units
-    assert back.pose == rom.pose and back.static_correction == rom.static_correction
+    assert back.input_names == rom.input_names
+    assert back.output_names == rom.output_names
+    assert back.input_units == rom.input_units
+    assert back.output_units == rom.output_units
+    assert back.pose == rom.pose
+    assert back.static_correction == rom.static_correction
     # provenance travels with the matrices
     assert back.parameters["reduction"]["n_modes"] == rom.n_modes
     assert back.parameters["timestep_s"] == rom.parameters["timestep_s"]
@@ -205,7 +208,8 @@ def test_python_control_state_space(rom):
     control = pytest.importorskip("control")
     sys = rom.to_control()
     assert isinstance(sys, control.StateSpace)
-    assert sys.input_labels == rom.input_names and sys.output_labels == rom.output_names
+    assert sys.input_labels == rom.input_names
+    assert sys.output_labels == rom.output_names
     assert np.allclose(np.sort_complex(sys.poles()), np.sort_complex(np.linalg.eigvals(rom.a)))
     assert np.allclose(control.dcgain(sys), rom.static_gain(), rtol=1e-8, atol=1e-14)
 

@@ -27,7 +27,9 @@ def env():
 
 def test_specs(env):
     spec = env.action_spec()
-    assert spec.shape == (3,) and np.all(spec.minimum == -5.0) and np.all(spec.maximum == 5.0)
+    assert spec.shape == (3,)
+    assert np.all(spec.minimum == -5.0)
+    assert np.all(spec.maximum == 5.0)
     assert tuple(env.observation_spec()) == OBSERVATION_KEYS
     assert env.parameters["motors"]["mode"] == "servo"
     # the physics step divides the control step exactly
@@ -51,7 +53,8 @@ def test_episode_starts_deflected_and_vibrates(env):
         assert 0.0 <= ts.reward <= 1.0
         if ts.last():
             break
-    assert steps == 20 and ts.discount == 1.0
+    assert steps == 20
+    assert ts.discount == 1.0
     # links vibrate: velocities and accelerometer readings appear
     assert np.abs(ts.observation["ee_vel"]).max() > 1e-4
     assert np.abs(ts.observation["link_accel"]).max() > 1e-2

@@ -42,7 +42,8 @@ def test_first_peak_matches_modal_f1_with_noise(symmetric_manip):
     at_peak = np.argmin(np.abs(res.frf.freq_hz - res.first_peak_hz))
     assert res.frf.coherence[at_peak] > 0.99
     d = res.to_dict()
-    assert d["first_peak_hz"] == res.first_peak_hz and d["modal_f1_hz"] == res.modal_f1_hz
+    assert d["first_peak_hz"] == res.first_peak_hz
+    assert d["modal_f1_hz"] == res.modal_f1_hz
     # end to end: the H1 of the nonlinear rollouts against the linear modal FRF of the same model, with the
     # window's damping 1 / (tau omega_r) added to every mode (exact for a sum of decaying modes). Left over:
     # leakage from truncating a 0.2 s record, the neighbouring modes, noise and nonlinearity: measured 2.6 %
@@ -108,7 +109,7 @@ def test_point_acceleration_is_rigid_body_kinematics(symmetric_manip):
     data = mujoco.MjData(model)
     pt = LinkPoint("distal_1", 0.37, "z")
     mujoco.mj_forward(model, data)
-    bid, p, e = locate(built, data, pt)
+    bid, p, _e = locate(built, data, pt)
     mujoco.mj_applyFT(model, data, np.array([0.0, 0.0, 3.0]), np.zeros(3), p, bid, data.qfrc_applied)
     mujoco.mj_forward(model, data)
     mujoco.mj_rnePostConstraint(model, data)

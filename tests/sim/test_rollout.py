@@ -1,6 +1,8 @@
 """Headless nonlinear rollouts: rest at the equilibrium, agreement with the reduced model in the
 linear range (displacements, accelerations, motor torques), outputs and bad input."""
 
+import re
+
 import mujoco
 import numpy as np
 import pytest
@@ -30,7 +32,8 @@ def flexible(symmetric_manip):
 def test_timestep_is_aligned_to_the_output_step(flexible):
     _, built, _ = flexible
     n = 1e-4 / built.timestep_s
-    assert abs(n - round(n)) < 1e-9 and built.timestep_s <= build_manipulator(
+    assert abs(n - round(n)) < 1e-9
+    assert built.timestep_s <= build_manipulator(
         flexible[0], POSE, ModelOptions(segments=3, axial=False)
     ).timestep_s * (1 + 1e-12)
 
@@ -100,7 +103,7 @@ def test_motor_torque_rollout_matches_the_reduced_model(symmetric_manip):
 
 @pytest.mark.parametrize("suffix", [".csv", ".npz"])
 def test_save(flexible, tmp_path, suffix):
-    manip, built, system = flexible
+    manip, built, _system = flexible
     res = rollout(built, manip, duration_s=0.002, ee_wrench=constant(0.0, 1.0, 0.0), accel_sites=["distal_0_p1"])
     path = res.save(tmp_path / f"r{suffix}")
     cols = res.columns()
@@ -116,7 +119,7 @@ def test_save(flexible, tmp_path, suffix):
 
 def test_bad_input(flexible):
     manip, built, _ = flexible
-    with pytest.raises(RolloutError, match="motors.mode = 'servo'"):
+    with pytest.raises(RolloutError, match=re.escape("motors.mode = 'servo'")):
         rollout(built, manip, duration_s=0.001, motor_torque=constant(1.0, 0.0, 0.0))
     with pytest.raises(RolloutError, match="accel_sites"):
         rollout(built, manip, duration_s=0.001, accel_sites=["nowhere"])
@@ -131,7 +134,7 @@ def test_diverging_or_non_finite_load_is_an_error_not_zeros(flexible, force_n, t
     """1e9 N made MuJoCo reset the state to qpos0 (a CSV of zero displacement, exit 0); inf and nan too."""
     monkeypatch.chdir(tmp_path)
     manip, built, system = flexible
-    with pytest.raises(RolloutError, match="diverged|finite"):
+    with pytest.raises(RolloutError, match=r"diverged|finite"):
         rollout(built, manip, duration_s=0.002, ee_wrench=constant(force_n, 0.0, 0.0), qpos=system.qpos)
     assert not (tmp_path / "MUJOCO_LOG.TXT").exists()  # MuJoCo's warning went to the error, not a file
 
@@ -147,7 +150,8 @@ def test_mujoco_warnings_never_write_a_log_file(tmp_path, monkeypatch):
     data.qfrc_applied[:] = np.nan
     with mujoco_messages() as messages:
         mujoco.mj_step(model, data)
-    assert messages and "QACC" in messages[0]
+    assert messages
+    assert "QACC" in messages[0]
     previous = mujoco.get_mju_user_warning()
     try:
         mujoco.set_mju_user_warning(None)

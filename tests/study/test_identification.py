@@ -22,7 +22,8 @@ def test_fit_recovers_known_parameters_of_an_analytic_model():
     # least_squares stops at ftol 1e-8 on the cost: parameters to ~1e-6 relative
     assert res.values == pytest.approx(truth, rel=1e-5)
     assert np.all(np.abs(res.residual_pct) < 1e-4)
-    assert res.correlation.shape == (2, 2) and res.correlation[0, 0] == pytest.approx(1.0)
+    assert res.correlation.shape == (2, 2)
+    assert res.correlation[0, 0] == pytest.approx(1.0)
 
 
 def test_link_identification_recovers_synthetic_length_and_clamp(default_manip):

@@ -112,7 +112,8 @@ def test_labelled_matching_picks_the_kind_not_the_rank():
     ]
     got = predict_observations(cfg, obs, options=fast_options(segments=SEG))
     # the solves ask for 5 and 6 eigenpairs: LAPACK's subset solve differs at ~1e-12 relative
-    assert got[0] == pytest.approx(first_in, rel=1e-9) and got[1] == pytest.approx(first_out, rel=1e-9)
+    assert got[0] == pytest.approx(first_in, rel=1e-9)
+    assert got[1] == pytest.approx(first_out, rel=1e-9)
     assert got[2] == pytest.approx(min(first_in, first_out), rel=1e-9)
     assert first_in != first_out
 
@@ -180,7 +181,8 @@ def test_cli_identify_writes_a_complete_folder_usable_with_config(tmp_path):
     }
     cfg = load_config(out / "config.toml")
     src = cfg.provenance["hardware.platform.mass_kg"]
-    assert src.startswith("identified: meas.csv") and "+-" in src
+    assert src.startswith("identified: meas.csv")
+    assert "+-" in src
     doc = json.loads((out / "identify.json").read_text())
     assert doc["cross_validation"]["folds"] == 2
     assert tomllib.loads((out / "config.toml").read_text())["hardware"]["platform"]["mass_kg"]["value"] > 0

@@ -15,7 +15,8 @@ def test_the_withheld_poses_are_the_readable_ones_missing_from_the_packaged_tabl
     known = {(m.row_mm, m.col_mm) for m in measured_table()}
     assert not set(w) & known
     readable = {(c.row_mm, c.col_mm) for c in comsol_table() if c.has_value}
-    assert set(w) <= readable and len(readable) == 18
+    assert set(w) <= readable
+    assert len(readable) == 18
     assert sum(m.readable for m in measured_table()) == 12
 
 
@@ -23,7 +24,8 @@ def test_report_states_predictions_for_withheld_poses_and_both_references():
     rep = reproduce_study(default_config(), options=fast_options(segments=2), subsystems=False, readability=False)
     md = rep.markdown()
     assert "Predictions at the six withheld poses" in md
-    assert "fpm-sim vs measured (12 poses, in-sample)" in md and "fpm-sim vs COMSOL (18 poses)" in md
+    assert "fpm-sim vs measured (12 poses, in-sample)" in md
+    assert "fpm-sim vs COMSOL (18 poses)" in md
     assert "COMSOL vs measured (the study's own" in md
     rows = rep.rows()
     assert sum(r["withheld"] for r in rows) == 6
@@ -37,4 +39,5 @@ def test_thin_links_get_no_error_statistics_against_the_30_mm_tables():
     md = rep.markdown()
     assert "No error statistics: not comparable" in md
     assert "mean (%)" not in md
-    assert rep.stats() == {"n": 0} and rep.to_dict()["stats_vs_comsol"] is None
+    assert rep.stats() == {"n": 0}
+    assert rep.to_dict()["stats_vs_comsol"] is None

@@ -62,10 +62,13 @@ def test_mode1_is_seen_out_of_plane_and_not_in_plane(system):
     in-plane one does not excite it (the planes couple only through the micrometre gravity sag)."""
     z, _ = mode1_readability(system, LinkPoint("distal_0", 0.5, "z"))
     n, _ = mode1_readability(system, LinkPoint("distal_0", 0.5, "normal"))
-    assert z.readable and z.prominence_db > 20.0
-    assert not n.readable and n.prominence_db < READABLE_PROMINENCE_DB
+    assert z.readable
+    assert z.prominence_db > 20.0
+    assert not n.readable
+    assert n.prominence_db < READABLE_PROMINENCE_DB
     assert n.excitation < 1e-3 * z.excitation
-    assert 0.0 < z.modal_share <= 1.0 and z.peak_height_db <= 0.0
+    assert 0.0 < z.modal_share <= 1.0
+    assert z.peak_height_db <= 0.0
 
 
 def test_peak_height_is_the_single_mode_resonance(system):
@@ -82,17 +85,23 @@ def test_table_and_markdown(symmetric_manip):
     cells = [c for c in study_poses() if c.row_mm == -50.0]  # 3 unreadable and 2 readable study cells
     assert sum(not math.isfinite(c.comsol_hz) for c in cells) == 3
     tab = readability_table(symmetric_manip, options=OPTS, poses=cells)
-    assert len(tab.rows) == 5 and len(tab.rows[0].metrics) == 3
+    assert len(tab.rows) == 5
+    assert len(tab.rows[0].metrics) == 3
     md = tab.to_markdown()
-    assert md.count("\n| (") == 5 and "| cell (row, col) mm |" in md
-    assert "unreadable" in md and "AUC" in md
+    assert md.count("\n| (") == 5
+    assert "| cell (row, col) mm |" in md
+    assert "unreadable" in md
+    assert "AUC" in md
     a = tab.agreement(0)
-    assert a["n"] == 5 and a["study_unreadable"] == 3
+    assert a["n"] == 5
+    assert a["study_unreadable"] == 3
     assert a["agree"] == a["both_unreadable"] + a["both_readable"]
     d = tab.to_dict()
-    assert len(d["rows"]) == 5 and d["rows"][0]["metrics"][0]["point"] == "distal_0@0.5/z"
+    assert len(d["rows"]) == 5
+    assert d["rows"][0]["metrics"][0]["point"] == "distal_0@0.5/z"
     for r in tab.rows:
-        assert r.f1_hz > 0 and r.f1_character.split()[0] in ("bend_out", "bend_in", "twist")
+        assert r.f1_hz > 0
+        assert r.f1_character.split()[0] in ("bend_out", "bend_in", "twist")
 
 
 def test_custom_poses_keep_their_flag(symmetric_manip):

@@ -12,7 +12,9 @@ from fpm_sim.study.reproduce import POSES_CSV_COLUMNS, error_stats
 def test_error_stats_in_the_studys_form():
     st = error_stats(np.array([110.0, 90.0, np.nan, 50.0]), np.array([100.0, 100.0, 20.0, np.nan]))
     assert st["n"] == 2
-    assert st["max_abs_hz"] == 10.0 and st["mean_abs_pct"] == 10.0 and st["median_abs_hz"] == 10.0
+    assert st["max_abs_hz"] == 10.0
+    assert st["mean_abs_pct"] == 10.0
+    assert st["median_abs_hz"] == 10.0
     assert st["mean_signed_pct"] == 0.0
 
 
@@ -63,13 +65,15 @@ def test_reproduce_writes_csv_report_and_figures(tmp_path, capsys):
     data = [dict(zip(rows[0], r)) for r in rows[1:]]
     assert sum(r["comsol_hz"] == "" for r in data) == 7
     for r in data:
-        assert float(r["x_mm"]) == float(r["col_mm"]) and float(r["y_mm"]) == float(r["row_mm"])  # rows are y
+        assert float(r["x_mm"]) == float(r["col_mm"])
+        assert float(r["y_mm"]) == float(r["row_mm"])
         assert float(r["phi_rad"]) == (-0.2 if float(r["col_mm"]) == 0 else 0.0)
         assert all(math.isfinite(float(r[f"f{k}_hz"])) for k in (1, 2, 3))
     report = (out / "report.md").read_text()
     for needle in ("Subsystem tests", "The 25 poses", "Error statistics", "provenance", "Mode-1 readability"):
         assert needle in report
-    assert (out / "heatmaps.png").stat().st_size > 0 and (out / "subsystems.png").stat().st_size > 0
+    assert (out / "heatmaps.png").stat().st_size > 0
+    assert (out / "subsystems.png").stat().st_size > 0
 
 
 @pytest.mark.parametrize(

@@ -20,10 +20,11 @@ def test_comsol_table_has_25_cells_18_values():
     cells = comsol_table()
     assert len(cells) == 25
     assert sum(c.has_value for c in cells) == 18
-    centre = [c for c in cells if c.row_mm == 0 and c.col_mm == 0][0]
+    centre = next(c for c in cells if c.row_mm == 0 and c.col_mm == 0)
     assert centre.comsol_hz == 61.37
     vals = [c.comsol_hz for c in cells if c.has_value]
-    assert math.isclose(min(vals), 27.14) and math.isclose(max(vals), 74.56)
+    assert math.isclose(min(vals), 27.14)
+    assert math.isclose(max(vals), 74.56)
 
 
 def test_mesh_convergence_and_stats_load():

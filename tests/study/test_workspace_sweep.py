@@ -14,7 +14,8 @@ def test_sweep_keeps_every_point_with_a_status(tmp_path, capsys):
     with open(tmp_path / "sweep_dense.csv") as fh:
         rows = list(csv.DictReader(fh))
     statuses = {r["status"] for r in rows}
-    assert "ok" in statuses and "unreachable" in statuses
+    assert "ok" in statuses
+    assert "unreachable" in statuses
     for r in rows:
         assert (r["f1_hz"] == "") == (r["status"] in ("unreachable", "singular"))
     assert (tmp_path / "sweep_dense.png").exists()
@@ -31,7 +32,8 @@ def test_singularity_fields_match_the_kinematics_module(default_manip):
             try:
                 asm = inverse_kinematics(default_manip.geometry, Pose.from_mm(x, y, 0.1), check_singularity=False)
             except UnreachablePoseError:
-                assert np.isnan(det[iy, ix]) and np.isnan(ser[iy, ix])
+                assert np.isnan(det[iy, ix])
+                assert np.isnan(ser[iy, ix])
                 continue
             assert ser[iy, ix] == pytest.approx(asm.singularity.serial, abs=1e-12)
             assert np.isfinite(det[iy, ix])

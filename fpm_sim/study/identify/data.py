@@ -31,8 +31,8 @@ __all__ = [
     "DEFAULT_SIGMA_PCT",
     "MODE_LABELS",
     "DataError",
-    "Observation",
     "DataSet",
+    "Observation",
     "read_measured_csv",
     "read_subsystems_csv",
 ]

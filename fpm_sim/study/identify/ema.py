@@ -26,7 +26,7 @@ import numpy as np
 from fpm_sim.errors import FpmSimError
 from fpm_sim.frf import pick_peaks
 
-__all__ = ["EmaError", "MeasuredFrf", "ModalEstimate", "read_frfs", "estimate_modes", "write_modes_csv"]
+__all__ = ["EmaError", "MeasuredFrf", "ModalEstimate", "estimate_modes", "read_frfs", "write_modes_csv"]
 
 
 class EmaError(FpmSimError):

@@ -52,17 +52,17 @@ from fpm_sim.study.identify.parameters import ParameterSet
 from fpm_sim.study.tables import SubsystemTest
 
 __all__ = [
+    "GLOBAL_METHODS",
+    "IN_PLANE_THRESHOLD",
+    "CrossValidation",
+    "Identification",
     "IdentifyOptions",
     "Problem",
     "SearchStep",
-    "Identification",
-    "CrossValidation",
-    "identify",
     "cross_validate",
+    "identify",
     "predict_observations",
     "predict_with_std",
-    "GLOBAL_METHODS",
-    "IN_PLANE_THRESHOLD",
 ]
 
 GLOBAL_METHODS = ("hybrid", "multistart", "surrogate-de", "none")

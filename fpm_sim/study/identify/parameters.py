@@ -43,7 +43,7 @@ import numpy as np
 from fpm_sim.config import ConfigError, LumpedMass, Manipulator
 from fpm_sim.errors import FpmSimError
 
-__all__ = ["GROUPS", "FreeParameter", "ParameterSet", "parameter_set", "ParameterError"]
+__all__ = ["GROUPS", "FreeParameter", "ParameterError", "ParameterSet", "parameter_set"]
 
 GROUPS = ("geometry", "geometry-per-chain", "hubs", "hardware", "section", "compliance", "rig")
 """Groups ``--free`` accepts."""

@@ -23,7 +23,7 @@ from fpm_sim.errors import FpmSimError
 from fpm_sim.results import to_jsonable
 from fpm_sim.study.identify.engine import CrossValidation, Identification
 
-__all__ = ["provenance_key", "identified_config", "write_identification", "render_report", "OutputError"]
+__all__ = ["OutputError", "identified_config", "provenance_key", "render_report", "write_identification"]
 
 
 class OutputError(FpmSimError):
