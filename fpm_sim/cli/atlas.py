@@ -24,7 +24,7 @@ from fpm_sim.cli.main import PLOT_SUFFIXES, save_figure
 
 __all__ = ["register"]
 
-PAPER_GRID_MM = [-100.0, -50.0, 0.0, 50.0, 100.0]
+PAPER_GRID_MM = [-100.0, -50.0, 0.0, 50.0, 100.0]  # study.poses.GRID_MM (a test checks), kept light for --help
 
 
 def cmd_atlas_build(args: argparse.Namespace) -> int:

@@ -26,7 +26,7 @@ import numpy as np
 from fpm_sim.errors import FpmSimError
 from fpm_sim.model.options import tangent_jacobian
 
-__all__ = ["EquilibriumError", "applied_forces", "force_jacobian", "static_equilibrium"]
+__all__ = ["EquilibriumError", "applied_forces", "equality_jacobian", "force_jacobian", "static_equilibrium"]
 
 
 class EquilibriumError(FpmSimError, RuntimeError):
@@ -71,8 +71,15 @@ def _constraints(
     """``(f, r, J)`` at ``qpos``: applied forces, equality residuals and their Jacobian."""
     f = applied_forces(model, data, qpos)
     rows = np.asarray(data.efc_type[: data.nefc]) == mujoco.mjtConstraint.mjCNSTR_EQUALITY
-    jac = np.asarray(data.efc_J[: data.nefc * model.nv]).reshape(data.nefc, model.nv)[rows].copy()
-    return f, np.asarray(data.efc_pos[: data.nefc])[rows].copy(), jac
+    return f, np.asarray(data.efc_pos[: data.nefc])[rows].copy(), equality_jacobian(model, data)
+
+
+def equality_jacobian(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
+    """Rows of the (dense) constraint Jacobian that belong to equality constraints, after a forward pass."""
+    rows = np.asarray(data.efc_type[: data.nefc]) == mujoco.mjtConstraint.mjCNSTR_EQUALITY
+    jac = np.asarray(data.efc_J[: data.nefc * model.nv]).reshape(data.nefc, model.nv)
+    eq_rows: np.ndarray = jac[rows].copy()
+    return eq_rows
 
 
 def static_equilibrium(

@@ -65,7 +65,7 @@ import scipy.linalg
 
 from fpm_sim.errors import FpmSimError, FpmSimWarning
 from fpm_sim.kinematics import NEAR_SINGULAR_WARN, NearSingularityWarning
-from fpm_sim.linear.equilibrium import static_equilibrium
+from fpm_sim.linear.equilibrium import equality_jacobian, static_equilibrium
 from fpm_sim.model.options import (
     BuiltModel,
     check_count,
@@ -338,14 +338,6 @@ def _forward_at(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray, qv
     data.qpos[:] = qpos
     data.qvel[:] = 0.0 if qvel is None else qvel
     mujoco.mj_forward(model, data)
-
-
-def equality_jacobian(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
-    """Rows of the (dense) constraint Jacobian that belong to equality constraints, after a forward pass."""
-    rows = np.asarray(data.efc_type[: data.nefc]) == mujoco.mjtConstraint.mjCNSTR_EQUALITY
-    jac = np.asarray(data.efc_J[: data.nefc * model.nv]).reshape(data.nefc, model.nv)
-    eq_rows: np.ndarray = jac[rows].copy()
-    return eq_rows
 
 
 def mass_matrix(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:

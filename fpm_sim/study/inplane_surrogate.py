@@ -28,7 +28,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from fpm_sim.config import Manipulator
-from fpm_sim.kinematics import Pose
+from fpm_sim.kinematics import Pose, assemble_many
 
 __all__ = ["CANTILEVER_TIP_MASS_FRACTION", "inplane_first_frequencies"]
 
@@ -57,19 +57,13 @@ def inplane_first_frequencies(config: Manipulator, poses: Sequence[Pose]) -> np.
     if n == 0:
         return np.zeros(0)
     xyphi = np.array([[p.x_m, p.y_m, p.phi_rad] for p in poses])
-    base = np.asarray(g.base_angles_rad)
-    a = np.asarray(g.base_radius_per_chain)[:, None] * np.stack([np.cos(base), np.sin(base)], axis=1)  # (3, 2)
-    ang = np.asarray(g.platform_angles_rad)[None, :] + xyphi[:, 2:3]  # (n, 3)
-    r_p = np.asarray(g.platform_radius_per_chain)[None, :, None]
-    r = r_p * np.stack([np.cos(ang), np.sin(ang)], axis=2)  # (n, 3, 2)
-    c = xyphi[:, None, :2] + r
-    d = c - a[None]
-    dist = np.hypot(d[..., 0], d[..., 1])
-    reach = np.all((dist >= abs(l1 - l2)) & (dist <= l1 + l2), axis=1)
-    cos_alpha = np.clip((l1**2 + dist**2 - l2**2) / (2.0 * l1 * np.maximum(dist, 1e-300)), -1.0, 1.0)
-    q = np.arctan2(d[..., 1], d[..., 0]) + np.asarray(g.elbow_branch)[None, :] * np.arccos(cos_alpha)
-    w = np.stack([np.cos(q), np.sin(q)], axis=2)  # (n, 3, 2)
-    b = a[None] + l1[..., None] * w
+    many = assemble_many(g, xyphi[:, 0], xyphi[:, 1], xyphi[:, 2])  # the one vectorised inverse kinematics
+    reach = many.reachable
+    c = np.where(reach[:, None, None], many.c, 0.0)  # unreachable poses: finite placeholders, masked below
+    b = np.where(reach[:, None, None], many.b, 1.0)
+    a = many.a
+    r = c - xyphi[:, None, :2]
+    w = (b - a[None]) / l1[..., None]  # (n, 3, 2)
     u = (c - b) / l2[..., None]
     cross = w[..., 0] * u[..., 1] - w[..., 1] * u[..., 0]
     ok = reach & np.all(np.abs(cross) > 1e-9, axis=1)

@@ -40,6 +40,10 @@ def test_parser_mirrors_agree_with_the_library():
     assert cli_identify.GROUPS == tuple(study_identify.GROUPS)
     assert cli_identify.GLOBAL_METHODS == tuple(study_identify.GLOBAL_METHODS)
     assert cli_identify.DEFAULT_SIGMA_PCT == study_identify.DEFAULT_SIGMA_PCT
+    from fpm_sim.cli import atlas as cli_atlas
+    from fpm_sim.study import poses as study_poses_module
+
+    assert tuple(cli_atlas.PAPER_GRID_MM) == study_poses_module.GRID_MM
     assert common.FIDELITY_CHOICES == options.FIDELITIES
     assert common.DEFAULT_FIDELITY == options.DEFAULT_FIDELITY
     assert common.LINK_MODEL_CHOICES == parts.LINK_MODELS
