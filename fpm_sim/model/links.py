@@ -122,7 +122,28 @@ def add_link(
     if link_model in ("cable", "flex"):
         if spec is None:
             raise TypeError(f"add_link(link_model={link_model!r}) needs spec= (the MjSpec of parent)")
-        common = dict(
+        if link_model == "flex":
+            return add_flex_link(
+                spec,
+                parent,
+                name=name,
+                pos=pos,
+                angle_rad=angle_rad,
+                length_m=length_m,
+                section=section,
+                material=material,
+                segments=segments,
+                axial=axial,
+                damping_beta_s=damping_beta_s,
+                start_lumps=start_lumps,
+                end_lumps=end_lumps,
+                rgba=rgba,
+                free_start=free_start,
+                free_end=free_end,
+            )
+        return add_cable_link(
+            spec,
+            parent,
             name=name,
             pos=pos,
             angle_rad=angle_rad,
@@ -135,10 +156,8 @@ def add_link(
             start_lumps=start_lumps,
             end_lumps=end_lumps,
             rgba=rgba,
+            rotary_inertia=rotary_inertia,
         )
-        if link_model == "flex":
-            return add_flex_link(spec, parent, free_start=free_start, free_end=free_end, **common)
-        return add_cable_link(spec, parent, rotary_inertia=rotary_inertia, **common)
     if link_model == "rigid":
         lengths = [length_m]
     else:
