@@ -25,6 +25,7 @@ import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -186,7 +187,8 @@ def fit(
 # step 1 and 2: subsystems
 
 
-def _with_rig(config: Manipulator, **changes: float) -> Manipulator:
+def _with_rig(config: Manipulator, **changes: Any) -> Manipulator:
+    # Any: RigConfig fields of several types (lengths, LumpedMass); dataclasses.replace checks the names.
     rig = config.rig
     if rig is None:
         raise ValueError("the configuration has no [rig] table: the subsystem tests need the test piece")
@@ -338,11 +340,11 @@ base radius, platform radius, the two link lengths, the rotation of the motor tr
 motor at 90 deg) and the platform joints' angular offset from the motors at phi = 0."""
 
 
-def geometry_from(values: Sequence[float], elbow_branch: tuple[int, int, int]) -> Geometry:
+def geometry_from(values: Sequence[float] | np.ndarray, elbow_branch: tuple[int, int, int]) -> Geometry:
     """Geometry from :data:`GEOMETRY_PARAMETERS` values (SI, degrees)."""
     r_b, r_p, l1, l2, rot, off = (float(v) for v in values[:6])
-    base = tuple(math.radians(rot + a) for a in (90.0, 210.0, 330.0))
-    plat = tuple(math.radians(rot + off + a) for a in (90.0, 210.0, 330.0))
+    base = (math.radians(rot + 90.0), math.radians(rot + 210.0), math.radians(rot + 330.0))
+    plat = (math.radians(rot + off + 90.0), math.radians(rot + off + 210.0), math.radians(rot + off + 330.0))
     return Geometry(r_b, base, l1, l2, r_p, plat, elbow_branch)
 
 
@@ -380,7 +382,8 @@ def identify_manipulator(
             hw = config.hardware
             m0 = hw.platform.mass_kg
             ratio = float(theta[6]) / m0
-            plat = LumpedMass(float(theta[6]), tuple(v * ratio for v in hw.platform.inertia_kg_m2))
+            i0, i1, i2 = hw.platform.inertia_kg_m2
+            plat = LumpedMass(float(theta[6]), (i0 * ratio, i1 * ratio, i2 * ratio))
             cfg = cfg.replace(hardware=dataclasses.replace(hw, platform=plat))
         return cfg
 
