@@ -315,7 +315,7 @@ class ParameterSet:
     def x0(self) -> np.ndarray:
         return np.clip(np.array([p.start for p in self.parameters]), self.lower, self.upper)
 
-    def apply(self, x: Sequence[float], *, base: Manipulator | None = None) -> Manipulator:
+    def apply(self, x: Sequence[float] | np.ndarray, *, base: Manipulator | None = None) -> Manipulator:
         """The description with ``x`` set (validated). Raises :class:`ConfigError` for impossible values."""
         cfg = base or self.start
         for p, v in zip(self.parameters, x):
