@@ -28,6 +28,7 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from fpm_sim.config import Geometry
 from fpm_sim.errors import FpmSimError, FpmSimWarning
@@ -237,7 +238,7 @@ def _unit(d: np.ndarray) -> np.ndarray:
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 
-def assemble_many(g: Geometry, x_m: np.ndarray, y_m: np.ndarray, phi_rad: np.ndarray | float) -> Assemblies:
+def assemble_many(g: Geometry, x_m: ArrayLike, y_m: ArrayLike, phi_rad: ArrayLike) -> Assemblies:
     """Inverse kinematics and singularity measures of many poses at once (vectorised; no checks, no warnings).
 
     The same formulas as :func:`inverse_kinematics` (which calls this for one pose), for arrays of positions
