@@ -186,4 +186,5 @@ def timoshenko_beam_hz(
     k, m = k[np.ix_(keep, keep)], m[np.ix_(keep, keep)]
     skip = 2 if boundary == "free-free" else 0  # the two rigid-body modes
     w2 = scipy.linalg.eigh(k, m, eigvals_only=True, subset_by_index=[0, skip + n_modes - 1])[skip:]
-    return np.sqrt(np.maximum(w2, 0.0)) / (2.0 * math.pi)
+    freq_hz: np.ndarray = np.sqrt(np.maximum(w2, 0.0)) / (2.0 * math.pi)  # w2 is Any: scipy has no stubs here
+    return freq_hz

@@ -28,6 +28,7 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from fpm_sim.config import Geometry
 from fpm_sim.errors import FpmSimError, FpmSimWarning
@@ -123,12 +124,14 @@ class Assembly:
     @property
     def proximal_dirs(self) -> np.ndarray:
         d = self.b - self.a
-        return d / np.linalg.norm(d, axis=1, keepdims=True)
+        dirs: np.ndarray = d / np.linalg.norm(d, axis=1, keepdims=True)
+        return dirs
 
     @property
     def distal_dirs(self) -> np.ndarray:
         d = self.c - self.b
-        return d / np.linalg.norm(d, axis=1, keepdims=True)
+        dirs: np.ndarray = d / np.linalg.norm(d, axis=1, keepdims=True)
+        return dirs
 
 
 def _rot(phi: float) -> np.ndarray:
@@ -137,20 +140,23 @@ def _rot(phi: float) -> np.ndarray:
 
 
 def _cross2(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+    cross: np.ndarray = u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+    return cross
 
 
 def base_points(g: Geometry) -> np.ndarray:
     """Motor axis points A_i (3 x 2, m)."""
     ang = np.asarray(g.base_angles_rad)
-    return np.asarray(g.base_radius_per_chain)[:, None] * np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    points: np.ndarray = np.asarray(g.base_radius_per_chain)[:, None] * np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    return points
 
 
 def platform_points(g: Geometry, pose: Pose) -> np.ndarray:
     """Platform joint points C_i in the world (3 x 2, m)."""
     ang = np.asarray(g.platform_angles_rad)
     local = np.asarray(g.platform_radius_per_chain)[:, None] * np.stack([np.cos(ang), np.sin(ang)], axis=1)
-    return np.array([pose.x_m, pose.y_m]) + local @ _rot(pose.phi_rad).T
+    points: np.ndarray = np.array([pose.x_m, pose.y_m]) + local @ _rot(pose.phi_rad).T
+    return points
 
 
 def _char_length(g: Geometry) -> float:
@@ -213,7 +219,8 @@ class Assemblies:
     @property
     def singularity(self) -> np.ndarray:
         """``(n,)`` singularity measure ``min(serial, parallel)`` (NaN where unreachable)."""
-        return np.minimum(self.serial, self.parallel)
+        measure: np.ndarray = np.minimum(self.serial, self.parallel)
+        return measure
 
     def assembly(self, k: int, pose: Pose | None = None) -> Assembly:
         """Pose ``k`` as an :class:`Assembly` (it must be reachable); ``pose`` is recorded in it if given."""
@@ -234,10 +241,11 @@ class Assemblies:
 
 
 def _unit(d: np.ndarray) -> np.ndarray:
-    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+    unit: np.ndarray = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    return unit
 
 
-def assemble_many(g: Geometry, x_m: np.ndarray, y_m: np.ndarray, phi_rad: np.ndarray | float) -> Assemblies:
+def assemble_many(g: Geometry, x_m: ArrayLike, y_m: ArrayLike, phi_rad: ArrayLike) -> Assemblies:
     """Inverse kinematics and singularity measures of many poses at once (vectorised; no checks, no warnings).
 
     The same formulas as :func:`inverse_kinematics` (which calls this for one pose), for arrays of positions

@@ -137,8 +137,7 @@ def pose_assembly(config: Manipulator, pose: Pose) -> tuple[Assembly | None, flo
     Unreachable and singular poses get no assembly (status :data:`STATUS_UNREACHABLE` /
     :data:`STATUS_SINGULAR`); near-singular ones are assembled and marked :data:`STATUS_NEAR`.
     """
-    # assemble_many broadcasts array-likes; its annotation says ndarray until kinematics.py takes ArrayLike
-    many = assemble_many(config.geometry, pose.x_m, pose.y_m, pose.phi_rad)  # type: ignore[arg-type]
+    many = assemble_many(config.geometry, pose.x_m, pose.y_m, pose.phi_rad)
     singularity, status = float(many.singularity[0]), _status(float(many.singularity[0]), bool(many.reachable[0]))
     if status in (STATUS_UNREACHABLE, STATUS_SINGULAR):
         return None, singularity, status
@@ -398,7 +397,7 @@ def solve_poses(
     if not poses:
         return PoseFrequencies(poses=[], frequencies_hz=freq, in_plane=frac, singularity=np.zeros(0), status=[])
     xs, ys, phis = [p.x_m for p in poses], [p.y_m for p in poses], [p.phi_rad for p in poses]
-    many = assemble_many(config.geometry, xs, ys, phis)  # type: ignore[arg-type]  # array-likes, as above
+    many = assemble_many(config.geometry, xs, ys, phis)
     sing = many.singularity
     status = [_status(float(v), bool(r)) for v, r in zip(sing, many.reachable)]
     reposable = options.link_model in REPOSABLE_LINK_MODELS and not recompile

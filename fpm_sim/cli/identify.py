@@ -54,10 +54,10 @@ def cmd_identify(args: argparse.Namespace) -> int:
         groups.append("rig")
     datasets = []
     for m in args.measured or []:
-        path, opts = parse_measured_arg(m)
-        rd_text = opts.get("reading", args.reading)
+        path, file_opts = parse_measured_arg(m)
+        rd_text = file_opts.get("reading", args.reading)
         reading = parse_reading(rd_text) if rd_text else None
-        sigma = float(opts.get("sigma_pct", args.sigma_pct))
+        sigma = float(file_opts.get("sigma_pct", args.sigma_pct))
         datasets.append(read_measured_csv(path, reading=reading, sigma_pct=sigma))
     tests = read_subsystems_csv(args.subsystems) if args.subsystems else []
     observations = [o for ds in datasets for o in ds.observations]

@@ -34,7 +34,7 @@ PEAK_FORCE_N = 20.0
 
 def cmd_impact(args: argparse.Namespace) -> int:
     from fpm_sim.model.manipulator import build_manipulator
-    from fpm_sim.model.options import warn_if_coarse
+    from fpm_sim.model.options import resolve_segments, warn_if_coarse
     from fpm_sim.outputs import atomic_file
     from fpm_sim.sim.impact import STUDY_IMPACT_POINT, ImpactSetup, virtual_impact_test
 
@@ -42,8 +42,9 @@ def cmd_impact(args: argparse.Namespace) -> int:
     check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
     check_output_file(args.uff, "--uff", (".uff", ".unv"))
     opts = model_options(args)
-    if opts.segments < 2:
-        raise CliError(f"--segments must be >= 2 for flexible links, got {opts.segments}")
+    segments = resolve_segments(segments=opts.segments, link_model=opts.link_model)  # ModelOptions resolved it
+    if segments < 2:
+        raise CliError(f"--segments must be >= 2 for flexible links, got {segments}")
     warn_if_coarse(opts)
     manip = load_manipulator(args)
     built = build_manipulator(manip, pose_of(args), opts)

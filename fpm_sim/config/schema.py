@@ -292,7 +292,7 @@ class _Reader:
             raise ConfigError(f"field '{path}.{key}' must be a number, got {v!r}")
         return float(v)
 
-    def number_or_triple(self, table: dict[str, Any], path: str, key: str) -> float | tuple:
+    def number_or_triple(self, table: dict[str, Any], path: str, key: str) -> float | tuple[float, float, float]:
         """One number (all chains) or a list of three (one per chain)."""
         v = self.get(table, path, key)
         if isinstance(v, (list, tuple)):
@@ -300,19 +300,21 @@ class _Reader:
                 raise ConfigError(
                     f"field '{path}.{key}' must be a number or a list of 3 numbers (per chain), got {v!r}"
                 )
-            return tuple(float(x) for x in v)
+            return (float(v[0]), float(v[1]), float(v[2]))
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             raise ConfigError(f"field '{path}.{key}' must be a number or a list of 3 numbers (per chain), got {v!r}")
         return float(v)
 
-    def triple(self, table: dict[str, Any], path: str, key: str, default: Any = dataclasses.MISSING) -> tuple:
+    def triple(
+        self, table: dict[str, Any], path: str, key: str, default: Any = dataclasses.MISSING
+    ) -> tuple[float, float, float]:
         v = self.get(table, path, key, default)
         if not isinstance(v, (list, tuple)) or len(v) != 3:
             raise ConfigError(f"field '{path}.{key}' must be a list of 3 numbers, got {v!r}")
         for x in v:
             if isinstance(x, bool) or not isinstance(x, (int, float)):
                 raise ConfigError(f"field '{path}.{key}' must be a list of 3 numbers, got {v!r}")
-        return tuple(float(x) for x in v)
+        return (float(v[0]), float(v[1]), float(v[2]))
 
     def table(self, parent: dict[str, Any], path: str, key: str, required: bool = True) -> dict[str, Any]:
         full = f"{path}.{key}" if path else key
@@ -330,6 +332,10 @@ def _check_keys(table: dict[str, Any], path: str, allowed: set[str]) -> None:
     unknown = set(table) - allowed
     if unknown:
         raise ConfigError(f"unknown field(s) in '[{path}]': {sorted(unknown)}; allowed: {sorted(allowed)}")
+
+
+def _radians3(deg: tuple[float, float, float]) -> tuple[float, float, float]:
+    return (math.radians(deg[0]), math.radians(deg[1]), math.radians(deg[2]))
 
 
 def _lump(r: _Reader, t: dict[str, Any], path: str) -> LumpedMass:
@@ -380,12 +386,12 @@ def parse_config(data: dict[str, Any], *, source: str = "user") -> Manipulator:
         raise ConfigError(f"field 'geometry.elbow_branch' must be three values each +1 or -1, got {branch!r}")
     geometry = Geometry(
         base_radius_m=r.number_or_triple(g, "geometry", "base_radius_m"),
-        base_angles_rad=tuple(math.radians(a) for a in r.triple(g, "geometry", "base_angles_deg")),
+        base_angles_rad=_radians3(r.triple(g, "geometry", "base_angles_deg")),
         proximal_length_m=r.number_or_triple(g, "geometry", "proximal_length_m"),
         distal_length_m=r.number_or_triple(g, "geometry", "distal_length_m"),
         platform_radius_m=r.number_or_triple(g, "geometry", "platform_radius_m"),
-        platform_angles_rad=tuple(math.radians(a) for a in r.triple(g, "geometry", "platform_angles_deg")),
-        elbow_branch=tuple(int(b) for b in branch),
+        platform_angles_rad=_radians3(r.triple(g, "geometry", "platform_angles_deg")),
+        elbow_branch=(int(branch[0]), int(branch[1]), int(branch[2])),
         hub_length_m=r.number(g, "geometry", "hub_length_m", 0.0),
     )
     s = r.table(data, "", "section")
@@ -394,9 +400,7 @@ def parse_config(data: dict[str, Any], *, source: str = "user") -> Manipulator:
     _check_keys(m, "material", {"young_pa", "poisson", "density_kg_m3"})
     hw = r.table(data, "", "hardware", required=False)
     _check_keys(hw, "hardware", {f.name for f in dataclasses.fields(Hardware)})
-    hardware = Hardware(
-        **{k: _lump(r, r.table(hw, "hardware", k), f"hardware.{k}") for k in hw}  # type: ignore[arg-type]
-    )
+    hardware = Hardware(**{k: _lump(r, r.table(hw, "hardware", k), f"hardware.{k}") for k in hw})
     c = r.table(data, "", "compliance", required=False)
     _check_keys(c, "compliance", {f.name for f in dataclasses.fields(Compliance)})
     compliance = Compliance(**{k: r.number(c, "compliance", k) for k in c})

@@ -148,7 +148,12 @@ def apply_design(config: Manipulator, values: Mapping[str, float]) -> Manipulato
 def link_mass_kg(config: Manipulator) -> float:
     """Mass of the six links (kg): section area x density x link lengths."""
     g = config.geometry
-    return 3.0 * (g.proximal_length_m + g.distal_length_m) * config.section.area_m2 * config.material.density_kg_m3
+    p, d = g.proximal_length_m, g.distal_length_m
+    if isinstance(p, (tuple, list)) or isinstance(d, (tuple, list)):
+        total_length_m = sum(g.proximal_length_per_chain) + sum(g.distal_length_per_chain)  # per-chain lengths
+    else:
+        total_length_m = 3.0 * (p + d)
+    return total_length_m * config.section.area_m2 * config.material.density_kg_m3
 
 
 def moving_mass_kg(config: Manipulator) -> float:

@@ -30,6 +30,8 @@ states what each can and cannot represent. Their ``segments`` is the number of e
 
 from __future__ import annotations
 
+from typing import TypedDict
+
 import mujoco
 import numpy as np
 
@@ -65,6 +67,23 @@ def _add_spring(body: mujoco.MjsBody, name: str, kind: str, stiffness: float, be
     j.stiffness = [stiffness, 0.0, 0.0]
     j.springref = 0.0
     j.damping = [beta * stiffness, 0.0, 0.0]
+
+
+class _DeformableLinkArgs(TypedDict):
+    """The keywords :func:`add_link` passes on to both ``add_cable_link`` and ``add_flex_link``."""
+
+    name: str
+    pos: np.ndarray
+    angle_rad: float
+    length_m: float
+    section: Section
+    material: Material
+    segments: int
+    axial: bool
+    damping_beta_s: float
+    start_lumps: tuple[LumpedMass, ...]
+    end_lumps: tuple[LumpedMass, ...]
+    rgba: tuple[float, float, float, float]
 
 
 def add_link(
@@ -122,7 +141,7 @@ def add_link(
     if link_model in ("cable", "flex"):
         if spec is None:
             raise TypeError(f"add_link(link_model={link_model!r}) needs spec= (the MjSpec of parent)")
-        common = dict(
+        common = _DeformableLinkArgs(
             name=name,
             pos=pos,
             angle_rad=angle_rad,

@@ -312,7 +312,7 @@ def _lhs(n: int, d: int, seed: int) -> np.ndarray:
     return qmc.LatinHypercube(d=d, seed=seed).random(n)
 
 
-def _surrogate_starts(obj: _Objective, opts: IdentifyOptions) -> list[tuple[np.ndarray, str]]:
+def _surrogate_starts(obj: _Objective, opts: IdentifyOptions) -> list[tuple[np.ndarray, str, tuple[int, int, int]]]:
     """Differential evolution of the ``geometry`` group on the in-plane surrogate, per elbow-branch class."""
     from scipy.optimize import differential_evolution
 

@@ -37,10 +37,11 @@ import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
-from fpm_sim.config import ConfigError, LumpedMass, Manipulator
+from fpm_sim.config import ConfigError, LumpedMass, Manipulator, RigConfig
 from fpm_sim.errors import FpmSimError
 
 __all__ = ["GROUPS", "FreeParameter", "ParameterError", "ParameterSet", "parameter_set"]
@@ -72,12 +73,14 @@ class FreeParameter:
 def _scaled_lump(lump: LumpedMass, mass: float) -> LumpedMass:
     if lump.mass_kg > 0:
         ratio = mass / lump.mass_kg
-        return LumpedMass(mass, tuple(v * ratio for v in lump.inertia_kg_m2))
+        i0, i1, i2 = lump.inertia_kg_m2
+        return LumpedMass(mass, (i0 * ratio, i1 * ratio, i2 * ratio))
     r2 = 0.015**2  # no start inertia to scale: a 15 mm radius of gyration (joint hardware size)
     return LumpedMass(mass, (mass * r2, mass * r2, mass * r2))
 
 
-def _set_geometry(cfg: Manipulator, **changes: object) -> Manipulator:
+def _set_geometry(cfg: Manipulator, **changes: Any) -> Manipulator:
+    # Any: the field names are chosen at run time; dataclasses.replace checks them.
     return dataclasses.replace(cfg, geometry=dataclasses.replace(cfg.geometry, **changes))
 
 
@@ -101,7 +104,9 @@ def _chain_setter(field_name: str, i: int) -> Callable[[Manipulator, float], Man
     return set_
 
 
-def _angle_setter(field_name: str, start: tuple[float, ...], chains: Sequence[int]) -> Callable:
+def _angle_setter(
+    field_name: str, start: tuple[float, ...], chains: Sequence[int]
+) -> Callable[[Manipulator, float], Manipulator]:
     def set_(cfg: Manipulator, v_deg: float) -> Manipulator:
         cur = list(getattr(cfg.geometry, field_name))
         for i in chains:
@@ -231,25 +236,27 @@ def _rig(cfg: Manipulator) -> list[FreeParameter]:
     if rig is None:
         raise ParameterError("--free rig needs a [rig] table in the start description (--config)")
 
-    def setter(**kw_of_value: Callable[[float], dict]) -> Callable:
+    # build(rig, value) -> the new value of the one RigConfig field named by the keyword (Any: its type
+    # depends on that field).
+    def setter(**kw_of_value: Callable[[RigConfig, float], Any]) -> Callable[[Manipulator, float], Manipulator]:
         ((attr, build),) = kw_of_value.items()
 
         def set_(c: Manipulator, v: float) -> Manipulator:
             assert c.rig is not None
-            return dataclasses.replace(c, rig=dataclasses.replace(c.rig, **{attr: build(c, v)}))
+            return dataclasses.replace(c, rig=dataclasses.replace(c.rig, **{attr: build(c.rig, v)}))
 
         return set_
 
     L = rig.length_m
     hinge_m = rig.chain_hinge.mass_kg
     return [
-        FreeParameter("rig.length_m", L, 0.5 * L, 2.0 * L, setter(length_m=lambda c, v: v), "rig", True),
+        FreeParameter("rig.length_m", L, 0.5 * L, 2.0 * L, setter(length_m=lambda r, v: v), "rig", True),
         FreeParameter(
             "rig.clamped_length_m",
             max(rig.clamped_length_m, 0.05 * L),
             0.0,
             0.4 * L,
-            setter(clamped_length_m=lambda c, v: v),
+            setter(clamped_length_m=lambda r, v: v),
             "rig",
             True,
         ),
@@ -258,7 +265,7 @@ def _rig(cfg: Manipulator) -> list[FreeParameter]:
             rig.section.height_m,
             0.4 * rig.section.height_m,
             2.5 * rig.section.height_m,
-            setter(section=lambda c, v: dataclasses.replace(c.rig.section, height_m=v)),
+            setter(section=lambda r, v: dataclasses.replace(r.section, height_m=v)),
             "rig",
             True,
         ),
@@ -267,7 +274,7 @@ def _rig(cfg: Manipulator) -> list[FreeParameter]:
             hinge_m if hinge_m > 0 else 0.2,
             0.0,
             2.0,
-            setter(chain_hinge=lambda c, v: _scaled_lump(c.rig.chain_hinge, v)),
+            setter(chain_hinge=lambda r, v: _scaled_lump(r.chain_hinge, v)),
             "rig",
             True,
         ),
@@ -308,7 +315,7 @@ class ParameterSet:
     def x0(self) -> np.ndarray:
         return np.clip(np.array([p.start for p in self.parameters]), self.lower, self.upper)
 
-    def apply(self, x: Sequence[float], *, base: Manipulator | None = None) -> Manipulator:
+    def apply(self, x: Sequence[float] | np.ndarray, *, base: Manipulator | None = None) -> Manipulator:
         """The description with ``x`` set (validated). Raises :class:`ConfigError` for impossible values."""
         cfg = base or self.start
         for p, v in zip(self.parameters, x):
