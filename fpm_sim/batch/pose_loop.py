@@ -330,7 +330,7 @@ class PlaneSplit:
         for dofs, m_b, k_b, j_b, (rs, cs) in problems:
             rank, _, basis = scaled_null_space(j_b, rs, cs)
             deficient = deficient or rank < j_b.shape[0]
-            z, _, _, w2, x = reduced_eigenproblem(m_b, k_b, basis)
+            z, _, _, w2, x = reduced_eigenproblem(m_b, k_b, basis, n_modes=n_modes)
             m = min(n_modes, w2.size)
             w2_all.append(w2[:m])
             v = np.zeros((nv, m))

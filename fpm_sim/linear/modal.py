@@ -800,12 +800,13 @@ def _constrained_floating(built: BuiltModel, q0: np.ndarray, n_modes: int | None
 
 
 def reduced_eigenproblem(
-    mass: np.ndarray, stiff: np.ndarray, basis: np.ndarray
+    mass: np.ndarray, stiff: np.ndarray, basis: np.ndarray, *, n_modes: int | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The constrained generalised eigenproblem ``Z'KZ x = w^2 Z'MZ x`` on the admissible motions ``Z``.
 
     ``basis`` is ``Z``: :attr:`ConstraintRank.basis` from :func:`constraint_rank` (the one rank
-    decision), or the identity for an unconstrained model.
+    decision), or the identity for an unconstrained model. ``n_modes``: only the lowest ``n_modes``
+    eigenpairs (LAPACK's subset driver; the pose loop's floor); default all.
 
     Returns ``(z, kr, mr, w2, x)``: the null-space basis, the symmetrised reduced stiffness and mass,
     the eigenvalues ``w^2`` (ascending) and the ``mr``-normalised eigenvectors.
@@ -816,7 +817,10 @@ def reduced_eigenproblem(
     mr = z.T @ mass @ z
     mr = 0.5 * (mr + mr.T)
     try:
-        w2, x = scipy.linalg.eigh(kr, mr)
+        if n_modes is not None and 0 < n_modes < kr.shape[0]:
+            w2, x = scipy.linalg.eigh(kr, mr, subset_by_index=[0, n_modes - 1])
+        else:
+            w2, x = scipy.linalg.eigh(kr, mr)
     except np.linalg.LinAlgError as e:
         m = np.diag(mass)
         raise FpmSimError(

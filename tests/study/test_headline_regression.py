@@ -64,7 +64,13 @@ def test_subsystems_within_the_headline_0p3_percent(shipped):
 
 
 def test_pose_frequencies_as_shipped(shipped):
-    np.testing.assert_allclose(shipped.f1_hz, SHIPPED_F1_HZ, rtol=1e-7)
+    # Round-off of an eigenvalue grows as w_max^2 / w^2: at the pose next to a singularity (0.44 Hz, measure
+    # 0.003) two LAPACK drivers (all eigenpairs vs the lowest few) differ by 1.4e-6 relative, measured; 1e-5
+    # there, 1e-7 elsewhere.
+    near = shipped.frequencies.singularity < 0.01
+    np.testing.assert_allclose(shipped.f1_hz[~near], SHIPPED_F1_HZ[~near], rtol=1e-7)
+    np.testing.assert_allclose(shipped.f1_hz[near], SHIPPED_F1_HZ[near], rtol=1e-5)
+    assert near.sum() == 1
 
 
 def test_error_statistics_against_comsol_as_shipped(shipped):
