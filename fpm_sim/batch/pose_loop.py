@@ -289,24 +289,28 @@ class PlaneSplit:
 
     def blocks(
         self, mass: np.ndarray, jac: np.ndarray, scales: tuple[np.ndarray, np.ndarray] | None = None
-    ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]] | None:
-        """``[(dofs, M_block, K_block, J_block, (row_scale, col_scale))]`` of the two decoupled problems, or
-        ``None``. ``scales`` are :func:`fpm_sim.linear.modal.unit_scales` (default: none, unit factors)."""
+    ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, int, int, np.ndarray]] | None:
+        """``[(dofs, M_block, K_block, n_rows, rank, basis)]`` of the two decoupled problems, or ``None``.
+
+        ``rank`` and ``basis`` are the block's :func:`fpm_sim.linear.modal.scaled_null_space` (one SVD per block,
+        used both for the acceptance check and for the solve). ``scales`` are
+        :func:`fpm_sim.linear.modal.unit_scales` (default: none, unit factors).
+        """
         if not self.usable or np.any(mass[self._cross] != 0.0):
             return None
         rows = [np.any(jac[:, d] != 0.0, axis=1) for d in self.dofs]
         if np.any(rows[0] & rows[1]):
             return None
         row_scale, col_scale = scales or (np.ones(jac.shape[0]), np.ones(jac.shape[1]))
-        parts = [(r, d, (row_scale[r], col_scale[d])) for r, d in zip(rows, self.dofs)]
-        jacs = [jac[r][:, d] for r, d, _ in parts]
-        scaled = [s[0][:, None] * j * s[1][None, :] for j, (_, _, s) in zip(jacs, parts)]
-        svs = [np.linalg.svd(j, compute_uv=False) if j.size else np.zeros(0) for j in scaled]
-        top = max((float(sv[0]) for sv in svs if sv.size), default=0.0)
-        for sv in svs:
-            if sv.size and np.sum(sv > NULLSPACE_RCOND * top) != np.sum(sv > NULLSPACE_RCOND * sv[0]):
+        nulls = [scaled_null_space(jac[r][:, d], row_scale[r], col_scale[d]) for r, d in zip(rows, self.dofs)]
+        top = max((float(sv[0]) for _, sv, _ in nulls if sv.size), default=0.0)
+        for rank, sv, _ in nulls:  # the split keeps exactly the directions the whole problem keeps
+            if sv.size and np.sum(sv > NULLSPACE_RCOND * top) != rank:
                 return None
-        return [(d, mass[sq], k, j, s) for (_, d, s), sq, k, j in zip(parts, self._square, self._k, jacs)]
+        return [
+            (d, mass[sq], k, int(np.sum(r)), rank, basis)
+            for d, sq, k, r, (rank, _, basis) in zip(self.dofs, self._square, self._k, rows, nulls)
+        ]
 
     def modes(
         self,
@@ -323,13 +327,14 @@ class PlaneSplit:
         freedom have no spring, so the energy share counts the springs of :data:`IN_PLANE_KINDS`.
         """
         nv = self.in_plane.size
-        whole_scales = scales or (np.ones(jac.shape[0]), np.ones(nv))
-        problems = self.blocks(mass, jac, scales) or [(self._whole[0], mass, self._whole[1], jac, whole_scales)]
+        problems = self.blocks(mass, jac, scales)
+        if problems is None:
+            rank, _, basis = scaled_null_space(jac, *(scales or (np.ones(jac.shape[0]), np.ones(nv))))
+            problems = [(self._whole[0], mass, self._whole[1], jac.shape[0], rank, basis)]
         w2_all, shapes = [], []
         deficient = False
-        for dofs, m_b, k_b, j_b, (rs, cs) in problems:
-            rank, _, basis = scaled_null_space(j_b, rs, cs)
-            deficient = deficient or rank < j_b.shape[0]
+        for dofs, m_b, k_b, n_rows, rank, basis in problems:
+            deficient = deficient or rank < n_rows
             z, _, _, w2, x = reduced_eigenproblem(m_b, k_b, basis, n_modes=n_modes)
             m = min(n_modes, w2.size)
             w2_all.append(w2[:m])
