@@ -4,20 +4,19 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 from pathlib import Path
 
-from fpm_sim.cli.common import CliError, add_output_args, add_overwrite_arg, emit
+from fpm_sim.cli.common import CliError, add_output_args, add_overwrite_arg, check_output_dir, emit
 
 __all__ = ["cmd_ema", "register"]
 
 
 def cmd_ema(args: argparse.Namespace) -> int:
+    from fpm_sim.outputs import atomic_dir
     from fpm_sim.results import to_jsonable
     from fpm_sim.study.identify.ema import estimate_modes, read_frfs, write_modes_csv
-    from fpm_sim.study.identify.report import check_output
 
-    check_output(args.out, overwrite=args.overwrite)
+    check_output_dir(args.out, "--out", overwrite=args.overwrite)
     if not 0 <= args.f_lower_hz < args.f_upper_hz:
         raise CliError(f"--f-lower-hz {args.f_lower_hz} must be >= 0 and below --f-upper-hz {args.f_upper_hz}")
     if args.n_modes < 1:
@@ -41,20 +40,14 @@ def cmd_ema(args: argparse.Namespace) -> int:
                     pol_order=args.pol_order,
                 )
             )
-    tmp = args.out.parent / f".{args.out.name}.tmp-{os.getpid()}"
-    tmp.mkdir(parents=True, exist_ok=True)
     header = (
         "Natural frequencies (Hz) and damping ratios estimated by fpm-sim ema (sdypy-EMA LSCF, stable poles "
         f"nearest the FRF peaks, {args.f_lower_hz:g}-{args.f_upper_hz:g} Hz, orders up to {args.pol_order}).\n"
         "Columns as fpm-sim identify --measured reads them."
     )
-    write_modes_csv(estimates, tmp / "modes.csv", header=header)
-    (tmp / "ema.json").write_text(json.dumps(to_jsonable([e.to_dict() for e in estimates]), indent=1))
-    if args.out.exists():
-        import shutil
-
-        shutil.rmtree(args.out)
-    tmp.rename(args.out)
+    with atomic_dir(args.out, overwrite=True) as tmp:  # --out / --overwrite were checked before computing
+        write_modes_csv(estimates, tmp / "modes.csv", header=header)
+        (tmp / "ema.json").write_text(json.dumps(to_jsonable([e.to_dict() for e in estimates]), indent=1))
     lines = [
         f"{e.source} at {e.pose_mm_rad}: "
         + ", ".join(f"{f:.3f} Hz ({100 * z:.2f} %)" for f, z in zip(e.freq_hz, e.damping))

@@ -7,7 +7,15 @@ import shlex
 import sys
 from pathlib import Path
 
-from fpm_sim.cli.common import CliError, add_config_args, add_output_args, add_overwrite_arg, emit, load_manipulator
+from fpm_sim.cli.common import (
+    CliError,
+    add_config_args,
+    add_output_args,
+    add_overwrite_arg,
+    check_output_dir,
+    emit,
+    load_manipulator,
+)
 
 __all__ = ["cmd_identify", "parse_measured_arg", "register"]
 
@@ -44,10 +52,10 @@ def cmd_identify(args: argparse.Namespace) -> int:
         read_measured_csv,
         read_subsystems_csv,
     )
-    from fpm_sim.study.identify.report import check_output, summary, write_identification
+    from fpm_sim.study.identify.report import summary, write_identification
     from fpm_sim.study.poses import parse_reading
 
-    check_output(args.out, overwrite=args.overwrite)
+    check_output_dir(args.out, "--out", overwrite=args.overwrite)
     start = load_manipulator(args)
     groups = [g.strip() for g in args.free.split(",") if g.strip()]
     if args.subsystems and "rig" not in groups:

@@ -1,16 +1,13 @@
 """Writing an identification: ``config.toml``, ``identify.json``, ``report.md`` and figures, atomically.
 
-The folder is written as a temporary sibling and renamed into place when complete, so a reader never
-sees a mix of two runs or a half-written one (an interrupted run leaves only the temporary folder,
-named ``.<out>.tmp-<pid>``, which is removed on the next run into the same place).
+The folder is written with :func:`fpm_sim.outputs.atomic_dir`: a temporary sibling renamed into place
+when complete, so a reader never sees a mix of two runs or a half-written one.
 """
 
 from __future__ import annotations
 
 import json
 import math
-import os
-import shutil
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -19,15 +16,11 @@ import numpy as np
 from scipy.stats import spearmanr
 
 from fpm_sim.config import Manipulator, config_to_toml
-from fpm_sim.errors import FpmSimError
+from fpm_sim.outputs import atomic_dir
 from fpm_sim.results import to_jsonable
 from fpm_sim.study.identify.engine import CrossValidation, Identification
 
-__all__ = ["OutputError", "identified_config", "provenance_key", "render_report", "write_identification"]
-
-
-class OutputError(FpmSimError):
-    """The output folder cannot be written (exists without ``--overwrite``, or not writable)."""
+__all__ = ["identified_config", "provenance_key", "render_report", "write_identification"]
 
 
 def provenance_key(name: str) -> str:
@@ -225,19 +218,6 @@ def plot_figures(result: Identification, cv: CrossValidation | None, folder: Pat
     plt.close(fig)
 
 
-def check_output(out: Path, *, overwrite: bool) -> None:
-    """Refuse before any computation when ``out`` cannot be written."""
-    if out.exists() and not out.is_dir():
-        raise OutputError(f"--out {out} is a file; give a folder")
-    if out.exists() and any(out.iterdir()) and not overwrite:
-        raise OutputError(f"--out {out} already holds results; give another folder or --overwrite")
-    parent = out.resolve().parent
-    if not parent.exists():
-        raise OutputError(f"--out {out}: the parent folder {parent} does not exist")
-    if not os.access(parent, os.W_OK):
-        raise OutputError(f"--out {out}: the folder {parent} is not writable; choose another --out")
-
-
 def write_identification(
     out: Path,
     result: Identification,
@@ -252,11 +232,26 @@ def write_identification(
     figures: bool = True,
 ) -> Manipulator:
     """Write the folder atomically (see module docstring); returns the identified description."""
-    out = Path(out)
-    tmp = out.parent / f".{out.name}.tmp-{os.getpid()}"
-    if tmp.exists():
-        shutil.rmtree(tmp)
-    tmp.mkdir(parents=True)
+    with atomic_dir(out, overwrite=True) as tmp:  # the command checked --out / --overwrite before computing
+        return _write_identification(
+            tmp, result, cv, command=command, data_files=data_files, data_note=data_note, header=header,
+            extra_report=extra_report, extra_json=extra_json, figures=figures,
+        )  # fmt: skip
+
+
+def _write_identification(
+    tmp: Path,
+    result: Identification,
+    cv: CrossValidation | None,
+    *,
+    command: str,
+    data_files: Sequence[str],
+    data_note: str,
+    header: str | None,
+    extra_report: str,
+    extra_json: dict[str, Any] | None,
+    figures: bool,
+) -> Manipulator:
     method_note = (
         f"fpm-sim identify ({result.options.global_method} global search, seed {result.options.seed}, then bounded "
         f"least squares, {result.options.segments} segments/link)"
@@ -281,11 +276,4 @@ def write_identification(
     )
     if figures:
         plot_figures(result, cv, tmp)
-    old = None
-    if out.exists():
-        old = out.parent / f".{out.name}.old-{os.getpid()}"
-        out.rename(old)
-    tmp.rename(out)
-    if old is not None:
-        shutil.rmtree(old)
     return cfg
