@@ -9,12 +9,15 @@ in-plane and an out-of-plane mode near a crossing does not swap the match.
 
 Search (:func:`identify`):
 
-1. global exploration: ``"multistart"`` (a Latin hypercube of ``n_starts`` points inside the bounds
-   plus the start, each scored with the full model), ``"surrogate-de"`` (differential evolution of the
-   geometry on the in-plane surrogate, :mod:`fpm_sim.study.inplane_surrogate`, scale-free, for every
-   elbow-branch class, each class's best scored with the full model) or ``"hybrid"`` (both candidate
-   lists together; the default). The best ``n_refine`` candidates are refined. All seeded (``seed``):
-   the same seed gives the same result.
+1. global exploration: ``"de"`` (the default: differential evolution of every free parameter on the
+   full model at the fitted resolution, the elbow-branch combination an integer variable when the
+   geometry is free; the best final-population member of each branch combination is a candidate),
+   ``"multistart"`` (a Latin hypercube of ``n_starts`` points inside the bounds plus the start, each
+   scored with the full model), ``"surrogate-de"`` (differential evolution of the geometry on the
+   in-plane surrogate, :mod:`fpm_sim.study.inplane_surrogate`, scale-free, for every elbow-branch
+   class, each class's best scored with the full model) or ``"hybrid"`` (the last two candidate lists
+   together). The best ``n_refine`` candidates are refined. All seeded (``seed``): the same seed gives
+   the same result.
 2. local refinement: bounded least squares (:func:`scipy.optimize.least_squares`, trust-region
    reflective) on the full segment model; its Jacobian is by forward finite differences in
    parameters normalised to their bounds (step ``1e-3`` of the bound width). The model's
@@ -65,13 +68,24 @@ __all__ = [
     "predict_with_std",
 ]
 
-GLOBAL_METHODS = ("hybrid", "multistart", "surrogate-de", "none")
+GLOBAL_METHODS = ("de", "hybrid", "multistart", "surrogate-de", "none")
 IN_PLANE_THRESHOLD = 0.5
 """A mode is ``in_plane`` when more than this fraction of its strain energy is in in-plane springs."""
 PENALTY_SIGMAS = 30.0
 """Residual (in sigmas) of an observation the model cannot give (unreachable or singular pose, too few
 modes of the asked kind): large, finite, so that the search moves away from it."""
 MODE_MARGIN = 4
+ELBOW_BRANCHES: tuple[tuple[int, int, int], ...] = (
+    (1, 1, 1),
+    (-1, -1, -1),
+    (1, 1, -1),
+    (1, -1, 1),
+    (-1, 1, 1),
+    (-1, -1, 1),
+    (-1, 1, -1),
+    (1, -1, -1),
+)
+"""Every elbow-branch combination: the discrete variable of ``global_method="de"``."""
 """Modes computed beyond the highest one asked for, so that labelled matching finds its kind."""
 
 
@@ -84,9 +98,13 @@ class IdentifyOptions:
     """Search settings. ``segments``: spring locations per link of the model fitted."""
 
     segments: int = 4
-    global_method: str = "hybrid"
+    global_method: str = "de"
     n_starts: int = 24
     n_refine: int = 4
+    generations: int = 60
+    """``de``: generations of the differential evolution (each ``popsize`` x dimensions evaluations)."""
+    popsize: int = 8
+    """``de``: population size per dimension (scipy's ``popsize``)."""
     seed: int = 0
     max_nfev: int = 40
     workers: int = 1
@@ -357,6 +375,52 @@ def _surrogate_starts(obj: _Objective, opts: IdentifyOptions) -> list[tuple[np.n
     return [(z, note, br) for z, note, br, _ in out]
 
 
+def _full_model_de(
+    problem: Problem, obj: _Objective, opts: IdentifyOptions
+) -> list[tuple[float, np.ndarray, str, tuple[int, int, int] | None]]:
+    """Differential evolution of every free parameter on the full model (the fitted resolution), with the
+    elbow-branch combination as one more, integer, variable when the geometry is free. Returns the final
+    population's best member of each branch combination (cost, z, note, branch), best first."""
+    from scipy.optimize import differential_evolution
+
+    ps = problem.parameters
+    geometry_free = any(p.group in ("geometry", "geometry-per-chain") for p in ps.parameters)
+    branches: list[tuple[int, int, int] | None] = list(ELBOW_BRANCHES) if geometry_free else [None]
+    objs = [obj if b is None else _Objective(_with_branch(problem, b), opts) for b in branches]
+    d = len(ps.parameters)
+
+    def cost(v: np.ndarray) -> float:
+        k = int(round(v[d])) if geometry_free else 0
+        return objs[k].cost(v[:d])
+
+    bounds = [(0.0, 1.0)] * d + ([(0.0, len(branches) - 1.0)] if geometry_free else [])
+    integrality = [False] * d + ([True] if geometry_free else [])
+    sol = differential_evolution(
+        cost,
+        bounds,
+        integrality=integrality,
+        seed=opts.seed,
+        maxiter=opts.generations,
+        popsize=opts.popsize,
+        tol=1e-8,
+        polish=False,
+        init="sobol",
+        updating="deferred",
+    )
+    obj.nfev += sum(o.nfev for o in objs if o is not obj)
+    pop = np.atleast_2d(getattr(sol, "population", sol.x[None, :]))
+    energies = np.atleast_1d(getattr(sol, "population_energies", [sol.fun]))
+    out: dict[int, tuple[float, np.ndarray, str, tuple[int, int, int] | None]] = {}
+    for v, e in sorted(zip(pop, energies), key=lambda t: t[1]):
+        k = int(round(v[d])) if geometry_free else 0
+        if k not in out:
+            note = f"differential evolution ({sol.nit} generations, {sol.nfev} evaluations), best of its final population"
+            if branches[k] is not None:
+                note += f" with elbow branches {branches[k]}"
+            out[k] = (float(e), np.clip(v[:d], 0.0, 1.0), note, branches[k])
+    return sorted(out.values(), key=lambda t: t[0])
+
+
 def _with_branch(problem: Problem, branch: tuple[int, int, int]) -> Problem:
     import dataclasses
 
@@ -409,6 +473,10 @@ def identify(problem: Problem, *, options: IdentifyOptions | None = None, progre
             min(t[0] for t in scored),
             "best geometry of each elbow-branch class, scored with the full model",
         )
+    if opts.global_method == "de":
+        found = _full_model_de(problem, obj, opts)
+        scored.extend(found)
+        log("global differential evolution", found[0][0], f"full model; {len(found)} elbow-branch classes in the final population")
     scored.sort(key=lambda t: t[0])
     starts = [(z, note, branch) for _, z, note, branch in scored[: max(1, opts.n_refine)]]
     if opts.global_method == "none":
