@@ -12,6 +12,8 @@ __all__ = [
     "BETA_L",
     "euler_bernoulli_hz",
     "shear_coefficient_rectangle",
+    "spring_hinged_cantilever_beta_l",
+    "spring_hinged_cantilever_hz",
     "timoshenko_beam_hz",
     "timoshenko_simply_supported_hz",
 ]
@@ -42,10 +44,77 @@ def euler_bernoulli_hz(
         raise ValueError(f"boundary must be one of {sorted(BETA_L)}, got {boundary!r}")
     if n_modes > len(BETA_L[boundary]):
         raise ValueError(f"at most {len(BETA_L[boundary])} modes tabulated")
+    return _beta_l_to_hz(np.array(BETA_L[boundary][:n_modes]), length_m, section, material, plane)
+
+
+def _beta_l_to_hz(bl: np.ndarray, length_m: float, section: Section, material: Material, plane: str) -> np.ndarray:
+    """``f_n = (beta_n L)^2 / (2 pi L^2) * sqrt(E I / (rho A))`` (Hz) for bending in or out of the base plane."""
+    if plane not in ("in", "out"):
+        raise ValueError(f"plane must be 'in' or 'out', got {plane!r}")
     inertia = section.i_inplane_m4 if plane == "in" else section.i_outofplane_m4
     c = math.sqrt(material.young_pa * inertia / (material.density_kg_m3 * section.area_m2))
-    bl = np.array(BETA_L[boundary][:n_modes])
-    return bl**2 / (2.0 * math.pi * length_m**2) * c
+    return np.asarray(bl, float) ** 2 / (2.0 * math.pi * length_m**2) * c
+
+
+def spring_hinged_cantilever_beta_l(stiffness_ratio: float, n_modes: int = 3) -> np.ndarray:
+    """Roots ``beta_n L`` of a cantilever whose root is held by a rotational spring (elastically restrained).
+
+    The root cannot move but turns against a spring ``k`` (N m/rad); the tip is free. With
+    ``w = A (cosh - cos) + B sinh + D sin`` (so ``w(0) = 0``), the root condition ``E I w''(0) = k w'(0)``
+    and a free tip (``w''(L) = 0``, ``w'''(L) = 0``) have a non-zero solution when
+
+    ``K (1 + cos(bL) cosh(bL)) = bL (sin(bL) cosh(bL) - cos(bL) sinh(bL))``,  ``K = k L / (E I)``,
+
+    solved here divided by ``cosh(bL)`` (no overflow) with :func:`scipy.optimize.brentq` between the
+    sign changes on a 0.01 grid (the roots are more than 1.5 apart). ``K -> inf`` gives the clamped-free
+    roots (:data:`BETA_L` ``"cantilever"``, 1.8751...); ``K -> 0`` the pinned-free ones: a rigid rotation
+    (``bL -> (3 K)^(1/4)``, the link swinging on its spring) then ``tan(bL) = tanh(bL)`` (3.9266...).
+
+    Parameters
+    ----------
+    stiffness_ratio
+        ``K = k L / (E I)`` (dimensionless), > 0; ``math.inf`` for a clamped root.
+    n_modes
+        Number of roots, lowest first.
+    """
+    from scipy.optimize import brentq
+
+    if not stiffness_ratio > 0:
+        raise ValueError(f"stiffness_ratio must be > 0 (inf = clamped), got {stiffness_ratio!r}")
+    if n_modes < 1:
+        raise ValueError(f"n_modes must be >= 1, got {n_modes!r}")
+    clamped = math.isinf(stiffness_ratio)
+    k_ratio = 1.0 if clamped else float(stiffness_ratio)
+    slope = 0.0 if clamped else 1.0
+
+    def f(x: float) -> float:
+        return k_ratio * (1.0 / math.cosh(x) + math.cos(x)) - slope * x * (math.sin(x) - math.cos(x) * math.tanh(x))
+
+    # root n lies below the clamped-free root n, itself below (n - 1/2) pi + 0.4
+    grid = np.arange(1e-9, (n_modes + 0.5) * math.pi, 0.01)
+    values = np.array([f(x) for x in grid])
+    roots = [
+        brentq(f, grid[j], grid[j + 1], xtol=1e-14, rtol=1e-14)
+        for j in np.flatnonzero(np.sign(values[:-1]) != np.sign(values[1:]))
+    ]
+    return np.array(roots[:n_modes], float)
+
+
+def spring_hinged_cantilever_hz(
+    *,
+    length_m: float,
+    section: Section,
+    material: Material,
+    root_stiffness_nm_per_rad: float,
+    plane: str = "out",
+    n_modes: int = 3,
+) -> np.ndarray:
+    """First ``n_modes`` bending frequencies (Hz) of a uniform Euler-Bernoulli cantilever whose root turns
+    against a rotational spring of ``root_stiffness_nm_per_rad`` in the bending plane (``"out"``: out of the
+    base plane, the default; ``"in"``). Roots from :func:`spring_hinged_cantilever_beta_l`."""
+    inertia = section.i_inplane_m4 if plane == "in" else section.i_outofplane_m4
+    ratio = root_stiffness_nm_per_rad * length_m / (material.young_pa * inertia)
+    return _beta_l_to_hz(spring_hinged_cantilever_beta_l(ratio, n_modes), length_m, section, material, plane)
 
 
 def mode_shape(boundary: str, n: int, xi: np.ndarray) -> np.ndarray:
