@@ -127,14 +127,30 @@ def test_parameter_groups_and_errors():
     g = ps.apply(x).geometry
     assert g.proximal_length_per_chain[1] == pytest.approx(cfg.geometry.proximal_length_m * 1.05)
     assert g.proximal_length_per_chain[0] == cfg.geometry.proximal_length_m
-    with pytest.raises(ParameterError, match="offsets"):
-        parameter_set(cfg, ["offsets"])
+    ps = parameter_set(cfg, ["offsets"])
+    assert ps.names == ["geometry.distal_offset_m", "geometry.platform_offset_m"]
+    assert list(ps.lower) == [0.0, 0.0]
+    assert list(ps.upper) == [0.06, 0.06]
+    assert ps.apply(ps.x0).geometry == cfg.geometry  # the coplanar start reproduces the start
+    g = ps.apply([0.03, 0.01]).geometry
+    assert g.distal_offset_per_chain == (0.03, 0.03, 0.03)
+    assert g.platform_offset_per_chain == (0.01, 0.01, 0.01)
+    stacked = cfg.replace(geometry=dataclasses.replace(cfg.geometry, distal_offset_m=(0.01, 0.02, 0.03)))
+    ps = parameter_set(stacked, ["offsets"])
+    assert ps.x0[0] == pytest.approx(0.02)  # a per-chain start: its mean, the differences kept
+    assert ps.apply([0.03, 0.0]).geometry.distal_offset_per_chain == pytest.approx((0.02, 0.03, 0.04))
     with pytest.raises(ParameterError, match="unknown parameter group"):
         parameter_set(cfg, ["geometery"])
     ps = parameter_set(cfg, ["geometry", "compliance"])
     g2 = ps.apply(ps.x0).geometry
     assert g2 == cfg.geometry  # the start values reproduce the start
     assert math.isclose(ps.apply(ps.x0).compliance.passive_joint_tilt_nm_per_rad, 1e7)
+    assert [n for n in ps.names if n.startswith("compliance.")] == [
+        "compliance.log10_passive_joint_tilt_nm_per_rad",
+        "compliance.log10_motor_clamp_nm_per_rad",
+        "compliance.log10_motor_mount_tilt_nm_per_rad",
+    ]
+    assert math.isclose(ps.apply(ps.x0).compliance.motor_mount_tilt_nm_per_rad, 1e7)
 
 
 def test_cli_identify_writes_a_complete_folder_usable_with_config(tmp_path):
