@@ -286,3 +286,18 @@ def test_reposed_stacked_model_equals_the_per_pose_compile(default_manip):
     np.testing.assert_allclose(fast.in_plane, ref.in_plane, rtol=1e-9, atol=1e-12)
     # stacked layers couple in-plane and out-of-plane motion: the modes are no longer pure
     assert np.any((fast.in_plane > 1e-3) & (fast.in_plane < 1 - 1e-3))
+
+
+def test_stacked_mounted_model_survives_the_mjcf_export(default_manip):
+    cfg = _stacked(_with_compliance(default_manip, motor_mount_tilt_nm_per_rad=2e4), 0.03, (0.0, 0.01, 0.02))
+    built = build_manipulator(cfg, Pose.from_mm(20.0, -10.0, 0.1), ModelOptions(segments=2))
+    back = mujoco.MjModel.from_xml_string(built.to_xml())
+    assert back.nv == built.model.nv
+    for name in ("motor_0_mount_tiltx", "motor_2_mount_tilty"):
+        assert back.joint(name).stiffness[0] == 2e4
+    # the MJCF carries 6 significant digits: 5e-7 on positions below 1 m and on unit quaternions
+    np.testing.assert_allclose(back.body_pos, built.model.body_pos, rtol=0, atol=5e-7)
+    np.testing.assert_allclose(back.body_quat, built.model.body_quat, rtol=0, atol=5e-7)
+    for i, z in enumerate((0.0, 0.01, 0.02)):  # the layer offsets come through exactly
+        assert back.body(f"distal_{i}_b0").pos[2] == 0.03
+        assert back.body(f"pin_{i}").pos[2] == z
