@@ -26,7 +26,9 @@ Groups (:data:`GROUPS`):
 ``offsets``
     The stacked links' layer heights ``geometry.distal_offset_m`` (distal links above the proximal ones)
     and ``geometry.platform_offset_m`` (platform joints and platform above the distal links), m, 0 .. 0.06,
-    from the start description's values (a per-chain start keeps its chain-to-chain differences).
+    from the start description's values (a per-chain start keeps its chain-to-chain differences). A
+    coplanar start (0) begins at 0.03 instead: flipping every layer (z -> -z) leaves the frequencies as
+    they are, so 0 is a stationary point where a local fit would never move (it stays there, tested).
 ``rig``
     The test pieces (only with ``--subsystems``): rig length, clamped length, the piece's height and
     the chain hinge's mass.
@@ -244,7 +246,10 @@ def _offsets(cfg: Manipulator) -> list[FreeParameter]:
     out = []
     for f in ("distal_offset_m", "platform_offset_m"):
         per = getattr(g, f"{f[:-2]}_per_chain")
-        out.append(FreeParameter(f"geometry.{f}", _chain_mean(per), *OFFSET_BOUNDS_M, _mean_setter(f, per), "offsets"))
+        # coplanar (all 0) is a stationary point of every frequency (the mirror z -> -z maps +offsets to -offsets
+        # and leaves the frequencies), where a local fit cannot move: start such a description mid-range
+        start = _chain_mean(per) if any(per) else 0.5 * (OFFSET_BOUNDS_M[0] + OFFSET_BOUNDS_M[1])
+        out.append(FreeParameter(f"geometry.{f}", start, *OFFSET_BOUNDS_M, _mean_setter(f, per), "offsets"))
     return out
 
 
