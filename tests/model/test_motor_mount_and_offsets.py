@@ -122,11 +122,11 @@ def test_motor_mount_lowers_out_of_plane_modes_only(default_manip):
         n_in = min(in_r.sum(), in_s.sum())
         assert n_in >= 3
         # in-plane modes: the tilt springs are out-of-plane freedoms, decoupled from them in a coplanar model;
-        # measured identical to 1e-12 (round-off)
+        # measured 0 at home and 8.5e-11 at the second pose (round-off)
         np.testing.assert_allclose(soft.frequencies_hz[p][in_s][:n_in], rigid.frequencies_hz[p][in_r][:n_in], rtol=1e-9)
-        # out-of-plane modes: softer mounts lower each of them (measured -8 % to -26 % for the first three)
+        # out-of-plane modes: softer mounts lower each of them (measured -18 % to -33 % for the first three)
         out_r, out_s = rigid.frequencies_hz[p][~in_r][:3], soft.frequencies_hz[p][~in_s][:3]
-        assert np.all(out_s < 0.97 * out_r), (out_s, out_r)
+        assert np.all(out_s < 0.9 * out_r), (out_s, out_r)
     # a very stiff mount is the rigid one: measured max 1.3e-6 relative, the round-off of 1e12 N m/rad springs
     # beside the links' ~1e3-1e4 N m/rad (the physical change, ~6e-9 at 1e12, is 5.6e-5 at 1e8)
     np.testing.assert_allclose(stiff.frequencies_hz, rigid.frequencies_hz, rtol=5e-6)
@@ -259,8 +259,9 @@ def test_stacked_static_compliance_matches_an_exact_beam_frame(default_manip, of
     truth = SCALE @ _frame_platform_compliance(cfg, pose) @ SCALE
     flat = SCALE @ _frame_platform_compliance(default_manip, pose) @ SCALE
     if offsets[0] != 0.0:
-        # the layers matter: the in-plane compliance grows by 15-32 % (torsion and out-of-plane bending of the
-        # proximal links under the distal links' forces, lever arm = the offsets)
+        # the layers matter: the in-plane compliances grow by 8-32 % (torsion and out-of-plane bending of the
+        # proximal links under the distal links' forces, lever arm = the offsets); largest entry change measured
+        # 18 % (stacked) and 7 % (per-chain) of the largest entry
         assert np.max(np.abs(truth - flat)) > 0.05 * np.max(np.abs(flat))
     err = {}
     for seg in (12, 24):
