@@ -1,4 +1,5 @@
-"""Analytic Euler-Bernoulli beam frequencies: the independent truth for the single-link rigs."""
+"""Analytic beam frequencies (Euler-Bernoulli bending, free torsion, Timoshenko FE): the independent truths for the
+single-link rigs and the root springs."""
 
 from __future__ import annotations
 
@@ -12,6 +13,8 @@ __all__ = [
     "BETA_L",
     "euler_bernoulli_hz",
     "shear_coefficient_rectangle",
+    "spring_held_torsion_hz",
+    "spring_held_torsion_roots",
     "spring_hinged_cantilever_beta_l",
     "spring_hinged_cantilever_hz",
     "timoshenko_beam_hz",
@@ -256,4 +259,57 @@ def timoshenko_beam_hz(
     skip = 2 if boundary == "free-free" else 0  # the two rigid-body modes
     w2 = scipy.linalg.eigh(k, m, eigvals_only=True, subset_by_index=[0, skip + n_modes - 1])[skip:]
     freq_hz: np.ndarray = np.sqrt(np.maximum(w2, 0.0)) / (2.0 * math.pi)  # w2 is Any: scipy has no stubs here
+    return freq_hz
+
+
+def spring_held_torsion_roots(stiffness_ratio: float, n_modes: int = 3) -> np.ndarray:
+    """Roots ``alpha_n L`` of a uniform bar in free torsion whose root turns against a torsional spring.
+
+    With ``theta = A cos(alpha x) + B sin(alpha x)``, the root condition ``G J theta'(0) = k theta(0)`` and
+    a free end (``theta'(L) = 0``) give ``alpha L tan(alpha L) = K``, ``K = k L / (G J)``; root ``n`` lies in
+    ``((n - 1) pi, (n - 1/2) pi)``, found by :func:`scipy.optimize.brentq` on ``x sin x - K cos x`` (no poles).
+    ``K -> inf``: the clamped-free roots ``(n - 1/2) pi``; ``K -> 0``: a rigid rotation
+    (``alpha L -> sqrt(K)``) then ``(n - 1) pi``.
+
+    Parameters
+    ----------
+    stiffness_ratio
+        ``K = k L / (G J)`` (dimensionless), > 0; ``math.inf`` for a clamped root.
+    n_modes
+        Number of roots, lowest first.
+    """
+    from scipy.optimize import brentq
+
+    if not stiffness_ratio > 0:
+        raise ValueError(f"stiffness_ratio must be > 0 (inf = clamped), got {stiffness_ratio!r}")
+    if n_modes < 1:
+        raise ValueError(f"n_modes must be >= 1, got {n_modes!r}")
+    n = np.arange(1, n_modes + 1)
+    if math.isinf(stiffness_ratio):
+        out: np.ndarray = (n - 0.5) * math.pi
+        return out
+    k_ratio = float(stiffness_ratio)
+
+    def f(x: float) -> float:
+        return x * math.sin(x) - k_ratio * math.cos(x)
+
+    return np.array([brentq(f, (j - 1) * math.pi, (j - 0.5) * math.pi, xtol=1e-14, rtol=1e-14) for j in n])
+
+
+def spring_held_torsion_hz(
+    *,
+    length_m: float,
+    section: Section,
+    material: Material,
+    root_stiffness_nm_per_rad: float,
+    n_modes: int = 3,
+) -> np.ndarray:
+    """First ``n_modes`` torsion frequencies (Hz) of a uniform bar whose root turns against a torsional spring
+    of ``root_stiffness_nm_per_rad``, the other end free: ``f_n = alpha_n L / (2 pi L) * sqrt(G J / (rho I_p))``
+    with Saint-Venant's ``J`` (:attr:`Section.torsion_constant_m4`) and the section's polar moment
+    ``I_p = A (t^2 + h^2) / 12``. Roots from :func:`spring_held_torsion_roots`."""
+    gj = material.shear_pa * section.torsion_constant_m4
+    rho_ip = material.density_kg_m3 * section.area_m2 * (section.thickness_m**2 + section.height_m**2) / 12.0
+    roots = spring_held_torsion_roots(root_stiffness_nm_per_rad * length_m / gj, n_modes)
+    freq_hz: np.ndarray = roots / (2.0 * math.pi * length_m) * math.sqrt(gj / rho_ip)
     return freq_hz
