@@ -77,7 +77,8 @@ class Geometry:
     the elbow between the layers is a rigid pin of this length. 0 (default): coplanar links."""
     platform_offset_m: float | tuple[float, float, float] = 0.0
     """Stacked links: height of the platform-joint/platform layer above the distal-link layer (a rigid
-    pin at each platform joint). 0 (default): the platform in the distal links' plane."""
+    pin at each platform joint). 0 (default): the platform in the distal links' plane. Per chain, the
+    platform's centre (its mass, ``platform_center``) sits at chain 0's height."""
 
     @staticmethod
     def _three(v: float | tuple[float, ...]) -> tuple[float, float, float]:

@@ -20,8 +20,9 @@ straight, unstressed links):
 - stacked links: ``geometry.distal_offset_m`` places ``distal_i`` that far above its proximal link's
   end (+z) and ``geometry.platform_offset_m`` places ``pin_i`` (and so the platform) that far above
   its distal link's end: the offset is the joint's child body's position along the joint axis, so the
-  pin between the layers is rigid and the hinge axis (z) is the same line; in-plane positions and
-  the kinematics are those of the coplanar model.
+  pin between the layers is rigid (and massless: its mass belongs to the joint's hardware lumps) and
+  the hinge axis (z) is the same line; in-plane positions and the kinematics are those of the coplanar
+  model. The platform's centre sits at chain 0's pin height.
 """
 
 from __future__ import annotations
