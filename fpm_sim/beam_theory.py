@@ -1,4 +1,5 @@
-"""Analytic Euler-Bernoulli beam frequencies: the independent truth for the single-link rigs."""
+"""Analytic beam frequencies (Euler-Bernoulli bending, free torsion, Timoshenko FE): the independent truths for the
+single-link rigs and the root springs."""
 
 from __future__ import annotations
 
@@ -12,6 +13,10 @@ __all__ = [
     "BETA_L",
     "euler_bernoulli_hz",
     "shear_coefficient_rectangle",
+    "spring_held_torsion_hz",
+    "spring_held_torsion_roots",
+    "spring_hinged_cantilever_beta_l",
+    "spring_hinged_cantilever_hz",
     "timoshenko_beam_hz",
     "timoshenko_simply_supported_hz",
 ]
@@ -42,10 +47,77 @@ def euler_bernoulli_hz(
         raise ValueError(f"boundary must be one of {sorted(BETA_L)}, got {boundary!r}")
     if n_modes > len(BETA_L[boundary]):
         raise ValueError(f"at most {len(BETA_L[boundary])} modes tabulated")
+    return _beta_l_to_hz(np.array(BETA_L[boundary][:n_modes]), length_m, section, material, plane)
+
+
+def _beta_l_to_hz(bl: np.ndarray, length_m: float, section: Section, material: Material, plane: str) -> np.ndarray:
+    """``f_n = (beta_n L)^2 / (2 pi L^2) * sqrt(E I / (rho A))`` (Hz) for bending in or out of the base plane."""
+    if plane not in ("in", "out"):
+        raise ValueError(f"plane must be 'in' or 'out', got {plane!r}")
     inertia = section.i_inplane_m4 if plane == "in" else section.i_outofplane_m4
     c = math.sqrt(material.young_pa * inertia / (material.density_kg_m3 * section.area_m2))
-    bl = np.array(BETA_L[boundary][:n_modes])
-    return bl**2 / (2.0 * math.pi * length_m**2) * c
+    return np.asarray(bl, float) ** 2 / (2.0 * math.pi * length_m**2) * c
+
+
+def spring_hinged_cantilever_beta_l(stiffness_ratio: float, n_modes: int = 3) -> np.ndarray:
+    """Roots ``beta_n L`` of a cantilever whose root is held by a rotational spring (elastically restrained).
+
+    The root cannot move but turns against a spring ``k`` (N m/rad); the tip is free. With
+    ``w = A (cosh - cos) + B sinh + D sin`` (so ``w(0) = 0``), the root condition ``E I w''(0) = k w'(0)``
+    and a free tip (``w''(L) = 0``, ``w'''(L) = 0``) have a non-zero solution when
+
+    ``K (1 + cos(bL) cosh(bL)) = bL (sin(bL) cosh(bL) - cos(bL) sinh(bL))``,  ``K = k L / (E I)``,
+
+    solved here divided by ``cosh(bL)`` (no overflow) with :func:`scipy.optimize.brentq` between the
+    sign changes on a 0.01 grid (the roots are more than 1.5 apart). ``K -> inf`` gives the clamped-free
+    roots (:data:`BETA_L` ``"cantilever"``, 1.8751...); ``K -> 0`` the pinned-free ones: a rigid rotation
+    (``bL -> (3 K)^(1/4)``, the link swinging on its spring) then ``tan(bL) = tanh(bL)`` (3.9266...).
+
+    Parameters
+    ----------
+    stiffness_ratio
+        ``K = k L / (E I)`` (dimensionless), > 0; ``math.inf`` for a clamped root.
+    n_modes
+        Number of roots, lowest first.
+    """
+    from scipy.optimize import brentq
+
+    if not stiffness_ratio > 0:
+        raise ValueError(f"stiffness_ratio must be > 0 (inf = clamped), got {stiffness_ratio!r}")
+    if n_modes < 1:
+        raise ValueError(f"n_modes must be >= 1, got {n_modes!r}")
+    clamped = math.isinf(stiffness_ratio)
+    k_ratio = 1.0 if clamped else float(stiffness_ratio)
+    slope = 0.0 if clamped else 1.0
+
+    def f(x: float) -> float:
+        return k_ratio * (1.0 / math.cosh(x) + math.cos(x)) - slope * x * (math.sin(x) - math.cos(x) * math.tanh(x))
+
+    # root n lies below the clamped-free root n, itself below (n - 1/2) pi + 0.4
+    grid = np.arange(1e-9, (n_modes + 0.5) * math.pi, 0.01)
+    values = np.array([f(x) for x in grid])
+    roots = [
+        brentq(f, grid[j], grid[j + 1], xtol=1e-14, rtol=1e-14)
+        for j in np.flatnonzero(np.sign(values[:-1]) != np.sign(values[1:]))
+    ]
+    return np.array(roots[:n_modes], float)
+
+
+def spring_hinged_cantilever_hz(
+    *,
+    length_m: float,
+    section: Section,
+    material: Material,
+    root_stiffness_nm_per_rad: float,
+    plane: str = "out",
+    n_modes: int = 3,
+) -> np.ndarray:
+    """First ``n_modes`` bending frequencies (Hz) of a uniform Euler-Bernoulli cantilever whose root turns
+    against a rotational spring of ``root_stiffness_nm_per_rad`` in the bending plane (``"out"``: out of the
+    base plane, the default; ``"in"``). Roots from :func:`spring_hinged_cantilever_beta_l`."""
+    inertia = section.i_inplane_m4 if plane == "in" else section.i_outofplane_m4
+    ratio = root_stiffness_nm_per_rad * length_m / (material.young_pa * inertia)
+    return _beta_l_to_hz(spring_hinged_cantilever_beta_l(ratio, n_modes), length_m, section, material, plane)
 
 
 def mode_shape(boundary: str, n: int, xi: np.ndarray) -> np.ndarray:
@@ -187,4 +259,57 @@ def timoshenko_beam_hz(
     skip = 2 if boundary == "free-free" else 0  # the two rigid-body modes
     w2 = scipy.linalg.eigh(k, m, eigvals_only=True, subset_by_index=[0, skip + n_modes - 1])[skip:]
     freq_hz: np.ndarray = np.sqrt(np.maximum(w2, 0.0)) / (2.0 * math.pi)  # w2 is Any: scipy has no stubs here
+    return freq_hz
+
+
+def spring_held_torsion_roots(stiffness_ratio: float, n_modes: int = 3) -> np.ndarray:
+    """Roots ``alpha_n L`` of a uniform bar in free torsion whose root turns against a torsional spring.
+
+    With ``theta = A cos(alpha x) + B sin(alpha x)``, the root condition ``G J theta'(0) = k theta(0)`` and
+    a free end (``theta'(L) = 0``) give ``alpha L tan(alpha L) = K``, ``K = k L / (G J)``; root ``n`` lies in
+    ``((n - 1) pi, (n - 1/2) pi)``, found by :func:`scipy.optimize.brentq` on ``x sin x - K cos x`` (no poles).
+    ``K -> inf``: the clamped-free roots ``(n - 1/2) pi``; ``K -> 0``: a rigid rotation
+    (``alpha L -> sqrt(K)``) then ``(n - 1) pi``.
+
+    Parameters
+    ----------
+    stiffness_ratio
+        ``K = k L / (G J)`` (dimensionless), > 0; ``math.inf`` for a clamped root.
+    n_modes
+        Number of roots, lowest first.
+    """
+    from scipy.optimize import brentq
+
+    if not stiffness_ratio > 0:
+        raise ValueError(f"stiffness_ratio must be > 0 (inf = clamped), got {stiffness_ratio!r}")
+    if n_modes < 1:
+        raise ValueError(f"n_modes must be >= 1, got {n_modes!r}")
+    n = np.arange(1, n_modes + 1)
+    if math.isinf(stiffness_ratio):
+        out: np.ndarray = (n - 0.5) * math.pi
+        return out
+    k_ratio = float(stiffness_ratio)
+
+    def f(x: float) -> float:
+        return x * math.sin(x) - k_ratio * math.cos(x)
+
+    return np.array([brentq(f, (j - 1) * math.pi, (j - 0.5) * math.pi, xtol=1e-14, rtol=1e-14) for j in n])
+
+
+def spring_held_torsion_hz(
+    *,
+    length_m: float,
+    section: Section,
+    material: Material,
+    root_stiffness_nm_per_rad: float,
+    n_modes: int = 3,
+) -> np.ndarray:
+    """First ``n_modes`` torsion frequencies (Hz) of a uniform bar whose root turns against a torsional spring
+    of ``root_stiffness_nm_per_rad``, the other end free: ``f_n = alpha_n L / (2 pi L) * sqrt(G J / (rho I_p))``
+    with Saint-Venant's ``J`` (:attr:`Section.torsion_constant_m4`) and the section's polar moment
+    ``I_p = A (t^2 + h^2) / 12``. Roots from :func:`spring_held_torsion_roots`."""
+    gj = material.shear_pa * section.torsion_constant_m4
+    rho_ip = material.density_kg_m3 * section.area_m2 * (section.thickness_m**2 + section.height_m**2) / 12.0
+    roots = spring_held_torsion_roots(root_stiffness_nm_per_rad * length_m / gj, n_modes)
+    freq_hz: np.ndarray = roots / (2.0 * math.pi * length_m) * math.sqrt(gj / rho_ip)
     return freq_hz

@@ -154,3 +154,123 @@ def test_rigid_hubs_match_the_beam_with_rigid_ends():
     assert abs(e24[1]) < 1.4e-3
     assert e12 / e24 == pytest.approx([4.0, 4.0], rel=0.05)
     assert ref[0] > 1.3 * no_hub[0]  # hubs matter: the same link flexible joint to joint is far softer
+
+
+# --- spring-hinged cantilever -------------------------------------------------------------------------
+
+import scipy.linalg  # noqa: E402
+
+from fpm_sim.beam_theory import spring_hinged_cantilever_beta_l, spring_hinged_cantilever_hz  # noqa: E402
+
+
+def _hermite_cantilever_with_root_spring_beta_l(ratio: float, *, elements: int = 50, n: int = 3) -> np.ndarray:
+    """``beta_n L`` of a unit beam (E I = rho A = L = 1) by cubic Hermite finite elements, root deflection fixed,
+    root rotation held by a spring ``ratio`` (= k L / E I): an independent numerical truth. 50 elements: its
+    discretisation error on beta L is O(h^4), ~2e-7 at mode 3; the round-off of the dense solve grows with the
+    spectrum's span (~1/h^4): ~9e-7 on the soft mode 1 at K = 0.1 here, 1e-3 at 400 elements."""
+    h = 1.0 / elements
+    ke = (
+        np.array(
+            [
+                [12, 6 * h, -12, 6 * h],
+                [6 * h, 4 * h * h, -6 * h, 2 * h * h],
+                [-12, -6 * h, 12, -6 * h],
+                [6 * h, 2 * h * h, -6 * h, 4 * h * h],
+            ]
+        )
+        / h**3
+    )
+    me = (
+        h
+        / 420.0
+        * np.array(
+            [
+                [156, 22 * h, 54, -13 * h],
+                [22 * h, 4 * h * h, 13 * h, -3 * h * h],
+                [54, 13 * h, 156, -22 * h],
+                [-13 * h, -3 * h * h, -22 * h, 4 * h * h],
+            ]
+        )
+    )
+    size = 2 * (elements + 1)
+    k, m = np.zeros((size, size)), np.zeros((size, size))
+    for e in range(elements):
+        s = slice(2 * e, 2 * e + 4)
+        k[s, s] += ke
+        m[s, s] += me
+    k[1, 1] += ratio
+    w2 = scipy.linalg.eigh(k[1:, 1:], m[1:, 1:], eigvals_only=True, subset_by_index=[0, n - 1])
+    return np.sqrt(np.sqrt(w2))  # w = (beta L)^2 for the unit beam
+
+
+@pytest.mark.parametrize("ratio", [0.1, 1.0, 10.0, 100.0])
+def test_spring_hinged_roots_match_a_beam_fe(ratio):
+    fe = _hermite_cantilever_with_root_spring_beta_l(ratio)
+    # 2e-6: the 50-element FE's own error on beta L (measured <= 8.8e-7: round-off, mode 1 at K = 0.1)
+    np.testing.assert_allclose(spring_hinged_cantilever_beta_l(ratio, 3), fe, rtol=2e-6)
+
+
+def test_spring_hinged_roots_reach_the_clamped_and_pinned_limits():
+    np.testing.assert_allclose(spring_hinged_cantilever_beta_l(math.inf, 5), BETA_L["cantilever"], rtol=1e-10)
+    # a stiff spring: beta L approaches the clamped roots as 1 / K
+    np.testing.assert_allclose(spring_hinged_cantilever_beta_l(1e9, 3), BETA_L["cantilever"][:3], rtol=1e-8)
+    soft = spring_hinged_cantilever_beta_l(1e-8, 3)
+    assert soft[0] == pytest.approx((3e-8) ** 0.25, rel=1e-6)  # the link swinging rigidly on its spring
+    for bl in soft[1:]:  # then the pinned-free roots, tan = tanh (3.9266, 7.0686)
+        assert math.tan(bl) - math.tanh(bl) == pytest.approx(0.0, abs=1e-6)
+    assert soft[1] == pytest.approx(3.9266023120, rel=1e-8)
+    with pytest.raises(ValueError, match="stiffness_ratio"):
+        spring_hinged_cantilever_beta_l(0.0)
+
+
+def test_spring_hinged_hz_uses_the_bending_plane():
+    kw = dict(length_m=0.2, section=Section(0.01, 0.02), material=Material(200e9, 0.3, 7850), n_modes=3)
+    stiff = spring_hinged_cantilever_hz(root_stiffness_nm_per_rad=math.inf, plane="out", **kw)
+    np.testing.assert_allclose(stiff, euler_bernoulli_hz("cantilever", plane="out", **kw), rtol=1e-10)
+    ei_out = 200e9 * kw["section"].i_outofplane_m4
+    ei_in = 200e9 * kw["section"].i_inplane_m4
+    f_out = spring_hinged_cantilever_hz(root_stiffness_nm_per_rad=ei_out / 0.2, plane="out", **kw)  # K = 1
+    f_in = spring_hinged_cantilever_hz(root_stiffness_nm_per_rad=ei_in / 0.2, plane="in", **kw)  # K = 1 in plane
+    np.testing.assert_allclose(f_out / f_in, 2.0, rtol=1e-10)  # the same root; sqrt(I) doubles out of plane
+
+
+# --- spring-held bar in torsion -----------------------------------------------------------------------
+
+from fpm_sim.beam_theory import spring_held_torsion_hz, spring_held_torsion_roots  # noqa: E402
+
+
+def _linear_fe_torsion_roots(ratio: float, *, elements: int = 400, n: int = 3) -> np.ndarray:
+    """``alpha_n L`` of a unit shaft (G J = rho I_p = L = 1) by linear elements with consistent inertia, the root
+    rotation held by a spring ``ratio`` (= k L / G J): an independent numerical truth (error O(h^2))."""
+    h = 1.0 / elements
+    size = elements + 1
+    k, m = np.zeros((size, size)), np.zeros((size, size))
+    for e in range(elements):
+        s = slice(e, e + 2)
+        k[s, s] += np.array([[1.0, -1.0], [-1.0, 1.0]]) / h
+        m[s, s] += h / 6.0 * np.array([[2.0, 1.0], [1.0, 2.0]])
+    k[0, 0] += ratio
+    w2 = scipy.linalg.eigh(k, m, eigvals_only=True, subset_by_index=[0, n - 1])
+    return np.sqrt(w2)  # w = alpha L for the unit shaft
+
+
+@pytest.mark.parametrize("ratio", [0.1, 1.0, 10.0, 100.0])
+def test_spring_held_torsion_roots_match_a_shaft_fe(ratio):
+    fe = _linear_fe_torsion_roots(ratio)
+    # 2e-5: the 400-element FE's own error, (h alpha L)^2 / 24 relative: measured <= 1.6e-5 (mode 3, K = 100)
+    np.testing.assert_allclose(spring_held_torsion_roots(ratio, 3), fe, rtol=2e-5)
+
+
+def test_spring_held_torsion_limits_and_frequency():
+    np.testing.assert_allclose(spring_held_torsion_roots(math.inf, 3), [math.pi / 2, 3 * math.pi / 2, 5 * math.pi / 2])
+    np.testing.assert_allclose(spring_held_torsion_roots(1e9, 2), [math.pi / 2, 3 * math.pi / 2], rtol=1e-8)
+    soft = spring_held_torsion_roots(1e-8, 3)
+    assert soft[0] == pytest.approx(1e-4, rel=1e-6)  # rigid rotation on the spring: alpha L = sqrt(K)
+    np.testing.assert_allclose(soft[1:], [math.pi, 2 * math.pi], rtol=1e-7)
+    # clamped-free shaft: f1 = sqrt(G J / (rho I_p)) / (4 L)
+    sec, mat = Section(0.02, 0.01), Material(200e9, 0.3, 7850)
+    c = math.sqrt(mat.shear_pa * sec.torsion_constant_m4 / (mat.density_kg_m3 * sec.area_m2 * (0.02**2 + 0.01**2) / 12))
+    f = spring_held_torsion_hz(length_m=0.3, section=sec, material=mat, root_stiffness_nm_per_rad=math.inf, n_modes=1)
+    assert f[0] == pytest.approx(c / (4 * 0.3), rel=1e-12)
+    with pytest.raises(ValueError, match="stiffness_ratio"):
+        spring_held_torsion_roots(-1.0)

@@ -19,7 +19,7 @@ from fpm_sim.cli.common import (
 
 __all__ = ["cmd_identify", "parse_measured_arg", "register"]
 
-GROUPS = ("geometry", "geometry-per-chain", "hubs", "hardware", "section", "compliance", "rig")
+GROUPS = ("geometry", "geometry-per-chain", "hubs", "hardware", "section", "compliance", "offsets", "rig")
 """:data:`fpm_sim.study.identify.GROUPS`, listed here so that building the parser imports neither MuJoCo nor
 SciPy (a test checks they agree)."""
 GLOBAL_METHODS = ("hybrid", "multistart", "surrogate-de", "none")

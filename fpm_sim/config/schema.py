@@ -50,6 +50,9 @@ class ConfigError(FpmSimError):
 class Geometry:
     """Planar 3RRR geometry in the base plane (z = 0), SI units.
 
+    The links lie in the base plane unless ``distal_offset_m`` / ``platform_offset_m`` stack them in
+    layers along the joint axes (z); the in-plane kinematics does not depend on the layers.
+
     Chain ``i`` runs from the motor axis ``A_i`` on the base circle through the elbow ``B_i`` to the
     platform joint ``C_i``. ``elbow_branch[i]`` (+1 or -1) selects which of the two inverse-kinematics
     solutions the chain takes: +1 puts the elbow to the left of the line ``A_i -> C_i``.
@@ -69,6 +72,13 @@ class Geometry:
     hub_length_m: float = 0.0
     """Rigid length at each end of every link (joint hardware, clamped bosses): the flexible span is the
     joint-to-joint length minus twice this. 0 (default): flexible from joint to joint."""
+    distal_offset_m: float | tuple[float, float, float] = 0.0
+    """Stacked links: height (along the joint axes, +z) of the distal-link layer above the proximal one;
+    the elbow between the layers is a rigid pin of this length. 0 (default): coplanar links."""
+    platform_offset_m: float | tuple[float, float, float] = 0.0
+    """Stacked links: height of the platform-joint/platform layer above the distal-link layer (a rigid
+    pin at each platform joint). 0 (default): the platform in the distal links' plane. Per chain, the
+    platform's centre (its mass, ``platform_center``) sits at chain 0's height."""
 
     @staticmethod
     def _three(v: float | tuple[float, ...]) -> tuple[float, float, float]:
@@ -95,6 +105,16 @@ class Geometry:
     def distal_length_per_chain(self) -> tuple[float, float, float]:
         """Joint-to-joint length of each distal link (m)."""
         return self._three(self.distal_length_m)
+
+    @property
+    def distal_offset_per_chain(self) -> tuple[float, float, float]:
+        """Height of each distal link above its proximal link (m)."""
+        return self._three(self.distal_offset_m)
+
+    @property
+    def platform_offset_per_chain(self) -> tuple[float, float, float]:
+        """Height of each platform joint (and the platform) above its distal link (m)."""
+        return self._three(self.platform_offset_m)
 
     def is_symmetric_in_lengths(self) -> bool:
         """True when every radius and link length is the same for the three chains."""
@@ -177,13 +197,16 @@ class Compliance:
 
     ``passive_joint_tilt_nm_per_rad``: bearing stiffness of each passive hinge about the two axes
     normal to its own (out-of-plane tilt). ``motor_clamp_nm_per_rad``: stiffness of each locked motor
-    about its axis. ``base_clamp_nm_per_rad``: rotational stiffness of the rigs' clamps (the study's
-    concrete cylinders) about both bending axes.
+    about its axis. ``motor_mount_tilt_nm_per_rad``: stiffness of each motor's mounting on the base
+    about the two axes normal to the motor axis (out-of-plane tilt of the proximal link's root: about
+    the link, twisting it, and across it, bending it out of the plane). ``base_clamp_nm_per_rad``:
+    rotational stiffness of the rigs' clamps (the study's concrete cylinders) about both bending axes.
     """
 
     passive_joint_tilt_nm_per_rad: float = math.inf
     motor_clamp_nm_per_rad: float = math.inf
     base_clamp_nm_per_rad: float = math.inf
+    motor_mount_tilt_nm_per_rad: float = math.inf
 
 
 @dataclass(frozen=True)
@@ -292,9 +315,11 @@ class _Reader:
             raise ConfigError(f"field '{path}.{key}' must be a number, got {v!r}")
         return float(v)
 
-    def number_or_triple(self, table: dict[str, Any], path: str, key: str) -> float | tuple[float, float, float]:
+    def number_or_triple(
+        self, table: dict[str, Any], path: str, key: str, default: Any = dataclasses.MISSING
+    ) -> float | tuple[float, float, float]:
         """One number (all chains) or a list of three (one per chain)."""
-        v = self.get(table, path, key)
+        v = self.get(table, path, key, default)
         if isinstance(v, (list, tuple)):
             if len(v) != 3 or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in v):
                 raise ConfigError(
@@ -379,6 +404,8 @@ def parse_config(data: dict[str, Any], *, source: str = "user") -> Manipulator:
             "platform_angles_deg",
             "elbow_branch",
             "hub_length_m",
+            "distal_offset_m",
+            "platform_offset_m",
         },
     )
     branch = r.get(g, "geometry", "elbow_branch", [1, 1, 1])
@@ -393,6 +420,8 @@ def parse_config(data: dict[str, Any], *, source: str = "user") -> Manipulator:
         platform_angles_rad=_radians3(r.triple(g, "geometry", "platform_angles_deg")),
         elbow_branch=(int(branch[0]), int(branch[1]), int(branch[2])),
         hub_length_m=r.number(g, "geometry", "hub_length_m", 0.0),
+        distal_offset_m=r.number_or_triple(g, "geometry", "distal_offset_m", 0.0),
+        platform_offset_m=r.number_or_triple(g, "geometry", "platform_offset_m", 0.0),
     )
     s = r.table(data, "", "section")
     _check_keys(s, "section", {"thickness_m", "height_m"})
@@ -531,6 +560,9 @@ def config_to_toml(m: Manipulator, *, header: str = "", default_source: str = "u
     lines.append(entry("geometry", "elbow_branch", list(g.elbow_branch)))
     if g.hub_length_m:
         lines.append(entry("geometry", "hub_length_m", g.hub_length_m))
+    for key in ("distal_offset_m", "platform_offset_m"):  # written only when stacked (0 = coplanar)
+        if any(getattr(g, f"{key[:-2]}_per_chain")):
+            lines.append(entry("geometry", key, _compact(getattr(g, key))))
 
     def section(path: str, sec: Section) -> None:
         lines.extend(
@@ -617,6 +649,14 @@ def validate(m: Manipulator) -> None:
                 if math.dist(pts[i], pts[j]) < 1e-6:
                     raise ConfigError(f"field 'geometry.{name}': chains {i} and {j} share an angle")
     _nonneg(g.hub_length_m, "geometry.hub_length_m")
+    for key in ("distal_offset_m", "platform_offset_m"):
+        raw = getattr(g, key)
+        for i, v in enumerate(getattr(g, f"{key[:-2]}_per_chain")):
+            if not math.isfinite(v):
+                sfx = f"[{i}]" if isinstance(raw, tuple) else ""
+                raise ConfigError(
+                    f"field 'geometry.{key}{sfx}' must be a finite height in m (0 = coplanar layers), got {v!r}"
+                )
     shortest = min(g.proximal_length_per_chain + g.distal_length_per_chain)
     if 2.0 * g.hub_length_m >= shortest:
         raise ConfigError(

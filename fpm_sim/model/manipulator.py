@@ -8,12 +8,21 @@ straight, unstressed links):
 
 - motors locked: the proximal link's root is part of the base; a finite
   ``compliance.motor_clamp_nm_per_rad`` or ``motors.mode = "servo"`` adds a z-hinge spring there;
+- motor mounts: rigid; a finite ``compliance.motor_mount_tilt_nm_per_rad`` adds two tilt springs
+  (x along the proximal link, y across it) at each proximal link's root, on the base side of the
+  motor hinge (:func:`add_motor_mount`);
 - passive joints: ideal z-hinges; a finite ``compliance.passive_joint_tilt_nm_per_rad`` adds two
   tilt springs (x, y) at each;
 - hardware: half the elbow hardware sits at the proximal link's end and half at the distal link's
   start (assumed split), the platform-joint hardware is the ``pin_i`` body, the motor flange sits at
   the proximal root, platform and payload at the platform centre. A pin without hardware mass gets
   :data:`MIN_PIN_MASS_KG` (MuJoCo needs mass on every moving body).
+- stacked links: ``geometry.distal_offset_m`` places ``distal_i`` that far above its proximal link's
+  end (+z) and ``geometry.platform_offset_m`` places ``pin_i`` (and so the platform) that far above
+  its distal link's end: the offset is the joint's child body's position along the joint axis, so the
+  pin between the layers is rigid (and massless: its mass belongs to the joint's hardware lumps) and
+  the hinge axis (z) is the same line; in-plane positions and the kinematics are those of the coplanar
+  model. The platform's centre sits at chain 0's pin height.
 """
 
 from __future__ import annotations
@@ -24,13 +33,13 @@ from dataclasses import asdict
 import mujoco
 import numpy as np
 
-from fpm_sim.config import LumpedMass, Manipulator
+from fpm_sim.config import Compliance, LumpedMass, Manipulator
 from fpm_sim.kinematics import Assembly, Pose, inverse_kinematics
 from fpm_sim.model.links import add_link
 from fpm_sim.model.options import BuiltModel, ModelOptions, add_weld, compile_model, new_spec
 from fpm_sim.model.parts import add_compliance_springs, add_hinge, half_lump, lump_part, quat_z, set_inertial
 
-__all__ = ["MIN_PIN_MASS_KG", "build_manipulator"]
+__all__ = ["MIN_PIN_MASS_KG", "add_motor_mount", "build_manipulator"]
 
 MIN_PIN_MASS_KG = 1e-4
 
@@ -40,6 +49,20 @@ def _add_passive_joint(body: mujoco.MjsBody, name: str, manip: Manipulator, kind
     kinds[name] = "passive"
     k_tilt = manip.compliance.passive_joint_tilt_nm_per_rad
     add_compliance_springs(body, f"{name}_tilt", "xy", k_tilt, manip.damping.stiffness_proportional_s, "tilt", kinds)
+
+
+def add_motor_mount(
+    body: mujoco.MjsBody, name: str, compliance: Compliance, beta_s: float, kinds: dict[str, str]
+) -> None:
+    """The motor's mounting on the base at the root ``body`` of a proximal link (x along the link).
+
+    A finite ``compliance.motor_mount_tilt_nm_per_rad`` adds the rotational springs ``{name}_mount_tiltx``
+    (about the link: twists its root) and ``{name}_mount_tilty`` (across it: bends the link out of the
+    plane), damping ``beta_s * k``, kind ``tilt``; rigid (``inf``) adds nothing. Called before the motor's
+    own z-hinge, so the motor axis tilts with its mount.
+    """
+    k = compliance.motor_mount_tilt_nm_per_rad
+    add_compliance_springs(body, f"{name}_mount_tilt", "xy", k, beta_s, "tilt", kinds)
 
 
 def build_manipulator(
@@ -93,6 +116,7 @@ def build_manipulator(
             rgba=(0.25, 0.45, 0.8, 1.0),
             **link_kw,
         )
+        add_motor_mount(prox.first, f"motor_{i}", manip.compliance, beta, kinds)
         if manip.motors.mode == "servo":
             k, c_damp = manip.motors.servo_stiffness_nm_per_rad, manip.motors.servo_damping_nms_per_rad
             add_hinge(prox.first, f"motor_{i}", [0, 0, 1], k, c_damp)
@@ -104,7 +128,7 @@ def build_manipulator(
         dist = add_link(
             prox.last,
             name=f"distal_{i}",
-            pos=np.array([prox.last_length_m, 0.0, 0.0]),
+            pos=np.array([prox.last_length_m, 0.0, g.distal_offset_per_chain[i]]),
             angle_rad=ang_d - ang_p,
             length_m=g.distal_length_per_chain[i],
             start_lumps=(half_lump(hw.elbow_joint),),
@@ -115,7 +139,11 @@ def build_manipulator(
         for lb in (prox, dist):
             kinds.update(dict(lb.joints))
             links[lb.name] = lb.sites
-        pin = dist.last.add_body(name=f"pin_{i}", pos=[dist.last_length_m, 0.0, 0.0], quat=quat_z(pose.phi_rad - ang_d))
+        pin = dist.last.add_body(
+            name=f"pin_{i}",
+            pos=[dist.last_length_m, 0.0, g.platform_offset_per_chain[i]],
+            quat=quat_z(pose.phi_rad - ang_d),
+        )
         pin_lump = hw.platform_joint
         if pin_lump.mass_kg <= 0.0:
             pin_lump = LumpedMass(MIN_PIN_MASS_KG, (1e-9, 1e-9, 1e-9))

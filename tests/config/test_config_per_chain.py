@@ -73,3 +73,53 @@ def test_equal_per_chain_values_give_the_scalar_model():
     b = pose_frequencies(tri, poses, n_modes=3, options=fast_options(segments=3)).frequencies_hz
     np.testing.assert_allclose(a, b, rtol=1e-12)
     assert math.isfinite(a[0, 0])
+
+
+def test_stacked_offsets_and_motor_mount_round_trip_with_provenance():
+    cfg = default_config()
+    assert cfg.geometry.distal_offset_per_chain == (0.0, 0.0, 0.0)
+    assert math.isinf(cfg.compliance.motor_mount_tilt_nm_per_rad)
+    assert cfg.provenance["compliance.motor_mount_tilt_nm_per_rad"].startswith("assumed: rigid")
+    assert "offset" not in config_to_toml(cfg)  # coplanar (0) is not written, as hub_length_m
+    stacked = _per_chain(cfg, distal_offset_m=0.025, platform_offset_m=(0.01, 0.0, 0.02))
+    stacked = stacked.replace(compliance=dataclasses.replace(cfg.compliance, motor_mount_tilt_nm_per_rad=4e4))
+    prov = dict(stacked.provenance, **{"geometry.distal_offset_m": "assumed: 25 mm layer"})
+    stacked = dataclasses.replace(stacked, provenance=prov)
+    back = parse_config(tomllib.loads(config_to_toml(stacked)), source="x")
+    assert back == stacked
+    assert back.geometry.platform_offset_per_chain == (0.01, 0.0, 0.02)
+    assert back.provenance["geometry.distal_offset_m"] == "assumed: 25 mm layer"
+    assert back.provenance["geometry.platform_offset_m"] == "unknown"  # the writer's default source
+    assert back.compliance.motor_mount_tilt_nm_per_rad == 4e4
+
+
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [
+        ({"distal_offset_m": math.nan}, r"geometry\.distal_offset_m'"),
+        ({"platform_offset_m": (0.0, math.inf, 0.0)}, r"geometry\.platform_offset_m\[1\]"),
+    ],
+)
+def test_bad_offsets_name_the_field(change, match):
+    with pytest.raises(ConfigError, match=match):
+        _per_chain(default_config(), **change)
+
+
+@pytest.mark.parametrize(("value", "match"), [(0.0, "is 0: that is a free joint"), (-5.0, ">= 0"), (math.nan, ">= 0")])
+def test_bad_motor_mount_stiffness_names_the_field(value, match):
+    cfg = default_config()
+    with pytest.raises(ConfigError, match=r"compliance\.motor_mount_tilt_nm_per_rad.*" + match):
+        cfg.replace(compliance=dataclasses.replace(cfg.compliance, motor_mount_tilt_nm_per_rad=value))
+
+
+def test_offsets_in_a_user_file(tmp_path):
+    text = config_to_toml(default_config()).replace(
+        "[section]", "distal_offset_m = 0.02\nplatform_offset_m = [0.01, 0.01, 0.015]\n\n[section]", 1
+    )
+    p = tmp_path / "stacked.toml"
+    p.write_text(text)
+    g = load_config(p).geometry
+    assert g.distal_offset_m == 0.02
+    assert g.platform_offset_per_chain == (0.01, 0.01, 0.015)
+    with pytest.raises(ConfigError, match=r"geometry\.distal_offset_m.*list of 3"):
+        parse_config(tomllib.loads(text.replace("distal_offset_m = 0.02", "distal_offset_m = [0.02]")))

@@ -127,14 +127,49 @@ def test_parameter_groups_and_errors():
     g = ps.apply(x).geometry
     assert g.proximal_length_per_chain[1] == pytest.approx(cfg.geometry.proximal_length_m * 1.05)
     assert g.proximal_length_per_chain[0] == cfg.geometry.proximal_length_m
-    with pytest.raises(ParameterError, match="offsets"):
-        parameter_set(cfg, ["offsets"])
+    ps = parameter_set(cfg, ["offsets"])
+    assert ps.names == ["geometry.distal_offset_m", "geometry.platform_offset_m"]
+    assert list(ps.lower) == [0.0, 0.0]
+    assert list(ps.upper) == [0.06, 0.06]
+    assert list(ps.x0) == [0.03, 0.03]  # a coplanar start begins mid-range (0 is a stationary point)
+    g = ps.apply([0.03, 0.01]).geometry
+    assert g.distal_offset_per_chain == (0.03, 0.03, 0.03)
+    assert g.platform_offset_per_chain == (0.01, 0.01, 0.01)
+    stacked = cfg.replace(geometry=dataclasses.replace(cfg.geometry, distal_offset_m=(0.01, 0.02, 0.03)))
+    ps = parameter_set(stacked, ["offsets"])
+    assert ps.x0[0] == pytest.approx(0.02)  # a per-chain start: its mean, the differences kept
+    assert ps.apply([0.03, 0.0]).geometry.distal_offset_per_chain == pytest.approx((0.02, 0.03, 0.04))
     with pytest.raises(ParameterError, match="unknown parameter group"):
         parameter_set(cfg, ["geometery"])
     ps = parameter_set(cfg, ["geometry", "compliance"])
     g2 = ps.apply(ps.x0).geometry
     assert g2 == cfg.geometry  # the start values reproduce the start
     assert math.isclose(ps.apply(ps.x0).compliance.passive_joint_tilt_nm_per_rad, 1e7)
+    assert [n for n in ps.names if n.startswith("compliance.")] == [
+        "compliance.log10_passive_joint_tilt_nm_per_rad",
+        "compliance.log10_motor_clamp_nm_per_rad",
+        "compliance.log10_motor_mount_tilt_nm_per_rad",
+    ]
+    assert math.isclose(ps.apply(ps.x0).compliance.motor_mount_tilt_nm_per_rad, 1e7)
+
+
+def test_offsets_group_recovers_stacked_layers_from_synthetic_frequencies():
+    # synthetic truth: the default with 40 mm / 15 mm layers, three modes at four poses, noise-free
+    cfg = default_config()
+    truth = cfg.replace(geometry=dataclasses.replace(cfg.geometry, distal_offset_m=0.04, platform_offset_m=0.015))
+    obs = [Observation(p, m, 1.0, 1.0, None, "synthetic") for p in POSES[:4] for m in (1, 2, 3)]
+    f = predict_observations(truth, obs, options=fast_options(segments=SEG))
+    obs = [dataclasses.replace(o, freq_hz=float(v), sigma_hz=0.01 * float(v)) for o, v in zip(obs, f)]
+    opts = IdentifyOptions(segments=SEG, global_method="none", max_nfev=40)
+    ps = parameter_set(cfg, ["offsets"])
+    res = identify(Problem(ps, obs), options=opts)
+    # noise-free data, same model: the fit lands on the truth (measured 4e-13 m off)
+    np.testing.assert_allclose(res.values, [0.04, 0.015], rtol=0, atol=1e-6)
+    # why a coplanar description does not start at 0: the fit stays there (every gradient vanishes)
+    ps.parameters = [dataclasses.replace(p, start=0.0) for p in ps.parameters]
+    stuck = identify(Problem(ps, obs), options=opts)
+    assert np.all(stuck.values < 1e-3)
+    assert stuck.cost > 1e6 * res.cost
 
 
 def test_cli_identify_writes_a_complete_folder_usable_with_config(tmp_path):

@@ -21,14 +21,17 @@ Groups (:data:`GROUPS`):
     The links' out-of-plane height and in-plane thickness (m), 0.5-2 x the start. (On the study's data
     freeing the thickness too gave the lower cross-validated error: 12.8 % vs 18.3 %, docs/identification.md.)
 ``compliance``
-    ``log10`` of the passive-joint tilt and locked-motor rotational stiffnesses (N m/rad), 2 .. 7 (a
-    rigid start, ``inf``, starts at 7: the stiff end).
+    ``log10`` of the passive-joint tilt, locked-motor and motor-mount tilt rotational stiffnesses
+    (N m/rad), 2 .. 7 (a rigid start, ``inf``, starts at 7: the stiff end).
+``offsets``
+    The stacked links' layer heights ``geometry.distal_offset_m`` (distal links above the proximal ones)
+    and ``geometry.platform_offset_m`` (platform joints and platform above the distal links), m, 0 .. 0.06,
+    from the start description's values (a per-chain start keeps its chain-to-chain differences). A
+    coplanar start (0) begins at 0.03 instead: flipping every layer (z -> -z) leaves the frequencies as
+    they are, so 0 is a stationary point where a local fit would never move (it stays there, tested).
 ``rig``
     The test pieces (only with ``--subsystems``): rig length, clamped length, the piece's height and
     the chain hinge's mass.
-
-``offsets`` (links stacked along the joint axis) is not modelled in this version: asking for it is
-an error, not a silent no-op.
 """
 
 from __future__ import annotations
@@ -46,10 +49,12 @@ from fpm_sim.errors import FpmSimError
 
 __all__ = ["GROUPS", "FreeParameter", "ParameterError", "ParameterSet", "parameter_set"]
 
-GROUPS = ("geometry", "geometry-per-chain", "hubs", "hardware", "section", "compliance", "rig")
+GROUPS = ("geometry", "geometry-per-chain", "hubs", "hardware", "section", "compliance", "offsets", "rig")
 """Groups ``--free`` accepts."""
 
 LOG_STIFF_BOUNDS = (2.0, 7.0)
+OFFSET_BOUNDS_M = (0.0, 0.06)
+"""Bounds of the ``offsets`` group's layer heights (m)."""
 
 
 class ParameterError(FpmSimError):
@@ -84,9 +89,14 @@ def _set_geometry(cfg: Manipulator, **changes: Any) -> Manipulator:
     return dataclasses.replace(cfg, geometry=dataclasses.replace(cfg.geometry, **changes))
 
 
+def _chain_mean(per_chain: tuple[float, float, float]) -> float:
+    """The chains' common value, or their mean where they differ."""
+    return per_chain[0] if len(set(per_chain)) == 1 else float(np.mean(per_chain))
+
+
 def _mean_setter(field_name: str, per_chain: tuple[float, float, float]) -> Callable[[Manipulator, float], Manipulator]:
     sym = len(set(per_chain)) == 1
-    mean0 = per_chain[0] if sym else float(np.mean(per_chain))
+    mean0 = _chain_mean(per_chain)
 
     def set_(cfg: Manipulator, v: float) -> Manipulator:
         value: float | tuple = v if sym else tuple(x + (v - mean0) for x in per_chain)
@@ -121,7 +131,7 @@ def _geometry(cfg: Manipulator) -> list[FreeParameter]:
     out = []
     for f in ("base_radius_m", "platform_radius_m", "proximal_length_m", "distal_length_m"):
         per = getattr(g, f"{f[:-2]}_per_chain")
-        m = per[0] if len(set(per)) == 1 else float(np.mean(per))
+        m = _chain_mean(per)
         out.append(FreeParameter(f"geometry.{f}", m, 0.6 * m, 1.6 * m, _mean_setter(f, per), "geometry"))
     out.append(
         FreeParameter(
@@ -220,7 +230,7 @@ def _section(cfg: Manipulator) -> list[FreeParameter]:
 
 def _compliance(cfg: Manipulator) -> list[FreeParameter]:
     out = []
-    for f in ("passive_joint_tilt_nm_per_rad", "motor_clamp_nm_per_rad"):
+    for f in ("passive_joint_tilt_nm_per_rad", "motor_clamp_nm_per_rad", "motor_mount_tilt_nm_per_rad"):
         v = getattr(cfg.compliance, f)
         start = min(math.log10(v), LOG_STIFF_BOUNDS[1]) if math.isfinite(v) else LOG_STIFF_BOUNDS[1]
 
@@ -228,6 +238,18 @@ def _compliance(cfg: Manipulator) -> list[FreeParameter]:
             return dataclasses.replace(c, compliance=dataclasses.replace(c.compliance, **{f: 10.0**x}))
 
         out.append(FreeParameter(f"compliance.log10_{f}", start, *LOG_STIFF_BOUNDS, set_, "compliance"))
+    return out
+
+
+def _offsets(cfg: Manipulator) -> list[FreeParameter]:
+    g = cfg.geometry
+    out = []
+    for f in ("distal_offset_m", "platform_offset_m"):
+        per = getattr(g, f"{f[:-2]}_per_chain")
+        # coplanar (all 0) is a stationary point of every frequency (the mirror z -> -z maps +offsets to -offsets
+        # and leaves the frequencies), where a local fit cannot move: start such a description mid-range
+        start = _chain_mean(per) if any(per) else 0.5 * (OFFSET_BOUNDS_M[0] + OFFSET_BOUNDS_M[1])
+        out.append(FreeParameter(f"geometry.{f}", start, *OFFSET_BOUNDS_M, _mean_setter(f, per), "offsets"))
     return out
 
 
@@ -288,6 +310,7 @@ _BUILDERS = {
     "hardware": _hardware,
     "section": _section,
     "compliance": _compliance,
+    "offsets": _offsets,
     "rig": _rig,
 }
 
@@ -331,11 +354,6 @@ def parameter_set(start: Manipulator, groups: Sequence[str]) -> ParameterSet:
     """The free parameters of ``groups`` (see module docstring) over ``start``."""
     params: list[FreeParameter] = []
     for g in groups:
-        if g == "offsets":
-            raise ParameterError(
-                "--free offsets: links stacked along the joint axis are not modelled in this version; "
-                f"choose from {', '.join(GROUPS)}"
-            )
         if g not in _BUILDERS:
             raise ParameterError(f"--free: unknown parameter group {g!r}; choose from {', '.join(GROUPS)}")
         params += _BUILDERS[g](start)
