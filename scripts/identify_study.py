@@ -140,7 +140,12 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--folds", type=int, default=4)
     ap.add_argument("--free", default="geometry,hardware,section")
-    ap.add_argument("--global", dest="global_method", default="hybrid")
+    ap.add_argument("--global", dest="global_method", default="de")
+    ap.add_argument("--generations", type=int, default=60)
+    ap.add_argument("--sigma-measured-pct", type=float, default=2.0)
+    ap.add_argument("--sigma-comsol-pct", type=float, default=7.0)
+    ap.add_argument("--reading", default="x+")
+    ap.add_argument("--segments", type=int, default=4)
     ap.add_argument("--max-nfev", type=int, default=40)
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--refine", type=int, default=4, help="global candidates refined locally")
@@ -160,17 +165,21 @@ def main() -> int:
         "--config",
         str(start),
         "--measured",
-        f"{data / 'measured_table4_train.csv'},sigma_pct=2",
+        f"{data / 'measured_table4_train.csv'},sigma_pct={args.sigma_measured_pct:g}",
         "--measured",
-        f"{data / 'comsol_table5.csv'},sigma_pct=7",
+        f"{data / 'comsol_table5.csv'},sigma_pct={args.sigma_comsol_pct:g}",
         "--subsystems",
         str(data / "subsystems.csv"),
         "--reading",
-        "x+",
+        args.reading,
+        "--segments",
+        str(args.segments),
         "--free",
         args.free,
         "--global",
         args.global_method,
+        "--generations",
+        str(3 if args.quick else args.generations),
         "--seed",
         str(args.seed),
         "--folds",

@@ -22,7 +22,7 @@ __all__ = ["cmd_identify", "parse_measured_arg", "register"]
 GROUPS = ("geometry", "geometry-per-chain", "hubs", "hardware", "section", "compliance", "offsets", "rig")
 """:data:`fpm_sim.study.identify.GROUPS`, listed here so that building the parser imports neither MuJoCo nor
 SciPy (a test checks they agree)."""
-GLOBAL_METHODS = ("hybrid", "multistart", "surrogate-de", "none")
+GLOBAL_METHODS = ("de", "hybrid", "multistart", "surrogate-de", "none")
 """:data:`fpm_sim.study.identify.GLOBAL_METHODS` (checked by a test)."""
 DEFAULT_SIGMA_PCT = 2.0
 """:data:`fpm_sim.study.identify.DEFAULT_SIGMA_PCT` (checked by a test)."""
@@ -76,13 +76,17 @@ def cmd_identify(args: argparse.Namespace) -> int:
         raise CliError("--free rig needs --subsystems FILE.csv (the rig parameters are seen only by rig tests)")
     if args.workers < 1:
         raise CliError(f"--workers must be >= 1, got {args.workers}")
-    if args.segments < 1:
-        raise CliError(f"--segments must be >= 1, got {args.segments}")
+    counts = (("--segments", args.segments), ("--generations", args.generations), ("--popsize", args.popsize))
+    for flag, value in counts:
+        if value < 1:
+            raise CliError(f"{flag} must be >= 1, got {value}")
     opts = IdentifyOptions(
         segments=args.segments,
         global_method=args.global_method,
         n_starts=args.starts,
         n_refine=args.refine,
+        generations=args.generations,
+        popsize=args.popsize,
         seed=args.seed,
         max_nfev=args.max_nfev,
         workers=args.workers,
@@ -151,10 +155,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--global",
         dest="global_method",
-        default="hybrid",
+        default="de",
         choices=GLOBAL_METHODS,
-        help="global exploration before the local refinement (default hybrid; see docs/identification.md)",
+        help="global exploration before the local refinement (default de: differential evolution on the full "
+        "model; see docs/identification.md)",
     )
+    p.add_argument("--generations", type=int, default=60, help="de: generations (default 60)")
+    p.add_argument("--popsize", type=int, default=8, help="de: population per free parameter (default 8)")
     p.add_argument("--starts", type=int, default=24, help="multistart: Latin-hypercube points (default 24)")
     p.add_argument("--refine", type=int, default=4, help="best global candidates refined locally (default 4)")
     p.add_argument(

@@ -376,7 +376,7 @@ def _surrogate_starts(obj: _Objective, opts: IdentifyOptions) -> list[tuple[np.n
 
 
 def _full_model_de(
-    problem: Problem, obj: _Objective, opts: IdentifyOptions
+    problem: Problem, obj: _Objective, opts: IdentifyOptions, *, progress: bool = False
 ) -> list[tuple[float, np.ndarray, str, tuple[int, int, int] | None]]:
     """Differential evolution of every free parameter on the full model (the fitted resolution), with the
     elbow-branch combination as one more, integer, variable when the geometry is free. Returns the final
@@ -390,10 +390,21 @@ def _full_model_de(
     d = len(ps.parameters)
 
     def cost(v: np.ndarray) -> float:
-        k = int(round(v[d])) if geometry_free else 0
+        k = int(np.rint(v[d])) if geometry_free else 0
         return objs[k].cost(v[:d])
 
     bounds = [(0.0, 1.0)] * d + ([(0.0, len(branches) - 1.0)] if geometry_free else [])
+    t0, generation = time.time(), [0]
+
+    def report(intermediate_result: Any) -> None:
+        generation[0] += 1
+        if progress and (generation[0] % 10 == 0 or generation[0] == opts.generations):
+            print(
+                f"[identify] differential evolution: generation {generation[0]}/{opts.generations}, best cost "
+                f"{intermediate_result.fun:.4g} ({time.time() - t0:.0f} s)",
+                flush=True,
+            )
+
     integrality = [False] * d + ([True] if geometry_free else [])
     sol = differential_evolution(
         cost,
@@ -406,15 +417,19 @@ def _full_model_de(
         polish=False,
         init="sobol",
         updating="deferred",
+        callback=report,
     )
     obj.nfev += sum(o.nfev for o in objs if o is not obj)
     pop = np.atleast_2d(getattr(sol, "population", sol.x[None, :]))
     energies = np.atleast_1d(getattr(sol, "population_energies", [sol.fun]))
     out: dict[int, tuple[float, np.ndarray, str, tuple[int, int, int] | None]] = {}
     for v, e in sorted(zip(pop, energies), key=lambda t: t[1]):
-        k = int(round(v[d])) if geometry_free else 0
+        k = int(np.rint(v[d])) if geometry_free else 0
         if k not in out:
-            note = f"differential evolution ({sol.nit} generations, {sol.nfev} evaluations), best of its final population"
+            note = (
+                f"differential evolution ({sol.nit} generations, {sol.nfev} evaluations), "
+                "best of its final population"
+            )
             if branches[k] is not None:
                 note += f" with elbow branches {branches[k]}"
             out[k] = (float(e), np.clip(v[:d], 0.0, 1.0), note, branches[k])
@@ -474,9 +489,13 @@ def identify(problem: Problem, *, options: IdentifyOptions | None = None, progre
             "best geometry of each elbow-branch class, scored with the full model",
         )
     if opts.global_method == "de":
-        found = _full_model_de(problem, obj, opts)
+        found = _full_model_de(problem, obj, opts, progress=progress)
         scored.extend(found)
-        log("global differential evolution", found[0][0], f"full model; {len(found)} elbow-branch classes in the final population")
+        log(
+            "global differential evolution",
+            found[0][0],
+            f"full model; {len(found)} elbow-branch classes in the final population",
+        )
     scored.sort(key=lambda t: t[0])
     starts = [(z, note, branch) for _, z, note, branch in scored[: max(1, opts.n_refine)]]
     if opts.global_method == "none":
