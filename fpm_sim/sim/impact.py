@@ -35,13 +35,14 @@ the small coupling of the gravity sag). Choose ``axis="normal"`` for an in-plane
 Integration step. By default the rollouts use the model's own integrator and step (``implicitfast``,
 ``h = 0.5 / omega_max``, :mod:`fpm_sim.model.options`): its spring hinges are integrated explicitly, so the step
 is set by the stiffest spring's highest mode, a discretisation mode far above any band of interest, and shrinks
-as ``1 / segments^2`` (3 segments: 5 us; 12 segments: 0.3 us, about 40 min of CPU per simulated second).
+as ``1 / segments^2`` (3 segments: 5-7 us; 12 segments: 0.3-0.4 us, about 40 min of CPU per simulated second).
 ``ImpactSetup.timestep_s`` instead runs them with MuJoCo's ``discrete`` integrator (MuJoCo >= 3.13: springs,
 dampers and the loop-closing welds implicit in one solve, stable at any step) at the given step, chosen for the
 band: the implicit step damps a mode at ``f`` by about ``pi f h`` (the read damping then includes it) and moves
-its frequency by ``O((2 pi f h)^2)``. Measured at pose (0, 0, 0.2), 0.5 s records, ``h = 20 us``: 12 segments
-run 55x faster (``scripts/benchmark_impact_timestep.py``), the EMA's f1 (in-plane) and first out-of-plane
-frequency stay within 0.07 % of the modal ones, as with the model's own step.
+its frequency by ``O((2 pi f h)^2)``. Measured at pose (0, 0, 0.2) with ``h = 20 us``
+(``scripts/benchmark_impact_timestep.py``): 12 segments run 46-54x faster, 3 segments 2.4-2.9x, and the EMA
+reads the same frequencies from both FRFs to 0.04 % (12 segments, 0.1 s records) and 0.005 % (3 segments,
+0.5 s records).
 
 Modal reference: :func:`fpm_sim.rom.reduction.modal_system` of the *same* compiled model (same
 discretisation and timestep) at the same equilibrium.
