@@ -10,6 +10,10 @@ from fpm_sim.cli.common import CliError, add_output_args, add_overwrite_arg, che
 
 __all__ = ["cmd_ema", "register"]
 
+MODE_LABELS = ("in_plane", "out_of_plane")
+""":data:`fpm_sim.study.identify.data.MODE_LABELS`, listed here so that building the parser imports neither
+MuJoCo nor SciPy (a test checks they agree)."""
+
 
 def cmd_ema(args: argparse.Namespace) -> int:
     from fpm_sim.outputs import atomic_dir
@@ -31,15 +35,15 @@ def cmd_ema(args: argparse.Namespace) -> int:
                         f"{frf.source}: the file does not say where it was measured; give --x-mm and --y-mm"
                     )
                 frf.pose_mm_rad = (float(given[0]), float(given[1]), float(given[2] or 0.0))
-            estimates.append(
-                estimate_modes(
-                    frf,
-                    f_lower_hz=args.f_lower_hz,
-                    f_upper_hz=args.f_upper_hz,
-                    n_modes=args.n_modes,
-                    pol_order=args.pol_order,
-                )
+            est = estimate_modes(
+                frf,
+                f_lower_hz=args.f_lower_hz,
+                f_upper_hz=args.f_upper_hz,
+                n_modes=args.n_modes,
+                pol_order=args.pol_order,
             )
+            est.mode_label = args.mode_label
+            estimates.append(est)
     header = (
         "Natural frequencies (Hz) and damping ratios estimated by fpm-sim ema (sdypy-EMA LSCF, stable poles "
         f"nearest the FRF peaks, {args.f_lower_hz:g}-{args.f_upper_hz:g} Hz, orders up to {args.pol_order}).\n"
@@ -71,6 +75,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--f-upper-hz", type=float, default=500.0, help="upper band edge (Hz, default 500)")
     p.add_argument("--n-modes", type=int, default=3, help="modes per FRF, lowest peaks first (default 3)")
     p.add_argument("--pol-order", type=int, default=40, help="highest LSCF model order (default 40)")
+    p.add_argument(
+        "--mode-label",
+        choices=MODE_LABELS,
+        default=None,
+        help="the kind of modes these FRFs see, written to the mode column (e.g. out_of_plane for a hammer and "
+        "accelerometer along the motor axes): identify then matches the K-th estimate to the K-th model mode of "
+        "that kind instead of the K-th lowest overall (default: unlabelled)",
+    )
     p.add_argument("--x-mm", type=float, default=None, help="pose of FRFs whose file does not carry one (mm)")
     p.add_argument("--y-mm", type=float, default=None, help="pose of FRFs whose file does not carry one (mm)")
     p.add_argument("--phi-rad", type=float, default=None, help="pose of FRFs whose file does not carry one (rad)")

@@ -41,6 +41,13 @@ def cmd_impact(args: argparse.Namespace) -> int:
     check_output_file(args.csv, "--csv", (".csv",))
     check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
     check_output_file(args.uff, "--uff", (".uff", ".unv"))
+    if args.implicit_step_s is not None:
+        top = min(ImpactSetup.sample_s, args.pulse_ms * 1e-4)  # the sampling interval; a tenth of the pulse
+        if not 0.0 < args.implicit_step_s <= top:
+            raise CliError(
+                f"--implicit-step-s {args.implicit_step_s:g} must lie in (0, {top:g}] s: at most the "
+                f"{ImpactSetup.sample_s * 1e3:g} ms sampling interval and a tenth of --pulse-ms"
+            )
     opts = model_options(args)
     segments = resolve_segments(segments=opts.segments, link_model=opts.link_model)  # ModelOptions resolved it
     if segments < 2:
@@ -60,6 +67,7 @@ def cmd_impact(args: argparse.Namespace) -> int:
         noise_m_s2=args.noise_m_s2,
         seed=args.seed,
         f_max_hz=args.f_max_hz,
+        timestep_s=args.implicit_step_s,
     )
     res = virtual_impact_test(built, setup, progress=not args.json)
     if args.csv:
@@ -78,7 +86,7 @@ def cmd_impact(args: argparse.Namespace) -> int:
     payload["plot"] = str(args.plot) if args.plot else None
     text = (
         f"pose {pose_of(args).label()}, {opts.segments} segments, axial {opts.axial}, nv {built.model.nv}, "
-        f"timestep {built.timestep_s:.3g} s\n"
+        f"timestep {res.parameters['rollout_timestep_s']:.3g} s ({res.parameters['rollout_integrator']})\n"
         + res.table()
         + "\n"
         + resolution_line(opts)
@@ -109,6 +117,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--noise-m-s2", type=float, default=0.0, help="accelerometer noise standard deviation (m/s^2)")
     p.add_argument("--seed", type=int, default=0, help="random seed (force spread, noise)")
     p.add_argument("--f-max-hz", type=float, default=1000.0, help="top of the band searched for peaks (Hz)")
+    p.add_argument(
+        "--implicit-step-s",
+        type=float,
+        default=None,
+        help="run the rollouts with MuJoCo's discrete integrator (springs and welds implicit) at this step (s), "
+        "instead of the model's own explicit-spring step (5 us at 3 segments, ~0.4 us at 12): e.g. 2e-5 runs 12 "
+        "segments ~50x faster; adds ~pi f h of damping to a mode at f (default: the model's own step)",
+    )
     add_resolution_args(p, axial=False)
     p.add_argument(
         "--gravity", action=argparse.BooleanOptionalAction, default=True, help="gravity along the motor axes"

@@ -102,6 +102,7 @@ CASES: list[tuple[str, list[str], str]] = [
     ("impact-record-zero", ["impact", "--record-s", "0", *S3], "record"),
     ("impact-noise-negative", ["impact", "--noise-m-s2", "-1", *S3], "noise"),
     ("impact-force-nan", ["impact", "--peak-force-n", "nan", *S3], "peak-force"),
+    ("impact-implicit-step-too-long", ["impact", "--implicit-step-s", "1e-3", *S3], "implicit-step-s"),
     # study commands
     ("reproduce-reading", ["reproduce", "--reading", "bogus", "--out", "{tmp}/r"], "reading"),
     ("reproduce-thickness-negative", ["reproduce", "--thickness-mm", "-5", "--out", "{tmp}/r"], "thickness"),

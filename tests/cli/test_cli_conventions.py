@@ -40,6 +40,10 @@ def test_parser_mirrors_agree_with_the_library():
     assert cli_identify.GROUPS == tuple(study_identify.GROUPS)
     assert cli_identify.GLOBAL_METHODS == tuple(study_identify.GLOBAL_METHODS)
     assert cli_identify.DEFAULT_SIGMA_PCT == study_identify.DEFAULT_SIGMA_PCT
+    from fpm_sim.cli import ema as cli_ema
+    from fpm_sim.study.identify import data as identify_data
+
+    assert cli_ema.MODE_LABELS == identify_data.MODE_LABELS
     from fpm_sim.cli import atlas as cli_atlas
     from fpm_sim.study import poses as study_poses_module
 

@@ -1,0 +1,125 @@
+"""The scatter behind the bounds of tests/study/test_identify_impact_road.py: the same rollouts, many noise draws.
+
+Simulates the test's impacts once per pose and axis without noise (``virtual_impact_test``, the test's truth,
+poses and settings), then for each seed adds accelerometer noise, forms H1 as ``fpm-sim impact`` does, writes
+UFF 58, and runs ``fpm-sim ema`` and ``fpm-sim identify`` as the test does. Prints, per seed, the EMA frequency
+error against the truth's modal frequency (first mode of the test's kind) and the identified section values
+against the truth (relative error and in reported standard deviations); then the ranges.
+
+    python scripts/impact_road_scatter.py [--seeds 12] [--noise-m-s2 0.01] [--record-s 0.5]
+
+(A developer script: it imports the test module for its truth and poses, so run it from a source checkout.)
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import sys
+import tempfile
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+import fpm_sim  # noqa: F401  (single-threaded BLAS)
+from fpm_sim.batch.frequencies import pose_frequencies
+from fpm_sim.cli.main import main as cli_main
+from fpm_sim.config.schema import config_to_toml
+from fpm_sim.frf import FrequencyResponse, LinkPoint
+from fpm_sim.kinematics import Pose
+from fpm_sim.model.manipulator import build_manipulator
+from fpm_sim.model.options import ModelOptions
+from fpm_sim.sim.impact import ImpactRecord, ImpactSetup, h1_estimate, virtual_impact_test, write_uff58
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "study"))
+import test_identify_impact_road as road
+
+
+def _cli(*argv: str) -> dict:
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(io.StringIO()):
+        rc = cli_main([*argv, "--json"])
+    if rc != 0:
+        raise SystemExit(f"fpm-sim {argv[0]} failed: {buf.getvalue()[-2000:]}")
+    return json.loads(buf.getvalue())
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, default=12)
+    ap.add_argument("--noise-m-s2", type=float, default=road.NOISE_M_S2)
+    ap.add_argument("--record-s", type=float, default=0.5)
+    args = ap.parse_args()
+    warnings.simplefilter("ignore")
+    start = road._reference()
+    truth = start.with_section(**road.TRUTH_SECTION_M)
+    opts = ModelOptions(segments=road.SEGMENTS, axial=False, gravity=False)
+    pf = pose_frequencies(truth, [Pose.from_mm(*p) for p in road.POSES_MM], n_modes=6, options=opts)
+    records, target = {}, {}
+    for i, pose_mm in enumerate(road.POSES_MM):
+        built = build_manipulator(truth, Pose.from_mm(*pose_mm), opts)
+        in_plane = pf.in_plane[i] > 0.5
+        for axis, kind in road.AXES.items():
+            p = LinkPoint("distal_0", 0.5, axis)
+            setup = ImpactSetup(impact=p, accelerometer=p, record_s=args.record_s, n_impacts=1, f_max_hz=400.0)
+            records[(pose_mm, axis)] = virtual_impact_test(built, setup).records[0]
+            target[(pose_mm, kind)] = pf.frequencies_hz[i][in_plane if kind == "in_plane" else ~in_plane][0]
+    ema_err: dict[str, list[float]] = {k: [] for k in road.AXES.values()}
+    fit: dict[str, list[tuple[float, float]]] = {k: [] for k in road.TRUTH_SECTION_M}
+    for seed in range(args.seeds):
+        rng = np.random.default_rng(seed)
+        with tempfile.TemporaryDirectory() as tmp:
+            d = Path(tmp)
+            (d / "start.toml").write_text(config_to_toml(start))
+            measured = []
+            for axis, kind in road.AXES.items():
+                files = []
+                for pose_mm in road.POSES_MM:
+                    r = records[(pose_mm, axis)]
+                    noisy = r.accel_m_s2 + rng.normal(0.0, args.noise_m_s2, r.accel_m_s2.size)
+                    f, h, _ = h1_estimate(
+                        [ImpactRecord(r.t_s, r.force_n, noisy, r.peak_force_n, 0.0)], pad_s=8.0, window_end=0.01
+                    )
+                    frf = FrequencyResponse(f, h, "accelerance", "m/s^2/N", "hammer", "accel")
+                    files.append(str(write_uff58(frf, d / f"{pose_mm}_{axis}.uff", pose_mm_rad=pose_mm)))
+                band = ("--f-lower-hz", "20", "--f-upper-hz", "400", "--n-modes", "1")
+                out = _cli("ema", *files, *band, "--mode-label", kind, "--out", str(d / kind))
+                for e in out["estimates"]:
+                    ema_err[kind].append(e["freq_hz"][0] / target[(tuple(e["pose_mm_rad"]), kind)] - 1.0)
+                measured += ["--measured", f"{d / kind / 'modes.csv'},sigma_pct={road.SIGMA_PCT}"]
+            res = _cli(
+                "identify",
+                "--config",
+                str(d / "start.toml"),
+                "--free",
+                "section",
+                "--global",
+                "none",
+                *measured,
+                "--segments",
+                str(road.SEGMENTS),
+                "--quiet",
+                "--out",
+                str(d / "id"),
+            )
+        row = []
+        for name, value in road.TRUTH_SECTION_M.items():
+            p = res["result"]["parameters"][f"section.{name}"]
+            fit[name].append((p["value"] / value - 1.0, (p["value"] - value) / p["std"]))
+            row.append(f"{name} {100 * fit[name][-1][0]:+.3f} % ({fit[name][-1][1]:+.2f} std)")
+        print(f"seed {seed}: " + ", ".join(row))
+    for kind, errs in ema_err.items():
+        print(f"EMA f / modal f - 1, {kind}: {100 * min(errs):+.3f} .. {100 * max(errs):+.3f} %")
+    for name, rows in fit.items():
+        a = np.array(rows)
+        print(
+            f"{name}: {100 * a[:, 0].min():+.3f} .. {100 * a[:, 0].max():+.3f} %, |error| / std up to "
+            f"{np.abs(a[:, 1]).max():.2f}"
+        )
+
+
+if __name__ == "__main__":
+    main()
