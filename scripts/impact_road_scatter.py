@@ -54,7 +54,7 @@ def main() -> None:
     ap.add_argument("--record-s", type=float, default=0.5)
     args = ap.parse_args()
     warnings.simplefilter("ignore")
-    start = road._reference()
+    start = road.reference_config()
     truth = start.with_section(**road.TRUTH_SECTION_M)
     opts = ModelOptions(segments=road.SEGMENTS, axial=False, gravity=False)
     pf = pose_frequencies(truth, [Pose.from_mm(*p) for p in road.POSES_MM], n_modes=6, options=opts)

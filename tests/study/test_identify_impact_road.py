@@ -17,7 +17,7 @@ import json
 
 import numpy as np
 import pytest
-from test_identify_uff import _reference  # the tests' reference geometry, shared with the modal-FRF road
+from test_identify_uff import reference_config  # the tests' reference geometry, shared with the modal-FRF road
 
 from fpm_sim.batch.frequencies import pose_frequencies
 from fpm_sim.cli.main import main
@@ -57,7 +57,7 @@ def _cli(capsys, *argv: str):
 
 @pytest.mark.slow
 def test_impact_uff_ema_identify_recovers_the_hidden_section(tmp_path, capsys):
-    start = _reference()
+    start = reference_config()
     truth = start.with_section(**TRUTH_SECTION_M)
     (tmp_path / "truth.toml").write_text(config_to_toml(truth))
     (tmp_path / "start.toml").write_text(config_to_toml(start))

@@ -52,7 +52,8 @@ def test_ema_refuses_a_band_without_peaks():
         estimate_modes(MeasuredFrf(f, np.ones_like(f) + 0j, "flat", None), f_lower_hz=5, f_upper_hz=90)
 
 
-def _reference():
+def reference_config():
+    """The tests' own manipulator (shared with the impact road test)."""
     # the tests' own geometry (the default before its identify re-run): away from singularities at POSES_MM
     import math
 
@@ -73,7 +74,7 @@ def _reference():
 
 
 def _truth():
-    cfg = _reference()
+    cfg = reference_config()
     plat = LumpedMass(3.0, tuple(v * 3.0 / cfg.hardware.platform.mass_kg for v in cfg.hardware.platform.inertia_kg_m2))
     return cfg.replace(hardware=dataclasses.replace(cfg.hardware, platform=plat))
 
@@ -98,7 +99,7 @@ def test_simulate_uff_ema_identify_recovers_the_platform_mass(tmp_path):
             estimates.append(est)
     csv_path = write_modes_csv(estimates, tmp_path / "modes.csv")
     data = read_measured_csv(csv_path, sigma_pct=1.0)
-    start = _reference()  # platform mass 4.79 kg; the truth has 3.0 kg
+    start = reference_config()  # platform mass 4.79 kg; the truth has 3.0 kg
     ps = parameter_set(start, ["hardware"])
     ps.parameters = [p for p in ps.parameters if p.name == "hardware.platform.mass_kg"]
     res = identify(Problem(ps, data.observations), options=IdentifyOptions(segments=SEGMENTS, global_method="none"))
