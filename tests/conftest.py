@@ -34,6 +34,8 @@ def steel_bar() -> RigConfig:
 
 SYMMETRIC_CONFIG = Path(__file__).resolve().parent / "data" / "symmetric_3rrr.toml"
 REFERENCE_CONFIG = Path(__file__).resolve().parent / "data" / "reference_3rrr.toml"
+PREVIOUS_DEFAULT_CONFIG = Path(__file__).resolve().parent / "data" / "previous_default_3rrr.toml"
+"""The default as identified in stop 14: masses and section of the tests calibrated on it."""
 
 
 @pytest.fixture(scope="session")
@@ -42,6 +44,12 @@ def reference_manip() -> Manipulator:
     backend tests were measured on (their study poses include a known near-singular one), so that
     re-identifying the default does not move them."""
     return load_config(REFERENCE_CONFIG)
+
+
+@pytest.fixture(scope="session")
+def previous_default_manip() -> Manipulator:
+    """The embedded default as identified in stop 14 (frozen copy): masses and section of tests calibrated on it."""
+    return load_config(PREVIOUS_DEFAULT_CONFIG)
 
 
 @pytest.fixture(scope="session")

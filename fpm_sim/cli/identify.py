@@ -19,7 +19,17 @@ from fpm_sim.cli.common import (
 
 __all__ = ["cmd_identify", "parse_measured_arg", "register"]
 
-GROUPS = ("geometry", "geometry-per-chain", "hubs", "hardware", "section", "compliance", "offsets", "rig")
+GROUPS = (
+    "geometry",
+    "geometry-per-chain",
+    "hubs",
+    "hardware",
+    "section",
+    "section-height",
+    "compliance",
+    "offsets",
+    "rig",
+)
 """:data:`fpm_sim.study.identify.GROUPS`, listed here so that building the parser imports neither MuJoCo nor
 SciPy (a test checks they agree)."""
 GLOBAL_METHODS = ("de", "hybrid", "multistart", "surrogate-de", "none")
@@ -160,7 +170,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="global exploration before the local refinement (default de: differential evolution on the full "
         "model; see docs/identification.md)",
     )
-    p.add_argument("--generations", type=int, default=60, help="de: generations (default 60)")
+    p.add_argument("--generations", type=int, default=200, help="de: generations (default 200)")
     p.add_argument("--popsize", type=int, default=8, help="de: population per free parameter (default 8)")
     p.add_argument("--starts", type=int, default=24, help="multistart: Latin-hypercube points (default 24)")
     p.add_argument("--refine", type=int, default=4, help="best global candidates refined locally (default 4)")

@@ -19,33 +19,33 @@ from fpm_sim.study.reproduce import reproduce_study
 
 SHIPPED_F1_HZ = np.array(
     [
-        44.1261505028, 46.8012345673, 48.0869503352, 48.6696645381, 47.1939615010,
-        47.2058182493, 51.9440791296, 55.2494473082, 61.2046471036, 52.8016464083,
-        49.9614403539, 57.5684411623, 62.8528767239, 57.4042250946, 38.6032588422,
-        53.5260649939, 63.0661216893, 56.0394160850, 34.5715487411, 11.7027491057,
-        59.8745570795, 54.5567831220, 25.3998945002, 0.4397288154, 34.5721078462,
+        43.7081976915, 46.4974721003, 47.9307626379, 49.2053395092, 46.8285240360,
+        46.7875064001, 51.7090272347, 55.2211483020, 61.1973500600, 52.5302502730,
+        49.6686932229, 57.5746971211, 63.0750583367, 57.5378409235, 38.9110076612,
+        53.7443017680, 63.6252124746, 55.7789578536, 34.4054340863, 12.8073667635,
+        61.2201949530, 52.2185194909, 24.6048657879, 0.5862964483, 34.6704668177,
     ]
 )  # fmt: skip
 """f1 at the 25 study poses (default reading: rows are x, +0.2 rad; the default resolution, 12 segments,
-gravity off), measured 2026-12-01 on the default re-identified by issue 12 (``fpm-sim identify``). The pose
-at 0.44 Hz sits next to a parallel singularity of the identified geometry (docs/identification.md)."""
+gravity off), measured 2026-12-01 on the default re-identified by `fpm-sim identify --global de` (issue 12). The pose
+at 0.59 Hz sits next to a parallel singularity of the identified geometry (docs/identification.md)."""
 
 SHIPPED_STATS = {
     "n": 18,
-    "mean_abs_pct": 16.18371195183777,
-    "median_abs_pct": 8.266617123033196,
-    "max_abs_pct": 84.087842129403,
-    "min_abs_pct": 0.6449745010365296,
-    "mean_signed_pct": -0.39992258144514836,
-    "spearman": 0.7440660474716203,
+    "mean_abs_pct": 16.050982817572166,
+    "median_abs_pct": 9.1654252721175,
+    "max_abs_pct": 83.009186525112,
+    "min_abs_pct": 0.16138016404367567,
+    "mean_signed_pct": -0.536224056870526,
+    "spearman": 0.7254901960784313,
 }
 
 SHIPPED_SUBSYSTEMS_HZ = {
-    ("free-free", 180.0): 985.0503313395697,
-    ("cantilever", 180.0): 220.56036759379938,
-    ("chain", 60.0): 78.99482403162676,
-    ("chain", 90.0): 87.74260283473338,
-    ("chain", 180.0): 80.9133424910521,
+    ("free-free", 180.0): 985.0503306592504,
+    ("cantilever", 180.0): 220.560367702428,
+    ("chain", 60.0): 78.99482402938015,
+    ("chain", 90.0): 87.7426028383071,
+    ("chain", 180.0): 80.91334246192663,
 }
 
 
@@ -64,8 +64,8 @@ def test_subsystems_within_the_headline_0p3_percent(shipped):
 
 
 def test_pose_frequencies_as_shipped(shipped):
-    # Round-off of an eigenvalue grows as w_max^2 / w^2: at the pose next to a singularity (0.44 Hz, measure
-    # 0.003) two LAPACK drivers (all eigenpairs vs the lowest few) differ by 1.4e-6 relative, measured; 1e-5
+    # Round-off of an eigenvalue grows as w_max^2 / w^2: at the pose next to a singularity (0.59 Hz, measure
+    # 0.0045) two LAPACK drivers (all eigenpairs vs the lowest few) differ by 1.4e-6 relative, measured; 1e-5
     # there, 1e-7 elsewhere.
     near = shipped.frequencies.singularity < 0.01
     np.testing.assert_allclose(shipped.f1_hz[~near], SHIPPED_F1_HZ[~near], rtol=1e-7)

@@ -46,8 +46,9 @@ def test_de_finds_the_branches_and_geometry_a_local_search_misses():
     np.testing.assert_allclose(de.values, x_true, rtol=1e-3, atol=1e-2)
     assert de.cost < 1e-3
     assert local.cost > 1e3 * max(de.cost, 1e-6)
-    # reproducible with the seed
+    # reproducible with the seed, and the same when the population is scored in two processes
     again = identify(
-        problem, options=IdentifyOptions(segments=SEG, global_method="de", generations=15, popsize=6, n_refine=2)
+        problem,
+        options=IdentifyOptions(segments=SEG, global_method="de", generations=15, popsize=6, n_refine=2, workers=2),
     )
     np.testing.assert_array_equal(again.values, de.values)

@@ -5,7 +5,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from fpm_sim.config import LumpedMass, default_config
+from fpm_sim.config import LumpedMass, load_config
 from fpm_sim.frf import FrequencyResponse, LinkPoint, modal_frf
 from fpm_sim.kinematics import Pose
 from fpm_sim.model.manipulator import build_manipulator
@@ -14,6 +14,7 @@ from fpm_sim.rom.reduction import modal_system
 from fpm_sim.sim.impact import write_uff58
 from fpm_sim.study.identify import IdentifyOptions, Problem, identify, parameter_set, read_measured_csv
 from fpm_sim.study.identify.ema import EmaError, estimate_modes, read_frfs, write_modes_csv
+from tests.conftest import PREVIOUS_DEFAULT_CONFIG
 
 SEGMENTS = 3
 POSES_MM = [(0.0, 0.0, 0.2), (50.0, -50.0, 0.0), (-50.0, 50.0, 0.0), (100.0, 0.0, 0.2)]
@@ -68,7 +69,7 @@ def reference_config():
         tuple(math.radians(a) for a in (-178.6021, -58.6021, 61.3979)),
         (-1, -1, -1),
     )
-    cfg = default_config()
+    cfg = load_config(PREVIOUS_DEFAULT_CONFIG)  # frozen: re-identifying the embedded default must not move it
     plat = LumpedMass(4.79, (4.79e-3, 4.79e-3, 9.58e-3 * (1 - 1e-6)))
     return cfg.replace(geometry=geo, hardware=dataclasses.replace(cfg.hardware, platform=plat))
 

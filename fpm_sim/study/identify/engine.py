@@ -101,7 +101,7 @@ class IdentifyOptions:
     global_method: str = "de"
     n_starts: int = 24
     n_refine: int = 4
-    generations: int = 60
+    generations: int = 200
     """``de``: generations of the differential evolution (each ``popsize`` x dimensions evaluations)."""
     popsize: int = 8
     """``de``: population size per dimension (scipy's ``popsize``)."""
@@ -375,24 +375,57 @@ def _surrogate_starts(obj: _Objective, opts: IdentifyOptions) -> list[tuple[np.n
     return [(z, note, br) for z, note, br, _ in out]
 
 
+_DE_STATE: tuple[list[_Objective], np.ndarray, np.ndarray, bool] | None = None
+"""The objectives of the running differential evolution: module state so that forked worker processes
+inherit them (the parameter setters are closures, which cannot be pickled)."""
+
+
+def _de_member_cost(v: np.ndarray) -> float:
+    assert _DE_STATE is not None
+    objs, z_fixed, free, geometry_free = _DE_STATE
+    z = z_fixed.copy()
+    z[free] = v[: len(free)]
+    k = int(np.rint(v[len(free)])) if geometry_free else 0
+    return objs[k].cost(z)
+
+
 def _full_model_de(
     problem: Problem, obj: _Objective, opts: IdentifyOptions, *, progress: bool = False
 ) -> list[tuple[float, np.ndarray, str, tuple[int, int, int] | None]]:
     """Differential evolution of every free parameter on the full model (the fitted resolution), with the
     elbow-branch combination as one more, integer, variable when the geometry is free. Returns the final
-    population's best member of each branch combination (cost, z, note, branch), best first."""
+    population's best member of each branch combination (cost, z, note, branch), best first.
+
+    The rig parameters (seen only by the rig tests, which see nothing else) are separable: they are fitted
+    to the rig tests alone first and held there, so that the evolution spends no rig solve per member.
+    With ``opts.workers > 1`` each generation's members are scored in that many forked processes (the
+    pose loop inside each then runs serially)."""
+    import dataclasses
+    import multiprocessing
+
     from scipy.optimize import differential_evolution
 
+    global _DE_STATE
     ps = problem.parameters
     geometry_free = any(p.group in ("geometry", "geometry-per-chain") for p in ps.parameters)
     branches: list[tuple[int, int, int] | None] = list(ELBOW_BRANCHES) if geometry_free else [None]
-    objs = [obj if b is None else _Objective(_with_branch(problem, b), opts) for b in branches]
-    d = len(ps.parameters)
+    member_opts = dataclasses.replace(opts, workers=1)
+    objs = [_Objective(problem if b is None else _with_branch(problem, b), member_opts) for b in branches]
+    z_fixed = obj.z(ps.x0)
+    free = np.array(obj.man_idx, dtype=int)
+    if obj.sub_idx:
+        sub = np.array(obj.sub_idx, dtype=int)
+        n_obs = len(obj.obs)
 
-    def cost(v: np.ndarray) -> float:
-        k = int(np.rint(v[d])) if geometry_free else 0
-        return objs[k].cost(v[:d])
+        def rig_residuals(zs: np.ndarray) -> np.ndarray:
+            z = z_fixed.copy()
+            z[sub] = zs
+            return obj.residuals(z)[n_obs:]  # the pose block is cached: only the rigs are re-solved
 
+        z_fixed[sub] = least_squares(
+            rig_residuals, z_fixed[sub], bounds=(0.0, 1.0), method="trf", diff_step=1e-3, max_nfev=40
+        ).x
+    d = len(free)
     bounds = [(0.0, 1.0)] * d + ([(0.0, len(branches) - 1.0)] if geometry_free else [])
     t0, generation = time.time(), [0]
 
@@ -406,20 +439,28 @@ def _full_model_de(
             )
 
     integrality = [False] * d + ([True] if geometry_free else [])
-    sol = differential_evolution(
-        cost,
-        bounds,
-        integrality=integrality,
-        seed=opts.seed,
-        maxiter=opts.generations,
-        popsize=opts.popsize,
-        tol=1e-8,
-        polish=False,
-        init="sobol",
-        updating="deferred",
-        callback=report,
-    )
-    obj.nfev += sum(o.nfev for o in objs if o is not obj)
+    _DE_STATE = (objs, z_fixed, free, geometry_free)
+    pool = multiprocessing.get_context("fork").Pool(opts.workers) if opts.workers > 1 else None
+    try:
+        sol = differential_evolution(
+            _de_member_cost,
+            bounds,
+            integrality=integrality,
+            seed=opts.seed,
+            maxiter=opts.generations,
+            popsize=opts.popsize,
+            tol=1e-8,
+            polish=False,
+            init="sobol",
+            updating="deferred",
+            callback=report,
+            workers=pool.map if pool is not None else 1,
+        )
+    finally:
+        _DE_STATE = None
+        if pool is not None:
+            pool.terminate()
+    obj.nfev += int(sol.nfev)
     pop = np.atleast_2d(getattr(sol, "population", sol.x[None, :]))
     energies = np.atleast_1d(getattr(sol, "population_energies", [sol.fun]))
     out: dict[int, tuple[float, np.ndarray, str, tuple[int, int, int] | None]] = {}
@@ -432,7 +473,9 @@ def _full_model_de(
             )
             if branches[k] is not None:
                 note += f" with elbow branches {branches[k]}"
-            out[k] = (float(e), np.clip(v[:d], 0.0, 1.0), note, branches[k])
+            z = z_fixed.copy()
+            z[free] = np.clip(v[:d], 0.0, 1.0)
+            out[k] = (float(e), z, note, branches[k])
     return sorted(out.values(), key=lambda t: t[0])
 
 
