@@ -59,6 +59,14 @@ def _beta_l_to_hz(bl: np.ndarray, length_m: float, section: Section, material: M
     return np.asarray(bl, float) ** 2 / (2.0 * math.pi * length_m**2) * c
 
 
+def _check_spring_root(stiffness_ratio: float, n_modes: int) -> None:
+    """The arguments shared by the spring-held root solvers: ``K > 0`` (``inf`` = clamped), ``n_modes >= 1``."""
+    if not stiffness_ratio > 0:
+        raise ValueError(f"stiffness_ratio must be > 0 (inf = clamped), got {stiffness_ratio!r}")
+    if n_modes < 1:
+        raise ValueError(f"n_modes must be >= 1, got {n_modes!r}")
+
+
 def spring_hinged_cantilever_beta_l(stiffness_ratio: float, n_modes: int = 3) -> np.ndarray:
     """Roots ``beta_n L`` of a cantilever whose root is held by a rotational spring (elastically restrained).
 
@@ -82,10 +90,7 @@ def spring_hinged_cantilever_beta_l(stiffness_ratio: float, n_modes: int = 3) ->
     """
     from scipy.optimize import brentq
 
-    if not stiffness_ratio > 0:
-        raise ValueError(f"stiffness_ratio must be > 0 (inf = clamped), got {stiffness_ratio!r}")
-    if n_modes < 1:
-        raise ValueError(f"n_modes must be >= 1, got {n_modes!r}")
+    _check_spring_root(stiffness_ratio, n_modes)
     clamped = math.isinf(stiffness_ratio)
     k_ratio = 1.0 if clamped else float(stiffness_ratio)
     slope = 0.0 if clamped else 1.0
@@ -280,10 +285,7 @@ def spring_held_torsion_roots(stiffness_ratio: float, n_modes: int = 3) -> np.nd
     """
     from scipy.optimize import brentq
 
-    if not stiffness_ratio > 0:
-        raise ValueError(f"stiffness_ratio must be > 0 (inf = clamped), got {stiffness_ratio!r}")
-    if n_modes < 1:
-        raise ValueError(f"n_modes must be >= 1, got {n_modes!r}")
+    _check_spring_root(stiffness_ratio, n_modes)
     n = np.arange(1, n_modes + 1)
     if math.isinf(stiffness_ratio):
         out: np.ndarray = (n - 0.5) * math.pi

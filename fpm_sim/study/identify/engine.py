@@ -33,6 +33,7 @@ Search (:func:`identify`):
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 import warnings
@@ -75,6 +76,7 @@ PENALTY_SIGMAS = 30.0
 """Residual (in sigmas) of an observation the model cannot give (unreachable or singular pose, too few
 modes of the asked kind): large, finite, so that the search moves away from it."""
 MODE_MARGIN = 4
+"""Modes computed beyond the highest one asked for, so that labelled matching finds its kind."""
 ELBOW_BRANCHES: tuple[tuple[int, int, int], ...] = (
     (1, 1, 1),
     (-1, -1, -1),
@@ -86,7 +88,6 @@ ELBOW_BRANCHES: tuple[tuple[int, int, int], ...] = (
     (1, -1, -1),
 )
 """Every elbow-branch combination: the discrete variable of ``global_method="de"``."""
-"""Modes computed beyond the highest one asked for, so that labelled matching finds its kind."""
 
 
 class IdentificationError(FpmSimError):
@@ -347,7 +348,7 @@ def _surrogate_starts(obj: _Objective, opts: IdentifyOptions) -> list[tuple[np.n
     z0 = obj.z(ps.x0)
     out = []
     for branch in ((1, 1, 1), (-1, -1, -1), (1, 1, -1), (1, -1, -1), (-1, -1, 1), (-1, 1, 1)):
-        base = ps.start.replace(geometry=__import__("dataclasses").replace(ps.start.geometry, elbow_branch=branch))
+        base = ps.start.replace(geometry=dataclasses.replace(ps.start.geometry, elbow_branch=branch))
 
         def cost(zg: np.ndarray, base: Manipulator = base) -> float:
             z = z0.copy()
@@ -380,12 +381,17 @@ _DE_STATE: tuple[list[_Objective], np.ndarray, np.ndarray, bool] | None = None
 inherit them (the parameter setters are closures, which cannot be pickled)."""
 
 
+def _de_decode(v: np.ndarray, z_fixed: np.ndarray, free: np.ndarray, geometry_free: bool) -> tuple[np.ndarray, int]:
+    """A member of the evolution -> normalised parameters (the held ones from ``z_fixed``) and its branch index."""
+    z = z_fixed.copy()
+    z[free] = np.clip(v[: len(free)], 0.0, 1.0)
+    return z, int(np.rint(v[len(free)])) if geometry_free else 0
+
+
 def _de_member_cost(v: np.ndarray) -> float:
     assert _DE_STATE is not None
     objs, z_fixed, free, geometry_free = _DE_STATE
-    z = z_fixed.copy()
-    z[free] = v[: len(free)]
-    k = int(np.rint(v[len(free)])) if geometry_free else 0
+    z, k = _de_decode(v, z_fixed, free, geometry_free)
     return objs[k].cost(z)
 
 
@@ -400,7 +406,6 @@ def _full_model_de(
     to the rig tests alone first and held there, so that the evolution spends no rig solve per member.
     With ``opts.workers > 1`` each generation's members are scored in that many forked processes (the
     pose loop inside each then runs serially)."""
-    import dataclasses
     import multiprocessing
 
     from scipy.optimize import differential_evolution
@@ -465,23 +470,18 @@ def _full_model_de(
     energies = np.atleast_1d(getattr(sol, "population_energies", [sol.fun]))
     out: dict[int, tuple[float, np.ndarray, str, tuple[int, int, int] | None]] = {}
     for v, e in sorted(zip(pop, energies), key=lambda t: t[1]):
-        k = int(np.rint(v[d])) if geometry_free else 0
+        z, k = _de_decode(v, z_fixed, free, geometry_free)
         if k not in out:
             note = (
-                f"differential evolution ({sol.nit} generations, {sol.nfev} evaluations), "
-                "best of its final population"
+                f"differential evolution ({sol.nit} generations, {sol.nfev} evaluations), best of its final population"
             )
             if branches[k] is not None:
                 note += f" with elbow branches {branches[k]}"
-            z = z_fixed.copy()
-            z[free] = np.clip(v[:d], 0.0, 1.0)
             out[k] = (float(e), z, note, branches[k])
     return sorted(out.values(), key=lambda t: t[0])
 
 
 def _with_branch(problem: Problem, branch: tuple[int, int, int]) -> Problem:
-    import dataclasses
-
     ps = problem.parameters
     start = ps.start.replace(geometry=dataclasses.replace(ps.start.geometry, elbow_branch=branch))
     return Problem(
