@@ -136,6 +136,7 @@ def main() -> int:
     ap.add_argument("--global", dest="global_method", default="de")
     ap.add_argument("--generations", type=int, default=200)
     ap.add_argument("--popsize", type=int, default=8)
+    ap.add_argument("--surrogate-seeds", type=int, default=2)
     ap.add_argument("--sigma-measured-pct", type=float, default=2.0)
     ap.add_argument("--sigma-comsol-pct", type=float, default=7.0)
     ap.add_argument("--reading", default="x+")
@@ -144,6 +145,13 @@ def main() -> int:
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--refine", type=int, default=4, help="global candidates refined locally")
     ap.add_argument("--timoshenko", action="store_true", help="links as Timoshenko beams")
+    ap.add_argument(
+        "--min-singularity",
+        type=float,
+        default=0.0,
+        help="a workspace prior at the study's 25 poses with this singularity-measure threshold (default 0: "
+        "none; docs/identification.md compares 0.05)",
+    )
     ap.add_argument("--quick", action="store_true", help="tiny budgets (a smoke run, not a result)")
     ap.add_argument("--install", type=Path, help="make this identify output folder the embedded default, and stop")
     args = ap.parse_args()
@@ -154,6 +162,19 @@ def main() -> int:
     start = args.out.parent / f"{args.out.name}_nominal_start.toml"
     start.write_text(config_to_toml(nominal_start(), header="nominal start of scripts/identify_study.py"))
     data = resources.files("fpm_sim.data")
+    workspace: list[str] = []
+    if args.min_singularity > 0:
+        # the workspace prior: the study placed the prototype at all 25 grid poses with its motors locked and
+        # hammered it there (seven of the FRFs were unreadable: near-singular poses are one possible cause)
+        from fpm_sim.study.poses import parse_reading, study_poses
+
+        ws = args.out.parent / f"{args.out.name}_workspace.csv"
+        rows = ["x_mm,y_mm,phi_rad"] + [
+            f"{1e3 * p.pose.x_m:g},{1e3 * p.pose.y_m:g},{p.pose.phi_rad:g}"
+            for p in study_poses(parse_reading(args.reading))
+        ]
+        ws.write_text("\n".join(rows) + "\n")
+        workspace = ["--workspace", str(ws), "--min-singularity", f"{args.min_singularity:g}"]
     cmd = [
         "identify",
         "--config",
@@ -176,6 +197,8 @@ def main() -> int:
         str(3 if args.quick else args.generations),
         "--popsize",
         str(args.popsize),
+        "--surrogate-seeds",
+        str(args.surrogate_seeds),
         "--seed",
         str(args.seed),
         "--folds",
@@ -191,7 +214,7 @@ def main() -> int:
         "--out",
         str(args.out),
         "--overwrite",
-    ] + (["--timoshenko"] if args.timoshenko else [])
+    ] + (["--timoshenko"] if args.timoshenko else []) + workspace
     print("fpm-sim " + " ".join(shlex.quote(c) for c in cmd), flush=True)
     sys.argv = ["fpm-sim", *cmd]
     return cli_main(cmd)

@@ -496,22 +496,23 @@ class PosesFileError(FpmSimError):
     """A poses CSV file (``--poses``) is missing, empty or malformed."""
 
 
-def read_poses_csv(path: str | Path) -> list[Pose]:
-    """Poses from a CSV file with columns ``x_mm,y_mm,phi_rad`` (other columns are ignored)."""
+def read_poses_csv(path: str | Path, *, flag: str = "--poses") -> list[Pose]:
+    """Poses from a CSV file with columns ``x_mm,y_mm,phi_rad`` (other columns are ignored); errors name
+    ``flag``, the option that gave the file."""
     p = Path(path)
     if not p.is_file():
-        raise PosesFileError(f"--poses {p}: no such file")
+        raise PosesFileError(f"{flag} {p}: no such file")
     with open(p, newline="") as fh:
         reader = csv.DictReader(fh)
         missing = {"x_mm", "y_mm", "phi_rad"} - set(reader.fieldnames or [])
         if missing:
             raise PosesFileError(
-                f"--poses {p}: missing column(s) {', '.join(sorted(missing))} (the header must hold x_mm,y_mm,phi_rad)"
+                f"{flag} {p}: missing column(s) {', '.join(sorted(missing))} (the header must hold x_mm,y_mm,phi_rad)"
             )
         try:
             poses = [Pose.from_mm(float(r["x_mm"]), float(r["y_mm"]), float(r["phi_rad"])) for r in reader]
         except (TypeError, ValueError):
-            raise PosesFileError(f"--poses {p}: x_mm, y_mm and phi_rad must be numbers on every row") from None
+            raise PosesFileError(f"{flag} {p}: x_mm, y_mm and phi_rad must be numbers on every row") from None
     if not poses:
-        raise PosesFileError(f"--poses {p}: no rows after the header")
+        raise PosesFileError(f"{flag} {p}: no rows after the header")
     return poses

@@ -90,6 +90,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
     for flag, value in counts:
         if value < 1:
             raise CliError(f"{flag} must be >= 1, got {value}")
+    if args.surrogate_seeds < 0:
+        raise CliError(f"--surrogate-seeds must be >= 0, got {args.surrogate_seeds}")
     opts = IdentifyOptions(
         segments=args.segments,
         global_method=args.global_method,
@@ -97,12 +99,27 @@ def cmd_identify(args: argparse.Namespace) -> int:
         n_refine=args.refine,
         generations=args.generations,
         popsize=args.popsize,
+        surrogate_seeds=args.surrogate_seeds,
         seed=args.seed,
         max_nfev=args.max_nfev,
         workers=args.workers,
         timoshenko=args.timoshenko,
     )
-    problem = Problem(ps, observations, tests, subsystem_sigma_pct=args.subsystem_sigma_pct)
+    workspace = []
+    if args.workspace is not None:
+        from fpm_sim.batch.pose_loop import read_poses_csv
+
+        workspace = read_poses_csv(args.workspace, flag="--workspace")
+    if not 0.0 < args.min_singularity < 1.0:
+        raise CliError(f"--min-singularity must be in (0, 1), got {args.min_singularity}")
+    problem = Problem(
+        ps,
+        observations,
+        tests,
+        subsystem_sigma_pct=args.subsystem_sigma_pct,
+        workspace=workspace,
+        min_singularity=args.min_singularity,
+    )
     result = identify(problem, options=opts, progress=not args.quiet)
     cv = None
     if args.folds:
@@ -154,6 +171,21 @@ def register(sub: argparse._SubParsersAction) -> None:
         default="geometry,hardware",
         help=f"comma-separated parameter groups: {', '.join(GROUPS)} (default geometry,hardware)",
     )
+    p.add_argument(
+        "--workspace",
+        type=Path,
+        metavar="POSES.csv",
+        help="poses (x_mm,y_mm,phi_rad) the machine is known to work at with its motors locked: descriptions "
+        "under which one is unreachable or nearer a singularity than --min-singularity are penalised (prior "
+        "knowledge; no frequency is read there)",
+    )
+    p.add_argument(
+        "--min-singularity",
+        type=float,
+        default=0.05,
+        help="smallest singularity measure accepted at a --workspace pose (default 0.05, the near-singularity "
+        "warning's threshold)",
+    )
     p.add_argument("--reading", default=None, help="how to read row_mm,col_mm files: x+, x-, y+ or y-")
     p.add_argument(
         "--sigma-pct",
@@ -172,6 +204,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--generations", type=int, default=200, help="de: generations (default 200)")
     p.add_argument("--popsize", type=int, default=8, help="de: population per free parameter (default 8)")
+    p.add_argument(
+        "--surrogate-seeds",
+        type=int,
+        default=2,
+        help="de: first-population members per elbow-branch combination seeded with that branch's in-plane "
+        "surrogate geometry (default 2; 0 = a Sobol population only)",
+    )
     p.add_argument("--starts", type=int, default=24, help="multistart: Latin-hypercube points (default 24)")
     p.add_argument("--refine", type=int, default=4, help="best global candidates refined locally (default 4)")
     p.add_argument(

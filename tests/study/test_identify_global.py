@@ -52,3 +52,51 @@ def test_de_finds_the_branches_and_geometry_a_local_search_misses():
         options=IdentifyOptions(segments=SEG, global_method="de", generations=15, popsize=6, n_refine=2, workers=2),
     )
     np.testing.assert_array_equal(again.values, de.values)
+
+
+def test_first_population_is_sobol_with_surrogate_seeds_per_branch(monkeypatch):
+    from fpm_sim.study.identify import engine
+
+    ref = load_config(REFERENCE_CONFIG)
+    ps = parameter_set(ref, ["geometry", "hardware"])
+    obs = [Observation(p, 1, 40.0, 0.4, None, "synthetic") for p in POSES]
+    problem = Problem(ps, obs)
+    obj = engine._Objective(problem, IdentifyOptions(segments=SEG))
+    free = np.array(obj.man_idx, dtype=int)
+    geo = [j for j, i in enumerate(free) if ps.parameters[i].group == "geometry"]
+    assert 0 < len(geo) < len(free)
+    branches = list(engine.ELBOW_BRANCHES)
+    # a stand-in surrogate: each branch's "optimum" a distinct, recognisable geometry (the order is its ranking)
+    ranked = branches[::-1]
+    fake = []
+    for k, b in enumerate(ranked):
+        z = np.full(len(ps.parameters), 0.5)
+        z[free[geo]] = 0.01 * (k + 1)
+        fake.append((z, f"fake {b}", b))
+    calls = []
+    monkeypatch.setattr(engine, "_surrogate_starts", lambda o, opts, br: calls.append(list(br)) or fake)
+
+    d = len(free) + 1
+    plain = engine._de_initial_population(
+        problem, obj, IdentifyOptions(segments=SEG, popsize=5, surrogate_seeds=0), free, branches
+    )
+    assert calls == []  # no surrogate run when no seed is asked for
+    n = plain.shape[0]
+    assert plain.shape == (n, d)
+    assert n >= 5 * d
+    assert n & (n - 1) == 0  # scipy's Sobol size: a power of two
+    assert np.all((plain[:, :-1] >= 0) & (plain[:, :-1] <= 1))
+    assert np.all((plain[:, -1] >= 0) & (plain[:, -1] <= len(branches) - 1))
+
+    seeded = engine._de_initial_population(
+        problem, obj, IdentifyOptions(segments=SEG, popsize=5, surrogate_seeds=2), free, branches
+    )
+    assert calls == [branches]  # every combination, not the surrogate-de's own six
+    for k, b in enumerate(ranked):
+        for row in (2 * k, 2 * k + 1):
+            np.testing.assert_array_equal(seeded[row, geo], 0.01 * (k + 1))
+            assert seeded[row, -1] == branches.index(b)
+    rest = [j for j in range(len(free)) if j not in geo]
+    # the seeds' other parameters, and every later member, are the Sobol population's own
+    np.testing.assert_array_equal(seeded[:, rest], plain[:, rest])
+    np.testing.assert_array_equal(seeded[2 * len(branches) :], plain[2 * len(branches) :])

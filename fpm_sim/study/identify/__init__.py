@@ -25,6 +25,7 @@ from fpm_sim.study.identify.engine import (
     identify,
     predict_observations,
     predict_with_std,
+    workspace_residuals,
 )
 from fpm_sim.study.identify.parameters import GROUPS, ParameterError, ParameterSet, parameter_set
 
@@ -49,4 +50,5 @@ __all__ = [
     "predict_with_std",
     "read_measured_csv",
     "read_subsystems_csv",
+    "workspace_residuals",
 ]

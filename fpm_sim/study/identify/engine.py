@@ -49,7 +49,7 @@ from fpm_sim.batch.frequencies import pose_frequencies
 from fpm_sim.batch.pose_loop import fast_options
 from fpm_sim.config import ConfigError, Manipulator
 from fpm_sim.errors import FpmSimError
-from fpm_sim.kinematics import NearSingularityWarning, Pose
+from fpm_sim.kinematics import NearSingularityWarning, Pose, assemble_many
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.study.identify.data import Observation
 from fpm_sim.study.identify.parameters import ParameterSet
@@ -67,6 +67,7 @@ __all__ = [
     "identify",
     "predict_observations",
     "predict_with_std",
+    "workspace_residuals",
 ]
 
 GLOBAL_METHODS = ("de", "hybrid", "multistart", "surrogate-de", "none")
@@ -106,6 +107,10 @@ class IdentifyOptions:
     """``de``: generations of the differential evolution (each ``popsize`` x dimensions evaluations)."""
     popsize: int = 8
     """``de``: population size per dimension (scipy's ``popsize``)."""
+    surrogate_seeds: int = 2
+    """``de`` with the geometry free: members of the initial population per elbow-branch combination whose
+    geometry is that branch's in-plane surrogate optimum (:func:`_surrogate_starts`; their other parameters
+    from the Sobol sequence like the rest). ``0``: a Sobol population only."""
     seed: int = 0
     max_nfev: int = 40
     workers: int = 1
@@ -127,6 +132,12 @@ class Problem:
     observations: list[Observation]
     subsystem_tests: list[SubsystemTest] = field(default_factory=list)
     subsystem_sigma_pct: float = 1.0
+    workspace: list[Pose] = field(default_factory=list)
+    """Poses the machine is known to work at (it was placed there with its motors locked): a description
+    under which one is unreachable or has a singularity measure below ``min_singularity`` is penalised
+    (:meth:`_Objective.workspace_residuals`). Prior knowledge, not data: no frequency is read there."""
+    min_singularity: float = 0.05
+    """Smallest singularity measure (:mod:`fpm_sim.kinematics`) accepted at a ``workspace`` pose."""
 
     @property
     def measured(self) -> np.ndarray:
@@ -142,6 +153,18 @@ class Problem:
     @property
     def labels(self) -> list[str]:
         return [o.describe() for o in self.observations] + [f"rig {t.label}" for t in self.subsystem_tests]
+
+
+def workspace_residuals(problem: Problem, config: Manipulator) -> np.ndarray:
+    """One residual per ``problem.workspace`` pose: ``PENALTY_SIGMAS * (1 - m / m_min)`` where its singularity
+    measure ``m`` is below ``m_min = problem.min_singularity`` (a hinge: 0 at and above it), ``PENALTY_SIGMAS``
+    where it is unreachable."""
+    ws = problem.workspace
+    if not ws:
+        return np.zeros(0)
+    m = assemble_many(config.geometry, [p.x_m for p in ws], [p.y_m for p in ws], [p.phi_rad for p in ws]).singularity
+    r = PENALTY_SIGMAS * np.clip(1.0 - m / problem.min_singularity, 0.0, 1.0)
+    return np.where(np.isfinite(r), r, PENALTY_SIGMAS)
 
 
 def _unique_poses(obs: Sequence[Observation]) -> tuple[list[Pose], list[int]]:
@@ -255,10 +278,25 @@ class _Objective:
             self._cache.clear()
         return out
 
+    def workspace_residuals(self, x: np.ndarray) -> np.ndarray:
+        """The workspace prior's residuals at parameters ``x`` (:func:`workspace_residuals`)."""
+        if not self.problem.workspace:
+            return np.zeros(0)
+        try:
+            cfg = self.ps.apply(np.asarray(x, float))
+        except (ConfigError, ValueError):
+            return np.full(len(self.problem.workspace), PENALTY_SIGMAS)
+        return workspace_residuals(self.problem, cfg)
+
     def residuals(self, z: np.ndarray) -> np.ndarray:
-        f = self.predictions(self.x(z))
+        """Observations, then rig tests, then workspace poses (in sigmas)."""
+        x = self.x(z)
+        f = self.predictions(x)
         r = (f - self.measured) / self.sigma
-        return np.where(np.isfinite(r), r, PENALTY_SIGMAS)
+        r = np.where(np.isfinite(r), r, PENALTY_SIGMAS)
+        if not self.problem.workspace:
+            return r
+        return np.concatenate([r, self.workspace_residuals(x)])
 
     def cost(self, z: np.ndarray) -> float:
         return float(np.sum(self.residuals(z) ** 2))
@@ -331,8 +369,23 @@ def _lhs(n: int, d: int, seed: int) -> np.ndarray:
     return qmc.LatinHypercube(d=d, seed=seed).random(n)
 
 
-def _surrogate_starts(obj: _Objective, opts: IdentifyOptions) -> list[tuple[np.ndarray, str, tuple[int, int, int]]]:
-    """Differential evolution of the ``geometry`` group on the in-plane surrogate, per elbow-branch class."""
+SURROGATE_BRANCHES: tuple[tuple[int, int, int], ...] = (
+    (1, 1, 1),
+    (-1, -1, -1),
+    (1, 1, -1),
+    (1, -1, -1),
+    (-1, -1, 1),
+    (-1, 1, 1),
+)
+"""The elbow-branch classes ``global_method="surrogate-de"`` and ``"hybrid"`` explore (kept as published:
+their results depend on it); ``"de"`` seeds its population from all of :data:`ELBOW_BRANCHES`."""
+
+
+def _surrogate_starts(
+    obj: _Objective, opts: IdentifyOptions, branches: Sequence[tuple[int, int, int]] = SURROGATE_BRANCHES
+) -> list[tuple[np.ndarray, str, tuple[int, int, int]]]:
+    """Differential evolution of the ``geometry`` group on the in-plane surrogate, per elbow-branch class
+    (best surrogate cost first)."""
     from scipy.optimize import differential_evolution
 
     from fpm_sim.study.inplane_surrogate import inplane_first_frequencies
@@ -347,7 +400,7 @@ def _surrogate_starts(obj: _Objective, opts: IdentifyOptions) -> list[tuple[np.n
     w = 1.0 / np.array([obj.obs[k].sigma_hz / obj.obs[k].freq_hz for k in first])
     z0 = obj.z(ps.x0)
     out = []
-    for branch in ((1, 1, 1), (-1, -1, -1), (1, 1, -1), (1, -1, -1), (-1, -1, 1), (-1, 1, 1)):
+    for branch in branches:
         base = ps.start.replace(geometry=dataclasses.replace(ps.start.geometry, elbow_branch=branch))
 
         def cost(zg: np.ndarray, base: Manipulator = base) -> float:
@@ -364,7 +417,7 @@ def _surrogate_starts(obj: _Objective, opts: IdentifyOptions) -> list[tuple[np.n
             d = np.log(np.where(ok, f, 1.0)) - logf
             d = d - np.average(d[ok], weights=w[ok] ** 2)  # scale-free: the level comes from the masses
             d = np.where(ok, d * w, PENALTY_SIGMAS)
-            return float(np.sum(d**2))
+            return float(np.sum(d**2) + np.sum(workspace_residuals(obj.problem, cfg) ** 2))
 
         sol = differential_evolution(
             cost, [(0.0, 1.0)] * len(gi), seed=opts.seed, maxiter=80, popsize=12, tol=1e-7, polish=False
@@ -425,13 +478,15 @@ def _full_model_de(
         def rig_residuals(zs: np.ndarray) -> np.ndarray:
             z = z_fixed.copy()
             z[sub] = zs
-            return obj.residuals(z)[n_obs:]  # the pose block is cached: only the rigs are re-solved
+            # the pose block is cached: only the rigs are re-solved (the workspace block does not see them)
+            return obj.residuals(z)[n_obs : n_obs + len(problem.subsystem_tests)]
 
         z_fixed[sub] = least_squares(
             rig_residuals, z_fixed[sub], bounds=(0.0, 1.0), method="trf", diff_step=1e-3, max_nfev=40
         ).x
     d = len(free)
     bounds = [(0.0, 1.0)] * d + ([(0.0, len(branches) - 1.0)] if geometry_free else [])
+    init = _de_initial_population(problem, obj, opts, free, branches, progress=progress)
     t0, generation = time.time(), [0]
 
     def report(intermediate_result: Any) -> None:
@@ -456,7 +511,7 @@ def _full_model_de(
             popsize=opts.popsize,
             tol=1e-8,
             polish=False,
-            init="sobol",
+            init=init,
             updating="deferred",
             callback=report,
             workers=pool.map if pool is not None else 1,
@@ -481,12 +536,50 @@ def _full_model_de(
     return sorted(out.values(), key=lambda t: t[0])
 
 
+def _de_initial_population(
+    problem: Problem,
+    obj: _Objective,
+    opts: IdentifyOptions,
+    free: np.ndarray,
+    branches: Sequence[tuple[int, int, int] | None],
+    *,
+    progress: bool = False,
+) -> np.ndarray:
+    """The evolution's first population: a scrambled Sobol sequence (scipy's size for ``init="sobol"``: the
+    power of two at or above ``popsize`` x dimensions), its first ``opts.surrogate_seeds`` members per
+    elbow-branch combination given that branch's in-plane surrogate optimum as geometry."""
+    d = len(free) + (1 if branches != [None] else 0)
+    n = int(2 ** math.ceil(math.log2(max(5, opts.popsize * d))))
+    pop = qmc.Sobol(d=d, scramble=True, seed=opts.seed).random(n)
+    if branches != [None]:
+        pop[:, -1] *= len(branches) - 1.0
+    if opts.surrogate_seeds <= 0 or branches == [None]:
+        return pop
+    t0 = time.time()
+    ps = problem.parameters
+    geo = [j for j, i in enumerate(free) if ps.parameters[i].group in ("geometry", "geometry-per-chain")]
+    row = 0
+    found = _surrogate_starts(obj, opts, [b for b in branches if b is not None])
+    for z, _, branch in found:
+        for _ in range(opts.surrogate_seeds):
+            if row >= n:
+                break
+            pop[row, geo] = z[free[geo]]
+            pop[row, -1] = float(branches.index(branch))
+            row += 1
+    if progress:
+        print(
+            f"[identify] differential evolution: {row} of {n} first members seeded from the in-plane surrogate's "
+            f"optimum of each elbow-branch combination ({time.time() - t0:.0f} s)",
+            flush=True,
+        )
+    return pop
+
+
 def _with_branch(problem: Problem, branch: tuple[int, int, int]) -> Problem:
     ps = problem.parameters
     start = ps.start.replace(geometry=dataclasses.replace(ps.start.geometry, elbow_branch=branch))
-    return Problem(
-        ParameterSet(start, ps.parameters), problem.observations, problem.subsystem_tests, problem.subsystem_sigma_pct
-    )
+    return dataclasses.replace(problem, parameters=ParameterSet(start, ps.parameters))
 
 
 def identify(problem: Problem, *, options: IdentifyOptions | None = None, progress: bool = False) -> Identification:
@@ -573,7 +666,7 @@ def identify(problem: Problem, *, options: IdentifyOptions | None = None, progre
     x = ob.x(sol.x)
     jz = sol.jac
     jx = jz / ob.width[None, :]
-    n, k = len(sol.fun), len(x)
+    n, k = len(sol.fun) - len(problem.workspace), len(x)  # the workspace residuals are a prior, not data
     dof = max(n - k, 0)
     chi2 = float(np.sum(sol.fun**2))
     chi2_dof = chi2 / dof if dof > 0 else math.nan

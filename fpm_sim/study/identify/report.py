@@ -16,6 +16,7 @@ import numpy as np
 from scipy.stats import spearmanr
 
 from fpm_sim.config import Manipulator, config_to_toml
+from fpm_sim.kinematics import assemble_many
 from fpm_sim.outputs import atomic_dir
 from fpm_sim.results import to_jsonable
 from fpm_sim.study.identify.engine import CrossValidation, Identification
@@ -97,6 +98,26 @@ def summary(result: Identification, cv: CrossValidation | None) -> dict[str, Any
     return out
 
 
+def workspace_check(result: Identification) -> dict[str, Any] | None:
+    """The workspace prior (``Problem.workspace``) at the optimum: poses, threshold, smallest measure and
+    the poses below the threshold (``None`` without a workspace)."""
+    ws = result.problem.workspace
+    if not ws:
+        return None
+    m = assemble_many(
+        result.config.geometry, [p.x_m for p in ws], [p.y_m for p in ws], [p.phi_rad for p in ws]
+    ).singularity
+    m_min = result.problem.min_singularity
+    below = [ws[i].label() for i in range(len(ws)) if not (m[i] >= m_min)]
+    return {
+        "poses": len(ws),
+        "min_singularity": m_min,
+        "smallest_measure": float(np.nanmin(m)) if np.isfinite(m).any() else math.nan,
+        "unreachable": int(np.sum(~np.isfinite(m))),
+        "below_threshold": below,
+    }
+
+
 def render_report(
     result: Identification,
     cv: CrossValidation | None,
@@ -120,6 +141,17 @@ def render_report(
         f"geometry enters through MjSpec compilation, which is not differentiable); {result.options.segments} spring "
         f"locations per link. {result.history[-1].evaluations} model evaluations, {result.seconds:.0f} s.",
         "",
+    ]
+    ws = workspace_check(result)
+    if ws is not None:
+        lines += [
+            f"Workspace prior: {ws['poses']} poses the machine works at; a singularity measure below "
+            f"{ws['min_singularity']:g} or an unreachable pose is penalised. At the optimum the smallest measure "
+            f"is {ws['smallest_measure']:.3g}"
+            + (f"; below the threshold: {', '.join(ws['below_threshold'])}." if ws["below_threshold"] else "."),
+            "",
+        ]
+    lines += [
         "## Error statistics",
         "",
         "| data | n | in-sample mean abs % | in-sample max % | Spearman | CV mean abs % | CV max % | CV Spearman |",
@@ -267,6 +299,7 @@ def _write_identification(
         "result": result.to_dict(),
         "cross_validation": cv.to_dict() if cv is not None else None,
         "summary": summary(result, cv),
+        "workspace": workspace_check(result),
     }
     if extra_json:
         doc.update(extra_json)
