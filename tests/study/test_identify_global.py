@@ -78,7 +78,7 @@ def test_first_population_is_sobol_with_surrogate_seeds_per_branch(monkeypatch):
 
     d = len(free) + 1
     plain = engine._de_initial_population(
-        problem, obj, IdentifyOptions(segments=SEG, popsize=5, surrogate_seeds=0), free, branches
+        obj, IdentifyOptions(segments=SEG, popsize=5, surrogate_seeds=0), free, branches
     )
     assert calls == []  # no surrogate run when no seed is asked for
     n = plain.shape[0]
@@ -89,7 +89,7 @@ def test_first_population_is_sobol_with_surrogate_seeds_per_branch(monkeypatch):
     assert np.all((plain[:, -1] >= 0) & (plain[:, -1] <= len(branches) - 1))
 
     seeded = engine._de_initial_population(
-        problem, obj, IdentifyOptions(segments=SEG, popsize=5, surrogate_seeds=2), free, branches
+        obj, IdentifyOptions(segments=SEG, popsize=5, surrogate_seeds=2), free, branches
     )
     assert calls == [branches]  # every combination, not the surrogate-de's own six
     for k, b in enumerate(ranked):

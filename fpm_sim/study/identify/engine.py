@@ -67,6 +67,7 @@ __all__ = [
     "identify",
     "predict_observations",
     "predict_with_std",
+    "workspace_measures",
     "workspace_residuals",
 ]
 
@@ -155,14 +156,19 @@ class Problem:
         return [o.describe() for o in self.observations] + [f"rig {t.label}" for t in self.subsystem_tests]
 
 
+def workspace_measures(problem: Problem, config: Manipulator) -> np.ndarray:
+    """The singularity measure of each ``problem.workspace`` pose under ``config`` (NaN where unreachable)."""
+    ws = problem.workspace
+    return assemble_many(config.geometry, [p.x_m for p in ws], [p.y_m for p in ws], [p.phi_rad for p in ws]).singularity
+
+
 def workspace_residuals(problem: Problem, config: Manipulator) -> np.ndarray:
     """One residual per ``problem.workspace`` pose: ``PENALTY_SIGMAS * (1 - m / m_min)`` where its singularity
     measure ``m`` is below ``m_min = problem.min_singularity`` (a hinge: 0 at and above it), ``PENALTY_SIGMAS``
     where it is unreachable."""
-    ws = problem.workspace
-    if not ws:
+    if not problem.workspace:
         return np.zeros(0)
-    m = assemble_many(config.geometry, [p.x_m for p in ws], [p.y_m for p in ws], [p.phi_rad for p in ws]).singularity
+    m = workspace_measures(problem, config)
     r = PENALTY_SIGMAS * np.clip(1.0 - m / problem.min_singularity, 0.0, 1.0)
     return np.where(np.isfinite(r), r, PENALTY_SIGMAS)
 
@@ -486,7 +492,7 @@ def _full_model_de(
         ).x
     d = len(free)
     bounds = [(0.0, 1.0)] * d + ([(0.0, len(branches) - 1.0)] if geometry_free else [])
-    init = _de_initial_population(problem, obj, opts, free, branches, progress=progress)
+    init = _de_initial_population(obj, opts, free, branches, progress=progress)
     t0, generation = time.time(), [0]
 
     def report(intermediate_result: Any) -> None:
@@ -537,7 +543,6 @@ def _full_model_de(
 
 
 def _de_initial_population(
-    problem: Problem,
     obj: _Objective,
     opts: IdentifyOptions,
     free: np.ndarray,
@@ -548,16 +553,16 @@ def _de_initial_population(
     """The evolution's first population: a scrambled Sobol sequence (scipy's size for ``init="sobol"``: the
     power of two at or above ``popsize`` x dimensions), its first ``opts.surrogate_seeds`` members per
     elbow-branch combination given that branch's in-plane surrogate optimum as geometry."""
-    d = len(free) + (1 if branches != [None] else 0)
+    geometry_free = branches != [None]
+    d = len(free) + (1 if geometry_free else 0)
     n = int(2 ** math.ceil(math.log2(max(5, opts.popsize * d))))
     pop = qmc.Sobol(d=d, scramble=True, seed=opts.seed).random(n)
-    if branches != [None]:
+    if geometry_free:
         pop[:, -1] *= len(branches) - 1.0
-    if opts.surrogate_seeds <= 0 or branches == [None]:
+    if opts.surrogate_seeds <= 0 or not geometry_free:
         return pop
     t0 = time.time()
-    ps = problem.parameters
-    geo = [j for j, i in enumerate(free) if ps.parameters[i].group in ("geometry", "geometry-per-chain")]
+    geo = [j for j, i in enumerate(free) if obj.ps.parameters[i].group in ("geometry", "geometry-per-chain")]
     row = 0
     found = _surrogate_starts(obj, opts, [b for b in branches if b is not None])
     for z, _, branch in found:

@@ -16,10 +16,9 @@ import numpy as np
 from scipy.stats import spearmanr
 
 from fpm_sim.config import Manipulator, config_to_toml
-from fpm_sim.kinematics import assemble_many
 from fpm_sim.outputs import atomic_dir
 from fpm_sim.results import to_jsonable
-from fpm_sim.study.identify.engine import CrossValidation, Identification
+from fpm_sim.study.identify.engine import CrossValidation, Identification, workspace_measures
 
 __all__ = ["identified_config", "provenance_key", "render_report", "write_identification"]
 
@@ -104,9 +103,7 @@ def workspace_check(result: Identification) -> dict[str, Any] | None:
     ws = result.problem.workspace
     if not ws:
         return None
-    m = assemble_many(
-        result.config.geometry, [p.x_m for p in ws], [p.y_m for p in ws], [p.phi_rad for p in ws]
-    ).singularity
+    m = workspace_measures(result.problem, result.config)
     m_min = result.problem.min_singularity
     below = [ws[i].label() for i in range(len(ws)) if not (m[i] >= m_min)]
     return {
