@@ -4,7 +4,10 @@ Simulates the test's impacts once per pose and axis without noise (``virtual_imp
 poses and settings), then for each seed adds accelerometer noise, forms H1 as ``fpm-sim impact`` does, writes
 UFF 58, and runs ``fpm-sim ema`` and ``fpm-sim identify`` as the test does. Prints, per seed, the EMA frequency
 error against the truth's modal frequency (first mode of the test's kind) and the identified section values
-against the truth (relative error and in reported standard deviations); then the ranges.
+against the truth (relative error and in reported standard deviations); then the ranges. Every seed is analysed
+twice: with the exponential window's decay removed by the EMA (the UFF records carry its time constant, as
+``fpm-sim impact --uff`` writes them) and without (``fpm-sim ema --exp-window-tau-s inf``), so the window's bias
+shows as the difference.
 
     python scripts/impact_road_scatter.py [--seeds 12] [--noise-m-s2 0.01] [--record-s 0.5]
 
@@ -34,6 +37,7 @@ from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.sim.impact import ImpactRecord, ImpactSetup, h1_estimate, virtual_impact_test, write_uff58
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the tests package the test module imports
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "study"))
 import test_identify_impact_road as road
 
@@ -67,16 +71,16 @@ def main() -> None:
             setup = ImpactSetup(impact=p, accelerometer=p, record_s=args.record_s, n_impacts=1, f_max_hz=400.0)
             records[(pose_mm, axis)] = virtual_impact_test(built, setup).records[0]
             target[(pose_mm, kind)] = pf.frequencies_hz[i][in_plane if kind == "in_plane" else ~in_plane][0]
-    ema_err: dict[str, list[float]] = {k: [] for k in road.AXES.values()}
-    fit: dict[str, list[tuple[float, float]]] = {k: [] for k in road.TRUTH_SECTION_M}
+    ways = {"window removed": (), "window kept": ("--exp-window-tau-s", "inf")}
+    ema_err = {(w, k): [] for w in ways for k in road.AXES.values()}
+    fit: dict[tuple[str, str], list[tuple[float, float]]] = {(w, n): [] for w in ways for n in road.TRUTH_SECTION_M}
     for seed in range(args.seeds):
         rng = np.random.default_rng(seed)
         with tempfile.TemporaryDirectory() as tmp:
             d = Path(tmp)
             (d / "start.toml").write_text(config_to_toml(start))
-            measured = []
-            for axis, kind in road.AXES.items():
-                files = []
+            files: dict[str, list[str]] = {axis: [] for axis in road.AXES}
+            for axis in road.AXES:
                 for pose_mm in road.POSES_MM:
                     r = records[(pose_mm, axis)]
                     noisy = r.accel_m_s2 + rng.normal(0.0, args.noise_m_s2, r.accel_m_s2.size)
@@ -84,39 +88,46 @@ def main() -> None:
                         [ImpactRecord(r.t_s, r.force_n, noisy, r.peak_force_n, 0.0)], pad_s=8.0, window_end=0.01
                     )
                     frf = FrequencyResponse(f, h, "accelerance", "m/s^2/N", "hammer", "accel")
-                    files.append(str(write_uff58(frf, d / f"{pose_mm}_{axis}.uff", pose_mm_rad=pose_mm)))
-                band = ("--f-lower-hz", "20", "--f-upper-hz", "400", "--n-modes", "1")
-                out = _cli("ema", *files, *band, "--mode-label", kind, "--out", str(d / kind))
-                for e in out["estimates"]:
-                    ema_err[kind].append(e["freq_hz"][0] / target[(tuple(e["pose_mm_rad"]), kind)] - 1.0)
-                measured += ["--measured", f"{d / kind / 'modes.csv'},sigma_pct={road.SIGMA_PCT}"]
-            res = _cli(
-                "identify",
-                "--config",
-                str(d / "start.toml"),
-                "--free",
-                "section",
-                "--global",
-                "none",
-                *measured,
-                "--segments",
-                str(road.SEGMENTS),
-                "--quiet",
-                "--out",
-                str(d / "id"),
-            )
-        row = []
-        for name, value in road.TRUTH_SECTION_M.items():
-            p = res["result"]["parameters"][f"section.{name}"]
-            fit[name].append((p["value"] / value - 1.0, (p["value"] - value) / p["std"]))
-            row.append(f"{name} {100 * fit[name][-1][0]:+.3f} % ({fit[name][-1][1]:+.2f} std)")
-        print(f"seed {seed}: " + ", ".join(row))
-    for kind, errs in ema_err.items():
-        print(f"EMA f / modal f - 1, {kind}: {100 * min(errs):+.3f} .. {100 * max(errs):+.3f} %")
-    for name, rows in fit.items():
+                    tau_s = float(r.t_s[-1]) / np.log(100.0)  # as fpm-sim impact: 1 % at the record's end
+                    uff = write_uff58(frf, d / f"{pose_mm}_{axis}.uff", pose_mm_rad=pose_mm, window_tau_s=tau_s)
+                    files[axis].append(str(uff))
+            row = []
+            for way, extra in ways.items():
+                measured = []
+                for axis, kind in road.AXES.items():
+                    band = ("--f-lower-hz", "20", "--f-upper-hz", "400", "--n-modes", "1", *extra)
+                    out_dir = d / f"{kind}_{len(extra)}"
+                    out = _cli("ema", *files[axis], *band, "--mode-label", kind, "--out", str(out_dir))
+                    for e in out["estimates"]:
+                        ema_err[(way, kind)].append(e["freq_hz"][0] / target[(tuple(e["pose_mm_rad"]), kind)] - 1.0)
+                    measured += ["--measured", f"{out_dir / 'modes.csv'},sigma_pct={road.SIGMA_PCT}"]
+                res = _cli(
+                    "identify",
+                    "--config",
+                    str(d / "start.toml"),
+                    "--free",
+                    "section",
+                    "--global",
+                    "none",
+                    *measured,
+                    "--segments",
+                    str(road.SEGMENTS),
+                    "--quiet",
+                    "--out",
+                    str(d / f"id_{len(extra)}"),
+                )
+                for name, value in road.TRUTH_SECTION_M.items():
+                    p = res["result"]["parameters"][f"section.{name}"]
+                    fit[(way, name)].append((p["value"] / value - 1.0, (p["value"] - value) / p["std"]))
+                    rel, nstd = fit[(way, name)][-1]
+                    row.append(f"{way}: {name} {100 * rel:+.3f} % ({nstd:+.2f} std)")
+        print(f"seed {seed}: " + "; ".join(row))
+    for (way, kind), errs in ema_err.items():
+        print(f"{way}: EMA f / modal f - 1, {kind}: {100 * min(errs):+.3f} .. {100 * max(errs):+.3f} %")
+    for (way, name), rows in fit.items():
         a = np.array(rows)
         print(
-            f"{name}: {100 * a[:, 0].min():+.3f} .. {100 * a[:, 0].max():+.3f} %, |error| / std up to "
+            f"{way}: {name}: {100 * a[:, 0].min():+.3f} .. {100 * a[:, 0].max():+.3f} %, |error| / std up to "
             f"{np.abs(a[:, 1]).max():.2f}"
         )
 

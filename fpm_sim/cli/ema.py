@@ -25,15 +25,15 @@ def cmd_ema(args: argparse.Namespace) -> int:
         raise CliError(f"--f-lower-hz {args.f_lower_hz} must be >= 0 and below --f-upper-hz {args.f_upper_hz}")
     if args.n_modes < 1:
         raise CliError(f"--n-modes must be >= 1, got {args.n_modes}")
+    if args.exp_window_tau_s is not None and not args.exp_window_tau_s > 0:
+        raise CliError(f"--exp-window-tau-s must be > 0 s (inf: no window), got {args.exp_window_tau_s}")
     given = (args.x_mm, args.y_mm, args.phi_rad)
     estimates = []
     for path in args.files:
         for frf in read_frfs(path):
             if frf.pose_mm_rad is None:
                 if None in given[:2]:
-                    raise CliError(
-                        f"{frf.source}: the file does not say where it was measured; give --x-mm and --y-mm"
-                    )
+                    raise CliError(f"{frf.source}: the file does not say where it was measured; give --x-mm and --y-mm")
                 frf.pose_mm_rad = (float(given[0]), float(given[1]), float(given[2] or 0.0))
             est = estimate_modes(
                 frf,
@@ -41,12 +41,16 @@ def cmd_ema(args: argparse.Namespace) -> int:
                 f_upper_hz=args.f_upper_hz,
                 n_modes=args.n_modes,
                 pol_order=args.pol_order,
+                window_tau_s=args.exp_window_tau_s,
             )
             est.mode_label = args.mode_label
             estimates.append(est)
+    taus = {f"{e.window_tau_s:.4g}" for e in estimates if e.window_tau_s is not None}
     header = (
         "Natural frequencies (Hz) and damping ratios estimated by fpm-sim ema (sdypy-EMA LSCF, stable poles "
-        f"nearest the FRF peaks, {args.f_lower_hz:g}-{args.f_upper_hz:g} Hz, orders up to {args.pol_order}).\n"
+        f"nearest the FRF peaks, {args.f_lower_hz:g}-{args.f_upper_hz:g} Hz, orders up to {args.pol_order}"
+        + (f"; exponential window decay removed, tau {', '.join(sorted(taus))} s" if taus else "")
+        + ").\n"
         "Columns as fpm-sim identify --measured reads them."
     )
     with atomic_dir(args.out, overwrite=True) as tmp:  # --out / --overwrite were checked before computing
@@ -55,6 +59,7 @@ def cmd_ema(args: argparse.Namespace) -> int:
     lines = [
         f"{e.source} at {e.pose_mm_rad}: "
         + ", ".join(f"{f:.3f} Hz ({100 * z:.2f} %)" for f, z in zip(e.freq_hz, e.damping))
+        + (f" (window tau {e.window_tau_s:.4g} s removed)" if e.window_tau_s is not None else "")
         for e in estimates
     ]
     lines.append(f"wrote {args.out / 'modes.csv'} (give it to fpm-sim identify --measured)")
@@ -82,6 +87,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="the kind of modes these FRFs see, written to the mode column (e.g. out_of_plane for a hammer and "
         "accelerometer along the motor axes): identify then matches the K-th estimate to the K-th model mode of "
         "that kind instead of the K-th lowest overall (default: unlabelled)",
+    )
+    p.add_argument(
+        "--exp-window-tau-s",
+        type=float,
+        default=None,
+        help="time constant (s) of the exponential response window the FRFs were computed with: its decay is "
+        "removed from every pole, so damping and frequency are the structure's (default: what each UFF record says; "
+        "fpm-sim impact --uff writes it; none when it says nothing; inf: no window)",
     )
     p.add_argument("--x-mm", type=float, default=None, help="pose of FRFs whose file does not carry one (mm)")
     p.add_argument("--y-mm", type=float, default=None, help="pose of FRFs whose file does not carry one (mm)")

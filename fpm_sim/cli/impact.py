@@ -78,7 +78,12 @@ def cmd_impact(args: argparse.Namespace) -> int:
 
         pose = pose_of(args)
         with atomic_file(args.uff) as tmp:
-            write_uff58(res.frf, tmp, pose_mm_rad=(pose.x_m * 1e3, pose.y_m * 1e3, pose.phi_rad))
+            write_uff58(
+                res.frf,
+                tmp,
+                pose_mm_rad=(pose.x_m * 1e3, pose.y_m * 1e3, pose.phi_rad),
+                window_tau_s=res.window_tau_s,
+            )
     if args.plot:
         save_figure(args.plot, res.plot)
     payload = with_resolution(res.to_dict(), opts)
@@ -130,7 +135,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--gravity", action=argparse.BooleanOptionalAction, default=True, help="gravity along the motor axes"
     )
     p.add_argument("--csv", type=Path, help="write the H1 FRF and coherence to this CSV")
-    p.add_argument("--uff", type=Path, help="write the H1 FRF as a Universal File type-58 record (for fpm-sim ema)")
+    p.add_argument(
+        "--uff",
+        type=Path,
+        help="write the H1 FRF as a Universal File type-58 record (for fpm-sim ema; it carries the pose and the "
+        "exponential window's time constant, which fpm-sim ema removes from the poles)",
+    )
     p.add_argument("--plot", type=Path, help="H1 magnitude/phase/coherence plot (.png, .pdf, .svg)")
     add_pose_args(p)
     add_config_args(p)

@@ -315,6 +315,9 @@ class ImpactTestResult:
     modal_freq_hz: np.ndarray
     damping_half_power: float
     window_damping: float
+    window_tau_s: float
+    """Time constant (s) of the exponential response window (``inf``: none); give it to ``fpm-sim ema`` (it
+    travels in the UFF record written by :func:`write_uff58`) so that the EMA removes the window's decay."""
     setup: ImpactSetup
     parameters: dict[str, Any] = field(default_factory=dict)
 
@@ -354,6 +357,7 @@ class ImpactTestResult:
             ][:8],
             "damping_ratio_half_power": self.damping_half_power,
             "window_added_damping_at_first_peak": self.window_damping,
+            "window_tau_s": self.window_tau_s if math.isfinite(self.window_tau_s) else None,
             "identified_damping_ratio": self.identified_damping_ratio,
             "min_coherence_in_band": float(np.min(self.frf.coherence[band & (self.frf.freq_hz >= self.setup.f_min_hz)]))
             if self.frf.coherence.size
@@ -485,6 +489,7 @@ def virtual_impact_test(
         modal_freq_hz=system.frequencies_hz,
         damping_half_power=zeta,
         window_damping=window_zeta,
+        window_tau_s=tau,
         setup=setup,
         parameters={
             **built.parameters,
@@ -510,6 +515,8 @@ def _with_discrete_step(built: BuiltModel, timestep_s: float) -> BuiltModel:
 
 UFF_POSE_TAG = "fpm-sim pose"
 """Prefix of the UFF 58 ``id4`` record that carries the pose (``fpm-sim pose x_mm=.. y_mm=.. phi_rad=..``)."""
+UFF_WINDOW_TAG = "fpm-sim exp-window"
+"""Prefix of the UFF 58 ``id5`` record that carries the exponential window (``fpm-sim exp-window tau_s=..``)."""
 
 
 def write_uff58(
@@ -522,13 +529,16 @@ def write_uff58(
     response_dir: int = 3,
     reference_dir: int = 3,
     description: str = "fpm-sim virtual impact test",
+    window_tau_s: float | None = None,
 ) -> Path:
     """Write an FRF as a Universal File Format type-58 record (ASCII) with :mod:`pyuff`.
 
     Function type 4 (FRF), complex ordinate, even abscissa spacing (``frf.freq_hz`` must be evenly
     spaced), SI units as they are (accelerance m/s^2/N). ``pose_mm_rad`` (x_mm, y_mm, phi_rad) is
     written into ``id4`` so that :func:`fpm_sim.study.identify.ema.read_frfs` knows where the test was;
-    directions follow UFF (1 = x, 2 = y, 3 = z; negative for the opposite sense). Overwrites ``path``.
+    directions follow UFF (1 = x, 2 = y, 3 = z; negative for the opposite sense). ``window_tau_s`` (s), the
+    time constant of the exponential window the FRF was computed with, is written into ``id5``, so that
+    ``fpm-sim ema`` removes the decay it added (None or ``inf``: no window). Overwrites ``path``.
     """
     import pyuff
 
@@ -538,16 +548,20 @@ def write_uff58(
         raise FrfError(f"UFF 58 needs an evenly spaced frequency axis; {p} not written")
     if p.exists():
         p.unlink()
-    id4 = "NONE" if pose_mm_rad is None else (
-        f"{UFF_POSE_TAG} x_mm={pose_mm_rad[0]:.6g} y_mm={pose_mm_rad[1]:.6g} phi_rad={pose_mm_rad[2]:.6g}"
+    id4 = (
+        "NONE"
+        if pose_mm_rad is None
+        else (f"{UFF_POSE_TAG} x_mm={pose_mm_rad[0]:.6g} y_mm={pose_mm_rad[1]:.6g} phi_rad={pose_mm_rad[2]:.6g}")
     )
+    windowed = window_tau_s is not None and math.isfinite(window_tau_s)
+    id5 = f"{UFF_WINDOW_TAG} tau_s={window_tau_s:.9g}" if windowed else "NONE"
     ds = pyuff.prepare_58(
         binary=0,
         id1=description[:80],
         id2=f"{frf.quantity} ({frf.unit})"[:80],
         id3=f"excitation {frf.excitation}, response {frf.response}"[:80],
         id4=id4[:80],
-        id5="NONE",
+        id5=id5[:80],
         func_type=4,
         rsp_node=response_node,
         rsp_dir=response_dir,

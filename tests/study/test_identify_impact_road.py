@@ -95,16 +95,20 @@ def test_impact_uff_ema_identify_recovers_the_hidden_section(tmp_path, capsys):
         d = _cli(capsys, "ema", *map(str, uff[axis]), *band, "--mode-label", kind, "--out", str(out))
         for e in d["estimates"]:
             assert e["mode_label"] == kind
+            # the UFF record told the EMA the window: 1 % at the end of the record, 0.5 s to a whole number of
+            # rollout samples (measured 0.499993 s)
+            assert e["window_tau_s"] == pytest.approx(0.5 / np.log(100.0), rel=1e-4)
             ema_f[(tuple(e["pose_mm_rad"]), kind)] = e["freq_hz"][0]
         csvs.append(out / "modes.csv")
 
     # the EMA read the right peak: against the truth's first mode of each kind from the constrained eigen-solve
-    # (not from the rollouts). Noise-free, the EMA reads +0.06..+0.10 % in-plane and +0.02..+0.03 % out-of-plane at
-    # these poses: the exponential window adds the decay rate 1/tau to every pole, which keeps the damped frequency
-    # and raises |pole| (the natural frequency LSCF reports) by about (zeta_total^2 - zeta^2) / 2, 0.06 % at 59 Hz
-    # (zeta 1.1 % own + 2.5 % window; a 1 s record quarters it). With 0.01 m/s^2 noise on one impact, over 17 noise
-    # draws (scripts/impact_road_scatter.py, and a first scan of 5): in-plane +0.04..+0.27 %, out-of-plane
-    # -0.006..+0.08 %. Bounds: about 2x those; a wrong peak is >= 25 Hz off.
+    # (not from the rollouts). The exponential window adds the decay rate 1/tau to every pole, which keeps the damped
+    # frequency and raises |pole| (the natural frequency LSCF reports) by about (zeta_total^2 - zeta^2) / 2, 0.06 %
+    # at 59 Hz (zeta 1.1 % own + 2.5 % window); the UFF records carry tau and fpm-sim ema removes it. Measured with
+    # 0.01 m/s^2 noise on one impact (scripts/impact_road_scatter.py --seeds 8, which runs the EMA with and without
+    # the correction): window removed, in-plane -0.025..+0.119 %, out-of-plane -0.034..-0.001 %; window kept
+    # +0.041..+0.195 % and -0.006..+0.031 % (17 earlier draws, window kept: up to +0.27 % and +0.08 %, so about
+    # +0.20 % and +0.045 % with it removed). Bounds: about 2x those; a wrong peak is >= 25 Hz off.
     poses = [Pose.from_mm(*p) for p in POSES_MM]
     pf = pose_frequencies(truth, poses, n_modes=6, options=ModelOptions(segments=SEGMENTS, axial=False, gravity=False))
     errors = {}
@@ -115,7 +119,7 @@ def test_impact_uff_ema_identify_recovers_the_hidden_section(tmp_path, capsys):
     with capsys.disabled():  # the numbers behind the bounds, shown with pytest -s
         print("\nEMA f / model f - 1:", {f"{p} {k}": f"{100 * v:+.3f} %" for (p, k), v in errors.items()})
     for (pose_mm, kind), e in errors.items():
-        assert abs(e) < (0.005 if kind == "in_plane" else 0.0016), (pose_mm, kind, e)
+        assert abs(e) < (0.004 if kind == "in_plane" else 0.001), (pose_mm, kind, e)
 
     # 3. identify the section from the reference start, through the CLI, with the same model options
     argv = ["identify", "--config", str(tmp_path / "start.toml"), "--free", "section", "--global", "none"]
@@ -123,11 +127,12 @@ def test_impact_uff_ema_identify_recovers_the_hidden_section(tmp_path, capsys):
         argv += ["--measured", f"{c},sigma_pct={SIGMA_PCT}"]
     argv += ["--segments", str(SEGMENTS), "--quiet", "--out", str(tmp_path / "ident")]
     res = _cli(capsys, *argv)["result"]["parameters"]
-    # Measured over 24 noise draws on these rollouts (scripts/impact_road_scatter.py and a first scan of 12):
-    # thickness +0.040..+0.127 % (always high: the window's positive bias on the in-plane frequencies, which
-    # rise with the in-plane thickness), height -0.008..-0.038 %; |error| / reported std up to 1.5 and 0.4.
-    # Bounds: 2x the worst relative error, and 2 reported std. The start is 7.5 % and 9.5 % away.
-    rel_tol = {"thickness_m": 0.0025, "height_m": 0.0008}
+    # Measured over 8 noise draws with the window removed (scripts/impact_road_scatter.py --seeds 8): thickness
+    # +0.001..+0.055 %, height -0.015..-0.032 %, |error| / reported std up to 0.66 and 0.35; with the window kept
+    # the thickness comes out +0.040..+0.093 % (24 earlier draws: up to +0.127 %), biased high by the window, as the
+    # in-plane frequencies rise with it. Bounds: about 2x the worst relative error expected over more draws, and 2
+    # reported std. The start is 7.5 % and 9.5 % away.
+    rel_tol = {"thickness_m": 0.0015, "height_m": 0.0008}
     for name, value in TRUTH_SECTION_M.items():
         p = res[f"section.{name}"]
         with capsys.disabled():

@@ -132,3 +132,74 @@ def test_cli_ema_writes_the_csv_identify_reads(tmp_path):
     csv = tmp_path / "frf.csv"
     FrequencyResponse(f, h, "accelerance", "m/s^2/N", "hammer", "accel").save_csv(csv)
     assert main(["ema", str(csv), "--out", str(tmp_path / "e2")]) == 2
+
+
+def _accelerance(f_hz: np.ndarray, fn_hz: np.ndarray, decay_1_s: np.ndarray) -> np.ndarray:
+    """Accelerance of modes with natural frequency ``fn_hz`` (undamped) and pole real part ``-decay_1_s``."""
+    w = 2 * np.pi * f_hz
+    h = np.zeros(f_hz.shape, complex)
+    for a, s in zip(2 * np.pi * fn_hz, decay_1_s):
+        h += -(w**2) / (a**2 - w**2 + 2j * s * w)
+    return h
+
+
+def test_ema_removes_the_exponential_windows_decay():
+    """A window exp(-t / tau) adds 1 / tau to every pole's decay: an FRF whose poles decay at sigma + 1/tau,
+    analysed with that tau, gives back the structure's own frequencies and damping."""
+    from fpm_sim.study.identify.ema import MeasuredFrf
+
+    f = np.arange(0.0, 400.0, 0.25)
+    fn, zeta = np.array([40.0, 65.0, 130.0]), np.array([0.011, 0.015, 0.01])
+    tau_s = 0.5 / np.log(100.0)  # fpm-sim impact's window: 1 % at the end of a 0.5 s record
+    # the windowed FRF's poles: same damped frequency, decay sigma + 1/tau
+    sigma = zeta * 2 * np.pi * fn
+    wd = 2 * np.pi * fn * np.sqrt(1 - zeta**2)
+    s_win = sigma + 1 / tau_s
+    fn_win = np.hypot(s_win, wd) / (2 * np.pi)
+    h = _accelerance(f, fn_win, s_win)
+    raw = estimate_modes(MeasuredFrf(f, h, "windowed", (0, 0, 0)), f_lower_hz=5, f_upper_hz=300, n_modes=3)
+    # uncorrected, the damping is 2.6..4.5x the structure's at these frequencies and the frequency is high
+    assert np.all(raw.damping > 1.5 * zeta)
+    assert np.all(raw.freq_hz > fn)
+    frf = MeasuredFrf(f, h, "windowed", (0, 0, 0), window_tau_s=tau_s)
+    est = estimate_modes(frf, f_lower_hz=5, f_upper_hz=300, n_modes=3)
+    assert est.window_tau_s == tau_s
+    # noise-free rational FRF: LSCF exact to its conditioning (test_ema_recovers_known_poles: 1e-6 / 1e-4)
+    np.testing.assert_allclose(est.freq_hz, fn, rtol=1e-6)
+    np.testing.assert_allclose(est.damping, zeta, rtol=1e-4)
+    # the argument overrides the file's value; inf means no window
+    same = estimate_modes(frf, f_lower_hz=5, f_upper_hz=300, n_modes=3, window_tau_s=np.inf)
+    np.testing.assert_allclose(same.damping, raw.damping, rtol=1e-12)
+    assert same.window_tau_s is None
+    # a window decaying faster than a pole's own total decay is a wrong tau: refused, the option named
+    with pytest.raises(EmaError, match="exp-window-tau-s"):
+        estimate_modes(frf, f_lower_hz=5, f_upper_hz=300, n_modes=3, window_tau_s=tau_s / 3)
+
+
+def test_uff58_carries_the_window_and_the_cli_reports_it(tmp_path, capsys):
+    import json
+
+    from fpm_sim.cli.main import main
+
+    f = np.arange(0.0, 300.0, 0.25)
+    tau_s = 0.5 / np.log(100.0)  # fpm-sim impact's window on a 0.5 s record
+    fn, zeta = np.array([55.0]), np.array([0.012])
+    s_win = zeta * 2 * np.pi * fn + 1 / tau_s
+    fn_win = np.hypot(s_win, 2 * np.pi * fn * np.sqrt(1 - zeta**2)) / (2 * np.pi)
+    frf = FrequencyResponse(f, _accelerance(f, fn_win, s_win), "accelerance", "m/s^2/N", "hammer", "accel")
+    uff = write_uff58(frf, tmp_path / "w.uff", pose_mm_rad=(0.0, 0.0, 0.2), window_tau_s=tau_s)
+    (back,) = read_frfs(uff)
+    assert back.window_tau_s == pytest.approx(tau_s, rel=1e-8)  # written with 9 significant digits
+    (plain,) = read_frfs(write_uff58(frf, tmp_path / "p.uff", window_tau_s=np.inf))
+    assert plain.window_tau_s is None
+    band = ["--f-lower-hz", "10", "--f-upper-hz", "200", "--n-modes", "1"]
+    assert main(["ema", str(uff), *band, "--out", str(tmp_path / "e"), "--json"]) == 0
+    (e,) = json.loads(capsys.readouterr().out)["estimates"]
+    assert e["window_tau_s"] == pytest.approx(tau_s, rel=1e-8)
+    assert e["freq_hz"][0] == pytest.approx(55.0, rel=1e-5)
+    assert e["damping"][0] == pytest.approx(0.012, rel=1e-3)
+    assert "exponential window decay removed" in (tmp_path / "e" / "modes.csv").read_text()
+    # the option overrides the file; a time constant that is not positive is refused, naming the option
+    assert main(["ema", str(uff), *band, "--exp-window-tau-s", "inf", "--out", str(tmp_path / "e2")]) == 0
+    assert main(["ema", str(uff), *band, "--exp-window-tau-s", "0", "--out", str(tmp_path / "e3")]) == 2
+    assert "--exp-window-tau-s" in capsys.readouterr().err

@@ -10,6 +10,15 @@ peaks (:func:`fpm_sim.frf.pick_peaks`), so no chart has to be clicked.
 
 The pose of a test comes from the UFF record's ``id4`` (``fpm-sim pose x_mm=.. y_mm=.. phi_rad=..``,
 written by ``fpm-sim impact --uff``) or is given by the caller.
+
+**Exponential response window.** Impact tests multiply the response (and the force) by ``exp(-t / tau)`` so
+that it dies out within the record. The window adds the decay rate ``1 / tau`` to every pole: a mode
+``-sigma + i omega_d`` is read as ``-(sigma + 1/tau) + i omega_d``. Uncorrected, the damping ratio comes out
+``(sigma + 1/tau) / |pole|`` (e.g. 3.6 % for a mode of 1.1 % under a 0.5 s record's window) and the natural
+frequency ``|pole|`` slightly high. Given ``tau`` (``window_tau_s``; ``fpm-sim impact --uff`` writes it into
+the record's ``id5``, ``fpm-sim exp-window tau_s=..``, which :func:`read_frfs` reads back), each pole's real part
+is corrected by ``1 / tau`` before its frequency and damping are reported: the standard correction of
+exponential-window damping, exact for a pole model of the windowed FRF.
 """
 
 from __future__ import annotations
@@ -26,7 +35,15 @@ import numpy as np
 from fpm_sim.errors import FpmSimError
 from fpm_sim.frf import pick_peaks
 
-__all__ = ["EmaError", "MeasuredFrf", "ModalEstimate", "estimate_modes", "read_frfs", "write_modes_csv"]
+__all__ = [
+    "EmaError",
+    "MeasuredFrf",
+    "ModalEstimate",
+    "estimate_modes",
+    "read_frfs",
+    "remove_window_decay",
+    "write_modes_csv",
+]
 
 
 class EmaError(FpmSimError):
@@ -41,6 +58,9 @@ class MeasuredFrf:
     h: np.ndarray
     source: str
     pose_mm_rad: tuple[float, float, float] | None
+    window_tau_s: float | None = None
+    """Time constant (s) of the exponential response window the FRF was computed with; None: no window, or
+    the file does not say."""
 
 
 @dataclass
@@ -54,10 +74,13 @@ class ModalEstimate:
     mode_label: str | None = None
     """``in_plane`` / ``out_of_plane`` when the test says which kind of mode it sees (e.g. an accelerometer
     along the motor axes sees only out-of-plane modes of a planar structure); written to the ``mode`` column."""
+    window_tau_s: float | None = None
+    """The exponential window's time constant (s) removed from the poles; None: no correction."""
 
     def to_dict(self) -> dict:
         return {
             "mode_label": self.mode_label,
+            "window_tau_s": self.window_tau_s,
             "source": self.source,
             "pose_mm_rad": self.pose_mm_rad,
             "freq_hz": self.freq_hz.tolist(),
@@ -66,6 +89,7 @@ class ModalEstimate:
 
 
 _POSE_RE = re.compile(r"x_mm=([-+0-9.eE]+)\s+y_mm=([-+0-9.eE]+)\s+phi_rad=([-+0-9.eE]+)")
+_WINDOW_RE = re.compile(r"fpm-sim exp-window tau_s=([-+0-9.eE]+)")
 
 
 def read_frfs(path: str | Path) -> list[MeasuredFrf]:
@@ -99,7 +123,9 @@ def read_frfs(path: str | Path) -> list[MeasuredFrf]:
         d = uff.read_sets(i)
         m = _POSE_RE.search(str(d.get("id4", "")))
         pose = (float(m.group(1)), float(m.group(2)), float(m.group(3))) if m else None
-        out.append(MeasuredFrf(np.asarray(d["x"], float), np.asarray(d["data"], complex), f"{p.name}#{i}", pose))
+        w = _WINDOW_RE.search(str(d.get("id5", "")))
+        tau = float(w.group(1)) if w else None
+        out.append(MeasuredFrf(np.asarray(d["x"], float), np.asarray(d["data"], complex), f"{p.name}#{i}", pose, tau))
     if not out:
         raise EmaError(f"{p}: no type-58 (function) record")
     return out
@@ -115,8 +141,14 @@ def estimate_modes(
     fn_tol: float = 0.001,
     xi_tol: float = 0.05,
     min_prominence_db: float = 3.0,
+    window_tau_s: float | None = None,
 ) -> ModalEstimate:
-    """LSCF poles (sdypy-EMA) at the ``n_modes`` lowest FRF peaks in ``[f_lower_hz, f_upper_hz]``."""
+    """LSCF poles (sdypy-EMA) at the ``n_modes`` lowest FRF peaks in ``[f_lower_hz, f_upper_hz]``.
+
+    ``window_tau_s`` (s): the exponential response window's time constant, removed from every pole
+    (:func:`remove_window_decay`); None takes the FRF's own (``frf.window_tau_s``, read from the file); ``inf``:
+    no window.
+    """
     import contextlib
 
     from sdypy import EMA
@@ -141,8 +173,38 @@ def estimate_modes(
         model.select_closest_poles(approx, f_window=max(2.0, 0.05 * min(approx)), fn_temp=fn_tol, xi_temp=xi_tol)
     fn = np.asarray(model.nat_freq, float)
     xi = np.asarray(model.nat_xi, float)
+    tau = frf.window_tau_s if window_tau_s is None else window_tau_s
+    tau = None if tau == np.inf else tau  # an infinite time constant: no window
+    if tau is not None:
+        fn, xi = remove_window_decay(fn, xi, window_tau_s=tau, source=frf.source)
     order = np.argsort(fn)
-    return ModalEstimate(frf.source, frf.pose_mm_rad, fn[order], xi[order])
+    return ModalEstimate(frf.source, frf.pose_mm_rad, fn[order], xi[order], window_tau_s=tau)
+
+
+def remove_window_decay(
+    freq_hz: np.ndarray, damping: np.ndarray, *, window_tau_s: float, source: str = "FRF"
+) -> tuple[np.ndarray, np.ndarray]:
+    """Natural frequencies (Hz) and damping ratios with an exponential window's decay removed (module docstring).
+
+    ``freq_hz`` and ``damping`` are what a pole fit of the windowed FRF reports (``|pole| / 2 pi`` and
+    ``-Re(pole) / |pole|``); ``window_tau_s`` is the window ``exp(-t / tau)``'s time constant (s; ``inf`` = no
+    window). Raises :class:`EmaError` when a pole decays slower than the window alone (a wrong ``tau``).
+    """
+    if not window_tau_s > 0.0:
+        raise EmaError(f"{source}: the exponential window's time constant must be > 0 s, got {window_tau_s!r}")
+    wn = 2.0 * np.pi * np.asarray(freq_hz, float)
+    xi = np.asarray(damping, float)
+    sigma = xi * wn - 1.0 / window_tau_s
+    wd = wn * np.sqrt(np.clip(1.0 - xi**2, 0.0, None))
+    if np.any(sigma < 0.0):
+        k = int(np.argmin(sigma))
+        raise EmaError(
+            f"{source}: the pole at {freq_hz[k]:.4g} Hz decays at {xi[k] * wn[k]:.4g} 1/s, slower than the exponential "
+            f"window's 1/tau = {1.0 / window_tau_s:.4g} 1/s alone: the window's time constant "
+            f"({window_tau_s:.4g} s) is wrong (--exp-window-tau-s)"
+        )
+    wn_true = np.hypot(sigma, wd)
+    return wn_true / (2.0 * np.pi), sigma / wn_true
 
 
 def write_modes_csv(estimates: Sequence[ModalEstimate], path: str | Path, *, header: str = "") -> Path:

@@ -52,7 +52,7 @@ from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import NearSingularityWarning, Pose, assemble_many
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.study.identify.data import Observation
-from fpm_sim.study.identify.parameters import ParameterSet
+from fpm_sim.study.identify.parameters import GEOMETRY_GROUPS, ParameterSet
 from fpm_sim.study.tables import SubsystemTest
 
 __all__ = [
@@ -397,7 +397,7 @@ def _surrogate_starts(
     from fpm_sim.study.inplane_surrogate import inplane_first_frequencies
 
     ps = obj.ps
-    gi = [i for i, p in enumerate(ps.parameters) if p.group in ("geometry", "geometry-per-chain")]
+    gi = [i for i, p in enumerate(ps.parameters) if p.group in GEOMETRY_GROUPS]
     if not gi:
         raise IdentificationError("--global surrogate-de needs the geometry group free (--free geometry)")
     first = [k for k, o in enumerate(obj.obs) if o.mode == 1 and o.label in (None, "in_plane")]
@@ -471,7 +471,7 @@ def _full_model_de(
 
     global _DE_STATE
     ps = problem.parameters
-    geometry_free = any(p.group in ("geometry", "geometry-per-chain") for p in ps.parameters)
+    geometry_free = any(p.group in GEOMETRY_GROUPS for p in ps.parameters)
     branches: list[tuple[int, int, int] | None] = list(ELBOW_BRANCHES) if geometry_free else [None]
     member_opts = dataclasses.replace(opts, workers=1)
     objs = [_Objective(problem if b is None else _with_branch(problem, b), member_opts) for b in branches]
@@ -562,7 +562,7 @@ def _de_initial_population(
     if opts.surrogate_seeds <= 0 or not geometry_free:
         return pop
     t0 = time.time()
-    geo = [j for j, i in enumerate(free) if obj.ps.parameters[i].group in ("geometry", "geometry-per-chain")]
+    geo = [j for j, i in enumerate(free) if obj.ps.parameters[i].group in GEOMETRY_GROUPS]
     row = 0
     found = _surrogate_starts(obj, opts, [b for b in branches if b is not None])
     for z, _, branch in found:
@@ -618,7 +618,7 @@ def identify(problem: Problem, *, options: IdentifyOptions | None = None, progre
         for k, z in enumerate(pts):
             scored.append((obj.cost(z), z, f"latin-hypercube point {k}", None))
         log("global latin hypercube", min(t[0] for t in scored), f"{len(pts)} points scored with the full model")
-    geometry_free = any(p.group in ("geometry", "geometry-per-chain") for p in ps.parameters)
+    geometry_free = any(p.group in GEOMETRY_GROUPS for p in ps.parameters)
     if opts.global_method == "surrogate-de" or (opts.global_method == "hybrid" and geometry_free):
         for z, note, branch in _surrogate_starts(obj, opts):
             ob = _Objective(_with_branch(problem, branch), opts)

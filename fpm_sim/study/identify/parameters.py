@@ -49,7 +49,7 @@ import numpy as np
 from fpm_sim.config import ConfigError, LumpedMass, Manipulator, RigConfig
 from fpm_sim.errors import FpmSimError
 
-__all__ = ["GROUPS", "FreeParameter", "ParameterError", "ParameterSet", "parameter_set"]
+__all__ = ["GEOMETRY_GROUPS", "GROUPS", "FreeParameter", "ParameterError", "ParameterSet", "parameter_set"]
 
 GROUPS = (
     "geometry",
@@ -63,6 +63,9 @@ GROUPS = (
     "rig",
 )
 """Groups ``--free`` accepts."""
+
+GEOMETRY_GROUPS = ("geometry", "geometry-per-chain")
+"""The groups that move the joint layout (and so the elbow-branch choice matters)."""
 
 LOG_STIFF_BOUNDS = (2.0, 7.0)
 OFFSET_BOUNDS_M = (0.0, 0.06)
@@ -374,7 +377,7 @@ def parameter_set(start: Manipulator, groups: Sequence[str]) -> ParameterSet:
         if g not in _BUILDERS:
             raise ParameterError(f"--free: unknown parameter group {g!r}; choose from {', '.join(GROUPS)}")
         params += _BUILDERS[g](start)
-    for a, b in (("geometry", "geometry-per-chain"), ("section", "section-height")):
+    for a, b in (GEOMETRY_GROUPS, ("section", "section-height")):
         if a in groups and b in groups:
             raise ParameterError(f"--free: {a} and {b} overlap; choose one of them")
     if not params:
