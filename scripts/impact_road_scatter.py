@@ -35,11 +35,21 @@ from fpm_sim.frf import FrequencyResponse, LinkPoint
 from fpm_sim.kinematics import Pose
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import ModelOptions
-from fpm_sim.sim.impact import ImpactRecord, ImpactSetup, h1_estimate, virtual_impact_test, write_uff58
+from fpm_sim.sim.impact import (
+    ImpactRecord,
+    ImpactSetup,
+    exp_window_tau_s,
+    h1_estimate,
+    virtual_impact_test,
+    write_uff58,
+)
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the tests package the test module imports
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "study"))
 import test_identify_impact_road as road
+
+WINDOW_END = ImpactSetup.window_end
+"""The exponential window at the record's end: fpm-sim impact's default."""
 
 
 def _cli(*argv: str) -> dict:
@@ -85,10 +95,10 @@ def main() -> None:
                     r = records[(pose_mm, axis)]
                     noisy = r.accel_m_s2 + rng.normal(0.0, args.noise_m_s2, r.accel_m_s2.size)
                     f, h, _ = h1_estimate(
-                        [ImpactRecord(r.t_s, r.force_n, noisy, r.peak_force_n, 0.0)], pad_s=8.0, window_end=0.01
+                        [ImpactRecord(r.t_s, r.force_n, noisy, r.peak_force_n, 0.0)], pad_s=8.0, window_end=WINDOW_END
                     )
                     frf = FrequencyResponse(f, h, "accelerance", "m/s^2/N", "hammer", "accel")
-                    tau_s = float(r.t_s[-1]) / np.log(100.0)  # as fpm-sim impact: 1 % at the record's end
+                    tau_s = exp_window_tau_s(float(r.t_s[-1]), WINDOW_END)
                     uff = write_uff58(frf, d / f"{pose_mm}_{axis}.uff", pose_mm_rad=pose_mm, window_tau_s=tau_s)
                     files[axis].append(str(uff))
             row = []

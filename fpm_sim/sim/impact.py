@@ -80,6 +80,7 @@ __all__ = [
     "ImpactRecord",
     "ImpactSetup",
     "ImpactTestResult",
+    "exp_window_tau_s",
     "h1_estimate",
     "point_acceleration",
     "virtual_impact_test",
@@ -275,6 +276,12 @@ def _one_impact(
     return ImpactRecord(t_s, force, accel, peak_force_n, wall)
 
 
+def exp_window_tau_s(record_s: float, window_end: float) -> float:
+    """Time constant (s) of the exponential window ``exp(-t / tau)`` that falls to ``window_end`` of its initial
+    value at ``t = record_s`` (``inf`` for ``window_end = 1``: no window)."""
+    return record_s / math.log(1.0 / window_end) if window_end < 1.0 else math.inf
+
+
 def h1_estimate(
     records: list[ImpactRecord], *, pad_s: float, window_end: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -286,7 +293,7 @@ def h1_estimate(
     dt = float(t[1] - t[0])
     n = len(t)
     n_fft = int(2 ** math.ceil(math.log2(max(pad_s / dt, n))))
-    tau = t[-1] / math.log(1.0 / window_end) if window_end < 1.0 else math.inf
+    tau = exp_window_tau_s(float(t[-1]), window_end)
     win = np.exp(-t / tau)
     sff = np.zeros(n_fft // 2 + 1)
     saa = np.zeros(n_fft // 2 + 1)
@@ -479,7 +486,7 @@ def virtual_impact_test(
     ]
     first = peaks[0].freq_hz if peaks else math.nan
     zeta = half_power_damping(freq[keep], np.abs(h1[keep]), first) if peaks else math.nan
-    tau = dt * (n_samples - 1) / math.log(1.0 / setup.window_end) if setup.window_end < 1.0 else math.inf
+    tau = exp_window_tau_s(dt * (n_samples - 1), setup.window_end)
     window_zeta = 1.0 / (tau * 2.0 * math.pi * first) if peaks and math.isfinite(tau) else 0.0
     return ImpactTestResult(
         frf=frf,
