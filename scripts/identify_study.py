@@ -144,6 +144,8 @@ def main() -> int:
     ap.add_argument("--max-nfev", type=int, default=40)
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--refine", type=int, default=4, help="global candidates refined locally")
+    ap.add_argument("--refine-per-class", type=int, default=1, help="de: candidates per elbow-branch class")
+    ap.add_argument("--de-strategy", default="best1bin")
     ap.add_argument("--timoshenko", action="store_true", help="links as Timoshenko beams")
     ap.add_argument(
         "--min-singularity",
@@ -175,46 +177,54 @@ def main() -> int:
         ]
         ws.write_text("\n".join(rows) + "\n")
         workspace = ["--workspace", str(ws), "--min-singularity", f"{args.min_singularity:g}"]
-    cmd = [
-        "identify",
-        "--config",
-        str(start),
-        "--measured",
-        f"{data / 'measured_table4_train.csv'},sigma_pct={args.sigma_measured_pct:g}",
-        "--measured",
-        f"{data / 'comsol_table5.csv'},sigma_pct={args.sigma_comsol_pct:g}",
-        "--subsystems",
-        str(data / "subsystems.csv"),
-        "--reading",
-        args.reading,
-        "--segments",
-        str(args.segments),
-        "--free",
-        args.free,
-        "--global",
-        args.global_method,
-        "--generations",
-        str(3 if args.quick else args.generations),
-        "--popsize",
-        str(args.popsize),
-        "--surrogate-seeds",
-        str(args.surrogate_seeds),
-        "--seed",
-        str(args.seed),
-        "--folds",
-        str(args.folds),
-        "--max-nfev",
-        str(3 if args.quick else args.max_nfev),
-        "--starts",
-        str(4 if args.quick else 24),
-        "--workers",
-        str(args.workers),
-        "--refine",
-        str(args.refine),
-        "--out",
-        str(args.out),
-        "--overwrite",
-    ] + (["--timoshenko"] if args.timoshenko else []) + workspace
+    cmd = (
+        [
+            "identify",
+            "--config",
+            str(start),
+            "--measured",
+            f"{data / 'measured_table4_train.csv'},sigma_pct={args.sigma_measured_pct:g}",
+            "--measured",
+            f"{data / 'comsol_table5.csv'},sigma_pct={args.sigma_comsol_pct:g}",
+            "--subsystems",
+            str(data / "subsystems.csv"),
+            "--reading",
+            args.reading,
+            "--segments",
+            str(args.segments),
+            "--free",
+            args.free,
+            "--global",
+            args.global_method,
+            "--generations",
+            str(3 if args.quick else args.generations),
+            "--popsize",
+            str(args.popsize),
+            "--surrogate-seeds",
+            str(args.surrogate_seeds),
+            "--seed",
+            str(args.seed),
+            "--folds",
+            str(args.folds),
+            "--max-nfev",
+            str(3 if args.quick else args.max_nfev),
+            "--starts",
+            str(4 if args.quick else 24),
+            "--workers",
+            str(args.workers),
+            "--refine",
+            str(args.refine),
+            "--refine-per-class",
+            str(args.refine_per_class),
+            "--de-strategy",
+            args.de_strategy,
+            "--out",
+            str(args.out),
+            "--overwrite",
+        ]
+        + (["--timoshenko"] if args.timoshenko else [])
+        + workspace
+    )
     print("fpm-sim " + " ".join(shlex.quote(c) for c in cmd), flush=True)
     sys.argv = ["fpm-sim", *cmd]
     return cli_main(cmd)

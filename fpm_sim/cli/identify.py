@@ -90,6 +90,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
     for flag, value in counts:
         if value < 1:
             raise CliError(f"{flag} must be >= 1, got {value}")
+    if args.refine < 1 or args.refine_per_class < 1:
+        raise CliError(f"--refine and --refine-per-class must be >= 1, got {args.refine} and {args.refine_per_class}")
     if args.surrogate_seeds < 0:
         raise CliError(f"--surrogate-seeds must be >= 0, got {args.surrogate_seeds}")
     opts = IdentifyOptions(
@@ -97,6 +99,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
         global_method=args.global_method,
         n_starts=args.starts,
         n_refine=args.refine,
+        refine_per_class=args.refine_per_class,
+        de_strategy=args.de_strategy,
         generations=args.generations,
         popsize=args.popsize,
         surrogate_seeds=args.surrogate_seeds,
@@ -213,6 +217,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--starts", type=int, default=24, help="multistart: Latin-hypercube points (default 24)")
     p.add_argument("--refine", type=int, default=4, help="best global candidates refined locally (default 4)")
+    p.add_argument(
+        "--de-strategy",
+        default="best1bin",
+        choices=("best1bin", "rand1bin"),
+        help="de: mutation strategy (default best1bin: around the best member; rand1bin: around a random one, "
+        "keeps more basins alive)",
+    )
+    p.add_argument(
+        "--refine-per-class",
+        type=int,
+        default=1,
+        help="de: final-population members per elbow-branch class that are refinement candidates, class "
+        "leaders first (default 1)",
+    )
     p.add_argument(
         "--max-nfev", type=int, default=30, help="local least squares: max residual evaluations (default 30)"
     )

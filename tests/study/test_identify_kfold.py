@@ -224,3 +224,17 @@ def test_cli_identify_writes_a_complete_folder_usable_with_config(tmp_path):
     # a second run into the same folder is refused without --overwrite, before any computation
     assert main(["identify", "--measured", str(csv), "--free", "hardware", "--out", str(out)]) == 2
     assert not list(tmp_path.glob(".id.tmp-*"))
+
+
+@pytest.mark.parametrize(
+    ("flag", "value"), [("--refine", "0"), ("--refine-per-class", "0"), ("--generations", "0"), ("--workers", "0")]
+)
+def test_cli_identify_refuses_counts_below_one_naming_the_option(tmp_path, capsys, flag, value):
+    from fpm_sim.cli.main import main
+
+    csv = tmp_path / "meas.csv"
+    csv.write_text("x_mm,y_mm,phi_rad,f1_hz\n0,0,0,40\n")
+    rc = main(["identify", "--measured", str(csv), "--free", "hardware", flag, value, "--out", str(tmp_path / "id")])
+    assert rc == 2
+    assert flag in capsys.readouterr().err
+    assert not (tmp_path / "id").exists()

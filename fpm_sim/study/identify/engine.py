@@ -11,16 +11,19 @@ Search (:func:`identify`):
 
 1. global exploration: ``"de"`` (the default: differential evolution of every free parameter on the
    full model at the fitted resolution, the elbow-branch combination an integer variable when the
-   geometry is free; the best final-population member of each branch combination is a candidate),
+   geometry is free, mutation ``de_strategy``; the best ``refine_per_class`` final-population members of
+   each branch combination are candidates, class leaders first),
    ``"multistart"`` (a Latin hypercube of ``n_starts`` points inside the bounds plus the start, each
    scored with the full model), ``"surrogate-de"`` (differential evolution of the geometry on the
    in-plane surrogate, :mod:`fpm_sim.study.inplane_surrogate`, scale-free, for every elbow-branch
    class, each class's best scored with the full model) or ``"hybrid"`` (the last two candidate lists
    together). The best ``n_refine`` candidates are refined. All seeded (``seed``): the same seed gives
    the same result.
-2. local refinement: bounded least squares (:func:`scipy.optimize.least_squares`, trust-region
-   reflective) on the full segment model; its Jacobian is by forward finite differences in
-   parameters normalised to their bounds (step ``1e-3`` of the bound width). The model's
+2. local refinement of every candidate (in ``workers`` forked processes when there are several):
+   bounded least squares (:func:`scipy.optimize.least_squares`, trust-region reflective) on the full
+   segment model; the lowest end is the optimum, every end is kept (``Identification.candidates``). The
+   Jacobian is by forward finite differences in parameters normalised to their bounds (step ``1e-3`` of
+   the bound width). The model's
    geometry enters through MjSpec compilation, which is not differentiable, so the gradients are
    finite differences, not exact (stated in the report).
 3. uncertainty: the Gauss-Newton covariance ``s^2 (J'J)^+`` at the optimum with
@@ -37,7 +40,7 @@ import dataclasses
 import math
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -112,6 +115,13 @@ class IdentifyOptions:
     """``de`` with the geometry free: members of the initial population per elbow-branch combination whose
     geometry is that branch's in-plane surrogate optimum (:func:`_surrogate_starts`; their other parameters
     from the Sobol sequence like the rest). ``0``: a Sobol population only."""
+    de_strategy: str = "best1bin"
+    """``de``: scipy's mutation strategy (``"best1bin"``: around the best member, greedy; ``"rand1bin"``: around
+    a random member, keeps more basins alive)."""
+    refine_per_class: int = 1
+    """``de``: final-population members of each elbow-branch class that are candidates for the local
+    refinement (its best ones). The candidates are taken class leaders first (every class's best, then every
+    class's second best, ...), ``n_refine`` of them."""
     seed: int = 0
     max_nfev: int = 40
     workers: int = 1
@@ -515,6 +525,7 @@ def _full_model_de(
             seed=opts.seed,
             maxiter=opts.generations,
             popsize=opts.popsize,
+            strategy=opts.de_strategy,
             tol=1e-8,
             polish=False,
             init=init,
@@ -529,17 +540,21 @@ def _full_model_de(
     obj.nfev += int(sol.nfev)
     pop = np.atleast_2d(getattr(sol, "population", sol.x[None, :]))
     energies = np.atleast_1d(getattr(sol, "population_energies", [sol.fun]))
-    out: dict[int, tuple[float, np.ndarray, str, tuple[int, int, int] | None]] = {}
+    out: dict[int, list[tuple[float, np.ndarray, str, tuple[int, int, int] | None]]] = {}
+    note = f"differential evolution ({sol.nit} generations, {sol.nfev} evaluations)"
     for v, e in sorted(zip(pop, energies), key=lambda t: t[1]):
         z, k = _de_decode(v, z_fixed, free, geometry_free)
-        if k not in out:
-            note = (
-                f"differential evolution ({sol.nit} generations, {sol.nfev} evaluations), best of its final population"
-            )
-            if branches[k] is not None:
-                note += f" with elbow branches {branches[k]}"
-            out[k] = (float(e), z, note, branches[k])
-    return sorted(out.values(), key=lambda t: t[0])
+        members = out.setdefault(k, [])
+        if len(members) < max(1, opts.refine_per_class):
+            rank = "best" if not members else f"no. {len(members) + 1}"
+            where = f" with elbow branches {branches[k]}" if branches[k] is not None else ""
+            members.append((float(e), z, f"{note}, {rank} of its final population{where}", branches[k]))
+    # class leaders first (every class's best, best first), then every class's second best, ...
+    return [
+        c
+        for rank in range(max(1, opts.refine_per_class))
+        for c in sorted((m[rank] for m in out.values() if len(m) > rank), key=lambda t: t[0])
+    ]
 
 
 def _de_initial_population(
@@ -587,6 +602,56 @@ def _with_branch(problem: Problem, branch: tuple[int, int, int]) -> Problem:
     return dataclasses.replace(problem, parameters=ParameterSet(start, ps.parameters))
 
 
+_REFINE_STATE: tuple[Problem, IdentifyOptions] | None = None
+"""The problem of the running local refinements: module state so that forked worker processes inherit it."""
+
+_Refined = tuple[np.ndarray, np.ndarray, np.ndarray, bool, int]
+"""A local refinement's end: normalised parameters, residuals, Jacobian, success, evaluations spent."""
+
+
+def _refine(job: tuple[np.ndarray, tuple[int, int, int] | None]) -> _Refined:
+    """Bounded least squares from ``job = (z, branch)`` on the problem in :data:`_REFINE_STATE` (on the
+    elbow-branch combination ``branch`` when given)."""
+    assert _REFINE_STATE is not None
+    problem, opts = _REFINE_STATE
+    z, branch = job
+    ob = _Objective(problem if branch is None else _with_branch(problem, branch), opts)
+    sol = least_squares(
+        ob.residuals,
+        np.clip(z, 0, 1),
+        bounds=(0.0, 1.0),
+        method="trf",
+        diff_step=1e-3,
+        max_nfev=opts.max_nfev,
+        x_scale=1.0,
+    )
+    return sol.x, sol.fun, sol.jac, bool(sol.success), ob.nfev
+
+
+def _refine_all(
+    problem: Problem, opts: IdentifyOptions, starts: Sequence[tuple[np.ndarray, str, Any]]
+) -> Iterator[_Refined]:
+    """Every start refined (:func:`_refine`). With ``opts.workers > 1`` and several starts, the starts are
+    refined in that many forked processes, one pose loop each (fewer, longer jobs than splitting each
+    evaluation's pose loop); otherwise one after the other, each pose loop in ``opts.workers`` processes.
+    Yields the ends in the starts' order as they come."""
+    import multiprocessing
+
+    global _REFINE_STATE
+    jobs = [(z, branch) for z, _, branch in starts]
+    parallel = opts.workers > 1 and len(jobs) > 1
+    _REFINE_STATE = (problem, dataclasses.replace(opts, workers=1) if parallel else opts)
+    try:
+        if not parallel:
+            for job in jobs:
+                yield _refine(job)
+            return
+        with multiprocessing.get_context("fork").Pool(min(opts.workers, len(jobs))) as pool:
+            yield from pool.imap(_refine, jobs, chunksize=1)
+    finally:
+        _REFINE_STATE = None
+
+
 def identify(problem: Problem, *, options: IdentifyOptions | None = None, progress: bool = False) -> Identification:
     """Fit ``problem`` (see module docstring). Returns the optimum with its uncertainty and history."""
 
@@ -631,49 +696,37 @@ def identify(problem: Problem, *, options: IdentifyOptions | None = None, progre
         )
     if opts.global_method == "de":
         found = _full_model_de(problem, obj, opts, progress=progress)
-        scored.extend(found)
         log(
             "global differential evolution",
-            found[0][0],
-            f"full model; {len(found)} elbow-branch classes in the final population",
+            min(t[0] for t in found),
+            f"full model; {len({t[3] for t in found})} elbow-branch classes in the final population",
         )
-    scored.sort(key=lambda t: t[0])
+        # the evolution's candidates in their order (class leaders first), then the start description
+        scored = found + scored[:1]
+    else:
+        scored.sort(key=lambda t: t[0])
     starts = [(z, note, branch) for _, z, note, branch in scored[: max(1, opts.n_refine)]]
     if opts.global_method == "none":
         starts = [(z_start, "start description", None)]
 
     best = None
     candidates = []
-    for z, note, branch in starts:
-        if branch is not None:
-            problem_b = _with_branch(problem, branch)
-            ob = _Objective(problem_b, opts)
-            ob.nfev = obj.nfev
-        else:
-            problem_b, ob = problem, obj
-        sol = least_squares(
-            ob.residuals,
-            np.clip(z, 0, 1),
-            bounds=(0.0, 1.0),
-            method="trf",
-            diff_step=1e-3,
-            max_nfev=opts.max_nfev,
-            x_scale=1.0,
-        )
-        obj.nfev = max(obj.nfev, ob.nfev)
-        c = float(np.sum(sol.fun**2))
-        candidates.append({"from": note, "cost": c, "values": ob.x(sol.x).tolist(), "success": bool(sol.success)})
+    for (_, note, branch), (zs, fun, jac, success, nfev) in zip(starts, _refine_all(problem, opts, starts)):
+        problem_b = problem if branch is None else _with_branch(problem, branch)
+        obj.nfev += nfev
+        c = float(np.sum(fun**2))
+        candidates.append({"from": note, "cost": c, "values": obj.x(zs).tolist(), "success": success})
         log("local least squares", c, f"from {note}")
         if best is None or c < best[0]:
-            best = (c, sol, problem_b, ob)
+            best = (c, (zs, fun, jac), problem_b)
     assert best is not None
-    cost, sol, problem_b, ob = best
-    x = ob.x(sol.x)
-    jz = sol.jac
+    cost, (z_opt, fun, jz), problem_b = best
+    ob = obj if problem_b is problem else _Objective(problem_b, opts)
+    x = ob.x(z_opt)
     jx = jz / ob.width[None, :]
-    n, k = len(sol.fun) - len(problem.workspace), len(x)  # the workspace residuals are a prior, not data
+    n, k = len(fun) - len(problem.workspace), len(x)  # the workspace residuals are a prior, not data
     dof = max(n - k, 0)
-    chi2 = float(np.sum(sol.fun**2))
+    chi2 = float(np.sum(fun**2))
     chi2_dof = chi2 / dof if dof > 0 else math.nan
     s2 = max(chi2_dof, 1.0) if dof > 0 else 1.0
     cov = s2 * np.linalg.pinv(jx.T @ jx)
@@ -681,7 +734,7 @@ def identify(problem: Problem, *, options: IdentifyOptions | None = None, progre
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(std, std)
     eps = 1e-6
-    at_bound = [p.name for p, zi in zip(ps.parameters, sol.x) if zi < eps or zi > 1 - eps]
+    at_bound = [p.name for p, zi in zip(ps.parameters, z_opt) if zi < eps or zi > 1 - eps]
     cfg = problem_b.parameters.apply(x)
     predicted = ob.predictions(x)
     return Identification(

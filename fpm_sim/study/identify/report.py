@@ -198,15 +198,36 @@ def render_report(
     lines += ["", "## Search history", "", "| stage | evaluations | cost | seconds | note |", "|---|---|---|---|---|"]
     for h in result.history:
         lines.append(f"| {h.stage} | {h.evaluations} | {h.cost:.4g} | {h.seconds:.0f} | {h.note} |")
-    if result.candidates:
-        lines += [
-            "",
-            "Local refinements: " + "; ".join(f"from {c['from']}: cost {c['cost']:.4g}" for c in result.candidates),
-        ]
+    lines += competing_optima_lines(result)
     if extra:
         lines += ["", extra]
     lines += ["", "Figures: `measured_vs_predicted.png`, `residuals_workspace.png`."]
     return "\n".join(lines) + "\n"
+
+
+def competing_optima_lines(result: Identification) -> list[str]:
+    """The report's table of every local refinement's end, best first: its cost above the optimum's in units
+    of ``s^2 = max(chi^2/dof, 1)`` (the scale of the standard deviations: an end within a few units fits the
+    data about as well, so the data do not decide between them) and its parameter values."""
+    if not result.candidates:
+        return []
+    s2 = max(result.chi2_per_dof, 1.0) if math.isfinite(result.chi2_per_dof) else 1.0
+    names = result.names
+    lines = [
+        "",
+        "## Local refinements (competing optima)",
+        "",
+        "Every refinement's end, best first. Delta: its cost above the optimum's divided by "
+        f"s^2 = {s2:.3g} (ends a few units apart fit the data about as well; their predictions elsewhere can "
+        "differ by far more than the standard deviations above).",
+        "",
+        "| cost | delta | from | " + " | ".join(names) + " |",
+        "|---|---|---|" + "---|" * len(names),
+    ]
+    for c in sorted(result.candidates, key=lambda c: c["cost"]):
+        vals = " | ".join(f"{v:.4g}" for v in c["values"])
+        lines.append(f"| {c['cost']:.4g} | {(c['cost'] - result.cost) / s2:.2f} | {c['from']} | {vals} |")
+    return lines
 
 
 def plot_figures(result: Identification, cv: CrossValidation | None, folder: Path) -> None:
