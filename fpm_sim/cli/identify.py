@@ -84,14 +84,17 @@ def cmd_identify(args: argparse.Namespace) -> int:
     ps = parameter_set(start, groups)
     if any(p.subsystem for p in ps.parameters) and not tests:
         raise CliError("--free rig needs --subsystems FILE.csv (the rig parameters are seen only by rig tests)")
-    if args.workers < 1:
-        raise CliError(f"--workers must be >= 1, got {args.workers}")
-    counts = (("--segments", args.segments), ("--generations", args.generations), ("--popsize", args.popsize))
+    counts = (
+        ("--workers", args.workers),
+        ("--segments", args.segments),
+        ("--generations", args.generations),
+        ("--popsize", args.popsize),
+        ("--refine", args.refine),
+        ("--refine-per-class", args.refine_per_class),
+    )
     for flag, value in counts:
         if value < 1:
             raise CliError(f"{flag} must be >= 1, got {value}")
-    if args.refine < 1 or args.refine_per_class < 1:
-        raise CliError(f"--refine and --refine-per-class must be >= 1, got {args.refine} and {args.refine_per_class}")
     if args.surrogate_seeds < 0:
         raise CliError(f"--surrogate-seeds must be >= 0, got {args.surrogate_seeds}")
     opts = IdentifyOptions(

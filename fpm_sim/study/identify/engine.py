@@ -70,6 +70,7 @@ __all__ = [
     "identify",
     "predict_observations",
     "predict_with_std",
+    "variance_scale",
     "workspace_measures",
     "workspace_residuals",
 ]
@@ -381,6 +382,20 @@ class Identification:
         }
 
 
+def _least_squares_z(fun: Any, z0: np.ndarray, max_nfev: int) -> Any:
+    """Bounded least squares (trust-region reflective) in parameters normalised to their bounds, ``z in [0, 1]``;
+    forward finite differences with a step of ``1e-3`` of the bound width. Every local fit here goes through it."""
+    return least_squares(
+        fun, np.clip(z0, 0.0, 1.0), bounds=(0.0, 1.0), method="trf", diff_step=1e-3, max_nfev=max_nfev, x_scale=1.0
+    )
+
+
+def variance_scale(chi2_per_dof: float) -> float:
+    """``s^2 = max(chi^2/dof, 1)`` (1 where there is no degree of freedom, ``chi2_per_dof`` NaN): the factor on
+    the Gauss-Newton covariance, and the unit of the report's cost differences between competing optima."""
+    return max(chi2_per_dof, 1.0) if math.isfinite(chi2_per_dof) else 1.0
+
+
 def _lhs(n: int, d: int, seed: int) -> np.ndarray:
     return qmc.LatinHypercube(d=d, seed=seed).random(n)
 
@@ -497,9 +512,7 @@ def _full_model_de(
             # the pose block is cached: only the rigs are re-solved (the workspace block does not see them)
             return obj.residuals(z)[n_obs : n_obs + len(problem.subsystem_tests)]
 
-        z_fixed[sub] = least_squares(
-            rig_residuals, z_fixed[sub], bounds=(0.0, 1.0), method="trf", diff_step=1e-3, max_nfev=40
-        ).x
+        z_fixed[sub] = _least_squares_z(rig_residuals, z_fixed[sub], max_nfev=40).x
     d = len(free)
     bounds = [(0.0, 1.0)] * d + ([(0.0, len(branches) - 1.0)] if geometry_free else [])
     init = _de_initial_population(obj, opts, free, branches, progress=progress)
@@ -616,15 +629,7 @@ def _refine(job: tuple[np.ndarray, tuple[int, int, int] | None]) -> _Refined:
     problem, opts = _REFINE_STATE
     z, branch = job
     ob = _Objective(problem if branch is None else _with_branch(problem, branch), opts)
-    sol = least_squares(
-        ob.residuals,
-        np.clip(z, 0, 1),
-        bounds=(0.0, 1.0),
-        method="trf",
-        diff_step=1e-3,
-        max_nfev=opts.max_nfev,
-        x_scale=1.0,
-    )
+    sol = _least_squares_z(ob.residuals, z, max_nfev=opts.max_nfev)
     return sol.x, sol.fun, sol.jac, bool(sol.success), ob.nfev
 
 
@@ -728,7 +733,7 @@ def identify(problem: Problem, *, options: IdentifyOptions | None = None, progre
     dof = max(n - k, 0)
     chi2 = float(np.sum(fun**2))
     chi2_dof = chi2 / dof if dof > 0 else math.nan
-    s2 = max(chi2_dof, 1.0) if dof > 0 else 1.0
+    s2 = variance_scale(chi2_dof)
     cov = s2 * np.linalg.pinv(jx.T @ jx)
     std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -838,7 +843,7 @@ def cross_validate(
         train = np.array([fold[i] != k for i in index])
         ob = _Objective(problem, opts, obs_mask=train)
         z_best = ob.z(result.values)
-        sol = least_squares(ob.residuals, z_best, bounds=(0.0, 1.0), method="trf", diff_step=1e-3, max_nfev=max_nfev)
+        sol = _least_squares_z(ob.residuals, z_best, max_nfev=max_nfev)
         cfg = problem.parameters.apply(ob.x(sol.x))
         test = [o for o, t in zip(obs, train) if not t]
         f = predict_observations(cfg, test, options=opts.model_options(), workers=opts.workers)

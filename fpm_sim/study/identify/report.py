@@ -18,7 +18,7 @@ from scipy.stats import spearmanr
 from fpm_sim.config import Manipulator, config_to_toml
 from fpm_sim.outputs import atomic_dir
 from fpm_sim.results import to_jsonable
-from fpm_sim.study.identify.engine import CrossValidation, Identification, workspace_measures
+from fpm_sim.study.identify.engine import CrossValidation, Identification, variance_scale, workspace_measures
 
 __all__ = ["identified_config", "provenance_key", "render_report", "write_identification"]
 
@@ -211,7 +211,7 @@ def competing_optima_lines(result: Identification) -> list[str]:
     data about as well, so the data do not decide between them) and its parameter values."""
     if not result.candidates:
         return []
-    s2 = max(result.chi2_per_dof, 1.0) if math.isfinite(result.chi2_per_dof) else 1.0
+    s2 = variance_scale(result.chi2_per_dof)
     names = result.names
     lines = [
         "",
