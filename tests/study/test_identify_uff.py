@@ -17,6 +17,14 @@ from fpm_sim.study.identify.ema import EmaError, estimate_modes, read_frfs, writ
 from tests.conftest import PREVIOUS_DEFAULT_CONFIG
 
 SEGMENTS = 3
+# What LSCF with sdypy-EMA's stabilisation chart promises on a noise-free rational FRF. The reported pole is the
+# one nearest each peak among those stable between consecutive polynomial orders (fn_tol 1e-3, xi_tol 5e-2), so
+# which order supplies it depends on floating-point detail: 1e-8 relative here (numpy 2.4 / scipy 1.17 /
+# sdypy-EMA 0.31.0), 2.5e-5 on a newcomer's machine with the same sdypy-EMA (130.0032 Hz for 130 Hz). 1e-4 is
+# 4x the worst seen and 10x inside the chart's own fn_tol. A pole's error spreads to its real part, so the
+# damping ratio's relative error is about the frequency's divided by zeta (0.01 here): 2.5e-3, hence 5e-3.
+EMA_FREQ_RTOL = 1e-4
+EMA_DAMPING_RTOL = 5e-3
 POSES_MM = [(0.0, 0.0, 0.2), (50.0, -50.0, 0.0), (-50.0, 50.0, 0.0), (100.0, 0.0, 0.2)]
 
 
@@ -40,9 +48,9 @@ def test_ema_recovers_known_poles():
     from fpm_sim.study.identify.ema import MeasuredFrf
 
     est = estimate_modes(MeasuredFrf(f, h, "synthetic", (0, 0, 0)), f_lower_hz=5, f_upper_hz=300, n_modes=3)
-    # noise-free rational FRF: LSCF is exact up to its numerical conditioning (measured ~1e-8 relative)
-    np.testing.assert_allclose(est.freq_hz, fn, rtol=1e-6)
-    np.testing.assert_allclose(est.damping, zeta, rtol=1e-4)
+    # noise-free rational FRF: LSCF exact up to which stable order is picked (EMA_FREQ_RTOL says why)
+    np.testing.assert_allclose(est.freq_hz, fn, rtol=EMA_FREQ_RTOL)
+    np.testing.assert_allclose(est.damping, zeta, rtol=EMA_DAMPING_RTOL)
 
 
 def test_ema_refuses_a_band_without_peaks():
@@ -164,9 +172,9 @@ def test_ema_removes_the_exponential_windows_decay():
     frf = MeasuredFrf(f, h, "windowed", (0, 0, 0), window_tau_s=tau_s)
     est = estimate_modes(frf, f_lower_hz=5, f_upper_hz=300, n_modes=3)
     assert est.window_tau_s == tau_s
-    # noise-free rational FRF: LSCF exact to its conditioning (test_ema_recovers_known_poles: 1e-6 / 1e-4)
-    np.testing.assert_allclose(est.freq_hz, fn, rtol=1e-6)
-    np.testing.assert_allclose(est.damping, zeta, rtol=1e-4)
+    # noise-free rational FRF: LSCF exact up to which stable order is picked (EMA_FREQ_RTOL says why)
+    np.testing.assert_allclose(est.freq_hz, fn, rtol=EMA_FREQ_RTOL)
+    np.testing.assert_allclose(est.damping, zeta, rtol=EMA_DAMPING_RTOL)
     # the argument overrides the file's value; inf means no window
     same = estimate_modes(frf, f_lower_hz=5, f_upper_hz=300, n_modes=3, window_tau_s=np.inf)
     np.testing.assert_allclose(same.damping, raw.damping, rtol=1e-12)
