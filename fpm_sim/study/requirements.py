@@ -560,8 +560,8 @@ def evaluate(
                     + (
                         f"{m:.3f} Hz ({pct:.2f} %) outside {lo:g}..{hi:g} Hz"
                         if m >= 0
-                        else f"inside {lo:g}..{hi:g} Hz by {-m:.3f} Hz ({-pct:.2f} %: the smallest shift that clears the "
-                        "band)"
+                        else f"inside {lo:g}..{hi:g} Hz by {-m:.3f} Hz ({-pct:.2f} %: the smallest shift "
+                        "that clears the band)"
                     )
                 ),
             )
