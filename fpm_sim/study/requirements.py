@@ -350,7 +350,10 @@ def parse_requirements(data: dict[str, Any], path: Path) -> RequirementsFile:
     reqs = data.get("requirement", [])
     if not isinstance(reqs, list) or not reqs:
         raise RequirementError(f"{path}: no requirement; add [[requirement]] tables (name, kind, ...)")
-    parsed = tuple(_requirement(t, i, base, seg) for i, t in enumerate(reqs))
+    try:
+        parsed = tuple(_requirement(t, i, base, seg) for i, t in enumerate(reqs))
+    except RequirementError as exc:
+        raise RequirementError(f"{path}: {exc}") from None
     names = [r.name for r in parsed]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
@@ -684,7 +687,9 @@ class CheckReport:
         ax.barh(names, vals, color=colors)
         ax.axvline(0.0, color="black", lw=1)
         ax.set_xlabel("margin at the worst point (%; < 0 fails)")
-        ax.set_title(f"{self.source} on {self.config_name}", fontsize=9)
+        import textwrap
+
+        ax.set_title(textwrap.fill(f"{self.source} on {self.config_name}", 90), fontsize=8)
         return fig
 
     def junit_xml(self) -> str:
@@ -730,32 +735,29 @@ def check_requirements(
     """
     cache = cache or SweepCache()
     before = cache.computed
+    effective = [r if segments is None else dataclasses.replace(r, segments=segments) for r in reqs.requirements]
     resolved: list[list[Pose] | None] = []
-    for r in reqs.requirements:
-        if segments is not None:
-            r = dataclasses.replace(r, segments=segments)
+    for r in effective:
         if r.kind == "match_measurements":
             resolved.append(None)
             continue
-        _check_probability(r)
-        resolved.append(r.poses.resolve(config, f"requirement {r.name!r}"))
+        try:
+            _check_probability(r)
+            resolved.append(r.poses.resolve(config, f"requirement {r.name!r}"))
+        except FpmSimError as exc:
+            raise RequirementError(f"{reqs.path}: {exc}") from None
     need: dict[tuple[Any, ...], tuple[list[Pose], float | None, ModelOptions, int]] = {}
-    for r, pts in zip(reqs.requirements, resolved):
+    for r, pts in zip(effective, resolved):
         if pts is None:
             continue
-        opts = r.options(segments)
+        opts = r.options()
         for m in _needed_payloads(r):
             key = (_pose_key(pts), m, opts)
             n = max(r.modes_needed(), need[key][3] if key in need else 0)
             need[key] = (pts, m, opts, n)
     for pts, m, opts, n in need.values():
         cache.frequencies(config, pts, m, opts, n)
-    outcomes = [
-        evaluate(
-            dataclasses.replace(r, segments=segments) if segments is not None else r, config, cache=cache, poses=pts
-        )
-        for r, pts in zip(reqs.requirements, resolved)
-    ]
+    outcomes = [evaluate(r, config, cache=cache, poses=pts) for r, pts in zip(effective, resolved)]
     return CheckReport(reqs.path.name, config.name, outcomes, cache.computed - before)
 
 
