@@ -48,7 +48,7 @@ def _no_posterior(probability: float | None, posterior: Any) -> None:
         )
 
 
-def _pose_spec(poses: Any, grid: Any) -> tuple[Any, list[Pose] | None]:
+def pose_spec_of(poses: Any, grid: Any) -> tuple[Any, list[Pose] | None]:
     """``(PoseSpec, explicit poses or None)`` from the helpers' ``poses=``/``grid=`` arguments."""
     from fpm_sim.kinematics import Pose
     from fpm_sim.study.requirements import PoseSpec, RequirementError, parse_pose_spec
@@ -152,7 +152,7 @@ def assert_min_frequency(
     from fpm_sim.study.requirements import Requirement
 
     _no_posterior(probability, posterior)
-    spec, explicit = _pose_spec(poses, grid)
+    spec, explicit = pose_spec_of(poses, grid)
     req = Requirement(
         name=name or f"f{mode} >= {at_least_hz:g} Hz",
         kind="min_frequency",
@@ -189,7 +189,7 @@ def assert_no_mode_in_band(
 
     if not 0 <= low_hz < high_hz:
         raise FpmSimError(f"the band must satisfy 0 <= low_hz < high_hz, got {low_hz:g}..{high_hz:g}")
-    spec, explicit = _pose_spec(poses, grid)
+    spec, explicit = pose_spec_of(poses, grid)
     req = Requirement(
         name=name or f"no mode in {low_hz:g}..{high_hz:g} Hz",
         kind="band_exclusion",

@@ -64,11 +64,13 @@ __all__ = [
     "RequirementsFile",
     "SweepCache",
     "check_requirements",
+    "effective_requirements",
     "evaluate",
     "load_requirements",
     "parse_pose_spec",
     "parse_requirements",
     "pose_text",
+    "prepare_sweeps",
     "with_payload",
 ]
 
@@ -725,19 +727,21 @@ class CheckReport:
         return Path(path)
 
 
-def check_requirements(
-    reqs: RequirementsFile, config: Manipulator, *, cache: SweepCache | None = None, segments: int | None = None
-) -> CheckReport:
-    """Evaluate every requirement of ``reqs`` on ``config`` (``segments`` overrides the file's resolution).
+def effective_requirements(reqs: RequirementsFile, segments: int | None = None) -> list[Requirement]:
+    """The requirements of ``reqs`` with ``segments`` (when given) overriding each one's resolution."""
+    return [r if segments is None else dataclasses.replace(r, segments=segments) for r in reqs.requirements]
 
-    Pose sets are resolved (and checked) first, so that bad input fails before any sweep; each shared sweep
-    is then run once, for the most modes the requirements that share it need.
+
+def prepare_sweeps(
+    requirements: Sequence[Requirement], config: Manipulator, cache: SweepCache, *, keep_errors: bool = False
+) -> list[list[Pose] | FpmSimError | None]:
+    """Resolve every requirement's poses, then run each shared sweep once, for the most modes it is asked for.
+
+    Returns per requirement its poses (None for ``match_measurements``); a requirement whose poses cannot be
+    resolved raises, or with ``keep_errors`` gets its :class:`FpmSimError` in its place (the others still run).
     """
-    cache = cache or SweepCache()
-    before = cache.computed
-    effective = [r if segments is None else dataclasses.replace(r, segments=segments) for r in reqs.requirements]
-    resolved: list[list[Pose] | None] = []
-    for r in effective:
+    resolved: list[list[Pose] | FpmSimError | None] = []
+    for r in requirements:
         if r.kind == "match_measurements":
             resolved.append(None)
             continue
@@ -745,10 +749,12 @@ def check_requirements(
             _check_probability(r)
             resolved.append(r.poses.resolve(config, f"requirement {r.name!r}"))
         except FpmSimError as exc:
-            raise RequirementError(f"{reqs.path}: {exc}") from None
+            if not keep_errors:
+                raise
+            resolved.append(exc)
     need: dict[tuple[Any, ...], tuple[list[Pose], float | None, ModelOptions, int]] = {}
-    for r, pts in zip(effective, resolved):
-        if pts is None:
+    for r, pts in zip(requirements, resolved):
+        if not isinstance(pts, list):
             continue
         opts = r.options()
         for m in _needed_payloads(r):
@@ -757,7 +763,28 @@ def check_requirements(
             need[key] = (pts, m, opts, n)
     for pts, m, opts, n in need.values():
         cache.frequencies(config, pts, m, opts, n)
-    outcomes = [evaluate(r, config, cache=cache, poses=pts) for r, pts in zip(effective, resolved)]
+    return resolved
+
+
+def check_requirements(
+    reqs: RequirementsFile, config: Manipulator, *, cache: SweepCache | None = None, segments: int | None = None
+) -> CheckReport:
+    """Evaluate every requirement of ``reqs`` on ``config`` (``segments`` overrides the file's resolution).
+
+    Pose sets are resolved (and checked) first, so that bad input fails before any sweep; each shared sweep
+    is then run once, for the most modes the requirements that share it need (:func:`prepare_sweeps`).
+    """
+    cache = cache or SweepCache()
+    before = cache.computed
+    effective = effective_requirements(reqs, segments)
+    try:
+        resolved = prepare_sweeps(effective, config, cache)
+    except FpmSimError as exc:
+        raise RequirementError(f"{reqs.path}: {exc}") from None
+    outcomes = [
+        evaluate(r, config, cache=cache, poses=pts if isinstance(pts, list) else None)
+        for r, pts in zip(effective, resolved)
+    ]
     return CheckReport(reqs.path.name, config.name, outcomes, cache.computed - before)
 
 
