@@ -71,6 +71,7 @@ def test_check_passes_and_fails_with_exit_codes_table_json_and_junit(tmp_path, c
 def test_bad_input_is_one_error_line_and_exit_2(tmp_path, capsys, body, match):
     code, out, err = run(capsys, "check", str(write(tmp_path, body)))
     assert code == 2
+    assert out == ""
     assert err.startswith("error: ")
     assert err.count("\n") == 1
     assert match in err
