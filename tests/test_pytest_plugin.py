@@ -11,8 +11,9 @@ from importlib.metadata import entry_points
 
 import pytest
 
-import fpm_sim.study.requirements  # noqa: F401  (loaded before pytester's snapshot of sys.modules: the
-# in-process runs below would otherwise unload NumPy and MuJoCo at each test's end, and they load once only)
+# loaded before pytester's snapshot of sys.modules: the in-process runs below would otherwise unload NumPy and
+# MuJoCo at each test's end, and those load once per process only
+import fpm_sim.study.requirements  # noqa: F401
 
 pytest_plugins = ["pytester"]
 
