@@ -46,7 +46,7 @@ from fpm_sim.batch.frequencies import pose_frequencies
 from fpm_sim.batch.pose_loop import PoseFrequencies, fast_options, pose_assembly, read_poses_csv
 from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError
-from fpm_sim.kinematics import Pose
+from fpm_sim.kinematics import SINGULAR_TOL, Pose, assemble_many
 from fpm_sim.model.options import ModelOptions, resolution_label
 from fpm_sim.study.identify.data import read_measured_csv
 from fpm_sim.study.identify.engine import predict_observations
@@ -134,11 +134,12 @@ class PoseSpec:
         """The poses; an explicitly named pose that is unreachable or singular raises, naming ``where``."""
         if self.kind == "workspace":
             grid = dense_grid(config, step_mm=self.step_mm, phi_rad=self.phi_rad)
-            poses = []
-            for p in grid:
-                _, measure, status = pose_assembly(config, p)
-                if status in ("ok", "near_singular") and measure >= self.min_singularity:
-                    poses.append(p)
+            many = assemble_many(
+                config.geometry, [p.x_m for p in grid], [p.y_m for p in grid], [p.phi_rad for p in grid]
+            )
+            # the pose loop's statuses ok / near_singular (pose_assembly): reachable and not singular
+            keep = many.reachable & (many.singularity >= max(SINGULAR_TOL, self.min_singularity))
+            poses = [p for p, k in zip(grid, keep) if k]
         elif self.kind == "paper":
             poses = [sp.pose for sp in study_poses(parse_reading(self.reading))]
         else:
@@ -741,13 +742,16 @@ def prepare_sweeps(
     resolved raises, or with ``keep_errors`` gets its :class:`FpmSimError` in its place (the others still run).
     """
     resolved: list[list[Pose] | FpmSimError | None] = []
+    by_spec: dict[PoseSpec, list[Pose]] = {}  # requirements naming the same pose set resolve it once
     for r in requirements:
         if r.kind == "match_measurements":
             resolved.append(None)
             continue
         try:
             _check_probability(r)
-            resolved.append(r.poses.resolve(config, f"requirement {r.name!r}"))
+            if r.poses not in by_spec:
+                by_spec[r.poses] = r.poses.resolve(config, f"requirement {r.name!r}")
+            resolved.append(by_spec[r.poses])
         except FpmSimError as exc:
             if not keep_errors:
                 raise
