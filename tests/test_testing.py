@@ -288,3 +288,19 @@ def test_reader_errors_name_the_requirement_and_key(tmp_path, text, match):
     path.write_text(text)
     with pytest.raises(RequirementError, match=match):
         load_requirements(path)
+
+
+def test_workspace_pose_set_is_the_pose_loops_computable_grid_points(default_manip):
+    """The vectorised workspace filter keeps exactly the grid points the pose loop computes (ok, near_singular)."""
+    from fpm_sim.batch.pose_loop import pose_assembly
+    from fpm_sim.study.requirements import PoseSpec
+    from fpm_sim.study.sweep import dense_grid
+
+    grid = dense_grid(default_manip, step_mm=50.0)
+    statuses = [pose_assembly(default_manip, p) for p in grid]
+    expected = [p for p, (_, _, s) in zip(grid, statuses) if s in ("ok", "near_singular")]
+    assert PoseSpec(step_mm=50.0).resolve(default_manip, "w") == expected
+    assert 0 < len(expected) < len(grid)  # the grid's square holds unreachable corners
+    far = [p for p, (_, m, s) in zip(grid, statuses) if s in ("ok", "near_singular") and m >= 0.3]
+    assert PoseSpec(step_mm=50.0, min_singularity=0.3).resolve(default_manip, "w") == far
+    assert len(far) < len(expected)
