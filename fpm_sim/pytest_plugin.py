@@ -166,12 +166,11 @@ class FpmSweep:
         segments: int | None = None,
     ) -> PoseFrequencies:
         """The lowest ``n_modes`` frequencies at the poses (default: the reachable workspace, 10 mm grid)."""
-        from fpm_sim.batch.pose_loop import fast_options
+        from fpm_sim.study.requirements import options_for
 
         seg = segments if segments is not None else self.segments
-        opts = fast_options() if seg is None else fast_options(segments=seg)
         pts = self._poses(poses, grid)
-        return self.cache.frequencies(self.config, pts, payload_kg, opts, n_modes)
+        return self.cache.frequencies(self.config, pts, payload_kg, options_for(seg), n_modes)
 
     def mode(
         self,
@@ -183,14 +182,13 @@ class FpmSweep:
         segments: int | None = None,
     ) -> ModeFrequencies:
         """Mode ``mode`` at every pose, comparable with a number: ``assert fpm_sweep.mode(1) >= 40.0``."""
-        from fpm_sim.batch.pose_loop import fast_options
         from fpm_sim.model.options import resolution_label
-        from fpm_sim.study.requirements import ModeFrequencies
+        from fpm_sim.study.requirements import ModeFrequencies, options_for
 
         seg = segments if segments is not None else self.segments
         pf = self.frequencies(poses=poses, grid=grid, payload_kg=payload_kg, n_modes=mode, segments=seg)
-        opts = fast_options() if seg is None else fast_options(segments=seg)
-        return ModeFrequencies(mode, pf.poses, pf.frequencies_hz[:, mode - 1], payload_kg, resolution_label(opts))
+        label = resolution_label(options_for(seg))
+        return ModeFrequencies(mode, pf.poses, pf.frequencies_hz[:, mode - 1], payload_kg, label)
 
     def check(self, requirement: Requirement) -> RequirementOutcome:
         """Evaluate a requirement (:class:`fpm_sim.study.requirements.Requirement`) on the shared sweeps."""

@@ -67,6 +67,7 @@ __all__ = [
     "effective_requirements",
     "evaluate",
     "load_requirements",
+    "options_for",
     "parse_pose_spec",
     "parse_requirements",
     "pose_text",
@@ -94,6 +95,11 @@ class RequirementError(FpmSimError):
 def pose_text(pose: Pose) -> str:
     """``(x=50.0 mm, y=-20.0 mm, phi=0.000 rad)``."""
     return pose.label()
+
+
+def options_for(segments: int | None) -> ModelOptions:
+    """The pose loop's options at ``segments`` per link (None: the shared default fidelity)."""
+    return fast_options() if segments is None else fast_options(segments=segments)
 
 
 def with_payload(config: Manipulator, payload_kg: float) -> Manipulator:
@@ -233,7 +239,7 @@ class Requirement:
 
     def options(self, default_segments: int | None = None) -> ModelOptions:
         seg = self.segments if self.segments is not None else default_segments
-        return fast_options() if seg is None else fast_options(segments=seg)
+        return options_for(seg)
 
     def describe(self) -> str:
         pay = "" if not self.payload_kg else f", payload {' .. '.join(f'{m:g}' for m in self.payload_kg)} kg"
