@@ -304,3 +304,18 @@ def test_workspace_pose_set_is_the_pose_loops_computable_grid_points(default_man
     far = [p for p, (_, m, s) in zip(grid, statuses) if s in ("ok", "near_singular") and m >= 0.3]
     assert PoseSpec(step_mm=50.0, min_singularity=0.3).resolve(default_manip, "w") == far
     assert len(far) < len(expected)
+
+
+def test_assert_requirement_on_a_requirement_and_on_an_outcome(default_manip):
+    from fpm_sim.study.requirements import PoseSpec, Requirement, evaluate
+    from fpm_sim.testing import assert_requirement
+
+    spec = PoseSpec(kind="list", points=tuple(POSES_MM))
+    req = Requirement("f1 > 1 kHz", "min_frequency", spec, segments=SEG, at_least_hz=1000.0)
+    with pytest.raises(AssertionError, match=r"requirement 'f1 > 1 kHz' .*FAILED: worst mode 1 at pose"):
+        assert_requirement(req, default_manip)
+    ok = evaluate(Requirement("f1 > 1 Hz", "min_frequency", spec, segments=SEG, at_least_hz=1.0), default_manip)
+    assert ok.passed
+    assert_requirement(ok)
+    with pytest.raises(FpmSimError, match="give the description"):
+        assert_requirement(req)

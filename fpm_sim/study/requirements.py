@@ -687,18 +687,21 @@ class CheckReport:
         import matplotlib.pyplot as plt
 
         if ax is None:
-            fig, ax = plt.subplots(figsize=(7, 0.5 * len(self.outcomes) + 1.5), constrained_layout=True)
+            width = 5.0 + 0.07 * max(len(o.name) for o in self.outcomes)  # room for the names
+            fig, ax = plt.subplots(figsize=(width, 0.5 * len(self.outcomes) + 1.5), constrained_layout=True)
         else:
             fig = ax.figure
         names = [o.name for o in self.outcomes][::-1]
         vals = [o.margin_pct if math.isfinite(o.margin_pct) else -100.0 for o in self.outcomes][::-1]
         colors = ["tab:green" if o.passed else "tab:red" for o in self.outcomes][::-1]
-        ax.barh(names, vals, color=colors)
+        bars = ax.barh(names, vals, color=colors)
+        ax.bar_label(bars, labels=[f"{v:.1f} %" for v in vals], padding=3, fontsize=8)
+        ax.margins(x=0.15)
         ax.axvline(0.0, color="black", lw=1)
         ax.set_xlabel("margin at the worst point (%; < 0 fails)")
         import textwrap
 
-        ax.set_title(textwrap.fill(f"{self.source} on {self.config_name}", 90), fontsize=8)
+        ax.set_title(textwrap.fill(f"{self.source} on {self.config_name}", int(11 * fig.get_figwidth())), fontsize=8)
         return fig
 
     def junit_xml(self) -> str:
