@@ -222,6 +222,8 @@ def assert_matches_measurements(
 
     if not (math.isfinite(tolerance_pct) and tolerance_pct > 0):
         raise FpmSimError(f"tolerance_pct must be > 0, got {tolerance_pct!r}")
+    if len(_payload(payload_kg)) > 1:
+        raise FpmSimError("payload_kg: measurements were taken at one payload; give one mass (kg)")
     req = Requirement(
         name=name or f"within {tolerance_pct:g} % of {Path(measured_csv).name}",
         kind="match_measurements",

@@ -32,7 +32,13 @@ def test_f1_above_40_hz_as_a_comparison(fpm_sweep):
 
 def test_no_mode_in_spindle_band(fpm_config, fpm_sweep):
     assert_no_mode_in_band(
-        fpm_config, 160.0, 175.0, poses=MACHINING_POSES, n_modes=4, payload_kg=(0.0, 1.0), segments=4,
+        fpm_config,
+        160.0,
+        175.0,
+        poses=MACHINING_POSES,
+        n_modes=4,
+        payload_kg=(0.0, 1.0),
+        segments=4,
         cache=fpm_sweep.cache,
     )
 
@@ -47,7 +53,8 @@ def test_regression_against_last_release(fpm_sweep):
     assert_frequencies_close(result, [126.5, 139.2, 139.2], rtol=0.002)
 
 
-@pytest.mark.xfail(reason="near the singularity loci f1 falls to ~11 Hz: the whole reachable workspace is not usable",
-                   strict=True)
+@pytest.mark.xfail(
+    reason="near the singularity loci f1 falls to ~11 Hz: the whole reachable workspace is not usable", strict=True
+)
 def test_f1_above_40_hz_everywhere_reachable(fpm_config, fpm_sweep):
     assert_min_frequency(fpm_config, 40.0, grid={"grid": "dense", "step_mm": 50}, segments=4, cache=fpm_sweep.cache)

@@ -489,9 +489,8 @@ def _grid_outcome(
     passed = n_fail == 0
     head = f"requirement {req.name!r} ({req.kind}: {req.describe()}) {'passed' if passed else 'FAILED'}"
     where = f"mode {mode} at pose {pose_text(poses[i])} with {_payload_text(pay)}"
-    msg = (
-        f"{head}: worst {where}: {describe(value, margin, pct)}; {n_fail} of {len(poses)} poses fail; resolution: {res}"
-    )
+    detail = describe(value, margin, pct) if math.isfinite(value) else "no frequency computed there (NaN)"
+    msg = f"{head}: worst {where}: {detail}; {n_fail} of {len(poses)} poses fail; resolution: {res}"
     return RequirementOutcome(
         req.name, req.kind, passed, margin, pct, poses[i], mode, value, pay, len(poses), n_fail, res, msg
     )
