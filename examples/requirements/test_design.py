@@ -48,7 +48,8 @@ def test_matches_hammer_tests(fpm_config):
 
 
 def test_regression_against_last_release(fpm_sweep):
-    # f1..f3 at the centre pose as the released design had them (4 segments per link, the description's payload)
+    # f1..f3 at the centre pose as recorded from this design (4 segments per link, the description's 0.5 kg
+    # payload): a change of design.toml that moves one of them by more than 0.2 % fails here
     result = fpm_sweep.frequencies(poses=[(0, 0, 0.0)], n_modes=3)
     assert_frequencies_close(result, [126.5, 139.2, 139.2], rtol=0.002)
 
