@@ -319,3 +319,24 @@ def test_assert_requirement_on_a_requirement_and_on_an_outcome(default_manip):
     assert_requirement(ok)
     with pytest.raises(FpmSimError, match="give the description"):
         assert_requirement(req)
+
+
+def test_pose_file_and_paper_pose_sets(default_manip, tmp_path):
+    (tmp_path / "poses.csv").write_text("x_mm,y_mm,phi_rad\n0,0,0\n50,0,0\n")
+    (tmp_path / "far.csv").write_text("x_mm,y_mm,phi_rad\n0,0,0\n900,0,0\n")
+    path = tmp_path / "fpm-requirements.toml"
+    body = '[[requirement]]\nname = "{n}"\nkind = "min_frequency"\nat_least_hz = 1\nposes = {p}\n'
+    path.write_text(
+        body.format(n="file", p='{ file = "poses.csv" }')
+        + body.format(n="paper", p='{ grid = "paper", reading = "y-" }')
+        + body.format(n="far", p='{ file = "far.csv" }')
+    )
+    reqs = load_requirements(path)
+    assert reqs["file"].poses.resolve(default_manip, "r") == POSES[:2]
+    from fpm_sim.study.poses import parse_reading, study_poses
+
+    assert reqs["paper"].poses.resolve(default_manip, "r") == [sp.pose for sp in study_poses(parse_reading("y-"))]
+    with pytest.raises(FpmSimError, match=r"r.poses: pose \(x=900.0 mm, y=0.0 mm, phi=0.000 rad\) is unreachable"):
+        reqs["far"].poses.resolve(default_manip, "r")
+    with pytest.raises(RequirementError, match="no requirement named 'nope'"):
+        reqs["nope"]

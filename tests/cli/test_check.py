@@ -86,3 +86,18 @@ def test_missing_file_and_bad_report_path(tmp_path, capsys):
     code, _, err = run(capsys, "check", str(ok), "--junit-xml", str(tmp_path / "report.txt"))
     assert code == 2
     assert "--junit-xml" in err
+
+
+def test_description_from_the_settings_or_config_option(tmp_path, capsys):
+    from fpm_sim.config import config_to_toml, default_config
+
+    (tmp_path / "mine.toml").write_text(config_to_toml(default_config().replace(name="my cell")))
+    path = tmp_path / "fpm-requirements.toml"
+    path.write_text('[settings]\nconfig = "mine.toml"\nsegments = 3\n\n' + min_req("low bar", 1.0))
+    code, out, _ = run(capsys, "check", str(path))
+    assert code == 0
+    assert out.startswith("fpm-requirements.toml on my cell:")
+    (tmp_path / "other.toml").write_text(config_to_toml(default_config().replace(name="other cell")))
+    code, out, _ = run(capsys, "check", str(path), "--config", str(tmp_path / "other.toml"))
+    assert code == 0
+    assert out.startswith("fpm-requirements.toml on other cell:")
