@@ -137,6 +137,16 @@ def test_reversed_comparison_fails(fpm_sweep):
     assert 1000.0 <= fpm_sweep.mode(1, poses=POSES)
 
 
+def test_requirement_checked_on_the_shared_sweeps(fpm_sweep):
+    from fpm_sim.study.requirements import PoseSpec, Requirement
+
+    spec = PoseSpec(kind="list", points=tuple(tuple(p) for p in POSES))
+    outcome = fpm_sweep.check(Requirement("f2", "min_frequency", spec, at_least_hz=1.0, mode=2))
+    assert outcome.passed
+    assert outcome.resolution.startswith("3 segments per link")
+    assert fpm_sweep.cache.computed == 2  # mode 2 needs one more mode than the sweep of the tests above
+
+
 def test_helper_fails(fpm_config, fpm_sweep):
     assert_min_frequency(fpm_config, 1000.0, poses=POSES, segments=3, cache=fpm_sweep.cache, name="fast enough")
 """
@@ -147,7 +157,7 @@ def test_fixtures_marker_and_explained_failures(pytester):
     pytester.makepyfile(test_design=TESTS)
     junit = pytester.path / "junit.xml"
     result = pytester.runpytest("-q", "--fpm-segments", "3", f"--junit-xml={junit}", "-p", "no:randomly")
-    result.assert_outcomes(passed=3, failed=3)
+    result.assert_outcomes(passed=4, failed=3)
     # the comparison explained: worst pose, mode, margin, resolution (both operand orders)
     result.stdout.fnmatch_lines(
         [
