@@ -682,6 +682,7 @@ class CheckReport:
                 f"{'pass' if o.passed else 'FAIL'}"
             )
         lines += [o.message for o in self.outcomes if not o.passed]
+        lines += [f"resolution: {r}" for r in dict.fromkeys(o.resolution for o in self.outcomes)]
         return "\n".join(lines)
 
     def plot(self, ax: Any = None) -> Any:
