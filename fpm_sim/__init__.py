@@ -12,6 +12,7 @@ package has no side effects)::
     fs.frf(cfg, pose)                         # frequency response function
     fs.rollout(cfg, pose, force_x_n=1.0)      # nonlinear simulation
     fs.reproduce(cfg)                         # the study's tests and 25 poses
+    fs.check_requirements(fs.load_requirements("fpm-requirements.toml"), cfg)  # docs/testing.md
 
 Every result has ``.to_dict()``, ``.table()`` and ``.plot(ax=None)`` (a ``matplotlib`` ``Figure``).
 Resolution: ``fidelity="fast" | "standard" | "fine"`` or ``segments=N`` in every entry point.
@@ -36,6 +37,8 @@ _API = {
     "frf": "fpm_sim.api",
     "rollout": "fpm_sim.api",
     "reproduce": "fpm_sim.api",
+    "load_requirements": "fpm_sim.study.requirements",
+    "check_requirements": "fpm_sim.study.requirements",
 }
 
 __all__ = ["__version__", *_API]

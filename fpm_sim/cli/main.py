@@ -68,6 +68,7 @@ COMMAND_MODULES: list[str] = [
     "fpm_sim.cli.design",
     "fpm_sim.cli.identify",
     "fpm_sim.cli.ema",
+    "fpm_sim.cli.check",
 ]
 """Command modules beyond the core ones (each exposes ``register(subparsers)``)."""
 
