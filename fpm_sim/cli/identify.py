@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import shlex
-import sys
 from pathlib import Path
 
 from fpm_sim.cli.common import (
@@ -134,7 +132,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     files = [ds.source + f" (sigma {ds.sigma_pct:g} % where not given)" for ds in datasets]
     if tests:
         files.append(f"{Path(args.subsystems).name} (rig tests, sigma {args.subsystem_sigma_pct:g} %)")
-    command = "fpm-sim " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    command = args.command_line  # set by main(argv): the command that ran, also when run from Python
     data_note = ", ".join([ds.source for ds in datasets] + ([Path(args.subsystems).name] if tests else []))
     write_identification(args.out, result, cv, command=command, data_files=files, data_note=data_note)
     summ = summary(result, cv)

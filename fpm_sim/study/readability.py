@@ -7,7 +7,7 @@ seven (the cells left empty in its Table 5, ``fpm_sim/data/comsol_table5.csv``),
 placed for a clean impact and more damping. The model can say how strongly the impact excites mode 1
 and how strongly the accelerometer sees it at each pose.
 
-Metrics of mode 1 at one pose (driving-point accelerance from the linear model, :mod:`fpm_sim.frf`,
+Metrics of mode 1 at one pose (driving-point accelerance from the linear model, :mod:`fpm_sim.response`,
 model damping unless given):
 
 - ``excitation``: ``|phi_1' b|``, the modal force of a unit hammer force (1/sqrt(kg)); for the
@@ -42,9 +42,9 @@ import numpy as np
 from tqdm import tqdm
 
 from fpm_sim.config import Manipulator
-from fpm_sim.frf import FrequencyResponse, FrfError, LinkPoint, modal_frf, pick_peaks
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import ModelOptions, dof_stiffness
+from fpm_sim.response import FrequencyResponse, FrfError, LinkPoint, modal_frf, pick_peaks
 from fpm_sim.rom.reduction import ModalSystem, modal_system
 from fpm_sim.sim.impact import STUDY_IMPACT_POINT
 from fpm_sim.study.poses import ROTATION_RAD, TableReading, study_poses

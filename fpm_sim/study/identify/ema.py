@@ -6,7 +6,7 @@ Poles are estimated with sdypy-EMA (:class:`sdypy.EMA.Model`): the least-squares
 method (LSCF) at model orders up to ``pol_order``; the physical poles are the *stable* ones
 (frequency within ``fn_tol`` and damping within ``xi_tol`` between consecutive orders, the
 stabilisation chart's criterion, :meth:`sdypy.EMA.Model.select_closest_poles`) nearest the FRF's
-peaks (:func:`fpm_sim.frf.pick_peaks`), so no chart has to be clicked.
+peaks (:func:`fpm_sim.response.pick_peaks`), so no chart has to be clicked.
 
 The pose of a test comes from the UFF record's ``id4`` (``fpm-sim pose x_mm=.. y_mm=.. phi_rad=..``,
 written by ``fpm-sim impact --uff``) or is given by the caller.
@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from fpm_sim.errors import FpmSimError
-from fpm_sim.frf import pick_peaks
+from fpm_sim.response import pick_peaks
 
 __all__ = [
     "EmaError",

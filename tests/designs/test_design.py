@@ -8,7 +8,7 @@ import pytest
 from fpm_sim.batch.engine import EngineOptions
 from fpm_sim.batch.pose_loop import fast_options
 from fpm_sim.cli.main import main
-from fpm_sim.design import DesignError, design_study, factorial, moving_mass_kg, parse_spec, parse_vary
+from fpm_sim.designs import DesignError, design_study, factorial, moving_mass_kg, parse_spec, parse_vary
 from fpm_sim.kinematics import Pose
 from fpm_sim.study.poses import study_poses
 
