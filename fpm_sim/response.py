@@ -370,24 +370,28 @@ class FrequencyResponse:
     ) -> Any:
         """Magnitude (dB) and phase against frequency; returns the ``Figure``.
 
-        ``ax`` (or ``axes``): two axes (magnitude, phase) to draw on; default a new figure.
+        ``ax``: one axes (the magnitude alone) or two (magnitude, phase); ``axes``: two axes; default a new
+        figure with both.
         """
         import matplotlib.pyplot as plt
 
         axes = ax if ax is not None else axes
         if axes is None:
             _, axes = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True, gridspec_kw={"height_ratios": [2, 1]})
-        ax, axp = axes
+        ax, axp = (axes, None) if not np.iterable(axes) else axes
         ax.plot(self.freq_hz, 20 * np.log10(np.maximum(self.magnitude, 1e-300)), lw=1.2, label=label)
-        axp.plot(self.freq_hz, np.degrees(np.angle(self.h)), lw=1.0)
+        if axp is not None:
+            axp.plot(self.freq_hz, np.degrees(np.angle(self.h)), lw=1.0)
+            axp.set_ylabel("phase (deg)")
+            axp.set_xlabel("frequency (Hz)")
+        else:
+            ax.set_xlabel("frequency (Hz)")
         if modal_lines:
             for f in self.modal_freq_hz:
                 if self.freq_hz[0] <= f <= self.freq_hz[-1]:
                     ax.axvline(f, color="0.8", lw=0.7, zorder=0)
         ax.set_ylabel(f"|H| (dB re 1 {self.unit})")
         ax.set_title(f"{self.quantity}: {self.excitation} -> {self.response}", fontsize=10)
-        axp.set_ylabel("phase (deg)")
-        axp.set_xlabel("frequency (Hz)")
         if label:
             ax.legend(fontsize=8)
         return ax.figure

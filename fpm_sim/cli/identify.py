@@ -136,12 +136,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     data_note = ", ".join([ds.source for ds in datasets] + ([Path(args.subsystems).name] if tests else []))
     write_identification(args.out, result, cv, command=command, data_files=files, data_note=data_note)
     summ = summary(result, cv)
-    lines = [
-        f"identified {len(result.names)} parameters in {result.seconds:.0f} s (cost {result.cost:.4g}, "
-        f"chi2/dof {result.chi2_per_dof:.3g})"
-    ]
-    for n, v, s in zip(result.names, result.values, result.std):
-        lines.append(f"  {n:<42} {v:>12.5g} +- {s:.3g}" + ("  (at bound)" if n in result.at_bound else ""))
+    lines = [result.table()]
     for src, st in summ.items():
         i, c = st["in_sample"], st.get("cross_validated")
         lines.append(

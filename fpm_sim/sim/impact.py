@@ -395,11 +395,15 @@ class ImpactTestResult:
             lines.append(f"{i:>6}  {p['freq_hz']:>10.3f}  {p['prominence_db']:>16.1f}")
         return "\n".join(lines)
 
-    def plot(self, *, axes: Any = None) -> Any:
-        """H1 magnitude and phase with the modal frequencies marked, and the coherence (matplotlib)."""
+    def plot(self, ax: Any = None, *, axes: Any = None) -> Any:
+        """H1 magnitude and phase with the modal frequencies marked, and the coherence; returns the ``Figure``.
+
+        ``ax``: one axes for the H1 magnitude alone; ``axes``: three (magnitude, phase, coherence); default a
+        new figure.
+        """
         import matplotlib.pyplot as plt
 
-        if axes is None:
+        if ax is None and axes is None:
             _, axes = plt.subplots(3, 1, figsize=(8, 7), sharex=True, gridspec_kw={"height_ratios": [2, 1, 1]})
         band = (self.frf.freq_hz >= self.setup.f_min_hz) & (self.frf.freq_hz <= self.setup.f_max_hz)
         sub = FrequencyResponse(
@@ -411,6 +415,10 @@ class ImpactTestResult:
             self.frf.response,
             modal_freq_hz=self.modal_freq_hz,
         )
+        if ax is not None:
+            sub.plot(ax=ax, label=f"H1, {len(self.records)} impacts")
+            ax.axvline(self.first_peak_hz, color="r", ls="--", lw=0.8)
+            return ax.figure
         sub.plot(axes=axes[:2], label=f"H1, {len(self.records)} impacts")
         axes[1].set_xlabel("")
         axes[0].axvline(self.first_peak_hz, color="r", ls="--", lw=0.8)
@@ -418,7 +426,7 @@ class ImpactTestResult:
         axes[2].set_ylabel("coherence")
         axes[2].set_ylim(0, 1.05)
         axes[2].set_xlabel("frequency (Hz)")
-        return axes
+        return axes[0].figure
 
 
 def virtual_impact_test(

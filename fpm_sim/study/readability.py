@@ -316,12 +316,17 @@ class ReadabilityTable:
         )
         return "\n".join([intro, "", *self._lines(" | ", True), "", *("- " + s for s in self.summary_lines())])
 
-    def plot(self, *, axes: Any = None) -> Any:
-        """Mode-1 prominence (dB) at each pose for each point, study-unreadable poses circled (matplotlib)."""
+    def plot(self, ax: Any = None, *, axes: Any = None) -> Any:
+        """Mode-1 prominence (dB) at each pose for each point, study-unreadable poses circled; the ``Figure``.
+
+        ``ax``: one axes for the first point (the hammer's); ``axes``: one per point; default a new figure.
+        """
         import matplotlib.pyplot as plt
 
         n = len(self.points)
-        if axes is None:
+        if ax is not None:
+            axes = [ax]
+        elif axes is None:
             _, axes = plt.subplots(1, n, figsize=(4.2 * n, 3.8), squeeze=False)
             axes = axes[0]
         x = np.array([r.cell.pose.x_m * 1e3 for r in self.rows])
@@ -336,8 +341,9 @@ class ReadabilityTable:
             ax.set_ylabel("y (mm)")
             ax.set_aspect("equal")
             ax.figure.colorbar(sc, ax=ax, shrink=0.8)
-        np.atleast_1d(axes)[0].figure.suptitle("mode-1 readability (red circles: unreadable in the study)", fontsize=10)
-        return axes
+        fig = np.atleast_1d(axes)[0].figure
+        fig.suptitle("mode-1 readability (red circles: unreadable in the study)", fontsize=10)
+        return fig
 
     def table(self) -> str:
         """Plain-text version."""

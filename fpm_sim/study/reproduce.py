@@ -227,6 +227,19 @@ class StudyReproduction:
             out.append(row)
         return out
 
+    def to_xarray(self) -> Any:
+        """The frequencies over the study's poses (:func:`fpm_sim.results.frequencies_dataset`) with COMSOL's and
+        the measured first frequency (``comsol_hz``, ``measured_hz``, Hz) and the table's cells (``row_mm``,
+        ``col_mm``) on ``pose``."""
+        ds = self.frequencies.to_xarray()
+        ds["comsol_hz"] = ("pose", self.comsol_hz)
+        ds["measured_hz"] = ("pose", self.measured_hz)
+        ds = ds.assign_coords(
+            row_mm=("pose", [p.row_mm for p in self.poses]), col_mm=("pose", [p.col_mm for p in self.poses])
+        )
+        ds.attrs.update(config=self.config.name, reading=self.reading.name)
+        return ds
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: poses with f1..f3 (Hz) and COMSOL's value, statistics, subsystem tests, resolution."""
         from fpm_sim.model.options import resolution_summary
