@@ -506,7 +506,7 @@ class ModalAtlas:
         """
         import matplotlib.pyplot as plt
 
-        labels = list(labels)
+        labels = [lab for lab in labels if lab <= self.n_modes]
         if ax is not None:
             axes, labels = [ax], labels[:1]
         elif axes is None:

@@ -318,8 +318,9 @@ class StudyReproduction:
         return "\n".join(lines)
 
     def plot(self, ax: Any = None) -> Any:
-        """The f1 heatmaps (ours, COMSOL's, difference); the ``Figure``. ``ax``: three axes to draw on."""
-        return self.plot_heatmaps(ax)
+        """The f1 heatmaps (ours, COMSOL's, difference); the ``Figure``. ``ax``: three axes to draw on, or one
+        for our f1 alone."""
+        return self.plot_heatmaps(ax if ax is None or np.iterable(ax) else [ax])
 
     def plot_heatmaps(self, axes: Any = None) -> Any:
         """Figure: our f1, COMSOL's, and their difference (%) over the grid (x, y under the reading)."""
