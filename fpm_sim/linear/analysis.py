@@ -66,7 +66,7 @@ class ModalComparison:
         import matplotlib.pyplot as plt
 
         if ax is None:
-            _, ax = plt.subplots(figsize=(5.5, 3.5))
+            _, ax = plt.subplots(figsize=(5.5, 3.5), constrained_layout=True)
         diff = np.abs(np.asarray(self.relative_differences(), float))
         ax.semilogy(np.arange(1, len(diff) + 1), np.maximum(diff, 1e-16), "o-")
         ax.set_xlabel("mode")
