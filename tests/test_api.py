@@ -181,7 +181,8 @@ def test_reproduce():
 def test_import_has_no_heavy_imports_or_side_effects():
     code = (
         "import os, sys; before = dict(os.environ); import fpm_sim; "
-        "heavy = [m for m in ('jax', 'matplotlib', 'dm_control', 'control', 'mujoco') if m in sys.modules]; "
+        "heavy = [m for m in ('jax', 'matplotlib', 'dm_control', 'control', 'mujoco', 'scipy', 'xarray') "
+        "if m in sys.modules]; "
         "print(heavy, os.environ == before)"
     )
     env = {k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL",)}
@@ -203,3 +204,17 @@ def test_coarse_resolution_warns():
 
     with pytest.warns(ResolutionWarning, match="41 %"):  # 0.41 / 1^2; measured +54 % on f1
         fs.modes(options=fs.ModelOptions(segments=1), n_modes=1)
+
+
+def test_no_public_name_is_shadowed_by_a_submodule():
+    """Importing a submodule sets it on the package: a submodule named like a public function would replace it."""
+    import pkgutil
+
+    submodules = {m.name for m in pkgutil.iter_modules(fs.__path__)}
+    assert not submodules & set(fs.__all__), submodules & set(fs.__all__)
+    import importlib
+
+    importlib.import_module("fpm_sim.designs")  # the package beside fs.design
+    importlib.import_module("fpm_sim.response")  # the module beside fs.frf
+    assert callable(fs.design)
+    assert callable(fs.frf)
