@@ -22,9 +22,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    import numpy as np
-    from numpy.typing import ArrayLike
-
     from fpm_sim.config import Manipulator, RigConfig
     from fpm_sim.designs.study import DesignResult
     from fpm_sim.kinematics import Pose
@@ -49,7 +46,6 @@ __all__ = [
     "ema",
     "export_mjcf",
     "frf",
-    "frf_grid",
     "identify",
     "impact",
     "modes",
@@ -309,24 +305,6 @@ def reduce(
     )
 
 
-def frf_grid(f_min_hz: float, f_max_hz: float, df_hz: float, modal_freq_hz: ArrayLike) -> np.ndarray:
-    """Make a frequency grid (Hz) from ``f_min_hz`` to ``f_max_hz`` by ``df_hz``, plus the natural frequencies.
-
-    The natural frequencies inside the band are added so that every resonance peak is sampled at its top.
-    """
-    import numpy as np
-
-    from fpm_sim.response import FrfError
-
-    if not (0.0 <= f_min_hz < f_max_hz) or not df_hz > 0:
-        raise FrfError("need 0 <= f_min_hz < f_max_hz and df_hz > 0 (--f-min-hz, --f-max-hz, --df-hz)")
-    if (f_max_hz - f_min_hz) / df_hz > 1e6:
-        raise FrfError("the band holds more than 1e6 frequencies (--f-min-hz, --f-max-hz, --df-hz); use a larger df_hz")
-    freq = np.arange(f_min_hz, f_max_hz + df_hz / 2, df_hz)
-    fm = np.asarray(modal_freq_hz, float)
-    return np.unique(np.concatenate([freq, fm[(fm >= freq[0]) & (fm <= freq[-1])]]))
-
-
 def frf(
     config: Manipulator | None = None,
     pose: Pose | None = None,
@@ -364,7 +342,7 @@ def frf(
     options
         Model options (as :func:`modes`; the links must be flexible).
     """
-    from fpm_sim.response import FrfError, LinkPoint, modal_frf
+    from fpm_sim.response import FrfError, LinkPoint, frf_grid, modal_frf
     from fpm_sim.rom.reduction import modal_system
 
     if options is not None and options.link_model == "rigid":

@@ -39,6 +39,7 @@ from typing import Any
 import mujoco
 import numpy as np
 import scipy.signal
+from numpy.typing import ArrayLike
 
 from fpm_sim.errors import FpmSimError
 from fpm_sim.model.options import BuiltModel
@@ -52,6 +53,7 @@ __all__ = [
     "LinkPoint",
     "MaterialPoint",
     "Peak",
+    "frf_grid",
     "half_power_damping",
     "locate",
     "material_point",
@@ -410,6 +412,20 @@ def _damping(system: ModalSystem, damping_ratio: float | Sequence[float] | None)
     if np.any(~np.isfinite(z)) or np.any(z < 0.0) or np.any(z >= 1.0):
         raise FrfError(f"damping ratios must lie in [0, 1), got {damping_ratio!r}")
     return z[:n]
+
+
+def frf_grid(f_min_hz: float, f_max_hz: float, df_hz: float, modal_freq_hz: ArrayLike) -> np.ndarray:
+    """Make a frequency grid (Hz) from ``f_min_hz`` to ``f_max_hz`` by ``df_hz``, plus the natural frequencies.
+
+    The natural frequencies inside the band are added so that every resonance peak is sampled at its top.
+    """
+    if not (0.0 <= f_min_hz < f_max_hz) or not df_hz > 0:
+        raise FrfError("need 0 <= f_min_hz < f_max_hz and df_hz > 0 (--f-min-hz, --f-max-hz, --df-hz)")
+    if (f_max_hz - f_min_hz) / df_hz > 1e6:
+        raise FrfError("the band holds more than 1e6 frequencies (--f-min-hz, --f-max-hz, --df-hz); use a larger df_hz")
+    freq = np.arange(f_min_hz, f_max_hz + df_hz / 2, df_hz)
+    fm = np.asarray(modal_freq_hz, float)
+    return np.unique(np.concatenate([freq, fm[(fm >= freq[0]) & (fm <= freq[-1])]]))
 
 
 def modal_frf(

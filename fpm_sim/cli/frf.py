@@ -79,11 +79,10 @@ def point_of(args: argparse.Namespace, prefix: str, fallback: Any = None) -> Any
 
 
 def cmd_frf(args: argparse.Namespace) -> int:
-    from fpm_sim.api import frf_grid
     from fpm_sim.model.manipulator import build_manipulator
     from fpm_sim.model.options import warn_if_coarse
     from fpm_sim.outputs import atomic_file
-    from fpm_sim.response import LinkPoint, modal_frf
+    from fpm_sim.response import LinkPoint, frf_grid, modal_frf
     from fpm_sim.rom.reduction import modal_system
 
     frf_grid(args.f_min_hz, args.f_max_hz, args.df_hz, [])  # checks the band before any computation
