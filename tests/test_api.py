@@ -225,3 +225,16 @@ def test_export_mjcf_is_the_model_the_other_entry_points_solve():
     direct = build_rig(RigSetup("chain", angle_deg=120.0), rig_piece(cfg), TINY, compliance=cfg.compliance)
     assert rig == direct.to_xml()
     assert rig != fs.export_mjcf(cfg, rig="chain", options=TINY)  # the hinge angle reaches the model
+
+
+def test_design_and_sweep_agree_at_the_same_poses():
+    """Two entry points over the same pose loop: the base design's frequencies are the sweep's."""
+    import numpy as np
+
+    loop = fs.ModelOptions(segments=SEG, axial=False, gravity=False)
+    poses = [fs.Pose.from_mm(0, 0, 0), fs.Pose.from_mm(40, -30, 0.05)]
+    sw = fs.sweep(grid="poses", poses=poses, options=loop)
+    des = fs.design(poses=poses, vary={"hardware.payload.mass_kg": [fs.default_config().hardware.payload.mass_kg, 2.0]},
+                    options=loop)  # fmt: skip
+    np.testing.assert_allclose(des.frequencies_hz[0], sw.frequencies.frequencies_hz, rtol=1e-12)
+    assert np.all(des.frequencies_hz[1, :, 0] < des.frequencies_hz[0, :, 0])  # a heavier payload: lower f1
