@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal, overload
 
 if TYPE_CHECKING:
     from fpm_sim.config import Manipulator, RigConfig
@@ -84,6 +84,28 @@ def _built(config: Manipulator | None, pose: Pose | None, options: ModelOptions 
     from fpm_sim.model.manipulator import build_manipulator
 
     return build_manipulator(_config(config), _pose(pose), _options(options, stacklevel=4))
+
+
+@overload
+def modes(
+    config: Manipulator | None = None,
+    pose: Pose | None = None,
+    *,
+    options: ModelOptions | None = None,
+    n_modes: int | None = 10,
+    method: Literal["transition_fd", "constrained"] = "transition_fd",
+) -> ModalResult: ...
+
+
+@overload
+def modes(
+    config: Manipulator | None = None,
+    pose: Pose | None = None,
+    *,
+    options: ModelOptions | None = None,
+    n_modes: int | None = 10,
+    method: Literal["both"],
+) -> ModalComparison: ...
 
 
 def modes(
