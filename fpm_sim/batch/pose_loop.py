@@ -180,6 +180,7 @@ class PoseFrequencies:
         ax.set_xlabel("x (mm)")
         ax.set_ylabel("y (mm)")
         ax.set_aspect("equal")
+        ax.set_title(f"first natural frequency at {len(self.poses)} poses ({int(ok.sum())} computed)", fontsize=9)
         return ax.figure
 
 

@@ -69,6 +69,7 @@ class ModalComparison:
             _, ax = plt.subplots(figsize=(5.5, 3.5), constrained_layout=True)
         diff = np.abs(np.asarray(self.relative_differences(), float))
         ax.semilogy(np.arange(1, len(diff) + 1), np.maximum(diff, 1e-16), "o-")
+        ax.set_xticks(np.arange(1, len(diff) + 1))
         ax.set_xlabel("mode")
         ax.set_ylabel("|f transitionFD / f constrained - 1|")
         ax.set_title("the two linearisations of the same model")
