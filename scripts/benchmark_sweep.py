@@ -266,7 +266,7 @@ def _main() -> None:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                full = manipulator_modes(p, config=cfg, n_modes=3).frequencies_hz
+                full = manipulator_modes(cfg, p, n_modes=3).frequencies_hz
         except EquilibriumError as exc:
             print(f"  {p.label()}: full analysis failed ({exc})")
             continue

@@ -42,7 +42,7 @@ def _poses(args: argparse.Namespace, config: Any) -> tuple[list[Any], str]:
 
 
 def cmd_design(args: argparse.Namespace) -> int:
-    from fpm_sim.design import design_study, parse_vary, read_designs_csv
+    from fpm_sim.designs import design_study, parse_vary, read_designs_csv
     from fpm_sim.model.options import warn_if_coarse
     from fpm_sim.outputs import atomic_dir
 

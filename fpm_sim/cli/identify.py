@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import shlex
-import sys
 from pathlib import Path
 
 from fpm_sim.cli.common import (
@@ -134,16 +132,11 @@ def cmd_identify(args: argparse.Namespace) -> int:
     files = [ds.source + f" (sigma {ds.sigma_pct:g} % where not given)" for ds in datasets]
     if tests:
         files.append(f"{Path(args.subsystems).name} (rig tests, sigma {args.subsystem_sigma_pct:g} %)")
-    command = "fpm-sim " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    command = args.command_line  # set by main(argv): the command that ran, also when run from Python
     data_note = ", ".join([ds.source for ds in datasets] + ([Path(args.subsystems).name] if tests else []))
     write_identification(args.out, result, cv, command=command, data_files=files, data_note=data_note)
     summ = summary(result, cv)
-    lines = [
-        f"identified {len(result.names)} parameters in {result.seconds:.0f} s (cost {result.cost:.4g}, "
-        f"chi2/dof {result.chi2_per_dof:.3g})"
-    ]
-    for n, v, s in zip(result.names, result.values, result.std):
-        lines.append(f"  {n:<42} {v:>12.5g} +- {s:.3g}" + ("  (at bound)" if n in result.at_bound else ""))
+    lines = [result.table()]
     for src, st in summ.items():
         i, c = st["in_sample"], st.get("cross_validated")
         lines.append(

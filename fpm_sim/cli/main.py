@@ -16,6 +16,7 @@ import argparse
 import contextlib
 import importlib
 import os
+import shlex
 import sys
 import traceback
 import warnings
@@ -97,27 +98,6 @@ def save_figure(path: Path, draw: Callable[[], Any]) -> None:
     plt.close(fig)
 
 
-def _result_payload(result: ModalResult | ModalComparison, n_modes: int) -> tuple[dict[str, Any], str]:
-    from fpm_sim.linear.analysis import ModalComparison
-
-    if isinstance(result, ModalComparison):
-        a, b = result.transition_fd, result.constrained
-        payload = a.to_dict(n_modes)
-        payload["cross_check"] = {
-            "method": "constrained",
-            "modes": b.to_dict(n_modes)["modes"],
-            "relative_difference": result.relative_differences(n_modes),
-        }
-        lines = [f"{'mode':>4}  {'transitionFD (Hz)':>17}  {'constrained (Hz)':>16}  {'diff':>8}  {'damping':>8}"]
-        for i, d in enumerate(result.relative_differences(n_modes)):
-            lines.append(
-                f"{i + 1:>4}  {a.modes[i].frequency_hz:>17.3f}  {b.modes[i].frequency_hz:>16.3f}  {d:>8.2e}  "
-                f"{a.modes[i].damping_ratio:>8.4f}"
-            )
-        return payload, "\n".join(lines)
-    return result.to_dict(n_modes), result.table(n_modes)
-
-
 def _header(built: BuiltModel, title: str) -> str:
     p = built.parameters
     o = p["options"]
@@ -175,7 +155,7 @@ def cmd_modes(args: argparse.Namespace) -> int:
     warn_if_coarse(opts)
     built = build_manipulator(manip, pose, opts)
     result = analyse(built, args.method, args.n_modes)
-    payload, table = _result_payload(result, args.n_modes)
+    payload, table = result.to_dict(args.n_modes), result.table(args.n_modes)
     payload["config"] = manip.name
     payload["manipulator"] = manip.to_dict()
     with_resolution(payload, opts)
@@ -224,7 +204,7 @@ def cmd_rig(args: argparse.Namespace) -> int:
     warn_if_coarse(opts)
     built = build_rig(_rig_setup(args), _rig_piece(args, manip), opts, compliance=manip.compliance)
     result = analyse(built, args.method, args.n_modes)
-    payload, table = _result_payload(result, args.n_modes)
+    payload, table = result.to_dict(args.n_modes), result.table(args.n_modes)
     with_resolution(payload, opts)
     title = f"rig {args.rig}" + (f" (hinge angle {args.angle_deg:g} deg)" if args.rig == "chain" else "")
     text = _header(built, title) + "\n" + table + _n_modes_note(result, args.n_modes) + "\n" + resolution_line(opts)
@@ -404,7 +384,9 @@ def main(argv: list[str] | None = None) -> int:
     """Run ``fpm-sim`` with ``argv``; returns the exit status (0, 2 user error, 130 interrupted, 1 bug)."""
     with _cli_warnings():
         try:
+            argv = sys.argv[1:] if argv is None else list(argv)
             args = build_parser().parse_args(argv)
+            args.command_line = "fpm-sim " + shlex.join(argv)  # what was run, recorded by commands that write reports
             code = int(args.func(args))
             sys.stdout.flush()  # a closed pipe shows here, inside the handlers below
             return code

@@ -54,7 +54,7 @@ def cmd_reduce(args: argparse.Namespace) -> int:
     control_note = ""
     try:
         sys_ = rom.to_control()
-        payload["python_control"] = repr(type(sys_).__name__)
+        payload["python_control"] = type(sys_).__name__
         control_note = (
             f"\npython-control StateSpace: {sys_.nstates} states, {sys_.ninputs} inputs, {sys_.noutputs} outputs"
         )

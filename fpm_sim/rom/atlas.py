@@ -439,7 +439,25 @@ class ModalAtlas:
         """
         return self._interp("label_freq_hz", pose, self._method(method))
 
+    def to_xarray(self) -> Any:
+        """Tracked frequencies over the grid poses (:func:`fpm_sim.results.frequencies_dataset`; ``mode`` is the
+        tracked label, poses in :meth:`poses` order) with ``mac`` (the label's MAC with its parent pose)."""
+        from fpm_sim.results import frequencies_dataset
+
+        poses = self.poses()
+        f = self.nodes["label_freq_hz"].reshape(len(poses), self.n_modes)
+        return frequencies_dataset(
+            f,
+            x_mm=[p.x_m * 1e3 for p in poses],
+            y_mm=[p.y_m * 1e3 for p in poses],
+            phi_rad=[p.phi_rad for p in poses],
+            status=np.where(np.isfinite(f).all(axis=1), "ok", "not_computed"),
+            data_vars={"mac": (("pose", "mode"), self.nodes["mac"].reshape(len(poses), self.n_modes))},
+            attrs={"config": str(self.parameters.get("config", ""))},
+        )
+
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: the grid (mm, rad), inputs and outputs, weak links and label changes, parameters."""
         return {
             "x_mm": (self.x_m * 1e3).tolist(),
             "y_mm": (self.y_m * 1e3).tolist(),
@@ -480,13 +498,18 @@ class ModalAtlas:
             lines.append(f"{pose.x_m * 1e3:>7.1f} {pose.y_m * 1e3:>7.1f} {pose.phi_rad:>6.3f}  " + "  ".join(cells))
         return "\n".join(lines)
 
-    def plot(self, labels: Sequence[int] = (1, 2, 3), *, phi_index: int = 0, axes: Any = None) -> Any:
+    def plot(self, ax: Any = None, *, labels: Sequence[int] = (1, 2, 3), phi_index: int = 0, axes: Any = None) -> Any:
         """Tracked frequency (Hz) of the given mode labels (1-based) over the x-y grid at one rotation, with
-        the label changes marked (matplotlib)."""
+        the label changes marked; returns the ``Figure``.
+
+        ``ax``: one axes for the first label; ``axes``: one per label; default a new figure.
+        """
         import matplotlib.pyplot as plt
 
-        labels = list(labels)
-        if axes is None:
+        labels = [lab for lab in labels if lab <= self.n_modes]
+        if ax is not None:
+            axes, labels = [ax], labels[:1]
+        elif axes is None:
             _, axes = plt.subplots(1, len(labels), figsize=(4.2 * len(labels), 3.8), squeeze=False)
             axes = axes[0]
         xx, yy = np.meshgrid(self.x_m * 1e3, self.y_m * 1e3, indexing="ij")
@@ -500,7 +523,7 @@ class ModalAtlas:
             ax.set_ylabel("y (mm)")
             ax.set_aspect("equal")
             ax.figure.colorbar(sc, ax=ax, shrink=0.8, label="Hz")
-        return axes
+        return np.atleast_1d(axes)[0].figure
 
     def save(self, path: str | Path) -> Path:
         p = Path(path)

@@ -324,7 +324,33 @@ class StepResponse:
     def output(self, name: str) -> np.ndarray:
         return self.y[:, self.output_names.index(name)]
 
-    def plot(self, outputs: list[str] | None = None, *, ax: Any = None, label: str | None = None) -> Any:
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: the input, each output's name, unit, final and peak value, and the samples."""
+        return {
+            "input": self.input_name,
+            "t_s": self.t_s.tolist(),
+            "outputs": [
+                {
+                    "name": n,
+                    "unit": u,
+                    "final": float(self.y[-1, j]),
+                    "peak": float(self.y[np.argmax(np.abs(self.y[:, j])), j]),
+                    "values": self.y[:, j].tolist(),
+                }
+                for j, (n, u) in enumerate(zip(self.output_names, self.output_units))
+            ],
+        }
+
+    def table(self) -> str:
+        """Each output's final and peak value after the unit step (SI units)."""
+        lines = [f"unit step on {self.input_name}, {self.t_s[-1]:.4g} s", f"{'output':<24} {'final':>12} {'peak':>12}"]
+        for j, (n, u) in enumerate(zip(self.output_names, self.output_units)):
+            peak = self.y[np.argmax(np.abs(self.y[:, j])), j]
+            lines.append(f"{n + ' (' + u + ')':<24} {self.y[-1, j]:>12.4g} {peak:>12.4g}")
+        return "\n".join(lines)
+
+    def plot(self, ax: Any = None, *, outputs: list[str] | None = None, label: str | None = None) -> Any:
+        """The outputs (default those that are not accelerations) against time; returns the ``Figure``."""
         import matplotlib.pyplot as plt
 
         outputs = outputs or [n for n in self.output_names if not n.startswith("acc")]
@@ -339,7 +365,7 @@ class StepResponse:
         ax.set_xlabel("t (s)")
         ax.set_title(f"unit step on {self.input_name}")
         ax.legend(fontsize=8)
-        return ax
+        return ax.figure
 
 
 @dataclass
@@ -502,7 +528,7 @@ class ReducedModel:
 
     def plot(self, ax: Any = None, *, input_name: str = "force_x", duration_s: float = 0.2) -> Any:
         """Step response of the displacement outputs to ``input_name`` over ``duration_s`` (s); the ``Figure``."""
-        return self.step_response(input_name, duration_s=duration_s).plot(ax=ax).figure
+        return self.step_response(input_name, duration_s=duration_s).plot(ax=ax)
 
     # -- files -------------------------------------------------------------------------------
 

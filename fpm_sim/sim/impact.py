@@ -22,7 +22,7 @@ value at the end of the record: the standard response window of impact testing, 
 damping ``ln(1 / window_end) / (2 pi f record_s)`` to every mode without shifting its peak) and are
 zero-padded to ``pad_s`` before the FFT. The FRF estimate is H1: ``sum conj(F_i) A_i / sum |F_i|^2``
 over the impacts, with its ordinary coherence. The first frequency is the lowest peak of ``|H1|`` above
-``f_min_hz`` with a prominence of at least ``min_prominence_db`` (:func:`fpm_sim.frf.pick_peaks`).
+``f_min_hz`` with a prominence of at least ``min_prominence_db`` (:func:`fpm_sim.response.pick_peaks`).
 
 Study set-up, as assumed here (the study does not say which chain or where along the link): the
 accelerometer at mid-span of chain 0's distal link (the "second link"), the hammer hitting the same
@@ -60,7 +60,9 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from fpm_sim.frf import (
+from fpm_sim.linear.equilibrium import static_equilibrium
+from fpm_sim.model.options import BuiltModel
+from fpm_sim.response import (
     DEFAULT_MIN_PROMINENCE_DB,
     FrequencyResponse,
     FrfError,
@@ -68,8 +70,6 @@ from fpm_sim.frf import (
     half_power_damping,
     material_point,
 )
-from fpm_sim.linear.equilibrium import static_equilibrium
-from fpm_sim.model.options import BuiltModel
 from fpm_sim.rom.reduction import ModalSystem, modal_system
 
 __all__ = [
@@ -339,7 +339,7 @@ class ImpactTestResult:
     @property
     def identified_damping_ratio(self) -> float:
         """Damping ratio of the first mode identified from the test: the half-power reading minus the damping
-        the exponential window adds (pass it to :func:`fpm_sim.frf.modal_frf` or ``fpm-sim frf
+        the exponential window adds (pass it to :func:`fpm_sim.response.modal_frf` or ``fpm-sim frf
         --damping-ratio``)."""
         return self.damping_half_power - self.window_damping
 
@@ -395,11 +395,15 @@ class ImpactTestResult:
             lines.append(f"{i:>6}  {p['freq_hz']:>10.3f}  {p['prominence_db']:>16.1f}")
         return "\n".join(lines)
 
-    def plot(self, *, axes: Any = None) -> Any:
-        """H1 magnitude and phase with the modal frequencies marked, and the coherence (matplotlib)."""
+    def plot(self, ax: Any = None, *, axes: Any = None) -> Any:
+        """H1 magnitude and phase with the modal frequencies marked, and the coherence; returns the ``Figure``.
+
+        ``ax``: one axes for the H1 magnitude alone; ``axes``: three (magnitude, phase, coherence); default a
+        new figure.
+        """
         import matplotlib.pyplot as plt
 
-        if axes is None:
+        if ax is None and axes is None:
             _, axes = plt.subplots(3, 1, figsize=(8, 7), sharex=True, gridspec_kw={"height_ratios": [2, 1, 1]})
         band = (self.frf.freq_hz >= self.setup.f_min_hz) & (self.frf.freq_hz <= self.setup.f_max_hz)
         sub = FrequencyResponse(
@@ -411,6 +415,10 @@ class ImpactTestResult:
             self.frf.response,
             modal_freq_hz=self.modal_freq_hz,
         )
+        if ax is not None:
+            sub.plot(ax=ax, label=f"H1, {len(self.records)} impacts")
+            ax.axvline(self.first_peak_hz, color="r", ls="--", lw=0.8)
+            return ax.figure
         sub.plot(axes=axes[:2], label=f"H1, {len(self.records)} impacts")
         axes[1].set_xlabel("")
         axes[0].axvline(self.first_peak_hz, color="r", ls="--", lw=0.8)
@@ -418,7 +426,7 @@ class ImpactTestResult:
         axes[2].set_ylabel("coherence")
         axes[2].set_ylim(0, 1.05)
         axes[2].set_xlabel("frequency (Hz)")
-        return axes
+        return axes[0].figure
 
 
 def virtual_impact_test(

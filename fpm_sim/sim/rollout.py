@@ -236,11 +236,14 @@ class RolloutResult:
     def plot(self, ax: Any = None, *, axes: Any = None) -> Any:
         """End-effector displacement, deflection and accelerations against time; returns the ``Figure``.
 
-        ``ax`` (or ``axes``): a sequence of 2 (3 with accelerations) axes to draw on; default a new figure.
+        ``ax`` (or ``axes``): a sequence of 2 (3 with accelerations) axes to draw on, or one axes for the
+        end-effector displacement alone; default a new figure.
         """
         import matplotlib.pyplot as plt
 
         axes = ax if ax is not None else axes
+        if axes is not None and not np.iterable(axes):
+            axes = [axes]
         n_ax = 3 if self.accel else 2
         if axes is None:
             _, axes = plt.subplots(n_ax, 1, figsize=(8, 2.6 * n_ax), sharex=True)
@@ -252,6 +255,9 @@ class RolloutResult:
         ax2.plot(self.t_s, self.ee_disp[:, 2] * 1e3, color="0.5", lw=0.8, label="phi")
         ax2.set_ylabel("phi (mrad)")
         ax.legend(loc="upper left", fontsize=8)
+        if len(axes) == 1:
+            ax.set_xlabel("t (s)")
+            return ax.figure
         ax = axes[1]
         ax.plot(self.t_s, self.deflection[:, 0] * 1e3, label="x")
         ax.plot(self.t_s, self.deflection[:, 1] * 1e3, label="y")

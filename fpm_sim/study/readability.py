@@ -7,7 +7,7 @@ seven (the cells left empty in its Table 5, ``fpm_sim/data/comsol_table5.csv``),
 placed for a clean impact and more damping. The model can say how strongly the impact excites mode 1
 and how strongly the accelerometer sees it at each pose.
 
-Metrics of mode 1 at one pose (driving-point accelerance from the linear model, :mod:`fpm_sim.frf`,
+Metrics of mode 1 at one pose (driving-point accelerance from the linear model, :mod:`fpm_sim.response`,
 model damping unless given):
 
 - ``excitation``: ``|phi_1' b|``, the modal force of a unit hammer force (1/sqrt(kg)); for the
@@ -42,9 +42,9 @@ import numpy as np
 from tqdm import tqdm
 
 from fpm_sim.config import Manipulator
-from fpm_sim.frf import FrequencyResponse, FrfError, LinkPoint, modal_frf, pick_peaks
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import ModelOptions, dof_stiffness
+from fpm_sim.response import FrequencyResponse, FrfError, LinkPoint, modal_frf, pick_peaks
 from fpm_sim.rom.reduction import ModalSystem, modal_system
 from fpm_sim.sim.impact import STUDY_IMPACT_POINT
 from fpm_sim.study.poses import ROTATION_RAD, TableReading, study_poses
@@ -316,12 +316,17 @@ class ReadabilityTable:
         )
         return "\n".join([intro, "", *self._lines(" | ", True), "", *("- " + s for s in self.summary_lines())])
 
-    def plot(self, *, axes: Any = None) -> Any:
-        """Mode-1 prominence (dB) at each pose for each point, study-unreadable poses circled (matplotlib)."""
+    def plot(self, ax: Any = None, *, axes: Any = None) -> Any:
+        """Mode-1 prominence (dB) at each pose for each point, study-unreadable poses circled; the ``Figure``.
+
+        ``ax``: one axes for the first point (the hammer's); ``axes``: one per point; default a new figure.
+        """
         import matplotlib.pyplot as plt
 
         n = len(self.points)
-        if axes is None:
+        if ax is not None:
+            axes = [ax]
+        elif axes is None:
             _, axes = plt.subplots(1, n, figsize=(4.2 * n, 3.8), squeeze=False)
             axes = axes[0]
         x = np.array([r.cell.pose.x_m * 1e3 for r in self.rows])
@@ -336,8 +341,9 @@ class ReadabilityTable:
             ax.set_ylabel("y (mm)")
             ax.set_aspect("equal")
             ax.figure.colorbar(sc, ax=ax, shrink=0.8)
-        np.atleast_1d(axes)[0].figure.suptitle("mode-1 readability (red circles: unreadable in the study)", fontsize=10)
-        return axes
+        fig = np.atleast_1d(axes)[0].figure
+        fig.suptitle("mode-1 readability (red circles: unreadable in the study)", fontsize=10)
+        return fig
 
     def table(self) -> str:
         """Plain-text version."""

@@ -24,9 +24,11 @@ from fpm_sim.batch.engine import EngineOptions
 from fpm_sim.batch.frequencies import pose_frequencies
 from fpm_sim.batch.pose_loop import PoseFrequencies
 from fpm_sim.config import Manipulator
+from fpm_sim.errors import FpmSimError
 from fpm_sim.linear.analysis import rig_modes
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.study.poses import GRID_MM, StudyPose, TableReading, study_poses
+from fpm_sim.study.sweep import WorkspaceSweep
 from fpm_sim.study.tables import (
     STUDY_COMSOL_VS_EXPERIMENT,
     STUDY_THICKNESS_M,
@@ -116,7 +118,7 @@ def subsystem_frequencies(
     opts = ModelOptions(segments=segments, gravity=False)
     out = []
     for t in tests or subsystem_tests():
-        res = rig_modes(t.rig, angle_deg=t.angle_deg, config=config, options=opts, n_modes=1, method="constrained")
+        res = rig_modes(config, t.rig, angle_deg=t.angle_deg, options=opts, n_modes=1, method="constrained")
         m = res.modes[0]
         out.append(SubsystemResult(t, float(m.frequency_hz), m.dominant))
     return out
@@ -135,6 +137,19 @@ class StudyReproduction:
     notes: list[str] = field(default_factory=list)
     readability: list[Any] = field(default_factory=list)
     """Mode-1 readability tables (:class:`fpm_sim.study.readability.ReadabilityTable`), one per hammer axis."""
+
+    @classmethod
+    def from_sweep(cls, sweep: WorkspaceSweep, reading: TableReading | None = None) -> StudyReproduction:
+        """The pose table of a ``grid="paper"`` sweep (read with ``reading``, as the sweep was), from the same
+        frequencies: no subsystem rigs, no readability."""
+        if sweep.grid != "paper":
+            raise FpmSimError(
+                f"a study reproduction needs the sweep of the study's poses (grid 'paper'), not {sweep.grid!r}"
+            )
+        rd = reading or TableReading()
+        from fpm_sim.batch.pose_loop import fast_options
+
+        return cls(sweep.config, rd, study_poses(rd), sweep.frequencies, [], sweep.options or fast_options())
 
     @property
     def comsol_hz(self) -> np.ndarray:
@@ -211,6 +226,19 @@ class StudyReproduction:
             row["withheld"] = bool(self.withheld[i])
             out.append(row)
         return out
+
+    def to_xarray(self) -> Any:
+        """The frequencies over the study's poses (:func:`fpm_sim.results.frequencies_dataset`) with COMSOL's and
+        the measured first frequency (``comsol_hz``, ``measured_hz``, Hz) and the table's cells (``row_mm``,
+        ``col_mm``) on ``pose``."""
+        ds = self.frequencies.to_xarray()
+        ds["comsol_hz"] = ("pose", self.comsol_hz)
+        ds["measured_hz"] = ("pose", self.measured_hz)
+        ds = ds.assign_coords(
+            row_mm=("pose", [p.row_mm for p in self.poses]), col_mm=("pose", [p.col_mm for p in self.poses])
+        )
+        ds.attrs.update(config=self.config.name, reading=self.reading.name)
+        return ds
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: poses with f1..f3 (Hz) and COMSOL's value, statistics, subsystem tests, resolution."""
@@ -290,8 +318,9 @@ class StudyReproduction:
         return "\n".join(lines)
 
     def plot(self, ax: Any = None) -> Any:
-        """The f1 heatmaps (ours, COMSOL's, difference); the ``Figure``. ``ax``: three axes to draw on."""
-        return self.plot_heatmaps(ax)
+        """The f1 heatmaps (ours, COMSOL's, difference); the ``Figure``. ``ax``: three axes to draw on, or one
+        for our f1 alone."""
+        return self.plot_heatmaps(ax if ax is None or np.iterable(ax) else [ax])
 
     def plot_heatmaps(self, axes: Any = None) -> Any:
         """Figure: our f1, COMSOL's, and their difference (%) over the grid (x, y under the reading)."""
@@ -634,8 +663,7 @@ def reproduce_study(
     tables = []
     notes = []
     if readability:
-        from fpm_sim.errors import FpmSimError
-        from fpm_sim.frf import LinkPoint
+        from fpm_sim.response import LinkPoint
         from fpm_sim.study.readability import readability_table
 
         for axis in ("z", "normal"):

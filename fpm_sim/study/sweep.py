@@ -141,6 +141,12 @@ class WorkspaceSweep:
             "resolution": resolution_summary(self.options) if self.options is not None else {},
         }
 
+    def to_xarray(self) -> Any:
+        """The frequencies over poses (:meth:`fpm_sim.batch.pose_loop.PoseFrequencies.to_xarray`), with the grid."""
+        ds = self.frequencies.to_xarray()
+        ds.attrs.update(config=self.config.name, grid=self.grid, step_mm=self.step_mm, grid_phi_rad=self.phi_rad)
+        return ds
+
     def table(self) -> str:
         """Counts by status and the f1 range (Hz)."""
         f1 = self.frequencies.f1_hz

@@ -7,10 +7,10 @@ import mujoco
 import numpy as np
 import pytest
 
-from fpm_sim.frf import FrfError, LinkPoint, locate, modal_frf
 from fpm_sim.kinematics import Pose
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import ModelOptions
+from fpm_sim.response import FrfError, LinkPoint, locate, modal_frf
 from fpm_sim.rom.reduction import modal_system
 from fpm_sim.sim.impact import ImpactRecord, ImpactSetup, h1_estimate, point_acceleration, virtual_impact_test
 

@@ -22,9 +22,9 @@ from test_identify_uff import reference_config  # the tests' reference geometry,
 from fpm_sim.batch.frequencies import pose_frequencies
 from fpm_sim.cli.main import main
 from fpm_sim.config.schema import config_to_toml
-from fpm_sim.frf import FrequencyResponse
 from fpm_sim.kinematics import Pose
 from fpm_sim.model.options import ModelOptions
+from fpm_sim.response import FrequencyResponse
 from fpm_sim.sim.impact import write_uff58
 from fpm_sim.study.identify import read_measured_csv
 

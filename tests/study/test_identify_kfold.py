@@ -220,6 +220,9 @@ def test_cli_identify_writes_a_complete_folder_usable_with_config(tmp_path):
     assert "+-" in src
     doc = json.loads((out / "identify.json").read_text())
     assert doc["cross_validation"]["folds"] == 2
+    # the command recorded is the one main() was given (not the test runner's sys.argv)
+    assert doc["command"].startswith(f"fpm-sim identify --measured {csv},sigma_pct=1 --free hardware")
+    assert f"Command: `fpm-sim identify --measured {csv},sigma_pct=1" in (out / "report.md").read_text()
     assert tomllib.loads((out / "config.toml").read_text())["hardware"]["platform"]["mass_kg"]["value"] > 0
     # a second run into the same folder is refused without --overwrite, before any computation
     assert main(["identify", "--measured", str(csv), "--free", "hardware", "--out", str(out)]) == 2

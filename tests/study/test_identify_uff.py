@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from fpm_sim.config import LumpedMass, load_config
-from fpm_sim.frf import FrequencyResponse, LinkPoint, modal_frf
 from fpm_sim.kinematics import Pose
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import ModelOptions
+from fpm_sim.response import FrequencyResponse, LinkPoint, modal_frf
 from fpm_sim.rom.reduction import modal_system
 from fpm_sim.sim.impact import write_uff58
 from fpm_sim.study.identify import IdentifyOptions, Problem, identify, parameter_set, read_measured_csv

@@ -6,7 +6,7 @@ Poles are estimated with sdypy-EMA (:class:`sdypy.EMA.Model`): the least-squares
 method (LSCF) at model orders up to ``pol_order``; the physical poles are the *stable* ones
 (frequency within ``fn_tol`` and damping within ``xi_tol`` between consecutive orders, the
 stabilisation chart's criterion, :meth:`sdypy.EMA.Model.select_closest_poles`) nearest the FRF's
-peaks (:func:`fpm_sim.frf.pick_peaks`), so no chart has to be clicked.
+peaks (:func:`fpm_sim.response.pick_peaks`), so no chart has to be clicked.
 
 The pose of a test comes from the UFF record's ``id4`` (``fpm-sim pose x_mm=.. y_mm=.. phi_rad=..``,
 written by ``fpm-sim impact --uff``) or is given by the caller.
@@ -29,11 +29,12 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from fpm_sim.errors import FpmSimError
-from fpm_sim.frf import pick_peaks
+from fpm_sim.response import pick_peaks
 
 __all__ = [
     "EmaError",
@@ -77,7 +78,28 @@ class ModalEstimate:
     window_tau_s: float | None = None
     """The exponential window's time constant (s) removed from the poles; None: no correction."""
 
-    def to_dict(self) -> dict:
+    def table(self) -> str:
+        """Each estimated mode's frequency (Hz) and damping ratio, with where the FRF was measured."""
+        lines = [f"{self.source} at {self.pose_mm_rad} (x mm, y mm, phi rad)"]
+        lines.append(f"{'mode':>4}  {'freq (Hz)':>10}  {'damping':>8}")
+        for i, (f, z) in enumerate(zip(self.freq_hz, self.damping), 1):
+            lines.append(f"{i:>4}  {f:>10.3f}  {z:>8.4f}")
+        return "\n".join(lines)
+
+    def plot(self, ax: Any = None) -> Any:
+        """Damping ratio (%) against natural frequency (Hz) of the estimated modes; returns the ``Figure``."""
+        import matplotlib.pyplot as plt
+
+        if ax is None:
+            _, ax = plt.subplots(figsize=(5.5, 3.5), constrained_layout=True)
+        ax.stem(self.freq_hz, 100.0 * self.damping)
+        ax.set_xlabel("natural frequency (Hz)")
+        ax.set_ylabel("damping ratio (%)")
+        ax.set_title(f"EMA of {Path(self.source).name}", fontsize=9)
+        return ax.figure
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: source, pose (mm, mm, rad), frequencies (Hz), damping ratios, mode label, window."""
         return {
             "mode_label": self.mode_label,
             "window_tau_s": self.window_tau_s,

@@ -381,6 +381,40 @@ class Identification:
             "seconds": self.seconds,
         }
 
+    def table(self) -> str:
+        """The fit (cost, chi^2 per degree of freedom) and each parameter's value +- one standard deviation."""
+        lines = [
+            f"identified {len(self.names)} parameters in {self.seconds:.0f} s (cost {self.cost:.4g}, "
+            f"chi2/dof {self.chi2_per_dof:.3g})"
+        ]
+        for n, v, s in zip(self.names, self.values, self.std):
+            lines.append(f"  {n:<42} {v:>12.5g} +- {s:.3g}" + ("  (at bound)" if n in self.at_bound else ""))
+        return "\n".join(lines)
+
+    def plot(self, ax: Any = None, *, cv: CrossValidation | None = None) -> Any:
+        """Model against measured frequency (Hz) of every measured pose, by data source (with ``cv``: also the
+        cross-validated predictions); returns the ``Figure``."""
+        import matplotlib.pyplot as plt
+
+        if ax is None:
+            _, ax = plt.subplots(figsize=(5.5, 5), constrained_layout=True)
+        p = self.problem
+        n_obs = len(p.observations)
+        meas, pred = self.measured[:n_obs], self.predicted[:n_obs]
+        sources = [o.source for o in p.observations]
+        for s in sorted(set(sources)):
+            m = np.array([x == s for x in sources])
+            ax.errorbar(meas[m], pred[m], xerr=p.sigma[:n_obs][m], fmt="o", label=f"{s} (in-sample)", alpha=0.8)
+            if cv is not None:
+                ax.plot(meas[m], cv.predicted[m], "x", label=f"{s} (cross-validated)")
+        if n_obs:
+            lim = [np.nanmin(meas) * 0.9, np.nanmax(meas) * 1.1]
+            ax.plot(lim, lim, "k--", lw=0.8)
+        ax.set_xlabel("measured (Hz)")
+        ax.set_ylabel("model (Hz)")
+        ax.legend(fontsize=7)
+        return ax.figure
+
 
 def _least_squares_z(fun: Any, z0: np.ndarray, max_nfev: int) -> Any:
     """Bounded least squares (trust-region reflective) in parameters normalised to their bounds, ``z in [0, 1]``;
@@ -815,6 +849,35 @@ class CrossValidation:
             "mean_abs_pct": {s: self.mean_abs_pct(s) for s in sorted(set(self.sources))},
             "seconds": self.seconds,
         }
+
+    def table(self) -> str:
+        """Each observation's measured and cross-validated frequency (Hz), and the mean error per source."""
+        lines = [f"{self.folds}-fold cross-validation ({self.seconds:.0f} s)"]
+        lines.append(f"  {'data':<36} {'measured Hz':>11} {'CV Hz':>9} {'err %':>7}")
+        for lab, m, p, e in zip(self.labels, self.measured, self.predicted, self.error_pct()):
+            lines.append(f"  {lab:<36} {m:>11.3f} {p:>9.3f} {e:>+7.2f}")
+        for s in sorted(set(self.sources)):
+            lines.append(f"  {s}: mean |err| {self.mean_abs_pct(s):.2f} %")
+        return "\n".join(lines)
+
+    def plot(self, ax: Any = None) -> Any:
+        """Cross-validated prediction against measured frequency (Hz), by source; returns the ``Figure``."""
+        import matplotlib.pyplot as plt
+
+        if ax is None:
+            _, ax = plt.subplots(figsize=(5.5, 5), constrained_layout=True)
+        for s in sorted(set(self.sources)):
+            m = np.array([x == s for x in self.sources])
+            ax.plot(self.measured[m], self.predicted[m], "x", label=f"{s} ({self.mean_abs_pct(s):.2f} % mean |err|)")
+        ok = np.isfinite(self.measured)
+        if ok.any():
+            lim = [np.min(self.measured[ok]) * 0.9, np.max(self.measured[ok]) * 1.1]
+            ax.plot(lim, lim, "k--", lw=0.8)
+        ax.set_xlabel("measured (Hz)")
+        ax.set_ylabel("cross-validated model (Hz)")
+        ax.set_title(f"{self.folds}-fold cross-validation", fontsize=9)
+        ax.legend(fontsize=7)
+        return ax.figure
 
 
 def fold_assignment(n_poses: int, folds: int, seed: int) -> np.ndarray:

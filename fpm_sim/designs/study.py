@@ -309,33 +309,30 @@ class DesignResult:
 
     @property
     def dataset(self) -> Any:
-        """An :class:`xarray.Dataset`: dimensions each varied field (a factorial study) or ``design``
-        (a list of designs), ``pose`` and ``mode``; variables ``frequency_hz``, ``in_plane_mode1``,
-        ``singularity``, ``status``, ``link_mass_kg``, ``moving_mass_kg``; pose coordinates ``x_mm``,
-        ``y_mm``, ``phi_rad``."""
-        import xarray as xr
+        """:meth:`to_xarray` (the name this result has had)."""
+        return self.to_xarray()
 
-        n_d, n_p, n_m = self.frequencies_hz.shape
-        coords: dict[str, Any] = {
-            "design": np.arange(n_d),
-            "pose": np.arange(n_p),
-            "mode": np.arange(1, n_m + 1),
-            "x_mm": ("pose", np.array([p.x_m * 1e3 for p in self.poses])),
-            "y_mm": ("pose", np.array([p.y_m * 1e3 for p in self.poses])),
-            "phi_rad": ("pose", np.array([p.phi_rad for p in self.poses])),
-        }
-        for f in self.fields:
-            coords[f] = ("design", np.array([d[f] for d in self.designs]))
-        ds = xr.Dataset(
-            {
-                "frequency_hz": (("design", "pose", "mode"), self.frequencies_hz),
+    def to_xarray(self) -> Any:
+        """The frequencies over designs x poses (:func:`fpm_sim.results.frequencies_dataset`): ``freq_hz`` with
+        dimensions each varied field (a factorial study) or ``design`` (a list of designs), ``pose`` and
+        ``mode``; ``status`` per design and pose; pose coordinates ``x_mm``, ``y_mm``, ``phi_rad``; variables
+        ``in_plane_mode1``, ``singularity``, ``link_mass_kg``, ``moving_mass_kg``."""
+        from fpm_sim.results import frequencies_dataset
+
+        ds = frequencies_dataset(
+            self.frequencies_hz,
+            x_mm=[p.x_m * 1e3 for p in self.poses],
+            y_mm=[p.y_m * 1e3 for p in self.poses],
+            phi_rad=[p.phi_rad for p in self.poses],
+            status=self.status,
+            leading={"design": np.arange(len(self.designs))},
+            coords={f: ("design", np.array([d[f] for d in self.designs])) for f in self.fields},
+            data_vars={
                 "in_plane_mode1": (("design", "pose"), self.in_plane),
                 "singularity": (("design", "pose"), self.singularity),
-                "status": (("design", "pose"), self.status.astype(str)),
                 "link_mass_kg": ("design", self.link_mass_kg),
                 "moving_mass_kg": ("design", self.moving_mass_kg),
             },
-            coords=coords,
             attrs={
                 "config": self.config.name,
                 "f_min_hz": math.nan if self.f_min_hz is None else self.f_min_hz,
