@@ -295,14 +295,23 @@ def frf_grid(f_min_hz: float, f_max_hz: float, df_hz: float, modal_freq_hz: Arra
 
     The natural frequencies inside the band are added so that every resonance peak is sampled at its top.
     """
+    import math
+
     import numpy as np
 
     from fpm_sim.frf import FrfError
 
-    if not (0.0 <= f_min_hz < f_max_hz) or not df_hz > 0:
-        raise FrfError("need 0 <= f_min_hz < f_max_hz and df_hz > 0 (--f-min-hz, --f-max-hz, --df-hz)")
+    need = "need 0 <= f_min_hz < f_max_hz and df_hz > 0"
+    if not 0.0 <= f_min_hz < math.inf:
+        raise FrfError(need, parameter="f_min_hz", value=f_min_hz)
+    if not f_min_hz < f_max_hz < math.inf:
+        raise FrfError(need, parameter="f_max_hz", value=f_max_hz)
+    if not df_hz > 0:
+        raise FrfError(need, parameter="df_hz", value=df_hz)
     if (f_max_hz - f_min_hz) / df_hz > 1e6:
-        raise FrfError("the band holds more than 1e6 frequencies (--f-min-hz, --f-max-hz, --df-hz); use a larger df_hz")
+        raise FrfError(
+            "the band holds more than 1e6 frequencies", parameter="df_hz", value=df_hz, hint="use a larger one"
+        )
     freq = np.arange(f_min_hz, f_max_hz + df_hz / 2, df_hz)
     fm = np.asarray(modal_freq_hz, float)
     return np.unique(np.concatenate([freq, fm[(fm >= freq[0]) & (fm <= freq[-1])]]))
@@ -354,15 +363,17 @@ def frf(
 
     if link_model == "rigid":
         raise FrfError(
-            "an FRF needs flexible links: with rigid links and locked motors nothing moves; use link_model "
-            "'segments' (--link-model)"
+            "an FRF needs flexible links: with rigid links and locked motors nothing moves",
+            parameter="link_model",
+            value=link_model,
+            hint="use 'segments'",
         )
     opts = model_options(fidelity=fidelity, segments=segments, link_model=link_model, axial=axial, gravity=gravity)
     built = build_manipulator(_config(config), _pose(pose), opts)
     exc = excitation or LinkPoint("distal_0", 0.5, "z")
     resp = response or exc
-    exc.check(built)
-    resp.check(built)
+    exc.check(built, "input")
+    resp.check(built, "output")
     system = modal_system(built)
     return modal_frf(
         system,

@@ -96,13 +96,16 @@ class LinkPoint:
             return f"platform/{self.axis}"
         return f"{self.link}@{self.fraction:g}/{self.axis}"
 
-    def check(self, built: BuiltModel) -> None:
+    def check(self, built: BuiltModel, role: str = "") -> None:
+        """Raise :class:`FrfError` for a point the model does not have; ``role`` (``input``/``output``) names
+        the fraction parameter ``<role>_fraction``."""
         if self.link != "platform" and self.link not in built.links:
             raise FrfError(f"unknown link {self.link!r}; choose one of platform, {', '.join(sorted(built.links))}")
         if not (0.0 <= self.fraction <= 1.0) or not math.isfinite(self.fraction):
             raise FrfError(
-                f"fraction must lie in [0, 1] (position along {self.link}; --input-fraction or --output-fraction on "
-                f"the command line), got {self.fraction!r}"
+                f"the fraction must lie in [0, 1] (position along {self.link})",
+                parameter=f"{role}_fraction" if role else "fraction",
+                value=self.fraction,
             )
         if self.axis not in AXES:
             raise FrfError(f"axis must be one of {', '.join(AXES)}, got {self.axis!r}")

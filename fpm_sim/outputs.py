@@ -71,7 +71,11 @@ def atomic_dir(target: str | Path, *, overwrite: bool = False) -> Iterator[Path]
         yield tmp
         if target.exists():
             if any(target.iterdir()) and not overwrite:
-                raise OutputError(f"{target} already holds another run's results; pass --overwrite to replace it")
+                raise OutputError(
+                    f"{target} already holds another run's results",
+                    parameter="out",
+                    hint="allow overwrite to replace it, or choose another folder",
+                )
             old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old-", dir=parent))
             os.replace(target, old / "run")  # move the old run aside, then the new one in
             os.replace(tmp, target)

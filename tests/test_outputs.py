@@ -17,7 +17,7 @@ def test_atomic_dir_appears_on_success_and_replaces_only_with_overwrite(tmp_path
         assert tmp.parent == tmp_path
         (tmp / "a.csv").write_text("1")
     assert (target / "a.csv").read_text() == "1"
-    with pytest.raises(OutputError, match="--overwrite"), atomic_dir(target) as tmp:
+    with pytest.raises(OutputError, match="allow overwrite"), atomic_dir(target) as tmp:
         (tmp / "b.csv").write_text("2")
     assert sorted(p.name for p in target.iterdir()) == ["a.csv"]  # the first run untouched
     with atomic_dir(target, overwrite=True) as tmp:

@@ -35,6 +35,7 @@ try:  # Ctrl-C while the modules load (a second or so): one line and 130, as at 
         check_output_file,
         count_arg,
         emit,
+        error_line,
         load_manipulator,
         mm,
         model_options,
@@ -310,6 +311,16 @@ class _Parser(argparse.ArgumentParser):
     """Usage errors become :class:`CliError` (one ``error:`` line and exit 2 from :func:`main`, like every
     other user error) instead of argparse's own exit."""
 
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("allow_abbrev", False)  # --thickness-m must not be read as --thickness-mm
+        super().__init__(*args, **kwargs)
+
+    def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:  # type: ignore[override]
+        """Also record the option strings of the parsers used (``_cli_options``), for :func:`error_line`."""
+        ns, rest = super().parse_known_args(args, namespace)
+        ns._cli_options = set(getattr(ns, "_cli_options", ())) | set(self._option_string_actions)
+        return ns, rest
+
     def error(self, message: str) -> NoReturn:
         raise CliError(f"{message} ({self.prog}); see '{self.prog} --help'")
 
@@ -401,6 +412,7 @@ def _quiet_stdout() -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Run ``fpm-sim`` with ``argv``; returns the exit status (0, 2 user error, 130 interrupted, 1 bug)."""
+    args: argparse.Namespace | None = None
     with _cli_warnings():
         try:
             args = build_parser().parse_args(argv)
@@ -408,7 +420,8 @@ def main(argv: list[str] | None = None) -> int:
             sys.stdout.flush()  # a closed pipe shows here, inside the handlers below
             return code
         except FpmSimError as exc:
-            print(f"error: {exc}", file=sys.stderr)
+            command, options = getattr(args, "command", None), getattr(args, "_cli_options", None)
+            print(error_line(exc, command, options), file=sys.stderr)
             return 2
         except KeyboardInterrupt:
             print("interrupted (Ctrl-C); unfinished outputs were not written", file=sys.stderr)

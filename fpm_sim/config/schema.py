@@ -488,7 +488,11 @@ def load_config(path: str | Path) -> Manipulator:
         raise ConfigError(f"config file not found: {p}") from exc
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{p}: invalid TOML: {exc}") from exc
-    return parse_config(data, source=f"user: {p.name}")
+    try:
+        return parse_config(data, source=f"user: {p.name}")
+    except ConfigError as exc:
+        exc.file = exc.file or str(p)  # the value came from this file, not from an option
+        raise
 
 
 def default_config() -> Manipulator:
@@ -603,13 +607,13 @@ def config_to_toml(m: Manipulator, *, header: str = "", default_source: str = "u
 
 def _positive(value: float, name: str) -> None:
     if not (math.isfinite(value) and value > 0.0):
-        raise ConfigError(f"field '{name}' must be a positive finite number, got {value!r}")
+        raise ConfigError("must be a positive finite number", parameter=name, value=value)
 
 
 def _nonneg(value: float, name: str, allow_inf: bool = False) -> None:
     ok = value >= 0.0 and (allow_inf or math.isfinite(value))
     if not ok or math.isnan(value):
-        raise ConfigError(f"field '{name}' must be >= 0{' (inf = rigid)' if allow_inf else ''}, got {value!r}")
+        raise ConfigError(f"must be >= 0{' (inf = rigid)' if allow_inf else ''}", parameter=name, value=value)
 
 
 def _validate_lump(lump: LumpedMass, name: str) -> None:
@@ -627,7 +631,7 @@ def _validate_section_material(sec: Section, mat: Material, prefix: str) -> None
     _positive(mat.young_pa, f"{prefix}material.young_pa")
     _positive(mat.density_kg_m3, f"{prefix}material.density_kg_m3")
     if not (-1.0 < mat.poisson < 0.5):
-        raise ConfigError(f"field '{prefix}material.poisson' must lie in (-1, 0.5), got {mat.poisson!r}")
+        raise ConfigError("must lie in (-1, 0.5)", parameter=f"{prefix}material.poisson", value=mat.poisson)
 
 
 def validate(m: Manipulator) -> None:

@@ -125,7 +125,9 @@ def resolve_segments(
         return segments
     fid = DEFAULT_FIDELITY if fidelity is None else fidelity
     if fid not in FIDELITY_SCALE:
-        raise FpmSimError(f"unknown fidelity {fid!r} (--fidelity); choose one of {', '.join(FIDELITIES)}")
+        raise FpmSimError(
+            "unknown fidelity", parameter="fidelity", value=fid, hint=f"choose one of {', '.join(FIDELITIES)}"
+        )
     return FIDELITY_RESOLUTION.get(link_model, FIDELITY_RESOLUTION["segments"])[fid]
 
 
@@ -175,7 +177,7 @@ def resolution_of_parameters(parameters: dict[str, Any]) -> dict[str, Any]:
 def resolution_label(options: ModelOptions) -> str:
     """One line: ``12 segments per link (fidelity standard), estimated f1 discretisation error 0.28 %``."""
     r = resolution_summary(options)
-    fid = f"fidelity {r['fidelity']}" if r["fidelity"] else "explicit --segments"
+    fid = f"fidelity {r['fidelity']}" if r["fidelity"] else "explicit segments"
     err = r["f1_error_estimate"]
     est = "not estimated" if math.isnan(err) else f"{100 * err:.2g} %"
     if options.link_model == "rigid":
@@ -190,8 +192,8 @@ def warn_if_coarse(options: ModelOptions, *, stacklevel: int = 2) -> None:
         finer = max(n for n in range(1, 201) if DISCRETISATION_COEFF[options.link_model] / n**2 > RESOLUTION_WARN) + 1
         warnings.warn(
             f"coarse resolution: {options.segments} {options.link_model} per link gives an estimated discretisation "
-            f"error of {100 * err:.2g} % on the first frequency (--segments/--fidelity); use --segments >= {finer} "
-            f"or --fidelity standard for below {100 * RESOLUTION_WARN:g} %",
+            f"error of {100 * err:.2g} % on the first frequency (segments/fidelity); use segments >= {finer} "
+            f"or fidelity 'standard' for below {100 * RESOLUTION_WARN:g} %",
             ResolutionWarning,
             stacklevel=stacklevel + 1,
         )
@@ -261,13 +263,16 @@ class ModelOptions:
         elif self.fidelity is not None:
             if self.fidelity not in FIDELITY_SCALE:
                 raise FpmSimError(
-                    f"unknown fidelity {self.fidelity!r} (--fidelity); choose one of {', '.join(FIDELITIES)}"
+                    "unknown fidelity",
+                    parameter="fidelity",
+                    value=self.fidelity,
+                    hint=f"choose one of {', '.join(FIDELITIES)}",
                 )
             if self.segments != resolve_segments(fidelity=self.fidelity, link_model=self.link_model):
                 object.__setattr__(self, "fidelity", None)  # an explicit resolution overrides the preset
         check_link_model(self.link_model, self.segments)
         if self.timestep_s is not None and not (0.0 < self.timestep_s <= 1e-2):
-            raise TimestepError(f"timestep_s must be in (0, 0.01] s, got {self.timestep_s!r}")
+            raise TimestepError("must be in (0, 0.01] s", parameter="timestep_s", value=self.timestep_s)
 
 
 @dataclass
@@ -517,11 +522,11 @@ def check_finite(name: str, value: Any, *, positive: bool = False) -> np.ndarray
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
-        raise FpmSimError(f"{name} must be a number, got {value!r}") from None
+        raise FpmSimError("must be a number", parameter=name, value=value) from None
     if not np.all(np.isfinite(arr)):
-        raise FpmSimError(f"{name} must be finite, got {value!r}")
+        raise FpmSimError("must be finite", parameter=name, value=value)
     if positive and not np.all(arr > 0):
-        raise FpmSimError(f"{name} must be positive, got {value!r}")
+        raise FpmSimError("must be positive", parameter=name, value=value)
     return arr
 
 
@@ -532,13 +537,13 @@ def check_count(name: str, value: Any, *, low: int = 1, high: int | None = None,
         ok, value = True, int(value)
     if not ok or value < low or (high is not None and value > high):
         bound = f"[{low}, {high}]" if high is not None else f">= {low}"
-        raise FpmSimError(f"{name} must be an integer {bound}{hint}, got {value!r}")
+        raise FpmSimError(f"must be an integer {bound}{hint}", parameter=name, value=value)
     return int(value)
 
 
 @contextlib.contextmanager
 def open_for_writing(
-    path: str | Path, *, parameter: str = "--out", error: type[FpmSimError] = FpmSimError
+    path: str | Path, *, parameter: str = "out", error: type[FpmSimError] = FpmSimError
 ) -> Iterator[IO[bytes]]:
     """Open ``path`` for binary writing (parent folders created), turning a failure (read-only place, a folder
     in the way, ...) into ``error`` naming the file and ``parameter`` instead of a library's own message."""
@@ -547,6 +552,8 @@ def open_for_writing(
         p.parent.mkdir(parents=True, exist_ok=True)
         handle = open(p, "wb")  # closed below
     except OSError as e:
-        raise error(f"cannot write {str(p)!r} ({e.strerror or e}); choose a writable path for {parameter}") from e
+        raise error(
+            f"cannot write {str(p)!r} ({e.strerror or e})", parameter=parameter, hint="choose a writable path"
+        ) from e
     with handle:
         yield handle

@@ -201,7 +201,9 @@ def remove_window_decay(
         raise EmaError(
             f"{source}: the pole at {freq_hz[k]:.4g} Hz decays at {xi[k] * wn[k]:.4g} 1/s, slower than the exponential "
             f"window's 1/tau = {1.0 / window_tau_s:.4g} 1/s alone: the window's time constant "
-            f"({window_tau_s:.4g} s) is wrong (--exp-window-tau-s)"
+            f"({window_tau_s:.4g} s) is wrong",
+            parameter="window_tau_s",
+            value=window_tau_s,
         )
     wn_true = np.hypot(sigma, wd)
     return wn_true / (2.0 * np.pi), sigma / wn_true
@@ -220,7 +222,9 @@ def write_modes_csv(estimates: Sequence[ModalEstimate], path: str | Path, *, hea
         w.writerow(cols)
         for e in estimates:
             if e.pose_mm_rad is None:
-                raise EmaError(f"{e.source}: the pose of this FRF is unknown; give it (--x-mm/--y-mm/--phi-rad)")
+                raise EmaError(
+                    f"{e.source}: the pose of this FRF is unknown", parameter="pose_mm_rad", hint="give it"
+                )
             f = [f"{v:.6g}" for v in e.freq_hz] + [""] * (n - len(e.freq_hz))
             z = [f"{v:.5g}" for v in e.damping] + [""] * (n - len(e.damping))
             w.writerow([f"{v:.6g}" for v in e.pose_mm_rad] + f + z + [e.mode_label or "", e.source])

@@ -424,7 +424,9 @@ def _surrogate_starts(
     ps = obj.ps
     gi = [i for i, p in enumerate(ps.parameters) if p.group in GEOMETRY_GROUPS]
     if not gi:
-        raise IdentificationError("--global surrogate-de needs the geometry group free (--free geometry)")
+        raise IdentificationError(
+            "surrogate-de needs the geometry group free", parameter="global_method", hint="add geometry to free"
+        )
     first = [k for k, o in enumerate(obj.obs) if o.mode == 1 and o.label in (None, "in_plane")]
     poses = [obj.obs[k].pose for k in first]
     logf = np.log([obj.obs[k].freq_hz for k in first])
@@ -662,9 +664,14 @@ def identify(problem: Problem, *, options: IdentifyOptions | None = None, progre
 
     opts = options or IdentifyOptions()
     if opts.global_method not in GLOBAL_METHODS:
-        raise IdentificationError(f"--global {opts.global_method!r}: choose from {', '.join(GLOBAL_METHODS)}")
+        raise IdentificationError(
+            "unknown global method",
+            parameter="global_method",
+            value=opts.global_method,
+            hint=f"choose from {', '.join(GLOBAL_METHODS)}",
+        )
     if not problem.observations and not problem.subsystem_tests:
-        raise IdentificationError("no data: give --measured FILE.csv and/or --subsystems FILE.csv")
+        raise IdentificationError("no data", parameter="measured", hint="give measured and/or subsystems data")
     t_start = time.time()
     history: list[SearchStep] = []
     ps = problem.parameters
@@ -820,7 +827,9 @@ class CrossValidation:
 def fold_assignment(n_poses: int, folds: int, seed: int) -> np.ndarray:
     """Fold (0 .. folds-1) of each of ``n_poses`` poses: a seeded permutation dealt round-robin."""
     if not 2 <= folds <= n_poses:
-        raise IdentificationError(f"--folds must be between 2 and the number of poses ({n_poses}), got {folds}")
+        raise IdentificationError(
+            f"must be between 2 and the number of poses ({n_poses})", parameter="folds", value=folds
+        )
     perm = np.random.default_rng(seed).permutation(n_poses)
     out = np.empty(n_poses, int)
     out[perm] = np.arange(n_poses) % folds
