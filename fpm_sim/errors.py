@@ -95,4 +95,21 @@ class FpmSimError(ValueError):
 
 
 class FpmSimWarning(UserWarning):
-    """A result computed from questionable input (near a singularity, coarse resolution, ...)."""
+    """A result computed from questionable input (near a singularity, coarse resolution, ...).
+
+    ``parameter`` optionally names the library parameter to change (the command line shows its option).
+    """
+
+    def __init__(self, message: str = "", *, parameter: str | None = None) -> None:
+        self.parameter = parameter
+        super().__init__(message)
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickle with ``parameter``."""
+        return (_rebuild_warning, (type(self), str(self), self.parameter))
+
+
+def _rebuild_warning(cls: type[FpmSimWarning], message: str, parameter: str | None) -> FpmSimWarning:
+    w = cls.__new__(cls)
+    FpmSimWarning.__init__(w, message, parameter=parameter)
+    return w

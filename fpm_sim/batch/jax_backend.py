@@ -431,7 +431,7 @@ def parameter_value(config: Manipulator, name: str) -> float:
         if part not in settable:
             what = "a derived value, not a settable field" if hasattr(obj, part) else "not a field"
             raise FpmSimError(
-                f"{part!r} is {what}",
+                f"unknown parameter: {part!r} is {what}",
                 parameter=name,
                 hint=f"settable here: {', '.join(settable) or 'none'}; e.g. {', '.join(GRADIENT_PARAMETERS)}",
             )

@@ -27,6 +27,7 @@ from fpm_sim import __version__
 
 try:  # Ctrl-C while the modules load (a second or so): one line and 130, as at any later moment
     from fpm_sim.cli.common import (
+        OPTION_NAMES,
         CliError,
         add_config_args,
         add_model_args,
@@ -43,7 +44,7 @@ try:  # Ctrl-C while the modules load (a second or so): one line and 130, as at 
         resolution_line,
         with_resolution,
     )
-    from fpm_sim.errors import FpmSimError
+    from fpm_sim.errors import FpmSimError, FpmSimWarning
 except KeyboardInterrupt:
     sys.stderr.write("interrupted (Ctrl-C)\n")
     raise SystemExit(130) from None
@@ -315,7 +316,7 @@ class _Parser(argparse.ArgumentParser):
         kwargs.setdefault("allow_abbrev", False)  # --thickness-m must not be read as --thickness-mm
         super().__init__(*args, **kwargs)
 
-    def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:  # type: ignore[override]
+    def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:
         """Also record the option strings of the parsers used (``_cli_options``), for :func:`error_line`."""
         ns, rest = super().parse_known_args(args, namespace)
         ns._cli_options = set(getattr(ns, "_cli_options", ())) | set(self._option_string_actions)
@@ -386,6 +387,9 @@ def _one_line_warning(
     message: Warning | str, category: type[Warning], filename: str, lineno: int, file: Any = None, line: Any = None
 ) -> None:
     text = str(message).replace("\n", " ")
+    name = getattr(message, "parameter", None)
+    if isinstance(message, FpmSimWarning) and name:
+        text = f"{OPTION_NAMES.get(name, (name,))[0]}: {text}"
     try:
         print(f"warning: {text}", file=sys.stderr if file is None else file)
     except (OSError, ValueError):  # stderr closed: nothing to say it on

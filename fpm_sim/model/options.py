@@ -191,10 +191,12 @@ def warn_if_coarse(options: ModelOptions, *, stacklevel: int = 2) -> None:
     if err > RESOLUTION_WARN:
         finer = max(n for n in range(1, 201) if DISCRETISATION_COEFF[options.link_model] / n**2 > RESOLUTION_WARN) + 1
         warnings.warn(
-            f"coarse resolution: {options.segments} {options.link_model} per link gives an estimated discretisation "
-            f"error of {100 * err:.2g} % on the first frequency (segments/fidelity); use segments >= {finer} "
-            f"or fidelity 'standard' for below {100 * RESOLUTION_WARN:g} %",
-            ResolutionWarning,
+            ResolutionWarning(
+                f"coarse resolution: {options.segments} {options.link_model} per link gives an estimated "
+                f"discretisation error of {100 * err:.2g} % on the first frequency; use segments >= {finer} "
+                f"or fidelity 'standard' for below {100 * RESOLUTION_WARN:g} %",
+                parameter="segments",
+            ),
             stacklevel=stacklevel + 1,
         )
 

@@ -437,8 +437,9 @@ def rollout(
                 if bar is not None:
                     bar.close()
                 raise RolloutError(
-                    f"the simulation diverged at t = {t[k + 1]:.4g} s: {why}; reduce the loads (ee_wrench, "
-                    "motor_torque) or the timestep (timestep_s)"
+                    f"the simulation diverged at t = {t[k + 1]:.4g} s: {why}",
+                    parameter="ee_wrench" if ee_wrench is not None else "motor_torque",
+                    hint="reduce the loads (ee_wrench, motor_torque) or the timestep (timestep_s)",
                 )
             if bar is not None:
                 bar.update(1)
