@@ -18,11 +18,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from fpm_sim.errors import FpmSimError
+from fpm_sim.outputs import prove_creatable
 
 if TYPE_CHECKING:
     from fpm_sim.config import Manipulator
@@ -266,7 +266,7 @@ def add_overwrite_arg(p: argparse.ArgumentParser) -> None:
         "--overwrite",
         action=argparse.BooleanOptionalAction,
         default=False,
-        help="replace an existing output folder (default: refuse)",
+        help="replace an existing output (default: refuse)",
     )
 
 
@@ -344,23 +344,14 @@ def emit(args: argparse.Namespace, payload: dict[str, Any], text: str) -> None:
 # output paths, checked before any computation
 
 
-def _creatable_dir(path: Path, option: str) -> None:
-    """Raise unless ``path`` is an existing writable folder or can be created (nearest existing parent writable)."""
-    probe = path
-    while not probe.exists():
-        if probe.parent == probe:
-            break
-        probe = probe.parent
-    if probe.exists() and not probe.is_dir():
-        raise CliError(f"{option} {path}: {probe} is a file, not a folder; choose another path")
-    if not os.access(probe, os.W_OK | os.X_OK):
-        raise CliError(f"{option} {path}: folder {probe} is not writable; choose a writable location")
+def check_output_file(
+    path: Path | None, option: str, suffixes: tuple[str, ...] = (), *, overwrite: bool | None = None
+) -> None:
+    """Check an output file path before computing: suffix, not a folder, creatable
+    (:func:`fpm_sim.outputs.prove_creatable`) and, where the command has ``--overwrite`` (``overwrite`` not
+    ``None``), not an existing file unless ``overwrite``.
 
-
-def check_output_file(path: Path | None, option: str, suffixes: tuple[str, ...] = ()) -> None:
-    """Check an output file path before computing: suffix, not a folder, parent creatable and writable.
-
-    Raises :class:`CliError` naming ``option``.
+    Raises :class:`CliError` (or :class:`fpm_sim.outputs.OutputError`) naming ``option``.
     """
     if path is None:
         return
@@ -370,9 +361,9 @@ def check_output_file(path: Path | None, option: str, suffixes: tuple[str, ...] 
     if path.is_dir():
         ends = " or ".join(suffixes) or "a suffix"
         raise CliError(f"{option} {path} is a folder; give a file name (ending in {ends})")
-    if path.exists() and not os.access(path, os.W_OK):
-        raise CliError(f"{option} {path} exists and is not writable; choose another file")
-    _creatable_dir(path.parent if str(path.parent) else Path("."), option)
+    if overwrite is False and path.exists():
+        raise CliError(f"{option} {path} already exists; pass --overwrite to replace it, or choose another file")
+    prove_creatable(path, parameter=option)
 
 
 def check_output_dir(path: Path, option: str, *, overwrite: bool, marker: str | None = None) -> None:
@@ -388,7 +379,7 @@ def check_output_dir(path: Path, option: str, *, overwrite: bool, marker: str | 
             f"{option} {path} already holds another run's results; pass --overwrite to replace it, or choose "
             "another folder"
         )
-    _creatable_dir(path, option)
+    prove_creatable(path, parameter=option, folder=True)
 
 
 def read_input_file(path: Path, option: str, loader: Any, what: str) -> Any:

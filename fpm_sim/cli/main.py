@@ -32,6 +32,7 @@ try:  # Ctrl-C while the modules load (a second or so): one line and 130, as at 
         add_config_args,
         add_model_args,
         add_output_args,
+        add_overwrite_arg,
         add_pose_args,
         check_output_file,
         count_arg,
@@ -255,7 +256,7 @@ def cmd_export_mjcf(args: argparse.Namespace) -> int:
     from fpm_sim.model.rigs import build_rig
     from fpm_sim.outputs import atomic_file
 
-    check_output_file(args.out, "--out", (".xml",))
+    check_output_file(args.out, "--out", (".xml",), overwrite=args.overwrite)
     manip = load_manipulator(args)
     opts = model_options(args)
     if args.what == "manipulator":
@@ -367,6 +368,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("export-mjcf", help="write the generated MJCF of the manipulator at a pose, or of a rig")
     p.add_argument("what", choices=("manipulator", *RIGS))
     p.add_argument("--out", type=Path, help="output file (.xml; default: stdout)")
+    add_overwrite_arg(p)
     add_pose_args(p)
     _add_rig_overrides(p)
     add_config_args(p)
