@@ -32,6 +32,7 @@ __all__ = [
     "DataError",
     "DataSet",
     "Observation",
+    "read_csv_rows",
     "read_measured_csv",
     "read_subsystems_csv",
 ]
@@ -82,7 +83,7 @@ class DataSet:
     sigma_pct: float = DEFAULT_SIGMA_PCT
 
 
-def _rows(path: Path, parameter: str = "measured") -> list[tuple[int, dict[str, str]]]:
+def read_csv_rows(path: Path, parameter: str = "measured") -> list[tuple[int, dict[str, str]]]:
     """``(line number, row)`` of every data row (``#`` comments and blank lines skipped); UTF-8 with or without
     a byte-order mark, any line ending; header names stripped."""
     try:
@@ -150,7 +151,7 @@ def read_measured_csv(
     p = Path(path)
     if not (math.isfinite(sigma_pct) and sigma_pct > 0):
         raise DataError("must be > 0", parameter="sigma_pct", value=sigma_pct)
-    rows = _rows(p)
+    rows = read_csv_rows(p)
     cols = set(rows[0][1])
     ds = DataSet(source=p.name, sigma_pct=sigma_pct)
     if {"x_mm", "y_mm"} <= cols:
@@ -221,7 +222,7 @@ def read_measured_csv(
 def read_subsystems_csv(path: str | Path) -> list[SubsystemTest]:
     """Rig tests in the shape of the study's ``subsystems.csv`` (``rig,setting,experimental_hz``)."""
     p = Path(path)
-    rows = [r for _, r in _rows(p, "subsystems")]
+    rows = [r for _, r in read_csv_rows(p, "subsystems")]
     try:
         return parse_subsystem_rows(rows)
     except (KeyError, ValueError, IndexError) as exc:
