@@ -27,6 +27,14 @@ __all__ = ["FpmSimError", "FpmSimWarning"]
 _UNSET: Any = type("_Unset", (), {"__repr__": lambda self: "<unset>"})()
 
 
+def _show(value: Any) -> str:
+    """``repr`` of a value, NumPy scalars as plain Python numbers (``0.5``, not ``np.float64(0.5)``)."""
+    item = getattr(value, "item", None)
+    if callable(item) and getattr(value, "shape", None) == ():
+        value = item()
+    return repr(value)
+
+
 def _rebuild(cls: type[FpmSimError], message: str, fields: dict[str, Any]) -> FpmSimError:
     """Unpickling (errors cross process boundaries in the pose loops): the fields survive."""
     exc = cls.__new__(cls)
@@ -73,7 +81,7 @@ class FpmSimError(ValueError):
         if name:
             text = f"{name}: {text}"
         if self.has_value:
-            text += f", got {value if value is not None else repr(self.value)}"
+            text += f", got {value if value is not None else _show(self.value)}"
         if self.hint:
             text += f"; {self.hint}"
         if self.row is not None:

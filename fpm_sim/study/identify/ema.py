@@ -238,7 +238,6 @@ def remove_window_decay(
             f"window's 1/tau = {1.0 / window_tau_s:.4g} 1/s alone: the window's time constant "
             f"({window_tau_s:.4g} s) is wrong",
             parameter="window_tau_s",
-            value=window_tau_s,
         )
     wn_true = np.hypot(sigma, wd)
     return wn_true / (2.0 * np.pi), sigma / wn_true
