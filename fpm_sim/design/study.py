@@ -64,7 +64,7 @@ class DesignError(FpmSimError):
 # ----------------------------------------------------------------------------------------------- inputs
 
 
-def parse_spec(spec: str, *, name: str = "SPEC") -> list[float]:
+def parse_spec(spec: str, *, name: str = "SPEC", parameter: str | None = None) -> list[float]:
     """Values of ``a,b,c`` (a list) or ``start:stop:count`` (``count`` values from ``start`` to ``stop``)."""
     text = spec.strip()
     try:
@@ -79,10 +79,15 @@ def parse_spec(spec: str, *, name: str = "SPEC") -> list[float]:
         values = [float(v) for v in text.split(",") if v.strip()]
     except ValueError:
         raise DesignError(
-            f"{name} {spec!r}: give a list a,b,c or a range start:stop:count (count an integer >= 1)"
+            f"{name} {spec!r}: give a list a,b,c or a range start:stop:count (count an integer >= 1)",
+            parameter=parameter,
         ) from None
     if not values:
-        raise DesignError(f"{name} {spec!r} is empty: give a list a,b,c or a range start:stop:count")
+        raise DesignError(
+            f"{name} {spec!r} is empty: give a list a,b,c or a range start:stop:count", parameter=parameter
+        )
+    if not all(math.isfinite(v) for v in values):
+        raise DesignError(f"{name} {spec!r}: every value must be finite", parameter=parameter)
     return values
 
 
@@ -112,7 +117,7 @@ def parse_vary(items: Sequence[str], config: Manipulator) -> dict[str, list[floa
         _check_field(config, name)
         if name in out:
             raise DesignError(f"{name} given twice", parameter="vary", hint="give all its values in one SPEC")
-        out[name] = parse_spec(spec, name=f"vary {name}")
+        out[name] = parse_spec(spec, name=name, parameter="vary")
     return out
 
 

@@ -125,7 +125,7 @@ VARY = ["--vary", "section.thickness_m=0.01,0.02"]
 EDGE_CASES: list[tuple[str, list[str], str]] = [
     # identify --measured
     ("identify-measured-header-only", ["identify", "--measured", "{tmp}/hdr.csv", *M],
-     r"hdr\.csv: row 1: only a header"),
+     r"hdr\.csv: row 2: only a header"),
     ("identify-measured-inf", ["identify", "--measured", "{tmp}/inf.csv", *M], r"inf\.csv: row 2: f1_hz"),
     ("identify-measured-nan", ["identify", "--measured", "{tmp}/nan.csv", *M], r"nan\.csv: row 2: f1_hz"),
     ("identify-measured-n/a", ["identify", "--measured", "{tmp}/na.csv", *M], r"na\.csv: row 3: f1_hz"),
