@@ -294,7 +294,7 @@ class _Reader:
         full = f"{path}.{key}" if path else key
         if key not in table:
             if default is dataclasses.MISSING:
-                raise ConfigError(f"missing field '{full}'")
+                raise ConfigError("missing field", parameter=full)
             return default
         raw = table[key]
         if isinstance(raw, dict) and "value" in raw:
@@ -312,7 +312,7 @@ class _Reader:
     def number(self, table: dict[str, Any], path: str, key: str, default: Any = dataclasses.MISSING) -> float:
         v = self.get(table, path, key, default)
         if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise ConfigError(f"field '{path}.{key}' must be a number, got {v!r}")
+            raise ConfigError("must be a number", parameter=f"{path}.{key}", value=v)
         return float(v)
 
     def number_or_triple(
@@ -323,11 +323,11 @@ class _Reader:
         if isinstance(v, (list, tuple)):
             if len(v) != 3 or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in v):
                 raise ConfigError(
-                    f"field '{path}.{key}' must be a number or a list of 3 numbers (per chain), got {v!r}"
+                    "must be a number or a list of 3 numbers (per chain)", parameter=f"{path}.{key}", value=v
                 )
             return (float(v[0]), float(v[1]), float(v[2]))
         if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise ConfigError(f"field '{path}.{key}' must be a number or a list of 3 numbers (per chain), got {v!r}")
+            raise ConfigError("must be a number or a list of 3 numbers (per chain)", parameter=f"{path}.{key}", value=v)
         return float(v)
 
     def triple(
@@ -335,10 +335,10 @@ class _Reader:
     ) -> tuple[float, float, float]:
         v = self.get(table, path, key, default)
         if not isinstance(v, (list, tuple)) or len(v) != 3:
-            raise ConfigError(f"field '{path}.{key}' must be a list of 3 numbers, got {v!r}")
+            raise ConfigError("must be a list of 3 numbers", parameter=f"{path}.{key}", value=v)
         for x in v:
             if isinstance(x, bool) or not isinstance(x, (int, float)):
-                raise ConfigError(f"field '{path}.{key}' must be a list of 3 numbers, got {v!r}")
+                raise ConfigError("must be a list of 3 numbers", parameter=f"{path}.{key}", value=v)
         return (float(v[0]), float(v[1]), float(v[2]))
 
     def table(self, parent: dict[str, Any], path: str, key: str, required: bool = True) -> dict[str, Any]:
@@ -410,7 +410,7 @@ def parse_config(data: dict[str, Any], *, source: str = "user") -> Manipulator:
     )
     branch = r.get(g, "geometry", "elbow_branch", [1, 1, 1])
     if not isinstance(branch, (list, tuple)) or len(branch) != 3 or any(b not in (1, -1) for b in branch):
-        raise ConfigError(f"field 'geometry.elbow_branch' must be three values each +1 or -1, got {branch!r}")
+        raise ConfigError("must be three values each +1 or -1", parameter="geometry.elbow_branch", value=branch)
     geometry = Geometry(
         base_radius_m=r.number_or_triple(g, "geometry", "base_radius_m"),
         base_angles_rad=_radians3(r.triple(g, "geometry", "base_angles_deg")),
@@ -659,7 +659,7 @@ def validate(m: Manipulator) -> None:
             if not math.isfinite(v):
                 sfx = f"[{i}]" if isinstance(raw, tuple) else ""
                 raise ConfigError(
-                    f"field 'geometry.{key}{sfx}' must be a finite height in m (0 = coplanar layers), got {v!r}"
+                    "must be a finite height in m (0 = coplanar layers)", parameter=f"geometry.{key}{sfx}", value=v
                 )
     shortest = min(g.proximal_length_per_chain + g.distal_length_per_chain)
     if 2.0 * g.hub_length_m >= shortest:
@@ -696,7 +696,8 @@ def validate(m: Manipulator) -> None:
         _nonneg(m.rig.clamped_length_m, "rig.clamped_length_m")
         if m.rig.clamped_length_m >= m.rig.length_m:
             raise ConfigError(
-                f"field 'rig.clamped_length_m' ({m.rig.clamped_length_m} m) must be shorter than 'rig.length_m' "
-                f"({m.rig.length_m} m)"
+                f"must be shorter than rig.length_m ({m.rig.length_m:.4g} m)",
+                parameter="rig.clamped_length_m",
+                value=m.rig.clamped_length_m,
             )
         _validate_lump(m.rig.chain_hinge, "rig.chain_hinge")
