@@ -207,6 +207,15 @@ TIMESTEP_SAFETY = 0.5
 WELD_SOLIMP = (0.9999, 0.9999, 0.001, 0.5, 2.0)
 
 
+FLEX_DAMPING_LIMIT = 1.0
+"""Largest ``mu_max h`` of the flexes' explicit bending damping (:func:`_limit_flex_damping`): at 1 the
+stiffest damped motion is removed in one step; beyond it the explicit step flips its sign, beyond 2 it grows."""
+
+
+class FlexDampingWarning(FpmSimWarning):
+    """A flex's bending damping was lowered to keep the step stable (MuJoCo applies it explicitly)."""
+
+
 class TimestepError(FpmSimError):
     """The requested timestep cannot integrate the model's stiffest spring stably."""
 
@@ -478,7 +487,47 @@ def compile_model(spec: mujoco.MjSpec, *, timestep_s: float | None) -> mujoco.Mj
     spec.option.timestep = h
     for eq in spec.equalities:
         eq.solref = [2.0 * h, 1.0]
+    _limit_flex_damping(spec, model, h)
     return spec.compile()
+
+
+def _limit_flex_damping(spec: mujoco.MjSpec, model: mujoco.MjModel, h: float) -> None:
+    """Scale the flexes' stiffness-proportional bending damping so that ``mu_max h <= FLEX_DAMPING_LIMIT``.
+
+    ``mu_max`` is the largest eigenvalue of ``M^-1 D`` with ``D`` the flexes' damping matrix at ``qpos0`` (the
+    passive damping less the joints' own, which ``implicitfast`` integrates implicitly). MuJoCo 3.17 applies
+    flex damping explicitly (neither ``implicitfast`` nor ``implicit`` takes it in), so its stiffest damped
+    motion is multiplied by ``1 - mu h`` a step: unstable beyond ``mu h = 2`` (measured: the largest
+    step-map eigenvalue is ``mu h - 1``), sign-flipping beyond 1. On the default manipulator (beta = 5.3e-5 s,
+    16 edges per link, gravity off) ``mu h`` was 10.7: 65 step-map modes at the Nyquist frequency grew by
+    ``|lambda| = 9.8`` a step, and none without the damping. The flex's edges are left undamped for the same
+    reason (:mod:`fpm_sim.model.deformable_links`). The low modes then keep only that fraction of the requested
+    damping: a :class:`FlexDampingWarning` says how much.
+    """
+    if model.nflex == 0 or not np.any(model.flex_damping > 0):
+        return
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    mass = np.zeros((model.nv, model.nv))
+    mujoco.mj_fullM(model, data, mass)
+    damp = passive_damping_matrix(model, model.qpos0.copy()) - np.diag(model.dof_damping)
+    mu_max = float(scipy.linalg.eigh(damp, mass, eigvals_only=True, subset_by_index=[model.nv - 1, model.nv - 1])[0])
+    if mu_max * h <= FLEX_DAMPING_LIMIT:
+        return
+    scale = FLEX_DAMPING_LIMIT / (mu_max * h)
+    beta = max(f.damping for f in spec.flexes)
+    for f in spec.flexes:
+        f.damping *= scale
+    warnings.warn(
+        FlexDampingWarning(
+            f"flex bending damping lowered from {beta:.3g} s to {beta * scale:.3g} s ({100 * scale:.2g} % of it): "
+            f"MuJoCo applies it explicitly, and at timestep {h:.3g} s the explicit step would flip or grow its "
+            f"stiffest damped motion (mu h = {mu_max * h:.3g} > {FLEX_DAMPING_LIMIT:g}); use link_model 'segments' "
+            "or 'cable' for modal damping ratios",
+            parameter="link_model",
+        ),
+        stacklevel=3,
+    )
 
 
 # ---------------------------------------------------------------------------------------------
