@@ -369,14 +369,16 @@ def frf(
 
     if options is not None and options.link_model == "rigid":
         raise FrfError(
-            "an FRF needs flexible links: with rigid links and locked motors nothing moves; use link_model "
-            "'segments' (--link-model)"
+            "an FRF needs flexible links: with rigid links and locked motors nothing moves",
+            parameter="link_model",
+            value=options.link_model,
+            hint="use 'segments'",
         )
     built = _built(config, pose, options)
     exc = excitation or LinkPoint("distal_0", 0.5, "z")
     resp = response or exc
-    exc.check(built)
-    resp.check(built)
+    exc.check(built, "input")
+    resp.check(built, "output")
     system = modal_system(built)
     return modal_frf(
         system,

@@ -98,13 +98,16 @@ class LinkPoint:
             return f"platform/{self.axis}"
         return f"{self.link}@{self.fraction:g}/{self.axis}"
 
-    def check(self, built: BuiltModel) -> None:
+    def check(self, built: BuiltModel, role: str = "") -> None:
+        """Raise :class:`FrfError` for a point the model does not have; ``role`` (``input``/``output``) names
+        the fraction parameter ``<role>_fraction``."""
         if self.link != "platform" and self.link not in built.links:
             raise FrfError(f"unknown link {self.link!r}; choose one of platform, {', '.join(sorted(built.links))}")
         if not (0.0 <= self.fraction <= 1.0) or not math.isfinite(self.fraction):
             raise FrfError(
-                f"fraction must lie in [0, 1] (position along {self.link}; --input-fraction or --output-fraction on "
-                f"the command line), got {self.fraction!r}"
+                f"the fraction must lie in [0, 1] (position along {self.link})",
+                parameter=f"{role}_fraction" if role else "fraction",
+                value=self.fraction,
             )
         if self.axis not in AXES:
             raise FrfError(f"axis must be one of {', '.join(AXES)}, got {self.axis!r}")
@@ -419,10 +422,17 @@ def frf_grid(f_min_hz: float, f_max_hz: float, df_hz: float, modal_freq_hz: Arra
 
     The natural frequencies inside the band are added so that every resonance peak is sampled at its top.
     """
-    if not (0.0 <= f_min_hz < f_max_hz) or not df_hz > 0:
-        raise FrfError("need 0 <= f_min_hz < f_max_hz and df_hz > 0 (--f-min-hz, --f-max-hz, --df-hz)")
+    need = "need 0 <= f_min_hz < f_max_hz and df_hz > 0"
+    if not 0.0 <= f_min_hz < math.inf:
+        raise FrfError(need, parameter="f_min_hz", value=f_min_hz)
+    if not f_min_hz < f_max_hz < math.inf:
+        raise FrfError(need, parameter="f_max_hz", value=f_max_hz)
+    if not df_hz > 0:
+        raise FrfError(need, parameter="df_hz", value=df_hz)
     if (f_max_hz - f_min_hz) / df_hz > 1e6:
-        raise FrfError("the band holds more than 1e6 frequencies (--f-min-hz, --f-max-hz, --df-hz); use a larger df_hz")
+        raise FrfError(
+            "the band holds more than 1e6 frequencies", parameter="df_hz", value=df_hz, hint="use a larger one"
+        )
     freq = np.arange(f_min_hz, f_max_hz + df_hz / 2, df_hz)
     fm = np.asarray(modal_freq_hz, float)
     return np.unique(np.concatenate([freq, fm[(fm >= freq[0]) & (fm <= freq[-1])]]))

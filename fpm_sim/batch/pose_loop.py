@@ -43,7 +43,15 @@ from numpy.typing import ArrayLike
 from fpm_sim.batch.engine import EngineOptions, chunk_size, run_chunks, split
 from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError, FpmSimWarning
-from fpm_sim.kinematics import NEAR_SINGULAR_WARN, SINGULAR_TOL, Assembly, Pose, assemble_many
+from fpm_sim.kinematics import (
+    NEAR_SINGULAR_WARN,
+    SINGULAR_TOL,
+    Assembly,
+    Pose,
+    PoseValueError,
+    assemble_many,
+    checked_pose_mm,
+)
 from fpm_sim.linear.modal import (
     NULLSPACE_RCOND,
     equality_jacobian,
@@ -559,26 +567,32 @@ def cpu_backend(
 
 
 class PosesFileError(FpmSimError):
-    """A poses CSV file (``--poses``) is missing, empty or malformed."""
+    """A poses CSV file (``poses``) is missing, empty or malformed."""
 
 
-def read_poses_csv(path: str | Path, *, flag: str = "--poses") -> list[Pose]:
-    """Poses from a CSV file with columns ``x_mm,y_mm,phi_rad`` (other columns are ignored); errors name
-    ``flag``, the option that gave the file."""
+def read_poses_csv(path: str | Path, *, parameter: str = "poses") -> list[Pose]:
+    """Poses from a CSV file with columns ``x_mm,y_mm,phi_rad`` (other columns are ignored; UTF-8 with or without
+    a byte-order mark, any line ending); each row checked by :func:`fpm_sim.kinematics.checked_pose_mm`. Errors
+    name ``parameter``, the file and the row."""
     p = Path(path)
     if not p.is_file():
-        raise PosesFileError(f"{flag} {p}: no such file")
-    with open(p, newline="") as fh:
+        raise PosesFileError(f"{p}: no such file", parameter=parameter)
+    with open(p, newline="", encoding="utf-8-sig") as fh:
         reader = csv.DictReader(fh)
-        missing = {"x_mm", "y_mm", "phi_rad"} - set(reader.fieldnames or [])
+        missing = {"x_mm", "y_mm", "phi_rad"} - {h.strip() for h in reader.fieldnames or []}
         if missing:
             raise PosesFileError(
-                f"{flag} {p}: missing column(s) {', '.join(sorted(missing))} (the header must hold x_mm,y_mm,phi_rad)"
+                f"{p}: missing column(s) {', '.join(sorted(missing))}",
+                parameter=parameter,
+                hint="the header must hold x_mm,y_mm,phi_rad",
             )
-        try:
-            poses = [Pose.from_mm(float(r["x_mm"]), float(r["y_mm"]), float(r["phi_rad"])) for r in reader]
-        except (TypeError, ValueError):
-            raise PosesFileError(f"{flag} {p}: x_mm, y_mm and phi_rad must be numbers on every row") from None
+        poses: list[Pose] = []
+        for r in reader:
+            r = {(k or "").strip(): v for k, v in r.items()}
+            try:
+                poses.append(checked_pose_mm(r["x_mm"], r["y_mm"], r["phi_rad"], row=reader.line_num))
+            except PoseValueError as e:
+                raise PosesFileError(f"{p}: {e}", parameter=parameter) from None
     if not poses:
-        raise PosesFileError(f"{flag} {p}: no rows after the header")
+        raise PosesFileError(f"{p}: no rows after the header", parameter=parameter)
     return poses

@@ -50,7 +50,9 @@ def cmd_design(args: argparse.Namespace) -> int:
     if bool(args.vary) == bool(args.designs):
         raise CliError("give --vary FIELD=SPEC (one or more) or --designs FILE.csv, not both and not neither")
     out = args.out
-    check_output_dir(out, "--out", overwrite=args.overwrite or args.resume)
+    # --resume continues OUT.partial/ (the folder itself appears only at the end): a finished run in --out, of this
+    # study or another, is replaced only with --overwrite
+    check_output_dir(out, "--out", overwrite=args.overwrite)
     vary = parse_vary(args.vary, config) if args.vary else None
     designs = read_designs_csv(args.designs, config) if args.designs else None
     poses, grid = _poses(args, config)
@@ -66,7 +68,7 @@ def cmd_design(args: argparse.Namespace) -> int:
         options=opts,
         engine=engine_options(args, out),
     )
-    with atomic_dir(out, overwrite=True) as tmp:  # the folder was checked above (--overwrite, --resume)
+    with atomic_dir(out, overwrite=True) as tmp:  # the folder was checked above (--overwrite)
         paths = [out / p.name for p in result.write(tmp)]
     finish_store(out)
     text = (

@@ -98,8 +98,8 @@ def cmd_frf(args: argparse.Namespace) -> int:
     built = build_manipulator(manip, pose_of(args), opts)
     exc = point_of(args, "input", LinkPoint("distal_0", 0.5, "z"))
     resp = point_of(args, "output", exc)
-    exc.check(built)
-    resp.check(built)
+    exc.check(built, "input")
+    resp.check(built, "output")
     system = modal_system(built)
     freq = frf_grid(args.f_min_hz, args.f_max_hz, args.df_hz, system.frequencies_hz)
     frf = modal_frf(

@@ -114,7 +114,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     if args.workspace is not None:
         from fpm_sim.batch.pose_loop import read_poses_csv
 
-        workspace = read_poses_csv(args.workspace, flag="--workspace")
+        workspace = read_poses_csv(args.workspace, parameter="workspace")
     if not 0.0 < args.min_singularity < 1.0:
         raise CliError(f"--min-singularity must be in (0, 1), got {args.min_singularity}")
     problem = Problem(

@@ -28,14 +28,17 @@ from fpm_sim import __version__
 
 try:  # Ctrl-C while the modules load (a second or so): one line and 130, as at any later moment
     from fpm_sim.cli.common import (
+        OPTION_NAMES,
         CliError,
         add_config_args,
         add_model_args,
         add_output_args,
+        add_overwrite_arg,
         add_pose_args,
         check_output_file,
         count_arg,
         emit,
+        error_line,
         load_manipulator,
         mm,
         model_options,
@@ -43,7 +46,7 @@ try:  # Ctrl-C while the modules load (a second or so): one line and 130, as at 
         resolution_line,
         with_resolution,
     )
-    from fpm_sim.errors import FpmSimError
+    from fpm_sim.errors import FpmSimError, FpmSimWarning
 except KeyboardInterrupt:
     sys.stderr.write("interrupted (Ctrl-C)\n")
     raise SystemExit(130) from None
@@ -234,7 +237,7 @@ def cmd_export_mjcf(args: argparse.Namespace) -> int:
     from fpm_sim.model.rigs import build_rig
     from fpm_sim.outputs import atomic_file
 
-    check_output_file(args.out, "--out", (".xml",))
+    check_output_file(args.out, "--out", (".xml",), overwrite=args.overwrite)
     manip = load_manipulator(args)
     opts = model_options(args)
     if args.what == "manipulator":
@@ -291,6 +294,16 @@ class _Parser(argparse.ArgumentParser):
     """Usage errors become :class:`CliError` (one ``error:`` line and exit 2 from :func:`main`, like every
     other user error) instead of argparse's own exit."""
 
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("allow_abbrev", False)  # --thickness-m must not be read as --thickness-mm
+        super().__init__(*args, **kwargs)
+
+    def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:
+        """Also record the option strings of the parsers used (``_cli_options``), for :func:`error_line`."""
+        ns, rest = super().parse_known_args(args, namespace)
+        ns._cli_options = set(getattr(ns, "_cli_options", ())) | set(self._option_string_actions)
+        return ns, rest
+
     def error(self, message: str) -> NoReturn:
         raise CliError(f"{message} ({self.prog}); see '{self.prog} --help'")
 
@@ -336,6 +349,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("export-mjcf", help="write the generated MJCF of the manipulator at a pose, or of a rig")
     p.add_argument("what", choices=("manipulator", *RIGS))
     p.add_argument("--out", type=Path, help="output file (.xml; default: stdout)")
+    add_overwrite_arg(p)
     add_pose_args(p)
     _add_rig_overrides(p)
     add_config_args(p)
@@ -356,6 +370,9 @@ def _one_line_warning(
     message: Warning | str, category: type[Warning], filename: str, lineno: int, file: Any = None, line: Any = None
 ) -> None:
     text = str(message).replace("\n", " ")
+    name = getattr(message, "parameter", None)
+    if isinstance(message, FpmSimWarning) and name:
+        text = f"{OPTION_NAMES.get(name, (name,))[0]}: {text}"
     try:
         print(f"warning: {text}", file=sys.stderr if file is None else file)
     except (OSError, ValueError):  # stderr closed: nothing to say it on
@@ -382,6 +399,7 @@ def _quiet_stdout() -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Run ``fpm-sim`` with ``argv``; returns the exit status (0, 2 user error, 130 interrupted, 1 bug)."""
+    args: argparse.Namespace | None = None
     with _cli_warnings():
         try:
             argv = sys.argv[1:] if argv is None else list(argv)
@@ -391,7 +409,8 @@ def main(argv: list[str] | None = None) -> int:
             sys.stdout.flush()  # a closed pipe shows here, inside the handlers below
             return code
         except FpmSimError as exc:
-            print(f"error: {exc}", file=sys.stderr)
+            command, options = getattr(args, "command", None), getattr(args, "_cli_options", None)
+            print(error_line(exc, command, options), file=sys.stderr)
             return 2
         except KeyboardInterrupt:
             print("interrupted (Ctrl-C); unfinished outputs were not written", file=sys.stderr)

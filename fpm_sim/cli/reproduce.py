@@ -54,8 +54,6 @@ def study_manipulator(args: argparse.Namespace) -> Any:
     """The manipulator of ``--config`` with ``--thickness-mm`` applied."""
     manip = load_manipulator(args)
     if args.thickness_mm is not None:
-        if not args.thickness_mm > 0:
-            raise CliError(f"--thickness-mm must be > 0, got {args.thickness_mm}; give the link thickness in mm")
         manip = manip.with_section(thickness_m=args.thickness_mm * 1e-3)
         manip = manip.replace(name=f"{manip.name} [links {args.thickness_mm:g} mm in-plane]")
     return manip

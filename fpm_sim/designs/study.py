@@ -64,7 +64,7 @@ class DesignError(FpmSimError):
 # ----------------------------------------------------------------------------------------------- inputs
 
 
-def parse_spec(spec: str, *, name: str = "SPEC") -> list[float]:
+def parse_spec(spec: str, *, name: str = "SPEC", parameter: str | None = None) -> list[float]:
     """Values of ``a,b,c`` (a list) or ``start:stop:count`` (``count`` values from ``start`` to ``stop``)."""
     text = spec.strip()
     try:
@@ -79,34 +79,45 @@ def parse_spec(spec: str, *, name: str = "SPEC") -> list[float]:
         values = [float(v) for v in text.split(",") if v.strip()]
     except ValueError:
         raise DesignError(
-            f"{name} {spec!r}: give a list a,b,c or a range start:stop:count (count an integer >= 1)"
+            f"{name} {spec!r}: give a list a,b,c or a range start:stop:count (count an integer >= 1)",
+            parameter=parameter,
         ) from None
     if not values:
-        raise DesignError(f"{name} {spec!r} is empty: give a list a,b,c or a range start:stop:count")
+        raise DesignError(
+            f"{name} {spec!r} is empty: give a list a,b,c or a range start:stop:count", parameter=parameter
+        )
+    if not all(math.isfinite(v) for v in values):
+        raise DesignError(f"{name} {spec!r}: every value must be finite", parameter=parameter)
     return values
 
 
-def _check_field(config: Manipulator, name: str) -> None:
+def _check_field(config: Manipulator, name: str, parameter: str = "vary") -> None:
+    """Raise :class:`DesignError` naming ``parameter`` (``vary`` or ``designs``) unless ``name`` is a settable
+    numeric field of ``config``."""
     try:
         parameter_value(config, name)
-    except ValueError as exc:
+    except FpmSimError as exc:
         raise DesignError(
-            f"--vary {name}: {exc}; fields are dotted paths of the description, e.g. section.thickness_m, "
-            "hardware.payload.mass_kg, geometry.distal_length_m (see `fpm-sim config`)"
+            f"field {name!r}: {exc.message}",
+            parameter=parameter,
+            hint=f"{exc.hint + '; ' if exc.hint else ''}fields are dotted paths of the description "
+            "(see `fpm-sim config`)",
         ) from None
 
 
 def parse_vary(items: Sequence[str], config: Manipulator) -> dict[str, list[float]]:
-    """``["FIELD=SPEC", ...]`` (the ``--vary`` options) as ``{field: values}``, fields checked on ``config``."""
+    """``["FIELD=SPEC", ...]`` (the ``vary`` items) as ``{field: values}``, fields checked on ``config``."""
     out: dict[str, list[float]] = {}
     for item in items:
         if "=" not in item:
-            raise DesignError(f"--vary {item!r}: write FIELD=SPEC, e.g. section.thickness_m=0.005:0.03:6")
+            raise DesignError(
+                "write FIELD=SPEC", parameter="vary", value=item, hint="e.g. section.thickness_m=0.005:0.03:6"
+            )
         name, spec = (s.strip() for s in item.split("=", 1))
         _check_field(config, name)
         if name in out:
-            raise DesignError(f"--vary {name} given twice; give all its values in one SPEC")
-        out[name] = parse_spec(spec, name=f"--vary {name}")
+            raise DesignError(f"{name} given twice", parameter="vary", hint="give all its values in one SPEC")
+        out[name] = parse_spec(spec, name=name, parameter="vary")
     return out
 
 
@@ -120,17 +131,37 @@ def read_designs_csv(path: str | Path, config: Manipulator) -> list[dict[str, fl
     """Designs from a CSV file: one column per dotted field, one row per design."""
     p = Path(path)
     if not p.is_file():
-        raise DesignError(f"--designs {p}: no such file")
-    with open(p, newline="") as fh:
-        rows = list(csv.DictReader(fh))
-    if not rows:
-        raise DesignError(f"--designs {p}: no rows (write a header of dotted fields, then one design per row)")
-    for name in rows[0]:
-        _check_field(config, name)
-    try:
-        return [{k: float(v) for k, v in r.items()} for r in rows]
-    except (TypeError, ValueError):
-        raise DesignError(f"--designs {p}: every cell must be a number (SI units, as the field's name says)") from None
+        raise DesignError(f"{p}: no such file", parameter="designs")
+    with open(p, newline="", encoding="utf-8-sig") as fh:
+        reader = csv.reader(fh)
+        header = [h.strip() for h in next(reader, [])]
+        rows = [r for r in reader if any(c.strip() for c in r)]
+    if not header or not rows:
+        raise DesignError(
+            f"{p}: no rows", parameter="designs", hint="write a header of dotted fields, then one design per row"
+        )
+    if len(set(header)) != len(header) or "" in header:
+        raise DesignError(f"{p}: the header {header} has an empty or repeated column", parameter="designs")
+    for name in header:
+        _check_field(config, name, "designs")
+    designs: list[dict[str, float]] = []
+    for line, r in enumerate(rows, start=2):
+        if len(r) != len(header):
+            raise DesignError(
+                f"{p}: row {line} has {len(r)} cells for {len(header)} columns", parameter="designs"
+            )
+        try:
+            values = [float(v) for v in r]
+        except ValueError:
+            raise DesignError(
+                f"{p}: row {line}: every cell must be a number (SI units, as the field's name says)",
+                parameter="designs",
+                value=r,
+            ) from None
+        if not all(math.isfinite(v) for v in values):
+            raise DesignError(f"{p}: row {line}: cells must be finite", parameter="designs", value=r)
+        designs.append(dict(zip(header, values)))
+    return designs
 
 
 def apply_design(config: Manipulator, values: Mapping[str, float]) -> Manipulator:
@@ -567,26 +598,29 @@ def design_study(
         Unknown field, invalid value, both or neither of ``vary``/``designs``, no poses.
     """
     if (vary is None) == (designs is None):
-        raise DesignError("give either vary (--vary FIELD=SPEC) or designs (--designs FILE.csv), not both or neither")
+        raise DesignError(
+            "give either vary (FIELD=SPEC items) or designs (rows of field values), not both or neither",
+            parameter="vary",
+        )
     if n_modes < 1:
-        raise DesignError(f"--n-modes must be >= 1, got {n_modes}")
+        raise DesignError("must be >= 1", parameter="n_modes", value=n_modes)
     if f_min_hz is not None and not f_min_hz >= 0:
-        raise DesignError(f"--f-min-hz must be >= 0, got {f_min_hz}")
+        raise DesignError("must be >= 0", parameter="f_min_hz", value=f_min_hz)
     poses = list(poses)
     if not poses:
-        raise DesignError("no poses: give --grid or --poses")
+        raise DesignError("no poses", parameter="poses", hint="give a grid or poses")
     if vary is not None:
         levels = {k: [float(v) for v in vals] for k, vals in vary.items()}
         for name, vals in levels.items():
             _check_field(config, name)
             if not vals:
-                raise DesignError(f"--vary {name}: no values")
+                raise DesignError(f"{name}: no values", parameter="vary")
         design_list = factorial(levels)
         is_factorial = True
     else:
         design_list = [{k: float(v) for k, v in d.items()} for d in designs or []]
         if not design_list:
-            raise DesignError("--designs: no designs")
+            raise DesignError("no designs", parameter="designs")
         levels = {k: sorted({d[k] for d in design_list}) for k in design_list[0]}
         is_factorial = False
     fields = list(levels)

@@ -81,7 +81,9 @@ def analyse(built: BuiltModel, method: Method | str, n_modes: int | None) -> Mod
     """Modes of ``built`` by ``"transition_fd"``, ``"constrained"`` or ``"both"``, with the static
     equilibrium solved once (floating models are linearised at ``qpos0`` by each method)."""
     if method not in ("transition_fd", "constrained", "both"):
-        raise FpmSimError(f"unknown method {method!r} (--method); choose 'transition_fd', 'constrained' or 'both'")
+        raise FpmSimError(
+            "unknown method", parameter="method", value=method, hint="choose 'transition_fd', 'constrained' or 'both'"
+        )
     qpos = None if built.floating else static_equilibrium(built.model, mujoco.MjData(built.model))
     with blas_threads():  # one BLAS thread around the dense eigen-solves (fpm_sim.linear.threads)
         if method == "transition_fd":

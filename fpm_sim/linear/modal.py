@@ -419,7 +419,7 @@ def system_damping_matrix(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray
     return damping_matrix(model)
 
 
-def check_n_modes(n_modes: int | None, available: int, *, name: str = "n_modes (--n-modes)") -> None:
+def check_n_modes(n_modes: int | None, available: int, *, name: str = "n_modes") -> None:
     """``n_modes`` must be ``None`` (all) or an integer in ``[1, available]`` (the model's degrees of freedom).
 
     Raises

@@ -616,7 +616,7 @@ def _bfs_tree(shape: tuple[int, int, int], root: tuple[int, int, int]) -> tuple[
 def _axis(values: Sequence[float], name: str) -> np.ndarray:
     a = np.asarray(sorted(float(v) for v in values))
     if a.size == 0 or np.any(~np.isfinite(a)) or np.any(np.diff(a) <= 0):
-        raise AtlasError(f"{name} must list distinct finite grid values, got {list(values)!r}")
+        raise AtlasError("must list distinct finite grid values", parameter=name, value=list(values))
     return a
 
 
@@ -648,12 +648,12 @@ def build_atlas(
     accel_fraction
         Accelerometer position on the distal links (the reduced models' acceleration outputs).
     """
-    xs, ys, ps = _axis(x_m, "x_m (--x-mm)"), _axis(y_m, "y_m (--y-mm)"), _axis(phi_rad, "phi_rad (--phi-rad)")
+    xs, ys, ps = _axis(x_m, "x_m"), _axis(y_m, "y_m"), _axis(phi_rad, "phi_rad")
     try:
-        check_count("n_modes (--modes)", n_modes, low=1, high=200)
-        check_count("n_extra (--extra)", n_extra, low=0, high=200)
+        check_count("n_modes", n_modes, low=1, high=200)
+        check_count("n_extra", n_extra, low=0, high=200)
     except FpmSimError as e:
-        raise AtlasError(str(e)) from None
+        raise AtlasError(e.message, parameter=e.parameter, value=e.value) from None
     shape = (len(xs), len(ys), len(ps))
     opts = options or ModelOptions(axial=False)  # the shared default resolution (model.options)
     if root is None:

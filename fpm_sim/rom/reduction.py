@@ -580,7 +580,7 @@ class ReducedModel:
                     },
                 )
         else:
-            raise ReductionError(f"output file {str(p)!r} must end in .mat or .npz (--out)")
+            raise ReductionError(f"output file {str(p)!r} must end in .mat or .npz", parameter="out")
         return p
 
 
@@ -634,27 +634,29 @@ def _choose_modes(system: ModalSystem, n_modes: int | None, band_hz: float | Non
     given = [n for n, v in (("n_modes", n_modes), ("band_hz", band_hz), ("error_bound", error_bound)) if v is not None]
     if len(given) != 1:
         raise ReductionError(
-            "choose the modes kept by exactly one of n_modes (--modes), band_hz (--band-hz) or error_bound "
-            f"(--error-bound); got {', '.join(given) or 'none'}"
+            "choose the modes kept by exactly one of n_modes, band_hz or error_bound; "
+            f"got {', '.join(given) or 'none'}",
+            parameter=given[-1] if given else "n_modes",
         )
     n_all = len(system.omega_rad_s)
     if n_modes is not None:
         if not (isinstance(n_modes, (int, np.integer)) and 1 <= n_modes <= n_all):
-            raise ReductionError(f"n_modes (--modes) must be an integer in [1, {n_all}], got {n_modes!r}")
+            raise ReductionError(f"must be an integer in [1, {n_all}]", parameter="n_modes", value=n_modes)
         return int(n_modes)
     if band_hz is not None:
         if not (math.isfinite(band_hz) and band_hz > 0):
-            raise ReductionError(f"band_hz (--band-hz) must be a positive frequency, got {band_hz!r}")
+            raise ReductionError("must be a positive frequency", parameter="band_hz", value=band_hz)
         k = int(np.sum(system.frequencies_hz <= band_hz))
         if k == 0:
             raise ReductionError(
-                f"no mode below band_hz = {band_hz:g} Hz (the first is {system.frequencies_hz[0]:.3g} Hz); "
-                "raise --band-hz"
+                f"no mode below {band_hz:g} Hz (the first is {system.frequencies_hz[0]:.3g} Hz)",
+                parameter="band_hz",
+                hint="raise it",
             )
         return k
     assert error_bound is not None
     if not (0.0 < error_bound < 1.0):
-        raise ReductionError(f"error_bound (--error-bound) must lie in (0, 1), got {error_bound!r}")
+        raise ReductionError("must lie in (0, 1)", parameter="error_bound", value=error_bound)
     for k in range(1, n_all + 1):
         if static_truncation_error(system, k) <= error_bound:
             return k

@@ -46,7 +46,7 @@ from fpm_sim.batch.frequencies import pose_frequencies
 from fpm_sim.batch.pose_loop import PoseFrequencies, fast_options, pose_assembly, read_poses_csv
 from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError
-from fpm_sim.kinematics import SINGULAR_TOL, Pose, assemble_many
+from fpm_sim.kinematics import SINGULAR_TOL, Pose, assemble_many, checked_pose_mm
 from fpm_sim.model.options import ModelOptions, resolution_label
 from fpm_sim.study.identify.data import read_measured_csv
 from fpm_sim.study.identify.engine import predict_observations
@@ -150,9 +150,9 @@ class PoseSpec:
             poses = [sp.pose for sp in study_poses(parse_reading(self.reading))]
         else:
             if self.kind == "file":
-                poses = read_poses_csv(self.file or "", flag=f"{where}.poses.file")
+                poses = read_poses_csv(self.file or "", parameter=f"{where}.poses.file")
             else:
-                poses = [Pose.from_mm(x, y, phi) for x, y, phi in self.points]
+                poses = [checked_pose_mm(x, y, phi, file=where) for x, y, phi in self.points]
             for p in poses:
                 status = pose_assembly(config, p)[2]
                 if status not in ("ok", "near_singular"):
@@ -591,7 +591,7 @@ def _evaluate_measurements(req: Requirement, config: Manipulator, opts: ModelOpt
         if status not in ("ok", "near_singular"):
             raise RequirementError(
                 f"{where}.measured_csv: pose {pose_text(o.pose)} is {status} for {config.name!r}; the measurement "
-                "cannot be of this description (check the file's x_mm,y_mm,phi_rad or the --config)"
+                "cannot be of this description (check the file's x_mm,y_mm,phi_rad or the description)"
             )
     pay = req.payload_kg[0] if req.payload_kg else None
     cfg = config if pay is None else with_payload(config, pay)

@@ -55,16 +55,18 @@ def dense_grid(config: Manipulator, *, step_mm: float, phi_rad: float = 0.0) -> 
     point is returned (reachable or not).
     """
     if not step_mm > 0:
-        raise FpmSimError(f"--step-mm must be > 0, got {step_mm}")
+        raise FpmSimError("must be > 0", parameter="step_mm", value=step_mm)
     half = _reach_half_width(config)
     n = math.floor(half * 1e3 / step_mm)
     ticks = np.arange(-n, n + 1) * step_mm
     if ticks.size > 401:
-        raise FpmSimError(f"--step-mm {step_mm} gives {ticks.size} x {ticks.size} points; use a larger step")
+        raise FpmSimError(
+            f"gives {ticks.size} x {ticks.size} points", parameter="step_mm", value=step_mm, hint="use a larger step"
+        )
     xx, yy = np.meshgrid(ticks * 1e-3, ticks * 1e-3)
     reach = assemble_many(config.geometry, xx.ravel(), yy.ravel(), phi_rad).reachable.reshape(xx.shape)
     if not reach.any():
-        raise FpmSimError(f"no reachable position at phi = {phi_rad} rad with step {step_mm} mm (--phi-rad)")
+        raise FpmSimError(f"no reachable position with step {step_mm} mm", parameter="phi_rad", value=phi_rad)
     rows, cols = np.where(reach.any(axis=1))[0], np.where(reach.any(axis=0))[0]
     ys, xs = ticks[rows.min() : rows.max() + 1], ticks[cols.min() : cols.max() + 1]
     return [Pose.from_mm(float(x), float(y), phi_rad) for y in ys for x in xs]
@@ -242,17 +244,17 @@ def sweep_workspace(
     runs (:class:`fpm_sim.batch.engine.EngineOptions`)."""
     if grid == "poses":
         if not poses:
-            raise FpmSimError("grid='poses' needs poses (--poses FILE.csv with columns x_mm,y_mm,phi_rad)")
+            raise FpmSimError("grid='poses' needs poses (x_mm,y_mm,phi_rad)", parameter="poses")
         poses = list(poses)
     elif poses is not None:
-        raise FpmSimError(f"poses are given: use grid='poses', not {grid!r} (--poses replaces --grid)")
+        raise FpmSimError("poses are given: use grid='poses'", parameter="grid", value=grid)
     elif grid == "dense":
         poses = dense_grid(config, step_mm=step_mm, phi_rad=phi_rad)
     elif grid == "paper":
         poses = [p.pose for p in study_poses(reading)]
         step_mm = 50.0
     else:
-        raise FpmSimError(f"--grid must be 'paper', 'dense' or 'poses', got {grid!r}")
+        raise FpmSimError("must be 'paper', 'dense' or 'poses'", parameter="grid", value=grid)
     opts = options or fast_options()
     fr = pose_frequencies(
         config,

@@ -167,6 +167,39 @@ class Problem:
         return [o.describe() for o in self.observations] + [f"rig {t.label}" for t in self.subsystem_tests]
 
 
+def check_problem(problem: Problem) -> None:
+    """Refuse a problem that cannot be fitted: fewer data than free parameters (the fit would report an optimum
+    and uncertainties that the data do not determine), or a measured pose the start description cannot reach
+    (its residual would be NaN). Raises :class:`IdentificationError` naming the file and row."""
+    n_free, n_data = len(problem.parameters.parameters), len(problem.observations) + len(problem.subsystem_tests)
+    if n_data < n_free:
+        raise IdentificationError(
+            f"{n_data} measured value(s) for {n_free} free parameters ({', '.join(problem.parameters.names)})",
+            parameter="measured",
+            hint="measure more poses or modes, or free fewer parameters",
+        )
+    obs = problem.observations
+    if not obs:
+        return
+    asm = assemble_many(
+        problem.parameters.start.geometry,
+        [o.pose.x_m for o in obs],
+        [o.pose.y_m for o in obs],
+        [o.pose.phi_rad for o in obs],
+    )
+    bad = [o for o, ok in zip(obs, asm.reachable) if not ok]
+    if bad:
+        o = bad[0]
+        where = f"row {o.line}" if o.line is not None else o.describe()
+        raise IdentificationError(
+            f"{o.source}: {where}: the pose (x = {o.pose.x_m * 1e3:g} mm, y = {o.pose.y_m * 1e3:g} mm, phi = "
+            f"{o.pose.phi_rad:g} rad) is unreachable for the start description"
+            + (f" ({len(bad)} such rows)" if len(bad) > 1 else ""),
+            parameter="measured",
+            hint="check the pose columns (x_mm, y_mm in mm, phi_rad in rad) or the start description",
+        )
+
+
 def workspace_measures(problem: Problem, config: Manipulator) -> np.ndarray:
     """The singularity measure of each ``problem.workspace`` pose under ``config`` (NaN where unreachable)."""
     ws = problem.workspace
@@ -458,7 +491,9 @@ def _surrogate_starts(
     ps = obj.ps
     gi = [i for i, p in enumerate(ps.parameters) if p.group in GEOMETRY_GROUPS]
     if not gi:
-        raise IdentificationError("--global surrogate-de needs the geometry group free (--free geometry)")
+        raise IdentificationError(
+            "surrogate-de needs the geometry group free", parameter="global_method", hint="add geometry to free"
+        )
     first = [k for k, o in enumerate(obj.obs) if o.mode == 1 and o.label in (None, "in_plane")]
     poses = [obj.obs[k].pose for k in first]
     logf = np.log([obj.obs[k].freq_hz for k in first])
@@ -696,9 +731,15 @@ def identify(problem: Problem, *, options: IdentifyOptions | None = None, progre
 
     opts = options or IdentifyOptions()
     if opts.global_method not in GLOBAL_METHODS:
-        raise IdentificationError(f"--global {opts.global_method!r}: choose from {', '.join(GLOBAL_METHODS)}")
+        raise IdentificationError(
+            "unknown global method",
+            parameter="global_method",
+            value=opts.global_method,
+            hint=f"choose from {', '.join(GLOBAL_METHODS)}",
+        )
     if not problem.observations and not problem.subsystem_tests:
-        raise IdentificationError("no data: give --measured FILE.csv and/or --subsystems FILE.csv")
+        raise IdentificationError("no data", parameter="measured", hint="give measured and/or subsystems data")
+    check_problem(problem)
     t_start = time.time()
     history: list[SearchStep] = []
     ps = problem.parameters
@@ -883,7 +924,9 @@ class CrossValidation:
 def fold_assignment(n_poses: int, folds: int, seed: int) -> np.ndarray:
     """Fold (0 .. folds-1) of each of ``n_poses`` poses: a seeded permutation dealt round-robin."""
     if not 2 <= folds <= n_poses:
-        raise IdentificationError(f"--folds must be between 2 and the number of poses ({n_poses}), got {folds}")
+        raise IdentificationError(
+            f"must be between 2 and the number of poses ({n_poses})", parameter="folds", value=folds
+        )
     perm = np.random.default_rng(seed).permutation(n_poses)
     out = np.empty(n_poses, int)
     out[perm] = np.arange(n_poses) % folds
