@@ -30,7 +30,9 @@ def cmd_readability(args: argparse.Namespace) -> int:
 
     check_output_file(args.markdown, "--markdown", (".md",))
     check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
-    opts = model_options(args)
+    # gravity off, as reproduce's pose loop and its readability tables: the same f1 at every study pose (with
+    # gravity's prestress f1 differs near singularities, e.g. 0.81 instead of 0.68 Hz at (-100, 50))
+    opts = model_options(args, gravity=False)
     warn_if_coarse(opts)
     manip = load_manipulator(args)
     tab = readability_table(

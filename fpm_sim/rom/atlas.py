@@ -414,10 +414,10 @@ class ModalAtlas:
         elif estimate > ATLAS_ERROR_WARN:
             warnings.warn(
                 f"atlas query at {pose.label()}: estimated interpolation error {estimate:.1%} exceeds "
-                f"{ATLAS_ERROR_WARN:.0%}; the estimate is the worst leave-one-out error at the neighbouring grid nodes, "
-                f"here at the node {_node_label(node)}, whose own neighbours may be near a singularity, so it can "
-                "overstate the error at this pose; check it with a direct computation (fpm-sim atlas query --direct, "
-                "fpm-sim reduce) or refine the atlas grid around this pose",
+                f"{ATLAS_ERROR_WARN:.0%}; the estimate is the worst leave-one-out error at the neighbouring grid "
+                f"nodes, here at the node {_node_label(node)}, whose own neighbours may be near a singularity, so "
+                "it can overstate the error at this pose; check it with a direct computation (fpm-sim atlas query "
+                "--direct, fpm-sim reduce) or refine the atlas grid around this pose",
                 AtlasAccuracyWarning,
                 stacklevel=2,
             )

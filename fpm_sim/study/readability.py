@@ -267,12 +267,7 @@ class ReadabilityTable:
         chains = [p.split("@")[0] for p in self.points]
         head = ["cell (row, col) mm", "pose x, y mm; phi rad", "study", "model f1 Hz", "mode 1", "share %", "height dB"]
         head += [f"prom. dB {c}" for c in chains] + ["predicted", "agrees"]
-        out = []
-        if markdown:
-            out.append("| " + " | ".join(head) + " |")
-            out.append("|" + "|".join("---" for _ in head) + "|")
-        else:
-            out.append(sep.join(head))
+        body = []
         for r in self.rows:
             m = r.primary
             study = "unreadable" if r.study_unreadable else f"{r.cell.comsol_hz:.2f} Hz"
@@ -288,8 +283,17 @@ class ReadabilityTable:
                 f"{m.peak_height_db:.1f}",
             ]
             cells += [f"{x.prominence_db:.1f}" for x in r.metrics] + [pred, agrees]
-            out.append(("| " + " | ".join(cells) + " |") if markdown else sep.join(cells))
-        return out
+            body.append(cells)
+        if markdown:
+            out = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
+            return out + ["| " + " | ".join(c) + " |" for c in body]
+        # plain text: every column as wide as its widest cell, text left, numbers right
+        width = [max(len(c[k]) for c in [head, *body]) for k in range(len(head))]
+        left = {0, 1, 2, 4, len(head) - 2, len(head) - 1}
+        return [
+            sep.join(c.ljust(w) if k in left else c.rjust(w) for k, (c, w) in enumerate(zip(cells, width))).rstrip()
+            for cells in [head, *body]
+        ]
 
     def summary_lines(self) -> list[str]:
         out = []
@@ -365,6 +369,7 @@ def readability_table(
     damping_ratio: float | None = None,
     poses: list[Any] | None = None,
     progress: bool = False,
+    desc: str | None = None,
 ) -> ReadabilityTable:
     """Mode-1 readability at the study's 25 poses (or ``poses``) for a driving-point test at ``point``
     and at the same point on the other two distal links (see module docstring).
@@ -384,6 +389,8 @@ def readability_table(
         ``comsol_hz`` (NaN where the study could not read the first peak), e.g. :class:`~fpm_sim.study.poses.StudyPose`.
     progress
         Show a tqdm progress bar.
+    desc
+        Its label (default: what it computes, ``mode-1 readability, hammer along <axis>``).
     """
     opts = options or ModelOptions(segments=6, axial=False)
     cells = poses if poses is not None else study_poses(TableReading(row_is, phi_sign))
@@ -391,7 +398,8 @@ def readability_table(
     if point.link.startswith("distal_"):
         others += [replace(point, link=f"distal_{i}") for i in range(3) if f"distal_{i}" != point.link]
     rows = []
-    it = tqdm(cells, desc="poses", unit="pose", leave=False) if progress else cells
+    label = desc or f"mode-1 readability, hammer along {point.axis}"
+    it = tqdm(cells, desc=label, unit="pose", leave=False) if progress else cells
     for cell in it:
         built = build_manipulator(manip, cell.pose, opts)
         system = modal_system(built)

@@ -24,6 +24,7 @@ from fpm_sim.batch.engine import EngineOptions
 from fpm_sim.batch.frequencies import pose_frequencies
 from fpm_sim.batch.pose_loop import PoseFrequencies
 from fpm_sim.config import Manipulator
+from fpm_sim.figures import text_colour, wrap_title
 from fpm_sim.linear.analysis import rig_modes
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.study.poses import GRID_MM, StudyPose, TableReading, study_poses
@@ -331,11 +332,12 @@ class StudyReproduction:
             pred = cv.get("mean_abs_pct", math.nan)
             if math.isfinite(pred) and pred > 1.2 * ref:
                 out.append(
-                    f"Verdict: fits the data it was identified from about as the study's model does, but predicts "
-                    f"unseen poses {pred / ref:.1f}x worse than the study's {ref:g} %: read predictions away from the "
-                    "measured poses as uncertain."
+                    "Verdict: fits the data it was identified from about as well as the study's model does, but "
+                    f"predicts unseen poses {pred / ref:.1f}x worse than the study's {ref:g} %: read predictions "
+                    "away from the measured poses as uncertain."
                     if sm["mean_abs_pct"] <= 1.2 * ref
-                    else f"Verdict: less accurate than the study's own model ({ref:g} %), in-sample and cross-validated."
+                    else f"Verdict: less accurate than the study's own model ({ref:g} %), in-sample and "
+                    "cross-validated."
                 )
             elif math.isfinite(pred):
                 out.append(f"Verdict: as accurate as the study's own model ({ref:g} %), cross-validated.")
@@ -346,8 +348,8 @@ class StudyReproduction:
                 )
         if sc.get("n"):
             out.append(
-                f"vs COMSOL ({sc['n']} poses): mean |err| {sc['mean_abs_pct']:.2f} %, median {sc['median_abs_pct']:.2f} "
-                f"%, max {sc['max_abs_pct']:.2f} %, Spearman {sc['spearman']:.3f}."
+                f"vs COMSOL ({sc['n']} poses): mean |err| {sc['mean_abs_pct']:.2f} %, "
+                f"median {sc['median_abs_pct']:.2f} %, max {sc['max_abs_pct']:.2f} %, Spearman {sc['spearman']:.3f}."
             )
         return out
 
@@ -375,7 +377,8 @@ class StudyReproduction:
             (diff, "fpm-sim / COMSOL - 1 (%)", "RdBu_r", -lim, lim),
         ][:n_panels]
         if n_panels == 1:
-            panels = [(self.f1_hz, "fpm-sim f1 (Hz)", "viridis", float(np.nanmin(self.f1_hz)), float(np.nanmax(self.f1_hz)))]
+            own = (float(np.nanmin(self.f1_hz)), float(np.nanmax(self.f1_hz)))
+            panels = [(self.f1_hz, "fpm-sim f1 (Hz)", "viridis", *own)]
         for ax, (vals, title, cmap, vmin, vmax) in zip(axes, panels):
             xs, ys, z = self.grid(vals)
             im = ax.imshow(z, origin="lower", extent=(-125, 125, -125, 125), cmap=cmap, vmin=vmin, vmax=vmax)
@@ -383,20 +386,20 @@ class StudyReproduction:
                 for ix in range(z.shape[1]):
                     v = z[iy, ix]
                     txt = "-" if not np.isfinite(v) else f"{v:.1f}"
-                    ax.text(xs[ix], ys[iy], txt, ha="center", va="center", fontsize=8, color=_text_colour(im, v))
+                    ax.text(xs[ix], ys[iy], txt, ha="center", va="center", fontsize=8, color=text_colour(im, v))
             ax.set_title(title, fontsize=10)
             ax.set_xlabel("x (mm)")
             ax.set_ylabel("y (mm)")
             ax.set_xticks(xs)
             ax.set_yticks(ys)
             fig.colorbar(im, ax=ax, shrink=0.85)
-        title = f"{_wrap(self.config.name)}\ntable reading {self.reading.name}"
+        title = f"{self.config.name}\ntable reading {self.reading.name}"
         if not self.comparable:
             title += (
                 f"; links {self.config.section.thickness_m * 1e3:g} mm: not comparable with the study's "
                 f"{STUDY_THICKNESS_M * 1e3:g} mm tables"
             )
-        fig.suptitle(title, fontsize=9)
+        fig.suptitle(wrap_title(title, fig, 9), fontsize=9)
         return fig
 
     def plot_subsystems(self) -> Any:
@@ -419,7 +422,7 @@ class StudyReproduction:
             ax.set_ylabel("first natural frequency (Hz)")
         fig.suptitle("subsystem tests: first natural frequency", fontsize=10)
         # one legend above the panels, outside the bars
-        fig.legend(*axes[0].get_legend_handles_labels(), loc="outside upper center", ncols=3, fontsize=8)
+        fig.legend(*axes[0].get_legend_handles_labels(), loc="outside lower center", ncols=3, fontsize=8)
         return fig
 
     def write(self, out_dir: str | Path) -> list[Path]:
@@ -480,7 +483,7 @@ class StudyReproduction:
         """Errors against the measured and the COMSOL values, in-sample and cross-validated, beside COMSOL's own;
         the predictions at the six withheld poses."""
         ref = STUDY_COMSOL_VS_EXPERIMENT
-        lines: list[str] = []
+        lines: list[str] = [""]
         if not self.comparable:
             lines += [
                 "## No error statistics: not comparable",
@@ -603,13 +606,13 @@ class StudyReproduction:
             sub_err = max((abs(x.error_pct) for x in self.subsystems), default=math.nan)
             lines += [
                 "**What the data determine and what they leave open.** The subsystem tests pin down the links and the "
-                f"test rigs (fitted within {sub_err:.2g} %). The manipulator's geometry and hardware masses are not pinned down: eleven "
-                "identification searches from scratch ended in eight optima that fit the data about equally well and "
-                "predict the unmeasured poses 2-4x apart (docs/identification.md). At the withheld poses (row, col) "
-                f"{agree} the optima agree within {lo_a:g}-{hi_a:g} %, so the data decide those predictions; at "
-                f"{open_} they disagree by {lo_o:g}-{hi_o:g} % (median), so there the prediction is one optimum's, not "
-                "the data's (see the table of withheld poses). Parameters with a standard deviation larger than "
-                "their value are flagged below.",
+                f"test rigs (fitted within {sub_err:.2g} %). The manipulator's geometry and hardware masses are not "
+                "pinned down: eleven identification searches from scratch ended in eight optima that fit the data "
+                "about equally well and predict the unmeasured poses 2-4x apart (docs/identification.md). At the "
+                f"withheld poses (row, col) {agree} the optima agree within {lo_a:g}-{hi_a:g} %, so the data decide "
+                f"those predictions; at {open_} they disagree by {lo_o:g}-{hi_o:g} % (median), so there the "
+                "prediction is one optimum's, not the data's (see the table of withheld poses). Parameters with a "
+                "standard deviation larger than their value are flagged below.",
                 "",
             ]
         elif self.comparable:
@@ -642,8 +645,8 @@ class StudyReproduction:
             f"turned {self.reading.phi_sign * 0.2:+.1f} rad).",
             f"Pose loop: constrained eigen-solve, gravity off, {self.options.segments} segments per link"
             f"{', axial springs' if self.options.axial else ', inextensible links'}. Near a singularity (singularity "
-            "measure below 0.05) f1 is sensitive to gravity's prestress: `fpm-sim modes` (gravity on) gives a different "
-            "value at those poses.",
+            "measure below 0.05) f1 is sensitive to gravity's prestress: `fpm-sim modes` (gravity on) gives a "
+            "different value at those poses.",
             "",
             *self._verdict_section(),
             "## Subsystem tests (first natural frequency)",
@@ -711,7 +714,7 @@ def _determination(provenance: str) -> str:
 
     m = re.search(r"= (-?[0-9.eE+-]+) \+- ([0-9.eE+-]+)", provenance)
     if not m:
-        return "-"
+        return "as its mass" if "scaled with the identified mass" in provenance else "-"
     value, sd = float(m.group(1)), float(m.group(2))
     if provenance.rstrip().endswith("deg"):  # an angle's size is no scale for its SD: judged in degrees
         return f"poorly (sd {sd:g} deg)" if sd >= 10.0 else f"yes (sd {sd:g} deg)"
@@ -721,21 +724,6 @@ def _determination(provenance: str) -> str:
     if rel >= 0.3:
         return f"poorly (sd {100 * rel:.0f} %)"
     return f"yes (sd {100 * rel:.0f} %)"
-
-
-def _text_colour(image: Any, value: float) -> str:
-    """Black or white, whichever reads on the colour ``image`` gives ``value`` (relative luminance)."""
-    if not np.isfinite(value):
-        return "k"
-    r, g, b, _ = image.cmap(image.norm(value))
-    return "k" if 0.2126 * r + 0.7152 * g + 0.0722 * b > 0.45 else "w"
-
-
-def _wrap(text: str, width: int = 110) -> str:
-    """``text`` broken at spaces into lines of at most ``width`` characters (long names in figure titles)."""
-    import textwrap
-
-    return "\n".join(textwrap.wrap(text, width)) or text
 
 
 def _value_of(config: Manipulator, dotted: str) -> str:

@@ -27,6 +27,7 @@ from fpm_sim.batch.frequencies import pose_frequencies
 from fpm_sim.batch.pose_loop import PoseFrequencies, fast_options
 from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError
+from fpm_sim.figures import text_colour, wrap_title
 from fpm_sim.kinematics import Pose, assemble_many
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.study.poses import TableReading, study_poses
@@ -179,7 +180,8 @@ class WorkspaceSweep:
         else:
             im = ax.scatter([r["x_mm"] for r in rows], [r["y_mm"] for r in rows], c=[r["f1_hz"] for r in rows], s=400)
             for r in rows:
-                ax.text(r["x_mm"], r["y_mm"], f"{r['f1_hz']:.1f}", ha="center", va="center", fontsize=7)
+                colour = text_colour(im, r["f1_hz"])
+                ax.text(r["x_mm"], r["y_mm"], f"{r['f1_hz']:.1f}", ha="center", va="center", fontsize=7, color=colour)
         fig.colorbar(im, ax=ax, label="first natural frequency (Hz)")
         marks = {"unreachable": ("x", "0.5"), "singular": ("s", "red"), "near_singular": ("o", "orange")}
         for status, (marker, color) in marks.items():
@@ -201,7 +203,15 @@ class WorkspaceSweep:
         ax.set_ylabel("y (mm)")
         ax.set_aspect("equal")
         ax.legend(fontsize=7, loc="upper right")
-        ax.set_title(f"{self.config.name}\nphi = {self.phi_rad:g} rad, grid {self.grid}", fontsize=9)
+        phis = sorted({round(float(r["phi_rad"]), 9) for r in rows})
+        if len(phis) == 1:
+            phi_text = f"phi = {phis[0]:g} rad"
+        else:  # e.g. the paper grid: its (x, 0) poses are turned 0.2 rad
+            count = {v: sum(round(float(r["phi_rad"]), 9) == v for r in rows) for v in phis}
+            phi_text = "phi = " + ", ".join(f"{v:g} rad at {n} poses" for v, n in count.items())
+            phi_text += f" (singularity loci drawn at {self.phi_rad:g} rad)"
+        title = f"{self.config.name}\n{phi_text}, grid {self.grid}"
+        ax.set_title(wrap_title(title, fig, 9, fraction=0.7), fontsize=9)
         return fig
 
     def write(self, out_dir: str | Path) -> list[Path]:
