@@ -134,9 +134,9 @@ def cmd_atlas_query(args: argparse.Namespace) -> int:
                 f"estimate is the worst leave-one-out error near the pose (at the grid node ({node[0] * 1e3:g}, "
                 f"{node[1] * 1e3:g}) mm), a worst case for the region; this direct comparison is the error at this pose"
             )
+        lines.append("resolution (the atlas's): " + resolution_line(opts).removeprefix("resolution: "))
     else:
-        lines.append(rom.table())
-    lines.append("resolution (the atlas's): " + resolution_line(opts).removeprefix("resolution: "))
+        lines.append(rom.table())  # ends with the atlas's resolution
     if args.out:
         lines.append(f"wrote {args.out}")
     emit(args, payload, "\n".join(lines))

@@ -13,7 +13,6 @@ from fpm_sim.cli.common import (
     emit,
     load_manipulator,
     model_options,
-    resolution_line,
     with_resolution,
 )
 from fpm_sim.cli.frf import add_point_args, point_of
@@ -54,7 +53,7 @@ def cmd_readability(args: argparse.Namespace) -> int:
     payload["markdown"] = str(args.markdown) if args.markdown else None
     payload["plot"] = str(args.plot) if args.plot else None
     wrote = "".join(f"\nwrote {f}" for f in (args.markdown, args.plot) if f)
-    emit(args, payload, tab.table() + "\n" + resolution_line(opts) + wrote)
+    emit(args, payload, tab.table() + wrote)
     return 0
 
 

@@ -35,7 +35,7 @@ from fpm_sim.batch.pose_loop import (
 from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError, FpmSimWarning
 from fpm_sim.kinematics import Pose
-from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.options import ModelOptions, resolution_footer
 
 __all__ = [
     "COMPUTED",
@@ -287,6 +287,7 @@ class DesignResult:
                 f"{r['moving_mass_kg']:.4f}",
             ]
             lines.append("  ".join(c.rjust(w) for c, w in zip(cells, width)))
+        lines.append(resolution_footer(self.options))
         return "\n".join(lines)
 
     def to_dict(self) -> dict[str, Any]:

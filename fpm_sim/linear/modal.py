@@ -273,7 +273,7 @@ class ModalResult:
     def table(self, n_modes: int | None = None) -> str:
         """A plain-text table of the modes, ending with the model's resolution (segments per link and the
         estimated discretisation error of f1) where the model records it."""
-        from fpm_sim.model.options import resolution_of_parameters, resolution_text
+        from fpm_sim.model.options import resolution_footer
 
         modes = self.modes[:n_modes] if n_modes else self.modes
         lines = [f"{'mode':>4}  {'freq (Hz)':>11}  {'damping':>8}  {'character':<30}"]
@@ -281,10 +281,8 @@ class ModalResult:
             top = sorted(m.character.items(), key=lambda kv: -kv[1])[:2]
             char = ", ".join(f"{k} {v:.0%}" for k, v in top if v > 0.005)
             lines.append(f"{i:>4}  {m.frequency_hz:>11.3f}  {m.damping_ratio:>8.4f}  {char:<30}")
-        res = resolution_of_parameters(self.built.parameters)
-        if res:
-            lines.append("resolution: " + resolution_text(res))
-        return "\n".join(lines)
+        footer = resolution_footer(self.built.parameters)
+        return "\n".join([*lines, footer] if footer else lines)
 
     def plot(self, ax: Any = None, *, index: int | None = None, n_modes: int = 1, scale_m: float = 0.03) -> Any:
         """Draw mode shapes in 3D over the equilibrium shape (matplotlib); returns the ``Figure``.

@@ -58,6 +58,7 @@ __all__ = [
     "open_for_writing",
     "passive_damping_matrix",
     "passive_stiffness_matrix",
+    "resolution_footer",
     "resolution_label",
     "resolution_of_parameters",
     "resolution_summary",
@@ -202,6 +203,15 @@ def resolution_text(summary: dict[str, Any]) -> str:
     if "gravity" in summary:
         extra.append("gravity on" if summary["gravity"] else "gravity off")
     return text + ("; " + ", ".join(extra) if extra else "")
+
+
+def resolution_footer(source: ModelOptions | dict[str, Any] | None) -> str:
+    """The line every result's table ends with, ``resolution: ...`` (:func:`resolution_text`), from model
+    options or a built model's ``parameters``; '' when ``source`` records no resolution."""
+    if source is None:
+        return ""
+    summary = resolution_summary(source) if isinstance(source, ModelOptions) else resolution_of_parameters(source)
+    return "resolution: " + resolution_text(summary) if summary else ""
 
 
 def resolution_label(options: ModelOptions) -> str:

@@ -44,7 +44,7 @@ from tqdm import tqdm
 from fpm_sim.config import Manipulator
 from fpm_sim.frf import FrequencyResponse, FrfError, LinkPoint, modal_frf, pick_peaks
 from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import ModelOptions, dof_stiffness
+from fpm_sim.model.options import ModelOptions, dof_stiffness, resolution_footer
 from fpm_sim.rom.reduction import ModalSystem, modal_system
 from fpm_sim.sim.impact import STUDY_IMPACT_POINT
 from fpm_sim.study.poses import ROTATION_RAD, TableReading, study_poses
@@ -345,7 +345,8 @@ class ReadabilityTable:
 
     def table(self) -> str:
         """Plain-text version."""
-        return "\n".join([*self._lines("  ", False), *self.summary_lines()])
+        footer = resolution_footer(self.parameters)
+        return "\n".join([*self._lines("  ", False), *self.summary_lines(), *([footer] if footer else [])])
 
 
 def _dominant(system: ModalSystem) -> str:
@@ -411,7 +412,13 @@ def readability_table(
         reading=f"row={row_is}, phi={'+' if phi_sign > 0 else '-'}{ROTATION_RAD:g}",
         parameters={
             "config": manip.name,
-            "options": {"segments": opts.segments, "axial": opts.axial, "link_model": opts.link_model},
+            "options": {
+                "segments": opts.segments,
+                "fidelity": opts.fidelity,
+                "axial": opts.axial,
+                "gravity": opts.gravity,
+                "link_model": opts.link_model,
+            },
             "f_max_hz": f_max_hz,
             "damping_ratio": damping_ratio,
             "grid_source": "fpm_sim.study.poses.study_poses",

@@ -26,7 +26,7 @@ from fpm_sim.batch.pose_loop import PoseFrequencies
 from fpm_sim.config import Manipulator
 from fpm_sim.figures import text_colour, wrap_title
 from fpm_sim.linear.analysis import rig_modes
-from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.options import ModelOptions, resolution_footer
 from fpm_sim.study.poses import GRID_MM, StudyPose, TableReading, study_poses
 from fpm_sim.study.tables import (
     STUDY_COMSOL_VS_EXPERIMENT,
@@ -304,6 +304,7 @@ class StudyReproduction:
             lines.append(text)
         lines.append("")
         lines += self.verdict_lines()
+        lines.append(resolution_footer(self.options))
         return "\n".join(lines)
 
     def verdict_lines(self) -> list[str]:

@@ -29,7 +29,7 @@ from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError
 from fpm_sim.figures import text_colour, wrap_title
 from fpm_sim.kinematics import Pose, assemble_many
-from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.options import ModelOptions, resolution_footer
 from fpm_sim.study.poses import TableReading, study_poses
 
 __all__ = ["SWEEP_CSV_COLUMNS", "WorkspaceSweep", "dense_grid", "singularity_fields", "sweep_workspace"]
@@ -153,7 +153,8 @@ class WorkspaceSweep:
         ]
         if ok.size:
             lines.append(f"f1 range: {ok.min():.2f} .. {ok.max():.2f} Hz")
-        return "\n".join(lines)
+        footer = resolution_footer(self.options)
+        return "\n".join([*lines, footer] if footer else lines)
 
     def plot(self, ax: Any = None) -> Any:
         """Heatmap of f1 with unreachable/singular points marked and the singularity loci drawn; the ``Figure``."""
