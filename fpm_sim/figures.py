@@ -20,7 +20,7 @@ def wrap_title(text: str, fig: Any, fontsize: float, *, fraction: float = 0.95) 
     (points); the existing line breaks are kept."""
     width_pt = fig.get_figwidth() * 72.0 * fraction
     chars = max(10, math.floor(width_pt / (fontsize * CHAR_WIDTH_EM)))
-    return "\n".join("\n".join(textwrap.wrap(line, chars)) or line for line in text.split("\n"))
+    return "\n".join("\n".join(textwrap.wrap(line, chars, break_on_hyphens=False)) or line for line in text.split("\n"))
 
 
 def text_colour(image: Any, value: float) -> str:

@@ -34,6 +34,7 @@ from fpm_sim.batch.pose_loop import (
 )
 from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError, FpmSimWarning
+from fpm_sim.figures import wrap_title
 from fpm_sim.kinematics import Pose
 from fpm_sim.model.options import ModelOptions, resolution_footer
 
@@ -435,7 +436,7 @@ class DesignResult:
             a.grid(alpha=0.3)
             if any(line.get_label() and not line.get_label().startswith("_") for line in a.get_lines()):
                 a.legend(fontsize=7)
-        fig.suptitle(f"{self.config.name}: weakest pose per design", fontsize=9)
+        fig.suptitle(wrap_title(f"{self.config.name}: weakest pose per design", fig, 9), fontsize=9)
         return fig
 
     def plot_maps(self, max_designs: int = 12) -> Any:

@@ -421,6 +421,7 @@ class StudyReproduction:
             ax.set_xticks(x)
             ax.set_xticklabels([s.test.label for s in grp])
             ax.set_ylabel("first natural frequency (Hz)")
+            ax.set_xlabel("subsystem test")
         fig.suptitle("subsystem tests: first natural frequency", fontsize=10)
         # one legend above the panels, outside the bars
         fig.legend(*axes[0].get_legend_handles_labels(), loc="outside lower center", ncols=3, fontsize=8)
