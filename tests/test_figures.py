@@ -62,6 +62,36 @@ def texts_outside(fig) -> list[str]:
     return out
 
 
+def _drawn_labels(a) -> list:
+    """Title, axis labels and the tick labels drawn (those at ticks inside the view limits) of axes ``a``."""
+    out = [a.title, a._left_title, a._right_title]
+    for axis in (a.xaxis, a.yaxis):
+        out.append(axis.label)
+        lo, hi = sorted(axis.get_view_interval())
+        span = hi - lo
+        for loc, label in zip(axis.get_majorticklocs(), axis.get_majorticklabels()):
+            if lo - 1e-9 * span <= loc <= hi + 1e-9 * span:
+                out.append(label)
+    return [t for t in out if t.get_visible() and t.get_text().strip()]
+
+
+def overlapping_labels(fig) -> list[str]:
+    """Pairs of labels (titles, axis labels, tick labels) of different axes whose boxes overlap: e.g. a colour
+    bar's tick labels over the next panel's y label."""
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    axes = [a for a in fig.axes if a.get_visible() and a.name != "3d"]
+    boxes = [[(t, t.get_window_extent(renderer)) for t in _drawn_labels(a)] for a in axes]
+    out = []
+    for i in range(len(axes)):
+        for j in range(i + 1, len(axes)):
+            for ti, bi in boxes[i]:
+                for tj, bj in boxes[j]:
+                    if bi.overlaps(bj):
+                        out.append(f"{ti.get_text()!r} / {tj.get_text()!r}")
+    return out
+
+
 def data_axes(fig) -> list:
     """The axes that show data (not colour bars, not switched off)."""
     return [a for a in fig.axes if a.get_visible() and a.axison and a.get_label() != "<colorbar>"]
@@ -70,6 +100,7 @@ def data_axes(fig) -> list:
 def check_figure(fig) -> None:
     """Texts inside the canvas; every data axes labelled on x and y (and z in 3D)."""
     assert texts_outside(fig) == []
+    assert overlapping_labels(fig) == []
     for a in data_axes(fig):
         assert a.get_xlabel().strip(), a
         assert a.get_ylabel().strip(), a
@@ -98,6 +129,14 @@ def test_the_checker_sees_a_clipped_title():
     ax.set_title(wrap_title(title, fig, 10, fraction=0.6), fontsize=10)
     fig.set_layout_engine("constrained")
     assert texts_outside(fig) == []
+    plt.close(fig)
+    # and colour-bar tick labels over the next panel's y label (three panels, no layout engine)
+    fig, axes = plt.subplots(1, 3, figsize=(12.6, 3.8))
+    for a in axes:
+        fig.colorbar(a.scatter([-100, 100], [-100, 100], c=[0.0, 30.0]), ax=a, shrink=0.8)
+        a.set_ylabel("y (mm)")
+        a.set_aspect("equal")
+    assert overlapping_labels(fig)
     plt.close(fig)
 
 
@@ -211,4 +250,18 @@ def test_modes_plot_has_a_legend_and_the_equilibrium_shape():
         labels = [t.get_text() for t in a.get_legend().get_texts()]
         assert labels[0] == "equilibrium"
         assert labels[1].startswith("mode shape")
+    plt.close(fig)
+
+
+def test_readability_panels_do_not_overlap(default_manip):
+    from fpm_sim.model.options import ModelOptions
+    from fpm_sim.study.readability import readability_table
+
+    cells = study_poses(TableReading())[:4]
+    tab = readability_table(default_manip, options=ModelOptions(segments=SEG, axial=False, gravity=False), poses=cells)
+    axes = tab.plot()
+    fig = np.atleast_1d(axes)[0].figure
+    check_figure(fig)
+    for k, a in enumerate(data_axes(fig)):
+        np.testing.assert_allclose(a.collections[0].get_array(), [r.metrics[k].prominence_db for r in tab.rows])
     plt.close(fig)

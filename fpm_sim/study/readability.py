@@ -326,7 +326,7 @@ class ReadabilityTable:
 
         n = len(self.points)
         if axes is None:
-            _, axes = plt.subplots(1, n, figsize=(4.2 * n, 3.8), squeeze=False)
+            _, axes = plt.subplots(1, n, figsize=(4.2 * n, 3.8), squeeze=False, constrained_layout=True)
             axes = axes[0]
         x = np.array([r.cell.pose.x_m * 1e3 for r in self.rows])
         y = np.array([r.cell.pose.y_m * 1e3 for r in self.rows])
@@ -335,7 +335,7 @@ class ReadabilityTable:
             prom = np.array([r.metrics[k].prominence_db for r in self.rows])
             sc = ax.scatter(x, y, c=prom, s=160, cmap="viridis", vmin=0.0)
             ax.scatter(x[bad], y[bad], s=420, facecolors="none", edgecolors="r", linewidths=1.5)
-            ax.set_title(f"{self.points[k]}: prominence (dB)", fontsize=9)
+            ax.set_title(f"{self.points[k]}\nmode-1 prominence (dB)", fontsize=9)
             ax.set_xlabel("x (mm)")
             ax.set_ylabel("y (mm)")
             ax.set_aspect("equal")
