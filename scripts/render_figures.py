@@ -132,6 +132,8 @@ def steps() -> list[Step]:
                 "identify",
                 "--measured",
                 f"{measured},sigma_pct=2",
+                "--reading",
+                "x+",
                 "--free",
                 "hardware",
                 "--global",

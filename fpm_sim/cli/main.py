@@ -216,7 +216,7 @@ def _rig_piece(args: argparse.Namespace, manip: Manipulator) -> Any:
 def _piece_line(args: argparse.Namespace, manip: Manipulator, piece: Any) -> str:
     """The test piece's dimensions and where each comes from (an option, or the description's provenance), and,
     when options change it, the description's own piece: the one ``reproduce``'s subsystem tests use."""
-    base = manip.rig
+    base = manip.rig if manip.rig is not None else piece  # rig_piece refuses a description without one
     dims = (
         ("length", "length_mm", "rig.length_m", piece.length_m, base.length_m),
         ("clamped", "clamped_length_mm", "rig.clamped_length_m", piece.clamped_length_m, base.clamped_length_m),

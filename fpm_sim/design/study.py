@@ -474,7 +474,7 @@ class DesignResult:
         shown = f"designs 1-{n} of {len(self.designs)} (the rest in design.csv)" if n < len(self.designs) else (
             f"all {n} designs"
         )
-        fig.suptitle(f"f1 over the poses, {shown}; grey x: no f1 (out of reach or failed)", fontsize=9)
+        fig.suptitle(f"f1 over the poses, {shown}; small grey marks: no f1 (out of reach or failed)", fontsize=9)
         return fig
 
     def plot_tradeoff(self) -> Any:

@@ -503,7 +503,8 @@ class ModalAtlas:
 
         labels = list(labels)
         if axes is None:
-            _, axes = plt.subplots(1, len(labels), figsize=(4.2 * len(labels), 3.8), squeeze=False)
+            fig, axes = plt.subplots(1, len(labels), figsize=(4.2 * len(labels), 3.8), squeeze=False)
+            fig.set_layout_engine("constrained")
             axes = axes[0]
         xx, yy = np.meshgrid(self.x_m * 1e3, self.y_m * 1e3, indexing="ij")
         for ax, lab in zip(np.atleast_1d(axes), labels):
@@ -515,7 +516,12 @@ class ModalAtlas:
             ax.set_xlabel("x (mm)")
             ax.set_ylabel("y (mm)")
             ax.set_aspect("equal")
-            ax.figure.colorbar(sc, ax=ax, shrink=0.8, label="Hz")
+            ax.figure.colorbar(sc, ax=ax, shrink=0.8, label="tracked frequency (Hz)")
+        np.atleast_1d(axes)[0].figure.suptitle(
+            f"red x: the label changes character there (its shape's MAC with the parent pose below {MAC_WARN:g}): "
+            "its frequency is unreliable",
+            fontsize=9,
+        )
         return axes
 
     def save(self, path: str | Path) -> Path:

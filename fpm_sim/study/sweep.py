@@ -203,7 +203,7 @@ class WorkspaceSweep:
         ax.set_xlabel("x (mm)")
         ax.set_ylabel("y (mm)")
         ax.set_aspect("equal")
-        ax.legend(fontsize=7, loc="upper right")
+        ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.1), ncols=2)  # below: covers no point
         phis = sorted({round(float(r["phi_rad"]), 9) for r in rows})
         if len(phis) == 1:
             phi_text = f"phi = {phis[0]:g} rad"
