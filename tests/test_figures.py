@@ -20,6 +20,7 @@ from fpm_sim.batch.pose_loop import fast_options
 from fpm_sim.design import design_study
 from fpm_sim.figures import text_colour, wrap_title
 from fpm_sim.kinematics import Pose
+from fpm_sim.model.options import ResolutionWarning
 from fpm_sim.study.poses import TableReading, study_poses
 from fpm_sim.study.reproduce import StudyReproduction, subsystem_frequencies
 from fpm_sim.study.sweep import sweep_workspace
@@ -243,7 +244,8 @@ def test_design_maps_say_how_many_designs_they_show(design):
 def test_modes_plot_has_a_legend_and_the_equilibrium_shape():
     import fpm_sim as fs
 
-    res = fs.modes(fs.default_config(), fs.Pose.from_mm(50, -50, 0.0), segments=SEG, n_modes=2)
+    with pytest.warns(ResolutionWarning):  # 3 segments: coarse on purpose (the layout does not depend on it)
+        res = fs.modes(fs.default_config(), fs.Pose.from_mm(50, -50, 0.0), segments=SEG, n_modes=2)
     fig = res.plot(n_modes=2)
     check_figure(fig)
     for a in fig.axes:
@@ -265,3 +267,22 @@ def test_readability_panels_do_not_overlap(default_manip):
     for k, a in enumerate(data_axes(fig)):
         np.testing.assert_allclose(a.collections[0].get_array(), [r.metrics[k].prominence_db for r in tab.rows])
     plt.close(fig)
+
+
+def test_atlas_figure_and_the_node_behind_its_estimate(default_manip):
+    from fpm_sim.model.options import ModelOptions
+    from fpm_sim.rom.atlas import build_atlas
+
+    grid = [-0.05, 0.0, 0.05]
+    atlas = build_atlas(default_manip, x_m=grid, y_m=grid, phi_rad=[0.0], options=ModelOptions(segments=SEG), n_modes=2)
+    axes = atlas.plot(labels=(1, 2))
+    fig = np.atleast_1d(axes)[0].figure
+    check_figure(fig)
+    assert "red x" in fig.get_suptitle()
+    plt.close(fig)
+    # the estimate is a quarter of the leave-one-out error at the node it names
+    pose = Pose(0.025, 0.025, 0.0)
+    node = atlas.error_estimate_node(pose)
+    axes_values = (atlas.x_m, atlas.y_m, atlas.phi_rad)
+    index = tuple(int(np.argmin(np.abs(np.asarray(v) - n))) for v, n in zip(axes_values, node))
+    assert atlas.error_estimate(pose) == pytest.approx(np.nanmax(atlas.loo_errors()[index]) / 4.0)

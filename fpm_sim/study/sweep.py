@@ -188,7 +188,12 @@ class WorkspaceSweep:
         for status, (marker, color) in marks.items():
             pts = [(r["x_mm"], r["y_mm"]) for r in rows if r["status"] == status]
             if pts:
-                ax.scatter(*zip(*pts), marker=marker, s=12, color=color, label=status.replace("_", " "), zorder=3)
+                label = status.replace("_", " ")
+                if self.grid == "dense" or marker == "x":
+                    ax.scatter(*zip(*pts), marker=marker, s=12, color=color, label=label, zorder=3)
+                else:  # a ring around the pose's disc: its number stays readable
+                    ax.scatter(*zip(*pts), marker=marker, s=620, facecolors="none", edgecolors=color, lw=2, zorder=3)
+                    ax.scatter([], [], marker=marker, s=40, facecolors="none", edgecolors=color, lw=1.5, label=label)
         pad = 20.0
         fx = np.linspace(xs[0] - pad, xs[-1] + pad, 241)
         fy = np.linspace(ys[0] - pad, ys[-1] + pad, 241)
