@@ -89,6 +89,12 @@ def main() -> int:
     ap.add_argument("--workdir", type=Path, default=None, help="parent folder of the clone (default: a temp folder)")
     ap.add_argument("--keep", action="store_true", help="keep the clone afterwards")
     ap.add_argument("--dry-run", action="store_true", help="print the README's blocks as extracted, run nothing")
+    ap.add_argument(
+        "--steps",
+        default="",
+        help="comma-separated step numbers to run (1 = the main job, 2 = the tests, 3 = the Python API block); "
+        "default all",
+    )
     args = ap.parse_args()
     if args.dry_run:
         readme = Path(args.repo, "README.md").read_text() if Path(args.repo).is_dir() else ""
@@ -102,7 +108,10 @@ def main() -> int:
     rc = subprocess.run(["git", "clone", "--quiet", args.repo, str(clone)], check=False).returncode
     timings.append(("git clone", time.perf_counter() - t0, rc))
     if rc == 0:
-        for name, interpreter, code in readme_steps((clone / "README.md").read_text()):
+        chosen = {int(v) for v in args.steps.split(",") if v.strip()}
+        for k, (name, interpreter, code) in enumerate(readme_steps((clone / "README.md").read_text()), 1):
+            if chosen and k not in chosen:
+                continue
             seconds, code_rc = run(name, interpreter, code, clone)
             timings.append((name, seconds, code_rc))
     print("\n===== newcomer check: time per step (measured here, not asserted) =====")
