@@ -422,8 +422,7 @@ class ImpactTestResult:
             f"{len(self.records)} impacts of {self.setup.pulse_s * 1e3:g} ms, record {self.setup.record_s:g} s",
             f"  first FRF peak   {self.first_peak_hz:10.3f} Hz",
             f"  modal f1         {self.modal_f1_hz:10.3f} Hz   (difference {self.relative_error * 100:+.3f} %)",
-            f"  first peak is mode {self.first_peak_mode}"
-            + ("" if self.first_peak_mode == 1 else f": {self.mode1_note()}"),
+            "  first peak is mode 1" if self.first_peak_mode == 1 else f"  {self.mode1_note()}",
             f"  half-power zeta  {self.damping_half_power:10.4f}     (includes {self.window_damping:.4f} from the "
             f"exponential window: identified {self.identified_damping_ratio:.4f})",
             f"{'peak':>6}  {'freq (Hz)':>10}  {'prominence (dB)':>16}",
