@@ -133,6 +133,8 @@ def test_fidelity_names_a_resolution():
         "segments": 8,
         "fidelity": "fast",
         "f1_error_estimate": pytest.approx(0.41 / 64),
+        "axial": False,
+        "gravity": True,
     }
 
 

@@ -31,7 +31,7 @@ from fpm_sim.model.parts import LinkModelError
 
 PACKAGE = Path(fpm_sim.__file__).parent
 FLAG = re.compile(r"(?<![\w-])--[a-z][a-z0-9-]*")
-COMMAND_LINE = re.compile(r"fpm-sim [a-z-]+")
+COMMAND_LINE = re.compile(r"fpm-sim [a-z-]+|python scripts/[a-z_]+\.py")  # a quoted command documents its options
 
 
 def _docstrings(tree: ast.AST) -> set[int]:

@@ -34,6 +34,7 @@ __all__ = [
     "LINK_MODEL_CHOICES",
     "MAX_MODES",
     "OPTION_NAMES",
+    "WORKERS_HELP",
     "CliError",
     "add_config_args",
     "add_engine_args",
@@ -55,6 +56,7 @@ __all__ = [
     "pose_of",
     "read_input_file",
     "with_resolution",
+    "workers_of",
 ]
 
 FIDELITY_CHOICES = ("fast", "standard", "fine")
@@ -410,6 +412,18 @@ def read_input_file(path: Path, option: str, loader: Any, what: str) -> Any:
 # --------------------------------------------------------------------------------------------- the Dask engine
 
 
+WORKERS_HELP = "processes for the pose loop (default: the CPU count, the same in every command)"
+"""The one ``--workers`` default (``None`` on the command line: :func:`workers_of` gives the CPU count)."""
+
+
+def workers_of(args: argparse.Namespace) -> int:
+    """``--workers``, or the CPU count when it was not given (the one default of every command)."""
+    import os
+
+    w = getattr(args, "workers", None)
+    return int(w) if w is not None else (os.cpu_count() or 1)
+
+
 def add_engine_args(p: argparse.ArgumentParser, *, workers: bool = False) -> None:
     """``--scheduler``, ``--resume``, ``--chunk-poses`` (and ``--workers`` when the command has none yet)."""
     g = p.add_argument_group("engine (Dask)")
@@ -433,7 +447,7 @@ def add_engine_args(p: argparse.ArgumentParser, *, workers: bool = False) -> Non
         help="poses per task (default: about four tasks per worker, 16-512; see docs/design.md, Scale on paper)",
     )
     if workers:
-        g.add_argument("--workers", type=int, default=None, help="local cluster processes (default: CPU count)")
+        g.add_argument("--workers", type=int, default=None, help=WORKERS_HELP)
 
 
 def engine_options(args: argparse.Namespace, out: Path | None) -> Any:

@@ -20,7 +20,6 @@ from fpm_sim.cli.common import (
     finish_store,
     load_manipulator,
     model_options,
-    resolution_line,
     with_resolution,
 )
 
@@ -73,7 +72,7 @@ def cmd_design(args: argparse.Namespace) -> int:
     finish_store(out)
     text = (
         f"{config.name}\n  {len(result.designs)} designs x {len(poses)} poses ({grid} grid), "
-        f"{result.elapsed_s:.1f} s\n{resolution_line(opts)}\n\n{result.table()}\n\n  wrote "
+        f"{result.elapsed_s:.1f} s\n\n{result.table()}\n\n  wrote "
         + ", ".join(str(p) for p in paths)
     )
     payload = {"summary": result.summary(), "files": [str(p) for p in paths], "elapsed_s": result.elapsed_s}

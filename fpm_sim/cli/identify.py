@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from fpm_sim.cli.common import (
+    WORKERS_HELP,
     CliError,
     add_config_args,
     add_output_args,
@@ -13,6 +14,7 @@ from fpm_sim.cli.common import (
     check_output_dir,
     emit,
     load_manipulator,
+    workers_of,
 )
 
 __all__ = ["cmd_identify", "parse_measured_arg", "register"]
@@ -82,6 +84,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     ps = parameter_set(start, groups)
     if any(p.subsystem for p in ps.parameters) and not tests:
         raise CliError("--free rig needs --subsystems FILE.csv (the rig parameters are seen only by rig tests)")
+    args.workers = workers_of(args)
     counts = (
         ("--workers", args.workers),
         ("--segments", args.segments),
@@ -234,7 +237,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--cv-max-nfev", type=int, default=10, help="per-fold refit budget (default 10)")
     p.add_argument("--seed", type=int, default=0, help="seed of the global search and the folds (default 0)")
     p.add_argument("--segments", type=int, default=4, help="spring locations per link of the fitted model (default 4)")
-    p.add_argument("--workers", type=int, default=1, help="processes for the pose loop (default 1)")
+    p.add_argument("--workers", type=int, default=None, help=WORKERS_HELP)
     p.add_argument(
         "--timoshenko",
         action=argparse.BooleanOptionalAction,

@@ -43,7 +43,6 @@ try:  # Ctrl-C while the modules load (a second or so): one line and 130, as at 
         mm,
         model_options,
         pose_of,
-        resolution_line,
         with_resolution,
     )
     from fpm_sim.errors import FpmSimError, FpmSimWarning
@@ -166,10 +165,8 @@ def cmd_modes(args: argparse.Namespace) -> int:
     text = (
         _header(built, f"{manip.name}\n  pose {pose.label()}")
         + "\n"
-        + table
+        + table  # ends with the resolution line
         + _n_modes_note(result, args.n_modes)
-        + "\n"
-        + resolution_line(opts)
         + note
     )
     emit(args, payload, text)
@@ -197,6 +194,34 @@ def _rig_piece(args: argparse.Namespace, manip: Manipulator) -> Any:
     )
 
 
+def _piece_line(args: argparse.Namespace, manip: Manipulator, piece: Any) -> str:
+    """The test piece's dimensions and where each comes from (an option, or the description's provenance), and,
+    when options change it, the description's own piece: the one ``reproduce``'s subsystem tests use."""
+    base = manip.rig if manip.rig is not None else piece  # rig_piece refuses a description without one
+    dims = (
+        ("length", "length_mm", "rig.length_m", piece.length_m, base.length_m),
+        ("clamped", "clamped_length_mm", "rig.clamped_length_m", piece.clamped_length_m, base.clamped_length_m),
+        ("thickness", "thickness_mm", "rig.section.thickness_m", piece.section.thickness_m, base.section.thickness_m),
+        ("height", "height_mm", "rig.section.height_m", piece.section.height_m, base.section.height_m),
+    )
+    own, changed = [], []
+    for name, opt, key, value, described in dims:
+        source = manip.provenance.get(key, "description").split(":")[0]
+        if getattr(args, opt, None) is not None:
+            own.append(f"{name} {value * 1e3:.4g} mm (--{opt.replace('_', '-')})")
+            if value != described:
+                changed.append(f"{name} {described * 1e3:.4g} mm ({source})")
+        else:
+            own.append(f"{name} {value * 1e3:.4g} mm ({source})")
+    line = "  test piece: " + ", ".join(own)
+    if changed:
+        line += (
+            "\n  (the description's piece, which reproduce's subsystem tests use, has " + ", ".join(changed) + ": "
+            "its frequencies differ from these for that reason)"
+        )
+    return line
+
+
 def cmd_rig(args: argparse.Namespace) -> int:
     from fpm_sim.linear.analysis import analyse
     from fpm_sim.model.options import warn_if_coarse
@@ -205,12 +230,20 @@ def cmd_rig(args: argparse.Namespace) -> int:
     manip = load_manipulator(args)
     opts = model_options(args)
     warn_if_coarse(opts)
-    built = build_rig(_rig_setup(args), _rig_piece(args, manip), opts, compliance=manip.compliance)
+    piece = _rig_piece(args, manip)
+    built = build_rig(_rig_setup(args), piece, opts, compliance=manip.compliance)
     result = analyse(built, args.method, args.n_modes)
     payload, table = result.to_dict(args.n_modes), result.table(args.n_modes)
     with_resolution(payload, opts)
     title = f"rig {args.rig}" + (f" (hinge angle {args.angle_deg:g} deg)" if args.rig == "chain" else "")
-    text = _header(built, title) + "\n" + table + _n_modes_note(result, args.n_modes) + "\n" + resolution_line(opts)
+    text = (
+        _header(built, title)
+        + "\n"
+        + _piece_line(args, manip, piece)
+        + "\n"
+        + table  # ends with the resolution line
+        + _n_modes_note(result, args.n_modes)
+    )
     emit(args, payload, text)
     return 0
 

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from fpm_sim.cli.common import (
+    WORKERS_HELP,
     CliError,
     add_config_args,
     add_engine_args,
@@ -19,8 +20,8 @@ from fpm_sim.cli.common import (
     finish_store,
     load_manipulator,
     model_options,
-    resolution_line,
     with_resolution,
+    workers_of,
 )
 
 __all__ = ["add_study_args", "cmd_reproduce", "default_out", "register", "study_manipulator", "study_options"]
@@ -38,7 +39,7 @@ def add_study_args(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--thickness-mm", type=float, help="in-plane link thickness (mm); the study: 30, 10, 5")
     add_resolution_args(p, axial=False)
-    p.add_argument("--workers", type=int, default=2, help="processes for the pose loop (default 2)")
+    p.add_argument("--workers", type=int, default=None, help=WORKERS_HELP)
     p.add_argument(
         "--backend",
         default="cpu",
@@ -63,6 +64,7 @@ def study_options(args: argparse.Namespace) -> Any:
     """Pose-loop model options (gravity off: the fast path's linearisation; see batch.pose_loop) and checks."""
     from fpm_sim.batch.frequencies import BACKENDS
 
+    args.workers = workers_of(args)
     if args.workers < 1:
         raise CliError(f"--workers must be >= 1, got {args.workers}")
     if args.backend not in BACKENDS:
@@ -100,7 +102,6 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         paths = [out / p.name for p in rep.write(tmp)]
     finish_store(out)
     lines = [rep.table()]
-    lines.append(resolution_line(opts))
     lines.append("wrote " + ", ".join(str(p) for p in paths))
     payload = with_resolution(rep.to_dict(), opts)
     payload["files"] = [str(p) for p in paths]

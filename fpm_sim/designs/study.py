@@ -34,8 +34,9 @@ from fpm_sim.batch.pose_loop import (
 )
 from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError, FpmSimWarning
+from fpm_sim.figures import wrap_title
 from fpm_sim.kinematics import Pose
-from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.options import ModelOptions, resolution_footer
 
 __all__ = [
     "COMPUTED",
@@ -318,6 +319,7 @@ class DesignResult:
                 f"{r['moving_mass_kg']:.4f}",
             ]
             lines.append("  ".join(c.rjust(w) for c, w in zip(cells, width)))
+        lines.append(resolution_footer(self.options))
         return "\n".join(lines)
 
     def to_dict(self) -> dict[str, Any]:
@@ -462,7 +464,7 @@ class DesignResult:
             a.grid(alpha=0.3)
             if any(line.get_label() and not line.get_label().startswith("_") for line in a.get_lines()):
                 a.legend(fontsize=7)
-        fig.suptitle(f"{self.config.name}: weakest pose per design", fontsize=9)
+        fig.suptitle(wrap_title(f"{self.config.name}: weakest pose per design", fig, 9), fontsize=9)
         return fig
 
     def plot_maps(self, max_designs: int = 12) -> Any:
@@ -490,11 +492,17 @@ class DesignResult:
             ok = np.isfinite(f1[d])
             sc = a.scatter(x[ok], y[ok], c=f1[d, ok], s=max(4.0, 2000.0 / max(len(x), 1)), vmin=vmin, vmax=vmax)
             a.scatter(x[~ok], y[~ok], marker="x", s=6, color="0.7")
-            a.set_title(", ".join(f"{k}={v:g}" for k, v in self.designs[d].items()) or "design", fontsize=7)
+            a.set_title("\n".join(f"{k}={v:g}" for k, v in self.designs[d].items()) or "design", fontsize=7)
             a.set_aspect("equal")
             a.tick_params(labelsize=6)
+            a.set_xlabel("x (mm)", fontsize=7)
+            a.set_ylabel("y (mm)", fontsize=7)
         if sc is not None:
             fig.colorbar(sc, ax=axes, label="f1 (Hz)", shrink=0.8)
+        shown = f"designs 1-{n} of {len(self.designs)} (the rest in design.csv)" if n < len(self.designs) else (
+            f"all {n} designs"
+        )
+        fig.suptitle(f"f1 over the poses, {shown}; small grey marks: no f1 (out of reach or failed)", fontsize=9)
         return fig
 
     def plot_tradeoff(self) -> Any:
@@ -503,14 +511,20 @@ class DesignResult:
 
         rows = self.summary()
         fig, ax = plt.subplots(figsize=(5, 4), constrained_layout=True)
-        ax.scatter([r["moving_mass_kg"] for r in rows], [r["min_f1_hz"] for r in rows])
+        # the y axis is summary.csv's min_f1_ok_hz (the weakest pose away from singularities), as labelled
+        ax.scatter([r["moving_mass_kg"] for r in rows], [r["min_f1_ok_hz"] for r in rows])
         for r in rows:
-            ax.annotate(", ".join(f"{r[f]:g}" for f in self.fields), (r["moving_mass_kg"], r["min_f1_hz"]), fontsize=6)
+            ax.annotate(
+                ", ".join(f"{r[f]:g}" for f in self.fields), (r["moving_mass_kg"], r["min_f1_ok_hz"]), fontsize=6
+            )
         if self.f_min_hz is not None:
-            ax.axhline(self.f_min_hz, color="red", ls="--", lw=1)
+            ax.axhline(self.f_min_hz, color="red", ls="--", lw=1, label=f"f_min {self.f_min_hz:g} Hz")
+            ax.legend(fontsize=7)
         ax.set_xlabel("moving mass (kg)")
         ax.set_ylabel("minimum f1 over the ok poses (Hz)")
-        ax.set_title(f"trade-off ({', '.join(self.fields)})", fontsize=8)
+        ax.set_title(
+            f"trade-off; labels: {', '.join(self.fields)}\n(near-singular poses excluded: min_f1_ok_hz)", fontsize=8
+        )
         ax.grid(alpha=0.3)
         return fig
 

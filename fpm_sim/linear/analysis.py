@@ -58,7 +58,10 @@ class ModalComparison:
                 f"{i + 1:>4}  {a[i].frequency_hz:>17.3f}  {b[i].frequency_hz:>16.3f}  {d:>8.2e}  "
                 f"{a[i].damping_ratio:>8.4f}"
             )
-        return "\n".join(lines)
+        from fpm_sim.model.options import resolution_footer
+
+        footer = resolution_footer(self.transition_fd.built.parameters)
+        return "\n".join([*lines, footer] if footer else lines)
 
     def plot(self, ax: Any = None) -> Any:
         """Relative difference ``|f_transition_fd / f_constrained - 1|`` per mode (log scale); returns the

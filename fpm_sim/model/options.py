@@ -58,9 +58,11 @@ __all__ = [
     "open_for_writing",
     "passive_damping_matrix",
     "passive_stiffness_matrix",
+    "resolution_footer",
     "resolution_label",
     "resolution_of_parameters",
     "resolution_summary",
+    "resolution_text",
     "resolve_segments",
     "route_mujoco_warnings",
     "tangent_jacobian",
@@ -156,6 +158,8 @@ def resolution_summary(options: ModelOptions) -> dict[str, Any]:
         "segments": n,
         "fidelity": options.fidelity,
         "f1_error_estimate": discretisation_error(n, options.link_model),
+        "axial": options.axial,
+        "gravity": options.gravity,
     }
 
 
@@ -166,23 +170,56 @@ def resolution_of_parameters(parameters: dict[str, Any]) -> dict[str, Any]:
         return {}
     lm = o.get("link_model", "segments")
     n = int(o.get("segments") or 1)
-    return {
+    out: dict[str, Any] = {
         "link_model": lm,
         "segments": n,
         "fidelity": o.get("fidelity"),
         "f1_error_estimate": discretisation_error(n, lm),
     }
+    out.update({k: bool(o[k]) for k in ("axial", "gravity") if k in o})
+    return out
+
+
+def resolution_text(summary: dict[str, Any]) -> str:
+    """One line from a :func:`resolution_summary` (or :func:`resolution_of_parameters`) dict, e.g.
+    ``12 segments per link (fidelity standard), estimated f1 discretisation error 0.28 %; axial springs off
+    (inextensible links), gravity off``; the axial springs and gravity are named where the dict records them
+    (commands differ in both, so every result says which it used)."""
+    lm = summary.get("link_model", "segments")
+    if lm == "rigid":
+        text = "rigid links (no discretisation)"
+    else:
+        n = int(summary.get("segments") or 1)
+        fid = summary.get("fidelity")
+        if fid:
+            how = f"fidelity {fid}"
+        else:  # no preset recorded: set explicitly, or read from a file (an atlas, a reduced model)
+            same = [f for f, r in FIDELITY_RESOLUTION.get(lm, {}).items() if r == n]
+            how = f"= fidelity {same[0]}" if same else "set explicitly"
+        err = summary.get("f1_error_estimate", discretisation_error(n, lm))
+        est = "not estimated" if err is None or math.isnan(err) else f"{100 * err:.2g} %"
+        text = f"{n} {lm} per link ({how}), estimated f1 discretisation error {est}"
+    extra = []
+    if "axial" in summary:
+        extra.append("axial springs on" if summary["axial"] else "axial springs off (inextensible links)")
+    if "gravity" in summary:
+        extra.append("gravity on" if summary["gravity"] else "gravity off")
+    return text + ("; " + ", ".join(extra) if extra else "")
+
+
+def resolution_footer(source: ModelOptions | dict[str, Any] | None) -> str:
+    """The line every result's table ends with, ``resolution: ...`` (:func:`resolution_text`), from model
+    options or a built model's ``parameters``; '' when ``source`` records no resolution."""
+    if source is None:
+        return ""
+    summary = resolution_summary(source) if isinstance(source, ModelOptions) else resolution_of_parameters(source)
+    return "resolution: " + resolution_text(summary) if summary else ""
 
 
 def resolution_label(options: ModelOptions) -> str:
-    """One line: ``12 segments per link (fidelity standard), estimated f1 discretisation error 0.28 %``."""
-    r = resolution_summary(options)
-    fid = f"fidelity {r['fidelity']}" if r["fidelity"] else "explicit segments"
-    err = r["f1_error_estimate"]
-    est = "not estimated" if math.isnan(err) else f"{100 * err:.2g} %"
-    if options.link_model == "rigid":
-        return "rigid links (no discretisation)"
-    return f"{r['segments']} {options.link_model} per link ({fid}), estimated f1 discretisation error {est}"
+    """One line: ``12 segments per link (fidelity standard), estimated f1 discretisation error 0.28 %; axial
+    springs off (inextensible links), gravity off`` (:func:`resolution_text`)."""
+    return resolution_text(resolution_summary(options))
 
 
 def warn_if_coarse(options: ModelOptions, *, stacklevel: int = 2) -> None:

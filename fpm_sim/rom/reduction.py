@@ -491,7 +491,10 @@ class ReducedModel:
         lines = [f"{'mode':>4}  {'freq (Hz)':>11}  {'damping':>8}"]
         for i, (f, z) in enumerate(zip(self.frequencies_hz, self.damping_ratios), 1):
             lines.append(f"{i:>4}  {f:>11.3f}  {z:>8.4f}")
-        return "\n".join(lines)
+        from fpm_sim.model.options import resolution_footer
+
+        footer = resolution_footer(self.parameters)
+        return "\n".join([*lines, footer] if footer else lines)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (no matrices)."""

@@ -53,6 +53,7 @@ from __future__ import annotations
 import copy
 import math
 import time
+import warnings
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -60,6 +61,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from fpm_sim.errors import FpmSimWarning
 from fpm_sim.linear.equilibrium import static_equilibrium
 from fpm_sim.model.options import BuiltModel
 from fpm_sim.response import (
@@ -69,6 +71,7 @@ from fpm_sim.response import (
     LinkPoint,
     half_power_damping,
     material_point,
+    modal_frf,
 )
 from fpm_sim.rom.reduction import ModalSystem, modal_system
 
@@ -327,6 +330,39 @@ class ImpactTestResult:
     travels in the UFF record written by :func:`write_uff58`) so that the EMA removes the window's decay."""
     setup: ImpactSetup
     parameters: dict[str, Any] = field(default_factory=dict)
+    modal_constants: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    """Per mode of the linear model: ``(c phi_r)(phi_r' b)`` (1/kg), hammer force in, acceleration out."""
+    excitation: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    """Per mode: ``|phi_r' b|``, how strongly the hammer excites it (1/sqrt(kg))."""
+    observation: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    """Per mode: ``|c phi_r|``, how strongly the accelerometer sees it (1/sqrt(kg))."""
+
+    def mode1_note(self) -> str:
+        """In words: which mode the first FRF peak is and, when it is not mode 1, why mode 1 was not seen (its
+        modal constant at this hammer/accelerometer pair against the seen mode's, split into how strongly the
+        hammer excites it and how strongly the accelerometer sees it); '' when the first peak is mode 1."""
+        k = self.first_peak_mode
+        if k == 1:
+            return ""
+        f1 = self.modal_f1_hz
+        if k == 0:
+            return f"no FRF peak in the band: mode 1 ({f1:.4g} Hz) and the others are not seen at this set-up"
+        text = (
+            f"the first FRF peak ({self.first_peak_hz:.4g} Hz) is mode {k} ({self.modal_freq_hz[k - 1]:.4g} Hz); "
+            f"mode 1 ({f1:.4g} Hz) is not seen"
+        )
+        if self.modal_constants.size >= k:
+            r = np.abs(self.modal_constants)
+            ex, ob = self.excitation, self.observation
+            ratio = r[0] / r[k - 1] if r[k - 1] > 0 else math.inf
+            text += (
+                f": at hammer {self.setup.impact.label()} and accelerometer {self.setup.accelerometer.label()} mode "
+                f"1's modal constant is {ratio:.2g} of mode {k}'s (the hammer excites mode 1 "
+                f"{ex[0] / ex[k - 1]:.2g}x as strongly as mode {k}, the accelerometer sees it {ob[0] / ob[k - 1]:.2g}x "
+                "as strongly), so its peak is too small to stand out; move the hammer or the accelerometer (e.g. "
+                "another axis: fpm-sim readability ranks the points)"
+            )
+        return text
 
     @property
     def first_peak_mode(self) -> int:
@@ -355,6 +391,7 @@ class ImpactTestResult:
             "first_peak_hz": self.first_peak_hz,
             "modal_f1_hz": self.modal_f1_hz,
             "first_peak_mode": self.first_peak_mode,
+            "first_peak_note": self.mode1_note(),
             "relative_error": self.relative_error,
             "modal_freq_hz": self.modal_freq_hz[:8].tolist(),
             "peaks": [
@@ -385,8 +422,7 @@ class ImpactTestResult:
             f"{len(self.records)} impacts of {self.setup.pulse_s * 1e3:g} ms, record {self.setup.record_s:g} s",
             f"  first FRF peak   {self.first_peak_hz:10.3f} Hz",
             f"  modal f1         {self.modal_f1_hz:10.3f} Hz   (difference {self.relative_error * 100:+.3f} %)",
-            f"  first peak is mode {self.first_peak_mode}"
-            + ("" if self.first_peak_mode == 1 else ": mode 1 is not seen with this hammer and accelerometer"),
+            "  first peak is mode 1" if self.first_peak_mode == 1 else f"  {self.mode1_note()}",
             f"  half-power zeta  {self.damping_half_power:10.4f}     (includes {self.window_damping:.4f} from the "
             f"exponential window: identified {self.identified_damping_ratio:.4f})",
             f"{'peak':>6}  {'freq (Hz)':>10}  {'prominence (dB)':>16}",
@@ -496,7 +532,12 @@ def virtual_impact_test(
     zeta = half_power_damping(freq[keep], np.abs(h1[keep]), first) if peaks else math.nan
     tau = exp_window_tau_s(dt * (n_samples - 1), setup.window_end)
     window_zeta = 1.0 / (tau * 2.0 * math.pi * first) if peaks and math.isfinite(tau) else 0.0
-    return ImpactTestResult(
+    # the linear model's modal constants at this set-up: why a mode is (not) seen
+    one_hz = np.array([1.0])
+    constants = modal_frf(system, excitation=setup.impact, response=setup.accelerometer, freq_hz=one_hz).residues
+    hammer = modal_frf(system, excitation=setup.impact, response=setup.impact, freq_hz=one_hz).residues
+    sensor = modal_frf(system, excitation=setup.accelerometer, response=setup.accelerometer, freq_hz=one_hz).residues
+    result = ImpactTestResult(
         frf=frf,
         records=records,
         first_peak_hz=first,
@@ -513,7 +554,13 @@ def virtual_impact_test(
             "rollout_timestep_s": h,
             "rollout_integrator": mujoco.mjtIntegrator(rollout.model.opt.integrator).name,
         },
+        modal_constants=np.asarray(constants),
+        excitation=np.sqrt(np.abs(hammer)),  # driving point: (phi' b)^2
+        observation=np.sqrt(np.abs(sensor)),  # driving point at the accelerometer: (c phi)^2
     )
+    if result.first_peak_mode != 1:
+        warnings.warn(result.mode1_note(), FpmSimWarning, stacklevel=2)
+    return result
 
 
 def _with_discrete_step(built: BuiltModel, timestep_s: float) -> BuiltModel:
