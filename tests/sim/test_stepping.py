@@ -1,0 +1,126 @@
+"""The discrete integrator's error bounds: the formulas against a one-hinge MuJoCo oscillator (an independent
+measurement: a pole fit of the simulated free response), the exact inverse, the step rule, and bad input."""
+
+import math
+
+import mujoco
+import numpy as np
+import pytest
+
+from fpm_sim.sim.stepping import (
+    MAX_NUMERICAL_DAMPING,
+    Stepping,
+    SteppingError,
+    discrete_pole,
+    numerical_damping,
+    period_error,
+    remove_integrator_effect,
+)
+
+_XML = """<mujoco><option timestep="{h}" integrator="{integrator}" gravity="0 0 0"/>
+<worldbody><body><joint type="hinge" axis="0 0 1" stiffness="{k}" damping="{c}"/>
+<geom type="sphere" size="0.01" pos="0.1 0 0" mass="1"/></body></worldbody></mujoco>"""
+
+
+def _measured_pole(freq_hz: float, zeta: float, h: float, integrator: str = "discrete") -> complex:
+    """The pole ``ln(z) / h`` of a one-hinge oscillator's simulated free response (linear prediction fit)."""
+    inertia = 0.01 + 0.4 * 1e-4  # point mass at 0.1 m plus the sphere's own (2/5 m r^2)
+    w = 2 * math.pi * freq_hz
+    model = mujoco.MjModel.from_xml_string(
+        _XML.format(h=h, integrator=integrator, k=inertia * w * w, c=2 * zeta * w * inertia)
+    )
+    data = mujoco.MjData(model)
+    data.qpos[0] = 1e-3
+    x = np.empty(400)
+    for i in range(x.size):
+        x[i] = data.qpos[0]
+        mujoco.mj_step(model, data)
+    # x[k+2] = s1 x[k+1] + s2 x[k]: the two-pole recursion a sampled mode obeys exactly
+    s1, s2 = np.linalg.lstsq(np.column_stack([x[1:-1], x[:-2]]), x[2:], rcond=None)[0]
+    z = np.roots([1.0, -s1, -s2])
+    z = z[np.argmax(z.imag)]
+    return complex(np.log(z) / h)
+
+
+@pytest.mark.parametrize(("freq_hz", "zeta", "h"), [(50.0, 0.0, 2e-5), (500.0, 0.0, 2e-5), (200.0, 0.02, 5e-5)])
+def test_discrete_pole_is_what_mujoco_does(freq_hz, zeta, h):
+    measured = _measured_pole(freq_hz, zeta, h)
+    predicted = complex(discrete_pole(freq_hz, zeta, h))
+    # the fit of a noise-free two-pole recursion is exact to round-off (measured 1e-12 relative)
+    assert abs(measured - predicted) < 1e-8 * abs(predicted)
+    # and it is not the continuous pole: the step's effect is far above that agreement
+    cont = 2 * math.pi * freq_hz * complex(-zeta, math.sqrt(1 - zeta**2))
+    assert abs(measured - cont) > 1e-4 * abs(cont)
+
+
+def test_first_order_bounds():
+    """zeta_num ~ pi f h (from below) and period error ~ (2 pi f h)^2 / 3 (from below)."""
+    for f, h in ((64.0, 2e-5), (320.0, 2e-5), (1000.0, 1e-5)):
+        a = 2 * math.pi * f * h
+        z, e = float(numerical_damping(f, h)), float(period_error(f, h))
+        assert 0 < z <= a / 2
+        assert z == pytest.approx(a / 2, rel=a**2)  # next term O(a^2) relative
+        assert 0 < e <= a**2 / 3
+        assert e == pytest.approx(a**2 / 3, rel=a**2)
+
+
+def test_explicit_reference_has_no_numerical_damping():
+    pole = _measured_pole(200.0, 0.0, 2e-5, integrator="implicitfast")
+    assert abs(pole.real) < 1e-8 * abs(pole)
+    a = 2 * math.pi * 200.0 * 2e-5
+    # symplectic Euler: frequency 2 asin(a / 2) / h
+    assert pole.imag * 2e-5 == pytest.approx(2 * math.asin(a / 2), rel=1e-9)
+    st = Stepping("explicit", 2e-5, 400.0, "given")
+    assert st.damping_at(200.0) == 0.0
+    assert st.period_error_at(200.0) == pytest.approx(a / (2 * math.asin(a / 2)) - 1, rel=1e-12)
+
+
+@pytest.mark.parametrize(("freq_hz", "zeta", "h"), [(64.0, 0.0, 2e-5), (320.0, 0.01, 2e-5), (900.0, 0.003, 5e-5)])
+def test_remove_integrator_effect_inverts_the_measured_pole(freq_hz, zeta, h):
+    s = _measured_pole(freq_hz, zeta, h)
+    fn, xi = remove_integrator_effect([abs(s) / (2 * math.pi)], [-s.real / abs(s)], step_s=h)
+    assert fn[0] == pytest.approx(freq_hz, rel=1e-8)
+    assert xi[0] == pytest.approx(zeta, abs=1e-8)
+
+
+def test_remove_integrator_effect_refuses_a_wrong_step():
+    # a lightly damped 50 Hz pole cannot come from a 1 ms discrete step (it would be damped by ~15 %)
+    with pytest.raises(SteppingError, match="step is wrong"):
+        remove_integrator_effect([50.0], [0.001], step_s=1e-3)
+    with pytest.raises(SteppingError, match="positive"):
+        remove_integrator_effect([50.0], [0.001], step_s=0.0)
+
+
+def test_step_rule_meets_the_bound(flexible_small):
+    from fpm_sim.sim.stepping import choose_stepping
+
+    built, f1 = flexible_small
+    st = choose_stepping(built, f1_hz=f1, divides_s=1e-4)
+    assert st.band_hz == pytest.approx(5 * f1)
+    assert st.damping_at(st.band_hz) <= MAX_NUMERICAL_DAMPING
+    n = 1e-4 / st.step_s
+    assert abs(n - round(n)) < 1e-9
+    d = st.to_dict()
+    assert d["numerical_damping_at_f1"] <= MAX_NUMERICAL_DAMPING / 5 * (1 + 1e-9)
+    assert choose_stepping(built, band_hz=1e4, f1_hz=f1).step_s == pytest.approx(
+        MAX_NUMERICAL_DAMPING / (math.pi * 1e4)
+    )
+    for kw, match in (
+        ({"integrator": "rk4"}, "--integrator"),
+        ({"band_hz": -5.0}, "--band-hz"),
+        ({"band_hz": float("nan")}, "--band-hz"),
+        ({"integrator": "explicit", "step_s": 1e-5}, "--step-s"),
+    ):
+        with pytest.raises(SteppingError, match=match):
+            choose_stepping(built, f1_hz=f1, **kw)
+
+
+@pytest.fixture(scope="module")
+def flexible_small(symmetric_manip):
+    from fpm_sim.kinematics import Pose
+    from fpm_sim.model.manipulator import build_manipulator
+    from fpm_sim.model.options import ModelOptions
+    from fpm_sim.sim.stepping import first_frequency_hz
+
+    built = build_manipulator(symmetric_manip, Pose(0.0, 0.0, 0.0), ModelOptions(segments=3, axial=False))
+    return built, first_frequency_hz(built)
