@@ -3,9 +3,9 @@
 The models are compiled with ``implicitfast`` (:mod:`fpm_sim.model.options`), whose spring hinges are
 integrated explicitly: the step must resolve the stiffest spring's highest (discretisation) mode and shrinks as
 ``1 / segments^2`` (12 segments: 0.4-0.8 us; at 1-2 ms of wall time a step, 20-80 min per simulated second).
-Every time-domain path (rollouts, the study transient, the virtual impact test, the dm_control environment, ``fpm-sim move``)
-instead runs by default on MuJoCo's ``discrete`` integrator (MuJoCo >= 3.13): the constraint solve and the
-implicit velocity update are one solve in the metric ``M + h D + h^2 K``, so springs, dampers and the
+Every time-domain path (rollouts, the study transient, the virtual impact test, the dm_control environment,
+``fpm-sim move``) instead runs by default on MuJoCo's ``discrete`` integrator (MuJoCo >= 3.13): the constraint
+solve and the implicit velocity update are one solve in the metric ``M + h D + h^2 K``, so springs, dampers and the
 loop-closing welds are implicit and the scheme is stable at any step. ``integrator="explicit"`` keeps the
 model's own integrator and step: the reference.
 
