@@ -303,6 +303,13 @@ def choose_stepping(
         h = min(h, max_step_s)
     if divides_s is not None:
         h = divides_s / math.ceil(divides_s / h * (1 - 1e-12))
+    h_explicit = float(built.model.opt.timestep)
+    if h < h_explicit * (1 - 1e-9):
+        raise SteppingError(
+            f"the discrete step would be {h:.3g} s, below the explicit reference's own {h_explicit:.3g} s, which is "
+            "then both cheaper and exact in the band: use integrator='explicit' (--integrator explicit), or a larger "
+            "output step (output_step_s, --output-step-s) or a lower band (band_hz, --band-hz)"
+        )
     return Stepping("discrete", h, band_hz, source, f1_hz)
 
 

@@ -102,14 +102,15 @@ def test_step_rule_meets_the_bound(flexible_small):
     assert abs(n - round(n)) < 1e-9
     d = st.to_dict()
     assert d["numerical_damping_at_f1"] <= MAX_NUMERICAL_DAMPING / 5 * (1 + 1e-9)
-    assert choose_stepping(built, band_hz=1e4, f1_hz=f1).step_s == pytest.approx(
-        MAX_NUMERICAL_DAMPING / (math.pi * 1e4)
+    assert choose_stepping(built, band_hz=400.0, f1_hz=f1).step_s == pytest.approx(
+        MAX_NUMERICAL_DAMPING / (math.pi * 400.0)
     )
     for kw, match in (
         ({"integrator": "rk4"}, "--integrator"),
         ({"band_hz": -5.0}, "--band-hz"),
         ({"band_hz": float("nan")}, "--band-hz"),
         ({"integrator": "explicit", "step_s": 1e-5}, "--step-s"),
+        ({"band_hz": 1e5}, "--integrator explicit"),
     ):
         with pytest.raises(SteppingError, match=match):
             choose_stepping(built, f1_hz=f1, **kw)
