@@ -290,9 +290,11 @@ def choose_stepping(
         if step_s is not None:
             raise SteppingError("step_s (--step-s) sets the discrete integrator's step; drop it with explicit")
         h = float(built.model.opt.timestep)
-        if band_hz is None and f1_hz is not None:
-            band_hz = BAND_F1_MULTIPLE * f1_hz
-        return Stepping("explicit", h, band_hz or 0.5 / h, "given" if band_hz else "Nyquist", f1_hz, 0.0)
+        if band_hz is not None:
+            return Stepping("explicit", h, band_hz, "given", f1_hz, 0.0)
+        if f1_hz is not None:
+            return Stepping("explicit", h, BAND_F1_MULTIPLE * f1_hz, f"{BAND_F1_MULTIPLE:g} x f1", f1_hz, 0.0)
+        return Stepping("explicit", h, 0.5 / h, "Nyquist of the step", None, 0.0)
     source = "given"
     if band_hz is None:
         f1_hz = f1_hz if f1_hz is not None else first_frequency_hz(built, qpos)
