@@ -392,6 +392,8 @@ def rollout(
     axial: bool = True,
     gravity: bool = True,
     progress: bool = False,
+    integrator: str = "discrete",
+    band_hz: float | None = None,
 ) -> RolloutResult:
     """Nonlinear simulation of the full manipulator from its static equilibrium under constant loads.
 
@@ -416,6 +418,9 @@ def rollout(
         Model options (:func:`model_options`).
     progress
         Show a progress bar.
+    integrator, band_hz
+        ``"discrete"`` (default) at the step of the band ``band_hz`` (Hz; default 5 x f1), or ``"explicit"``:
+        :func:`fpm_sim.sim.stepping.choose_stepping`.
     """
     from fpm_sim.model.manipulator import build_manipulator
     from fpm_sim.rom.reduction import accel_site_names
@@ -435,6 +440,8 @@ def rollout(
         motor_torque=constant(*motor_torque_nm) if any(motor_torque_nm) else None,
         accel_sites=accel_site_names(built, accel_fraction) if accel_fraction is not None else [],
         progress=progress,
+        integrator=integrator,
+        band_hz=band_hz,
     )
 
 
