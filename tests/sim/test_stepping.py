@@ -125,3 +125,56 @@ def flexible_small(symmetric_manip):
 
     built = build_manipulator(symmetric_manip, Pose(0.0, 0.0, 0.0), ModelOptions(segments=3, axial=False))
     return built, first_frequency_hz(built)
+
+
+@pytest.mark.parametrize("integrator", ["explicit", "discrete"])
+def test_energy_balance_of_free_vibration(symmetric_manip, integrator):
+    """Damping off, released from the static shape under 5 N: the discrete integrator loses the energy its
+    numerical damping predicts, mode by mode (``E_r exp(-2 sigma_r t)``, ``sigma_r`` from :func:`discrete_pole`),
+    and no more; the explicit reference keeps it. Energies: MuJoCo's own (``mjENBL_ENERGY``: springs, gravity,
+    kinetic) against the modal prediction (the constrained eigen-solve), two independent computations."""
+    from fpm_sim.config import Damping
+    from fpm_sim.kinematics import Pose
+    from fpm_sim.model.manipulator import build_manipulator
+    from fpm_sim.model.options import ModelOptions
+    from fpm_sim.rom.reduction import modal_system
+    from fpm_sim.sim.stepping import apply_stepping, choose_stepping
+
+    manip = symmetric_manip.with_section(thickness_m=0.005).replace(damping=Damping(stiffness_proportional_s=0.0))
+    built = build_manipulator(manip, Pose(0.0, 0.0, 0.0), ModelOptions(segments=3, axial=False))
+    system = modal_system(built)
+    assert np.abs(system.xi).max() == 0.0
+    force = np.array([5.0, 0.0])
+    eta = system.phi.T @ system.b_q[:, :2] @ force / system.omega_rad_s**2  # static modal amplitudes
+    e_modes = 0.5 * system.omega_rad_s**2 * eta**2
+    st = choose_stepping(built, integrator=integrator, f1_hz=float(system.frequencies_hz[0]), divides_s=1e-3)
+    model = apply_stepping(built, st).model
+    model.opt.enableflags |= int(mujoco.mjtEnableBit.mjENBL_ENERGY)
+    data = mujoco.MjData(model)
+    data.qpos[:] = system.qpos
+    mujoco.mj_forward(model, data)
+    e_eq = float(data.energy.sum())
+    mujoco.mj_integratePos(model, data.qpos, system.flexibility @ system.b_q[:, :2] @ force, 1.0)
+    mujoco.mj_forward(model, data)
+    n = round(0.5 / st.step_s)
+    t = np.arange(n + 1) * st.step_s
+    energy = np.empty(n + 1)
+    for k in range(n + 1):
+        energy[k] = data.energy.sum() - e_eq
+        if k < n:
+            mujoco.mj_step(model, data)
+    # the released state holds the modal energy (linear range: measured 2.4e-6 apart)
+    assert energy[0] == pytest.approx(e_modes.sum(), rel=1e-5)
+    sigma = -discrete_pole(system.frequencies_hz, 0.0, st.step_s).real if integrator == "discrete" else 0 * eta
+    predicted = (e_modes[None, :] * np.exp(-2.0 * sigma[None, :] * t[:, None])).sum(axis=1)
+    last = t >= 0.4  # a window's mean: the discrete scheme's energy ripples by ~omega h within a period (5 %)
+    kept, kept_predicted = energy[last].mean() / energy[0], predicted[last].mean() / predicted[0]
+    if integrator == "discrete":
+        # measured 0.7363 against 0.7371 predicted (26 % lost: 0.39 % numerical damping at f1 = 13.7 Hz, 91 us);
+        # 0.5 % covers the nonlinear response's share (the explicit reference loses 0.09 %)
+        assert kept_predicted < 0.8
+        assert kept == pytest.approx(kept_predicted, abs=5e-3)
+    else:
+        # symplectic, no numerical damping: measured 0.9991 (geometric nonlinearity, the soft welds)
+        assert kept_predicted == pytest.approx(1.0, abs=1e-12)
+        assert kept > 0.998
