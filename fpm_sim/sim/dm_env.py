@@ -46,13 +46,18 @@ from typing import TYPE_CHECKING, Any
 import mujoco
 import numpy as np
 
-from fpm_sim.config import Manipulator, Motors, default_config
+from fpm_sim.config import Manipulator, default_config
 from fpm_sim.kinematics import Pose
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.rom.reduction import END_EFFECTOR_SITE, accel_site_names, modal_system
 from fpm_sim.sim.rollout import aligned_options
 from fpm_sim.sim.stepping import DEFAULT_INTEGRATOR, choose_stepping
+from fpm_sim.sim.trajectory import (
+    DEFAULT_SERVO_DAMPING_NMS_PER_RAD,
+    DEFAULT_SERVO_STIFFNESS_NM_PER_RAD,
+    with_servo_motors,
+)
 
 if TYPE_CHECKING:
     from dm_control import mujoco as dm_mujoco
@@ -67,25 +72,8 @@ __all__ = [
     "regulation_env",
 ]
 
-DEFAULT_SERVO_STIFFNESS_NM_PER_RAD = 500.0
-"""Assumed position-loop stiffness of each motor servo (N m/rad): a geared servo motor; the study's
-motors were locked during its tests and no servo gains are given."""
-DEFAULT_SERVO_DAMPING_NMS_PER_RAD = 1.0
-"""Assumed velocity-loop damping of each servo (N m s/rad)."""
 HOME_POSE = Pose(0.0, 0.0, 0.0)
 OBSERVATION_KEYS = ("ee_disp", "ee_vel", "motor_angle", "motor_velocity", "link_accel")
-
-
-def _servo(manip: Manipulator) -> Manipulator:
-    if manip.motors.mode == "servo":
-        return manip
-    return manip.replace(
-        motors=Motors(
-            mode="servo",
-            servo_stiffness_nm_per_rad=DEFAULT_SERVO_STIFFNESS_NM_PER_RAD,
-            servo_damping_nms_per_rad=DEFAULT_SERVO_DAMPING_NMS_PER_RAD,
-        )
-    )
 
 
 def _env_xml(xml: str, accel_sites: list[str], max_torque_nm: float) -> str:
@@ -290,7 +278,7 @@ def regulation_env(
         ``"discrete"`` (default) at the step of the band ``band_hz`` (Hz; default 5 x f1), or ``"explicit"``
         (:func:`fpm_sim.sim.stepping.choose_stepping`).
     """
-    manip = _servo(manip or default_config())
+    manip = with_servo_motors(manip or default_config())
     if thickness_m is not None:
         manip = manip.with_section(thickness_m=thickness_m)
     for name, v in (

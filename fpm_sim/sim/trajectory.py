@@ -8,10 +8,10 @@ accelerating phase, jerk-limited; ``minimum-jerk``: ``10 u^3 - 15 u^4 + 6 u^5``)
 
 Each motor follows the rigid inverse kinematics (:func:`fpm_sim.kinematics.inverse_kinematics`) of the commanded
 pose through its position servo. The servo is the description's (``motors.mode = "servo"``: stiffness ``k`` and
-damping ``c``) or, for locked motors, the stated defaults :data:`fpm_sim.sim.dm_env.DEFAULT_SERVO_STIFFNESS_NM_PER_RAD`
-and :data:`~fpm_sim.sim.dm_env.DEFAULT_SERVO_DAMPING_NMS_PER_RAD`. The servo hinge is a spring-damper about the
-assembled angle; the command moves the spring's set point (``k theta_ref``) and feeds the reference velocity
-forward through the damper (``c dtheta_ref / dt``), so that the motor torque is the PD law
+damping ``c``) or, for locked motors, the stated defaults :data:`DEFAULT_SERVO_STIFFNESS_NM_PER_RAD` and
+:data:`DEFAULT_SERVO_DAMPING_NMS_PER_RAD` (shared with the dm_control environment). The servo hinge is a
+spring-damper about the assembled angle; the command moves the spring's set point (``k theta_ref``) and feeds the
+reference velocity forward through the damper (``c dtheta_ref / dt``), so that the motor torque is the PD law
 ``k (theta_ref - theta) + c (dtheta_ref / dt - dtheta / dt)``.
 
 The full nonlinear model is stepped by :func:`fpm_sim.sim.rollout.rollout` (discrete integrator at the step of
@@ -47,6 +47,8 @@ from fpm_sim.model.options import ModelOptions, open_for_writing
 from fpm_sim.sim.stepping import DEFAULT_INTEGRATOR, Stepping
 
 __all__ = [
+    "DEFAULT_SERVO_DAMPING_NMS_PER_RAD",
+    "DEFAULT_SERVO_STIFFNESS_NM_PER_RAD",
     "DEFAULT_SETTLE_TOL_M",
     "PROFILES",
     "SHAPERS",
@@ -69,6 +71,13 @@ SHAPERS = ("none", "zv", "zvd")
 DEFAULT_SETTLE_TOL_M = 20e-6
 """Settling tolerance (m) on the end effector's in-plane residual vibration: 20 um, a precision-positioning
 tolerance for 228 mm links (assumed; the default 30 mm move leaves 0.7 mm unshaped, 0.04 mm with ZVD)."""
+
+
+DEFAULT_SERVO_STIFFNESS_NM_PER_RAD = 500.0
+"""Assumed position-loop stiffness of each motor servo (N m/rad): a geared servo motor; the study's
+motors were locked during its tests and no servo gains are given."""
+DEFAULT_SERVO_DAMPING_NMS_PER_RAD = 1.0
+"""Assumed velocity-loop damping of each servo (N m s/rad)."""
 
 
 class MoveError(FpmSimError):
@@ -198,9 +207,7 @@ def read_path_csv(path: str | Path) -> np.ndarray:
 
 def with_servo_motors(manip: Manipulator) -> Manipulator:
     """``manip`` with position servos: its own if ``motors.mode = "servo"``, else the stated defaults
-    (:data:`fpm_sim.sim.dm_env.DEFAULT_SERVO_STIFFNESS_NM_PER_RAD`, ``..._DAMPING_NMS_PER_RAD``)."""
-    from fpm_sim.sim.dm_env import DEFAULT_SERVO_DAMPING_NMS_PER_RAD, DEFAULT_SERVO_STIFFNESS_NM_PER_RAD
-
+    (:data:`DEFAULT_SERVO_STIFFNESS_NM_PER_RAD`, :data:`DEFAULT_SERVO_DAMPING_NMS_PER_RAD`)."""
     if manip.motors.mode == "servo":
         return manip
     return manip.replace(
