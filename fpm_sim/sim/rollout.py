@@ -61,6 +61,7 @@ __all__ = [
     "constant",
     "end_effector_pose",
     "rollout",
+    "save_columns",
     "sine",
     "step_at",
 ]
@@ -185,24 +186,7 @@ class RolloutResult:
 
     def save(self, path: str | Path) -> Path:
         """Write ``.csv`` (one column per signal) or ``.npz`` by suffix."""
-        p = Path(path)
-        if p.suffix not in (".csv", ".npz"):
-            raise RolloutError(f"output file {str(p)!r} must end in .csv or .npz (--out)")
-        cols = self.columns()
-        with open_for_writing(p, error=RolloutError) as f:
-            if p.suffix == ".csv":
-                names = list(cols)
-                np.savetxt(
-                    f,
-                    np.column_stack([cols[n] for n in names]),
-                    delimiter=",",
-                    header=",".join(names),
-                    comments="",
-                    fmt="%.10g",
-                )
-            else:
-                np.savez(f, allow_pickle=True, **cols)  # named (its default): else mypy matches the columns to it
-        return p
+        return save_columns(path, self.columns(), RolloutError)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary: final and peak end-effector displacement (m, rad), peak accelerations, resolution."""
@@ -274,6 +258,22 @@ class RolloutResult:
         fig = axes[0].figure
         fig.tight_layout()
         return fig
+
+
+def save_columns(path: str | Path, cols: dict[str, np.ndarray], error: type[FpmSimError]) -> Path:
+    """Write named columns as ``.csv`` (header row) or ``.npz`` by suffix; a bad suffix or an unwritable file
+    raises ``error`` naming ``--out``."""
+    p = Path(path)
+    if p.suffix not in (".csv", ".npz"):
+        raise error(f"output file {str(p)!r} must end in .csv or .npz (--out)")
+    with open_for_writing(p, error=error) as f:
+        if p.suffix == ".csv":
+            names = list(cols)
+            data = np.column_stack([cols[n] for n in names])
+            np.savetxt(f, data, delimiter=",", header=",".join(names), comments="", fmt="%.10g")
+        else:
+            np.savez(f, allow_pickle=True, **cols)  # named (its default): else mypy matches the columns to it
+    return p
 
 
 def aligned_options(manip: Manipulator, pose: Pose, options: ModelOptions, output_step_s: float) -> ModelOptions:

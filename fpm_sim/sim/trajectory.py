@@ -43,7 +43,7 @@ import numpy as np
 from fpm_sim.config import Manipulator, Motors
 from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose, inverse_kinematics
-from fpm_sim.model.options import ModelOptions, open_for_writing
+from fpm_sim.model.options import ModelOptions
 from fpm_sim.sim.stepping import DEFAULT_INTEGRATOR, Stepping
 
 __all__ = [
@@ -389,18 +389,9 @@ class MoveResult:
 
     def save(self, path: str | Path) -> Path:
         """Write ``.csv`` (one column per signal) or ``.npz`` by suffix."""
-        p = Path(path)
-        if p.suffix not in (".csv", ".npz"):
-            raise MoveError(f"output file {str(p)!r} must end in .csv or .npz (--out)")
-        cols = self.columns()
-        with open_for_writing(p, error=MoveError) as f:
-            if p.suffix == ".csv":
-                names = list(cols)
-                data = np.column_stack([cols[n] for n in names])
-                np.savetxt(f, data, delimiter=",", header=",".join(names), comments="", fmt="%.10g")
-            else:
-                np.savez(f, allow_pickle=True, **cols)
-        return p
+        from fpm_sim.sim.rollout import save_columns
+
+        return save_columns(path, self.columns(), MoveError)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary: tracking error and deflection peaks, residual vibration, torques, stepping."""
