@@ -72,7 +72,7 @@ def main() -> None:
     axes[0].set_xlabel("t (ms)")
     axes[0].set_ylabel("|pose - command| (mm)")
     axes[0].set_title(
-        f"default machine, {res.parameters['segments']} segments: 30 mm in 0.3 s (minimum jerk), servos "
+        f"default machine, {opts.segments} segments: 30 mm in 0.3 s (minimum jerk), servos "
         f"{res.parameters['servo_stiffness_nm_per_rad']:g} N m/rad",
         fontsize=9,
     )
