@@ -242,6 +242,7 @@ class Stepping:
         ax.set_xlabel("frequency (Hz)")
         ax.set_title(f"{self.integrator} integrator, step {self.step_s:.3g} s", fontsize=9)
         ax.legend(fontsize=8)
+        ax.figure.tight_layout()
         return ax.figure
 
 
