@@ -6,8 +6,8 @@ of the platform, as :func:`fpm_sim.sim.rollout.rollout`) switched on at ``t = 0`
 under gravity, stepped on the :mod:`fpm_sim.sim.stepping` integrator (discrete at the band's step by default).
 The rollouts advance one output step at a time (``nstep`` integrator steps in C per call; the state is handed
 back between calls, so memory holds one output step, not the whole trajectory), and the end-effector pose is
-read from each state. Where models differ (moves x designs), use the Dask engine of :mod:`fpm_sim.batch` with one
-:func:`fpm_sim.sim.rollout.rollout` or :func:`fpm_sim.sim.trajectory.simulate_move` per task instead.
+read from each state. Where models differ (moves x designs), :func:`fpm_sim.batch.moves.moves_over_designs` runs
+one :func:`fpm_sim.sim.trajectory.simulate_move` per task on the Dask engine instead.
 
 Result: an :class:`xarray.Dataset` with one row per rollout (dims ``rollout``, ``time``, ``axis``): the applied
 wrench, the end-effector displacement from the equilibrium, and the stepping in its attributes; ``to_netcdf``
