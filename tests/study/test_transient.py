@@ -78,7 +78,8 @@ def test_discrete_and_explicit_agree_at_3_segments(default_manip):
 def test_discrete_matches_the_explicit_reference_at_12_segments(default_manip):
     """The issue's check: the study transient at the standard 12 segments, discrete (default band 5 x f1: the
     0.1 ms output step) against the explicit reference (0.81 us steps; 4-12 min a load axis on the shared
-    machine), NRMS <= 1 % on both axes. Measured 0.47 % (x) and 0.45 % (y), 48-177x faster."""
+    machine), NRMS <= 1 % on both axes. Measured 0.473 % (x) and 0.451 % (y), 192x faster
+    (scripts/benchmark_integrators.py)."""
     runs = [study_transient(default_manip, integrator=i) for i in ("explicit", "discrete")]
     for a in ("x", "y"):
         assert nrms_error(runs[0].case(a).disp_full_m, runs[1].case(a).disp_full_m) <= 0.01
