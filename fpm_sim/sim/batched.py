@@ -31,7 +31,7 @@ from fpm_sim.linear.equilibrium import static_equilibrium
 from fpm_sim.model.options import BuiltModel
 from fpm_sim.rom.reduction import END_EFFECTOR_SITE
 from fpm_sim.sim.rollout import end_effector_pose
-from fpm_sim.sim.stepping import DEFAULT_INTEGRATOR, apply_stepping, choose_stepping
+from fpm_sim.sim.stepping import DEFAULT_INTEGRATOR, SteppingError, apply_stepping, choose_stepping, reraise_as
 
 __all__ = ["BatchedRolloutError", "batched_rollouts"]
 
@@ -63,16 +63,21 @@ def batched_rollouts(
 
     w = np.atleast_2d(np.asarray(wrenches, float))
     if w.ndim != 2 or w.shape[1] != 3 or w.shape[0] < 1 or not np.all(np.isfinite(w)):
-        raise BatchedRolloutError(f"wrenches must be finite (n, 3) rows F_x, F_y, M_z, got shape {w.shape}")
-    if not (isinstance(threads, int) and threads >= 1):
-        raise BatchedRolloutError(f"threads (--threads) must be an integer >= 1, got {threads!r}")
+        raise BatchedRolloutError(
+            "must be finite (n, 3) rows F_x, F_y, M_z", parameter="wrenches", value=f"shape {w.shape}"
+        )
+    if not (isinstance(threads, int) and not isinstance(threads, bool) and threads >= 1):
+        raise BatchedRolloutError("must be an integer >= 1", parameter="threads", value=threads)
     for name, v in (("duration_s", duration_s), ("output_step_s", output_step_s)):
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-            raise BatchedRolloutError(f"{name} must be a positive finite time, got {v!r}")
+            raise BatchedRolloutError("must be a positive finite time", parameter=name, value=v)
     q0 = static_equilibrium(built.model, mujoco.MjData(built.model))
-    stepping = choose_stepping(
-        built, integrator=integrator, band_hz=band_hz, divides_s=output_step_s, f1_hz=f1_hz, qpos=q0
-    )
+    try:
+        stepping = choose_stepping(
+            built, integrator=integrator, band_hz=band_hz, divides_s=output_step_s, f1_hz=f1_hz, qpos=q0
+        )
+    except SteppingError as e:
+        raise reraise_as(BatchedRolloutError, e) from None
     model = apply_stepping(built, stepping).model
     h = float(model.opt.timestep)
     n_sub = max(1, round(output_step_s / h))
@@ -115,7 +120,8 @@ def batched_rollouts(
             disp[i, k] = end_effector_pose(model, probe) - ee0
         if not np.all(np.isfinite(state)) or np.abs(disp[:, k, :2]).max() > model.stat.extent:
             raise BatchedRolloutError(
-                f"a rollout diverged by t = {k * n_sub * h:.4g} s; reduce the wrenches or the band (--band-hz)"
+                f"a rollout diverged by t = {k * n_sub * h:.4g} s",
+                hint="reduce the loads (wrenches) or the band (band_hz)",
             )
     wall = time.perf_counter() - start
     t = np.arange(n_out + 1) * n_sub * h

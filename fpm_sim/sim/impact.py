@@ -75,7 +75,14 @@ from fpm_sim.response import (
     modal_frf,
 )
 from fpm_sim.rom.reduction import ModalSystem, modal_system
-from fpm_sim.sim.stepping import DEFAULT_INTEGRATOR, Stepping, SteppingError, apply_stepping, choose_stepping
+from fpm_sim.sim.stepping import (
+    DEFAULT_INTEGRATOR,
+    Stepping,
+    SteppingError,
+    apply_stepping,
+    choose_stepping,
+    reraise_as,
+)
 
 __all__ = [
     "PEAK_FORCE_N",
@@ -177,7 +184,12 @@ class ImpactSetup:
         if self.pad_s < self.record_s:
             raise FrfError(f"pad_s ({self.pad_s:g} s) must be at least record_s ({self.record_s:g} s)")
         if self.integrator == "explicit" and self.timestep_s is not None:
-            raise FrfError("timestep_s (--implicit-step-s) sets the discrete integrator's step; drop it with explicit")
+            raise FrfError(
+                "sets the discrete integrator's step",
+                parameter="timestep_s",
+                value=self.timestep_s,
+                hint="drop it with the explicit integrator (it runs at the model's own step)",
+            )
         if self.timestep_s is not None:
             h = self.timestep_s
             if not (math.isfinite(h) and h > 0):
@@ -373,6 +385,7 @@ class ImpactTestResult:
                 "another axis: fpm-sim readability ranks the points)"
             )
         return text
+
     stepping: Stepping | None = None
     """How the rollouts were stepped; its ``step_s`` travels in the UFF record (``discrete_step_s``)."""
 
@@ -532,7 +545,7 @@ def virtual_impact_test(
             f1_hz=float(system.frequencies_hz[0]),
         )
     except SteppingError as e:
-        raise FrfError(str(e)) from None
+        raise reraise_as(FrfError, e) from None
     rollout = apply_stepping(built, stepping)
     h = float(rollout.model.opt.timestep)
     n_sub = max(1, round(setup.sample_s / h))

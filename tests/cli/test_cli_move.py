@@ -90,7 +90,12 @@ def test_rollout_integrator_option(capsys):
     assert json.loads(out)["stepping"]["step_s"] == 5e-5
     code, _, err = run(capsys, *base, "--band-hz", "1e6")
     assert code == 2
-    assert "--integrator explicit" in err
+    line = err.splitlines()[-1]
+    assert line.startswith("error: --band-hz: the discrete step would be ")
+    assert line.endswith(", got 1000000.0; use the explicit integrator, or a larger output step or a lower band")
+    code, _, err = run(capsys, *base, "--timestep-s", "1e-9")  # the discrete step itself
+    assert code == 2
+    assert err.splitlines()[-1].startswith("error: --timestep-s: the discrete step would be 1e-09 s, below the ")
 
 
 def test_transient_and_impact_integrator_options(capsys):
