@@ -62,7 +62,7 @@ def test_shaper_cancels_the_mode(kind, zeta):
     assert abs(np.sum(amps * np.exp((zeta * w - 1j * wd) * times))) < 1e-12
     if kind == "zvd":
         assert abs(np.sum(amps * times * np.exp((zeta * w - 1j * wd) * times))) < 1e-12
-    with pytest.raises(MoveError, match="^shaper: unknown input shaper, got 'zvdd'; choose one of none, zv, zvd"):
+    with pytest.raises(MoveError, match=r"^shaper: unknown input shaper, got 'zvdd'; choose one of none, zv, zvd"):
         shaper("zvdd", f, zeta)
 
 
@@ -165,18 +165,18 @@ def test_move_outputs(short_moves, tmp_path):
 def test_bad_moves(default_manip):
     opts = ModelOptions(segments=3, axial=False)
     path = MovePath(Pose(0.0, 0.0, 0.0), Pose.from_mm(10.0, 0.0, 0.0), 0.15)
-    with pytest.raises(MoveError, match="^profile: unknown motion profile, got 'cubic'"):
+    with pytest.raises(MoveError, match=r"^profile: unknown motion profile, got 'cubic'"):
         simulate_move(default_manip, MovePath(path.start, path.end, 0.15, kind="cubic"), options=opts)
-    with pytest.raises(MoveError, match="^move_s: the move time must be a positive finite time \\(s\\), got -1.0"):
+    with pytest.raises(MoveError, match=r"^move_s: the move time must be a positive finite time \(s\), got -1.0"):
         simulate_move(default_manip, MovePath(path.start, path.end, -1.0), options=opts)
-    with pytest.raises(MoveError, match="^settle_s: must be a positive finite number, got 0.0"):
+    with pytest.raises(MoveError, match=r"^settle_s: must be a positive finite number, got 0.0"):
         simulate_move(default_manip, path, settle_s=0.0, options=opts)
-    with pytest.raises(MoveError, match="^settle_tol_m: must be a positive finite number, got nan"):
+    with pytest.raises(MoveError, match=r"^settle_tol_m: must be a positive finite number, got nan"):
         simulate_move(default_manip, path, settle_tol_m=math.nan, options=opts)
-    with pytest.raises(MoveError, match="^shaper: unknown input shaper"):
+    with pytest.raises(MoveError, match=r"^shaper: unknown input shaper"):
         simulate_move(default_manip, path, shaper_kind="zvdd", options=opts)
     sampled = MovePath(path.start, path.end, 0.15, samples=np.array([[0.0, 0, 0, 0], [0.15, 0.01, 0, 0]]))
-    with pytest.raises(MoveError, match="^shaper: a shaper shapes a profile move.*; drop the shaper"):
+    with pytest.raises(MoveError, match=r"^shaper: a shaper shapes a profile move.*; drop the shaper"):
         simulate_move(default_manip, sampled, shaper_kind="zv", options=opts)
     with pytest.raises(FpmSimError, match="unreachable"):
         simulate_move(default_manip, MovePath(path.start, Pose(2.0, 0.0), 0.15), options=opts)
