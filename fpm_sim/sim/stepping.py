@@ -326,18 +326,21 @@ def choose_stepping(
     h = step_s if step_s is not None else min(MAX_STEP_S, MAX_NUMERICAL_DAMPING / (math.pi * band_hz))
     if max_step_s is not None:
         h = min(h, max_step_s)
-    if divides_s is not None:
-        h = divides_s / math.ceil(divides_s / h * (1 - 1e-12))
     h_explicit = float(built.model.opt.timestep)
+    # the culprit: the step (or band) itself, or the output step it must divide
+    given, value = ("step_s", step_s) if step_s is not None else ("band_hz", band_hz)
+    remedy = "a larger step" if step_s is not None else "a lower band"
+    if divides_s is not None:
+        if h >= h_explicit * (1 - 1e-9):
+            given, value, remedy = "output_step_s", divides_s, "a larger output step"
+        h = divides_s / math.ceil(divides_s / h * (1 - 1e-12))
     if h < h_explicit * (1 - 1e-9):
-        given = "step_s" if step_s is not None else "band_hz"
         raise SteppingError(
-            f"the discrete step would be {h:.3g} s, below the explicit reference's own {h_explicit:.3g} s, which is "
-            "then both cheaper and exact in the band",
+            f"the discrete step from it, {h:.3g} s, is below the explicit reference's own {h_explicit:.3g} s (which "
+            "is then both cheaper and exact in the band)",
             parameter=given,
-            value=step_s if step_s is not None else band_hz,
-            hint="use the explicit integrator, or a larger output step or "
-            + ("a larger step" if step_s is not None else "a lower band"),
+            value=value,
+            hint=f"use the explicit integrator, or {remedy}",
         )
     return Stepping("discrete", h, band_hz, source, f1_hz)
 

@@ -71,6 +71,18 @@ def test_move_errors_name_the_option(capsys, extra, option):
     assert option in err
 
 
+def test_move_path_csv_errors_name_the_file_and_row(capsys, tmp_path):
+    bad = tmp_path / "path.csv"
+    bad.write_text("t_s,x_mm,y_mm,phi_rad\n0,0,0,0\n0.1,nan,0,0\n")
+    code, _, err = run(capsys, "move", "--segments", "3", "--path-csv", str(bad))
+    assert code == 2
+    assert err.splitlines()[-1] == f"error: {bad}: row 3: path_csv: every value must be finite, got '0.1,nan,0,0'"
+    bad.write_text("t_s,x_mm,y_mm,phi_rad\n0,0,0,0\n0.1,1,0,0\n")  # a good path cannot be shaped
+    code, _, err = run(capsys, "move", "--segments", "3", "--path-csv", str(bad), "--shaper", "zv")
+    assert code == 2
+    assert err.splitlines()[-1].startswith("error: --shaper: a shaper shapes a profile move")
+
+
 def test_rollout_integrator_option(capsys):
     base = ["rollout", "--segments", "3", "--no-axial", "--thickness-mm", "5", "--duration-s", "0.003", "--json"]
     code, out, err = run(capsys, *base, "--force-x-n", "1", "--integrator", "explicit")
@@ -91,11 +103,11 @@ def test_rollout_integrator_option(capsys):
     code, _, err = run(capsys, *base, "--band-hz", "1e6")
     assert code == 2
     line = err.splitlines()[-1]
-    assert line.startswith("error: --band-hz: the discrete step would be ")
-    assert line.endswith(", got 1000000.0; use the explicit integrator, or a larger output step or a lower band")
+    assert line.startswith("error: --band-hz: the discrete step from it, ")
+    assert line.endswith(", got 1000000.0; use the explicit integrator, or a lower band")
     code, _, err = run(capsys, *base, "--timestep-s", "1e-9")  # the discrete step itself
     assert code == 2
-    assert err.splitlines()[-1].startswith("error: --timestep-s: the discrete step would be 1e-09 s, below the ")
+    assert err.splitlines()[-1].startswith("error: --timestep-s: the discrete step from it, 1e-09 s, is below the ")
 
 
 def test_transient_and_impact_integrator_options(capsys):

@@ -118,6 +118,10 @@ def test_step_rule_meets_the_bound(flexible_small):
         assert exc.value.parameter == parameter
         given = kw[parameter]
         assert exc.value.value == given or (math.isnan(given) and math.isnan(exc.value.value))
+    # a band that allows a step the output step is too short for: the output step is named
+    with pytest.raises(SteppingError, match=r"; use the explicit integrator, or a larger output step$") as exc:
+        choose_stepping(built, f1_hz=f1, divides_s=1e-9)
+    assert (exc.value.parameter, exc.value.value) == ("output_step_s", 1e-9)
 
 
 @pytest.fixture(scope="module")
