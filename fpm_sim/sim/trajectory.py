@@ -161,6 +161,13 @@ class MovePath:
     samples: np.ndarray | None = None
     impulses: tuple[np.ndarray, np.ndarray] = field(default_factory=lambda: (np.array([1.0]), np.array([0.0])))
 
+    @classmethod
+    def from_csv(cls, path: str | Path) -> MovePath:
+        """The sampled path of a CSV ``t_s, x_mm, y_mm, phi_rad`` (:func:`read_path_csv`); it starts at its first
+        row's pose and ends at its last."""
+        samples = read_path_csv(path)
+        return cls(Pose(*samples[0, 1:]), Pose(*samples[-1, 1:]), float(samples[-1, 0]), samples=samples)
+
     def check(self) -> None:
         if self.samples is None:
             profile(self.kind, 0.0)
@@ -204,7 +211,7 @@ def read_path_csv(path: str | Path) -> np.ndarray:
             file=p,
             row=rows[0][0] if rows else None,
         )
-    values = []
+    values: list[list[float]] = []
     for i, r in rows[1:]:
         if len(r) != 4:
             raise MoveError(
@@ -434,7 +441,10 @@ class MoveResult:
         return save_columns(path, self.columns(), MoveError)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready summary: tracking error and deflection peaks, residual vibration, torques, stepping."""
+        """JSON-ready summary: tracking error and deflection peaks, residual vibration, torques, stepping,
+        resolution."""
+        from fpm_sim.model.options import resolution_of_parameters
+
         moving = self.t_s <= self.move_end_s
         err = np.linalg.norm(self.tracking_error[:, :2], axis=1)
         defl = np.linalg.norm(self.deflection[:, :2], axis=1)
@@ -450,6 +460,7 @@ class MoveResult:
             "stepping": self.stepping.to_dict() if self.stepping is not None else None,
             "wall_s": self.wall_s,
             "parameters": self.parameters,
+            "resolution": resolution_of_parameters(self.parameters),
         }
 
     def table(self) -> str:
@@ -474,12 +485,19 @@ class MoveResult:
         return "\n".join(lines)
 
     def plot(self, ax: Any = None) -> Any:
-        """Commanded and simulated path, tracking error and deflection, residual vibration; the ``Figure``."""
+        """Commanded and simulated path, tracking error and deflection, residual vibration; the ``Figure``.
+
+        ``ax``: ``None`` (a new figure of the three panels), three axes, or one axes (the main panel: the
+        residual vibration).
+        """
         import matplotlib.pyplot as plt
 
         if ax is None:
             fig = plt.figure(figsize=(10, 7))
             axes = [fig.add_subplot(2, 2, 1), fig.add_subplot(2, 2, 2), fig.add_subplot(2, 1, 2)]
+        elif hasattr(ax, "plot"):
+            self._plot_residual(ax)
+            return ax.figure
         else:
             axes = list(ax)
         a = axes[0]
@@ -498,7 +516,12 @@ class MoveResult:
         a.set_ylabel("mm")
         a.set_title("tracking error and link deflection", fontsize=9)
         a.legend(fontsize=8)
-        a = axes[2]
+        self._plot_residual(axes[2])
+        out: Any = axes[0].figure
+        out.tight_layout()
+        return out
+
+    def _plot_residual(self, a: Any) -> None:
         r = self.residual
         after = self.t_s >= self.move_end_s
         res = np.linalg.norm(self.tracking_error[:, :2] - r.final_offset_m, axis=1)
@@ -507,14 +530,11 @@ class MoveResult:
         a.set_xlabel("t (ms)")
         a.set_ylabel("residual (mm)")
         a.set_title(
-            f"residual vibration: peak {r.peak_m * 1e3:.4f} mm, {r.dominant_hz:.1f} Hz "
+            f"residual vibration: peak {r.peak_m * 1e3:.4f} mm, {r.dominant_hz:.1f} Hz\n"
             f"(modal f1 {r.modal_f1_hz:.1f} Hz, in-plane {r.inplane_mode_hz:.1f} Hz)",
             fontsize=9,
         )
         a.legend(fontsize=8)
-        out: Any = axes[0].figure
-        out.tight_layout()
-        return out
 
 
 def simulate_move(
