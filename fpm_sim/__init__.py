@@ -52,6 +52,7 @@ _API = {
     "frf": "fpm_sim.api",
     "rollout": "fpm_sim.api",
     "move": "fpm_sim.api",
+    "batched_rollouts": "fpm_sim.api",
     "impact": "fpm_sim.api",
     "transient": "fpm_sim.api",
     "readability": "fpm_sim.api",

@@ -31,6 +31,7 @@ if TYPE_CHECKING:
     from fpm_sim.response import FrequencyResponse, LinkPoint
     from fpm_sim.rom.atlas import ModalAtlas
     from fpm_sim.rom.reduction import ReducedModel
+    from fpm_sim.sim.batched import BatchedRollouts
     from fpm_sim.sim.impact import ImpactSetup, ImpactTestResult
     from fpm_sim.sim.rollout import RolloutResult
     from fpm_sim.sim.trajectory import MoveResult
@@ -43,6 +44,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "atlas",
+    "batched_rollouts",
     "design",
     "ema",
     "export_mjcf",
@@ -86,6 +88,19 @@ def _built(config: Manipulator | None, pose: Pose | None, options: ModelOptions 
     from fpm_sim.model.manipulator import build_manipulator
 
     return build_manipulator(_config(config), _pose(pose), _options(options, stacklevel=4))
+
+
+def _aligned(
+    config: Manipulator | None, pose: Pose | None, options: ModelOptions | None, output_step_s: float
+) -> tuple[Manipulator, BuiltModel]:
+    """Return the description and its model for a rollout (the timestep rounded down to divide the output step)."""
+    from fpm_sim.model.manipulator import build_manipulator
+    from fpm_sim.model.options import ModelOptions
+    from fpm_sim.sim.rollout import aligned_options
+
+    manip, p = _config(config), _pose(pose)
+    opts = _options(options, stacklevel=4) or ModelOptions()
+    return manip, build_manipulator(manip, p, aligned_options(manip, p, opts, output_step_s))
 
 
 @overload
@@ -438,14 +453,11 @@ def rollout(
         ``fpm-sim rollout --timestep-s``), or ``"explicit"``: the model's own step
         (:func:`fpm_sim.sim.stepping.choose_stepping`).
     """
-    from fpm_sim.model.manipulator import build_manipulator
-    from fpm_sim.model.options import ModelOptions
     from fpm_sim.rom.reduction import accel_site_names
-    from fpm_sim.sim.rollout import aligned_options, constant
+    from fpm_sim.sim.rollout import constant
     from fpm_sim.sim.rollout import rollout as _rollout
 
-    manip, p = _config(config), _pose(pose)
-    built = build_manipulator(manip, p, aligned_options(manip, p, _options(options) or ModelOptions(), output_step_s))
+    manip, built = _aligned(config, pose, options, output_step_s)
     wrench = (force_x_n, force_y_n, moment_z_nm)
     return _rollout(
         built,
@@ -460,6 +472,61 @@ def rollout(
         band_hz=band_hz,
         step_s=step_s,
     )
+
+
+def batched_rollouts(
+    config: Manipulator | None = None,
+    pose: Pose | None = None,
+    *,
+    wrenches: Sequence[Sequence[float]],
+    duration_s: float = 0.2,
+    output_step_s: float = 1e-4,
+    threads: int = 1,
+    options: ModelOptions | None = None,
+    integrator: str = "discrete",
+    band_hz: float | None = None,
+) -> BatchedRollouts:
+    """Many constant end-effector loads on one model, stepped in ``mujoco.rollout``'s threads.
+
+    Each row of ``wrenches`` (``F_x, F_y`` in N, ``M_z`` in N m) is one rollout from the static equilibrium under
+    gravity, as :func:`rollout` with that constant load (:mod:`fpm_sim.sim.batched`); no command of its own.
+
+    Parameters
+    ----------
+    config, pose
+        As :func:`modes`.
+    wrenches
+        ``(n, 3)`` constant end-effector loads, one rollout each.
+    duration_s, output_step_s
+        Simulated time (s) and sample period (s).
+    threads
+        Threads of the rollout pool.
+    options
+        Model options (as :func:`rollout`).
+    integrator, band_hz
+        As :func:`rollout`.
+
+    Returns
+    -------
+    BatchedRollouts
+        ``.to_xarray()`` (``ee_disp`` over ``rollout`` x ``time`` x ``axis``), ``.to_dict()``, ``.table()``,
+        ``.plot()``.
+    """
+    from fpm_sim.sim.batched import BatchedRollouts
+    from fpm_sim.sim.batched import batched_rollouts as _batched
+
+    manip, built = _aligned(config, pose, options, output_step_s)
+    ds = _batched(
+        built,
+        manip,
+        wrenches,
+        duration_s=duration_s,
+        output_step_s=output_step_s,
+        threads=threads,
+        integrator=integrator,
+        band_hz=band_hz,
+    )
+    return BatchedRollouts(ds)
 
 
 def move(

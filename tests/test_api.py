@@ -40,6 +40,7 @@ FACADE = {
     "frf",
     "rollout",
     "move",
+    "batched_rollouts",
     "impact",
     "ema",
     "identify",
@@ -176,6 +177,31 @@ def test_rollout_stepping_options():
     assert fs.rollout(integrator="explicit", **kw).stepping.integrator == "explicit"
     with pytest.raises(fs.FpmSimError, match=r"^step_s: sets the discrete integrator's step"):
         fs.rollout(integrator="explicit", step_s=5e-5, **kw)
+
+
+def test_batched_rollouts_are_the_single_rollouts():
+    """Each row of fs.batched_rollouts is fs.rollout under that constant load (same model, same steps)."""
+    import numpy as np
+
+    kw = {"duration_s": 0.003, "output_step_s": 1e-3, "options": fs.ModelOptions(segments=SEG, axial=False)}
+    wrenches = [[1.0, 0.0, 0.0], [0.0, 2.0, 0.1]]
+    res = fs.batched_rollouts(None, fs.Pose.from_mm(10, 0, 0), wrenches=wrenches, threads=2, **kw)
+    d = check_result(res)
+    assert [r["wrench"] for r in d["rollouts"]] == [
+        {"fx_n": 1.0, "fy_n": 0.0, "mz_nm": 0.0},
+        {"fx_n": 0.0, "fy_n": 2.0, "mz_nm": 0.1},
+    ]
+    disp = res.to_xarray()["ee_disp"].values
+    for w, row in zip(wrenches, disp):
+        single = fs.rollout(
+            None, fs.Pose.from_mm(10, 0, 0), force_x_n=w[0], force_y_n=w[1], moment_z_nm=w[2], accel_fraction=None, **kw
+        )
+        assert single.stepping.to_dict() == d["stepping"]
+        # same model and steps, mujoco.rollout against mj_step: round-off only (tests/sim/test_batched.py: 1.6e-15 m)
+        assert np.abs(single.ee_disp - row).max() < 1e-12
+        assert np.abs(row).max() > 1e-7  # the load moved it
+    with pytest.raises(fs.FpmSimError, match=r"^threads: must be an integer >= 1, got 0$"):
+        fs.batched_rollouts(wrenches=wrenches, threads=0, **kw)
 
 
 def test_move_is_the_library_move(tmp_path):
