@@ -158,8 +158,9 @@ def test_move_outputs(short_moves, tmp_path):
     assert "residual vibration" in res.table()
     fig = res.plot()
     assert len(fig.axes) == 3
-    with pytest.raises(MoveError, match="--out"):
+    with pytest.raises(MoveError, match=r"^out: output file .* must end in \.csv or \.npz") as exc:
         res.save(tmp_path / "m.txt")
+    assert exc.value.parameter == "out"  # the command line names its --out
 
 
 def test_bad_moves(default_manip):
