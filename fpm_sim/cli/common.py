@@ -148,6 +148,10 @@ OPTION_NAMES: dict[str, tuple[str, float]] = {
     "path_csv": ("--path-csv", 1.0),
     "settle_s": ("--settle-s", 1.0),
     "settle_tol_m": ("--settle-tol-mm", 1e3),
+    "n_impacts": ("--impacts", 1.0),
+    "record_s": ("--record-s", 1.0),
+    "peak_force_n": ("--peak-force-n", 1.0),
+    "noise_m_s2": ("--noise-m-s2", 1.0),
 }
 """The one map from the library's parameter names (:attr:`FpmSimError.parameter`) to the command line's option
 names, with the factor that converts a value to the option's unit. Only options the command has are used."""

@@ -172,13 +172,15 @@ class ImpactSetup:
         for name in positive:
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
-                raise FrfError(f"{name} must be positive, got {v!r}")
+                raise FrfError("must be positive", parameter=name, value=v)
         if not (isinstance(self.n_impacts, int) and self.n_impacts >= 1):
-            raise FrfError(f"n_impacts must be an integer >= 1, got {self.n_impacts!r}")
+            raise FrfError("must be an integer >= 1", parameter="n_impacts", value=self.n_impacts)
         if not (0.0 < self.window_end <= 1.0):
-            raise FrfError(f"window_end must lie in (0, 1], got {self.window_end!r}")
-        if not (self.noise_m_s2 >= 0.0 and 0.0 <= self.force_spread < 1.0):
-            raise FrfError("noise_m_s2 must be >= 0 and force_spread in [0, 1)")
+            raise FrfError("must lie in (0, 1]", parameter="window_end", value=self.window_end)
+        if not self.noise_m_s2 >= 0.0:
+            raise FrfError("must be >= 0", parameter="noise_m_s2", value=self.noise_m_s2)
+        if not 0.0 <= self.force_spread < 1.0:
+            raise FrfError("must lie in [0, 1)", parameter="force_spread", value=self.force_spread)
         if self.pulse_s >= self.record_s:
             raise FrfError(f"pulse_s ({self.pulse_s:g} s) must be shorter than record_s ({self.record_s:g} s)")
         if self.pad_s < self.record_s:
