@@ -121,7 +121,10 @@ BUILDERS = {
     ),
     "ImpactTestResult": _impact,
     "BatchedRollouts": lambda: _quiet_call(
-        fs.batched_rollouts, wrenches=[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], duration_s=0.002, output_step_s=1e-3,
+        fs.batched_rollouts,
+        wrenches=[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        duration_s=0.002,
+        output_step_s=1e-3,
         options=fs.ModelOptions(segments=SEG),
     ),
     "MoveResult": lambda: _move(),

@@ -117,6 +117,10 @@ def test_transient_and_impact_integrator_options(capsys):
     d = json.loads(out)
     assert d["stepping"]["band_hz"] == 300.0
     assert d["stepping"]["band_source"] == "given"
+    # the stepping's band is transient's --step-band-hz (its --band-hz is the reduced model's band)
+    code, _, err = run(capsys, *argv[:-2], "--step-band-hz", "1e6")
+    assert code == 2
+    assert err.splitlines()[-1].startswith("error: --step-band-hz: the discrete step from it, ")
     code, _, err = run(capsys, "impact", "--segments", "3", "--integrator", "explicit", "--implicit-step-s", "1e-5")
     assert code == 2
     assert "--implicit-step-s" in err
