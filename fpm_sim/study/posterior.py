@@ -26,7 +26,9 @@ quantiles and counted (:attr:`PredictiveBands.computed_fraction`).
 
 from __future__ import annotations
 
+import csv
 import dataclasses
+import math
 import time
 import tomllib
 from collections.abc import Sequence
@@ -44,6 +46,8 @@ from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.study.identify.parameters import ParameterSet, parameter_set
+from fpm_sim.study.poses import TableReading
+from fpm_sim.study.tables import measured_table, withheld_cells
 
 __all__ = [
     "BASE_CONFIG_ATTR",
@@ -53,8 +57,10 @@ __all__ = [
     "Posterior",
     "PosteriorError",
     "PredictiveBands",
+    "StudyBands",
     "default_posterior_path",
     "predict_bands",
+    "study_bands",
 ]
 
 BASE_CONFIG_ATTR = "fpm_sim_base_config"
@@ -501,9 +507,33 @@ class PredictiveBands:
             attrs={"config": self.name, "segments": int(self.options.segments or 0)},
         )
 
+    def write(self, out_dir: str | Path, *, stem: str = "bands", figures: bool = True) -> list[Path]:
+        """Write ``<stem>.nc`` (:attr:`dataset`, netCDF-4), ``<stem>.csv`` (:meth:`rows`) and the figures
+        ``<stem>.png`` (:meth:`plot`) and ``<stem>_map.png`` (:meth:`plot_map`); returns the paths."""
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        paths = [out / f"{stem}.nc", out / f"{stem}.csv"]
+        self.dataset.to_netcdf(paths[0], engine="h5netcdf")
+        rows = self.rows()
+        with open(paths[1], "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+            w.writeheader()
+            w.writerows(
+                {k: "" if isinstance(v, float) and not math.isfinite(v) else v for k, v in r.items()} for r in rows
+            )
+        if figures:
+            import matplotlib.pyplot as plt
+
+            for name, draw in ((f"{stem}.png", self.plot), (f"{stem}_map.png", self.plot_map)):
+                fig = draw()
+                fig.savefig(out / name, dpi=110)
+                plt.close(fig)
+                paths.append(out / name)
+        return paths
+
     # ------------------------------------------------------------------------------------------ figures
 
-    def plot(self, ax: Any = None, *, mode: int = 1, measured_hz: Sequence[float] | None = None) -> Any:
+    def plot(self, ax: Any = None, *, mode: int = 1, measured_hz: Sequence[float] | np.ndarray | None = None) -> Any:
         """Median and bands of frequency ``mode`` at each pose (thick: 25-75 %, thin: 5-95 %), with
         ``measured_hz`` (NaN: none) as crosses. Returns the ``Figure``."""
         import matplotlib.pyplot as plt
@@ -521,7 +551,7 @@ class PredictiveBands:
             ax.plot(x, np.asarray(measured_hz, float), "x", color="C3", ms=7, mew=1.5, label="measured")
         ax.set_xticks(x, [self.label(i) for i in range(len(self.poses))], rotation=60, ha="right", fontsize=6)
         ax.set_ylabel(f"f{mode} (Hz)")
-        ax.set_title(f"{self.name}: f{mode} over {self.n_draws} posterior draws", fontsize=8)
+        ax.set_title(f"{_short(self.name)}: f{mode} over {self.n_draws} posterior draws", fontsize=8)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
         return fig
@@ -556,9 +586,13 @@ class PredictiveBands:
                 fontsize=8,
                 color="red",
             )
-        axes[0].set_title(f"{self.name}: median over {self.n_draws} draws", fontsize=8)
+        axes[0].set_title(f"{_short(self.name)}: median over {self.n_draws} draws", fontsize=8)
         axes[1].set_title("relative width of the 90 % band", fontsize=8)
         return fig
+
+
+def _short(name: str, n: int = 60) -> str:
+    return name if len(name) <= n else name[: n - 3] + "..."
 
 
 def predict_bands(
@@ -619,4 +653,125 @@ def predict_bands(
         options=opts,
         labels=list(labels) if labels is not None else None,
         elapsed_s=time.perf_counter() - t0,
+    )
+
+
+# ----------------------------------------------------------------------------------------------- the study
+
+
+@dataclass
+class StudyBands:
+    """Bands at the study's poses (:func:`study_bands`): the measured ones, with the measured first frequency
+    (in-sample coverage: the posterior was conditioned on them), then the withheld ones (predictions only:
+    their measurements are not in the project)."""
+
+    bands: PredictiveBands
+    measured_hz: np.ndarray
+    """``(n_poses,)`` measured f1 (NaN at the withheld poses)."""
+    withheld: np.ndarray
+    """``(n_poses,)`` True at the withheld poses."""
+    reading: str
+
+    def coverage(self) -> dict[str, float]:
+        """At the measured poses: the share of measured f1 inside the 90 % and the 50 % bands, and the mean
+        absolute error of the median (%)."""
+        m = ~self.withheld & np.isfinite(self.measured_hz)
+        q = self.bands.quantiles_hz[:, m, 0]
+        f = self.measured_hz[m]
+        n = int(m.sum())
+        if n == 0:
+            return {"measured_poses": 0, "in_90_band": math.nan, "in_50_band": math.nan, "median_error_pct": math.nan}
+        with np.errstate(invalid="ignore"):
+            return {
+                "measured_poses": n,
+                "in_90_band": float(np.mean((f >= q[0]) & (f <= q[4]))),
+                "in_50_band": float(np.mean((f >= q[1]) & (f <= q[3]))),
+                "median_error_pct": float(np.nanmean(np.abs(q[2] / f - 1.0)) * 100),
+            }
+
+    def table(self) -> str:
+        """Measured poses (median, bands, measured, inside which band) and withheld poses (median, bands)."""
+        q = self.bands.quantiles_hz[:, :, 0]
+        comp = self.bands.computed_fraction
+        n = self.bands.n_draws
+        lines = [
+            f"f1 over {n} posterior draws, reading {self.reading}",
+            f"{'cell':>10}  {'median Hz':>9}  {'25-75 % Hz':>15}  {'5-95 % Hz':>15}  {'measured Hz':>11}  "
+            f"{'in':>4}  draws",
+        ]
+        for group, title in ((False, "measured poses (in-sample)"), (True, "withheld poses (predictions only)")):
+            lines.append(f"  {title}")
+            for i in np.flatnonzero(self.withheld == group):
+                f = self.measured_hz[i]
+                inside = (
+                    "-"
+                    if not math.isfinite(f)
+                    else "50"
+                    if q[1, i] <= f <= q[3, i]
+                    else "90"
+                    if q[0, i] <= f <= q[4, i]
+                    else "out"
+                )
+                lines.append(
+                    f"{self.bands.label(int(i)):>10}  {q[2, i]:>9.2f}  {q[1, i]:>6.2f} .. {q[3, i]:>6.2f}  "
+                    f"{q[0, i]:>6.2f} .. {q[4, i]:>6.2f}  {'' if not math.isfinite(f) else f'{f:.2f}':>11}  "
+                    f"{inside:>4}  {round(comp[i] * n)}/{n}"
+                )
+        c = self.coverage()
+        lines.append(
+            f"coverage at the {c['measured_poses']} measured poses: {100 * c['in_90_band']:.0f} % inside the 90 % "
+            "band, "
+            f"{100 * c['in_50_band']:.0f} % inside the 50 % band; median off by {c['median_error_pct']:.1f} % (mean)"
+        )
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: coverage, and per pose the bands, the measured value (``None``: withheld) and the flag."""
+        rows = self.bands.rows()
+        for r, f, w in zip(rows, self.measured_hz, self.withheld):
+            r["measured_hz"] = float(f) if math.isfinite(f) else None
+            r["withheld"] = bool(w)
+        return {"reading": self.reading, "n_draws": self.bands.n_draws, "coverage": self.coverage(), "poses": rows}
+
+    def plot(self, ax: Any = None) -> Any:
+        """The bands of f1 at the measured poses (with the measured values) and the withheld ones (shaded)."""
+        fig = self.bands.plot(ax, measured_hz=self.measured_hz)
+        a = fig.axes[0] if ax is None else ax
+        w = np.flatnonzero(self.withheld)
+        if w.size:
+            a.axvspan(w.min() - 0.5, w.max() + 0.5, color="0.9", zorder=0, label="withheld: predictions only")
+            a.legend(fontsize=7)
+        a.set_xlabel("study cell (row, col) mm")
+        return fig
+
+
+def study_bands(
+    posterior: Posterior,
+    *,
+    reading: TableReading | None = None,
+    n_draws: int | None = 100,
+    seed: int = 0,
+    options: ModelOptions | None = None,
+    engine: EngineOptions | None = None,
+) -> StudyBands:
+    """Bands of f1 at the study's measured poses (:func:`fpm_sim.study.tables.measured_table`) and at its
+    withheld poses (:func:`fpm_sim.study.tables.withheld_cells`: coordinates only) under ``reading``."""
+    rd = reading or TableReading()
+    measured = [(m.row_mm, m.col_mm, m.measured_hz) for m in measured_table() if m.readable]
+    cells = [(r, c, f) for r, c, f in measured] + [(r, c, math.nan) for r, c in withheld_cells()]
+    bands = predict_bands(
+        posterior,
+        [rd.pose(r, c) for r, c, _ in cells],
+        n_draws=n_draws,
+        seed=seed,
+        n_modes=1,
+        options=options,
+        engine=engine,
+        labels=[f"{r:g},{c:g}" for r, c, _ in cells],
+    )
+    return StudyBands(
+        bands=bands,
+        measured_hz=np.array([f for _, _, f in cells]),
+        withheld=np.array([i >= len(measured) for i in range(len(cells))]),
+        reading=rd.name,
     )

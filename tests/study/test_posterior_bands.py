@@ -16,7 +16,7 @@ from fpm_sim.config import default_config
 from fpm_sim.config.schema import config_to_toml
 from fpm_sim.kinematics import Pose
 from fpm_sim.study.identify.parameters import parameter_set
-from fpm_sim.study.posterior import QUANTILES, Posterior, PosteriorError, predict_bands
+from fpm_sim.study.posterior import QUANTILES, Posterior, PosteriorError, predict_bands, study_bands
 
 SEGMENTS = 4
 GROUPS = ("section-height", "hardware")
@@ -207,3 +207,24 @@ def test_bad_posterior_files_say_what_is_wrong(tmp_path):
     bad = write_posterior(tmp_path / "e.nc", draws={"section.height_m": -HEIGHTS_M})
     with pytest.raises(PosteriorError, match="draw 0 is not a valid description"):
         Posterior.from_netcdf(bad).config(0)
+
+
+def test_study_bands_cover_the_measured_poses_and_predict_the_withheld(posterior):
+    from fpm_sim.study.tables import measured_table, withheld_cells
+
+    sb = study_bands(posterior, n_draws=None, engine=EngineOptions(scheduler="serial"))
+    n_measured = sum(m.readable for m in measured_table())
+    assert n_measured == 12
+    assert len(withheld_cells()) == 6
+    assert sb.withheld.tolist() == [False] * 12 + [True] * 6
+    assert np.isnan(sb.measured_hz[12:]).all()  # never a value at the withheld poses
+    # coverage counted by hand from the quantiles
+    q = sb.bands.quantiles_hz[:, :12, 0]
+    f = sb.measured_hz[:12]
+    c = sb.coverage()
+    assert c["measured_poses"] == 12
+    assert c["in_90_band"] == np.mean((f >= q[0]) & (f <= q[4]))
+    assert c["in_50_band"] == np.mean((f >= q[1]) & (f <= q[3]))
+    assert "withheld poses (predictions only)" in sb.table()
+    d = sb.to_dict()
+    assert [r["measured_hz"] is None for r in d["poses"]] == [False] * 12 + [True] * 6
