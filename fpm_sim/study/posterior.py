@@ -524,7 +524,9 @@ class PredictiveBands:
         if figures:
             import matplotlib.pyplot as plt
 
-            for name, draw in ((f"{stem}.png", self.plot), (f"{stem}_map.png", self.plot_map)):
+            # the per-pose band figure only where its pose labels stay readable
+            todo = [(f"{stem}.png", self.plot)] if len(self.poses) <= 60 else []
+            for name, draw in [*todo, (f"{stem}_map.png", self.plot_map)]:
                 fig = draw()
                 fig.savefig(out / name, dpi=110)
                 plt.close(fig)
@@ -535,23 +537,32 @@ class PredictiveBands:
 
     def plot(self, ax: Any = None, *, mode: int = 1, measured_hz: Sequence[float] | np.ndarray | None = None) -> Any:
         """Median and bands of frequency ``mode`` at each pose (thick: 25-75 %, thin: 5-95 %), with
-        ``measured_hz`` (NaN: none) as crosses. Returns the ``Figure``."""
+        ``measured_hz`` (NaN: none) as crosses; at a single pose, every mode side by side. Returns the
+        ``Figure``."""
         import matplotlib.pyplot as plt
 
+        per_mode = len(self.poses) == 1 and measured_hz is None
+        n = self.n_modes if per_mode else len(self.poses)
         if ax is None:
-            fig, ax = plt.subplots(figsize=(max(5.0, 0.45 * len(self.poses) + 2), 3.8), constrained_layout=True)
+            fig, ax = plt.subplots(figsize=(max(5.0, 0.45 * n + 2), 3.8), constrained_layout=True)
         else:
             fig = ax.figure
-        q = self.quantiles_hz[:, :, mode - 1]
-        x = np.arange(len(self.poses))
+        q = self.quantiles_hz[:, 0, :] if per_mode else self.quantiles_hz[:, :, mode - 1]
+        x = np.arange(n)
         ax.vlines(x, q[0], q[4], color="C0", lw=1.2, label="5-95 %")
         ax.vlines(x, q[1], q[3], color="C0", lw=5, alpha=0.6, label="25-75 %")
         ax.plot(x, q[2], "o", color="C0", ms=4, label="median")
         if measured_hz is not None:
             ax.plot(x, np.asarray(measured_hz, float), "x", color="C3", ms=7, mew=1.5, label="measured")
-        ax.set_xticks(x, [self.label(i) for i in range(len(self.poses))], rotation=60, ha="right", fontsize=6)
-        ax.set_ylabel(f"f{mode} (Hz)")
-        ax.set_title(f"{_short(self.name)}: f{mode} over {self.n_draws} posterior draws", fontsize=8)
+        if per_mode:
+            ax.set_xticks(x, [f"mode {k + 1}" for k in x])
+            ax.set_ylabel("frequency (Hz)")
+            what = f"at {self.label(0)}"
+        else:
+            ax.set_xticks(x, [self.label(i) for i in range(n)], rotation=60, ha="right", fontsize=6)
+            ax.set_ylabel(f"f{mode} (Hz)")
+            what = f"f{mode}"
+        ax.set_title(f"{_short(self.name)}: {what}, {self.n_draws} posterior draws", fontsize=8)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
         return fig
@@ -575,23 +586,18 @@ class PredictiveBands:
             a.set_aspect("equal")
             a.set_xlabel("x (mm)")
             a.set_ylabel("y (mm)")
+        title = "relative width of the 90 % band"
         w = self.widest(mode)
         if w is not None:
-            axes[1].plot(x[w], y[w], marker="*", ms=16, color="red", mec="k")
-            axes[1].annotate(
-                f"measure here next\n({x[w]:g}, {y[w]:g}) mm: {width[w]:.0f} %",
-                (x[w], y[w]),
-                xytext=(8, 8),
-                textcoords="offset points",
-                fontsize=8,
-                color="red",
-            )
+            axes[1].plot(x[w], y[w], ls="", marker="*", ms=16, color="red", mec="k", label="measure here next")
+            axes[1].legend(fontsize=7, loc="lower right")
+            title += f"\nmeasure here next: ({x[w]:g}, {y[w]:g}) mm, band {width[w]:.1f} % of the median"
         axes[0].set_title(f"{_short(self.name)}: median over {self.n_draws} draws", fontsize=8)
-        axes[1].set_title("relative width of the 90 % band", fontsize=8)
+        axes[1].set_title(title, fontsize=8)
         return fig
 
 
-def _short(name: str, n: int = 60) -> str:
+def _short(name: str, n: int = 40) -> str:
     return name if len(name) <= n else name[: n - 3] + "..."
 
 
