@@ -31,7 +31,7 @@ import dataclasses
 import math
 import time
 import tomllib
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -525,7 +525,7 @@ class PredictiveBands:
             import matplotlib.pyplot as plt
 
             # the per-pose band figure only where its pose labels stay readable
-            todo = [(f"{stem}.png", self.plot)] if len(self.poses) <= 60 else []
+            todo: list[tuple[str, Callable[[], Any]]] = [(f"{stem}.png", self.plot)] if len(self.poses) <= 60 else []
             for name, draw in [*todo, (f"{stem}_map.png", self.plot_map)]:
                 fig = draw()
                 fig.savefig(out / name, dpi=110)
