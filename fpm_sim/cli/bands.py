@@ -216,3 +216,40 @@ def sweep_bands(args: argparse.Namespace) -> int:
     payload["files"] = [str(p) for p in paths]
     emit(args, payload, text)
     return 0
+
+
+# --------------------------------------------------------------------------------------------- reproduce
+
+
+def reproduce_posterior(args: argparse.Namespace) -> tuple[Posterior | None, str]:
+    """The posterior of ``reproduce``: ``--posterior``, else the shipped default's
+    (``fpm_sim/data/default_posterior.nc``) when the description is the embedded default (no ``--config``,
+    no ``--thickness-mm``); with a note when the default ships none."""
+    from fpm_sim.study.posterior import DEFAULT_POSTERIOR_NAME, default_posterior_path
+
+    if args.posterior is not None:
+        return load_posterior(args), ""
+    if args.config is not None or args.thickness_mm is not None:
+        return None, ""
+    path = default_posterior_path()
+    if path is None:
+        return None, (
+            f"no posterior shipped (fpm_sim/data/{DEFAULT_POSTERIOR_NAME}): the frequencies above are one "
+            "description's, without bands; give --posterior PATH (from 'fpm-sim calibrate') for bands"
+        )
+    return load_posterior(args, path), f"bands from the shipped posterior {path.name}"
+
+
+def reproduce_bands(args: argparse.Namespace, posterior: Posterior, reading: Any) -> Any:
+    """``reproduce`` with a posterior: bands and in-sample coverage at the 12 measured poses, predictive bands at
+    the six withheld poses (:func:`fpm_sim.study.posterior.study_bands`)."""
+    from fpm_sim.cli.common import engine_options
+    from fpm_sim.study.posterior import study_bands
+
+    return study_bands(
+        posterior,
+        reading=reading,
+        n_draws=args.draws,
+        options=band_options(args, posterior),
+        engine=engine_options(args, None),
+    )

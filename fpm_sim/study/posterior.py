@@ -514,13 +514,7 @@ class PredictiveBands:
         out.mkdir(parents=True, exist_ok=True)
         paths = [out / f"{stem}.nc", out / f"{stem}.csv"]
         self.dataset.to_netcdf(paths[0], engine="h5netcdf")
-        rows = self.rows()
-        with open(paths[1], "w", newline="") as fh:
-            w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-            w.writeheader()
-            w.writerows(
-                {k: "" if isinstance(v, float) and not math.isfinite(v) else v for k, v in r.items()} for r in rows
-            )
+        _write_rows(paths[1], self.rows())
         if figures:
             import matplotlib.pyplot as plt
 
@@ -595,6 +589,17 @@ class PredictiveBands:
         axes[0].set_title(f"{_short(self.name)}: median over {self.n_draws} draws", fontsize=8)
         axes[1].set_title(title, fontsize=8)
         return fig
+
+
+def _write_rows(path: Path, rows: list[dict[str, Any]]) -> None:
+    """``rows`` as CSV (header from the first row); NaN and ``None`` as empty cells."""
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(
+            {k: "" if v is None or (isinstance(v, float) and not math.isfinite(v)) else v for k, v in r.items()}
+            for r in rows
+        )
 
 
 def _short(name: str, n: int = 40) -> str:
@@ -738,6 +743,19 @@ class StudyBands:
             r["measured_hz"] = float(f) if math.isfinite(f) else None
             r["withheld"] = bool(w)
         return {"reading": self.reading, "n_draws": self.bands.n_draws, "coverage": self.coverage(), "poses": rows}
+
+    def write(self, out_dir: str | Path, *, stem: str = "bands") -> list[Path]:
+        """Write ``<stem>.nc`` and ``<stem>.csv`` (the bands, with the measured value and the withheld flag per
+        pose) and ``<stem>.png`` (:meth:`plot`); returns the paths."""
+        import matplotlib.pyplot as plt
+
+        out = Path(out_dir)
+        paths = self.bands.write(out, stem=stem, figures=False)
+        _write_rows(paths[1], self.to_dict()["poses"])
+        fig = self.plot()
+        fig.savefig(out / f"{stem}.png", dpi=110)
+        plt.close(fig)
+        return [*paths, out / f"{stem}.png"]
 
     def plot(self, ax: Any = None) -> Any:
         """The bands of f1 at the measured poses (with the measured values) and the withheld ones (shaded)."""
