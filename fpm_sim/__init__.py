@@ -12,6 +12,7 @@ package has no side effects)::
     fs.frf(cfg, pose)                         # frequency response function
     fs.rollout(cfg, pose, force_x_n=1.0)      # nonlinear simulation
     fs.reproduce(cfg)                         # the study's tests and 25 poses
+    fs.predict_bands("posterior.nc", pose)    # median and 5-95 % bands over a posterior's draws
 
 Every result has ``.to_dict()``, ``.table()`` and ``.plot(ax=None)`` (a ``matplotlib`` ``Figure``).
 Resolution: ``fidelity="fast" | "standard" | "fine"`` or ``segments=N`` in every entry point.
@@ -36,6 +37,7 @@ _API = {
     "frf": "fpm_sim.api",
     "rollout": "fpm_sim.api",
     "reproduce": "fpm_sim.api",
+    "predict_bands": "fpm_sim.api",
 }
 
 __all__ = ["__version__", *_API]

@@ -228,3 +228,14 @@ def test_study_bands_cover_the_measured_poses_and_predict_the_withheld(posterior
     assert "withheld poses (predictions only)" in sb.table()
     d = sb.to_dict()
     assert [r["measured_hz"] is None for r in d["poses"]] == [False] * 12 + [True] * 6
+
+
+@pytest.mark.filterwarnings("ignore:coarse resolution")
+def test_api_entry_point_gives_the_same_bands(posterior_file, bands):
+    import fpm_sim as fs
+
+    res = fs.predict_bands(posterior_file, POSES[:2], draws=None, n_modes=2, workers=1)
+    np.testing.assert_array_equal(res.frequencies_hz, bands.frequencies_hz[:, :2])
+    assert res.options.segments == SEGMENTS  # the posterior's resolution by default
+    one = fs.predict_bands(Posterior.from_netcdf(posterior_file), POSES[0], draws=3, n_modes=1, workers=1)
+    assert one.frequencies_hz.shape == (3, 1, 1)
