@@ -9,7 +9,18 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from fpm_sim.cli.common import CliError, count_arg, model_options
+from fpm_sim.cli.common import (
+    CliError,
+    check_output_dir,
+    count_arg,
+    emit,
+    engine_options,
+    finish_store,
+    model_options,
+    pose_of,
+    resolution_line,
+    with_resolution,
+)
 
 if TYPE_CHECKING:
     from fpm_sim.model.options import ModelOptions
@@ -93,7 +104,6 @@ def posterior_line(posterior: Posterior, n_used: int) -> str:
 def modes_bands(args: argparse.Namespace) -> tuple[Any, dict[str, Any], str]:
     """``modes --posterior``: the bands of the lowest ``--n-modes`` frequencies at the pose (the pose loop's
     constrained eigenproblem, gravity off). Returns the bands, the JSON payload and the text."""
-    from fpm_sim.cli.common import engine_options, pose_of, resolution_line, with_resolution
     from fpm_sim.study.posterior import predict_bands
 
     posterior = load_posterior(args)
@@ -165,14 +175,6 @@ def sweep_bands(args: argparse.Namespace) -> int:
     frequencies; writes ``bands.csv``, ``bands.nc``, ``bands.png`` and ``bands_map.png`` (the median f1 map, the
     band-width map and the pose of the widest band)."""
     from fpm_sim.batch.pose_loop import read_poses_csv
-    from fpm_sim.cli.common import (
-        check_output_dir,
-        emit,
-        engine_options,
-        finish_store,
-        resolution_line,
-        with_resolution,
-    )
     from fpm_sim.model.options import warn_if_coarse
     from fpm_sim.outputs import atomic_dir
     from fpm_sim.study.poses import parse_reading, study_poses
@@ -243,7 +245,6 @@ def reproduce_posterior(args: argparse.Namespace) -> tuple[Posterior | None, str
 def reproduce_bands(args: argparse.Namespace, posterior: Posterior, reading: Any) -> Any:
     """``reproduce`` with a posterior: bands and in-sample coverage at the 12 measured poses, predictive bands at
     the six withheld poses (:func:`fpm_sim.study.posterior.study_bands`)."""
-    from fpm_sim.cli.common import engine_options
     from fpm_sim.study.posterior import study_bands
 
     return study_bands(
@@ -264,12 +265,8 @@ def design_bands(
     """``design --posterior``: per design, P(min f1 over the ok poses >= ``--f-min-hz``) over the posterior's
     draws (:func:`fpm_sim.design.robust.design_over_draws`); writes ``design_bands.csv``, ``design_bands.json``
     and ``design_bands.png``."""
-    import json
-
-    from fpm_sim.cli.common import emit, engine_options, finish_store, resolution_line, with_resolution
     from fpm_sim.design.robust import design_over_draws
     from fpm_sim.outputs import atomic_dir
-    from fpm_sim.results import to_jsonable
 
     if args.f_min_hz is None:
         raise CliError("--posterior on design needs --f-min-hz (the target whose probability it reports)")
@@ -286,20 +283,7 @@ def design_bands(
         engine=engine_options(args, out),
     )
     with atomic_dir(out, overwrite=True) as tmp:  # the folder was checked by the caller (--overwrite, --resume)
-        import csv
-
-        import matplotlib.pyplot as plt
-
-        rows = result.summary()
-        with open(tmp / "design_bands.csv", "w", newline="") as fh:
-            w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-            w.writeheader()
-            w.writerows(rows)
-        (tmp / "design_bands.json").write_text(json.dumps(to_jsonable(result.to_dict()), indent=1))
-        fig = result.plot()
-        fig.savefig(tmp / "design_bands.png", dpi=110)
-        plt.close(fig)
-        names = ["design_bands.csv", "design_bands.json", "design_bands.png"]
+        names = [p.name for p in result.write(tmp)]
     finish_store(out)
     paths = [out / n for n in names]
     text = "\n".join(

@@ -12,11 +12,14 @@ whose ``min f1`` reaches it.
 
 from __future__ import annotations
 
+import csv
 import dataclasses
+import json
 import math
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -147,6 +150,29 @@ class DesignBands:
             "min_f1_ok_hz": np.where(np.isfinite(m), m, np.array(None)).tolist(),
             "elapsed_s": self.elapsed_s,
         }
+
+    def write(self, out_dir: str | Path) -> list[Path]:
+        """Write ``design_bands.csv`` (:meth:`summary`), ``design_bands.json`` (:meth:`to_dict`) and
+        ``design_bands.png`` (:meth:`plot`); returns the paths."""
+        import matplotlib.pyplot as plt
+
+        from fpm_sim.results import to_jsonable
+
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        paths = [out / "design_bands.csv", out / "design_bands.json", out / "design_bands.png"]
+        rows = self.summary()
+        with open(paths[0], "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+            w.writeheader()
+            w.writerows(
+                {k: "" if isinstance(v, float) and not math.isfinite(v) else v for k, v in r.items()} for r in rows
+            )
+        paths[1].write_text(json.dumps(to_jsonable(self.to_dict()), indent=1))
+        fig = self.plot()
+        fig.savefig(paths[2], dpi=110)
+        plt.close(fig)
+        return paths
 
     def plot(self, ax: Any = None) -> Any:
         """P(min f1 >= f_min) per design (bars) with the median and 5-95 % of min f1 on a second axis."""
