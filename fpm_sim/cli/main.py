@@ -172,6 +172,9 @@ def cmd_modes(args: argparse.Namespace) -> int:
     if args.posterior is not None:  # predictions with bands (fpm_sim.cli.bands)
         from fpm_sim.cli.bands import modes_bands
 
+        if args.shapes:
+            raise CliError("--shapes draws one description's mode shapes; drop it with --posterior (bands only)")
+
         bands, payload, text = modes_bands(args)
         if args.plot:
             save_figure(args.plot, bands.plot)

@@ -398,8 +398,13 @@ class PredictiveBands:
 
     def widest(self, mode: int = 1) -> int | None:
         """Index of the pose with the widest relative 90 % band of mode ``mode`` (``None`` if none computed):
-        the pose where one more measurement says most ("measure here next")."""
-        w = self.relative_width[:, mode - 1]
+        the pose where one more measurement says most ("measure here next"). Only poses that every draw
+        reaches away from singularities (status ``ok``) are candidates, where any is: near a singularity f1
+        dives to zero and a band's width says more about the locus than about the machine."""
+        w = self.relative_width[:, mode - 1].copy()
+        all_ok = np.all(self.status == STATUS_OK, axis=0) & np.isfinite(w)
+        if all_ok.any():
+            w[~all_ok] = np.nan
         return int(np.nanargmax(w)) if np.isfinite(w).any() else None
 
     def probability_above(self, f_min_hz: float, mode: int = 1) -> np.ndarray:
@@ -483,15 +488,14 @@ class PredictiveBands:
 
     @property
     def dataset(self) -> Any:
-        """An :class:`xarray.Dataset`: ``freq_hz`` over ``(draw, pose, mode)``, ``status`` over ``(draw, pose)``,
-        ``freq_quantile_hz`` over ``(quantile, pose, mode)`` and ``computed_fraction`` over ``pose``; pose
-        coordinates ``x_mm``, ``y_mm``, ``phi_rad``."""
+        """An :class:`xarray.Dataset`: ``freq_hz`` over ``(draw, pose, mode)``, ``freq_quantile_hz`` over
+        ``(quantile, pose, mode)`` and ``computed_fraction`` over ``pose``; coordinates ``x_mm``, ``y_mm``,
+        ``phi_rad`` (on ``pose``) and ``status`` (on ``draw, pose``)."""
         import xarray as xr
 
         return xr.Dataset(
             {
                 "freq_hz": (("draw", "pose", "mode"), self.frequencies_hz),
-                "status": (("draw", "pose"), self.status.astype(str)),
                 "freq_quantile_hz": (("quantile", "pose", "mode"), self.quantiles_hz),
                 "computed_fraction": ("pose", self.computed_fraction),
             },
@@ -503,6 +507,7 @@ class PredictiveBands:
                 "x_mm": ("pose", np.array([p.x_m * 1e3 for p in self.poses])),
                 "y_mm": ("pose", np.array([p.y_m * 1e3 for p in self.poses])),
                 "phi_rad": ("pose", np.array([p.phi_rad for p in self.poses])),
+                "status": (("draw", "pose"), self.status.astype(str)),
             },
             attrs={"config": self.name, "segments": int(self.options.segments or 0)},
         )

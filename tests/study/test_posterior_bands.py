@@ -239,3 +239,14 @@ def test_api_entry_point_gives_the_same_bands(posterior_file, bands):
     assert res.options.segments == SEGMENTS  # the posterior's resolution by default
     one = fs.predict_bands(Posterior.from_netcdf(posterior_file), POSES[0], draws=3, n_modes=1, workers=1)
     assert one.frequencies_hz.shape == (3, 1, 1)
+
+
+def test_measure_here_next_prefers_poses_every_draw_reaches_away_from_singularities(bands):
+    two = dataclasses.replace(bands, status=bands.status.copy(), frequencies_hz=bands.frequencies_hz.copy())
+    assert two.widest() == int(np.argmax(two.relative_width[:2, 0]))
+    w = 1 - two.widest()  # make the other reachable pose the widest, through one near-singular draw
+    two.frequencies_hz[0, w, 0] = 1.0
+    two.status[0, w] = "near_singular"
+    assert np.nanargmax(two.relative_width[:, 0]) == w
+    assert two.widest() == 1 - w  # not there: the widest band among the poses all draws reach as ok
+    assert set(two.dataset["status"].dims) == {"draw", "pose"}
