@@ -68,6 +68,12 @@ def test_sweep_prints_bands_and_names_where_to_measure_next(post, capsys, tmp_pa
     assert all_ok.sum() >= 15
     assert d["measure_here_next"]["relative_width"] == pytest.approx(np.nanmax(width[all_ok]), rel=1e-12)
     assert all_ok[d["measure_here_next"]["pose"]]
+    poses = tmp_path / "my_poses.csv"
+    poses.write_text("x_mm,y_mm,phi_rad\n0,0,0\n30,-20,0.1\n")
+    code, out, _ = run(capsys, "sweep", "--posterior", post, "--poses", str(poses), "--out", str(tmp_path / "P"))
+    assert code == 0
+    assert "(30, -20) mm, 0.1 rad" in out
+    assert "6/6" in out
     code, out, _ = run(capsys, "sweep", "--posterior", post, "--step-mm", "60", "--out", str(tmp_path / "D"))
     assert code == 0
     assert "measure here next" in out
