@@ -121,7 +121,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     lines.append("wrote " + ", ".join(str(p) for p in paths))
     payload = with_resolution(rep.to_dict(), opts)
     payload["bands"] = bands.to_dict() if bands is not None else None
-    payload["posterior"] = posterior_payload(posterior) if posterior is not None else note
+    payload["posterior"] = posterior_payload(posterior) if posterior is not None else (note or None)
     payload["files"] = [str(p) for p in paths]
     emit(args, payload, "\n".join(lines))
     return 0
