@@ -240,7 +240,11 @@ class Posterior:
         except FpmSimError as exc:
             raise PosteriorError(f"--posterior {p}: free groups {','.join(groups)!r} unusable: {exc}") from None
         names = [n for n in ps_names if n in names] + [n for n in names if n not in ps_names]  # set order first
-        values = np.column_stack([flat(n).astype(float) for n in names]) if names else np.zeros((0, 0))
+        if not names:
+            raise PosteriorError(
+                f"--posterior {p}: the posterior group holds no parameter variables (expected {', '.join(ps_names)})"
+            )
+        values = np.column_stack([flat(n).astype(float) for n in names])
         branch = flat(ELBOW_BRANCH_VAR) if ELBOW_BRANCH_VAR in post.data_vars else None
         likelihood = {
             str(n): flat(str(n)).astype(float) for n in post.data_vars if str(n).startswith(LIKELIHOOD_PREFIX)
