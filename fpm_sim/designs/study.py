@@ -22,15 +22,14 @@ from typing import Any
 
 import numpy as np
 
-from fpm_sim.batch.engine import EngineOptions, chunk_size, run_chunks, split
+from fpm_sim.batch.engine import EngineOptions
 from fpm_sim.batch.jax_backend import parameter_value, with_parameter
 from fpm_sim.batch.pose_loop import (
     STATUS_UNREACHABLE,
     PoseFrequencies,
     fast_options,
-    merge,
     read_poses_csv,
-    solve_poses,
+    solve_configs,
 )
 from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError, FpmSimWarning
@@ -566,11 +565,6 @@ def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
 # ----------------------------------------------------------------------------------------------- the loop
 
 
-def _design_chunk(item: tuple[Manipulator, list[Pose]], *, n_modes: int, options: ModelOptions) -> PoseFrequencies:
-    config, poses = item
-    return solve_poses(config, poses, n_modes=n_modes, options=options)
-
-
 def design_study(
     config: Manipulator,
     *,
@@ -642,20 +636,9 @@ def design_study(
     opts = options or fast_options()
     eng = engine or EngineOptions()
     eng = dataclasses.replace(eng, desc="design x poses" if eng.desc == "poses" else eng.desc)
-    size = eng.chunk or chunk_size(len(poses) * len(configs), eng.n_workers)
-    pose_chunks = split(poses, size)
-    items = [(c, chunk) for c in configs for chunk in pose_chunks]
     t0 = time.perf_counter()
-    parts = run_chunks(
-        _design_chunk,
-        items,
-        kwargs={"n_modes": n_modes, "options": opts},
-        weights=[len(chunk) for _, chunk in items],
-        options=eng,
-    )
+    merged = solve_configs(configs, poses, n_modes=n_modes, options=opts, engine=eng)
     elapsed = time.perf_counter() - t0
-    per = len(pose_chunks)
-    merged = [merge(parts[d * per : (d + 1) * per]) for d in range(len(configs))]
     return DesignResult(
         config=config,
         fields=fields,
