@@ -1,0 +1,40 @@
+"""Shared by the benchmark modules: the switch for the expensive cases and a spread of reachable poses."""
+
+from __future__ import annotations
+
+import os
+import warnings
+
+import numpy as np
+
+FULL_ENV = "FPM_SIM_BENCH_FULL"
+"""Set to 1 to run the expensive cases too (MJX compiles for minutes; dense grids take tens of seconds)."""
+
+
+def full_run() -> bool:
+    """Whether the expensive cases run (``FPM_SIM_BENCH_FULL=1``)."""
+    return os.environ.get(FULL_ENV, "") == "1"
+
+
+def require_full() -> None:
+    """Skip the calling benchmark's ``setup`` (asv reports it as skipped) unless the expensive cases are on."""
+    if not full_run():
+        raise NotImplementedError(f"expensive case: set {FULL_ENV}=1 to run it")
+
+
+def reachable_poses(config, n: int) -> list:
+    """``n`` reachable poses spread evenly over the 5 mm dense grid at phi = 0 (the backends' dense set)."""
+    from fpm_sim.kinematics import NearSingularityWarning, inverse_kinematics
+    from fpm_sim.study.sweep import dense_grid
+
+    ok = []
+    for p in dense_grid(config, step_mm=5.0):
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", NearSingularityWarning)
+                inverse_kinematics(config.geometry, p)
+        except ValueError:
+            continue
+        ok.append(p)
+    idx = np.linspace(0, len(ok) - 1, n).round().astype(int)
+    return [ok[i] for i in idx]
