@@ -80,62 +80,84 @@ class Backends:
 
     track_max_rel_diff_vs_cpu.unit = "relative"
 
+    def track_build_s(self, poses: str, backend: str) -> float:
+        """Of a steady call of a batched backend: building the per-pose models (0 for cpu: not timed apart)."""
+        timings = getattr(_call(self.config, self.poses, self.opts, backend), "timings", None)
+        return float(getattr(timings, "build_s", 0.0) or 0.0)
+
+    track_build_s.unit = "s"
+
+    def track_run_s(self, poses: str, backend: str) -> float:
+        """Of a steady call of a batched backend: the one batched linearisation and eigen-solve."""
+        timings = getattr(_call(self.config, self.poses, self.opts, backend), "timings", None)
+        return float(getattr(timings, "run_s", 0.0) or 0.0)
+
+    track_run_s.unit = "s"
+
 
 class Gradients:
-    """d f_i / d p at (50, -50, 0) mm, 3 segments: JAX (compiled in setup) or central differences of cpu."""
+    """d f_i / d p, 3 segments, at (50, -50, 0) mm (``frequency_gradients``) or at the computable study poses at
+    once (``pose_frequency_gradients``, ``FPM_SIM_BENCH_FULL=1``): JAX (compiled in setup) or central differences
+    of the cpu path (1 process)."""
 
-    params = [["jax", "central differences"]]
-    param_names = ["way"]
+    params = [["one pose", "study poses"], ["jax", "central differences"]]
+    param_names = ["poses", "way"]
     number = 1
     repeat = (1, 5, 60.0)
     timeout = 600.0
 
-    def setup(self, way: str) -> None:
+    def setup(self, poses: str, way: str) -> None:
+        from fpm_sim.batch.frequencies import pose_frequencies
         from fpm_sim.batch.pose_loop import fast_options
         from fpm_sim.config import default_config
         from fpm_sim.kinematics import Pose
+        from fpm_sim.study.poses import study_poses
 
         self.config, self.opts = default_config(), fast_options(segments=3)
-        self.pose = Pose.from_mm(50.0, -50.0, 0.0)
+        if poses == "one pose":
+            self.poses = [Pose.from_mm(50.0, -50.0, 0.0)]
+        else:
+            require_full()
+            study = [p.pose for p in study_poses()]
+            f1 = pose_frequencies(self.config, study, n_modes=N_MODES, options=self.opts).frequencies_hz[:, 0]
+            self.poses = [p for p, f in zip(study, f1) if np.isfinite(f)]
         self.gradient = self._gradient(way)  # the first JAX call compiles
 
     def _gradient(self, way: str) -> np.ndarray:
+        """(poses, modes, parameters)."""
         from fpm_sim.batch import jax_backend
         from fpm_sim.batch.frequencies import pose_frequencies
 
+        kw = {"n_modes": N_MODES, "options": self.opts}
         if way == "jax":
-            res = jax_backend.frequency_gradients(
-                self.config, self.pose, GRADIENT_PARAMETERS, n_modes=N_MODES, options=self.opts
-            )
-            return np.asarray(res.gradient)
+            if len(self.poses) == 1:
+                res = jax_backend.frequency_gradients(self.config, self.poses[0], GRADIENT_PARAMETERS, **kw)
+                return np.asarray(res.gradient)[None]
+            res = jax_backend.pose_frequency_gradients(self.config, self.poses, GRADIENT_PARAMETERS, **kw)
+            return np.stack([r.gradient for r in res])
         cols = []
         for name in GRADIENT_PARAMETERS:
             v = jax_backend.parameter_value(self.config, name)
             h = 1e-4 * v
-            f = [
-                pose_frequencies(
-                    jax_backend.with_parameter(self.config, name, v + s * h),
-                    [self.pose],
-                    n_modes=N_MODES,
-                    options=self.opts,
-                ).frequencies_hz[0]
+            up, down = (
+                pose_frequencies(jax_backend.with_parameter(self.config, name, v + s * h), self.poses, **kw)
                 for s in (1.0, -1.0)
-            ]
-            cols.append((f[0] - f[1]) / (2 * h))
-        return np.stack(cols, axis=1)
+            )
+            cols.append((up.frequencies_hz - down.frequencies_hz) / (2 * h))
+        return np.stack(cols, axis=-1)
 
-    def time_gradients(self, way: str) -> None:
+    def time_gradients(self, poses: str, way: str) -> None:
         self._gradient(way)
 
 
 class GradientAgreement:
-    """The JAX gradients against central differences of the cpu path (relative step 1e-4), same pose."""
+    """The JAX gradients against central differences of the cpu path (relative step 1e-4) at (50, -50, 0) mm."""
 
     timeout = 600.0
 
     def track_max_rel_diff_vs_central_differences(self) -> float:
         g = Gradients()
-        g.setup("jax")
+        g.setup("one pose", "jax")
         return float(np.abs(g.gradient / g._gradient("central differences") - 1.0).max())
 
     track_max_rel_diff_vs_central_differences.unit = "relative"

@@ -11,11 +11,15 @@ from __future__ import annotations
 
 import mujoco
 
-SEGMENTS = [4, 8]
-"""Links' segments (12 is the default resolution: 3.5 s per pose; run it with --bench and -a params)."""
+from benchmarks.common import require_full
+
+SEGMENTS = [4, 8, 12]
+"""Links' segments; 12 (the default resolution, seconds per stage) only with ``FPM_SIM_BENCH_FULL=1``."""
 
 
 def _built(segments: int):
+    if segments > 8:
+        require_full()
     from fpm_sim.config import default_config
     from fpm_sim.kinematics import Pose
     from fpm_sim.model.manipulator import build_manipulator
