@@ -21,7 +21,7 @@ solver (:func:`fpm_sim.batch.jax_linearisation.reduced_modes`). The three backen
 ``mjx``) solve the same discrete eigenproblem and agree to round-off (``tests/batch/test_mjx_pipeline.py``).
 
 Cost: MJX walks the kinematic tree level by level, so its XLA compile grows with the chain depth
-(``scripts/benchmark_backends.py``, ``docs/benchmarks.md``); on a CPU the ``jax`` backend compiles faster.
+(``benchmarks/backends.py``, ``docs/benchmarks.md``); on a CPU the ``jax`` backend compiles faster.
 With a GPU, this is the path to measure.
 
 The rigs are refused (:func:`check_mjx_model`): their kinematic tree is one serial chain, and
