@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -38,3 +39,17 @@ def reachable_poses(config, n: int) -> list:
         ok.append(p)
     idx = np.linspace(0, len(ok) - 1, n).round().astype(int)
     return [ok[i] for i in idx]
+
+
+SYMMETRIC_CONFIG = Path(__file__).resolve().parents[1] / "tests" / "data" / "symmetric_3rrr.toml"
+"""The well-conditioned, three-fold symmetric 3RRR (the default before the identification of issue 4; a data file
+of the source checkout). The single-pose method benchmarks use it, as their history in docs/benchmarks.md did:
+the identified default's static equilibrium at 12 segments is ill-conditioned (docs/benchmarks.md, issue 4) and
+its flex model is unstable under ``mjd_transitionFD``, which would time the equilibrium's struggle, not the method."""
+
+
+def symmetric_config():
+    """:data:`SYMMETRIC_CONFIG`, loaded."""
+    from fpm_sim.config import load_config
+
+    return load_config(SYMMETRIC_CONFIG)

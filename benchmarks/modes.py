@@ -1,17 +1,17 @@
 """One pose's modal analysis, stage by stage, and the two modal methods compared (issue 2).
 
-(Was ``scripts/benchmark_modes.py``.) The default manipulator at (0, 0, 0): build (MjSpec -> MjModel, automatic
-timestep), static equilibrium under gravity, then the modes by ``method``: ``transition_fd``
-(``mjd_transitionFD`` + eigen-decomposition + filtering) or ``constrained`` (K by finite differences + null-space
-generalised eigen-solve) at the same equilibrium. ``track_f1_hz`` records the first frequency of each method:
-the two must agree (70.835 / 70.836 Hz at 4 segments on the symmetric default).
+(Was ``scripts/benchmark_modes.py``.) The symmetric manipulator (``benchmarks.common.SYMMETRIC_CONFIG``) at (0, 0, 0):
+build (MjSpec -> MjModel, automatic timestep), static equilibrium under gravity, then the modes by ``method``:
+``transition_fd`` (``mjd_transitionFD`` + eigen-decomposition + filtering) or ``constrained`` (K by finite differences
++ null-space generalised eigen-solve) at the same equilibrium. ``track_f1_hz`` records the first frequency of each
+method: the two must agree (70.835 / 70.836 Hz at 4 segments in the history).
 """
 
 from __future__ import annotations
 
 import mujoco
 
-from benchmarks.common import require_full
+from benchmarks.common import require_full, symmetric_config
 
 SEGMENTS = [4, 8, 12]
 """Links' segments; 12 (the default resolution, seconds per stage) only with ``FPM_SIM_BENCH_FULL=1``."""
@@ -20,12 +20,11 @@ SEGMENTS = [4, 8, 12]
 def _built(segments: int):
     if segments > 8:
         require_full()
-    from fpm_sim.config import default_config
     from fpm_sim.kinematics import Pose
     from fpm_sim.model.manipulator import build_manipulator
     from fpm_sim.model.options import ModelOptions
 
-    return build_manipulator(default_config(), Pose(0.0, 0.0, 0.0), ModelOptions(segments=segments))
+    return build_manipulator(symmetric_config(), Pose(0.0, 0.0, 0.0), ModelOptions(segments=segments))
 
 
 class Stages:

@@ -226,12 +226,10 @@ class TwoProcesses:
             pose_frequencies(self.cfg, self.poses, n_modes=N_MODES, options=self.opts, engine=engine)
 
 
-def _noop(item: int) -> int:
-    return item
-
-
 class DaskTasks:
-    """Dask's cost per no-op task on a 2-worker LocalCluster: 200 submitted at once, or one at a time."""
+    """Dask's cost per no-op task on a 2-worker LocalCluster: 200 submitted at once, or one at a time. The task is
+    the builtin ``abs``: a function of this module would have to be importable in the workers, which asv's
+    benchmark package is not."""
 
     params = [["at once", "one at a time"]]
     param_names = ["submitted"]
@@ -253,10 +251,10 @@ class DaskTasks:
 
     def time_tasks(self, submitted: str) -> None:
         if submitted == "at once":
-            self.client.gather(self.client.map(_noop, range(self.n_tasks), pure=False))
+            self.client.gather(self.client.map(abs, range(self.n_tasks), pure=False))
         else:
             for i in range(self.n_tasks):
-                self.client.submit(_noop, i, pure=False).result()
+                self.client.submit(abs, i, pure=False).result()
 
 
 class FullVsFast:
