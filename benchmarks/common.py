@@ -53,3 +53,19 @@ def symmetric_config():
     from fpm_sim.config import load_config
 
     return load_config(SYMMETRIC_CONFIG)
+
+
+class OneBlasThread:
+    """A base for benchmarks that time dense eigen-solves: BLAS limited to one thread from ``setup`` (call
+    :meth:`limit_blas`) to ``teardown``, as the pose loop runs its solves (``fpm_sim/linear/threads.py``:
+    multithreaded OpenBLAS busy-waits on these small matrices). Forked worker processes inherit the limit."""
+
+    def limit_blas(self) -> None:
+        from fpm_sim.linear.threads import blas_threads
+
+        self._blas = blas_threads()
+        self._blas.__enter__()
+
+    def teardown(self, *params: object) -> None:
+        if hasattr(self, "_blas"):  # not when setup skipped the case
+            self._blas.__exit__(None, None, None)

@@ -28,7 +28,7 @@ import mujoco
 import numpy as np
 import scipy.linalg
 
-from benchmarks.common import require_full
+from benchmarks.common import OneBlasThread, require_full
 
 STEPS_MM = [20.0, 10.0]
 SEGMENTS = 6
@@ -140,7 +140,7 @@ def _floor(mats: list, way: str) -> None:
             scipy.linalg.eigh(0.5 * (kr + kr.T), 0.5 * (mr + mr.T), subset_by_index=[0, N_MODES - 1])
 
 
-class Sweep:
+class Sweep(OneBlasThread):
     """The dense grid in this process, one way (the parameter), CPU time of this process."""
 
     params = [STEPS_MM, WAYS]
@@ -151,15 +151,9 @@ class Sweep:
     timeout = 900.0
 
     def setup(self, step_mm: float, way: str) -> None:
-        from fpm_sim.linear.threads import blas_threads
-
         self.cfg, self.poses, self.opts = _grid(step_mm)
         self.mats = _matrices(self.cfg, self.poses, self.opts) if way.startswith("floor") else []
-        self._blas = blas_threads()
-        self._blas.__enter__()
-
-    def teardown(self, step_mm: float, way: str) -> None:
-        self._blas.__exit__(None, None, None)
+        self.limit_blas()
 
     def time_grid(self, step_mm: float, way: str) -> None:
         from fpm_sim.batch.pose_loop import solve_poses
@@ -203,7 +197,7 @@ class SweepAgreement:
     track_max_rel_diff_all_poses.unit = "relative"
 
 
-class TwoProcesses:
+class TwoProcesses(OneBlasThread):
     """The 20 mm grid on two processes (wall): the old fork pool or the cpu backend on a Dask LocalCluster."""
 
     params = [["process pool (before)", "Dask LocalCluster, start included (now)"]]
@@ -214,6 +208,7 @@ class TwoProcesses:
 
     def setup(self, way: str) -> None:
         self.cfg, self.poses, self.opts = _grid(STEPS_MM[0])
+        self.limit_blas()
 
     def time_grid(self, way: str) -> None:
         from fpm_sim.batch.engine import EngineOptions
@@ -294,6 +289,9 @@ class FullVsFastAgreement:
     """The fast path's first frequency against the full analysis's at (100, -100, 0) mm (``FPM_SIM_BENCH_FULL=1``)."""
 
     timeout = 600.0
+
+    def setup(self) -> None:
+        require_full()
 
     def track_fast_minus_full_f1_pct(self) -> float:
         """100 (f1_fast / f1_full - 1): 6 instead of 12 segments and no gravity prestress (docs: +0.6 %)."""
