@@ -18,18 +18,23 @@ PREVIOUS_DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "data" / "previo
 """The default as identified in stop 14 (frozen copy; ``tests/conftest.py`` names the same file)."""
 
 
+REFERENCE_GEOMETRY = Geometry(
+    0.1526,
+    tuple(math.radians(a) for a in (150.8546, -89.1454, 30.8546)),
+    0.1515,
+    0.1535,
+    0.0874,
+    tuple(math.radians(a) for a in (-178.6021, -58.6021, 61.3979)),
+    (-1, -1, -1),
+)
+"""The geometry many tests measured their numbers on (the embedded default before the identify re-run): they are
+about kinematics, surrogates and roads, not about whichever geometry the default holds now."""
+
+
 def reference_config() -> Manipulator:
-    """The tests' own manipulator (shared by the modal-FRF and the impact roads)."""
-    # the tests' own geometry (the default before its identify re-run): away from singularities at POSES_MM
-    geo = Geometry(
-        0.1526,
-        tuple(math.radians(a) for a in (150.8546, -89.1454, 30.8546)),
-        0.1515,
-        0.1535,
-        0.0874,
-        tuple(math.radians(a) for a in (-178.6021, -58.6021, 61.3979)),
-        (-1, -1, -1),
-    )
+    """The tests' own manipulator (shared by the modal-FRF and the impact roads): :data:`REFERENCE_GEOMETRY`, away
+    from singularities at the roads' poses, on the frozen previous default with a 4.79 kg platform."""
+    geo = REFERENCE_GEOMETRY
     cfg = load_config(PREVIOUS_DEFAULT_CONFIG)  # frozen: re-identifying the embedded default must not move it
     plat = LumpedMass(4.79, (4.79e-3, 4.79e-3, 9.58e-3 * (1 - 1e-6)))
     return cfg.replace(geometry=geo, hardware=dataclasses.replace(cfg.hardware, platform=plat))
