@@ -14,7 +14,7 @@ import itertools
 
 import numpy as np
 
-from benchmarks.common import require_full, symmetric_config
+from benchmarks.common import require_full, symmetric_config, warm_imports
 
 GRID_M = np.array([-0.1, 0.0, 0.1])
 N_MODES = 6
@@ -56,6 +56,7 @@ class AtlasBuild:
     def setup(self, segments: int) -> None:
         if segments > 4:
             require_full()
+        warm_imports()
 
     def time_build_atlas(self, segments: int) -> None:
         _atlas(segments)
@@ -85,6 +86,8 @@ class AtlasVsDirect:
             require_full()
         self.manip, self.opts, self.poses = _setting(segments)
         self.atlas = _atlas(segments) if way == "atlas.query" else None
+        if self.atlas is None:
+            _direct(self.manip, self.poses[0], self.opts)  # warm-up: what the first build initialises lazily
 
     def time_midpoints(self, segments: int, way: str) -> None:
         for pose in self.poses:

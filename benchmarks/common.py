@@ -12,6 +12,21 @@ FULL_ENV = "FPM_SIM_BENCH_FULL"
 """Set to 1 to run the expensive cases too (MJX compiles for minutes; dense grids take tens of seconds)."""
 
 
+def warm_imports() -> None:
+    """Import what the timed calls import lazily (SciPy, the linear layer, the model builder, the pose loop, the
+    atlas), so that the first parameter of a benchmark does not pay them: asv times all of a benchmark's
+    parameters in one process, one after another. Call it from ``setup``."""
+    import scipy.linalg  # noqa: F401
+
+    import fpm_sim.batch.frequencies
+    import fpm_sim.batch.pose_loop
+    import fpm_sim.linear.equilibrium
+    import fpm_sim.linear.modal
+    import fpm_sim.model.manipulator
+    import fpm_sim.rom.atlas
+    import fpm_sim.rom.reduction  # noqa: F401
+
+
 def full_run() -> bool:
     """Whether the expensive cases run (``FPM_SIM_BENCH_FULL=1``)."""
     return os.environ.get(FULL_ENV, "") == "1"

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import warnings
 
-from benchmarks.common import require_full, symmetric_config
+from benchmarks.common import require_full, symmetric_config, warm_imports
 
 
 def _pose(link_model: str):
@@ -43,6 +43,7 @@ class LinkModels:
     def setup(self, link_model: str) -> None:
         if link_model == "flex":
             require_full()
+        warm_imports()
 
     def time_pose(self, link_model: str) -> None:
         _pose(link_model)

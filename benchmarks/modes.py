@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import mujoco
 
-from benchmarks.common import require_full, symmetric_config
+from benchmarks.common import require_full, symmetric_config, warm_imports
 
 SEGMENTS = [4, 8, 12]
 """Links' segments; 12 (the default resolution, seconds per stage) only with ``FPM_SIM_BENCH_FULL=1``."""
@@ -35,6 +35,7 @@ class Stages:
     timeout = 300.0
 
     def setup(self, segments: int) -> None:
+        warm_imports()
         self.built = _built(segments)
 
     def time_build(self, segments: int) -> None:
@@ -60,6 +61,7 @@ class Methods:
         self.built = _built(segments)
         self.qpos = static_equilibrium(self.built.model, mujoco.MjData(self.built.model))
         self.modes = {"transition_fd": modal.modes_transition_fd, "constrained": modal.modes_constrained}[method]
+        self.modes(self.built, n_modes=6, qpos=self.qpos)  # warm-up: what the first call initialises lazily
 
     def time_modes(self, segments: int, method: str) -> None:
         self.modes(self.built, n_modes=6, qpos=self.qpos)

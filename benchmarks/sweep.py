@@ -28,7 +28,7 @@ import mujoco
 import numpy as np
 import scipy.linalg
 
-from benchmarks.common import OneBlasThread, require_full
+from benchmarks.common import OneBlasThread, require_full, warm_imports
 
 STEPS_MM = [20.0, 10.0]
 SEGMENTS = 6
@@ -152,6 +152,7 @@ class Sweep(OneBlasThread):
 
     def setup(self, step_mm: float, way: str) -> None:
         self.cfg, self.poses, self.opts = _grid(step_mm)
+        warm_imports()
         self.mats = _matrices(self.cfg, self.poses, self.opts) if way.startswith("floor") else []
         self.limit_blas()
 
