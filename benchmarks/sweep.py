@@ -279,7 +279,7 @@ class FullVsFast:
         if way == "full analysis":
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                return np.asarray(manipulator_modes(self.pose, config=self.cfg, n_modes=N_MODES).frequencies_hz)
+                return np.asarray(manipulator_modes(self.cfg, self.pose, n_modes=N_MODES).frequencies_hz)
         return solve_poses(self.cfg, [self.pose], n_modes=N_MODES, options=self.opts).frequencies_hz[0]
 
     def time_pose(self, way: str) -> None:

@@ -1,20 +1,31 @@
 """fpm-sim: natural frequencies, modes and reduced models of flexible planar parallel manipulators on MuJoCo.
 
 The public API, one screen (``import fpm_sim as fs``; everything is imported on first use, importing the
-package has no side effects)::
+package has no side effects). One function per command; the description first, the pose second, everything
+else keyword-only; the model options are one ``options=fs.ModelOptions(...)``::
 
     cfg = fs.default_config()                 # or fs.load_config("my.toml")
     pose = fs.Pose.from_mm(50, -20, 0.1)      # x, y (mm), phi (rad)
-    fs.modes(cfg, pose)                       # natural frequencies and mode shapes at a pose
+    fast = fs.ModelOptions(fidelity="fast")   # or segments=N, link_model=, axial=, gravity=, ...
+    fs.modes(cfg, pose, options=fast)         # natural frequencies and mode shapes at a pose
     fs.rig_modes(cfg, "cantilever")           # a subsystem rig
     fs.sweep(cfg, grid="paper")               # first frequencies over poses
+    fs.design(cfg, poses=[pose], vary={"section.thickness_m": [0.02, 0.03]})
     fs.reduce(cfg, pose, n_modes=6)           # reduced-order state-space model
-    fs.frf(cfg, pose)                         # frequency response function
+    fs.frf(cfg, pose, excitation=fs.LinkPoint("distal_0", 0.5, "z"))
     fs.rollout(cfg, pose, force_x_n=1.0)      # nonlinear simulation
+    fs.impact(cfg, pose)                      # virtual hammer test
+    fs.transient(cfg)                         # the study's transient: full model vs reduced model
+    fs.readability(cfg)                       # mode-1 readability at the study's poses
+    fs.atlas(cfg, x_m=[-0.05, 0, 0.05], y_m=[0.0])  # modal atlas (.query(pose))
+    fs.ema("frfs.uff", f_lower_hz=5, f_upper_hz=200)  # modes from measured FRFs
+    fs.identify(cfg, measured=["f.csv"])      # model updating
     fs.reproduce(cfg)                         # the study's tests and 25 poses
+    fs.export_mjcf(cfg, pose)                 # the generated MJCF
+    fs.check_requirements(fs.load_requirements("fpm-requirements.toml"), cfg)  # docs/testing.md
 
-Every result has ``.to_dict()``, ``.table()`` and ``.plot(ax=None)`` (a ``matplotlib`` ``Figure``).
-Resolution: ``fidelity="fast" | "standard" | "fine"`` or ``segments=N`` in every entry point.
+Every result keeps :class:`fpm_sim.results.Result`: ``.to_dict()`` (JSON-ready), ``.table()`` (text) and
+``.plot(ax=None)`` (a ``matplotlib`` ``Figure``); frequencies over poses are ``.to_xarray()``.
 """
 
 from __future__ import annotations
@@ -27,15 +38,28 @@ _API = {
     "load_config": "fpm_sim.config",
     "default_config": "fpm_sim.config",
     "Pose": "fpm_sim.kinematics",
+    "ModelOptions": "fpm_sim.model.options",
+    "LinkPoint": "fpm_sim.response",
     "FpmSimError": "fpm_sim.errors",
     "FpmSimWarning": "fpm_sim.errors",
+    "Result": "fpm_sim.results",
     "modes": "fpm_sim.api",
     "rig_modes": "fpm_sim.api",
     "sweep": "fpm_sim.api",
+    "design": "fpm_sim.api",
     "reduce": "fpm_sim.api",
     "frf": "fpm_sim.api",
     "rollout": "fpm_sim.api",
+    "impact": "fpm_sim.api",
+    "transient": "fpm_sim.api",
+    "readability": "fpm_sim.api",
+    "atlas": "fpm_sim.api",
+    "ema": "fpm_sim.api",
+    "identify": "fpm_sim.api",
     "reproduce": "fpm_sim.api",
+    "export_mjcf": "fpm_sim.api",
+    "load_requirements": "fpm_sim.study.requirements",
+    "check_requirements": "fpm_sim.study.requirements",
 }
 
 __all__ = ["__version__", *_API]
@@ -54,29 +78,3 @@ def __getattr__(name: str) -> Any:
 
 def __dir__() -> list[str]:
     return sorted(__all__)
-
-
-def _public_frf_over_the_submodule() -> None:
-    """``fs.frf`` is the API function although ``fpm_sim/frf.py`` is a submodule of the same name.
-
-    Importing a submodule sets it as an attribute of its package; a property on the package's module
-    class keeps the function there (the submodule stays importable by ``from fpm_sim.frf import ...``).
-    """
-    import sys
-    import types
-
-    class _Package(types.ModuleType):
-        @property
-        def frf(self) -> Any:
-            from fpm_sim.api import frf
-
-            return frf
-
-        @frf.setter
-        def frf(self, module: Any) -> None:
-            self.__dict__["_frf_module"] = module
-
-    sys.modules[__name__].__class__ = _Package
-
-
-_public_frf_over_the_submodule()

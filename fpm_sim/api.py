@@ -1,85 +1,62 @@
-"""The public entry points, one per capability (re-exported lazily by :mod:`fpm_sim`).
+"""The public entry points, one per capability of the command line (re-exported lazily by :mod:`fpm_sim`).
 
-Every function takes the description first (``config``: a :class:`fpm_sim.config.Manipulator`, ``None``
-for the embedded study prototype), then the pose where there is one (a :class:`fpm_sim.kinematics.Pose`
-in m, m, rad; ``None`` for ``(0, 0, 0)``), and everything else keyword-only. The model is always built
-here from ``(config, pose)``, so a result cannot mix a description with another model. The resolution
-is ``fidelity`` (``"fast"``, ``"standard"``, ``"fine"``) or ``segments`` per link (overrides), the one
-policy of :mod:`fpm_sim.model.options`; every result states it and its estimated discretisation error.
+The one public surface: ``import fpm_sim as fs`` and call ``fs.modes``, ``fs.sweep``, ... (the modules below
+are the library behind them). Every function takes the description first (``config``: a
+:class:`fpm_sim.config.Manipulator`, ``None`` for the embedded study prototype), then the pose where there is
+one (a :class:`fpm_sim.kinematics.Pose` in m, m, rad; ``None`` for the function's default pose), and
+everything else keyword-only. The model options are ONE parameter, ``options`` (a
+:class:`fpm_sim.model.options.ModelOptions`, exported as ``fs.ModelOptions``: resolution by ``fidelity`` or
+``segments``, link model, axial springs, gravity, ...); ``None`` takes the function's default, the same one
+as its command's. The model is always built here from ``(config, pose, options)``, so a result cannot mix a
+description with another model.
 
 Every result has ``.to_dict()`` (JSON-ready), ``.table()`` (text) and ``.plot(ax=None)`` (a
-``matplotlib.figure.Figure``). These are thin functions over the library: no computation of their own.
+``matplotlib.figure.Figure``); see :class:`fpm_sim.results.Result`. These are thin functions over the
+library: no computation of their own.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from pathlib import Path
+from typing import TYPE_CHECKING, Literal, overload
 
 if TYPE_CHECKING:
-    import numpy as np
-    from numpy.typing import ArrayLike
-
     from fpm_sim.config import Manipulator, RigConfig
-    from fpm_sim.frf import FrequencyResponse, LinkPoint
+    from fpm_sim.designs.study import DesignResult
     from fpm_sim.kinematics import Pose
+    from fpm_sim.linear.analysis import ModalComparison
     from fpm_sim.linear.modal import ModalResult
-    from fpm_sim.model.options import ModelOptions
+    from fpm_sim.model.options import BuiltModel, ModelOptions
+    from fpm_sim.response import FrequencyResponse, LinkPoint
+    from fpm_sim.rom.atlas import ModalAtlas
     from fpm_sim.rom.reduction import ReducedModel
+    from fpm_sim.sim.impact import ImpactSetup, ImpactTestResult
     from fpm_sim.sim.rollout import RolloutResult
+    from fpm_sim.study.identify import Identification, IdentifyOptions
+    from fpm_sim.study.identify.ema import ModalEstimate
+    from fpm_sim.study.readability import ReadabilityTable
     from fpm_sim.study.reproduce import StudyReproduction
     from fpm_sim.study.sweep import WorkspaceSweep
+    from fpm_sim.study.transient import TransientResult
 
-__all__ = ["frf", "frf_grid", "model_options", "modes", "reduce", "reproduce", "rig_modes", "rollout", "sweep"]
-
-
-def model_options(
-    *,
-    fidelity: str | None = None,
-    segments: int | None = None,
-    link_model: str = "segments",
-    axial: bool = True,
-    gravity: bool = True,
-    rotary_inertia: bool = False,
-    timestep_s: float | None = None,
-) -> ModelOptions:
-    """Build the model options of every entry point (see :class:`fpm_sim.model.options.ModelOptions`).
-
-    Parameters
-    ----------
-    fidelity
-        ``"fast"`` (8 segments per link), ``"standard"`` (12, the default) or ``"fine"`` (24).
-    segments
-        Resolution per link; overrides ``fidelity``.
-    link_model
-        ``"segments"``, ``"rigid"``, ``"cable"`` or ``"flex"``.
-    axial
-        Axial springs (extensible links).
-    gravity
-        Gravity (9.81 m/s^2) along the motor axes.
-    rotary_inertia
-        Section rotary inertia (Rayleigh beam).
-    timestep_s
-        Simulation step (s); ``None``: automatic.
-
-    Warns
-    -----
-    fpm_sim.model.options.ResolutionWarning
-        When the estimated discretisation error of the first frequency passes 1 %.
-    """
-    from fpm_sim.model.options import ModelOptions, warn_if_coarse
-
-    opts = ModelOptions(
-        link_model=link_model,
-        segments=segments,
-        fidelity=None if segments is not None else fidelity,
-        axial=axial,
-        gravity=gravity,
-        rotary_inertia=rotary_inertia,
-        timestep_s=timestep_s,
-    )
-    warn_if_coarse(opts, stacklevel=3)
-    return opts
+__all__ = [
+    "atlas",
+    "design",
+    "ema",
+    "export_mjcf",
+    "frf",
+    "identify",
+    "impact",
+    "modes",
+    "readability",
+    "reduce",
+    "reproduce",
+    "rig_modes",
+    "rollout",
+    "sweep",
+    "transient",
+]
 
 
 def _config(config: Manipulator | None) -> Manipulator:
@@ -94,20 +71,52 @@ def _pose(pose: Pose | None) -> Pose:
     return pose if pose is not None else Pose(0.0, 0.0, 0.0)
 
 
+def _options(options: ModelOptions | None, *, stacklevel: int = 3) -> ModelOptions | None:
+    """Return the caller's options, warned about when coarse; ``None`` stays (each function's default)."""
+    from fpm_sim.model.options import warn_if_coarse
+
+    if options is not None:
+        warn_if_coarse(options, stacklevel=stacklevel)  # pointing at the caller of the facade
+    return options
+
+
+def _built(config: Manipulator | None, pose: Pose | None, options: ModelOptions | None) -> BuiltModel:
+    from fpm_sim.model.manipulator import build_manipulator
+
+    return build_manipulator(_config(config), _pose(pose), _options(options, stacklevel=4))
+
+
+@overload
 def modes(
     config: Manipulator | None = None,
     pose: Pose | None = None,
     *,
-    fidelity: str | None = None,
-    segments: int | None = None,
-    link_model: str = "segments",
-    axial: bool = True,
-    gravity: bool = True,
-    rotary_inertia: bool = False,
+    options: ModelOptions | None = None,
+    n_modes: int | None = 10,
+    method: Literal["transition_fd", "constrained"] = "transition_fd",
+) -> ModalResult: ...
+
+
+@overload
+def modes(
+    config: Manipulator | None = None,
+    pose: Pose | None = None,
+    *,
+    options: ModelOptions | None = None,
+    n_modes: int | None = 10,
+    method: Literal["both"],
+) -> ModalComparison: ...
+
+
+def modes(
+    config: Manipulator | None = None,
+    pose: Pose | None = None,
+    *,
+    options: ModelOptions | None = None,
     n_modes: int | None = 10,
     method: str = "transition_fd",
-) -> ModalResult:
-    """Natural frequencies (Hz), damping ratios and mode shapes of the manipulator at ``pose``.
+) -> ModalResult | ModalComparison:
+    """Natural frequencies (Hz), damping ratios and mode shapes of the manipulator at ``pose`` (``fpm-sim modes``).
 
     Parameters
     ----------
@@ -115,29 +124,22 @@ def modes(
         Manipulator description; ``None``: the embedded study prototype.
     pose
         End-effector pose (m, m, rad); ``None``: ``(0, 0, 0)``.
-    fidelity, segments, link_model, axial, gravity, rotary_inertia
-        Model options (:func:`model_options`).
+    options
+        Model options; ``None``: ``ModelOptions()`` (standard resolution, gravity, axial springs).
     n_modes
         Number of physical modes returned (lowest first; ``None``: all).
     method
-        ``"transition_fd"`` (``mjd_transitionFD``) or ``"constrained"`` (constrained eigen-solve).
+        ``"transition_fd"`` (``mjd_transitionFD``), ``"constrained"`` (constrained eigen-solve) or ``"both"``
+        (a :class:`fpm_sim.linear.analysis.ModalComparison` of the two at one equilibrium).
 
     Returns
     -------
-    ModalResult
+    ModalResult or ModalComparison
         ``.frequencies_hz``, ``.damping_ratios``, ``.modes``; ``.to_dict()``, ``.table()``, ``.plot()``.
     """
-    from fpm_sim.linear.analysis import manipulator_modes
+    from fpm_sim.linear.analysis import analyse
 
-    opts = model_options(
-        fidelity=fidelity,
-        segments=segments,
-        link_model=link_model,
-        axial=axial,
-        gravity=gravity,
-        rotary_inertia=rotary_inertia,
-    )
-    return manipulator_modes(_pose(pose), config=_config(config), options=opts, n_modes=n_modes, method=method)  # type: ignore[arg-type]
+    return analyse(_built(config, pose, options), method, n_modes)
 
 
 def rig_modes(
@@ -146,16 +148,12 @@ def rig_modes(
     *,
     angle_deg: float = 180.0,
     piece: RigConfig | None = None,
-    fidelity: str | None = None,
-    segments: int | None = None,
-    link_model: str = "segments",
-    axial: bool = True,
-    gravity: bool = True,
+    options: ModelOptions | None = None,
     n_modes: int | None = 10,
     method: str = "transition_fd",
     damping_beta_s: float = 0.0,
 ) -> ModalResult:
-    """Modes of one of the study's subsystem rigs (``"free-free"``, ``"cantilever"``, ``"chain"``).
+    """Modes of one of the study's subsystem rigs (``"free-free"``, ``"cantilever"``, ``"chain"``; ``fpm-sim rig``).
 
     Parameters
     ----------
@@ -167,22 +165,21 @@ def rig_modes(
         Chain hinge interior angle (degrees; 180 = straight).
     piece
         Test piece overriding the config's (lengths in m).
-    fidelity, segments, link_model, axial, gravity
-        Model options (:func:`model_options`).
+    options
+        Model options (as :func:`modes`).
     n_modes, method
-        As :func:`modes`.
+        As :func:`modes` (``"transition_fd"`` or ``"constrained"``).
     damping_beta_s
         Rig stiffness-proportional damping (s).
     """
     from fpm_sim.linear.analysis import rig_modes as _rig_modes
 
-    opts = model_options(fidelity=fidelity, segments=segments, link_model=link_model, axial=axial, gravity=gravity)
     return _rig_modes(
+        config,
         rig,
         angle_deg=angle_deg,
         piece=piece,
-        config=_config(config),
-        options=opts,
+        options=_options(options),
         n_modes=n_modes,
         method=method,  # type: ignore[arg-type]
         damping_beta_s=damping_beta_s,
@@ -193,33 +190,37 @@ def sweep(
     config: Manipulator | None = None,
     *,
     grid: str = "dense",
+    poses: Sequence[Pose] | None = None,
     step_mm: float = 10.0,
     phi_rad: float = 0.0,
     reading: str = "x+",
-    fidelity: str | None = None,
-    segments: int | None = None,
-    axial: bool = False,
+    options: ModelOptions | None = None,
     backend: str = "cpu",
     workers: int = 1,
     progress: bool = False,
 ) -> WorkspaceSweep:
-    """First three natural frequencies (Hz) over the workspace or at the study's 25 poses.
+    """First three natural frequencies (Hz) over the workspace, the study's 25 poses or given poses.
+
+    The ``fpm-sim sweep`` command.
 
     Parameters
     ----------
     config
         Manipulator description; ``None``: the embedded one.
     grid
-        ``"dense"`` (a square grid of ``step_mm`` at rotation ``phi_rad``) or ``"paper"`` (the study's poses).
+        ``"dense"`` (a square grid of ``step_mm`` at rotation ``phi_rad``), ``"paper"`` (the study's poses) or
+        ``"poses"`` (``poses``).
+    poses
+        The poses of ``grid="poses"``.
     step_mm
         Dense grid spacing (mm).
     phi_rad
         Platform rotation of the dense grid (rad).
     reading
         How the study's table maps to poses (``"x+"``, ``"x-"``, ``"y+"``, ``"y-"``; paper grid).
-    fidelity, segments, axial
-        Resolution (:func:`model_options`); the pose loop solves with gravity off (its prestress moves f1
-        by less than 1e-5 relative at (0, 0, 0)).
+    options
+        Pose-loop model options; ``None``: :func:`fpm_sim.batch.pose_loop.fast_options` (standard resolution,
+        inextensible links, gravity off: its prestress moves f1 by less than 1e-5 relative at (0, 0, 0)).
     backend, workers
         Pose-loop backend (``"cpu"`` or a batched JAX one) and processes (cpu).
     progress
@@ -228,17 +229,60 @@ def sweep(
     from fpm_sim.study.poses import parse_reading
     from fpm_sim.study.sweep import sweep_workspace
 
-    opts = model_options(fidelity=fidelity, segments=segments, axial=axial, gravity=False)
     return sweep_workspace(
         _config(config),
         grid=grid,
+        poses=poses,
         step_mm=step_mm,
         phi_rad=phi_rad,
         reading=parse_reading(reading),
-        options=opts,
+        options=_options(options),
         backend=backend,
         workers=workers,
         progress=progress,
+    )
+
+
+def design(
+    config: Manipulator | None = None,
+    *,
+    poses: Sequence[Pose],
+    vary: dict[str, Sequence[float]] | None = None,
+    designs: Sequence[dict[str, float]] | None = None,
+    n_modes: int = 3,
+    f_min_hz: float | None = None,
+    options: ModelOptions | None = None,
+) -> DesignResult:
+    """Lowest ``n_modes`` frequencies for every design x pose (``fpm-sim design``).
+
+    Parameters
+    ----------
+    config
+        The base description; ``None``: the embedded one.
+    poses
+        The poses, the same for every design (e.g. ``fs.sweep``'s grids, or
+        :func:`fpm_sim.study.sweep.dense_grid`).
+    vary
+        ``{dotted field: values}`` (SI units, as the field names say): the full factorial.
+    designs
+        Instead of ``vary``: a list of ``{field: value}`` designs.
+    n_modes
+        Modes per pose.
+    f_min_hz
+        Threshold of the summary's workspace share (Hz).
+    options
+        Pose-loop model options; ``None``: as :func:`sweep`.
+    """
+    from fpm_sim.designs import design_study
+
+    return design_study(
+        _config(config),
+        poses=poses,
+        vary=vary,
+        designs=designs,
+        n_modes=n_modes,
+        f_min_hz=f_min_hz,
+        options=_options(options),
     )
 
 
@@ -251,13 +295,9 @@ def reduce(
     error_bound: float | None = None,
     static_correction: bool = True,
     accel_fraction: float = 0.5,
-    fidelity: str | None = None,
-    segments: int | None = None,
-    link_model: str = "segments",
-    axial: bool = True,
-    gravity: bool = True,
+    options: ModelOptions | None = None,
 ) -> ReducedModel:
-    """Reduced-order state-space model (modal truncation) at ``pose``.
+    """Reduced-order state-space model (modal truncation) at ``pose`` (``fpm-sim reduce``).
 
     Parameters
     ----------
@@ -270,42 +310,21 @@ def reduce(
         Feedthrough for the truncated modes.
     accel_fraction
         Accelerometer outputs at this fraction (0..1 from the elbow) of each distal link.
-    fidelity, segments, link_model, axial, gravity
-        Model options (:func:`model_options`).
+    options
+        Model options (as :func:`modes`).
     """
-    from fpm_sim.model.manipulator import build_manipulator
     from fpm_sim.rom.reduction import reduce_model
 
     if n_modes is None and band_hz is None and error_bound is None:
         n_modes = 6
-    opts = model_options(fidelity=fidelity, segments=segments, link_model=link_model, axial=axial, gravity=gravity)
-    built = build_manipulator(_config(config), _pose(pose), opts)
     return reduce_model(
-        built,
+        _built(config, pose, options),
         n_modes=n_modes,
         band_hz=band_hz,
         error_bound=error_bound,
         static_correction=static_correction,
         accel_fraction=accel_fraction,
     )
-
-
-def frf_grid(f_min_hz: float, f_max_hz: float, df_hz: float, modal_freq_hz: ArrayLike) -> np.ndarray:
-    """Make a frequency grid (Hz) from ``f_min_hz`` to ``f_max_hz`` by ``df_hz``, plus the natural frequencies.
-
-    The natural frequencies inside the band are added so that every resonance peak is sampled at its top.
-    """
-    import numpy as np
-
-    from fpm_sim.frf import FrfError
-
-    if not (0.0 <= f_min_hz < f_max_hz) or not df_hz > 0:
-        raise FrfError("need 0 <= f_min_hz < f_max_hz and df_hz > 0 (--f-min-hz, --f-max-hz, --df-hz)")
-    if (f_max_hz - f_min_hz) / df_hz > 1e6:
-        raise FrfError("the band holds more than 1e6 frequencies (--f-min-hz, --f-max-hz, --df-hz); use a larger df_hz")
-    freq = np.arange(f_min_hz, f_max_hz + df_hz / 2, df_hz)
-    fm = np.asarray(modal_freq_hz, float)
-    return np.unique(np.concatenate([freq, fm[(fm >= freq[0]) & (fm <= freq[-1])]]))
 
 
 def frf(
@@ -320,21 +339,18 @@ def frf(
     df_hz: float = 0.1,
     damping_ratio: float | Sequence[float] | None = None,
     n_modes: int | None = None,
-    fidelity: str | None = None,
-    segments: int | None = None,
-    link_model: str = "segments",
-    axial: bool = True,
-    gravity: bool = True,
+    options: ModelOptions | None = None,
 ) -> FrequencyResponse:
-    """Frequency response function of the linearised manipulator at ``pose`` (modal superposition).
+    """Frequency response function of the linearised manipulator at ``pose`` (``fpm-sim frf``).
+
+    By modal superposition of the constrained modes.
 
     Parameters
     ----------
     config, pose
         As :func:`modes`.
     excitation
-        Force input point and direction (:class:`fpm_sim.frf.LinkPoint`); default mid-span of
-        ``distal_0`` along z.
+        Force input point and direction (``fs.LinkPoint``); default mid-span of ``distal_0`` along z.
     response
         Response point and axis; default the excitation (a driving-point FRF).
     quantity
@@ -345,24 +361,24 @@ def frf(
         ``None``: the model's modal damping; a number: for every mode; a sequence: per mode.
     n_modes
         Sum over the lowest ``n_modes`` modes only (default all).
-    fidelity, segments, link_model, axial, gravity
-        Model options (:func:`model_options`).
+    options
+        Model options (as :func:`modes`; the links must be flexible).
     """
-    from fpm_sim.frf import FrfError, LinkPoint, modal_frf
-    from fpm_sim.model.manipulator import build_manipulator
+    from fpm_sim.response import FrfError, LinkPoint, frf_grid, modal_frf
     from fpm_sim.rom.reduction import modal_system
 
-    if link_model == "rigid":
+    if options is not None and options.link_model == "rigid":
         raise FrfError(
-            "an FRF needs flexible links: with rigid links and locked motors nothing moves; use link_model "
-            "'segments' (--link-model)"
+            "an FRF needs flexible links: with rigid links and locked motors nothing moves",
+            parameter="link_model",
+            value=options.link_model,
+            hint="use 'segments'",
         )
-    opts = model_options(fidelity=fidelity, segments=segments, link_model=link_model, axial=axial, gravity=gravity)
-    built = build_manipulator(_config(config), _pose(pose), opts)
+    built = _built(config, pose, options)
     exc = excitation or LinkPoint("distal_0", 0.5, "z")
     resp = response or exc
-    exc.check(built)
-    resp.check(built)
+    exc.check(built, "input")
+    resp.check(built, "output")
     system = modal_system(built)
     return modal_frf(
         system,
@@ -386,17 +402,13 @@ def rollout(
     moment_z_nm: float = 0.0,
     motor_torque_nm: Sequence[float] = (0.0, 0.0, 0.0),
     accel_fraction: float | None = 0.5,
-    fidelity: str | None = None,
-    segments: int | None = None,
-    link_model: str = "segments",
-    axial: bool = True,
-    gravity: bool = True,
+    options: ModelOptions | None = None,
     progress: bool = False,
 ) -> RolloutResult:
-    """Nonlinear simulation of the full manipulator from its static equilibrium under constant loads.
+    """Nonlinear simulation of the full manipulator from its static equilibrium (``fpm-sim rollout``).
 
-    The model is built here from ``(config, pose)`` (timestep rounded down to divide ``output_step_s``),
-    so the rollout always matches its description.
+    Under constant loads. The model is built here from ``(config, pose, options)`` (timestep rounded down to divide
+    ``output_step_s``), so the rollout always matches its description.
 
     Parameters
     ----------
@@ -412,19 +424,19 @@ def rollout(
         Constant motor torques (N m; needs servo motors in ``config``).
     accel_fraction
         Record accelerations at this fraction (0..1) of each distal link; ``None``: none.
-    fidelity, segments, link_model, axial, gravity
-        Model options (:func:`model_options`).
+    options
+        Model options (as :func:`modes`).
     progress
         Show a progress bar.
     """
     from fpm_sim.model.manipulator import build_manipulator
+    from fpm_sim.model.options import ModelOptions
     from fpm_sim.rom.reduction import accel_site_names
     from fpm_sim.sim.rollout import aligned_options, constant
     from fpm_sim.sim.rollout import rollout as _rollout
 
     manip, p = _config(config), _pose(pose)
-    opts = model_options(fidelity=fidelity, segments=segments, link_model=link_model, axial=axial, gravity=gravity)
-    built = build_manipulator(manip, p, aligned_options(manip, p, opts, output_step_s))
+    built = build_manipulator(manip, p, aligned_options(manip, p, _options(options) or ModelOptions(), output_step_s))
     wrench = (force_x_n, force_y_n, moment_z_nm)
     return _rollout(
         built,
@@ -438,20 +450,301 @@ def rollout(
     )
 
 
+def impact(
+    config: Manipulator | None = None,
+    pose: Pose | None = None,
+    *,
+    setup: ImpactSetup | None = None,
+    options: ModelOptions | None = None,
+    progress: bool = False,
+) -> ImpactTestResult:
+    """Virtual impact (hammer) test (``fpm-sim impact``).
+
+    Rollouts of the full model under half-sine hits, the H1 FRF and its peaks.
+
+    Parameters
+    ----------
+    config, pose
+        As :func:`modes`.
+    setup
+        Hammer, accelerometer, pulse, record, noise, ... (:class:`fpm_sim.sim.impact.ImpactSetup`; ``None``:
+        the study's set-up).
+    options
+        Model options (as :func:`modes`; the links must be flexible).
+    progress
+        Show a progress bar over the impacts.
+    """
+    from fpm_sim.sim.impact import virtual_impact_test
+
+    return virtual_impact_test(_built(config, pose, options), setup, progress=progress)
+
+
+def transient(
+    config: Manipulator | None = None,
+    pose: Pose | None = None,
+    *,
+    thickness_m: float | None = None,
+    force_n: float | None = None,
+    duration_s: float | None = None,
+    output_step_s: float | None = None,
+    band_hz: float | None = None,
+    n_modes: int | None = None,
+    options: ModelOptions | None = None,
+    progress: bool = False,
+) -> TransientResult:
+    """Run the study's transient, or a variant of it (``fpm-sim transient``).
+
+    The full nonlinear rollout against the reduced model under a step force. Every ``None`` takes the
+    study's value (:mod:`fpm_sim.study.transient`).
+
+    Parameters
+    ----------
+    config
+        Manipulator description; ``None``: the embedded one (motors as configured; the study: locked).
+    pose
+        Pose of the test (m, m, rad); ``None``: the study's, (0, 0, 0).
+    thickness_m
+        Link in-plane thickness (m); ``None``: the study's 5 mm.
+    force_n, duration_s, output_step_s
+        Step force (N), simulated time (s), sample period (s).
+    band_hz, n_modes
+        Modes the reduced model keeps: all up to ``band_hz`` (Hz; default 500) or the lowest ``n_modes``.
+    options
+        Model options; only ``segments`` (resolved from ``fidelity``) and ``axial`` are used; ``None``: the
+        study transient's 6 segments, inextensible links.
+    progress
+        Show progress bars.
+    """
+    from fpm_sim.model.options import resolve_segments
+    from fpm_sim.study import transient as tr
+
+    opts = _options(options)
+    return tr.study_transient(
+        _config(config),
+        pose=tr.STUDY_POSE if pose is None else pose,
+        thickness_m=tr.STUDY_THICKNESS_M if thickness_m is None else thickness_m,
+        force_n=tr.STUDY_FORCE_N if force_n is None else force_n,
+        duration_s=tr.STUDY_DURATION_S if duration_s is None else duration_s,
+        output_step_s=tr.STUDY_OUTPUT_STEP_S if output_step_s is None else output_step_s,
+        segments=tr.DEFAULT_SEGMENTS
+        if opts is None
+        else resolve_segments(segments=opts.segments, link_model=opts.link_model),
+        axial=False if opts is None else opts.axial,
+        band_hz=tr.DEFAULT_BAND_HZ if band_hz is None and n_modes is None else band_hz,
+        n_modes=n_modes,
+        progress=progress,
+    )
+
+
+def readability(
+    config: Manipulator | None = None,
+    *,
+    point: LinkPoint | None = None,
+    row_is: str = "x",
+    phi_sign: int = 1,
+    f_max_hz: float = 500.0,
+    damping_ratio: float | None = None,
+    poses: Sequence[Pose] | None = None,
+    options: ModelOptions | None = None,
+    progress: bool = False,
+) -> ReadabilityTable:
+    """Mode-1 readability at the study's 25 poses (``fpm-sim readability``).
+
+    For a driving-point hammer test at ``point`` (or at other ``poses``).
+
+    Parameters
+    ----------
+    config
+        Manipulator description; ``None``: the embedded one.
+    point
+        Hammer point and direction; ``None``: the study's (mid-span of ``distal_0`` along z).
+    row_is, phi_sign
+        How the study's table maps to poses (rows along ``"x"`` or ``"y"``; sign of its rotation).
+    f_max_hz
+        Top of the FRF band (Hz).
+    damping_ratio
+        ``None``: the model's modal damping; else for every mode.
+    poses
+        Other poses than the study's.
+    options
+        Model options; ``None``: 6 segments, inextensible links.
+    progress
+        Show a progress bar.
+    """
+    from fpm_sim.sim.impact import STUDY_IMPACT_POINT
+    from fpm_sim.study.readability import readability_table
+
+    return readability_table(
+        _config(config),
+        options=_options(options),
+        point=STUDY_IMPACT_POINT if point is None else point,
+        row_is=row_is,
+        phi_sign=phi_sign,
+        f_max_hz=f_max_hz,
+        damping_ratio=damping_ratio,
+        poses=None if poses is None else list(poses),
+        progress=progress,
+    )
+
+
+def atlas(
+    config: Manipulator | None = None,
+    *,
+    x_m: Sequence[float],
+    y_m: Sequence[float],
+    phi_rad: Sequence[float] = (0.0,),
+    n_modes: int = 6,
+    n_extra: int = 4,
+    options: ModelOptions | None = None,
+    progress: bool = False,
+) -> ModalAtlas:
+    """Build a modal atlas: reduced models on a pose grid with their modes tracked (``fpm-sim atlas build``).
+
+    Query it with ``atlas(...).query(pose)`` (``fpm-sim atlas query``: an interpolated
+    :class:`fpm_sim.rom.reduction.ReducedModel`); ``.save(path)`` and
+    :func:`fpm_sim.rom.atlas.load_atlas` store it.
+
+    Parameters
+    ----------
+    config
+        Manipulator description; ``None``: the embedded one.
+    x_m, y_m, phi_rad
+        The grid (m, m, rad).
+    n_modes, n_extra
+        Tracked (kept) modes and extra candidates for the tracking.
+    options
+        Model options; ``None``: the standard resolution, inextensible links.
+    progress
+        Show a progress bar.
+    """
+    from fpm_sim.rom.atlas import build_atlas
+
+    return build_atlas(
+        _config(config),
+        x_m=x_m,
+        y_m=y_m,
+        phi_rad=phi_rad,
+        options=_options(options),
+        n_modes=n_modes,
+        n_extra=n_extra,
+        progress=progress,
+    )
+
+
+def ema(
+    path: str | Path,
+    *,
+    f_lower_hz: float,
+    f_upper_hz: float,
+    n_modes: int = 3,
+    pol_order: int = 40,
+    window_tau_s: float | None = None,
+) -> list[ModalEstimate]:
+    """Experimental modal analysis of measured FRFs, CSV or UFF 58 (``fpm-sim ema``).
+
+    Natural frequencies and damping ratios by LSCF, one estimate per FRF in the file.
+
+    Parameters
+    ----------
+    path
+        The FRF file (as :func:`fpm_sim.study.identify.ema.read_frfs` reads it).
+    f_lower_hz, f_upper_hz
+        Band of the fit (Hz).
+    n_modes
+        Modes estimated (the stable poles nearest the FRF's highest peaks).
+    pol_order
+        Highest polynomial order of the stabilisation chart.
+    window_tau_s
+        Decay constant (s) of an exponential window to remove from the damping; ``None``: the file's, if any.
+    """
+    from fpm_sim.study.identify.ema import estimate_modes, read_frfs
+
+    return [
+        estimate_modes(
+            frf,
+            f_lower_hz=f_lower_hz,
+            f_upper_hz=f_upper_hz,
+            n_modes=n_modes,
+            pol_order=pol_order,
+            window_tau_s=window_tau_s,
+        )
+        for frf in read_frfs(path)
+    ]
+
+
+def identify(
+    config: Manipulator | None = None,
+    *,
+    measured: Sequence[str | Path] = (),
+    subsystems: str | Path | None = None,
+    free: Sequence[str] = ("geometry", "hardware"),
+    reading: str | None = None,
+    sigma_pct: float | None = None,
+    subsystem_sigma_pct: float = 1.0,
+    workspace: Sequence[Pose] = (),
+    min_singularity: float = 0.05,
+    settings: IdentifyOptions | None = None,
+    progress: bool = False,
+) -> Identification:
+    """Identify the description's free parameters (model updating; ``fpm-sim identify``).
+
+    From measured natural frequencies and rig tests.
+
+    Parameters
+    ----------
+    config
+        The starting description; ``None``: the embedded one.
+    measured
+        Measured-frequency CSV files (:func:`fpm_sim.study.identify.read_measured_csv`).
+    subsystems
+        Rig tests CSV (frees the ``rig`` group).
+    free
+        Parameter groups fitted (:data:`fpm_sim.study.identify.GROUPS`).
+    reading
+        How ``row_mm,col_mm`` files map to poses (``"x+"``, ...).
+    sigma_pct
+        Relative std (%) of a measured frequency where the file gives none; ``None``: the default (2 %).
+    subsystem_sigma_pct
+        Relative std (%) of a rig test.
+    workspace, min_singularity
+        Poses the machine is known to reach, and the smallest singularity measure accepted there.
+    settings
+        Search settings and the fitted model's resolution (:class:`fpm_sim.study.identify.IdentifyOptions`).
+    progress
+        Show progress lines.
+    """
+    from fpm_sim.study import identify as idf
+    from fpm_sim.study.poses import parse_reading
+
+    start = _config(config)
+    rd = parse_reading(reading) if reading else None
+    sigma = idf.DEFAULT_SIGMA_PCT if sigma_pct is None else sigma_pct
+    datasets = [idf.read_measured_csv(p, reading=rd, sigma_pct=sigma) for p in measured]
+    tests = idf.read_subsystems_csv(subsystems) if subsystems is not None else []
+    groups = list(free) + (["rig"] if tests and "rig" not in free else [])
+    problem = idf.Problem(
+        idf.parameter_set(start, groups),
+        [o for ds in datasets for o in ds.observations],
+        tests,
+        subsystem_sigma_pct=subsystem_sigma_pct,
+        workspace=list(workspace),
+        min_singularity=min_singularity,
+    )
+    return idf.identify(problem, options=settings, progress=progress)
+
+
 def reproduce(
     config: Manipulator | None = None,
     *,
     reading: str = "x+",
-    fidelity: str | None = None,
-    segments: int | None = None,
-    axial: bool = False,
+    options: ModelOptions | None = None,
     backend: str = "cpu",
     workers: int = 1,
     subsystems: bool = True,
     readability: bool = True,
     progress: bool = False,
 ) -> StudyReproduction:
-    """Reproduce the study's subsystem tests and its 25 poses against COMSOL.
+    """Reproduce the study's subsystem tests and its 25 poses against COMSOL (``fpm-sim reproduce``).
 
     Parameters
     ----------
@@ -459,8 +752,8 @@ def reproduce(
         Manipulator description (its ``[rig]`` table gives the test pieces); ``None``: the embedded one.
     reading
         How the study's table maps to poses: ``"x+"``, ``"x-"``, ``"y+"`` or ``"y-"``.
-    fidelity, segments, axial
-        Pose-loop resolution (:func:`model_options`; gravity off, as :func:`sweep`).
+    options
+        Pose-loop model options; ``None``: as :func:`sweep`.
     backend, workers
         Pose-loop backend and processes.
     subsystems, readability
@@ -471,14 +764,46 @@ def reproduce(
     from fpm_sim.study.poses import parse_reading
     from fpm_sim.study.reproduce import reproduce_study
 
-    opts = model_options(fidelity=fidelity, segments=segments, axial=axial, gravity=False)
     return reproduce_study(
         _config(config),
         reading=parse_reading(reading),
-        options=opts,
+        options=_options(options),
         backend=backend,
         workers=workers,
         progress=progress,
         subsystems=subsystems,
         readability=readability,
     )
+
+
+def export_mjcf(
+    config: Manipulator | None = None,
+    pose: Pose | None = None,
+    *,
+    rig: str | None = None,
+    angle_deg: float = 180.0,
+    piece: RigConfig | None = None,
+    options: ModelOptions | None = None,
+) -> str:
+    """Generate the MJCF (XML text) of the manipulator at ``pose`` or of a rig (``fpm-sim export-mjcf``).
+
+    Parameters
+    ----------
+    config, pose
+        As :func:`modes`.
+    rig
+        ``None``: the manipulator; else the rig (``"free-free"``, ``"cantilever"``, ``"chain"``; no pose).
+    angle_deg, piece
+        The rig's chain hinge angle (degrees) and test piece (as :func:`rig_modes`).
+    options
+        Model options (as :func:`modes`).
+    """
+    if rig is None:
+        return _built(config, pose, options).to_xml()
+    from fpm_sim.model.rigs import RigSetup, build_rig, rig_piece
+
+    cfg = _config(config)
+    built = build_rig(
+        RigSetup(rig, angle_deg=angle_deg), piece or rig_piece(cfg), _options(options), compliance=cfg.compliance
+    )
+    return built.to_xml()

@@ -40,11 +40,13 @@ __all__ = [
     "Assembly",
     "NearSingularityWarning",
     "Pose",
+    "PoseValueError",
     "SingularPoseError",
     "SingularityMeasure",
     "UnreachablePoseError",
     "assemble_many",
     "base_points",
+    "checked_pose_mm",
     "forward_kinematics",
     "inverse_kinematics",
     "jacobians",
@@ -64,6 +66,10 @@ class UnreachablePoseError(FpmSimError):
 
 class SingularPoseError(FpmSimError):
     """The pose is (numerically) at a serial or parallel singularity."""
+
+
+class PoseValueError(FpmSimError):
+    """A pose value that is not a number, not finite, or a rotation outside -pi..pi."""
 
 
 class NearSingularityWarning(FpmSimWarning):
@@ -87,6 +93,33 @@ class Pose:
 
     def label(self) -> str:
         return f"(x={self.x_m * 1e3:.1f} mm, y={self.y_m * 1e3:.1f} mm, phi={self.phi_rad:.3f} rad)"
+
+
+def checked_pose_mm(
+    x_mm: float | str, y_mm: float | str, phi_rad: float | str, *, file: object = None, row: int | None = None
+) -> Pose:
+    """The one pose validator (command line, poses files, measured data): a :class:`Pose` from millimetres and
+    radians, each a finite number, the rotation within -pi..pi (refused, not wrapped: a file in degrees would
+    otherwise be read silently). Raises :class:`PoseValueError` naming the value, and ``file``/``row`` if given."""
+    values: list[float] = []
+    for name, v in (("x_mm", x_mm), ("y_mm", y_mm), ("phi_rad", phi_rad)):
+        try:
+            f = float(v)
+        except (TypeError, ValueError):
+            raise PoseValueError("must be a number", parameter=name, value=v, file=file, row=row) from None
+        if not math.isfinite(f):
+            raise PoseValueError("must be a finite number", parameter=name, value=v, file=file, row=row)
+        values.append(f)
+    if abs(values[2]) > math.pi:
+        raise PoseValueError(
+            f"outside -pi..pi (it would be wrapped to {math.remainder(values[2], 2 * math.pi):.4g} rad)",
+            parameter="phi_rad",
+            value=values[2],
+            hint="give the rotation in radians within -pi..pi",
+            file=file,
+            row=row,
+        )
+    return Pose.from_mm(*values)
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from fpm_sim.errors import FpmSimError
 
-__all__ = ["OutputError", "atomic_dir", "atomic_file"]
+__all__ = ["OutputError", "atomic_dir", "atomic_file", "prove_creatable"]
 
 
 class OutputError(FpmSimError):
@@ -42,6 +42,38 @@ def _parent(path: Path) -> Path:
         msg = f"cannot create folder {parent} for {path}: permission denied; choose a writable place"
         raise OutputError(msg) from exc
     return parent
+
+
+def prove_creatable(path: str | Path, *, parameter: str = "out", folder: bool = False) -> None:
+    """Prove, before any computation, that the output ``path`` (a file, or a folder with ``folder``) can be created.
+
+    The proof is the real thing: a temporary sibling is created where ``path`` will go (in its parent folder, or
+    in the nearest existing ancestor when parent folders are still to be made) and removed at once. Nothing is
+    left behind. Raises :class:`OutputError` naming ``parameter`` when a file is in the way of a folder, a
+    folder is in the way of the file, or the place is not writable (read-only, ``/proc``, permissions).
+    """
+    target = Path(path)
+    if folder and target.exists() and not target.is_dir():
+        raise OutputError(
+            f"{target} is an existing file, not a folder", parameter=parameter, hint="choose a folder name"
+        )
+    if not folder and target.is_dir():
+        raise OutputError(f"{target} is a folder", parameter=parameter, hint="give a file name")
+    probe = target.parent if str(target.parent) else Path(".")
+    while not probe.exists() and probe.parent != probe:
+        probe = probe.parent
+    if not probe.is_dir():
+        raise OutputError(
+            f"cannot create {target}: {probe} is a file, not a folder", parameter=parameter, hint="choose another path"
+        )
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=f".{target.name}.probe-", dir=probe))
+        if target.is_file() and not os.access(target, os.W_OK):
+            raise PermissionError(13, "the file is read-only")
+    except OSError as exc:
+        raise OutputError(
+            f"cannot create {target} ({exc.strerror or exc})", parameter=parameter, hint="choose a writable place"
+        ) from exc
 
 
 @contextmanager
@@ -71,7 +103,11 @@ def atomic_dir(target: str | Path, *, overwrite: bool = False) -> Iterator[Path]
         yield tmp
         if target.exists():
             if any(target.iterdir()) and not overwrite:
-                raise OutputError(f"{target} already holds another run's results; pass --overwrite to replace it")
+                raise OutputError(
+                    f"{target} already holds another run's results",
+                    parameter="out",
+                    hint="allow overwrite to replace it, or choose another folder",
+                )
             old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old-", dir=parent))
             os.replace(target, old / "run")  # move the old run aside, then the new one in
             os.replace(tmp, target)

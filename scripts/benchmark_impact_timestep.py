@@ -22,10 +22,10 @@ import numpy as np
 import fpm_sim  # noqa: F401  (single-threaded BLAS)
 from fpm_sim.batch.frequencies import pose_frequencies
 from fpm_sim.config import default_config
-from fpm_sim.frf import LinkPoint
 from fpm_sim.kinematics import Pose
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import ModelOptions
+from fpm_sim.response import LinkPoint
 from fpm_sim.rom.reduction import modal_system
 from fpm_sim.sim.impact import ImpactSetup, virtual_impact_test
 from fpm_sim.study.identify.ema import MeasuredFrf, estimate_modes

@@ -32,10 +32,10 @@ import fpm_sim  # noqa: F401  (single-threaded BLAS)
 from fpm_sim.batch.frequencies import pose_frequencies
 from fpm_sim.cli.main import main as cli_main
 from fpm_sim.config.schema import config_to_toml
-from fpm_sim.frf import FrequencyResponse, LinkPoint
 from fpm_sim.kinematics import Pose
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import ModelOptions
+from fpm_sim.response import FrequencyResponse, LinkPoint
 from fpm_sim.sim.impact import (
     ImpactRecord,
     ImpactSetup,

@@ -59,7 +59,7 @@ def symmetric_manip() -> Manipulator:
 
 
 # --------------------------------------------------------------------------------------------- Dask on loopback
-# A real cluster for the engine tests (tests/batch, tests/design): one scheduler and two single-threaded
+# A real cluster for the engine tests (tests/batch, tests/designs): one scheduler and two single-threaded
 # workers started as subprocesses on 127.0.0.1, shared by the session and stopped at its end.
 START_TIMEOUT_S = 120.0
 """Scheduler and worker start, including the workers' import of fpm_sim/MuJoCo on a loaded 2-core machine."""

@@ -13,42 +13,104 @@ import pytest
 matplotlib.use("Agg")  # the tests' choice; the library never selects a backend
 
 import fpm_sim as fs
-from fpm_sim.frf import LinkPoint
 
 SEG = 3  # a tiny model: 3 spring locations per link
+TINY = fs.ModelOptions(segments=SEG)
 
 
 def check_result(result, *, expect_resolution: bool = True) -> dict:
-    """The contract every result keeps: JSON-ready ``to_dict``, text ``table``, ``plot`` -> Figure."""
-    from matplotlib.figure import Figure
+    """The facade's result states its resolution (the result contract itself: tests/test_results.py)."""
+    from fpm_sim.results import Result
 
+    assert isinstance(result, Result)
     d = result.to_dict()
     json.dumps(d)  # JSON-ready
-    text = result.table()
-    assert isinstance(text, str)
-    assert text.strip()
-    fig = result.plot()
-    assert isinstance(fig, Figure)
-    import matplotlib.pyplot as plt
-
-    plt.close(fig)
     if expect_resolution:
         assert d["resolution"]["segments"] == SEG
         assert d["resolution"]["f1_error_estimate"] == pytest.approx(0.41 / SEG**2)
     return d
 
 
+FACADE = {
+    "modes",
+    "rig_modes",
+    "sweep",
+    "design",
+    "reduce",
+    "frf",
+    "rollout",
+    "impact",
+    "ema",
+    "identify",
+    "reproduce",
+    "transient",
+    "readability",
+    "atlas",
+    "export_mjcf",
+    "ModelOptions",
+    "LinkPoint",
+    "Pose",
+    "load_config",
+    "default_config",
+    "FpmSimError",
+    "Result",
+}
+
+
 def test_public_names_are_lazy_and_listed():
-    assert {"modes", "rig_modes", "sweep", "reduce", "frf", "rollout", "reproduce", "load_config",
-            "default_config", "Pose"} <= set(dir(fs))
+    assert set(dir(fs)) >= FACADE
     with pytest.raises(AttributeError):
         fs.no_such_thing  # noqa: B018
+
+
+def test_every_command_has_its_facade_function():
+    """One function per command that computes (config and the atlas's query are not computations of their own;
+    check and calibrate are other helpers' commands)."""
+    from fpm_sim.cli.main import build_parser
+
+    sub = next(a for a in build_parser()._actions if a.dest == "command")
+    commands = {c.replace("-", "_") for c in sub.choices} - {"config", "check", "calibrate"}
+    renamed = {"rig": "rig_modes"}
+    assert {renamed.get(c, c) for c in commands} <= set(dir(fs))
+    for name in FACADE - {"Result", "FpmSimError", "Pose", "ModelOptions", "LinkPoint"}:
+        assert callable(getattr(fs, name))
+
+
+def test_facade_signatures_put_config_first_and_options_once():
+    """Config first, pose second, the rest keyword-only; the model options are one ``options`` parameter."""
+    import inspect
+
+    from fpm_sim import api
+
+    for name in api.__all__:
+        if name == "ema":  # a file of measured FRFs first: no description, no pose
+            continue
+        params = list(inspect.signature(getattr(api, name)).parameters.values())
+        assert params[0].name == "config", name
+        positional = [p.name for p in params if p.kind is p.POSITIONAL_OR_KEYWORD]
+        assert positional in (["config"], ["config", "pose"], ["config", "rig"]), (name, positional)
+        names = {p.name for p in params}
+        assert not names & {"fidelity", "segments", "link_model", "axial", "gravity"}, name
+        if name != "identify":  # identify's fitted model: its own settings (segments, Timoshenko links)
+            assert "options" in names, name
+
+
+def test_frf_is_the_function_and_the_module_is_response():
+    import importlib
+
+    import fpm_sim.response as response
+
+    assert callable(fs.frf)
+    assert fs.frf is importlib.import_module("fpm_sim.api").frf
+    assert response.LinkPoint is fs.LinkPoint
+    assert not hasattr(importlib.import_module("fpm_sim"), "_public_frf_over_the_submodule")
+    assert type(fs) is type(importlib)  # a plain module: no module-class trick
 
 
 def test_modes_and_rig_modes():
     cfg = fs.default_config()
     pose = fs.Pose.from_mm(20, -10, 0.05)
-    r = fs.modes(cfg, pose, segments=SEG, n_modes=3)
+    r = fs.modes(cfg, pose, options=TINY, n_modes=3)
     d = check_result(r)
     assert len(d["modes"]) == 3
     assert r.frequencies_hz[0] > 0
@@ -59,29 +121,31 @@ def test_modes_and_rig_modes():
 
     direct = analyse(build_manipulator(cfg, pose, ModelOptions(segments=SEG)), "transition_fd", 3)
     assert list(r.frequencies_hz) == list(direct.frequencies_hz)
-    rig = fs.rig_modes(cfg, "cantilever", segments=SEG, n_modes=2)
+    rig = fs.rig_modes(cfg, "cantilever", options=TINY, n_modes=2)
     check_result(rig)
     assert rig.frequencies_hz[0] > 0
 
 
 def test_fidelity_names_a_resolution():
-    r = fs.modes(fidelity="fast", n_modes=1, axial=False)
+    r = fs.modes(options=fs.ModelOptions(fidelity="fast", axial=False), n_modes=1)
     assert r.to_dict()["resolution"] == {
         "link_model": "segments",
         "segments": 8,
         "fidelity": "fast",
         "f1_error_estimate": pytest.approx(0.41 / 64),
+        "axial": False,
+        "gravity": True,
     }
 
 
 def test_sweep_reduce_frf():
-    sw = fs.sweep(grid="dense", step_mm=100, segments=SEG)
+    sw = fs.sweep(grid="dense", step_mm=100, options=fs.ModelOptions(segments=SEG, axial=False, gravity=False))
     d = check_result(sw)
     assert d["counts"].get("ok", 0) >= 1
-    rom = fs.reduce(None, fs.Pose(0.0, 0.0, 0.0), n_modes=2, segments=SEG)
+    rom = fs.reduce(None, fs.Pose(0.0, 0.0, 0.0), n_modes=2, options=TINY)
     check_result(rom)
     assert rom.n_modes == 2
-    h = fs.frf(None, None, excitation=LinkPoint("distal_0", 0.5, "z"), f_max_hz=200, df_hz=1.0, segments=SEG)
+    h = fs.frf(None, None, excitation=fs.LinkPoint("distal_0", 0.5, "z"), f_max_hz=200, df_hz=1.0, options=TINY)
     check_result(h, expect_resolution=False)  # an FRF carries no model parameters; the CLI adds them
     # the FRF's modes are the reduced model's (same model built from the same config and pose)
     assert h.modal_freq_hz[0] == pytest.approx(rom.frequencies_hz[0], rel=1e-12)
@@ -89,7 +153,14 @@ def test_sweep_reduce_frf():
 
 def test_rollout_builds_its_own_model():
     cfg = fs.default_config()
-    res = fs.rollout(cfg, None, duration_s=0.002, output_step_s=1e-3, force_x_n=1.0, segments=SEG, axial=False)
+    res = fs.rollout(
+        cfg,
+        None,
+        duration_s=0.002,
+        output_step_s=1e-3,
+        force_x_n=1.0,
+        options=fs.ModelOptions(segments=SEG, axial=False),
+    )
     d = check_result(res)
     assert d["n_samples"] == len(res.t_s) == 3
     assert d["parameters"]["pose"] == {"x_m": 0.0, "y_m": 0.0, "phi_rad": 0.0}
@@ -97,7 +168,7 @@ def test_rollout_builds_its_own_model():
 
 @pytest.mark.slow
 def test_reproduce():
-    rep = fs.reproduce(segments=SEG, readability=False)
+    rep = fs.reproduce(options=fs.ModelOptions(segments=SEG, axial=False, gravity=False), readability=False)
     d = check_result(rep)
     assert len(d["poses"]) == 25
 
@@ -105,7 +176,8 @@ def test_reproduce():
 def test_import_has_no_heavy_imports_or_side_effects():
     code = (
         "import os, sys; before = dict(os.environ); import fpm_sim; "
-        "heavy = [m for m in ('jax', 'matplotlib', 'dm_control', 'control', 'mujoco') if m in sys.modules]; "
+        "heavy = [m for m in ('jax', 'matplotlib', 'dm_control', 'control', 'mujoco', 'scipy', 'xarray') "
+        "if m in sys.modules]; "
         "print(heavy, os.environ == before)"
     )
     env = {k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL",)}
@@ -126,4 +198,45 @@ def test_coarse_resolution_warns():
     from fpm_sim.model.options import ResolutionWarning
 
     with pytest.warns(ResolutionWarning, match="41 %"):  # 0.41 / 1^2; measured +54 % on f1
-        fs.modes(segments=1, n_modes=1)
+        fs.modes(options=fs.ModelOptions(segments=1), n_modes=1)
+
+
+def test_no_public_name_is_shadowed_by_a_submodule():
+    """Importing a submodule sets it on the package: a submodule named like a public function would replace it."""
+    import pkgutil
+
+    submodules = {m.name for m in pkgutil.iter_modules(fs.__path__)}
+    assert not submodules & set(fs.__all__), submodules & set(fs.__all__)
+    import importlib
+
+    importlib.import_module("fpm_sim.designs")  # the package beside fs.design
+    importlib.import_module("fpm_sim.response")  # the module beside fs.frf
+    assert callable(fs.design)
+    assert callable(fs.frf)
+
+
+def test_export_mjcf_is_the_model_the_other_entry_points_solve():
+    from fpm_sim.model.manipulator import build_manipulator
+    from fpm_sim.model.rigs import RigSetup, build_rig, rig_piece
+
+    cfg, pose = fs.default_config(), fs.Pose.from_mm(20, 0, 0)
+    xml = fs.export_mjcf(cfg, pose, options=TINY)
+    assert xml.lstrip().startswith("<mujoco")
+    assert xml == build_manipulator(cfg, pose, TINY).to_xml()
+    rig = fs.export_mjcf(cfg, rig="chain", angle_deg=120.0, options=TINY)
+    direct = build_rig(RigSetup("chain", angle_deg=120.0), rig_piece(cfg), TINY, compliance=cfg.compliance)
+    assert rig == direct.to_xml()
+    assert rig != fs.export_mjcf(cfg, rig="chain", options=TINY)  # the hinge angle reaches the model
+
+
+def test_design_and_sweep_agree_at_the_same_poses():
+    """Two entry points over the same pose loop: the base design's frequencies are the sweep's."""
+    import numpy as np
+
+    loop = fs.ModelOptions(segments=SEG, axial=False, gravity=False)
+    poses = [fs.Pose.from_mm(0, 0, 0), fs.Pose.from_mm(40, -30, 0.05)]
+    sw = fs.sweep(grid="poses", poses=poses, options=loop)
+    des = fs.design(poses=poses, vary={"hardware.payload.mass_kg": [fs.default_config().hardware.payload.mass_kg, 2.0]},
+                    options=loop)  # fmt: skip
+    np.testing.assert_allclose(des.frequencies_hz[0], sw.frequencies.frequencies_hz, rtol=1e-12)
+    assert np.all(des.frequencies_hz[1, :, 0] < des.frequencies_hz[0, :, 0])  # a heavier payload: lower f1

@@ -1,11 +1,281 @@
-"""JSON-ready conversion shared by every result."""
+"""The result contract (fpm_sim.results.Result) for every public result type, JSON-ready conversion, and the one
+xarray shape of frequencies over poses."""
 
+import functools
 import json
 import math
+import warnings
 
+import matplotlib
 import numpy as np
+import pytest
 
-from fpm_sim.results import to_jsonable
+matplotlib.use("Agg")  # the tests' choice; the library never selects a backend
+
+import matplotlib.pyplot as plt
+from matplotlib.figure import Figure
+
+import fpm_sim as fs
+from fpm_sim.results import Result, frequencies_dataset, to_jsonable
+
+SEG = 3  # a tiny model: every instance here is built in well under a second or a few
+TINY = fs.ModelOptions(segments=SEG)
+LOOP = fs.ModelOptions(segments=SEG, axial=False, gravity=False)  # the pose loop's options at the tiny resolution
+POSES = [fs.Pose.from_mm(0, 0, 0), fs.Pose.from_mm(50, -50, 0)]
+REPR_MARKS = ("array(", "<", "Pose(", "dtype", "np.float", "object at 0x")
+"""What a Python repr leaves in a string (``array([...])``, ``<Figure ...>``, ``Pose(x_m=...)``)."""
+
+
+def _quiet(build):
+    @functools.wraps(build)
+    def wrapper(*args, **kwargs):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the tiny resolution's ResolutionWarning
+            return build(*args, **kwargs)
+
+    return functools.cache(wrapper)
+
+
+@_quiet
+def _sweep(grid="dense"):
+    if grid == "paper":
+        return fs.sweep(grid="paper", options=LOOP)
+    return fs.sweep(grid="poses", poses=POSES, options=LOOP)
+
+
+@_quiet
+def _frf():
+    return fs.frf(options=TINY, f_max_hz=150.0, df_hz=0.5)
+
+
+@_quiet
+def _identification():
+    import tempfile
+    from pathlib import Path
+
+    from fpm_sim.study.identify import IdentifyOptions
+
+    poses = [*POSES, fs.Pose.from_mm(-50, 50, 0), fs.Pose.from_mm(50, 50, 0)]
+    f1 = 1.03 * fs.sweep(grid="poses", poses=poses, options=LOOP).frequencies.f1_hz  # a heavier-looking machine
+    folder = Path(tempfile.mkdtemp())
+    csv = folder / "measured.csv"
+    csv.write_text(
+        "x_mm,y_mm,phi_rad,f1_hz\n"
+        + "".join(f"{p.x_m * 1e3:g},{p.y_m * 1e3:g},{p.phi_rad:g},{f:.6f}\n" for p, f in zip(poses, f1))
+    )
+    settings = IdentifyOptions(segments=SEG, global_method="none", max_nfev=3)
+    return fs.identify(measured=[csv], free=["hardware"], settings=settings)
+
+
+def _cross_validation():
+    from fpm_sim.study.identify import cross_validate
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return cross_validate(_identification(), folds=2, max_nfev=2)
+
+
+def _ema():
+    import tempfile
+    from pathlib import Path
+
+    path = _frf().save_csv(Path(tempfile.mkdtemp()) / "frf.csv")
+    return fs.ema(path, f_lower_hz=5.0, f_upper_hz=150.0, n_modes=1, pol_order=20)[0]
+
+
+def _impact():
+    from fpm_sim.sim.impact import ImpactSetup
+
+    setup = ImpactSetup(n_impacts=1, record_s=0.05, pad_s=0.1, f_max_hz=200.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return fs.impact(options=fs.ModelOptions(segments=SEG, axial=False), setup=setup)
+
+
+def _quiet_call(fn, *args, **kwargs):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return fn(*args, **kwargs)
+
+
+def _readability():
+    from fpm_sim.study.poses import study_poses
+
+    return _quiet_call(fs.readability, options=LOOP, poses=study_poses()[:2], f_max_hz=150.0)
+
+
+def _reproduction():
+    from fpm_sim.study.reproduce import StudyReproduction
+
+    return StudyReproduction.from_sweep(_sweep("paper"), None)
+
+
+BUILDERS = {
+    "ModalResult": lambda: _quiet_call(fs.modes, options=TINY, n_modes=3),
+    "ModalComparison": lambda: _quiet_call(fs.modes, options=TINY, n_modes=3, method="both"),
+    "ReducedModel": lambda: _quiet_call(fs.reduce, options=TINY, n_modes=3),
+    "StepResponse": lambda: _quiet_call(fs.reduce, options=TINY, n_modes=3).step_response("force_x", duration_s=0.01),
+    "FrequencyResponse": _frf,
+    "RolloutResult": lambda: _quiet_call(
+        fs.rollout, duration_s=0.002, output_step_s=1e-3, force_x_n=1.0, options=fs.ModelOptions(segments=SEG)
+    ),
+    "ImpactTestResult": _impact,
+    "WorkspaceSweep": _sweep,
+    "PoseFrequencies": lambda: _sweep().frequencies,
+    "StudyReproduction": _reproduction,
+    "DesignResult": lambda: _quiet_call(
+        fs.design, poses=POSES, vary={"hardware.payload.mass_kg": [0.0, 0.5]}, options=LOOP
+    ),
+    "ModalAtlas": lambda: _quiet_call(fs.atlas, x_m=[0.0, 0.02], y_m=[0.0], n_modes=2, n_extra=1, options=LOOP),
+    "ReadabilityTable": _readability,
+    "TransientResult": lambda: _quiet_call(
+        fs.transient, duration_s=0.003, output_step_s=1e-3, options=fs.ModelOptions(segments=2), n_modes=3
+    ),
+    "Identification": _identification,
+    "CrossValidation": _cross_validation,
+    "ModalEstimate": _ema,
+    "CheckReport": lambda: _check_report(),
+}
+
+
+@_quiet
+def _check_report():
+    from pathlib import Path
+
+    from fpm_sim.study.requirements import check_requirements, parse_requirements
+
+    reqs = parse_requirements(
+        {
+            "settings": {"segments": SEG},
+            "requirement": [
+                {"name": "f1 floor", "kind": "min_frequency", "at_least_hz": 1.0, "mode": 1,
+                 "poses": {"list": [[0, 0, 0.0], [50, -50, 0.0]]}},
+            ],
+        },
+        Path("fpm-requirements.toml"),
+    )
+    return check_requirements(reqs, fs.default_config())
+
+
+def test_every_public_result_class_is_built_here():
+    """The list above names every result class of the package (a new one must join the contract test)."""
+    import importlib
+    import inspect
+    import pkgutil
+
+    import fpm_sim
+
+    found = set()
+    for mod in pkgutil.walk_packages(fpm_sim.__path__, "fpm_sim."):
+        if ".cli" in mod.name or mod.name.endswith(("jax_backend", "mjx_backend", "dm_env")):
+            continue
+        module = importlib.import_module(mod.name)
+        for name, obj in vars(module).items():
+            if inspect.isclass(obj) and obj.__module__ == mod.name and not name.startswith("_"):
+                if all(callable(getattr(obj, m, None)) for m in ("to_dict", "table")) or name.endswith(
+                    ("Result", "Comparison", "Reproduction", "Sweep", "Frequencies", "Response", "Atlas")
+                ):
+                    found.add(name)
+    rows = {
+        "Result": "the protocol itself",
+        "SubsystemResult": "one row of StudyReproduction (its subsystems)",
+        "FpmSweep": "the pytest plugin's session cache of sweeps (a fixture, not an answer)",
+        "ModeFrequencies": "the pytest plugin's comparison operand (one column of a PoseFrequencies)",
+    }
+    assert found - set(rows) <= set(BUILDERS), found - set(rows) - set(BUILDERS)
+
+
+@pytest.mark.parametrize("name", list(BUILDERS))
+def test_result_contract(name):
+    r = BUILDERS[name]()
+    assert type(r).__name__ == name
+    assert isinstance(r, Result)
+    d = r.to_dict()
+    assert isinstance(d, dict)
+    raw = json.dumps(d)  # JSON-ready as it is (NaN allowed here: to_jsonable makes it standard)
+    for mark in REPR_MARKS:
+        assert mark not in raw, (name, mark, raw[max(0, raw.find(mark) - 80) : raw.find(mark) + 80])
+    json.dumps(to_jsonable(d), allow_nan=False)
+    text = r.table()
+    assert isinstance(text, str)
+    assert text.strip()
+    fig = r.plot()
+    assert isinstance(fig, Figure)
+    plt.close(fig)
+    fig = plt.figure()
+    ax = fig.add_subplot(projection="3d") if name == "ModalResult" else fig.add_subplot()  # mode shapes are 3D
+    assert r.plot(ax=ax) is fig
+    assert ax.has_data()  # drawn into the given axes
+    plt.close(fig)
+
+
+# ---------------------------------------------------------------------------------------------
+# the one xarray shape of frequencies over poses
+
+
+def check_frequency_dataset(ds, f_hz, poses, status):
+    assert ds["freq_hz"].dims[-2:] == ("pose", "mode")
+    np.testing.assert_array_equal(ds["freq_hz"].values, f_hz)
+    assert list(ds["mode"].values) == list(range(1, f_hz.shape[-1] + 1))
+    for c in ("x_mm", "y_mm", "phi_rad"):
+        assert ds[c].dims == ("pose",)
+    np.testing.assert_allclose(ds["x_mm"].values, [p.x_m * 1e3 for p in poses], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(ds["y_mm"].values, [p.y_m * 1e3 for p in poses], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(ds["phi_rad"].values, [p.phi_rad for p in poses], rtol=0, atol=1e-12)
+    assert [str(s) for s in np.ravel(ds["status"].values)] == list(np.ravel(status))
+
+
+def test_sweep_pose_frequencies_and_reproduction_share_the_dataset_shape():
+    sw = _sweep()
+    fr = sw.frequencies
+    for ds in (sw.to_xarray(), fr.to_xarray()):
+        check_frequency_dataset(ds, fr.frequencies_hz, fr.poses, fr.status)
+    rep = _reproduction()
+    ds = rep.to_xarray()
+    check_frequency_dataset(ds, rep.frequencies.frequencies_hz, rep.frequencies.poses, rep.frequencies.status)
+    np.testing.assert_array_equal(ds["comsol_hz"].values, rep.comsol_hz)
+    assert ds.attrs["reading"] == rep.reading.name
+
+
+def test_design_and_atlas_share_the_dataset_shape():
+    res = BUILDERS["DesignResult"]()
+    ds = res.to_xarray()
+    assert ds["freq_hz"].dims == ("hardware.payload.mass_kg", "pose", "mode")
+    for d in range(2):
+        sel = ds.isel({"hardware.payload.mass_kg": d})
+        check_frequency_dataset(sel, res.frequencies_hz[d], res.poses, res.status[d])
+    atlas = BUILDERS["ModalAtlas"]()
+    ds = atlas.to_xarray()
+    poses = atlas.poses()
+    f = np.array([[atlas.nodes["label_freq_hz"][i, 0, 0, k] for k in range(2)] for i in range(2)])
+    check_frequency_dataset(ds, f, poses, ["ok"] * len(poses))
+
+
+def test_frequencies_dataset_with_a_draw_dimension_and_its_checks():
+    f = np.arange(2 * 3 * 4, dtype=float).reshape(2, 3, 4)
+    ds = frequencies_dataset(
+        f, x_mm=[0, 1, 2], y_mm=[3, 4, 5], phi_rad=[0, 0, 0.1], status=["ok", "ok", "singular"],
+        leading={"draw": [0, 1]},
+    )  # fmt: skip
+    assert ds["freq_hz"].dims == ("draw", "pose", "mode")
+    assert ds["freq_hz"].sel(draw=1, pose=2, mode=4).item() == f[1, 2, 3]
+    assert ds["status"].sel(pose=2).item() == "singular"
+    with pytest.raises(ValueError, match="expected 3"):
+        frequencies_dataset(f[0, 0], x_mm=[0], y_mm=[0], phi_rad=[0], status=["ok"], leading={"draw": [0]})
+
+
+def test_xarray_stays_lazy():
+    import subprocess
+    import sys
+
+    code = "import sys, fpm_sim, fpm_sim.results; print('xarray' in sys.modules)"
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip() == (
+        "False"
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# JSON-ready conversion
 
 
 def test_numpy_values_tuples_and_non_finite_floats_become_standard_json():

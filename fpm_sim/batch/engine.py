@@ -101,15 +101,18 @@ class EngineOptions:
 
     def __post_init__(self) -> None:
         if self.workers is not None and self.workers < 1:
-            raise EngineError(f"workers must be >= 1 (--workers), got {self.workers}")
+            raise EngineError("must be >= 1", parameter="workers", value=self.workers)
         if self.chunk is not None and self.chunk < 1:
-            raise EngineError(f"chunk must be >= 1 (--chunk-poses), got {self.chunk}")
+            raise EngineError("must be >= 1", parameter="chunk", value=self.chunk)
         if self.resume and self.store is None:
-            raise EngineError("resume needs a store folder (the --out of the interrupted run)")
+            raise EngineError("needs a store folder (the output of the interrupted run)", parameter="resume")
         s = self.scheduler
         if s is not None and s not in ("local", "serial") and "://" not in s:
             raise EngineError(
-                f"scheduler {s!r}: use 'local', 'serial' or a scheduler address like tcp://127.0.0.1:8786 (--scheduler)"
+                "unknown scheduler",
+                parameter="scheduler",
+                value=s,
+                hint="use 'local', 'serial' or a scheduler address like tcp://127.0.0.1:8786",
             )
 
     @property
@@ -200,7 +203,9 @@ def run_chunks(
     try:
         store = _prepare_store(opts)
     except OSError as exc:
-        raise EngineError(f"cannot use the chunk folder {opts.store} ({exc}); pick another --out") from exc
+        raise EngineError(
+            f"cannot use the chunk folder {opts.store} ({exc})", parameter="out", hint="pick another output"
+        ) from exc
     results = _load(store, keys)
     todo = [i for i in range(len(items)) if i not in results]
     bar = None
@@ -254,7 +259,9 @@ def _run_dask(
             )
             client = Client(cluster)
     except OSError as exc:
-        raise EngineError(f"cannot reach the Dask scheduler {opts.scheduler!r} ({exc}); check --scheduler") from exc
+        raise EngineError(
+            f"cannot reach the Dask scheduler ({exc})", parameter="scheduler", value=opts.scheduler, hint="check it"
+        ) from exc
     try:
         link = _dashboard(client)
         if link and opts.progress:

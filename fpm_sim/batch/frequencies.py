@@ -88,16 +88,20 @@ def pose_frequencies(
         :class:`fpm_sim.batch.engine.EngineOptions`).
     """
     if backend not in BACKENDS:
-        raise FpmSimError(f"unknown backend {backend!r} (--backend); available: {', '.join(sorted(BACKENDS))}")
+        raise FpmSimError(
+            "unknown backend", parameter="backend", value=backend, hint=f"available: {', '.join(sorted(BACKENDS))}"
+        )
     if n_modes < 1:
-        raise FpmSimError(f"n_modes must be >= 1, got {n_modes}")
+        raise FpmSimError("must be >= 1", parameter="n_modes", value=n_modes)
     if workers < 1:
-        raise FpmSimError(f"workers must be >= 1 (--workers), got {workers}")
+        raise FpmSimError("must be >= 1", parameter="workers", value=workers)
     opts = options or fast_options()
     extra: dict[str, Any] = {}
     if engine is not None:
         if backend != "cpu":
-            raise ValueError(f"the engine options (--scheduler, --resume) need --backend cpu, got {backend!r}")
+            raise FpmSimError(
+                "the engine options (scheduler, resume) need the cpu backend", parameter="backend", value=backend
+            )
         extra["engine"] = engine
     return BACKENDS[backend](
         config, poses, n_modes=n_modes, options=opts, workers=workers, progress=progress, desc=desc, **extra

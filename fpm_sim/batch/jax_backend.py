@@ -182,7 +182,7 @@ def check_options(options: ModelOptions, backend: str) -> None:
         )
     if options.link_model != "segments":
         raise FpmSimError(
-            f"the {backend} backend needs link_model='segments' (--link-model segments), got {options.link_model!r}"
+            f"the {backend} backend needs link_model 'segments'", parameter="link_model", value=options.link_model
         )
 
 
@@ -427,13 +427,17 @@ def parameter_value(config: Manipulator, name: str) -> float:
     """The value (SI) of a dotted parameter name, e.g. ``section.thickness_m``."""
     obj: Any = config
     for part in name.split("."):
-        if not hasattr(obj, part):
+        settable = [f.name for f in dataclasses.fields(obj)] if dataclasses.is_dataclass(obj) else []
+        if part not in settable:
+            what = "a derived value, not a settable field" if hasattr(obj, part) else "not a field"
             raise FpmSimError(
-                f"unknown parameter {name!r}: {part!r} is not a field; use e.g. {', '.join(GRADIENT_PARAMETERS)}"
+                f"unknown parameter: {part!r} is {what}",
+                parameter=name,
+                hint=f"settable here: {', '.join(settable) or 'none'}; e.g. {', '.join(GRADIENT_PARAMETERS)}",
             )
         obj = getattr(obj, part)
-    if not isinstance(obj, (int, float)):
-        raise FpmSimError(f"parameter {name!r} is not a number")
+    if not isinstance(obj, (int, float)) or isinstance(obj, bool):
+        raise FpmSimError("is not a number", parameter=name)
     return float(obj)
 
 

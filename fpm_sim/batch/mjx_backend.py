@@ -119,7 +119,7 @@ def check_mjx_model(built: BuiltModel) -> None:
         raise MjxModelError(
             f"{what} is kept off MJX: its kinematic tree is a serial chain of {serial} dofs (more than "
             f"{SERIAL_DOF_LIMIT}), for which jit(mjx.kinematics) runs for seconds to minutes per call on the CPU "
-            "(docs/mjx_chain_rig.md); use the cpu path (no --backend mjx)"
+            "(docs/mjx_chain_rig.md); use the cpu backend"
         )
 
 

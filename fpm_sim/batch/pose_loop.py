@@ -34,6 +34,7 @@ import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -42,7 +43,15 @@ from numpy.typing import ArrayLike
 from fpm_sim.batch.engine import EngineOptions, chunk_size, run_chunks, split
 from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError, FpmSimWarning
-from fpm_sim.kinematics import NEAR_SINGULAR_WARN, SINGULAR_TOL, Assembly, Pose, assemble_many
+from fpm_sim.kinematics import (
+    NEAR_SINGULAR_WARN,
+    SINGULAR_TOL,
+    Assembly,
+    Pose,
+    PoseValueError,
+    assemble_many,
+    checked_pose_mm,
+)
 from fpm_sim.linear.modal import (
     NULLSPACE_RCOND,
     equality_jacobian,
@@ -116,6 +125,71 @@ class PoseFrequencies:
     @property
     def f1_hz(self) -> np.ndarray:
         return self.frequencies_hz[:, 0]
+
+    def to_xarray(self) -> Any:
+        """:func:`fpm_sim.results.frequencies_dataset` (``freq_hz`` over ``pose`` x ``mode``) with
+        ``in_plane`` (pose, mode) and ``singularity`` (pose)."""
+        from fpm_sim.results import frequencies_dataset
+
+        return frequencies_dataset(
+            self.frequencies_hz,
+            x_mm=[p.x_m * 1e3 for p in self.poses],
+            y_mm=[p.y_m * 1e3 for p in self.poses],
+            phi_rad=[p.phi_rad for p in self.poses],
+            status=self.status,
+            data_vars={"in_plane": (("pose", "mode"), self.in_plane), "singularity": ("pose", self.singularity)},
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: one row per pose (x, y mm; phi rad; status; singularity; f1.. Hz, NaN as ``"nan"``)."""
+        from fpm_sim.results import to_jsonable
+
+        rows = []
+        for i, p in enumerate(self.poses):
+            row: dict[str, Any] = {
+                "x_mm": p.x_m * 1e3,
+                "y_mm": p.y_m * 1e3,
+                "phi_rad": p.phi_rad,
+                "status": self.status[i] if i < len(self.status) else None,
+                "singularity": self.singularity[i],
+            }
+            row.update({f"f{k + 1}_hz": v for k, v in enumerate(self.frequencies_hz[i])})
+            rows.append(row)
+        return {"n_poses": len(self.poses), "n_modes": int(self.frequencies_hz.shape[1]), "poses": to_jsonable(rows)}
+
+    def table(self) -> str:
+        """One line per pose: x, y (mm), phi (rad), status and the frequencies (Hz)."""
+        n = self.frequencies_hz.shape[1]
+        head = "".join(f"{f'f{k + 1} Hz':>10}" for k in range(n))
+        lines = [f"{'x mm':>8} {'y mm':>8} {'phi':>6}  {'status':<13}" + head]
+        for i, p in enumerate(self.poses):
+            st = self.status[i] if i < len(self.status) else "-"
+            lines.append(
+                f"{p.x_m * 1e3:>8.1f} {p.y_m * 1e3:>8.1f} {p.phi_rad:>6.3f}  {st:<13}"
+                + "".join(f"{v:>10.3f}" for v in self.frequencies_hz[i])
+            )
+        return "\n".join(lines)
+
+    def plot(self, ax: Any = None) -> Any:
+        """First frequency (Hz) at each pose over x-y, unreachable/singular poses marked; returns the ``Figure``."""
+        import matplotlib.pyplot as plt
+
+        if ax is None:
+            _, ax = plt.subplots(figsize=(6, 5), constrained_layout=True)
+        x = np.array([p.x_m * 1e3 for p in self.poses])
+        y = np.array([p.y_m * 1e3 for p in self.poses])
+        ok = np.isfinite(self.f1_hz)
+        sc = ax.scatter(x[ok], y[ok], c=self.f1_hz[ok], s=80, cmap="viridis")
+        if ok.any():
+            ax.figure.colorbar(sc, ax=ax, label="first natural frequency (Hz)")
+        if (~ok).any():
+            ax.scatter(x[~ok], y[~ok], marker="x", color="0.5", label="not computed (unreachable or singular)")
+            ax.legend(fontsize=7)
+        ax.set_xlabel("x (mm)")
+        ax.set_ylabel("y (mm)")
+        ax.set_aspect("equal")
+        ax.set_title(f"first natural frequency at {len(self.poses)} poses ({int(ok.sum())} computed)", fontsize=9)
+        return ax.figure
 
 
 def fast_options(*, segments: int = FAST_SEGMENTS, axial: bool = False) -> ModelOptions:
@@ -493,26 +567,32 @@ def cpu_backend(
 
 
 class PosesFileError(FpmSimError):
-    """A poses CSV file (``--poses``) is missing, empty or malformed."""
+    """A poses CSV file (``poses``) is missing, empty or malformed."""
 
 
-def read_poses_csv(path: str | Path, *, flag: str = "--poses") -> list[Pose]:
-    """Poses from a CSV file with columns ``x_mm,y_mm,phi_rad`` (other columns are ignored); errors name
-    ``flag``, the option that gave the file."""
+def read_poses_csv(path: str | Path, *, parameter: str = "poses") -> list[Pose]:
+    """Poses from a CSV file with columns ``x_mm,y_mm,phi_rad`` (other columns are ignored; UTF-8 with or without
+    a byte-order mark, any line ending); each row checked by :func:`fpm_sim.kinematics.checked_pose_mm`. Errors
+    name ``parameter``, the file and the row."""
     p = Path(path)
     if not p.is_file():
-        raise PosesFileError(f"{flag} {p}: no such file")
-    with open(p, newline="") as fh:
+        raise PosesFileError(f"{p}: no such file", parameter=parameter)
+    with open(p, newline="", encoding="utf-8-sig") as fh:
         reader = csv.DictReader(fh)
-        missing = {"x_mm", "y_mm", "phi_rad"} - set(reader.fieldnames or [])
+        missing = {"x_mm", "y_mm", "phi_rad"} - {h.strip() for h in reader.fieldnames or []}
         if missing:
             raise PosesFileError(
-                f"{flag} {p}: missing column(s) {', '.join(sorted(missing))} (the header must hold x_mm,y_mm,phi_rad)"
+                f"{p}: missing column(s) {', '.join(sorted(missing))}",
+                parameter=parameter,
+                hint="the header must hold x_mm,y_mm,phi_rad",
             )
-        try:
-            poses = [Pose.from_mm(float(r["x_mm"]), float(r["y_mm"]), float(r["phi_rad"])) for r in reader]
-        except (TypeError, ValueError):
-            raise PosesFileError(f"{flag} {p}: x_mm, y_mm and phi_rad must be numbers on every row") from None
+        poses: list[Pose] = []
+        for r in reader:
+            r = {(k or "").strip(): v for k, v in r.items()}
+            try:
+                poses.append(checked_pose_mm(r["x_mm"], r["y_mm"], r["phi_rad"], row=reader.line_num))
+            except PoseValueError as e:
+                raise PosesFileError(f"{p}: {e}", parameter=parameter) from None
     if not poses:
-        raise PosesFileError(f"{flag} {p}: no rows after the header")
+        raise PosesFileError(f"{p}: no rows after the header", parameter=parameter)
     return poses

@@ -125,9 +125,18 @@ def cmd_atlas_query(args: argparse.Namespace) -> int:
             lines.append(
                 f"{i:>4}  {f:>11.3f}  {d:>11.3f}  {j + 1:>8}  {mac[i - 1, j]:>6.3f}  {r * 100:>8.3f}  {z:>8.4f}"
             )
+        q = rom.parameters.get("atlas_query", {})
+        est, node = q.get("error_estimate"), q.get("error_estimate_node")
+        worst = float(np.max(np.abs(rel)))
+        if est is not None and node is not None and est > 2 * worst:
+            lines.append(
+                f"atlas vs direct here: at most {100 * worst:.2f} %, well below the estimated {100 * est:.1f} %: the "
+                f"estimate is the worst leave-one-out error near the pose (at the grid node ({node[0] * 1e3:g}, "
+                f"{node[1] * 1e3:g}) mm), a worst case for the region; this direct comparison is the error at this pose"
+            )
+        lines.append("resolution (the atlas's): " + resolution_line(opts).removeprefix("resolution: "))
     else:
-        lines.append(rom.table())
-    lines.append(resolution_line(opts) + " (the atlas's)")
+        lines.append(rom.table())  # ends with the atlas's resolution
     if args.out:
         lines.append(f"wrote {args.out}")
     emit(args, payload, "\n".join(lines))

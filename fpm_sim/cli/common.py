@@ -18,12 +18,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
-import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from fpm_sim.errors import FpmSimError
+from fpm_sim.outputs import prove_creatable
 
 if TYPE_CHECKING:
     from fpm_sim.config import Manipulator
@@ -34,6 +33,8 @@ __all__ = [
     "FIDELITY_CHOICES",
     "LINK_MODEL_CHOICES",
     "MAX_MODES",
+    "OPTION_NAMES",
+    "WORKERS_HELP",
     "CliError",
     "add_config_args",
     "add_engine_args",
@@ -47,6 +48,7 @@ __all__ = [
     "count_arg",
     "emit",
     "engine_options",
+    "error_line",
     "finish_store",
     "load_manipulator",
     "mm",
@@ -54,6 +56,7 @@ __all__ = [
     "pose_of",
     "read_input_file",
     "with_resolution",
+    "workers_of",
 ]
 
 FIDELITY_CHOICES = ("fast", "standard", "fine")
@@ -70,6 +73,107 @@ MAX_MODES = 200
 
 class CliError(FpmSimError):
     """A command-line value that cannot work (the message names the option and the fix)."""
+
+
+OPTION_NAMES: dict[str, tuple[str, float]] = {
+    # library parameter -> (option, factor from the parameter's SI unit to the option's unit).
+    # "command:parameter" entries win over "parameter" for that command.
+    "section.thickness_m": ("--thickness-mm", 1e3),
+    "section.height_m": ("--height-mm", 1e3),
+    "x_m": ("--x-mm", 1e3),
+    "y_m": ("--y-mm", 1e3),
+    "phi_rad": ("--phi-rad", 1.0),
+    "pose.phi_rad": ("--phi-rad", 1.0),
+    "link_model": ("--link-model", 1.0),
+    "segments": ("--segments", 1.0),
+    "fidelity": ("--fidelity", 1.0),
+    "timestep_s": ("--timestep-s", 1.0),
+    "method": ("--method", 1.0),
+    "backend": ("--backend", 1.0),
+    "workers": ("--workers", 1.0),
+    "chunk": ("--chunk-poses", 1.0),
+    "scheduler": ("--scheduler", 1.0),
+    "resume": ("--resume", 1.0),
+    "out": ("--out", 1.0),
+    "overwrite": ("--overwrite", 1.0),
+    "config": ("--config", 1.0),
+    "n_modes": ("--n-modes", 1.0),
+    "atlas:n_modes": ("--modes", 1.0),
+    "reduce:n_modes": ("--modes", 1.0),
+    "transient:n_modes": ("--modes", 1.0),
+    "n_extra": ("--extra", 1.0),
+    "band_hz": ("--band-hz", 1.0),
+    "error_bound": ("--error-bound", 1.0),
+    "f_min_hz": ("--f-min-hz", 1.0),
+    "f_max_hz": ("--f-max-hz", 1.0),
+    "df_hz": ("--df-hz", 1.0),
+    "input_fraction": ("--input-fraction", 1.0),
+    "output_fraction": ("--output-fraction", 1.0),
+    "t0_s": ("--load-start-s", 1.0),
+    "freq_hz": ("--load-freq-hz", 1.0),
+    "duration_s": ("--duration-s", 1.0),
+    "ee_wrench": ("--force-x-n, --force-y-n, --moment-z-nm", 1.0),
+    "rig.angle_deg": ("--angle-deg", 1.0),
+    "rig.length_m": ("--length-mm", 1e3),
+    "rig.clamped_length_m": ("--clamped-length-mm", 1e3),
+    "rig.section.thickness_m": ("--thickness-mm", 1e3),
+    "rig.section.height_m": ("--height-mm", 1e3),
+    "rig.material.young_pa": ("--young-pa", 1.0),
+    "rig.material.poisson": ("--poisson", 1.0),
+    "rig.material.density_kg_m3": ("--density-kg-m3", 1.0),
+    "vary": ("--vary", 1.0),
+    "designs": ("--designs", 1.0),
+    "grid": ("--grid", 1.0),
+    "poses": ("--poses", 1.0),
+    "workspace": ("--workspace", 1.0),
+    "x_mm": ("--x-mm", 1.0),
+    "y_mm": ("--y-mm", 1.0),
+    "step_mm": ("--step-mm", 1.0),
+    "free": ("--free", 1.0),
+    "measured": ("--measured", 1.0),
+    "subsystems": ("--subsystems", 1.0),
+    "reading": ("--reading", 1.0),
+    "global_method": ("--global", 1.0),
+    "folds": ("--folds", 1.0),
+    "window_tau_s": ("--exp-window-tau-s", 1.0),
+}
+"""The one map from the library's parameter names (:attr:`FpmSimError.parameter`) to the command line's option
+names, with the factor that converts a value to the option's unit. Only options the command has are used."""
+
+
+def _option_for(parameter: str, command: str | None, options: set[str] | None) -> tuple[str, float] | None:
+    hit = OPTION_NAMES.get(f"{command}:{parameter}") or OPTION_NAMES.get(parameter)
+    if hit is None:
+        return None
+    if options is not None and not all(o in options for o in hit[0].split(", ")):
+        return None  # the command has no such option: the value came from elsewhere (a file, --vary)
+    return hit
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def error_line(exc: FpmSimError, command: str | None = None, options: set[str] | None = None) -> str:
+    """The ``error: ...`` line of ``exc``: its parameter as the command's option name, the value in its unit.
+
+    ``options`` are the option strings of the command (``None``: map every known parameter).
+    """
+    if exc.parameter is None or exc.file is not None:
+        return f"error: {exc}"
+    hit = _option_for(exc.parameter, command, options)
+    if hit is None:
+        return f"error: {exc}"
+    option, factor = hit
+    value = None
+    if exc.has_value and factor != 1.0:
+        unit = option.rsplit("-", 1)[-1]
+        v = exc.value
+        if _is_number(v):
+            value = f"{v * factor:g} {unit}"
+        elif isinstance(v, (list, tuple)) and all(_is_number(e) for e in v):
+            value = f"[{', '.join(f'{e * factor:g}' for e in v)}] {unit}"
+    return f"error: {exc.render(parameter=option, value=value)}"
 
 
 def mm(value_mm: float | None) -> float | None:
@@ -171,7 +275,7 @@ def add_overwrite_arg(p: argparse.ArgumentParser) -> None:
         "--overwrite",
         action=argparse.BooleanOptionalAction,
         default=False,
-        help="replace an existing output folder (default: refuse)",
+        help="replace an existing output (default: refuse)",
     )
 
 
@@ -215,18 +319,9 @@ def model_options(args: argparse.Namespace, **overrides: Any) -> ModelOptions:
 
 def pose_of(args: argparse.Namespace) -> Pose:
     """The pose of ``--x-mm``, ``--y-mm``, ``--phi-rad``; a rotation beyond pi is refused, not wrapped."""
-    from fpm_sim.kinematics import Pose
+    from fpm_sim.kinematics import checked_pose_mm
 
-    for name in ("x_mm", "y_mm", "phi_rad"):
-        v = getattr(args, name)
-        if not math.isfinite(v):
-            raise CliError(f"--{name.replace('_', '-')} must be a finite number, got {v!r}")
-    if abs(args.phi_rad) > math.pi:
-        raise CliError(
-            f"--phi-rad {args.phi_rad:g} is outside -pi..pi (it would be wrapped to "
-            f"{math.remainder(args.phi_rad, 2 * math.pi):.4g} rad); give the rotation in radians within -pi..pi"
-        )
-    return Pose.from_mm(args.x_mm, args.y_mm, args.phi_rad)
+    return checked_pose_mm(args.x_mm, args.y_mm, args.phi_rad)
 
 
 def with_resolution(payload: dict[str, Any], options: ModelOptions) -> dict[str, Any]:
@@ -258,23 +353,14 @@ def emit(args: argparse.Namespace, payload: dict[str, Any], text: str) -> None:
 # output paths, checked before any computation
 
 
-def _creatable_dir(path: Path, option: str) -> None:
-    """Raise unless ``path`` is an existing writable folder or can be created (nearest existing parent writable)."""
-    probe = path
-    while not probe.exists():
-        if probe.parent == probe:
-            break
-        probe = probe.parent
-    if probe.exists() and not probe.is_dir():
-        raise CliError(f"{option} {path}: {probe} is a file, not a folder; choose another path")
-    if not os.access(probe, os.W_OK | os.X_OK):
-        raise CliError(f"{option} {path}: folder {probe} is not writable; choose a writable location")
+def check_output_file(
+    path: Path | None, option: str, suffixes: tuple[str, ...] = (), *, overwrite: bool | None = None
+) -> None:
+    """Check an output file path before computing: suffix, not a folder, creatable
+    (:func:`fpm_sim.outputs.prove_creatable`) and, where the command has ``--overwrite`` (``overwrite`` not
+    ``None``), not an existing file unless ``overwrite``.
 
-
-def check_output_file(path: Path | None, option: str, suffixes: tuple[str, ...] = ()) -> None:
-    """Check an output file path before computing: suffix, not a folder, parent creatable and writable.
-
-    Raises :class:`CliError` naming ``option``.
+    Raises :class:`CliError` (or :class:`fpm_sim.outputs.OutputError`) naming ``option``.
     """
     if path is None:
         return
@@ -284,9 +370,9 @@ def check_output_file(path: Path | None, option: str, suffixes: tuple[str, ...] 
     if path.is_dir():
         ends = " or ".join(suffixes) or "a suffix"
         raise CliError(f"{option} {path} is a folder; give a file name (ending in {ends})")
-    if path.exists() and not os.access(path, os.W_OK):
-        raise CliError(f"{option} {path} exists and is not writable; choose another file")
-    _creatable_dir(path.parent if str(path.parent) else Path("."), option)
+    if overwrite is False and path.exists():
+        raise CliError(f"{option} {path} already exists; pass --overwrite to replace it, or choose another file")
+    prove_creatable(path, parameter=option)
 
 
 def check_output_dir(path: Path, option: str, *, overwrite: bool, marker: str | None = None) -> None:
@@ -302,7 +388,7 @@ def check_output_dir(path: Path, option: str, *, overwrite: bool, marker: str | 
             f"{option} {path} already holds another run's results; pass --overwrite to replace it, or choose "
             "another folder"
         )
-    _creatable_dir(path, option)
+    prove_creatable(path, parameter=option, folder=True)
 
 
 def read_input_file(path: Path, option: str, loader: Any, what: str) -> Any:
@@ -324,6 +410,18 @@ def read_input_file(path: Path, option: str, loader: Any, what: str) -> Any:
 
 
 # --------------------------------------------------------------------------------------------- the Dask engine
+
+
+WORKERS_HELP = "processes for the pose loop (default: the CPU count, the same in every command)"
+"""The one ``--workers`` default (``None`` on the command line: :func:`workers_of` gives the CPU count)."""
+
+
+def workers_of(args: argparse.Namespace) -> int:
+    """``--workers``, or the CPU count when it was not given (the one default of every command)."""
+    import os
+
+    w = getattr(args, "workers", None)
+    return int(w) if w is not None else (os.cpu_count() or 1)
 
 
 def add_engine_args(p: argparse.ArgumentParser, *, workers: bool = False) -> None:
@@ -349,7 +447,7 @@ def add_engine_args(p: argparse.ArgumentParser, *, workers: bool = False) -> Non
         help="poses per task (default: about four tasks per worker, 16-512; see docs/design.md, Scale on paper)",
     )
     if workers:
-        g.add_argument("--workers", type=int, default=None, help="local cluster processes (default: CPU count)")
+        g.add_argument("--workers", type=int, default=None, help=WORKERS_HELP)
 
 
 def engine_options(args: argparse.Namespace, out: Path | None) -> Any:

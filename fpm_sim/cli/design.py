@@ -20,7 +20,6 @@ from fpm_sim.cli.common import (
     finish_store,
     load_manipulator,
     model_options,
-    resolution_line,
     with_resolution,
 )
 
@@ -42,7 +41,7 @@ def _poses(args: argparse.Namespace, config: Any) -> tuple[list[Any], str]:
 
 
 def cmd_design(args: argparse.Namespace) -> int:
-    from fpm_sim.design import design_study, parse_vary, read_designs_csv
+    from fpm_sim.designs import design_study, parse_vary, read_designs_csv
     from fpm_sim.model.options import warn_if_coarse
     from fpm_sim.outputs import atomic_dir
 
@@ -50,7 +49,9 @@ def cmd_design(args: argparse.Namespace) -> int:
     if bool(args.vary) == bool(args.designs):
         raise CliError("give --vary FIELD=SPEC (one or more) or --designs FILE.csv, not both and not neither")
     out = args.out
-    check_output_dir(out, "--out", overwrite=args.overwrite or args.resume)
+    # --resume continues OUT.partial/ (the folder itself appears only at the end): a finished run in --out, of this
+    # study or another, is replaced only with --overwrite
+    check_output_dir(out, "--out", overwrite=args.overwrite)
     vary = parse_vary(args.vary, config) if args.vary else None
     designs = read_designs_csv(args.designs, config) if args.designs else None
     poses, grid = _poses(args, config)
@@ -66,12 +67,12 @@ def cmd_design(args: argparse.Namespace) -> int:
         options=opts,
         engine=engine_options(args, out),
     )
-    with atomic_dir(out, overwrite=True) as tmp:  # the folder was checked above (--overwrite, --resume)
+    with atomic_dir(out, overwrite=True) as tmp:  # the folder was checked above (--overwrite)
         paths = [out / p.name for p in result.write(tmp)]
     finish_store(out)
     text = (
         f"{config.name}\n  {len(result.designs)} designs x {len(poses)} poses ({grid} grid), "
-        f"{result.elapsed_s:.1f} s\n{resolution_line(opts)}\n\n{result.table()}\n\n  wrote "
+        f"{result.elapsed_s:.1f} s\n\n{result.table()}\n\n  wrote "
         + ", ".join(str(p) for p in paths)
     )
     payload = {"summary": result.summary(), "files": [str(p) for p in paths], "elapsed_s": result.elapsed_s}

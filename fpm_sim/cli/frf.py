@@ -26,14 +26,14 @@ from fpm_sim.cli.main import PLOT_SUFFIXES, save_figure
 __all__ = ["LinkPointDefault", "add_point_args", "point_of", "register", "save_figure"]
 
 AXES = ("normal", "along", "z", "x", "y")
-"""Directions of a link point (checked against :data:`fpm_sim.frf.AXES` by the tests; listed here so that
+"""Directions of a link point (checked against :data:`fpm_sim.response.AXES` by the tests; listed here so that
 building the parser stays light)."""
 QUANTITIES = ("receptance", "mobility", "accelerance")
-"""FRF kinds (checked against :data:`fpm_sim.frf.QUANTITIES` by the tests)."""
+"""FRF kinds (checked against :data:`fpm_sim.response.QUANTITIES` by the tests)."""
 
 
 class LinkPointDefault:
-    """A link point's defaults for the parser (link, fraction 0..1, axis), without importing :mod:`fpm_sim.frf`."""
+    """A link point's defaults for the parser (link, fraction 0..1, axis), without importing :mod:`fpm_sim.response`."""
 
     def __init__(self, link: str = "distal_0", fraction: float = 0.5, axis: str = "z") -> None:
         self.link, self.fraction, self.axis = link, fraction, axis
@@ -64,7 +64,7 @@ def add_point_args(p: argparse.ArgumentParser, prefix: str, what: str, default: 
 
 
 def point_of(args: argparse.Namespace, prefix: str, fallback: Any = None) -> Any:
-    from fpm_sim.frf import LinkPoint
+    from fpm_sim.response import LinkPoint
 
     key = prefix.replace("-", "_")
     fb = fallback or LinkPoint()
@@ -79,11 +79,10 @@ def point_of(args: argparse.Namespace, prefix: str, fallback: Any = None) -> Any
 
 
 def cmd_frf(args: argparse.Namespace) -> int:
-    from fpm_sim.api import frf_grid
-    from fpm_sim.frf import LinkPoint, modal_frf
     from fpm_sim.model.manipulator import build_manipulator
     from fpm_sim.model.options import warn_if_coarse
     from fpm_sim.outputs import atomic_file
+    from fpm_sim.response import LinkPoint, frf_grid, modal_frf
     from fpm_sim.rom.reduction import modal_system
 
     frf_grid(args.f_min_hz, args.f_max_hz, args.df_hz, [])  # checks the band before any computation
@@ -99,8 +98,8 @@ def cmd_frf(args: argparse.Namespace) -> int:
     built = build_manipulator(manip, pose_of(args), opts)
     exc = point_of(args, "input", LinkPoint("distal_0", 0.5, "z"))
     resp = point_of(args, "output", exc)
-    exc.check(built)
-    resp.check(built)
+    exc.check(built, "input")
+    resp.check(built, "output")
     system = modal_system(built)
     freq = frf_grid(args.f_min_hz, args.f_max_hz, args.df_hz, system.frequencies_hz)
     frf = modal_frf(

@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import shlex
-import sys
 from pathlib import Path
 
 from fpm_sim.cli.common import (
+    WORKERS_HELP,
     CliError,
     add_config_args,
     add_output_args,
@@ -15,6 +14,7 @@ from fpm_sim.cli.common import (
     check_output_dir,
     emit,
     load_manipulator,
+    workers_of,
 )
 
 __all__ = ["cmd_identify", "parse_measured_arg", "register"]
@@ -84,6 +84,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     ps = parameter_set(start, groups)
     if any(p.subsystem for p in ps.parameters) and not tests:
         raise CliError("--free rig needs --subsystems FILE.csv (the rig parameters are seen only by rig tests)")
+    args.workers = workers_of(args)
     counts = (
         ("--workers", args.workers),
         ("--segments", args.segments),
@@ -116,7 +117,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     if args.workspace is not None:
         from fpm_sim.batch.pose_loop import read_poses_csv
 
-        workspace = read_poses_csv(args.workspace, flag="--workspace")
+        workspace = read_poses_csv(args.workspace, parameter="workspace")
     if not 0.0 < args.min_singularity < 1.0:
         raise CliError(f"--min-singularity must be in (0, 1), got {args.min_singularity}")
     problem = Problem(
@@ -134,16 +135,11 @@ def cmd_identify(args: argparse.Namespace) -> int:
     files = [ds.source + f" (sigma {ds.sigma_pct:g} % where not given)" for ds in datasets]
     if tests:
         files.append(f"{Path(args.subsystems).name} (rig tests, sigma {args.subsystem_sigma_pct:g} %)")
-    command = "fpm-sim " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    command = args.command_line  # set by main(argv): the command that ran, also when run from Python
     data_note = ", ".join([ds.source for ds in datasets] + ([Path(args.subsystems).name] if tests else []))
     write_identification(args.out, result, cv, command=command, data_files=files, data_note=data_note)
     summ = summary(result, cv)
-    lines = [
-        f"identified {len(result.names)} parameters in {result.seconds:.0f} s (cost {result.cost:.4g}, "
-        f"chi2/dof {result.chi2_per_dof:.3g})"
-    ]
-    for n, v, s in zip(result.names, result.values, result.std):
-        lines.append(f"  {n:<42} {v:>12.5g} +- {s:.3g}" + ("  (at bound)" if n in result.at_bound else ""))
+    lines = [result.table()]
     for src, st in summ.items():
         i, c = st["in_sample"], st.get("cross_validated")
         lines.append(
@@ -241,7 +237,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--cv-max-nfev", type=int, default=10, help="per-fold refit budget (default 10)")
     p.add_argument("--seed", type=int, default=0, help="seed of the global search and the folds (default 0)")
     p.add_argument("--segments", type=int, default=4, help="spring locations per link of the fitted model (default 4)")
-    p.add_argument("--workers", type=int, default=1, help="processes for the pose loop (default 1)")
+    p.add_argument("--workers", type=int, default=None, help=WORKERS_HELP)
     p.add_argument(
         "--timoshenko",
         action=argparse.BooleanOptionalAction,

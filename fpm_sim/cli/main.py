@@ -16,6 +16,7 @@ import argparse
 import contextlib
 import importlib
 import os
+import shlex
 import sys
 import traceback
 import warnings
@@ -27,22 +28,24 @@ from fpm_sim import __version__
 
 try:  # Ctrl-C while the modules load (a second or so): one line and 130, as at any later moment
     from fpm_sim.cli.common import (
+        OPTION_NAMES,
         CliError,
         add_config_args,
         add_model_args,
         add_output_args,
+        add_overwrite_arg,
         add_pose_args,
         check_output_file,
         count_arg,
         emit,
+        error_line,
         load_manipulator,
         mm,
         model_options,
         pose_of,
-        resolution_line,
         with_resolution,
     )
-    from fpm_sim.errors import FpmSimError
+    from fpm_sim.errors import FpmSimError, FpmSimWarning
 except KeyboardInterrupt:
     sys.stderr.write("interrupted (Ctrl-C)\n")
     raise SystemExit(130) from None
@@ -68,6 +71,7 @@ COMMAND_MODULES: list[str] = [
     "fpm_sim.cli.design",
     "fpm_sim.cli.identify",
     "fpm_sim.cli.ema",
+    "fpm_sim.cli.check",
 ]
 """Command modules beyond the core ones (each exposes ``register(subparsers)``)."""
 
@@ -94,27 +98,6 @@ def save_figure(path: Path, draw: Callable[[], Any]) -> None:
     with atomic_file(path) as tmp:
         fig.savefig(tmp, dpi=120)
     plt.close(fig)
-
-
-def _result_payload(result: ModalResult | ModalComparison, n_modes: int) -> tuple[dict[str, Any], str]:
-    from fpm_sim.linear.analysis import ModalComparison
-
-    if isinstance(result, ModalComparison):
-        a, b = result.transition_fd, result.constrained
-        payload = a.to_dict(n_modes)
-        payload["cross_check"] = {
-            "method": "constrained",
-            "modes": b.to_dict(n_modes)["modes"],
-            "relative_difference": result.relative_differences(n_modes),
-        }
-        lines = [f"{'mode':>4}  {'transitionFD (Hz)':>17}  {'constrained (Hz)':>16}  {'diff':>8}  {'damping':>8}"]
-        for i, d in enumerate(result.relative_differences(n_modes)):
-            lines.append(
-                f"{i + 1:>4}  {a.modes[i].frequency_hz:>17.3f}  {b.modes[i].frequency_hz:>16.3f}  {d:>8.2e}  "
-                f"{a.modes[i].damping_ratio:>8.4f}"
-            )
-        return payload, "\n".join(lines)
-    return result.to_dict(n_modes), result.table(n_modes)
 
 
 def _header(built: BuiltModel, title: str) -> str:
@@ -174,7 +157,7 @@ def cmd_modes(args: argparse.Namespace) -> int:
     warn_if_coarse(opts)
     built = build_manipulator(manip, pose, opts)
     result = analyse(built, args.method, args.n_modes)
-    payload, table = _result_payload(result, args.n_modes)
+    payload, table = result.to_dict(args.n_modes), result.table(args.n_modes)
     payload["config"] = manip.name
     payload["manipulator"] = manip.to_dict()
     with_resolution(payload, opts)
@@ -182,10 +165,8 @@ def cmd_modes(args: argparse.Namespace) -> int:
     text = (
         _header(built, f"{manip.name}\n  pose {pose.label()}")
         + "\n"
-        + table
+        + table  # ends with the resolution line
         + _n_modes_note(result, args.n_modes)
-        + "\n"
-        + resolution_line(opts)
         + note
     )
     emit(args, payload, text)
@@ -213,6 +194,34 @@ def _rig_piece(args: argparse.Namespace, manip: Manipulator) -> Any:
     )
 
 
+def _piece_line(args: argparse.Namespace, manip: Manipulator, piece: Any) -> str:
+    """The test piece's dimensions and where each comes from (an option, or the description's provenance), and,
+    when options change it, the description's own piece: the one ``reproduce``'s subsystem tests use."""
+    base = manip.rig if manip.rig is not None else piece  # rig_piece refuses a description without one
+    dims = (
+        ("length", "length_mm", "rig.length_m", piece.length_m, base.length_m),
+        ("clamped", "clamped_length_mm", "rig.clamped_length_m", piece.clamped_length_m, base.clamped_length_m),
+        ("thickness", "thickness_mm", "rig.section.thickness_m", piece.section.thickness_m, base.section.thickness_m),
+        ("height", "height_mm", "rig.section.height_m", piece.section.height_m, base.section.height_m),
+    )
+    own, changed = [], []
+    for name, opt, key, value, described in dims:
+        source = manip.provenance.get(key, "description").split(":")[0]
+        if getattr(args, opt, None) is not None:
+            own.append(f"{name} {value * 1e3:.4g} mm (--{opt.replace('_', '-')})")
+            if value != described:
+                changed.append(f"{name} {described * 1e3:.4g} mm ({source})")
+        else:
+            own.append(f"{name} {value * 1e3:.4g} mm ({source})")
+    line = "  test piece: " + ", ".join(own)
+    if changed:
+        line += (
+            "\n  (the description's piece, which reproduce's subsystem tests use, has " + ", ".join(changed) + ": "
+            "its frequencies differ from these for that reason)"
+        )
+    return line
+
+
 def cmd_rig(args: argparse.Namespace) -> int:
     from fpm_sim.linear.analysis import analyse
     from fpm_sim.model.options import warn_if_coarse
@@ -221,12 +230,20 @@ def cmd_rig(args: argparse.Namespace) -> int:
     manip = load_manipulator(args)
     opts = model_options(args)
     warn_if_coarse(opts)
-    built = build_rig(_rig_setup(args), _rig_piece(args, manip), opts, compliance=manip.compliance)
+    piece = _rig_piece(args, manip)
+    built = build_rig(_rig_setup(args), piece, opts, compliance=manip.compliance)
     result = analyse(built, args.method, args.n_modes)
-    payload, table = _result_payload(result, args.n_modes)
+    payload, table = result.to_dict(args.n_modes), result.table(args.n_modes)
     with_resolution(payload, opts)
     title = f"rig {args.rig}" + (f" (hinge angle {args.angle_deg:g} deg)" if args.rig == "chain" else "")
-    text = _header(built, title) + "\n" + table + _n_modes_note(result, args.n_modes) + "\n" + resolution_line(opts)
+    text = (
+        _header(built, title)
+        + "\n"
+        + _piece_line(args, manip, piece)
+        + "\n"
+        + table  # ends with the resolution line
+        + _n_modes_note(result, args.n_modes)
+    )
     emit(args, payload, text)
     return 0
 
@@ -253,7 +270,7 @@ def cmd_export_mjcf(args: argparse.Namespace) -> int:
     from fpm_sim.model.rigs import build_rig
     from fpm_sim.outputs import atomic_file
 
-    check_output_file(args.out, "--out", (".xml",))
+    check_output_file(args.out, "--out", (".xml",), overwrite=args.overwrite)
     manip = load_manipulator(args)
     opts = model_options(args)
     if args.what == "manipulator":
@@ -310,6 +327,16 @@ class _Parser(argparse.ArgumentParser):
     """Usage errors become :class:`CliError` (one ``error:`` line and exit 2 from :func:`main`, like every
     other user error) instead of argparse's own exit."""
 
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("allow_abbrev", False)  # --thickness-m must not be read as --thickness-mm
+        super().__init__(*args, **kwargs)
+
+    def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:
+        """Also record the option strings of the parsers used (``_cli_options``), for :func:`error_line`."""
+        ns, rest = super().parse_known_args(args, namespace)
+        ns._cli_options = set(getattr(ns, "_cli_options", ())) | set(self._option_string_actions)
+        return ns, rest
+
     def error(self, message: str) -> NoReturn:
         raise CliError(f"{message} ({self.prog}); see '{self.prog} --help'")
 
@@ -355,6 +382,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("export-mjcf", help="write the generated MJCF of the manipulator at a pose, or of a rig")
     p.add_argument("what", choices=("manipulator", *RIGS))
     p.add_argument("--out", type=Path, help="output file (.xml; default: stdout)")
+    add_overwrite_arg(p)
     add_pose_args(p)
     _add_rig_overrides(p)
     add_config_args(p)
@@ -375,6 +403,9 @@ def _one_line_warning(
     message: Warning | str, category: type[Warning], filename: str, lineno: int, file: Any = None, line: Any = None
 ) -> None:
     text = str(message).replace("\n", " ")
+    name = getattr(message, "parameter", None)
+    if isinstance(message, FpmSimWarning) and name:
+        text = f"{OPTION_NAMES.get(name, (name,))[0]}: {text}"
     try:
         print(f"warning: {text}", file=sys.stderr if file is None else file)
     except (OSError, ValueError):  # stderr closed: nothing to say it on
@@ -401,14 +432,18 @@ def _quiet_stdout() -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Run ``fpm-sim`` with ``argv``; returns the exit status (0, 2 user error, 130 interrupted, 1 bug)."""
+    args: argparse.Namespace | None = None
     with _cli_warnings():
         try:
+            argv = sys.argv[1:] if argv is None else list(argv)
             args = build_parser().parse_args(argv)
+            args.command_line = "fpm-sim " + shlex.join(argv)  # what was run, recorded by commands that write reports
             code = int(args.func(args))
             sys.stdout.flush()  # a closed pipe shows here, inside the handlers below
             return code
         except FpmSimError as exc:
-            print(f"error: {exc}", file=sys.stderr)
+            command, options = getattr(args, "command", None), getattr(args, "_cli_options", None)
+            print(error_line(exc, command, options), file=sys.stderr)
             return 2
         except KeyboardInterrupt:
             print("interrupted (Ctrl-C); unfinished outputs were not written", file=sys.stderr)

@@ -17,7 +17,6 @@ from fpm_sim.cli.common import (
     load_manipulator,
     model_options,
     pose_of,
-    resolution_line,
     with_resolution,
 )
 from fpm_sim.cli.rollout import add_motor_args, apply_motor_args
@@ -54,7 +53,7 @@ def cmd_reduce(args: argparse.Namespace) -> int:
     control_note = ""
     try:
         sys_ = rom.to_control()
-        payload["python_control"] = repr(type(sys_).__name__)
+        payload["python_control"] = type(sys_).__name__
         control_note = (
             f"\npython-control StateSpace: {sys_.nstates} states, {sys_.ninputs} inputs, {sys_.noutputs} outputs"
         )
@@ -70,8 +69,6 @@ def cmd_reduce(args: argparse.Namespace) -> int:
         f"outputs: {', '.join(f'{n} ({u})' for n, u in zip(rom.output_names, rom.output_units))}\n"
         + rom.table()
         + control_note
-        + "\n"
-        + resolution_line(opts)
         + (f"\nwrote {args.out}" if args.out else "")
     )
     emit(args, payload, text)

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from fpm_sim.cli.common import (
+    WORKERS_HELP,
     CliError,
     add_config_args,
     add_engine_args,
@@ -19,8 +20,8 @@ from fpm_sim.cli.common import (
     finish_store,
     load_manipulator,
     model_options,
-    resolution_line,
     with_resolution,
+    workers_of,
 )
 
 __all__ = ["add_study_args", "cmd_reproduce", "default_out", "register", "study_manipulator", "study_options"]
@@ -38,7 +39,7 @@ def add_study_args(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--thickness-mm", type=float, help="in-plane link thickness (mm); the study: 30, 10, 5")
     add_resolution_args(p, axial=False)
-    p.add_argument("--workers", type=int, default=2, help="processes for the pose loop (default 2)")
+    p.add_argument("--workers", type=int, default=None, help=WORKERS_HELP)
     p.add_argument(
         "--backend",
         default="cpu",
@@ -54,8 +55,6 @@ def study_manipulator(args: argparse.Namespace) -> Any:
     """The manipulator of ``--config`` with ``--thickness-mm`` applied."""
     manip = load_manipulator(args)
     if args.thickness_mm is not None:
-        if not args.thickness_mm > 0:
-            raise CliError(f"--thickness-mm must be > 0, got {args.thickness_mm}; give the link thickness in mm")
         manip = manip.with_section(thickness_m=args.thickness_mm * 1e-3)
         manip = manip.replace(name=f"{manip.name} [links {args.thickness_mm:g} mm in-plane]")
     return manip
@@ -65,6 +64,7 @@ def study_options(args: argparse.Namespace) -> Any:
     """Pose-loop model options (gravity off: the fast path's linearisation; see batch.pose_loop) and checks."""
     from fpm_sim.batch.frequencies import BACKENDS
 
+    args.workers = workers_of(args)
     if args.workers < 1:
         raise CliError(f"--workers must be >= 1, got {args.workers}")
     if args.backend not in BACKENDS:
@@ -102,7 +102,6 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         paths = [out / p.name for p in rep.write(tmp)]
     finish_store(out)
     lines = [rep.table()]
-    lines.append(resolution_line(opts))
     lines.append("wrote " + ", ".join(str(p) for p in paths))
     payload = with_resolution(rep.to_dict(), opts)
     payload["files"] = [str(p) for p in paths]

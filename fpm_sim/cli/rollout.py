@@ -84,8 +84,6 @@ def cmd_rollout(args: argparse.Namespace) -> int:
     check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
     manip = load_manipulator(args)
     if args.thickness_mm is not None:
-        if not args.thickness_mm > 0:
-            raise CliError(f"--thickness-mm must be > 0, got {args.thickness_mm}")
         manip = manip.with_section(thickness_m=mm(args.thickness_mm))
     manip = apply_motor_args(manip, args)
     pose = pose_of(args)

@@ -57,11 +57,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     with atomic_dir(out, overwrite=args.overwrite) as tmp:
         names = [p.name for p in sw.write(tmp)]
         if args.grid == "paper":  # the reproduce command's poses.csv, from the same frequencies
-            from fpm_sim.study.poses import study_poses
             from fpm_sim.study.reproduce import StudyReproduction
 
-            rep = StudyReproduction(manip, reading, study_poses(reading), sw.frequencies, [], opts)
-            rep.write_csv(tmp / "poses.csv")
+            StudyReproduction.from_sweep(sw, reading).write_csv(tmp / "poses.csv")
             names.append("poses.csv")
     finish_store(out)
     paths = [Path(out) / n for n in names]

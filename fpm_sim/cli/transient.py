@@ -51,9 +51,7 @@ def cmd_transient(args: argparse.Namespace) -> int:
             raise CliError("--study needs motors.mode = 'locked' (the study's motors were locked); check --config")
         pose, thickness = STUDY_POSE, STUDY_THICKNESS_M
     else:
-        pose, thickness = pose_of(args), mm(args.thickness_mm)
-        if thickness is not None and not thickness > 0:
-            raise CliError(f"--thickness-mm must be > 0, got {args.thickness_mm}")
+        pose, thickness = pose_of(args), mm(args.thickness_mm)  # validated once, by the description (schema)
     for name in ("force_n", "duration_s", "output_step_s"):
         if not getattr(args, name) > 0:
             raise CliError(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)!r}")

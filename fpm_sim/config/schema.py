@@ -294,7 +294,7 @@ class _Reader:
         full = f"{path}.{key}" if path else key
         if key not in table:
             if default is dataclasses.MISSING:
-                raise ConfigError(f"missing field '{full}'")
+                raise ConfigError("missing field", parameter=full)
             return default
         raw = table[key]
         if isinstance(raw, dict) and "value" in raw:
@@ -312,7 +312,7 @@ class _Reader:
     def number(self, table: dict[str, Any], path: str, key: str, default: Any = dataclasses.MISSING) -> float:
         v = self.get(table, path, key, default)
         if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise ConfigError(f"field '{path}.{key}' must be a number, got {v!r}")
+            raise ConfigError("must be a number", parameter=f"{path}.{key}", value=v)
         return float(v)
 
     def number_or_triple(
@@ -323,11 +323,11 @@ class _Reader:
         if isinstance(v, (list, tuple)):
             if len(v) != 3 or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in v):
                 raise ConfigError(
-                    f"field '{path}.{key}' must be a number or a list of 3 numbers (per chain), got {v!r}"
+                    "must be a number or a list of 3 numbers (per chain)", parameter=f"{path}.{key}", value=v
                 )
             return (float(v[0]), float(v[1]), float(v[2]))
         if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise ConfigError(f"field '{path}.{key}' must be a number or a list of 3 numbers (per chain), got {v!r}")
+            raise ConfigError("must be a number or a list of 3 numbers (per chain)", parameter=f"{path}.{key}", value=v)
         return float(v)
 
     def triple(
@@ -335,10 +335,10 @@ class _Reader:
     ) -> tuple[float, float, float]:
         v = self.get(table, path, key, default)
         if not isinstance(v, (list, tuple)) or len(v) != 3:
-            raise ConfigError(f"field '{path}.{key}' must be a list of 3 numbers, got {v!r}")
+            raise ConfigError("must be a list of 3 numbers", parameter=f"{path}.{key}", value=v)
         for x in v:
             if isinstance(x, bool) or not isinstance(x, (int, float)):
-                raise ConfigError(f"field '{path}.{key}' must be a list of 3 numbers, got {v!r}")
+                raise ConfigError("must be a list of 3 numbers", parameter=f"{path}.{key}", value=v)
         return (float(v[0]), float(v[1]), float(v[2]))
 
     def table(self, parent: dict[str, Any], path: str, key: str, required: bool = True) -> dict[str, Any]:
@@ -410,7 +410,7 @@ def parse_config(data: dict[str, Any], *, source: str = "user") -> Manipulator:
     )
     branch = r.get(g, "geometry", "elbow_branch", [1, 1, 1])
     if not isinstance(branch, (list, tuple)) or len(branch) != 3 or any(b not in (1, -1) for b in branch):
-        raise ConfigError(f"field 'geometry.elbow_branch' must be three values each +1 or -1, got {branch!r}")
+        raise ConfigError("must be three values each +1 or -1", parameter="geometry.elbow_branch", value=branch)
     geometry = Geometry(
         base_radius_m=r.number_or_triple(g, "geometry", "base_radius_m"),
         base_angles_rad=_radians3(r.triple(g, "geometry", "base_angles_deg")),
@@ -488,7 +488,11 @@ def load_config(path: str | Path) -> Manipulator:
         raise ConfigError(f"config file not found: {p}") from exc
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{p}: invalid TOML: {exc}") from exc
-    return parse_config(data, source=f"user: {p.name}")
+    try:
+        return parse_config(data, source=f"user: {p.name}")
+    except ConfigError as exc:
+        exc.file = exc.file or str(p)  # the value came from this file, not from an option
+        raise
 
 
 def default_config() -> Manipulator:
@@ -603,13 +607,13 @@ def config_to_toml(m: Manipulator, *, header: str = "", default_source: str = "u
 
 def _positive(value: float, name: str) -> None:
     if not (math.isfinite(value) and value > 0.0):
-        raise ConfigError(f"field '{name}' must be a positive finite number, got {value!r}")
+        raise ConfigError("must be a positive finite number", parameter=name, value=value)
 
 
 def _nonneg(value: float, name: str, allow_inf: bool = False) -> None:
     ok = value >= 0.0 and (allow_inf or math.isfinite(value))
     if not ok or math.isnan(value):
-        raise ConfigError(f"field '{name}' must be >= 0{' (inf = rigid)' if allow_inf else ''}, got {value!r}")
+        raise ConfigError(f"must be >= 0{' (inf = rigid)' if allow_inf else ''}", parameter=name, value=value)
 
 
 def _validate_lump(lump: LumpedMass, name: str) -> None:
@@ -627,7 +631,7 @@ def _validate_section_material(sec: Section, mat: Material, prefix: str) -> None
     _positive(mat.young_pa, f"{prefix}material.young_pa")
     _positive(mat.density_kg_m3, f"{prefix}material.density_kg_m3")
     if not (-1.0 < mat.poisson < 0.5):
-        raise ConfigError(f"field '{prefix}material.poisson' must lie in (-1, 0.5), got {mat.poisson!r}")
+        raise ConfigError("must lie in (-1, 0.5)", parameter=f"{prefix}material.poisson", value=mat.poisson)
 
 
 def validate(m: Manipulator) -> None:
@@ -655,7 +659,7 @@ def validate(m: Manipulator) -> None:
             if not math.isfinite(v):
                 sfx = f"[{i}]" if isinstance(raw, tuple) else ""
                 raise ConfigError(
-                    f"field 'geometry.{key}{sfx}' must be a finite height in m (0 = coplanar layers), got {v!r}"
+                    "must be a finite height in m (0 = coplanar layers)", parameter=f"geometry.{key}{sfx}", value=v
                 )
     shortest = min(g.proximal_length_per_chain + g.distal_length_per_chain)
     if 2.0 * g.hub_length_m >= shortest:
@@ -692,7 +696,8 @@ def validate(m: Manipulator) -> None:
         _nonneg(m.rig.clamped_length_m, "rig.clamped_length_m")
         if m.rig.clamped_length_m >= m.rig.length_m:
             raise ConfigError(
-                f"field 'rig.clamped_length_m' ({m.rig.clamped_length_m} m) must be shorter than 'rig.length_m' "
-                f"({m.rig.length_m} m)"
+                f"must be shorter than rig.length_m ({m.rig.length_m:.4g} m)",
+                parameter="rig.clamped_length_m",
+                value=m.rig.clamped_length_m,
             )
         _validate_lump(m.rig.chain_hinge, "rig.chain_hinge")

@@ -1,10 +1,16 @@
-"""The small, typed Python API: one call per question a user asks."""
+"""Internal: the modal analysis behind :func:`fpm_sim.modes` and :func:`fpm_sim.rig_modes`.
+
+Not a public surface: users call the facade (``import fpm_sim as fs``; :mod:`fpm_sim.api`). The functions
+here take the built model or, like the facade, the description first (``config``, then the pose or rig).
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import mujoco
+import numpy as np
 
 from fpm_sim.config import Manipulator, RigConfig, default_config
 from fpm_sim.errors import FpmSimError
@@ -26,18 +32,61 @@ class ModalComparison:
     transition_fd: ModalResult
     constrained: ModalResult
 
-    def relative_differences(self, n_modes: int) -> list[float]:
-        """``f_transition_fd / f_constrained - 1`` for the first ``n_modes`` modes."""
+    def relative_differences(self, n_modes: int | None = None) -> list[float]:
+        """``f_transition_fd / f_constrained - 1`` for the first ``n_modes`` modes (``None``: all)."""
         a, b = self.transition_fd.frequencies_hz, self.constrained.frequencies_hz
-        n = min(n_modes, len(a), len(b))
+        n = min(len(a), len(b)) if n_modes is None else min(n_modes, len(a), len(b))
         return [float(a[i] / b[i] - 1.0) for i in range(n)]
+
+    def to_dict(self, n_modes: int | None = None) -> dict[str, Any]:
+        """The transitionFD result's dictionary with the constrained modes and the relative differences
+        under ``cross_check``."""
+        payload = self.transition_fd.to_dict(n_modes)
+        payload["cross_check"] = {
+            "method": "constrained",
+            "modes": self.constrained.to_dict(n_modes)["modes"],
+            "relative_difference": self.relative_differences(n_modes),
+        }
+        return payload
+
+    def table(self, n_modes: int | None = None) -> str:
+        """Both methods' frequencies side by side, their relative difference and the damping ratio."""
+        a, b = self.transition_fd.modes, self.constrained.modes
+        lines = [f"{'mode':>4}  {'transitionFD (Hz)':>17}  {'constrained (Hz)':>16}  {'diff':>8}  {'damping':>8}"]
+        for i, d in enumerate(self.relative_differences(n_modes)):
+            lines.append(
+                f"{i + 1:>4}  {a[i].frequency_hz:>17.3f}  {b[i].frequency_hz:>16.3f}  {d:>8.2e}  "
+                f"{a[i].damping_ratio:>8.4f}"
+            )
+        from fpm_sim.model.options import resolution_footer
+
+        footer = resolution_footer(self.transition_fd.built.parameters)
+        return "\n".join([*lines, footer] if footer else lines)
+
+    def plot(self, ax: Any = None) -> Any:
+        """Relative difference ``|f_transition_fd / f_constrained - 1|`` per mode (log scale); returns the
+        ``Figure``."""
+        import matplotlib.pyplot as plt
+
+        if ax is None:
+            _, ax = plt.subplots(figsize=(5.5, 3.5), constrained_layout=True)
+        diff = np.abs(np.asarray(self.relative_differences(), float))
+        ax.semilogy(np.arange(1, len(diff) + 1), np.maximum(diff, 1e-16), "o-")
+        ax.set_xticks(np.arange(1, len(diff) + 1))
+        ax.set_xlabel("mode")
+        ax.set_ylabel("|f transitionFD / f constrained - 1|")
+        ax.set_title("the two linearisations of the same model")
+        ax.grid(True, which="both", alpha=0.3)
+        return ax.figure
 
 
 def analyse(built: BuiltModel, method: Method | str, n_modes: int | None) -> ModalResult | ModalComparison:
     """Modes of ``built`` by ``"transition_fd"``, ``"constrained"`` or ``"both"``, with the static
     equilibrium solved once (floating models are linearised at ``qpos0`` by each method)."""
     if method not in ("transition_fd", "constrained", "both"):
-        raise FpmSimError(f"unknown method {method!r} (--method); choose 'transition_fd', 'constrained' or 'both'")
+        raise FpmSimError(
+            "unknown method", parameter="method", value=method, hint="choose 'transition_fd', 'constrained' or 'both'"
+        )
     qpos = None if built.floating else static_equilibrium(built.model, mujoco.MjData(built.model))
     with blas_threads():  # one BLAS thread around the dense eigen-solves (fpm_sim.linear.threads)
         if method == "transition_fd":
@@ -58,9 +107,9 @@ def compare_methods(built: BuiltModel, *, n_modes: int | None = 10) -> ModalComp
 
 
 def manipulator_modes(
+    config: Manipulator | None,
     pose: Pose,
     *,
-    config: Manipulator | None = None,
     options: ModelOptions | None = None,
     n_modes: int | None = 10,
     method: Method = "transition_fd",
@@ -69,10 +118,10 @@ def manipulator_modes(
 
     Parameters
     ----------
+    config
+        Manipulator description; ``None``: the embedded default.
     pose
         End-effector pose (m, m, rad).
-    config
-        Manipulator description; the embedded default if omitted.
     options
         Discretisation and simulation options.
     n_modes
@@ -87,11 +136,11 @@ def manipulator_modes(
 
 
 def rig_modes(
+    config: Manipulator | None,
     rig: str,
     *,
     angle_deg: float = 180.0,
     piece: RigConfig | None = None,
-    config: Manipulator | None = None,
     options: ModelOptions | None = None,
     n_modes: int | None = 10,
     method: Method = "transition_fd",

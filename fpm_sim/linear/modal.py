@@ -271,14 +271,18 @@ class ModalResult:
         }
 
     def table(self, n_modes: int | None = None) -> str:
-        """A plain-text table of the modes."""
+        """A plain-text table of the modes, ending with the model's resolution (segments per link and the
+        estimated discretisation error of f1) where the model records it."""
+        from fpm_sim.model.options import resolution_footer
+
         modes = self.modes[:n_modes] if n_modes else self.modes
         lines = [f"{'mode':>4}  {'freq (Hz)':>11}  {'damping':>8}  {'character':<30}"]
         for i, m in enumerate(modes, 1):
             top = sorted(m.character.items(), key=lambda kv: -kv[1])[:2]
             char = ", ".join(f"{k} {v:.0%}" for k, v in top if v > 0.005)
             lines.append(f"{i:>4}  {m.frequency_hz:>11.3f}  {m.damping_ratio:>8.4f}  {char:<30}")
-        return "\n".join(lines)
+        footer = resolution_footer(self.built.parameters)
+        return "\n".join([*lines, footer] if footer else lines)
 
     def plot(self, ax: Any = None, *, index: int | None = None, n_modes: int = 1, scale_m: float = 0.03) -> Any:
         """Draw mode shapes in 3D over the equilibrium shape (matplotlib); returns the ``Figure``.
@@ -311,16 +315,21 @@ class ModalResult:
         pos = self.point_positions()
         disp = self.point_displacements(index)
         peak = max(float(np.max(np.linalg.norm(d, axis=1))) for d in disp.values()) or 1.0
-        ends = []
-        for link, p in pos.items():
-            ax.plot(p[:, 0], p[:, 1], p[:, 2], color="0.75", lw=1)
+        ends, ends0 = [], []
+        for k, (link, p) in enumerate(pos.items()):
+            ax.plot(p[:, 0], p[:, 1], p[:, 2], color="0.55", lw=1, ls="--", label="equilibrium" if k == 0 else None)
             q = p + disp[link] * (scale_m / peak)
-            ax.plot(q[:, 0], q[:, 1], q[:, 2], lw=2)
+            label = f"mode shape (largest displacement drawn {scale_m * 1e3:g} mm)" if k == 0 else None
+            ax.plot(q[:, 0], q[:, 1], q[:, 2], lw=2, color="C0", label=label)
             if link.startswith("distal"):
                 ends.append(q[-1])
-        if len(ends) == 3:  # the platform triangle through the platform joints
+                ends0.append(p[-1])
+        if len(ends) == 3:  # the platform triangle through the platform joints, deformed and at equilibrium
+            tri0 = np.array(ends0 + ends0[:1])
+            ax.plot(tri0[:, 0], tri0[:, 1], tri0[:, 2], color="0.55", lw=1, ls="--")
             tri = np.array(ends + ends[:1])
-            ax.plot(tri[:, 0], tri[:, 1], tri[:, 2], color="k", lw=1.5)
+            ax.plot(tri[:, 0], tri[:, 1], tri[:, 2], color="k", lw=1.5, label="platform")
+        ax.legend(fontsize=7, loc="upper left")
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
         ax.set_zlabel("z (m)")
@@ -419,7 +428,7 @@ def system_damping_matrix(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray
     return damping_matrix(model)
 
 
-def check_n_modes(n_modes: int | None, available: int, *, name: str = "n_modes (--n-modes)") -> None:
+def check_n_modes(n_modes: int | None, available: int, *, name: str = "n_modes") -> None:
     """``n_modes`` must be ``None`` (all) or an integer in ``[1, available]`` (the model's degrees of freedom).
 
     Raises

@@ -108,12 +108,12 @@ def _check_engine(link_model: str) -> None:
     if major >= 4 and link_model == "cable":
         raise LinkModelError(
             f"link model 'cable' needs the mujoco.elasticity.cable plugin, removed in MuJoCo {mujoco.__version__}; "
-            "install mujoco==3.17.0 (the pinned version) or use --link-model segments"
+            "install mujoco==3.17.0 (the pinned version) or use link_model='segments'"
         )
     if major >= 4 and link_model == "flex":
         raise LinkModelError(
             f"link model 'flex' is not linearised correctly on MuJoCo {mujoco.__version__} (mjd_transitionFD "
-            "misses the rod frames in mjData.plastic); install mujoco==3.17.0 or use --link-model segments"
+            "misses the rod frames in mjData.plastic); install mujoco==3.17.0 or use link_model='segments'"
         )
 
 
@@ -247,7 +247,7 @@ def add_flex_link(
             f"(thickness_m != height_m): MuJoCo's 1D flex has one bending stiffness, that of the weaker "
             f"({weak}) axis, so the other plane is too soft by I_max/I_min = "
             f"{max(i_in, i_out) / min(i_in, i_out):.2f}x; "
-            "use --link-model segments or cable for such sections",
+            "use link_model 'segments' or 'cable' for such sections",
             SectionWarning,
             stacklevel=3,
         )
@@ -361,7 +361,7 @@ def add_flex_link(
         warnings.warn(
             "link model 'flex' damps bending only along the rod's current curvature (MuJoCo 3.17's 1D flex "
             "damping): at an equilibrium sagged out of plane by gravity its in-plane modes come out undamped; "
-            "use --link-model segments or cable for modal damping ratios",
+            "use link_model 'segments' or 'cable' for modal damping ratios",
             DampingWarning,
             stacklevel=3,
         )

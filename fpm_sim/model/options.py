@@ -58,9 +58,11 @@ __all__ = [
     "open_for_writing",
     "passive_damping_matrix",
     "passive_stiffness_matrix",
+    "resolution_footer",
     "resolution_label",
     "resolution_of_parameters",
     "resolution_summary",
+    "resolution_text",
     "resolve_segments",
     "route_mujoco_warnings",
     "tangent_jacobian",
@@ -125,7 +127,9 @@ def resolve_segments(
         return segments
     fid = DEFAULT_FIDELITY if fidelity is None else fidelity
     if fid not in FIDELITY_SCALE:
-        raise FpmSimError(f"unknown fidelity {fid!r} (--fidelity); choose one of {', '.join(FIDELITIES)}")
+        raise FpmSimError(
+            "unknown fidelity", parameter="fidelity", value=fid, hint=f"choose one of {', '.join(FIDELITIES)}"
+        )
     return FIDELITY_RESOLUTION.get(link_model, FIDELITY_RESOLUTION["segments"])[fid]
 
 
@@ -154,6 +158,8 @@ def resolution_summary(options: ModelOptions) -> dict[str, Any]:
         "segments": n,
         "fidelity": options.fidelity,
         "f1_error_estimate": discretisation_error(n, options.link_model),
+        "axial": options.axial,
+        "gravity": options.gravity,
     }
 
 
@@ -164,23 +170,56 @@ def resolution_of_parameters(parameters: dict[str, Any]) -> dict[str, Any]:
         return {}
     lm = o.get("link_model", "segments")
     n = int(o.get("segments") or 1)
-    return {
+    out: dict[str, Any] = {
         "link_model": lm,
         "segments": n,
         "fidelity": o.get("fidelity"),
         "f1_error_estimate": discretisation_error(n, lm),
     }
+    out.update({k: bool(o[k]) for k in ("axial", "gravity") if k in o})
+    return out
+
+
+def resolution_text(summary: dict[str, Any]) -> str:
+    """One line from a :func:`resolution_summary` (or :func:`resolution_of_parameters`) dict, e.g.
+    ``12 segments per link (fidelity standard), estimated f1 discretisation error 0.28 %; axial springs off
+    (inextensible links), gravity off``; the axial springs and gravity are named where the dict records them
+    (commands differ in both, so every result says which it used)."""
+    lm = summary.get("link_model", "segments")
+    if lm == "rigid":
+        text = "rigid links (no discretisation)"
+    else:
+        n = int(summary.get("segments") or 1)
+        fid = summary.get("fidelity")
+        if fid:
+            how = f"fidelity {fid}"
+        else:  # no preset recorded: set explicitly, or read from a file (an atlas, a reduced model)
+            same = [f for f, r in FIDELITY_RESOLUTION.get(lm, {}).items() if r == n]
+            how = f"= fidelity {same[0]}" if same else "set explicitly"
+        err = summary.get("f1_error_estimate", discretisation_error(n, lm))
+        est = "not estimated" if err is None or math.isnan(err) else f"{100 * err:.2g} %"
+        text = f"{n} {lm} per link ({how}), estimated f1 discretisation error {est}"
+    extra = []
+    if "axial" in summary:
+        extra.append("axial springs on" if summary["axial"] else "axial springs off (inextensible links)")
+    if "gravity" in summary:
+        extra.append("gravity on" if summary["gravity"] else "gravity off")
+    return text + ("; " + ", ".join(extra) if extra else "")
+
+
+def resolution_footer(source: ModelOptions | dict[str, Any] | None) -> str:
+    """The line every result's table ends with, ``resolution: ...`` (:func:`resolution_text`), from model
+    options or a built model's ``parameters``; '' when ``source`` records no resolution."""
+    if source is None:
+        return ""
+    summary = resolution_summary(source) if isinstance(source, ModelOptions) else resolution_of_parameters(source)
+    return "resolution: " + resolution_text(summary) if summary else ""
 
 
 def resolution_label(options: ModelOptions) -> str:
-    """One line: ``12 segments per link (fidelity standard), estimated f1 discretisation error 0.28 %``."""
-    r = resolution_summary(options)
-    fid = f"fidelity {r['fidelity']}" if r["fidelity"] else "explicit --segments"
-    err = r["f1_error_estimate"]
-    est = "not estimated" if math.isnan(err) else f"{100 * err:.2g} %"
-    if options.link_model == "rigid":
-        return "rigid links (no discretisation)"
-    return f"{r['segments']} {options.link_model} per link ({fid}), estimated f1 discretisation error {est}"
+    """One line: ``12 segments per link (fidelity standard), estimated f1 discretisation error 0.28 %; axial
+    springs off (inextensible links), gravity off`` (:func:`resolution_text`)."""
+    return resolution_text(resolution_summary(options))
 
 
 def warn_if_coarse(options: ModelOptions, *, stacklevel: int = 2) -> None:
@@ -189,10 +228,12 @@ def warn_if_coarse(options: ModelOptions, *, stacklevel: int = 2) -> None:
     if err > RESOLUTION_WARN:
         finer = max(n for n in range(1, 201) if DISCRETISATION_COEFF[options.link_model] / n**2 > RESOLUTION_WARN) + 1
         warnings.warn(
-            f"coarse resolution: {options.segments} {options.link_model} per link gives an estimated discretisation "
-            f"error of {100 * err:.2g} % on the first frequency (--segments/--fidelity); use --segments >= {finer} "
-            f"or --fidelity standard for below {100 * RESOLUTION_WARN:g} %",
-            ResolutionWarning,
+            ResolutionWarning(
+                f"coarse resolution: {options.segments} {options.link_model} per link gives an estimated "
+                f"discretisation error of {100 * err:.2g} % on the first frequency; use segments >= {finer} "
+                f"or fidelity 'standard' for below {100 * RESOLUTION_WARN:g} %",
+                parameter="segments",
+            ),
             stacklevel=stacklevel + 1,
         )
 
@@ -201,6 +242,15 @@ TIMESTEP_MAX_S = 1e-4
 TIMESTEP_SAFETY = 0.5
 """Automatic timestep: ``h = TIMESTEP_SAFETY / omega_max`` (explicit springs are stable below 2)."""
 WELD_SOLIMP = (0.9999, 0.9999, 0.001, 0.5, 2.0)
+
+
+FLEX_DAMPING_LIMIT = 1.0
+"""Largest ``mu_max h`` of the flexes' explicit bending damping (:func:`_limit_flex_damping`): at 1 the
+stiffest damped motion is removed in one step; beyond it the explicit step flips its sign, beyond 2 it grows."""
+
+
+class FlexDampingWarning(FpmSimWarning):
+    """A flex's bending damping was lowered to keep the step stable (MuJoCo applies it explicitly)."""
 
 
 class TimestepError(FpmSimError):
@@ -261,13 +311,16 @@ class ModelOptions:
         elif self.fidelity is not None:
             if self.fidelity not in FIDELITY_SCALE:
                 raise FpmSimError(
-                    f"unknown fidelity {self.fidelity!r} (--fidelity); choose one of {', '.join(FIDELITIES)}"
+                    "unknown fidelity",
+                    parameter="fidelity",
+                    value=self.fidelity,
+                    hint=f"choose one of {', '.join(FIDELITIES)}",
                 )
             if self.segments != resolve_segments(fidelity=self.fidelity, link_model=self.link_model):
                 object.__setattr__(self, "fidelity", None)  # an explicit resolution overrides the preset
         check_link_model(self.link_model, self.segments)
         if self.timestep_s is not None and not (0.0 < self.timestep_s <= 1e-2):
-            raise TimestepError(f"timestep_s must be in (0, 0.01] s, got {self.timestep_s!r}")
+            raise TimestepError("must be in (0, 0.01] s", parameter="timestep_s", value=self.timestep_s)
 
 
 @dataclass
@@ -471,7 +524,47 @@ def compile_model(spec: mujoco.MjSpec, *, timestep_s: float | None) -> mujoco.Mj
     spec.option.timestep = h
     for eq in spec.equalities:
         eq.solref = [2.0 * h, 1.0]
+    _limit_flex_damping(spec, model, h)
     return spec.compile()
+
+
+def _limit_flex_damping(spec: mujoco.MjSpec, model: mujoco.MjModel, h: float) -> None:
+    """Scale the flexes' stiffness-proportional bending damping so that ``mu_max h <= FLEX_DAMPING_LIMIT``.
+
+    ``mu_max`` is the largest eigenvalue of ``M^-1 D`` with ``D`` the flexes' damping matrix at ``qpos0`` (the
+    passive damping less the joints' own, which ``implicitfast`` integrates implicitly). MuJoCo 3.17 applies
+    flex damping explicitly (neither ``implicitfast`` nor ``implicit`` takes it in), so its stiffest damped
+    motion is multiplied by ``1 - mu h`` a step: unstable beyond ``mu h = 2`` (measured: the largest
+    step-map eigenvalue is ``mu h - 1``), sign-flipping beyond 1. On the default manipulator (beta = 5.3e-5 s,
+    16 edges per link, gravity off) ``mu h`` was 10.7: 65 step-map modes at the Nyquist frequency grew by
+    ``|lambda| = 9.8`` a step, and none without the damping. The flex's edges are left undamped for the same
+    reason (:mod:`fpm_sim.model.deformable_links`). The low modes then keep only that fraction of the requested
+    damping: a :class:`FlexDampingWarning` says how much.
+    """
+    if model.nflex == 0 or not np.any(model.flex_damping > 0):
+        return
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    mass = np.zeros((model.nv, model.nv))
+    mujoco.mj_fullM(model, data, mass)
+    damp = passive_damping_matrix(model, model.qpos0.copy()) - np.diag(model.dof_damping)
+    mu_max = float(scipy.linalg.eigh(damp, mass, eigvals_only=True, subset_by_index=[model.nv - 1, model.nv - 1])[0])
+    if mu_max * h <= FLEX_DAMPING_LIMIT:
+        return
+    scale = FLEX_DAMPING_LIMIT / (mu_max * h)
+    beta = max(f.damping for f in spec.flexes)
+    for f in spec.flexes:
+        f.damping *= scale
+    warnings.warn(
+        FlexDampingWarning(
+            f"flex bending damping lowered from {beta:.3g} s to {beta * scale:.3g} s ({100 * scale:.2g} % of it): "
+            f"MuJoCo applies it explicitly, and at timestep {h:.3g} s the explicit step would flip or grow its "
+            f"stiffest damped motion (mu h = {mu_max * h:.3g} > {FLEX_DAMPING_LIMIT:g}); use link_model 'segments' "
+            "or 'cable' for modal damping ratios",
+            parameter="link_model",
+        ),
+        stacklevel=3,
+    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -517,11 +610,11 @@ def check_finite(name: str, value: Any, *, positive: bool = False) -> np.ndarray
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
-        raise FpmSimError(f"{name} must be a number, got {value!r}") from None
+        raise FpmSimError("must be a number", parameter=name, value=value) from None
     if not np.all(np.isfinite(arr)):
-        raise FpmSimError(f"{name} must be finite, got {value!r}")
+        raise FpmSimError("must be finite", parameter=name, value=value)
     if positive and not np.all(arr > 0):
-        raise FpmSimError(f"{name} must be positive, got {value!r}")
+        raise FpmSimError("must be positive", parameter=name, value=value)
     return arr
 
 
@@ -532,13 +625,13 @@ def check_count(name: str, value: Any, *, low: int = 1, high: int | None = None,
         ok, value = True, int(value)
     if not ok or value < low or (high is not None and value > high):
         bound = f"[{low}, {high}]" if high is not None else f">= {low}"
-        raise FpmSimError(f"{name} must be an integer {bound}{hint}, got {value!r}")
+        raise FpmSimError(f"must be an integer {bound}{hint}", parameter=name, value=value)
     return int(value)
 
 
 @contextlib.contextmanager
 def open_for_writing(
-    path: str | Path, *, parameter: str = "--out", error: type[FpmSimError] = FpmSimError
+    path: str | Path, *, parameter: str = "out", error: type[FpmSimError] = FpmSimError
 ) -> Iterator[IO[bytes]]:
     """Open ``path`` for binary writing (parent folders created), turning a failure (read-only place, a folder
     in the way, ...) into ``error`` naming the file and ``parameter`` instead of a library's own message."""
@@ -547,6 +640,8 @@ def open_for_writing(
         p.parent.mkdir(parents=True, exist_ok=True)
         handle = open(p, "wb")  # closed below
     except OSError as e:
-        raise error(f"cannot write {str(p)!r} ({e.strerror or e}); choose a writable path for {parameter}") from e
+        raise error(
+            f"cannot write {str(p)!r} ({e.strerror or e})", parameter=parameter, hint="choose a writable path"
+        ) from e
     with handle:
         yield handle

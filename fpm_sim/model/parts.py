@@ -53,7 +53,10 @@ def check_link_model(link_model: str, segments: int | None) -> None:
     """Raise :class:`LinkModelError` for an unknown model or an impossible resolution."""
     if link_model not in LINK_MODELS:
         raise LinkModelError(
-            f"unknown link model {link_model!r} (--link-model); choose one of {', '.join(LINK_MODELS)}"
+            "unknown link model",
+            parameter="link_model",
+            value=link_model,
+            hint=f"choose one of {', '.join(LINK_MODELS)}",
         )
     if link_model == "rigid":
         return
@@ -61,8 +64,9 @@ def check_link_model(link_model: str, segments: int | None) -> None:
     if not (isinstance(segments, int) and not isinstance(segments, bool) and low <= segments <= MAX_SEGMENTS):
         what = {"flex": "flex edges", "segments": "spring locations", "cable": "elastic joints"}[link_model]
         raise LinkModelError(
-            f"link model {link_model!r} needs {low} <= segments <= {MAX_SEGMENTS} ({what} per link; --segments), "
-            f"got {segments!r}"
+            f"link model {link_model!r} needs {low} <= segments <= {MAX_SEGMENTS} ({what} per link)",
+            parameter="segments",
+            value=segments,
         )
 
 

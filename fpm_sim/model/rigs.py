@@ -51,7 +51,9 @@ class RigSetup:
         if self.rig not in RIGS:
             raise RigError(f"unknown rig {self.rig!r}; choose one of {', '.join(RIGS)}")
         if self.rig == "chain" and not (10.0 <= self.angle_deg <= 180.0):
-            raise RigError(f"chain hinge angle --angle-deg must lie in [10, 180] degrees, got {self.angle_deg}")
+            raise RigError(
+                "the chain hinge angle must lie in [10, 180] degrees", parameter="rig.angle_deg", value=self.angle_deg
+            )
 
 
 def _clamp_springs(body: mujoco.MjsBody, prefix: str, k: float, beta: float, kinds: dict[str, str]) -> None:

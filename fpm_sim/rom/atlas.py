@@ -342,6 +342,15 @@ class ModalAtlas:
         """Estimated worst relative frequency error of a query at ``pose`` (module docstring): a quarter of the
         largest leave-one-out error over the modes and the nodes of its grid cell and their neighbours; NaN
         without an estimate."""
+        return self._estimate(pose)[0]
+
+    def error_estimate_node(self, pose: Pose) -> tuple[float, float, float] | None:
+        """The grid node ``(x_m, y_m, phi_rad)`` whose leave-one-out error sets :meth:`error_estimate` at
+        ``pose`` (None without an estimate): a node whose interpolation stencil reaches a near-singular pose
+        makes the estimate large even where the query itself interpolates well."""
+        return self._estimate(pose)[1]
+
+    def _estimate(self, pose: Pose) -> tuple[float, tuple[float, float, float] | None]:
         err = self.loo_errors()
         window = []
         for values, v in zip((self.x_m, self.y_m, self.phi_rad), (pose.x_m, pose.y_m, pose.phi_rad)):
@@ -350,8 +359,12 @@ class ModalAtlas:
             window.append(slice(max(lo - 1, 0), min(hi + 2, len(values))))
         block = err[tuple(window)]
         if np.all(np.isnan(block)):
-            return math.nan
-        return float(np.nanmax(block)) / 4.0
+            return math.nan, None
+        worst = np.unravel_index(int(np.nanargmax(block)), block.shape)
+        node = tuple(
+            float(values[w.start + int(k)]) for values, w, k in zip((self.x_m, self.y_m, self.phi_rad), window, worst)
+        )
+        return float(np.nanmax(block)) / 4.0, (node[0], node[1], node[2])
 
     def _method(self, method: str) -> str:
         if method not in ("auto", "linear", "cubic"):
@@ -390,7 +403,7 @@ class ModalAtlas:
         c = np.vstack([np.hstack([cq, np.zeros_like(cq)]), np.hstack([-ca * w2, -ca @ xi])])
         d = get["d"].copy()
         d[cq.shape[0] :] = ca @ gamma  # acceleration feedthrough of the interpolated modes
-        estimate = self.error_estimate(pose)
+        estimate, node = self._estimate(pose)
         if math.isnan(estimate):
             warnings.warn(
                 "the atlas has fewer than 3 grid values on every axis: no interpolation error estimate; build it on "
@@ -400,9 +413,11 @@ class ModalAtlas:
             )
         elif estimate > ATLAS_ERROR_WARN:
             warnings.warn(
-                f"atlas query at {pose.label()}: estimated interpolation error {estimate:.1%} (leave-one-out at the "
-                f"neighbouring grid nodes) exceeds {ATLAS_ERROR_WARN:.0%}; refine the atlas grid around this pose or "
-                "compute the pose directly (fpm-sim reduce)",
+                f"atlas query at {pose.label()}: estimated interpolation error {estimate:.1%} exceeds "
+                f"{ATLAS_ERROR_WARN:.0%}; the estimate is the worst leave-one-out error at the neighbouring grid "
+                f"nodes, here at the node {_node_label(node)}, whose own neighbours may be near a singularity, so "
+                "it can overstate the error at this pose; check it with a direct computation (fpm-sim atlas query "
+                "--direct, fpm-sim reduce) or refine the atlas grid around this pose",
                 AtlasAccuracyWarning,
                 stacklevel=2,
             )
@@ -411,6 +426,7 @@ class ModalAtlas:
             "method": method,
             "pose": asdict(pose),
             "error_estimate": None if math.isnan(estimate) else estimate,
+            "error_estimate_node": None if node is None else list(node),
         }
         return ReducedModel(
             a=a,
@@ -439,7 +455,25 @@ class ModalAtlas:
         """
         return self._interp("label_freq_hz", pose, self._method(method))
 
+    def to_xarray(self) -> Any:
+        """Tracked frequencies over the grid poses (:func:`fpm_sim.results.frequencies_dataset`; ``mode`` is the
+        tracked label, poses in :meth:`poses` order) with ``mac`` (the label's MAC with its parent pose)."""
+        from fpm_sim.results import frequencies_dataset
+
+        poses = self.poses()
+        f = self.nodes["label_freq_hz"].reshape(len(poses), self.n_modes)
+        return frequencies_dataset(
+            f,
+            x_mm=[p.x_m * 1e3 for p in poses],
+            y_mm=[p.y_m * 1e3 for p in poses],
+            phi_rad=[p.phi_rad for p in poses],
+            status=np.where(np.isfinite(f).all(axis=1), "ok", "not_computed"),
+            data_vars={"mac": (("pose", "mode"), self.nodes["mac"].reshape(len(poses), self.n_modes))},
+            attrs={"config": str(self.parameters.get("config", ""))},
+        )
+
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: the grid (mm, rad), inputs and outputs, weak links and label changes, parameters."""
         return {
             "x_mm": (self.x_m * 1e3).tolist(),
             "y_mm": (self.y_m * 1e3).tolist(),
@@ -480,14 +514,20 @@ class ModalAtlas:
             lines.append(f"{pose.x_m * 1e3:>7.1f} {pose.y_m * 1e3:>7.1f} {pose.phi_rad:>6.3f}  " + "  ".join(cells))
         return "\n".join(lines)
 
-    def plot(self, labels: Sequence[int] = (1, 2, 3), *, phi_index: int = 0, axes: Any = None) -> Any:
+    def plot(self, ax: Any = None, *, labels: Sequence[int] = (1, 2, 3), phi_index: int = 0, axes: Any = None) -> Any:
         """Tracked frequency (Hz) of the given mode labels (1-based) over the x-y grid at one rotation, with
-        the label changes marked (matplotlib)."""
+        the label changes marked; returns the ``Figure``.
+
+        ``ax``: one axes for the first label; ``axes``: one per label; default a new figure.
+        """
         import matplotlib.pyplot as plt
 
-        labels = list(labels)
-        if axes is None:
-            _, axes = plt.subplots(1, len(labels), figsize=(4.2 * len(labels), 3.8), squeeze=False)
+        labels = [lab for lab in labels if lab <= self.n_modes]
+        if ax is not None:
+            axes, labels = [ax], labels[:1]
+        elif axes is None:
+            fig, axes = plt.subplots(1, len(labels), figsize=(4.2 * len(labels), 3.8), squeeze=False)
+            fig.set_layout_engine("constrained")
             axes = axes[0]
         xx, yy = np.meshgrid(self.x_m * 1e3, self.y_m * 1e3, indexing="ij")
         for ax, lab in zip(np.atleast_1d(axes), labels):
@@ -499,8 +539,14 @@ class ModalAtlas:
             ax.set_xlabel("x (mm)")
             ax.set_ylabel("y (mm)")
             ax.set_aspect("equal")
-            ax.figure.colorbar(sc, ax=ax, shrink=0.8, label="Hz")
-        return axes
+            ax.figure.colorbar(sc, ax=ax, shrink=0.8, label="tracked frequency (Hz)")
+        figure = np.atleast_1d(axes)[0].figure
+        figure.suptitle(
+            f"red x: the label changes character there (its shape's MAC with the parent pose below {MAC_WARN:g}): "
+            "its frequency is unreliable",
+            fontsize=9,
+        )
+        return figure
 
     def save(self, path: str | Path) -> Path:
         p = Path(path)
@@ -593,7 +639,7 @@ def _bfs_tree(shape: tuple[int, int, int], root: tuple[int, int, int]) -> tuple[
 def _axis(values: Sequence[float], name: str) -> np.ndarray:
     a = np.asarray(sorted(float(v) for v in values))
     if a.size == 0 or np.any(~np.isfinite(a)) or np.any(np.diff(a) <= 0):
-        raise AtlasError(f"{name} must list distinct finite grid values, got {list(values)!r}")
+        raise AtlasError("must list distinct finite grid values", parameter=name, value=list(values))
     return a
 
 
@@ -625,12 +671,12 @@ def build_atlas(
     accel_fraction
         Accelerometer position on the distal links (the reduced models' acceleration outputs).
     """
-    xs, ys, ps = _axis(x_m, "x_m (--x-mm)"), _axis(y_m, "y_m (--y-mm)"), _axis(phi_rad, "phi_rad (--phi-rad)")
+    xs, ys, ps = _axis(x_m, "x_m"), _axis(y_m, "y_m"), _axis(phi_rad, "phi_rad")
     try:
-        check_count("n_modes (--modes)", n_modes, low=1, high=200)
-        check_count("n_extra (--extra)", n_extra, low=0, high=200)
+        check_count("n_modes", n_modes, low=1, high=200)
+        check_count("n_extra", n_extra, low=0, high=200)
     except FpmSimError as e:
-        raise AtlasError(str(e)) from None
+        raise AtlasError(e.message, parameter=e.parameter, value=e.value) from None
     shape = (len(xs), len(ys), len(ps))
     opts = options or ModelOptions(axial=False)  # the shared default resolution (model.options)
     if root is None:
@@ -717,3 +763,10 @@ def build_atlas(
         },
         **names,
     )
+
+
+def _node_label(node: tuple[float, float, float] | None) -> str:
+    """``(x mm, y mm, phi rad)`` of a grid node."""
+    if node is None:
+        return "-"
+    return f"({node[0] * 1e3:g} mm, {node[1] * 1e3:g} mm, {node[2]:g} rad)"

@@ -324,7 +324,33 @@ class StepResponse:
     def output(self, name: str) -> np.ndarray:
         return self.y[:, self.output_names.index(name)]
 
-    def plot(self, outputs: list[str] | None = None, *, ax: Any = None, label: str | None = None) -> Any:
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: the input, each output's name, unit, final and peak value, and the samples."""
+        return {
+            "input": self.input_name,
+            "t_s": self.t_s.tolist(),
+            "outputs": [
+                {
+                    "name": n,
+                    "unit": u,
+                    "final": float(self.y[-1, j]),
+                    "peak": float(self.y[np.argmax(np.abs(self.y[:, j])), j]),
+                    "values": self.y[:, j].tolist(),
+                }
+                for j, (n, u) in enumerate(zip(self.output_names, self.output_units))
+            ],
+        }
+
+    def table(self) -> str:
+        """Each output's final and peak value after the unit step (SI units)."""
+        lines = [f"unit step on {self.input_name}, {self.t_s[-1]:.4g} s", f"{'output':<24} {'final':>12} {'peak':>12}"]
+        for j, (n, u) in enumerate(zip(self.output_names, self.output_units)):
+            peak = self.y[np.argmax(np.abs(self.y[:, j])), j]
+            lines.append(f"{n + ' (' + u + ')':<24} {self.y[-1, j]:>12.4g} {peak:>12.4g}")
+        return "\n".join(lines)
+
+    def plot(self, ax: Any = None, *, outputs: list[str] | None = None, label: str | None = None) -> Any:
+        """The outputs (default those that are not accelerations) against time; returns the ``Figure``."""
         import matplotlib.pyplot as plt
 
         outputs = outputs or [n for n in self.output_names if not n.startswith("acc")]
@@ -339,7 +365,7 @@ class StepResponse:
         ax.set_xlabel("t (s)")
         ax.set_title(f"unit step on {self.input_name}")
         ax.legend(fontsize=8)
-        return ax
+        return ax.figure
 
 
 @dataclass
@@ -465,7 +491,10 @@ class ReducedModel:
         lines = [f"{'mode':>4}  {'freq (Hz)':>11}  {'damping':>8}"]
         for i, (f, z) in enumerate(zip(self.frequencies_hz, self.damping_ratios), 1):
             lines.append(f"{i:>4}  {f:>11.3f}  {z:>8.4f}")
-        return "\n".join(lines)
+        from fpm_sim.model.options import resolution_footer
+
+        footer = resolution_footer(self.parameters)
+        return "\n".join([*lines, footer] if footer else lines)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (no matrices)."""
@@ -502,7 +531,7 @@ class ReducedModel:
 
     def plot(self, ax: Any = None, *, input_name: str = "force_x", duration_s: float = 0.2) -> Any:
         """Step response of the displacement outputs to ``input_name`` over ``duration_s`` (s); the ``Figure``."""
-        return self.step_response(input_name, duration_s=duration_s).plot(ax=ax).figure
+        return self.step_response(input_name, duration_s=duration_s).plot(ax=ax)
 
     # -- files -------------------------------------------------------------------------------
 
@@ -554,7 +583,7 @@ class ReducedModel:
                     },
                 )
         else:
-            raise ReductionError(f"output file {str(p)!r} must end in .mat or .npz (--out)")
+            raise ReductionError(f"output file {str(p)!r} must end in .mat or .npz", parameter="out")
         return p
 
 
@@ -608,27 +637,29 @@ def _choose_modes(system: ModalSystem, n_modes: int | None, band_hz: float | Non
     given = [n for n, v in (("n_modes", n_modes), ("band_hz", band_hz), ("error_bound", error_bound)) if v is not None]
     if len(given) != 1:
         raise ReductionError(
-            "choose the modes kept by exactly one of n_modes (--modes), band_hz (--band-hz) or error_bound "
-            f"(--error-bound); got {', '.join(given) or 'none'}"
+            "choose the modes kept by exactly one of n_modes, band_hz or error_bound; "
+            f"got {', '.join(given) or 'none'}",
+            parameter=given[-1] if given else "n_modes",
         )
     n_all = len(system.omega_rad_s)
     if n_modes is not None:
         if not (isinstance(n_modes, (int, np.integer)) and 1 <= n_modes <= n_all):
-            raise ReductionError(f"n_modes (--modes) must be an integer in [1, {n_all}], got {n_modes!r}")
+            raise ReductionError(f"must be an integer in [1, {n_all}]", parameter="n_modes", value=n_modes)
         return int(n_modes)
     if band_hz is not None:
         if not (math.isfinite(band_hz) and band_hz > 0):
-            raise ReductionError(f"band_hz (--band-hz) must be a positive frequency, got {band_hz!r}")
+            raise ReductionError("must be a positive frequency", parameter="band_hz", value=band_hz)
         k = int(np.sum(system.frequencies_hz <= band_hz))
         if k == 0:
             raise ReductionError(
-                f"no mode below band_hz = {band_hz:g} Hz (the first is {system.frequencies_hz[0]:.3g} Hz); "
-                "raise --band-hz"
+                f"no mode below {band_hz:g} Hz (the first is {system.frequencies_hz[0]:.3g} Hz)",
+                parameter="band_hz",
+                hint="raise it",
             )
         return k
     assert error_bound is not None
     if not (0.0 < error_bound < 1.0):
-        raise ReductionError(f"error_bound (--error-bound) must lie in (0, 1), got {error_bound!r}")
+        raise ReductionError("must lie in (0, 1)", parameter="error_bound", value=error_bound)
     for k in range(1, n_all + 1):
         if static_truncation_error(system, k) <= error_bound:
             return k

@@ -22,7 +22,7 @@ value at the end of the record: the standard response window of impact testing, 
 damping ``ln(1 / window_end) / (2 pi f record_s)`` to every mode without shifting its peak) and are
 zero-padded to ``pad_s`` before the FFT. The FRF estimate is H1: ``sum conj(F_i) A_i / sum |F_i|^2``
 over the impacts, with its ordinary coherence. The first frequency is the lowest peak of ``|H1|`` above
-``f_min_hz`` with a prominence of at least ``min_prominence_db`` (:func:`fpm_sim.frf.pick_peaks`).
+``f_min_hz`` with a prominence of at least ``min_prominence_db`` (:func:`fpm_sim.response.pick_peaks`).
 
 Study set-up, as assumed here (the study does not say which chain or where along the link): the
 accelerometer at mid-span of chain 0's distal link (the "second link"), the hammer hitting the same
@@ -53,6 +53,7 @@ from __future__ import annotations
 import copy
 import math
 import time
+import warnings
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -60,16 +61,18 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from fpm_sim.frf import (
+from fpm_sim.errors import FpmSimWarning
+from fpm_sim.linear.equilibrium import static_equilibrium
+from fpm_sim.model.options import BuiltModel
+from fpm_sim.response import (
     DEFAULT_MIN_PROMINENCE_DB,
     FrequencyResponse,
     FrfError,
     LinkPoint,
     half_power_damping,
     material_point,
+    modal_frf,
 )
-from fpm_sim.linear.equilibrium import static_equilibrium
-from fpm_sim.model.options import BuiltModel
 from fpm_sim.rom.reduction import ModalSystem, modal_system
 
 __all__ = [
@@ -327,6 +330,39 @@ class ImpactTestResult:
     travels in the UFF record written by :func:`write_uff58`) so that the EMA removes the window's decay."""
     setup: ImpactSetup
     parameters: dict[str, Any] = field(default_factory=dict)
+    modal_constants: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    """Per mode of the linear model: ``(c phi_r)(phi_r' b)`` (1/kg), hammer force in, acceleration out."""
+    excitation: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    """Per mode: ``|phi_r' b|``, how strongly the hammer excites it (1/sqrt(kg))."""
+    observation: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    """Per mode: ``|c phi_r|``, how strongly the accelerometer sees it (1/sqrt(kg))."""
+
+    def mode1_note(self) -> str:
+        """In words: which mode the first FRF peak is and, when it is not mode 1, why mode 1 was not seen (its
+        modal constant at this hammer/accelerometer pair against the seen mode's, split into how strongly the
+        hammer excites it and how strongly the accelerometer sees it); '' when the first peak is mode 1."""
+        k = self.first_peak_mode
+        if k == 1:
+            return ""
+        f1 = self.modal_f1_hz
+        if k == 0:
+            return f"no FRF peak in the band: mode 1 ({f1:.4g} Hz) and the others are not seen at this set-up"
+        text = (
+            f"the first FRF peak ({self.first_peak_hz:.4g} Hz) is mode {k} ({self.modal_freq_hz[k - 1]:.4g} Hz); "
+            f"mode 1 ({f1:.4g} Hz) is not seen"
+        )
+        if self.modal_constants.size >= k:
+            r = np.abs(self.modal_constants)
+            ex, ob = self.excitation, self.observation
+            ratio = r[0] / r[k - 1] if r[k - 1] > 0 else math.inf
+            text += (
+                f": at hammer {self.setup.impact.label()} and accelerometer {self.setup.accelerometer.label()} mode "
+                f"1's modal constant is {ratio:.2g} of mode {k}'s (the hammer excites mode 1 "
+                f"{ex[0] / ex[k - 1]:.2g}x as strongly as mode {k}, the accelerometer sees it {ob[0] / ob[k - 1]:.2g}x "
+                "as strongly), so its peak is too small to stand out; move the hammer or the accelerometer (e.g. "
+                "another axis: fpm-sim readability ranks the points)"
+            )
+        return text
 
     @property
     def first_peak_mode(self) -> int:
@@ -339,7 +375,7 @@ class ImpactTestResult:
     @property
     def identified_damping_ratio(self) -> float:
         """Damping ratio of the first mode identified from the test: the half-power reading minus the damping
-        the exponential window adds (pass it to :func:`fpm_sim.frf.modal_frf` or ``fpm-sim frf
+        the exponential window adds (pass it to :func:`fpm_sim.response.modal_frf` or ``fpm-sim frf
         --damping-ratio``)."""
         return self.damping_half_power - self.window_damping
 
@@ -355,6 +391,7 @@ class ImpactTestResult:
             "first_peak_hz": self.first_peak_hz,
             "modal_f1_hz": self.modal_f1_hz,
             "first_peak_mode": self.first_peak_mode,
+            "first_peak_note": self.mode1_note(),
             "relative_error": self.relative_error,
             "modal_freq_hz": self.modal_freq_hz[:8].tolist(),
             "peaks": [
@@ -385,8 +422,7 @@ class ImpactTestResult:
             f"{len(self.records)} impacts of {self.setup.pulse_s * 1e3:g} ms, record {self.setup.record_s:g} s",
             f"  first FRF peak   {self.first_peak_hz:10.3f} Hz",
             f"  modal f1         {self.modal_f1_hz:10.3f} Hz   (difference {self.relative_error * 100:+.3f} %)",
-            f"  first peak is mode {self.first_peak_mode}"
-            + ("" if self.first_peak_mode == 1 else ": mode 1 is not seen with this hammer and accelerometer"),
+            "  first peak is mode 1" if self.first_peak_mode == 1 else f"  {self.mode1_note()}",
             f"  half-power zeta  {self.damping_half_power:10.4f}     (includes {self.window_damping:.4f} from the "
             f"exponential window: identified {self.identified_damping_ratio:.4f})",
             f"{'peak':>6}  {'freq (Hz)':>10}  {'prominence (dB)':>16}",
@@ -395,11 +431,15 @@ class ImpactTestResult:
             lines.append(f"{i:>6}  {p['freq_hz']:>10.3f}  {p['prominence_db']:>16.1f}")
         return "\n".join(lines)
 
-    def plot(self, *, axes: Any = None) -> Any:
-        """H1 magnitude and phase with the modal frequencies marked, and the coherence (matplotlib)."""
+    def plot(self, ax: Any = None, *, axes: Any = None) -> Any:
+        """H1 magnitude and phase with the modal frequencies marked, and the coherence; returns the ``Figure``.
+
+        ``ax``: one axes for the H1 magnitude alone; ``axes``: three (magnitude, phase, coherence); default a
+        new figure.
+        """
         import matplotlib.pyplot as plt
 
-        if axes is None:
+        if ax is None and axes is None:
             _, axes = plt.subplots(3, 1, figsize=(8, 7), sharex=True, gridspec_kw={"height_ratios": [2, 1, 1]})
         band = (self.frf.freq_hz >= self.setup.f_min_hz) & (self.frf.freq_hz <= self.setup.f_max_hz)
         sub = FrequencyResponse(
@@ -411,6 +451,10 @@ class ImpactTestResult:
             self.frf.response,
             modal_freq_hz=self.modal_freq_hz,
         )
+        if ax is not None:
+            sub.plot(ax=ax, label=f"H1, {len(self.records)} impacts")
+            ax.axvline(self.first_peak_hz, color="r", ls="--", lw=0.8)
+            return ax.figure
         sub.plot(axes=axes[:2], label=f"H1, {len(self.records)} impacts")
         axes[1].set_xlabel("")
         axes[0].axvline(self.first_peak_hz, color="r", ls="--", lw=0.8)
@@ -418,7 +462,7 @@ class ImpactTestResult:
         axes[2].set_ylabel("coherence")
         axes[2].set_ylim(0, 1.05)
         axes[2].set_xlabel("frequency (Hz)")
-        return axes
+        return axes[0].figure
 
 
 def virtual_impact_test(
@@ -488,7 +532,12 @@ def virtual_impact_test(
     zeta = half_power_damping(freq[keep], np.abs(h1[keep]), first) if peaks else math.nan
     tau = exp_window_tau_s(dt * (n_samples - 1), setup.window_end)
     window_zeta = 1.0 / (tau * 2.0 * math.pi * first) if peaks and math.isfinite(tau) else 0.0
-    return ImpactTestResult(
+    # the linear model's modal constants at this set-up: why a mode is (not) seen
+    one_hz = np.array([1.0])
+    constants = modal_frf(system, excitation=setup.impact, response=setup.accelerometer, freq_hz=one_hz).residues
+    hammer = modal_frf(system, excitation=setup.impact, response=setup.impact, freq_hz=one_hz).residues
+    sensor = modal_frf(system, excitation=setup.accelerometer, response=setup.accelerometer, freq_hz=one_hz).residues
+    result = ImpactTestResult(
         frf=frf,
         records=records,
         first_peak_hz=first,
@@ -505,7 +554,13 @@ def virtual_impact_test(
             "rollout_timestep_s": h,
             "rollout_integrator": mujoco.mjtIntegrator(rollout.model.opt.integrator).name,
         },
+        modal_constants=np.asarray(constants),
+        excitation=np.sqrt(np.abs(hammer)),  # driving point: (phi' b)^2
+        observation=np.sqrt(np.abs(sensor)),  # driving point at the accelerometer: (c phi)^2
     )
+    if result.first_peak_mode != 1:
+        warnings.warn(result.mode1_note(), FpmSimWarning, stacklevel=2)
+    return result
 
 
 def _with_discrete_step(built: BuiltModel, timestep_s: float) -> BuiltModel:

@@ -95,7 +95,7 @@ def _finite(name: str, value: Any) -> np.ndarray:
     try:
         return check_finite(name, value)
     except FpmSimError as e:
-        raise RolloutError(str(e)) from None
+        raise RolloutError(e.message, parameter=e.parameter, value=e.value, hint=e.hint) from None
 
 
 def constant(*values: float) -> Profile:
@@ -106,7 +106,7 @@ def constant(*values: float) -> Profile:
 
 def step_at(t0_s: float, *values: float) -> Profile:
     """Zero before ``t0_s``, ``values`` from then on."""
-    _finite("t0_s (--load-start-s)", t0_s)
+    _finite("t0_s", t0_s)
     v = _finite("step values", values)
     z = np.zeros_like(v)
     return lambda t: v if t >= t0_s else z
@@ -114,8 +114,8 @@ def step_at(t0_s: float, *values: float) -> Profile:
 
 def sine(freq_hz: float, *amplitudes: float) -> Profile:
     """``amplitudes * sin(2 pi f t)``; ``freq_hz`` finite and >= 0."""
-    if not _finite("freq_hz (--load-freq-hz)", freq_hz) >= 0:
-        raise RolloutError(f"freq_hz (--load-freq-hz) must be >= 0 Hz, got {freq_hz!r}")
+    if not _finite("freq_hz", freq_hz) >= 0:
+        raise RolloutError("must be >= 0 Hz", parameter="freq_hz", value=freq_hz)
     a = _finite("sine amplitudes", amplitudes)
     return lambda t: a * math.sin(2.0 * math.pi * freq_hz * t)
 
@@ -182,7 +182,7 @@ class RolloutResult:
         """Write ``.csv`` (one column per signal) or ``.npz`` by suffix."""
         p = Path(path)
         if p.suffix not in (".csv", ".npz"):
-            raise RolloutError(f"output file {str(p)!r} must end in .csv or .npz (--out)")
+            raise RolloutError(f"output file {str(p)!r} must end in .csv or .npz", parameter="out")
         cols = self.columns()
         with open_for_writing(p, error=RolloutError) as f:
             if p.suffix == ".csv":
@@ -236,11 +236,14 @@ class RolloutResult:
     def plot(self, ax: Any = None, *, axes: Any = None) -> Any:
         """End-effector displacement, deflection and accelerations against time; returns the ``Figure``.
 
-        ``ax`` (or ``axes``): a sequence of 2 (3 with accelerations) axes to draw on; default a new figure.
+        ``ax`` (or ``axes``): a sequence of 2 (3 with accelerations) axes to draw on, or one axes for the
+        end-effector displacement alone; default a new figure.
         """
         import matplotlib.pyplot as plt
 
         axes = ax if ax is not None else axes
+        if axes is not None and not np.iterable(axes):
+            axes = [axes]
         n_ax = 3 if self.accel else 2
         if axes is None:
             _, axes = plt.subplots(n_ax, 1, figsize=(8, 2.6 * n_ax), sharex=True)
@@ -252,6 +255,9 @@ class RolloutResult:
         ax2.plot(self.t_s, self.ee_disp[:, 2] * 1e3, color="0.5", lw=0.8, label="phi")
         ax2.set_ylabel("phi (mrad)")
         ax.legend(loc="upper left", fontsize=8)
+        if len(axes) == 1:
+            ax.set_xlabel("t (s)")
+            return ax.figure
         ax = axes[1]
         ax.plot(self.t_s, self.deflection[:, 0] * 1e3, label="x")
         ax.plot(self.t_s, self.deflection[:, 1] * 1e3, label="y")
@@ -280,7 +286,7 @@ def aligned_options(manip: Manipulator, pose: Pose, options: ModelOptions, outpu
 def _load(name: str, value: ArrayLike, t_s: float) -> np.ndarray:
     v = np.asarray(value, float)
     if v.shape != (3,) or not np.all(np.isfinite(v)):
-        raise RolloutError(f"{name} must give 3 finite values, got {value!r} at t = {t_s:g} s")
+        raise RolloutError(f"must give 3 finite values at t = {t_s:g} s", parameter=name, value=value)
     return v
 
 
@@ -332,7 +338,7 @@ def rollout(
     """
     model = built.model
     if not (isinstance(duration_s, (int, float)) and duration_s > 0 and math.isfinite(duration_s)):
-        raise RolloutError(f"duration_s (--duration-s) must be a positive finite time, got {duration_s!r}")
+        raise RolloutError("must be a positive finite time", parameter="duration_s", value=duration_s)
     h = float(model.opt.timestep)
     if not (isinstance(output_step_s, (int, float)) and math.isfinite(output_step_s)):
         raise RolloutError(f"output_step_s must be a finite time, got {output_step_s!r}")
@@ -401,7 +407,7 @@ def rollout(
         data.xfrc_applied[bid] = 0.0
         data.qfrc_applied[:] = 0.0
         if ee_wrench is not None:
-            w = _load("ee_wrench (--force-x-n, --force-y-n, --moment-z-nm)", ee_wrench(tk), tk)
+            w = _load("ee_wrench", ee_wrench(tk), tk)
             wrench[k] = w
             data.xfrc_applied[bid, 0:2] = w[0:2]
             data.xfrc_applied[bid, 5] = w[2]
@@ -437,8 +443,9 @@ def rollout(
                 if bar is not None:
                     bar.close()
                 raise RolloutError(
-                    f"the simulation diverged at t = {t[k + 1]:.4g} s: {why}; reduce the loads (--force-x-n, "
-                    "--force-y-n, --moment-z-nm, motor torques) or the timestep (timestep_s)"
+                    f"the simulation diverged at t = {t[k + 1]:.4g} s: {why}",
+                    parameter="ee_wrench" if ee_wrench is not None else "motor_torque",
+                    hint="reduce the loads (ee_wrench, motor_torque) or the timestep (timestep_s)",
                 )
             if bar is not None:
                 bar.update(1)

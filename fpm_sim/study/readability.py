@@ -7,7 +7,7 @@ seven (the cells left empty in its Table 5, ``fpm_sim/data/comsol_table5.csv``),
 placed for a clean impact and more damping. The model can say how strongly the impact excites mode 1
 and how strongly the accelerometer sees it at each pose.
 
-Metrics of mode 1 at one pose (driving-point accelerance from the linear model, :mod:`fpm_sim.frf`,
+Metrics of mode 1 at one pose (driving-point accelerance from the linear model, :mod:`fpm_sim.response`,
 model damping unless given):
 
 - ``excitation``: ``|phi_1' b|``, the modal force of a unit hammer force (1/sqrt(kg)); for the
@@ -42,9 +42,9 @@ import numpy as np
 from tqdm import tqdm
 
 from fpm_sim.config import Manipulator
-from fpm_sim.frf import FrequencyResponse, FrfError, LinkPoint, modal_frf, pick_peaks
 from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import ModelOptions, dof_stiffness
+from fpm_sim.model.options import ModelOptions, dof_stiffness, resolution_footer
+from fpm_sim.response import FrequencyResponse, FrfError, LinkPoint, modal_frf, pick_peaks
 from fpm_sim.rom.reduction import ModalSystem, modal_system
 from fpm_sim.sim.impact import STUDY_IMPACT_POINT
 from fpm_sim.study.poses import ROTATION_RAD, TableReading, study_poses
@@ -267,12 +267,7 @@ class ReadabilityTable:
         chains = [p.split("@")[0] for p in self.points]
         head = ["cell (row, col) mm", "pose x, y mm; phi rad", "study", "model f1 Hz", "mode 1", "share %", "height dB"]
         head += [f"prom. dB {c}" for c in chains] + ["predicted", "agrees"]
-        out = []
-        if markdown:
-            out.append("| " + " | ".join(head) + " |")
-            out.append("|" + "|".join("---" for _ in head) + "|")
-        else:
-            out.append(sep.join(head))
+        body = []
         for r in self.rows:
             m = r.primary
             study = "unreadable" if r.study_unreadable else f"{r.cell.comsol_hz:.2f} Hz"
@@ -288,8 +283,17 @@ class ReadabilityTable:
                 f"{m.peak_height_db:.1f}",
             ]
             cells += [f"{x.prominence_db:.1f}" for x in r.metrics] + [pred, agrees]
-            out.append(("| " + " | ".join(cells) + " |") if markdown else sep.join(cells))
-        return out
+            body.append(cells)
+        if markdown:
+            out = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
+            return out + ["| " + " | ".join(c) + " |" for c in body]
+        # plain text: every column as wide as its widest cell, text left, numbers right
+        width = [max(len(c[k]) for c in [head, *body]) for k in range(len(head))]
+        left = {0, 1, 2, 4, len(head) - 2, len(head) - 1}
+        return [
+            sep.join(c.ljust(w) if k in left else c.rjust(w) for k, (c, w) in enumerate(zip(cells, width))).rstrip()
+            for cells in [head, *body]
+        ]
 
     def summary_lines(self) -> list[str]:
         out = []
@@ -316,13 +320,18 @@ class ReadabilityTable:
         )
         return "\n".join([intro, "", *self._lines(" | ", True), "", *("- " + s for s in self.summary_lines())])
 
-    def plot(self, *, axes: Any = None) -> Any:
-        """Mode-1 prominence (dB) at each pose for each point, study-unreadable poses circled (matplotlib)."""
+    def plot(self, ax: Any = None, *, axes: Any = None) -> Any:
+        """Mode-1 prominence (dB) at each pose for each point, study-unreadable poses circled; the ``Figure``.
+
+        ``ax``: one axes for the first point (the hammer's); ``axes``: one per point; default a new figure.
+        """
         import matplotlib.pyplot as plt
 
         n = len(self.points)
-        if axes is None:
-            _, axes = plt.subplots(1, n, figsize=(4.2 * n, 3.8), squeeze=False)
+        if ax is not None:
+            axes = [ax]
+        elif axes is None:
+            _, axes = plt.subplots(1, n, figsize=(4.2 * n, 3.8), squeeze=False, constrained_layout=True)
             axes = axes[0]
         x = np.array([r.cell.pose.x_m * 1e3 for r in self.rows])
         y = np.array([r.cell.pose.y_m * 1e3 for r in self.rows])
@@ -331,17 +340,19 @@ class ReadabilityTable:
             prom = np.array([r.metrics[k].prominence_db for r in self.rows])
             sc = ax.scatter(x, y, c=prom, s=160, cmap="viridis", vmin=0.0)
             ax.scatter(x[bad], y[bad], s=420, facecolors="none", edgecolors="r", linewidths=1.5)
-            ax.set_title(f"{self.points[k]}: prominence (dB)", fontsize=9)
+            ax.set_title(f"{self.points[k]}\nmode-1 prominence (dB)", fontsize=9)
             ax.set_xlabel("x (mm)")
             ax.set_ylabel("y (mm)")
             ax.set_aspect("equal")
             ax.figure.colorbar(sc, ax=ax, shrink=0.8)
-        np.atleast_1d(axes)[0].figure.suptitle("mode-1 readability (red circles: unreadable in the study)", fontsize=10)
-        return axes
+        fig = np.atleast_1d(axes)[0].figure
+        fig.suptitle("mode-1 readability (red circles: unreadable in the study)", fontsize=10)
+        return fig
 
     def table(self) -> str:
         """Plain-text version."""
-        return "\n".join([*self._lines("  ", False), *self.summary_lines()])
+        footer = resolution_footer(self.parameters)
+        return "\n".join([*self._lines("  ", False), *self.summary_lines(), *([footer] if footer else [])])
 
 
 def _dominant(system: ModalSystem) -> str:
@@ -365,6 +376,7 @@ def readability_table(
     damping_ratio: float | None = None,
     poses: list[Any] | None = None,
     progress: bool = False,
+    desc: str | None = None,
 ) -> ReadabilityTable:
     """Mode-1 readability at the study's 25 poses (or ``poses``) for a driving-point test at ``point``
     and at the same point on the other two distal links (see module docstring).
@@ -384,6 +396,8 @@ def readability_table(
         ``comsol_hz`` (NaN where the study could not read the first peak), e.g. :class:`~fpm_sim.study.poses.StudyPose`.
     progress
         Show a tqdm progress bar.
+    desc
+        Its label (default: what it computes, ``mode-1 readability, hammer along <axis>``).
     """
     opts = options or ModelOptions(segments=6, axial=False)
     cells = poses if poses is not None else study_poses(TableReading(row_is, phi_sign))
@@ -391,7 +405,8 @@ def readability_table(
     if point.link.startswith("distal_"):
         others += [replace(point, link=f"distal_{i}") for i in range(3) if f"distal_{i}" != point.link]
     rows = []
-    it = tqdm(cells, desc="poses", unit="pose", leave=False) if progress else cells
+    label = desc or f"mode-1 readability, hammer along {point.axis}"
+    it = tqdm(cells, desc=label, unit="pose", leave=False) if progress else cells
     for cell in it:
         built = build_manipulator(manip, cell.pose, opts)
         system = modal_system(built)
@@ -403,7 +418,13 @@ def readability_table(
         reading=f"row={row_is}, phi={'+' if phi_sign > 0 else '-'}{ROTATION_RAD:g}",
         parameters={
             "config": manip.name,
-            "options": {"segments": opts.segments, "axial": opts.axial, "link_model": opts.link_model},
+            "options": {
+                "segments": opts.segments,
+                "fidelity": opts.fidelity,
+                "axial": opts.axial,
+                "gravity": opts.gravity,
+                "link_model": opts.link_model,
+            },
             "f_max_hz": f_max_hz,
             "damping_ratio": damping_ratio,
             "grid_source": "fpm_sim.study.poses.study_poses",

@@ -24,9 +24,12 @@ from fpm_sim.batch.engine import EngineOptions
 from fpm_sim.batch.frequencies import pose_frequencies
 from fpm_sim.batch.pose_loop import PoseFrequencies
 from fpm_sim.config import Manipulator
+from fpm_sim.errors import FpmSimError
+from fpm_sim.figures import text_colour, wrap_title
 from fpm_sim.linear.analysis import rig_modes
-from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.options import ModelOptions, resolution_footer
 from fpm_sim.study.poses import GRID_MM, StudyPose, TableReading, study_poses
+from fpm_sim.study.sweep import WorkspaceSweep
 from fpm_sim.study.tables import (
     STUDY_COMSOL_VS_EXPERIMENT,
     STUDY_THICKNESS_M,
@@ -65,6 +68,18 @@ COMPARABLE_THICKNESS_REL = 0.25
 DEFAULT_IDENTIFICATION = "default_identification.json"
 """Packaged summary of the identification that produced the embedded default (its cross-validated errors)."""
 SUBSYSTEM_SEGMENTS = 12
+DEFAULT_OPTIMA_SPREAD_PCT = {
+    (100.0, -50.0): 1.5,
+    (100.0, 100.0): 2.9,
+    (50.0, 0.0): 1.7,
+    (0.0, -100.0): 23.0,
+    (-50.0, 100.0): 28.0,
+    (-100.0, -50.0): 16.0,
+}
+"""For the embedded default only: at each withheld pose ``(row_mm, col_mm)``, the median |deviation| (%) of the
+predicted f1 of the competing identified descriptions from their median (``scripts/optima_predictions.py`` over
+the thirteen identify folders of docs/identification.md, "What the competing optima agree on"). Small: the data
+pin the prediction down whatever the layout; large: the prediction depends on which optimum the search found."""
 """Spring locations per link for the subsystem rigs (cantilever mode 1 within +0.2 % of Euler-Bernoulli)."""
 
 
@@ -116,7 +131,7 @@ def subsystem_frequencies(
     opts = ModelOptions(segments=segments, gravity=False)
     out = []
     for t in tests or subsystem_tests():
-        res = rig_modes(t.rig, angle_deg=t.angle_deg, config=config, options=opts, n_modes=1, method="constrained")
+        res = rig_modes(config, t.rig, angle_deg=t.angle_deg, options=opts, n_modes=1, method="constrained")
         m = res.modes[0]
         out.append(SubsystemResult(t, float(m.frequency_hz), m.dominant))
     return out
@@ -135,6 +150,22 @@ class StudyReproduction:
     notes: list[str] = field(default_factory=list)
     readability: list[Any] = field(default_factory=list)
     """Mode-1 readability tables (:class:`fpm_sim.study.readability.ReadabilityTable`), one per hammer axis."""
+    posterior: Any = None
+    """The Bayesian calibration whose bands the report shows, or ``None``: the numbers are one identified
+    description's (a point estimate)."""
+
+    @classmethod
+    def from_sweep(cls, sweep: WorkspaceSweep, reading: TableReading | None = None) -> StudyReproduction:
+        """The pose table of a ``grid="paper"`` sweep (read with ``reading``, as the sweep was), from the same
+        frequencies: no subsystem rigs, no readability."""
+        if sweep.grid != "paper":
+            raise FpmSimError(
+                f"a study reproduction needs the sweep of the study's poses (grid 'paper'), not {sweep.grid!r}"
+            )
+        rd = reading or TableReading()
+        from fpm_sim.batch.pose_loop import fast_options
+
+        return cls(sweep.config, rd, study_poses(rd), sweep.frequencies, [], sweep.options or fast_options())
 
     @property
     def comsol_hz(self) -> np.ndarray:
@@ -212,6 +243,19 @@ class StudyReproduction:
             out.append(row)
         return out
 
+    def to_xarray(self) -> Any:
+        """The frequencies over the study's poses (:func:`fpm_sim.results.frequencies_dataset`) with COMSOL's and
+        the measured first frequency (``comsol_hz``, ``measured_hz``, Hz) and the table's cells (``row_mm``,
+        ``col_mm``) on ``pose``."""
+        ds = self.frequencies.to_xarray()
+        ds["comsol_hz"] = ("pose", self.comsol_hz)
+        ds["measured_hz"] = ("pose", self.measured_hz)
+        ds = ds.assign_coords(
+            row_mm=("pose", [p.row_mm for p in self.poses]), col_mm=("pose", [p.col_mm for p in self.poses])
+        )
+        ds.attrs.update(config=self.config.name, reading=self.reading.name)
+        return ds
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: poses with f1..f3 (Hz) and COMSOL's value, statistics, subsystem tests, resolution."""
         from fpm_sim.model.options import resolution_summary
@@ -272,35 +316,87 @@ class StudyReproduction:
             t = s.test
             lines.append(f"{t.label:<22}{t.experimental_hz:>10g}{t.comsol_hz:>10g}{s.ours_hz:>10.2f}{s.error_pct:>+8.2f}")
         lines.append("")
-        lines.append(f"{'row':>5}{'col':>6}{'x':>7}{'y':>7}{'phi':>6}{'f1 Hz':>9}{'COMSOL':>9}{'diff %':>8}")
+        cmp_ = self.comparable
+        head = f"{'row':>5}{'col':>6}{'x':>7}{'y':>7}{'phi':>6}{'f1 Hz':>9}"
+        lines.append(head + (f"{'measured':>10}{'COMSOL':>9}{'diff %':>8}" if cmp_ else ""))
         for row in self.rows():
             c = row["comsol_hz"]
-            d = f"{100 * (row['f1_hz'] / c - 1):+8.1f}" if c == c else f"{'-':>8}"
-            cs = f"{c:9.2f}" if c == c else f"{'-':>9}"
-            lines.append(
+            text = (
                 f"{row['row_mm']:>5g}{row['col_mm']:>6g}{row['x_mm']:>7g}{row['y_mm']:>7g}{row['phi_rad']:>6.1f}"
-                f"{row['f1_hz']:>9.2f}{cs}{d}"
+                f"{row['f1_hz']:>9.2f}"
             )
-        st = self.stats()
-        if st.get("n"):
-            lines.append(
-                f"\nvs COMSOL ({st['n']} poses): mean |err| {st['mean_abs_pct']:.2f} %, "
-                f"median {st['median_abs_pct']:.2f} %, max {st['max_abs_pct']:.2f} %, Spearman {st['spearman']:.3f}"
-            )
+            if cmp_:
+                meas = "withheld" if row["withheld"] else _f(row["measured_hz"])
+                d = f"{100 * (row['f1_hz'] / c - 1):+8.1f}" if c == c else f"{'-':>8}"
+                text += f"{meas:>10}{_f(c):>9}{d}"
+            lines.append(text)
+        lines.append("")
+        lines += self.verdict_lines()
+        lines.append(resolution_footer(self.options))
         return "\n".join(lines)
 
+    def verdict_lines(self) -> list[str]:
+        """The verdict in a few plain sentences: this description against the measurements (in-sample and
+        cross-validated) and against COMSOL, beside the study's own COMSOL-vs-measured error."""
+        ref = STUDY_COMSOL_VS_EXPERIMENT["mean_abs_pct"]
+        if not self.comparable:
+            return [
+                f"Not compared with the study's tables: these links are {self.config.section.thickness_m * 1e3:g} mm "
+                f"in-plane, the study's measured and COMSOL values are for {STUDY_THICKNESS_M * 1e3:g} mm links (a "
+                "comparison would measure the thickness change, not the model)."
+            ]
+        sm, sc = self.stats_vs_measured(), self.stats()
+        summ = self.identification_summary() or {}
+        cv = summ.get("summary", {}).get("measured_table4_train.csv", {}).get("cross_validated", {})
+        out = []
+        if sm.get("n"):
+            text = (
+                f"vs measured ({sm['n']} poses): mean |err| {sm['mean_abs_pct']:.2f} % in-sample (the poses it was "
+                "fitted to)"
+            )
+            if cv.get("n"):
+                text += f", {cv['mean_abs_pct']:.2f} % cross-validated (poses predicted by fits that did not see them)"
+            text += f"; the study's own COMSOL model: {ref:g} % against its 18 measured poses."
+            out.append(text)
+            pred = cv.get("mean_abs_pct", math.nan)
+            if math.isfinite(pred) and pred > 1.2 * ref:
+                out.append(
+                    "Verdict: fits the data it was identified from about as well as the study's model does, but "
+                    f"predicts unseen poses {pred / ref:.1f}x worse than the study's {ref:g} %: read predictions "
+                    "away from the measured poses as uncertain."
+                    if sm["mean_abs_pct"] <= 1.2 * ref
+                    else f"Verdict: less accurate than the study's own model ({ref:g} %), in-sample and "
+                    "cross-validated."
+                )
+            elif math.isfinite(pred):
+                out.append(f"Verdict: as accurate as the study's own model ({ref:g} %), cross-validated.")
+            else:
+                out.append(
+                    "Verdict: in-sample only (no cross-validation for this description; fpm-sim identify --folds K "
+                    "gives one)."
+                )
+        if sc.get("n"):
+            out.append(
+                f"vs COMSOL ({sc['n']} poses): mean |err| {sc['mean_abs_pct']:.2f} %, "
+                f"median {sc['median_abs_pct']:.2f} %, max {sc['max_abs_pct']:.2f} %, Spearman {sc['spearman']:.3f}."
+            )
+        return out
+
     def plot(self, ax: Any = None) -> Any:
-        """The f1 heatmaps (ours, COMSOL's, difference); the ``Figure``. ``ax``: three axes to draw on."""
-        return self.plot_heatmaps(ax)
+        """The f1 heatmaps (ours, COMSOL's, difference); the ``Figure``. ``ax``: three axes to draw on, or one
+        for our f1 alone."""
+        return self.plot_heatmaps(ax if ax is None or np.iterable(ax) else [ax])
 
     def plot_heatmaps(self, axes: Any = None) -> Any:
         """Figure: our f1, COMSOL's, and their difference (%) over the grid (x, y under the reading)."""
         import matplotlib.pyplot as plt
 
+        n_panels = 3 if self.comparable else 1  # COMSOL's table describes the study's 30 mm links only
         if axes is None:
-            fig, axes = plt.subplots(1, 3, figsize=(14, 4.4), constrained_layout=True)
+            fig, axes = plt.subplots(1, n_panels, figsize=(14 if n_panels == 3 else 6, 4.6), constrained_layout=True)
         else:
-            fig = axes[0].figure
+            fig = np.atleast_1d(axes)[0].figure
+        axes = np.atleast_1d(axes)
         diff = 100.0 * (self.f1_hz / self.comsol_hz - 1.0)
         lo = float(np.nanmin([np.nanmin(self.f1_hz), np.nanmin(self.comsol_hz)]))
         hi = float(np.nanmax([np.nanmax(self.f1_hz), np.nanmax(self.comsol_hz)]))
@@ -309,21 +405,31 @@ class StudyReproduction:
             (self.f1_hz, "fpm-sim f1 (Hz)", "viridis", lo, hi),
             (self.comsol_hz, "COMSOL f1 (Hz), study Table 5", "viridis", lo, hi),
             (diff, "fpm-sim / COMSOL - 1 (%)", "RdBu_r", -lim, lim),
-        ]
+        ][:n_panels]
+        if n_panels == 1:
+            own = (float(np.nanmin(self.f1_hz)), float(np.nanmax(self.f1_hz)))
+            panels = [(self.f1_hz, "fpm-sim f1 (Hz)", "viridis", *own)]
         for ax, (vals, title, cmap, vmin, vmax) in zip(axes, panels):
             xs, ys, z = self.grid(vals)
             im = ax.imshow(z, origin="lower", extent=(-125, 125, -125, 125), cmap=cmap, vmin=vmin, vmax=vmax)
             for iy in range(z.shape[0]):
                 for ix in range(z.shape[1]):
-                    txt = "-" if not np.isfinite(z[iy, ix]) else f"{z[iy, ix]:.1f}"
-                    ax.text(xs[ix], ys[iy], txt, ha="center", va="center", fontsize=8, color="k")
-            ax.set_title(title)
+                    v = z[iy, ix]
+                    txt = "-" if not np.isfinite(v) else f"{v:.1f}"
+                    ax.text(xs[ix], ys[iy], txt, ha="center", va="center", fontsize=8, color=text_colour(im, v))
+            ax.set_title(title, fontsize=10)
             ax.set_xlabel("x (mm)")
             ax.set_ylabel("y (mm)")
             ax.set_xticks(xs)
             ax.set_yticks(ys)
             fig.colorbar(im, ax=ax, shrink=0.85)
-        fig.suptitle(f"{self.config.name}\ntable reading {self.reading.name}", fontsize=9)
+        title = f"{self.config.name}\ntable reading {self.reading.name}"
+        if not self.comparable:
+            title += (
+                f"; links {self.config.section.thickness_m * 1e3:g} mm: not comparable with the study's "
+                f"{STUDY_THICKNESS_M * 1e3:g} mm tables"
+            )
+        fig.suptitle(wrap_title(title, fig, 9), fontsize=9)
         return fig
 
     def plot_subsystems(self) -> Any:
@@ -344,8 +450,10 @@ class StudyReproduction:
             ax.set_xticks(x)
             ax.set_xticklabels([s.test.label for s in grp])
             ax.set_ylabel("first natural frequency (Hz)")
-            ax.legend(fontsize=8, loc="lower center")
-        fig.suptitle("subsystem tests", fontsize=10)
+            ax.set_xlabel("subsystem test")
+        fig.suptitle("subsystem tests: first natural frequency", fontsize=10)
+        # one legend above the panels, outside the bars
+        fig.legend(*axes[0].get_legend_handles_labels(), loc="outside lower center", ncols=3, fontsize=8)
         return fig
 
     def write(self, out_dir: str | Path) -> list[Path]:
@@ -406,7 +514,7 @@ class StudyReproduction:
         """Errors against the measured and the COMSOL values, in-sample and cross-validated, beside COMSOL's own;
         the predictions at the six withheld poses."""
         ref = STUDY_COMSOL_VS_EXPERIMENT
-        lines: list[str] = []
+        lines: list[str] = [""]
         if not self.comparable:
             lines += [
                 "## No error statistics: not comparable",
@@ -451,6 +559,10 @@ class StudyReproduction:
                 lines += [
                     "### Cross-validated (from the identification that produced this description)",
                     "",
+                    "Identified by (its start description `out/identify_study_nominal_start.toml` is written by the "
+                    "script, so from a clone run `nice python scripts/identify_study.py --out out/identify_study "
+                    "--seed 0 --folds 4 --workers 2`, which runs this command):",
+                    "",
                     f"`{summ.get('command', '')}`",
                     "",
                     "| data | n | in-sample mean (%) | cross-validated mean (%) | cross-validated max (%) "
@@ -487,20 +599,78 @@ class StudyReproduction:
                 "The study measured these poses too, but their values were withheld from the project to judge "
                 "the models identified from the rest. Predicted here, never fitted.",
                 "",
-                "| row (mm) | col (mm) | x (mm) | y (mm) | phi (rad) | predicted f1 (Hz) | COMSOL (Hz) |",
-                "|---:|---:|---:|---:|---:|---:|---:|",
+            ]
+            spread = DEFAULT_OPTIMA_SPREAD_PCT if self.identification_summary() else {}
+            comsol_head = "COMSOL (Hz)"
+            if not self.comparable:
+                comsol_head = f"COMSOL, the study's {STUDY_THICKNESS_M * 1e3:g} mm links (Hz)"
+            if spread:
+                lines += [
+                    "Last column: how far the competing optima of the identification (descriptions that fit the data "
+                    "about equally well) predict apart here, median |deviation| from their median "
+                    "(`scripts/optima_predictions.py`, docs/identification.md): a few per cent, the data determine "
+                    "the prediction; tens of per cent, they leave it open.",
+                    "",
+                ]
+            lines += [
+                f"| row (mm) | col (mm) | x (mm) | y (mm) | phi (rad) | predicted f1 (Hz) | {comsol_head} |"
+                + (" competing optima spread (%) |" if spread else ""),
+                "|---:|---:|---:|---:|---:|---:|---:|" + ("---:|" if spread else ""),
             ]
             for r, k in zip(self.rows(), w):
                 if k:
+                    sp = spread.get((r["row_mm"], r["col_mm"]), math.nan) if spread else None
                     lines.append(
                         f"| {r['row_mm']:g} | {r['col_mm']:g} | {r['x_mm']:g} | {r['y_mm']:g} | {r['phi_rad']:+.1f} | "
-                        f"{_f(r['f1_hz'])} | {_f(r['comsol_hz'])} |"
+                        f"{_f(r['f1_hz'])} | {_f(r['comsol_hz'])} |" + (f" {_f(sp, '.1f')} |" if sp is not None else "")
                     )
             lines.append("")
         return lines
 
+    def _verdict_section(self) -> list[str]:
+        """The report's opening: the verdict, what the data determine and leave open, the bands."""
+        lines = ["## Verdict", "", " ".join(self.verdict_lines()), ""]
+        if self.comparable and self.identification_summary():
+            agree = ", ".join(f"({r:g}, {c:g})" for (r, c), v in DEFAULT_OPTIMA_SPREAD_PCT.items() if v < 5.0)
+            open_ = ", ".join(f"({r:g}, {c:g})" for (r, c), v in DEFAULT_OPTIMA_SPREAD_PCT.items() if v >= 5.0)
+            lo_a = min(v for v in DEFAULT_OPTIMA_SPREAD_PCT.values() if v < 5.0)
+            hi_a = max(v for v in DEFAULT_OPTIMA_SPREAD_PCT.values() if v < 5.0)
+            lo_o = min(v for v in DEFAULT_OPTIMA_SPREAD_PCT.values() if v >= 5.0)
+            hi_o = max(v for v in DEFAULT_OPTIMA_SPREAD_PCT.values() if v >= 5.0)
+            sub_err = max((abs(x.error_pct) for x in self.subsystems), default=math.nan)
+            lines += [
+                "**What the data determine and what they leave open.** The subsystem tests pin down the links and the "
+                f"test rigs (fitted within {sub_err:.2g} %). The manipulator's geometry and hardware masses are not "
+                "pinned down: eleven identification searches from scratch ended in eight optima that fit the data "
+                "about equally well and predict the unmeasured poses 2-4x apart (docs/identification.md). At the "
+                f"withheld poses (row, col) {agree} the optima agree within {lo_a:g}-{hi_a:g} %, so the data decide "
+                f"those predictions; at {open_} they disagree by {lo_o:g}-{hi_o:g} % (median), so there the "
+                "prediction is one optimum's, not the data's (see the table of withheld poses). Parameters with a "
+                "standard deviation larger than their value are flagged below.",
+                "",
+            ]
+        elif self.comparable:
+            lines += [
+                "**What the data leave open.** Not assessed for this description: `fpm-sim identify` with "
+                "`--refine-per-class K` lists its competing optima, and their spread at unmeasured poses says what "
+                "the data leave open.",
+                "",
+            ]
+        used = (
+            f"a posterior was used ({self.posterior})"
+            if self.posterior is not None
+            else "no posterior was used: the numbers above are one identified description's, without bands"
+        )
+        lines += [
+            "**Uncertainty bands.** Bayesian calibration (`fpm-sim calibrate`, `fpm-sim reproduce --posterior`) turns "
+            f"the data's uncertainty into bands on every prediction; here {used}.",
+            "",
+        ]
+        return lines
+
     def markdown(self) -> str:
         """The report (Markdown)."""
+        ref_mm = f"the study's {STUDY_THICKNESS_M * 1e3:g} mm links (Hz)"  # the tables' links, not these
         lines = [
             "# fpm-sim reproduction of the study (Segura, c. 2021)",
             "",
@@ -509,8 +679,11 @@ class StudyReproduction:
             f"Table reading: **{self.reading.name}** (rows are {self.reading.row_is}; the poses written (x, 0) "
             f"turned {self.reading.phi_sign * 0.2:+.1f} rad).",
             f"Pose loop: constrained eigen-solve, gravity off, {self.options.segments} segments per link"
-            f"{', axial springs' if self.options.axial else ', inextensible links'}.",
+            f"{', axial springs' if self.options.axial else ', inextensible links'}. Near a singularity (singularity "
+            "measure below 0.05) f1 is sensitive to gravity's prestress: `fpm-sim modes` (gravity on) gives a "
+            "different value at those poses.",
             "",
+            *self._verdict_section(),
             "## Subsystem tests (first natural frequency)",
             "",
             "| test | measured (Hz) | COMSOL (Hz) | fpm-sim (Hz) | fpm-sim vs measured | mode |",
@@ -527,9 +700,9 @@ class StudyReproduction:
             "",
             "## The 25 poses",
             "",
-            "| row (mm) | col (mm) | x (mm) | y (mm) | phi (rad) | f1 (Hz) | f2 (Hz) | f3 (Hz) | measured (Hz) "
-            "| COMSOL (Hz) | diff vs COMSOL (%) "
-            "| in-plane share of mode 1 | singularity measure | status |",
+            "| row (mm) | col (mm) | x (mm) | y (mm) | phi (rad) | f1 (Hz) | f2 (Hz) | f3 (Hz) | "
+            + ("measured (Hz) | COMSOL (Hz) " if self.comparable else f"measured, {ref_mm} | COMSOL, {ref_mm} ")
+            + "| diff vs COMSOL (%) | in-plane share of mode 1 | singularity measure | status |",
             "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
         ]
         fr = self.frequencies
@@ -549,9 +722,17 @@ class StudyReproduction:
         ident = {k: v for k, v in self.config.provenance.items() if v.startswith("identified")}
         if ident:
             lines += ["## Identified parameters (value; source, with +- one standard deviation)", ""]
-            lines += ["| parameter | value | from |", "|---|---|---|"]
+            lines += [
+                "A standard deviation as large as the value or larger means the data do not determine the parameter "
+                "(other values fit about as well); 30 % or more, poorly determined.",
+                "",
+                "| parameter | value | determined by the data? | from |",
+                "|---|---|---|---|",
+            ]
             for k, v in sorted(ident.items()):
-                lines.append(f"| `{k}` | {_value_of(self.config, k)} | {v[len('identified: ') :]} |")
+                lines.append(
+                    f"| `{k}` | {_value_of(self.config, k)} | {_determination(v)} | {v[len('identified: ') :]} |"
+                )
             lines.append("")
         lines += ["## Parameters and their provenance", ""]
         lines += ["| parameter | source |", "|---|---|"]
@@ -560,6 +741,24 @@ class StudyReproduction:
         if self.notes:
             lines += ["", "## Notes", ""] + [f"- {n}" for n in self.notes]
         return "\n".join(lines) + "\n"
+
+
+def _determination(provenance: str) -> str:
+    """From ``... = VALUE +- SD unit`` in an identified value's provenance: whether the data determine it."""
+    import re
+
+    m = re.search(r"= (-?[0-9.eE+-]+) \+- ([0-9.eE+-]+)", provenance)
+    if not m:
+        return "as its mass" if "scaled with the identified mass" in provenance else "-"
+    value, sd = float(m.group(1)), float(m.group(2))
+    if provenance.rstrip().endswith("deg"):  # an angle's size is no scale for its SD: judged in degrees
+        return f"poorly (sd {sd:g} deg)" if sd >= 10.0 else f"yes (sd {sd:g} deg)"
+    rel = sd / abs(value) if value else math.inf
+    if rel >= 1.0:
+        return f"**no: not determined by the data** (sd {100 * rel:.0f} % of the value)"
+    if rel >= 0.3:
+        return f"poorly (sd {100 * rel:.0f} %)"
+    return f"yes (sd {100 * rel:.0f} %)"
 
 
 def _value_of(config: Manipulator, dotted: str) -> str:
@@ -634,8 +833,7 @@ def reproduce_study(
     tables = []
     notes = []
     if readability:
-        from fpm_sim.errors import FpmSimError
-        from fpm_sim.frf import LinkPoint
+        from fpm_sim.response import LinkPoint
         from fpm_sim.study.readability import readability_table
 
         for axis in ("z", "normal"):

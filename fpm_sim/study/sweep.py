@@ -27,8 +27,9 @@ from fpm_sim.batch.frequencies import pose_frequencies
 from fpm_sim.batch.pose_loop import PoseFrequencies, fast_options
 from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError
+from fpm_sim.figures import text_colour, wrap_title
 from fpm_sim.kinematics import Pose, assemble_many
-from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.options import ModelOptions, resolution_footer
 from fpm_sim.study.poses import TableReading, study_poses
 
 __all__ = ["SWEEP_CSV_COLUMNS", "WorkspaceSweep", "dense_grid", "singularity_fields", "sweep_workspace"]
@@ -55,16 +56,18 @@ def dense_grid(config: Manipulator, *, step_mm: float, phi_rad: float = 0.0) -> 
     point is returned (reachable or not).
     """
     if not step_mm > 0:
-        raise FpmSimError(f"--step-mm must be > 0, got {step_mm}")
+        raise FpmSimError("must be > 0", parameter="step_mm", value=step_mm)
     half = _reach_half_width(config)
     n = math.floor(half * 1e3 / step_mm)
     ticks = np.arange(-n, n + 1) * step_mm
     if ticks.size > 401:
-        raise FpmSimError(f"--step-mm {step_mm} gives {ticks.size} x {ticks.size} points; use a larger step")
+        raise FpmSimError(
+            f"gives {ticks.size} x {ticks.size} points", parameter="step_mm", value=step_mm, hint="use a larger step"
+        )
     xx, yy = np.meshgrid(ticks * 1e-3, ticks * 1e-3)
     reach = assemble_many(config.geometry, xx.ravel(), yy.ravel(), phi_rad).reachable.reshape(xx.shape)
     if not reach.any():
-        raise FpmSimError(f"no reachable position at phi = {phi_rad} rad with step {step_mm} mm (--phi-rad)")
+        raise FpmSimError(f"no reachable position with step {step_mm} mm", parameter="phi_rad", value=phi_rad)
     rows, cols = np.where(reach.any(axis=1))[0], np.where(reach.any(axis=0))[0]
     ys, xs = ticks[rows.min() : rows.max() + 1], ticks[cols.min() : cols.max() + 1]
     return [Pose.from_mm(float(x), float(y), phi_rad) for y in ys for x in xs]
@@ -141,6 +144,12 @@ class WorkspaceSweep:
             "resolution": resolution_summary(self.options) if self.options is not None else {},
         }
 
+    def to_xarray(self) -> Any:
+        """The frequencies over poses (:meth:`fpm_sim.batch.pose_loop.PoseFrequencies.to_xarray`), with the grid."""
+        ds = self.frequencies.to_xarray()
+        ds.attrs.update(config=self.config.name, grid=self.grid, step_mm=self.step_mm, grid_phi_rad=self.phi_rad)
+        return ds
+
     def table(self) -> str:
         """Counts by status and the f1 range (Hz)."""
         f1 = self.frequencies.f1_hz
@@ -152,7 +161,8 @@ class WorkspaceSweep:
         ]
         if ok.size:
             lines.append(f"f1 range: {ok.min():.2f} .. {ok.max():.2f} Hz")
-        return "\n".join(lines)
+        footer = resolution_footer(self.options)
+        return "\n".join([*lines, footer] if footer else lines)
 
     def plot(self, ax: Any = None) -> Any:
         """Heatmap of f1 with unreachable/singular points marked and the singularity loci drawn; the ``Figure``."""
@@ -179,13 +189,19 @@ class WorkspaceSweep:
         else:
             im = ax.scatter([r["x_mm"] for r in rows], [r["y_mm"] for r in rows], c=[r["f1_hz"] for r in rows], s=400)
             for r in rows:
-                ax.text(r["x_mm"], r["y_mm"], f"{r['f1_hz']:.1f}", ha="center", va="center", fontsize=7)
+                colour = text_colour(im, r["f1_hz"])
+                ax.text(r["x_mm"], r["y_mm"], f"{r['f1_hz']:.1f}", ha="center", va="center", fontsize=7, color=colour)
         fig.colorbar(im, ax=ax, label="first natural frequency (Hz)")
         marks = {"unreachable": ("x", "0.5"), "singular": ("s", "red"), "near_singular": ("o", "orange")}
         for status, (marker, color) in marks.items():
             pts = [(r["x_mm"], r["y_mm"]) for r in rows if r["status"] == status]
             if pts:
-                ax.scatter(*zip(*pts), marker=marker, s=12, color=color, label=status.replace("_", " "), zorder=3)
+                label = status.replace("_", " ")
+                if self.grid == "dense" or marker == "x":
+                    ax.scatter(*zip(*pts), marker=marker, s=12, color=color, label=label, zorder=3)
+                else:  # a ring around the pose's disc: its number stays readable
+                    ax.scatter(*zip(*pts), marker=marker, s=620, facecolors="none", edgecolors=color, lw=2, zorder=3)
+                    ax.scatter([], [], marker=marker, s=40, facecolors="none", edgecolors=color, lw=1.5, label=label)
         pad = 20.0
         fx = np.linspace(xs[0] - pad, xs[-1] + pad, 241)
         fy = np.linspace(ys[0] - pad, ys[-1] + pad, 241)
@@ -200,8 +216,16 @@ class WorkspaceSweep:
         ax.set_xlabel("x (mm)")
         ax.set_ylabel("y (mm)")
         ax.set_aspect("equal")
-        ax.legend(fontsize=7, loc="upper right")
-        ax.set_title(f"{self.config.name}\nphi = {self.phi_rad:g} rad, grid {self.grid}", fontsize=9)
+        ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.1), ncols=2)  # below: covers no point
+        phis = sorted({round(float(r["phi_rad"]), 9) for r in rows})
+        if len(phis) == 1:
+            phi_text = f"phi = {phis[0]:g} rad"
+        else:  # e.g. the paper grid: its (x, 0) poses are turned 0.2 rad
+            count = {v: sum(round(float(r["phi_rad"]), 9) == v for r in rows) for v in phis}
+            phi_text = "phi = " + ", ".join(f"{v:g} rad at {n} poses" for v, n in count.items())
+            phi_text += f" (singularity loci drawn at {self.phi_rad:g} rad)"
+        title = f"{self.config.name}\n{phi_text}, grid {self.grid}"
+        ax.set_title(wrap_title(title, fig, 9, fraction=0.7), fontsize=9)
         return fig
 
     def write(self, out_dir: str | Path) -> list[Path]:
@@ -236,17 +260,17 @@ def sweep_workspace(
     runs (:class:`fpm_sim.batch.engine.EngineOptions`)."""
     if grid == "poses":
         if not poses:
-            raise FpmSimError("grid='poses' needs poses (--poses FILE.csv with columns x_mm,y_mm,phi_rad)")
+            raise FpmSimError("grid='poses' needs poses (x_mm,y_mm,phi_rad)", parameter="poses")
         poses = list(poses)
     elif poses is not None:
-        raise FpmSimError(f"poses are given: use grid='poses', not {grid!r} (--poses replaces --grid)")
+        raise FpmSimError("poses are given: use grid='poses'", parameter="grid", value=grid)
     elif grid == "dense":
         poses = dense_grid(config, step_mm=step_mm, phi_rad=phi_rad)
     elif grid == "paper":
         poses = [p.pose for p in study_poses(reading)]
         step_mm = 50.0
     else:
-        raise FpmSimError(f"--grid must be 'paper', 'dense' or 'poses', got {grid!r}")
+        raise FpmSimError("must be 'paper', 'dense' or 'poses'", parameter="grid", value=grid)
     opts = options or fast_options()
     fr = pose_frequencies(
         config,

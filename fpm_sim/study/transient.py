@@ -150,7 +150,12 @@ class TransientResult:
         out["parameters"] = self.parameters
         return out
 
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: :meth:`summary` (per load axis: peaks, NRMS error, wall times; the reduced model)."""
+        return to_jsonable(self.summary())
+
     def table(self) -> str:
+        """Per load axis: force, peak displacements of both models, NRMS error, wall times."""
         s = self.summary()
         lines = [
             f"{'axis':>4}  {'force (N)':>9}  {'peak full (mm)':>14}  {'peak ROM (mm)':>13}  {'NRMS':>7}  "
@@ -181,20 +186,39 @@ class TransientResult:
         )
         return "\n".join(lines)
 
-    def plot(self, *, axes: Any = None) -> Any:
+    def plot(self, ax: Any = None, *, axes: Any = None) -> Any:
+        """Displacement of the full and the reduced model against time; returns the ``Figure``.
+
+        ``ax``: one axes with every load axis; ``axes``: one per load axis; default a new figure.
+        """
         import matplotlib.pyplot as plt
 
+        if ax is not None:
+            for c in self.cases:
+                line = ax.plot(c.t_s, c.disp_full_m * 1e3, label=f"{c.axis}: full nonlinear", lw=1.5)[0]
+                ax.plot(
+                    c.t_s,
+                    c.disp_rom_m * 1e3,
+                    "--",
+                    color=line.get_color(),
+                    lw=1.2,
+                    label=f"{c.axis}: reduced ({self.rom.n_modes} modes), NRMS {c.nrms:.2%}",
+                )
+            ax.set_ylabel("displacement along the load (mm)")
+            ax.set_xlabel("t (s)")
+            ax.legend(fontsize=8)
+            return ax.figure
         if axes is None:
             _, axes = plt.subplots(len(self.cases), 1, figsize=(8, 3.2 * len(self.cases)), sharex=True)
         axes = np.atleast_1d(axes)
-        for ax, c in zip(axes, self.cases):
-            ax.plot(c.t_s, c.disp_full_m * 1e3, label="full nonlinear", lw=1.5)
-            ax.plot(c.t_s, c.disp_rom_m * 1e3, "--", label=f"reduced ({self.rom.n_modes} modes)", lw=1.2)
-            ax.set_ylabel(f"{c.axis} displacement (mm)")
-            ax.set_title(f"constant {c.force_n:g} N in {c.axis}: NRMS error {c.nrms:.2%}", fontsize=9)
-            ax.legend(fontsize=8)
+        for a, c in zip(axes, self.cases):
+            a.plot(c.t_s, c.disp_full_m * 1e3, label="full nonlinear", lw=1.5)
+            a.plot(c.t_s, c.disp_rom_m * 1e3, "--", label=f"reduced ({self.rom.n_modes} modes)", lw=1.2)
+            a.set_ylabel(f"{c.axis} displacement (mm)")
+            a.set_title(f"constant {c.force_n:g} N in {c.axis}: NRMS error {c.nrms:.2%}", fontsize=9)
+            a.legend(fontsize=8)
         axes[-1].set_xlabel("t (s)")
-        return axes
+        return axes[0].figure
 
     def save(self, out_dir: str | Path) -> dict[str, Path]:
         """Write ``transient.csv`` (``t_s,load_axis,disp_full_m,disp_rom_m``), ``transient.png``,
@@ -209,11 +233,11 @@ class TransientResult:
                     f.write(f"{t:.6g},{c.axis},{a:.10g},{b:.10g}\n")
         import matplotlib.pyplot as plt
 
-        axes = self.plot()
+        fig = self.plot()
         png = d / "transient.png"
-        axes[0].figure.tight_layout()
-        axes[0].figure.savefig(png, dpi=120)
-        plt.close(axes[0].figure)
+        fig.tight_layout()
+        fig.savefig(png, dpi=120)
+        plt.close(fig)
         js = d / "summary.json"
 
         js.write_text(json.dumps(to_jsonable(self.summary()), indent=2))

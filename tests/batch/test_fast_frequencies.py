@@ -14,7 +14,7 @@ def test_fast_path_matches_full_analysis_at_same_resolution(reference_manip):
     # uses the constrained eigen-solve instead of transitionFD (0.05 % apart, ENGINE_NOTES).
     pose = Pose.from_mm(30.0, -20.0, 0.1)
     fast = first_frequencies(reference_manip, [pose], n_modes=3, options=fast_options(segments=4, axial=True))[0]
-    full = manipulator_modes(pose, config=reference_manip, options=ModelOptions(segments=4), n_modes=3).frequencies_hz
+    full = manipulator_modes(reference_manip, pose, options=ModelOptions(segments=4), n_modes=3).frequencies_hz
     assert fast == pytest.approx(full, rel=5e-3)
 
 

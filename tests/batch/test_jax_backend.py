@@ -161,7 +161,7 @@ def test_bad_input_is_refused_with_the_parameter_named():
     config = default_config()
     with pytest.raises(ValueError, match="gravity"):
         pose_frequencies(config, [Pose(0, 0, 0)], backend="jax", options=ModelOptions(segments=2))
-    with pytest.raises(ValueError, match=re.escape("unknown parameter 'section.width_m'")):
+    with pytest.raises(ValueError, match=re.escape("section.width_m: unknown parameter: 'width_m'")):
         frequency_gradients(config, Pose(0, 0, 0), ["section.width_m"], options=fast_options(segments=2))
     with pytest.raises(ValueError, match="unknown parameter"):
         with_parameter(config, "hardware.nothing.mass_kg", 1.0)

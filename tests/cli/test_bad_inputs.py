@@ -117,6 +117,104 @@ CASES: list[tuple[str, list[str], str]] = [
     ("export-mjcf-segments", ["export-mjcf", "manipulator", "--segments", "0", "--out", "{tmp}/m.xml"], "segments"),
 ]
 
+# Files, outputs and parsers (issue 20): each case also prints exactly one ``error:`` line (its last line) and
+# writes nothing. ``{tmp}`` holds the files of :func:`_edge_files`; "afile" is a file in the way of a folder.
+M = ["--free", "section", "--out", "{tmp}/id"]
+EMA = ["--x-mm", "0", "--y-mm", "0", "--out", "{tmp}/ema"]
+VARY = ["--vary", "section.thickness_m=0.01,0.02"]
+EDGE_CASES: list[tuple[str, list[str], str]] = [
+    # identify --measured
+    ("identify-measured-header-only", ["identify", "--measured", "{tmp}/hdr.csv", *M],
+     r"hdr\.csv: row 2: only a header"),
+    ("identify-measured-inf", ["identify", "--measured", "{tmp}/inf.csv", *M], r"inf\.csv: row 2: f1_hz"),
+    ("identify-measured-nan", ["identify", "--measured", "{tmp}/nan.csv", *M], r"nan\.csv: row 2: f1_hz"),
+    ("identify-measured-n/a", ["identify", "--measured", "{tmp}/na.csv", *M], r"na\.csv: row 3: f1_hz"),
+    ("identify-measured-phi-degrees", ["identify", "--measured", "{tmp}/phi.csv", *M], r"row 2: phi_rad: outside"),
+    ("identify-measured-unreachable", ["identify", "--measured", "{tmp}/far.csv", *M],
+     r"far\.csv: row 3: .*unreachable"),
+    ("identify-too-few-data", ["identify", "--measured", "{tmp}/one.csv", "--free", "hardware", "--out", "{tmp}/id"],
+     r"--measured: 1 measured value\(s\) for 3 free parameters"),
+    ("identify-measured-missing", ["identify", "--measured", "{tmp}/nowhere.csv", *M], r"--measured: .*nowhere\.csv"),
+    ("identify-measured-folder", ["identify", "--measured", "{tmp}", *M], r"--measured: .* is a folder"),
+    ("identify-measured-columns", ["identify", "--measured", "{tmp}/cols.csv", *M], r"cols\.csv: columns"),
+    ("identify-measured-x-text", ["identify", "--measured", "{tmp}/xtext.csv", *M], r"row 2: x_mm: must be a number"),
+    ("identify-measured-negative-f", ["identify", "--measured", "{tmp}/negf.csv", *M], r"row 2: f1_hz: .* > 0"),
+    ("identify-measured-mode-kind", ["identify", "--measured", "{tmp}/mode.csv", *M],
+     r"row 2: mode: unknown mode kind"),
+    ("identify-measured-extra-cells", ["identify", "--measured", "{tmp}/cells.csv", *M], r"cells\.csv: row 2: 5 cells"),
+    ("identify-free-unknown", ["identify", "--measured", "{tmp}/ok.csv", "--free", "bogus", "--out", "{tmp}/id"],
+     "--free: unknown parameter group"),
+    ("identify-out-proc", ["identify", "--measured", "{tmp}/ok.csv", "--free", "section", "--out", "/proc/x/y"],
+     "--out: cannot create /proc/x/y"),
+    ("identify-out-under-a-file", ["identify", "--measured", "{tmp}/ok.csv", "--free", "section", "--out",
+     "{tmp}/afile/id"], "--out: cannot create .*afile is a file"),
+    # ema
+    ("ema-nan-cell", ["ema", "{tmp}/frf_nan.csv", *EMA], r"frf_nan\.csv: row 3: re_m_s2: must be finite"),
+    ("ema-n/a-cell", ["ema", "{tmp}/frf_na.csv", *EMA], r"frf_na\.csv: row 3: im_m_s2: not a number"),
+    ("ema-decreasing-frequency", ["ema", "{tmp}/frf_dec.csv", *EMA], r"row 4: freq_hz: .*strictly increasing"),
+    ("ema-repeated-frequency", ["ema", "{tmp}/frf_rep.csv", *EMA], r"row 3: freq_hz: .*strictly increasing"),
+    ("ema-header-only", ["ema", "{tmp}/frf_hdr.csv", *EMA], r"frf_hdr\.csv: row 1: only a header"),
+    ("ema-columns", ["ema", "{tmp}/cols.csv", *EMA], r"cols\.csv: an FRF CSV needs freq_hz"),
+    ("ema-missing-file", ["ema", "{tmp}/nowhere.csv", *EMA], r"nowhere\.csv"),
+    ("ema-out-proc", ["ema", "{tmp}/frf_dec.csv", "--out", "/proc/x/y"], "--out: cannot create /proc/x/y"),
+    # design
+    ("design-vary-derived-field", ["design", "--vary", "section.area_m2=1e-4,2e-4", "--out", "{tmp}/d"],
+     r"--vary: field 'section\.area_m2': .*derived value.*settable here: thickness_m, height_m"),
+    ("design-designs-derived-field", ["design", "--designs", "{tmp}/d_area.csv", "--out", "{tmp}/d"],
+     r"--designs: field 'section\.area_m2'.*derived"),
+    ("design-designs-unknown-field", ["design", "--designs", "{tmp}/d_typo.csv", "--out", "{tmp}/d"],
+     r"--designs: field 'section\.thicknes_m'"),
+    ("design-designs-text-cell", ["design", "--designs", "{tmp}/d_text.csv", "--out", "{tmp}/d"],
+     r"--designs: .*d_text\.csv: row 3: every cell must be a number"),
+    ("design-designs-short-row", ["design", "--designs", "{tmp}/d_short.csv", "--out", "{tmp}/d"],
+     r"--designs: .*row 2 has 1 cells for 2 columns"),
+    ("design-designs-header-only", ["design", "--designs", "{tmp}/d_hdr.csv", "--out", "{tmp}/d"],
+     r"--designs: .*d_hdr\.csv: no rows"),
+    ("design-designs-inf", ["design", "--designs", "{tmp}/d_inf.csv", "--out", "{tmp}/d"], r"--designs: .*finite"),
+    ("design-resume-over-another-run", ["design", *VARY, "--resume", "--out", "{tmp}/other_run"],
+     r"--out .*other_run already holds another run's results; pass --overwrite"),
+    ("design-out-under-a-file", ["design", *VARY, "--out", "{tmp}/afile/d"], "--out: cannot create"),
+    ("design-poses-phi-degrees", ["design", *VARY, "--poses", "{tmp}/p_phi.csv", "--out", "{tmp}/d"],
+     r"--poses: .*p_phi\.csv: row 2: phi_rad: outside"),
+    # sweep --poses
+    ("sweep-poses-phi-degrees", ["sweep", "--poses", "{tmp}/p_phi.csv", "--out", "{tmp}/s"],
+     r"p_phi\.csv: row 2: phi_rad"),
+    ("sweep-poses-bom-crlf-phi", ["sweep", "--poses", "{tmp}/p_bom.csv", "--out", "{tmp}/s"],
+     r"p_bom\.csv: row 3: phi_rad: outside"),  # the BOM header is read: the error is the row, not a missing column
+    ("sweep-poses-text", ["sweep", "--poses", "{tmp}/p_text.csv", "--out", "{tmp}/s"],
+     r"row 2: y_mm: must be a number"),
+    ("sweep-poses-inf", ["sweep", "--poses", "{tmp}/p_inf.csv", "--out", "{tmp}/s"], r"row 2: x_mm: must be a finite"),
+    ("sweep-poses-missing-column", ["sweep", "--poses", "{tmp}/p_cols.csv", "--out", "{tmp}/s"],
+     "--poses: .*missing column.*phi_rad"),
+    ("sweep-poses-header-only", ["sweep", "--poses", "{tmp}/p_hdr.csv", "--out", "{tmp}/s"], "--poses: .*no rows"),
+    ("sweep-out-proc", ["sweep", "--poses", "{tmp}/p_ok.csv", "--out", "/proc/x/y"], "--out: cannot create /proc/x/y"),
+    # impact --uff
+    ("impact-uff-proc", ["impact", "--uff", "/proc/x/y.uff", *S3], "--uff: cannot create /proc/x/y.uff"),
+    ("impact-uff-under-a-file", ["impact", "--uff", "{tmp}/afile/i.uff", *S3], "--uff: cannot create .*afile"),
+    ("impact-uff-suffix", ["impact", "--uff", "{tmp}/i.txt", *S3], r"--uff .*i\.txt must end in \.uff or \.unv"),
+    ("impact-uff-is-a-folder", ["impact", "--uff", "{tmp}/taken.uff", *S3], "--uff .*taken.uff is a folder"),
+    # export-mjcf
+    ("export-mjcf-existing-file", ["export-mjcf", "manipulator", "--out", "{tmp}/home.xml", *S3],
+     r"--out .*home\.xml already exists; pass --overwrite"),
+    ("export-mjcf-proc", ["export-mjcf", "manipulator", "--out", "/proc/x/m.xml", *S3], "--out: cannot create"),
+    ("export-mjcf-abbreviation", ["export-mjcf", "manipulator", "--segment", "3"], "unrecognized arguments: --segment"),
+    # reduce, frf, atlas build, reproduce
+    ("reduce-out-proc", ["reduce", "--modes", "3", "--out", "/proc/x/r.mat", *S3],
+     "--out: cannot create /proc/x/r.mat"),
+    ("reduce-out-under-a-file", ["reduce", "--modes", "3", "--out", "{tmp}/afile/r.npz", *S3], "--out: cannot create"),
+    ("frf-csv-proc", ["frf", "--csv", "/proc/x/f.csv", *S3], "--csv: cannot create /proc/x/f.csv"),
+    ("frf-plot-under-a-file", ["frf", "--plot", "{tmp}/afile/f.png", *S3], "--plot: cannot create"),
+    ("atlas-build-out-proc", ["atlas", "build", "--out", "/proc/x/a.npz", *S3], "--out: cannot create /proc/x/a.npz"),
+    ("atlas-build-abbreviation", ["atlas", "build", "--out", "{tmp}/a.npz", "--mode", "3"],
+     "unrecognized arguments: --mode"),
+    ("reproduce-out-proc", ["reproduce", "--out", "/proc/x/y"], "--out: cannot create /proc/x/y"),
+    ("reproduce-out-is-a-file", ["reproduce", "--out", "{tmp}/afile"], "--out .*afile is an existing file"),
+    ("reproduce-thickness-m-abbreviation", ["reproduce", "--thickness-m", "0.01", "--out", "{tmp}/r"],
+     "unrecognized arguments: --thickness-m"),
+    ("reproduce-thickness-zero", ["reproduce", "--thickness-mm", "0", "--out", "{tmp}/r"],
+     "--thickness-mm: must be a positive finite number, got 0 mm"),
+]  # fmt: skip
+
 XFAIL: dict[str, str] = {}
 """Cases expected to fail, with the reason (none at present)."""
 
@@ -177,6 +275,72 @@ def test_bad_input_exits_2_naming_the_parameter(argv, names, tmp_path, monkeypat
     assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
 
 
+def _edge_files(tmp: Path) -> None:
+    header = "x_mm,y_mm,phi_rad,f1_hz\n"
+    frf = "freq_hz,re_m_s2,im_m_s2\n"
+    texts = {
+        "afile": "a file in the way of a folder",
+        "hdr.csv": "# a comment\n" + header,
+        "inf.csv": header + "0,0,0,inf\n",
+        "nan.csv": header + "0,0,0,nan\n",
+        "na.csv": header + "# measured on Monday\n0,0,0,n/a\n",
+        "phi.csv": header + "0,0,30,50\n",
+        "far.csv": header + "0,0,0,50\n900,0,0,40\n",
+        "one.csv": header + "0,0,0,50\n",
+        "ok.csv": header + "0,0,0,50\n20,0,0,48\n",
+        "cols.csv": "a,b,c\n1,2,3\n",
+        "xtext.csv": header + "abc,0,0,50\n",
+        "negf.csv": header + "0,0,0,-5\n",
+        "mode.csv": "x_mm,y_mm,phi_rad,f1_hz,mode\n0,0,0,50,sideways\n",
+        "cells.csv": header + "0,0,0,50,7\n",
+        "frf_nan.csv": frf + "1,0.1,0.2\n2,nan,0.1\n",
+        "frf_na.csv": frf + "1,0.1,0.2\n2,0.1,n/a\n",
+        "frf_dec.csv": frf + "1,0.1,0.2\n3,0.2,0.1\n2,0.2,0.1\n",
+        "frf_rep.csv": frf + "1,0.1,0.2\n1,0.2,0.1\n",
+        "frf_hdr.csv": frf,
+        "d_area.csv": "section.thickness_m,section.area_m2\n0.01,1e-4\n",
+        "d_typo.csv": "section.thicknes_m\n0.01\n",
+        "d_text.csv": "section.thickness_m\n0.01\nthin\n",
+        "d_short.csv": "section.thickness_m,section.height_m\n0.01\n",
+        "d_hdr.csv": "section.thickness_m\n",
+        "d_inf.csv": "section.thickness_m\ninf\n",
+        "p_phi.csv": "x_mm,y_mm,phi_rad\n0,0,30\n",
+        "p_text.csv": "x_mm,y_mm,phi_rad\n0,north,0\n",
+        "p_inf.csv": "x_mm,y_mm,phi_rad\ninf,0,0\n",
+        "p_cols.csv": "x_mm,y_mm\n0,0\n",
+        "p_hdr.csv": "x_mm,y_mm,phi_rad\n",
+        "p_ok.csv": "x_mm,y_mm,phi_rad\n0,0,0\n",
+        "home.xml": "<mujoco/>\n",
+    }
+    for name, text in texts.items():
+        (tmp / name).write_text(text)
+    (tmp / "p_bom.csv").write_bytes(b"\xef\xbb\xbfx_mm,y_mm,phi_rad\r\n0,0,0\r\n0,0,10\r\n")
+    (tmp / "other_run").mkdir()
+    (tmp / "other_run" / "design.csv").write_text("another study's results\n")
+    (tmp / "taken.uff").mkdir()
+
+
+def _tree(root: Path) -> dict[str, bytes | None]:
+    return {str(p.relative_to(root)): (p.read_bytes() if p.is_file() else None) for p in sorted(root.rglob("*"))}
+
+
+@pytest.mark.parametrize(("argv", "pattern"), [c[1:] for c in EDGE_CASES], ids=[c[0] for c in EDGE_CASES])
+def test_bad_file_or_output_exits_2_with_one_error_line_and_writes_nothing(argv, pattern, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    _edge_files(tmp_path)
+    before = _tree(tmp_path)
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
+    code, text = _run(argv)
+    assert "Traceback" not in text, text[-3000:]
+    assert code == 2, f"exit {code}: {text[-2000:]}"
+    lines = text.strip().splitlines()
+    assert [ln for ln in lines if ln.startswith("error:")] == lines[-1:], text[-2000:]
+    assert re.search(pattern, lines[-1]), f"/{pattern}/ not in: {lines[-1]}"
+    assert _tree(tmp_path) == before  # nothing written, nothing changed
+
+
 def test_battery_has_at_least_50_cases():
+    assert len(EDGE_CASES) >= 40
+    assert len({c[0] for c in CASES + EDGE_CASES}) == len(CASES) + len(EDGE_CASES)
     assert len(CASES) >= 50
     assert len({c[0] for c in CASES}) == len(CASES)

@@ -92,8 +92,8 @@ def test_export_mjcf(tmp_path, capsys):
         (["modes", "--x-mm", "600"], "unreachable"),
         (["modes", "--segments", "0"], "--segments"),
         (["rig", "chain", "--angle-deg", "300"], "--angle-deg"),
-        (["rig", "cantilever", "--clamped-length-mm", "1000"], "rig.clamped_length_m"),
-        (["rig", "cantilever", "--poisson", "0.7"], "rig.material.poisson"),
+        (["rig", "cantilever", "--clamped-length-mm", "1000"], "--clamped-length-mm: must be shorter than"),
+        (["rig", "cantilever", "--poisson", "0.7"], "--poisson: must lie in (-1, 0.5), got 0.7"),
         (["modes", "--config", "/nonexistent.toml"], "not found"),
     ],
 )

@@ -96,7 +96,7 @@ def test_stacked_offsets_and_motor_mount_round_trip_with_provenance():
 @pytest.mark.parametrize(
     ("change", "match"),
     [
-        ({"distal_offset_m": math.nan}, r"geometry\.distal_offset_m'"),
+        ({"distal_offset_m": math.nan}, r"^geometry\.distal_offset_m: must be a finite height"),
         ({"platform_offset_m": (0.0, math.inf, 0.0)}, r"geometry\.platform_offset_m\[1\]"),
     ],
 )

@@ -205,5 +205,6 @@ def test_coarse_links_warn_about_resolution(segments, warns):
         warn_if_coarse(ModelOptions(segments=segments))
     got = [w for w in caught if issubclass(w.category, ResolutionWarning)]
     assert bool(got) == warns
-    if warns:
-        assert "--segments" in str(got[0].message)
+    if warns:  # names the parameter (the command line shows it as --segments)
+        assert got[0].message.parameter == "segments"
+        assert "use segments >= 7" in str(got[0].message)

@@ -13,7 +13,7 @@ from fpm_sim.kinematics import Pose
 from fpm_sim.linear.modal import modes_constrained, modes_transition_fd
 from fpm_sim.model.deformable_links import DampingWarning, SectionWarning
 from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.options import FlexDampingWarning, ModelOptions
 from fpm_sim.model.parts import DEFAULT_RESOLUTION, LinkModelError
 from fpm_sim.model.rigs import RigSetup, build_rig
 
@@ -298,3 +298,61 @@ def test_flex_junction_in_plane_modes_match_the_segment_chain(steel_bar):
     # measured: flex (n = 12) -0.4 % and segments (n = 16) +0.2 % from the chain at n = 32; 1 % bounds
     # their sum with margin, while a spurious junction mode sat 35-50 % low
     np.testing.assert_allclose(f_flex, f_seg, rtol=0.01)
+
+
+def _explicit_damping_mu_h(model: mujoco.MjModel) -> float:
+    """``mu_max h``: the largest eigenvalue of ``M^-1 D`` (the flex's damping, joints' own removed) times ``h``."""
+    import scipy.linalg
+
+    from fpm_sim.model.options import passive_damping_matrix
+
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    mass = np.zeros((model.nv, model.nv))
+    mujoco.mj_fullM(model, data, mass)
+    damp = passive_damping_matrix(model, model.qpos0.copy()) - np.diag(model.dof_damping)
+    return float(scipy.linalg.eigh(damp, mass, eigvals_only=True)[-1] * model.opt.timestep)
+
+
+def test_flex_damping_is_lowered_to_a_stable_explicit_step(steel_bar):
+    """At 16 edges the bar's requested damping (beta = 5e-5 s) has mu h = 2.6 (measured): MuJoCo's explicit
+    flex damping made the step map grow (|lambda| = 1.62). Lowered to mu h = 1, the map is stable and the
+    damping law zeta = beta omega / 2 holds with the lowered beta, which the warning reports."""
+    with pytest.warns(FlexDampingWarning, match=r"lowered from 5e-05 s to .* \(mu h = 2\.59 > 1\)"):
+        built = build_rig(
+            RigSetup("cantilever", damping_beta_s=5e-5),
+            steel_bar,
+            ModelOptions(link_model="flex", segments=16, gravity=False),
+        )
+    m = built.model
+    beta = float(m.flex_damping[0])
+    assert beta < 5e-5
+    assert _explicit_damping_mu_h(m) == pytest.approx(1.0, rel=1e-6)  # the cap, found by an independent solve
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    a = np.zeros((2 * m.nv, 2 * m.nv))
+    mujoco.mjd_transitionFD(m, d, 1e-6, True, a, None, None, None)
+    assert np.abs(np.linalg.eigvals(a)).max() <= 1.0 + 1e-9  # measured 1 - 2e-8: no growing step-map mode
+    # straight and gravity off, both planes are damped; as in test_flex_damping_acts_along_the_current_curvature_only
+    # the law is exact and the discrete map's error ~ (omega h)^2
+    for md in modes_transition_fd(built, n_modes=2).modes:
+        assert md.damping_ratio == pytest.approx(beta * 2 * np.pi * md.frequency_hz / 2, rel=1e-3)
+
+
+@pytest.mark.slow
+def test_flex_manipulator_at_the_default_resolution_is_stable_and_misses_only_its_documented_stiffness(
+    default_manip,
+):
+    """``fpm-sim modes --link-model flex`` on the default manipulator (16 edges) was refused as unstable. Now
+    it solves, and its in-plane modes are the segment chain's divided by sqrt(I_in / I_out) = 1.936: the
+    flex's one (weak-axis) bending stiffness, its documented limit (measured 1.9345 / 1.9350 / 1.9356 at
+    segments 12 vs flex 16, gravity on: two discretisations 0.1 % apart)."""
+    pose = Pose(0, 0, 0)
+    with pytest.warns(FlexDampingWarning):
+        flex = modes_transition_fd(build_manipulator(default_manip, pose, ModelOptions(link_model="flex")), n_modes=8)
+    seg = modes_transition_fd(build_manipulator(default_manip, pose, ModelOptions()), n_modes=8)
+    f_flex = [md.frequency_hz for md in flex.modes if md.dominant == "flex_in"][:3]
+    f_seg = [md.frequency_hz for md in seg.modes if md.dominant == "bend_in"][:3]
+    sec = default_manip.section
+    ratio = np.sqrt(sec.i_inplane_m4 / sec.i_outofplane_m4)
+    np.testing.assert_allclose(np.array(f_seg) / np.array(f_flex), ratio, rtol=0.01)

@@ -90,5 +90,6 @@ def test_clamped_length_shortens_the_cantilever(steel_bar):
 def test_bad_rig_settings():
     with pytest.raises(RigError, match="unknown rig"):
         RigSetup("trampoline")
-    with pytest.raises(RigError, match="--angle-deg"):
+    with pytest.raises(RigError, match="chain hinge angle") as exc:
         RigSetup("chain", angle_deg=200)
+    assert (exc.value.parameter, exc.value.value) == ("rig.angle_deg", 200)

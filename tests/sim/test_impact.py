@@ -7,10 +7,11 @@ import mujoco
 import numpy as np
 import pytest
 
-from fpm_sim.frf import FrfError, LinkPoint, locate, modal_frf
+from fpm_sim.errors import FpmSimWarning
 from fpm_sim.kinematics import Pose
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import ModelOptions
+from fpm_sim.response import FrfError, LinkPoint, locate, modal_frf
 from fpm_sim.rom.reduction import modal_system
 from fpm_sim.sim.impact import ImpactRecord, ImpactSetup, h1_estimate, point_acceleration, virtual_impact_test
 
@@ -102,10 +103,19 @@ def test_an_in_plane_hammer_misses_the_out_of_plane_mode_1(symmetric_manip):
     result says so (mode 1, out-of-plane bending for the default sections, is not excited)."""
     built = build_manipulator(symmetric_manip, Pose(0.0, 0.0, 0.0), ModelOptions(segments=3, axial=False))
     hit = LinkPoint("distal_0", 0.5, "normal")
-    res = virtual_impact_test(built, ImpactSetup(impact=hit, accelerometer=hit, record_s=0.1, n_impacts=1))
+    with pytest.warns(FpmSimWarning, match="mode 1 .* is not seen"):
+        res = virtual_impact_test(built, ImpactSetup(impact=hit, accelerometer=hit, record_s=0.1, n_impacts=1))
     assert res.first_peak_mode > 1
     assert res.first_peak_hz > 1.5 * res.modal_f1_hz
     assert "not seen" in res.table()
+    # the reason, from the linear model at this set-up: the in-plane hammer barely excites the out-of-plane
+    # mode 1 (driving point: excitation and observation are the same vector, so both ratios agree)
+    k = res.first_peak_mode - 1
+    assert res.excitation[0] < 0.1 * res.excitation[k]
+    assert res.excitation[0] == pytest.approx(res.observation[0], rel=1e-9)
+    assert abs(res.modal_constants[0]) == pytest.approx(res.excitation[0] ** 2, rel=1e-9)
+    assert f"mode {k + 1}'s" in res.mode1_note()
+    assert res.to_dict()["first_peak_note"] == res.mode1_note()
 
 
 def test_h1_recovers_a_single_mode():

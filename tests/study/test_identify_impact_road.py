@@ -21,9 +21,9 @@ import pytest
 from fpm_sim.batch.frequencies import pose_frequencies
 from fpm_sim.cli.main import main
 from fpm_sim.config.schema import config_to_toml
-from fpm_sim.frf import FrequencyResponse
 from fpm_sim.kinematics import Pose
 from fpm_sim.model.options import ModelOptions
+from fpm_sim.response import FrequencyResponse
 from fpm_sim.sim.impact import write_uff58
 from fpm_sim.study.identify import read_measured_csv
 from tests.helpers.truths import (  # the truth, poses and settings, shared with studies/impact_road_scatter.py

@@ -47,7 +47,7 @@ def test_fold_assignment_partitions_the_poses():
     assert np.array_equal(f, fold_assignment(12, 4, seed=3))  # reproducible
     assert not np.array_equal(f, fold_assignment(12, 4, seed=4))
     assert sorted(np.bincount(fold_assignment(7, 3, seed=0))) == [2, 2, 3]
-    with pytest.raises(ValueError, match="--folds"):
+    with pytest.raises(ValueError, match=r"^folds: "):
         fold_assignment(5, 6, seed=0)
 
 
@@ -84,12 +84,12 @@ def test_measured_csv_forms(tmp_path):
         (2, 80.0, 1.6, None),
     ]
     p.write_text("row_mm,col_mm,experimental_hz\n100,0,47\n50,50,unreadable\n")
-    with pytest.raises(DataError, match="--reading"):
+    with pytest.raises(DataError, match=r"^reading: "):
         read_measured_csv(p)
     (o,) = read_measured_csv(p, reading=parse_reading("y-")).observations
     assert (o.pose.x_m, o.pose.y_m, o.pose.phi_rad) == (0.0, 0.1, -0.2)
     p.write_text("x_mm,y_mm,phi_rad,f1_hz,mode\n0,0,0,50,sideways\n")
-    with pytest.raises(DataError, match="column 'mode'"):
+    with pytest.raises(DataError, match="row 2: mode: unknown mode kind, got 'sideways'"):
         read_measured_csv(p)
     p.write_text("x_mm,y_mm,phi_rad,f1_hz\n0,0,0,abc\n")
     with pytest.raises(DataError, match="f1_hz"):
@@ -220,6 +220,9 @@ def test_cli_identify_writes_a_complete_folder_usable_with_config(tmp_path):
     assert "+-" in src
     doc = json.loads((out / "identify.json").read_text())
     assert doc["cross_validation"]["folds"] == 2
+    # the command recorded is the one main() was given (not the test runner's sys.argv)
+    assert doc["command"].startswith(f"fpm-sim identify --measured {csv},sigma_pct=1 --free hardware")
+    assert f"Command: `fpm-sim identify --measured {csv},sigma_pct=1" in (out / "report.md").read_text()
     assert tomllib.loads((out / "config.toml").read_text())["hardware"]["platform"]["mass_kg"]["value"] > 0
     # a second run into the same folder is refused without --overwrite, before any computation
     assert main(["identify", "--measured", str(csv), "--free", "hardware", "--out", str(out)]) == 2

@@ -9,10 +9,10 @@ import pytest
 
 from fpm_sim.config import default_config
 from fpm_sim.errors import FpmSimError
-from fpm_sim.frf import LinkPoint
 from fpm_sim.kinematics import Pose
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import ModelOptions
+from fpm_sim.response import LinkPoint
 from fpm_sim.rom.reduction import modal_system
 from fpm_sim.study.poses import study_poses
 from fpm_sim.study.readability import (

@@ -17,13 +17,12 @@ Each file carries a relative standard deviation used when a row has no ``sigma_h
 from __future__ import annotations
 
 import csv
-import io
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from fpm_sim.errors import FpmSimError
-from fpm_sim.kinematics import Pose
+from fpm_sim.kinematics import Pose, PoseValueError, checked_pose_mm
 from fpm_sim.study.poses import TableReading
 from fpm_sim.study.tables import SubsystemTest, parse_subsystem_rows
 
@@ -33,6 +32,7 @@ __all__ = [
     "DataError",
     "DataSet",
     "Observation",
+    "read_csv_rows",
     "read_measured_csv",
     "read_subsystems_csv",
 ]
@@ -65,6 +65,8 @@ class Observation:
     source: str
     row_mm: float = math.nan
     col_mm: float = math.nan
+    line: int | None = None
+    """The row's line number in its file (for messages about this observation)."""
 
     def describe(self) -> str:
         kind = f" {self.label}" if self.label else ""
@@ -81,26 +83,47 @@ class DataSet:
     sigma_pct: float = DEFAULT_SIGMA_PCT
 
 
-def _rows(path: Path) -> list[dict[str, str]]:
+def read_csv_rows(path: Path, parameter: str = "measured") -> list[tuple[int, dict[str, str]]]:
+    """``(line number, row)`` of every data row (``#`` comments and blank lines skipped); UTF-8 with or without
+    a byte-order mark, any line ending; header names stripped."""
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8-sig")
     except FileNotFoundError as exc:
-        raise DataError(f"measured-data file not found: {path} (--measured)") from exc
+        raise DataError(f"file not found: {path}", parameter=parameter) from exc
     except IsADirectoryError as exc:
-        raise DataError(f"--measured {path} is a folder; give a CSV file") from exc
-    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+        raise DataError(f"{path} is a folder", parameter=parameter, hint="give a CSV file") from exc
+    except UnicodeDecodeError as exc:
+        raise DataError(f"{path} is not UTF-8 text ({exc.reason})", parameter=parameter) from exc
+    lines = [
+        (n, ln) for n, ln in enumerate(text.splitlines(), start=1) if ln.strip() and not ln.lstrip().startswith("#")
+    ]
     if not lines:
-        raise DataError(f"{path}: no data rows (only comments or empty)")
-    return list(csv.DictReader(io.StringIO("\n".join(lines))))
+        raise DataError("no data rows (only comments or empty)", file=path)
+    header = [h.strip() for h in next(csv.reader([lines[0][1]]))]
+    if len(lines) == 1:
+        raise DataError(f"only a header ({', '.join(header)}), no data rows", file=path, row=lines[0][0])
+    out: list[tuple[int, dict[str, str]]] = []
+    for n, ln in lines[1:]:
+        cells = next(csv.reader([ln]))
+        if len(cells) > len(header):
+            raise DataError(f"{len(cells)} cells for {len(header)} columns", file=path, row=n)
+        out.append((n, dict(zip(header, [c.strip() for c in cells] + [""] * (len(header) - len(cells))))))
+    return out
 
 
-def _float(text: str | None, path: Path, i: int, col: str) -> float:
+def _float(text: str | None, path: Path, line: int, col: str) -> float:
+    """The number in a cell, NaN for a blank one; anything else (``n/a``, ``inf``, ``nan``) is refused."""
     if text is None or not text.strip():
         return math.nan
     try:
-        return float(text)
-    except ValueError as exc:
-        raise DataError(f"{path}, data row {i + 1}, column '{col}': {text!r} is not a number") from exc
+        v = float(text)
+    except ValueError:
+        raise DataError("not a number", parameter=col, value=text, file=path, row=line) from None
+    if not math.isfinite(v):
+        raise DataError(
+            "must be finite (leave the cell blank if not measured)", parameter=col, value=text, file=path, row=line
+        )
+    return v
 
 
 def read_measured_csv(
@@ -123,66 +146,83 @@ def read_measured_csv(
     Raises
     ------
     DataError
-        Naming the file, row and column of anything unreadable.
+        Naming the file, row (its line number in the file) and column of anything unreadable.
     """
     p = Path(path)
     if not (math.isfinite(sigma_pct) and sigma_pct > 0):
-        raise DataError(f"{p}: sigma_pct must be > 0, got {sigma_pct!r}")
-    rows = _rows(p)
-    cols = set(rows[0])
+        raise DataError("must be > 0", parameter="sigma_pct", value=sigma_pct)
+    rows = read_csv_rows(p)
+    cols = set(rows[0][1])
     ds = DataSet(source=p.name, sigma_pct=sigma_pct)
     if {"x_mm", "y_mm"} <= cols:
-        fcols = sorted((c for c in cols if c.startswith("f") and c.endswith("_hz")), key=lambda c: int(c[1:-3]))
+        fcols = [c for c in cols if c.startswith("f") and c.endswith("_hz")]
         for c in fcols:
             if not c[1:-3].isdigit():
-                raise DataError(f"{p}: column {c!r} not understood; frequency columns are f1_hz, f2_hz, ...")
+                raise DataError(f"column {c!r} not understood", file=p, hint="frequency columns are f1_hz, f2_hz, ...")
+        fcols.sort(key=lambda c: int(c[1:-3]))
         if not fcols:
-            raise DataError(f"{p}: no frequency column; expected f1_hz, f2_hz, ... beside x_mm,y_mm,phi_rad")
-        for i, r in enumerate(rows):
-            x, y = _float(r["x_mm"], p, i, "x_mm"), _float(r["y_mm"], p, i, "y_mm")
-            phi = _float(r.get("phi_rad", "0") or "0", p, i, "phi_rad")
-            if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(phi)):
-                raise DataError(f"{p}, data row {i + 1}: x_mm, y_mm and phi_rad must be finite numbers")
+            raise DataError("no frequency column", file=p, hint="expected f1_hz, f2_hz, ... beside x_mm,y_mm,phi_rad")
+        for line, r in rows:
+            try:
+                pose = checked_pose_mm(r["x_mm"], r["y_mm"], r.get("phi_rad") or "0", file=p, row=line)
+            except PoseValueError as e:
+                raise DataError(
+                    e.message, parameter=e.parameter, value=e.value, hint=e.hint, file=p, row=line
+                ) from None
             label = (r.get("mode") or "").strip() or None
             if label is not None and label not in MODE_LABELS:
-                raise DataError(f"{p}, data row {i + 1}, column 'mode': {label!r}; use in_plane or out_of_plane")
-            sig = _float(r.get("sigma_hz"), p, i, "sigma_hz")
+                raise DataError(
+                    "unknown mode kind",
+                    parameter="mode",
+                    value=label,
+                    hint="use in_plane or out_of_plane",
+                    file=p,
+                    row=line,
+                )
+            sig = _float(r.get("sigma_hz"), p, line, "sigma_hz")
             for c in fcols:
-                f = _float(r[c], p, i, c)
+                f = _float(r[c], p, line, c)
                 if math.isnan(f):
                     continue
                 if not f > 0:
-                    raise DataError(f"{p}, data row {i + 1}, column '{c}': frequency must be > 0, got {f}")
+                    raise DataError("a frequency must be > 0", parameter=c, value=f, file=p, row=line)
                 s = sig if math.isfinite(sig) else f * sigma_pct / 100.0
                 if not s > 0:
-                    raise DataError(f"{p}, data row {i + 1}, column 'sigma_hz': must be > 0, got {s}")
-                ds.observations.append(Observation(Pose.from_mm(x, y, phi), int(c[1:-3]), f, s, label, p.name))
+                    raise DataError("must be > 0", parameter="sigma_hz", value=s, file=p, row=line)
+                ds.observations.append(Observation(pose, int(c[1:-3]), f, s, label, p.name, line=line))
         return ds
     if {"row_mm", "col_mm"} <= cols:
         if reading is None:
             raise DataError(
-                f"{p} uses the study's row_mm,col_mm labels: say how to read them with --reading x+|x-|y+|y-"
+                f"{p} uses the study's row_mm,col_mm labels: say how to read them",
+                parameter="reading",
+                hint="x+, x-, y+ or y-",
             )
         fcol = next((c for c in ("experimental_hz", "comsol_hz", "f1_hz") if c in cols), None)
         if fcol is None:
-            raise DataError(f"{p}: no frequency column; expected experimental_hz, comsol_hz or f1_hz")
-        for i, r in enumerate(rows):
+            raise DataError("no frequency column", file=p, hint="expected experimental_hz, comsol_hz or f1_hz")
+        for line, r in rows:
             v = (r[fcol] or "").strip()
             if not v or v.lower() == "unreadable":
                 continue
-            f = _float(v, p, i, fcol)
-            rm, cm = _float(r["row_mm"], p, i, "row_mm"), _float(r["col_mm"], p, i, "col_mm")
-            ds.observations.append(Observation(reading.pose(rm, cm), 1, f, f * sigma_pct / 100.0, None, p.name, rm, cm))
+            f = _float(v, p, line, fcol)
+            if not f > 0:
+                raise DataError("a frequency must be > 0", parameter=fcol, value=f, file=p, row=line)
+            rm, cm = _float(r["row_mm"], p, line, "row_mm"), _float(r["col_mm"], p, line, "col_mm")
+            if math.isnan(rm) or math.isnan(cm):
+                raise DataError("row_mm and col_mm must both be given", file=p, row=line)
+            obs = Observation(reading.pose(rm, cm), 1, f, f * sigma_pct / 100.0, None, p.name, rm, cm, line=line)
+            ds.observations.append(obs)
         return ds
     raise DataError(
-        f"{p}: columns {sorted(cols)} not understood; expected x_mm,y_mm,phi_rad,f1_hz,... or row_mm,col_mm"
+        f"columns {sorted(cols)} not understood", file=p, hint="expected x_mm,y_mm,phi_rad,f1_hz,... or row_mm,col_mm"
     )
 
 
 def read_subsystems_csv(path: str | Path) -> list[SubsystemTest]:
     """Rig tests in the shape of the study's ``subsystems.csv`` (``rig,setting,experimental_hz``)."""
     p = Path(path)
-    rows = _rows(p)
+    rows = [r for _, r in read_csv_rows(p, "subsystems")]
     try:
         return parse_subsystem_rows(rows)
     except (KeyError, ValueError, IndexError) as exc:

@@ -6,7 +6,7 @@ Poles are estimated with sdypy-EMA (:class:`sdypy.EMA.Model`): the least-squares
 method (LSCF) at model orders up to ``pol_order``; the physical poles are the *stable* ones
 (frequency within ``fn_tol`` and damping within ``xi_tol`` between consecutive orders, the
 stabilisation chart's criterion, :meth:`sdypy.EMA.Model.select_closest_poles`) nearest the FRF's
-peaks (:func:`fpm_sim.frf.pick_peaks`), so no chart has to be clicked.
+peaks (:func:`fpm_sim.response.pick_peaks`), so no chart has to be clicked.
 
 The pose of a test comes from the UFF record's ``id4`` (``fpm-sim pose x_mm=.. y_mm=.. phi_rad=..``,
 written by ``fpm-sim impact --uff``) or is given by the caller.
@@ -25,15 +25,18 @@ from __future__ import annotations
 
 import csv
 import io
+import math
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from fpm_sim.errors import FpmSimError
-from fpm_sim.frf import pick_peaks
+from fpm_sim.response import pick_peaks
+from fpm_sim.study.identify.data import read_csv_rows
 
 __all__ = [
     "EmaError",
@@ -77,7 +80,28 @@ class ModalEstimate:
     window_tau_s: float | None = None
     """The exponential window's time constant (s) removed from the poles; None: no correction."""
 
-    def to_dict(self) -> dict:
+    def table(self) -> str:
+        """Each estimated mode's frequency (Hz) and damping ratio, with where the FRF was measured."""
+        lines = [f"{self.source} at {self.pose_mm_rad} (x mm, y mm, phi rad)"]
+        lines.append(f"{'mode':>4}  {'freq (Hz)':>10}  {'damping':>8}")
+        for i, (f, z) in enumerate(zip(self.freq_hz, self.damping), 1):
+            lines.append(f"{i:>4}  {f:>10.3f}  {z:>8.4f}")
+        return "\n".join(lines)
+
+    def plot(self, ax: Any = None) -> Any:
+        """Damping ratio (%) against natural frequency (Hz) of the estimated modes; returns the ``Figure``."""
+        import matplotlib.pyplot as plt
+
+        if ax is None:
+            _, ax = plt.subplots(figsize=(5.5, 3.5), constrained_layout=True)
+        ax.stem(self.freq_hz, 100.0 * self.damping)
+        ax.set_xlabel("natural frequency (Hz)")
+        ax.set_ylabel("damping ratio (%)")
+        ax.set_title(f"EMA of {Path(self.source).name}", fontsize=9)
+        return ax.figure
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: source, pose (mm, mm, rad), frequencies (Hz), damping ratios, mode label, window."""
         return {
             "mode_label": self.mode_label,
             "window_tau_s": self.window_tau_s,
@@ -92,23 +116,50 @@ _POSE_RE = re.compile(r"x_mm=([-+0-9.eE]+)\s+y_mm=([-+0-9.eE]+)\s+phi_rad=([-+0-
 _WINDOW_RE = re.compile(r"fpm-sim exp-window tau_s=([-+0-9.eE]+)")
 
 
+def _check_frequencies(freq_hz: np.ndarray, path: Path, lines: list[int] | None, record: int | None = None) -> None:
+    """Refuse frequencies that are negative or not strictly increasing (a resorted or duplicated line would be
+    fitted as a mode); ``lines`` are the rows' line numbers in a CSV."""
+    where = f"record {record}, " if record is not None else ""
+    if freq_hz.size and freq_hz[0] < 0:
+        row = lines[0] if lines else None
+        raise EmaError(
+            f"{where}frequencies must be >= 0", parameter="freq_hz", value=float(freq_hz[0]), file=path, row=row
+        )
+    steps = np.diff(freq_hz)
+    if np.any(steps <= 0):
+        k = int(np.argmax(steps <= 0)) + 1
+        row = lines[k] if lines else None
+        raise EmaError(
+            f"{where}frequencies must be strictly increasing ({freq_hz[k - 1]:g} Hz, then {freq_hz[k]:g} Hz)"
+            + ("" if lines else f" at line {k + 1}"),
+            parameter="freq_hz",
+            file=path,
+            row=row,
+        )
+
+
 def read_frfs(path: str | Path) -> list[MeasuredFrf]:
     """FRFs of a UFF 58 file (every type-58 record) or of an FRF CSV."""
     p = Path(path)
     if not p.is_file():
         raise EmaError(f"FRF file not found: {p}")
     if p.suffix.lower() == ".csv":
-        lines = [ln for ln in p.read_text().splitlines() if ln.strip() and not ln.startswith("#")]
-        rows = list(csv.DictReader(io.StringIO("\n".join(lines))))
-        if not rows:
-            raise EmaError(f"{p}: no rows")
-        re_col = next((c for c in rows[0] if c.startswith("re_")), None)
-        im_col = next((c for c in rows[0] if c.startswith("im_")), None)
-        if "freq_hz" not in rows[0] or re_col is None or im_col is None:
-            raise EmaError(f"{p}: an FRF CSV needs freq_hz, re_<unit> and im_<unit> columns")
-        f = np.array([float(r["freq_hz"]) for r in rows])
-        h = np.array([float(r[re_col]) + 1j * float(r[im_col]) for r in rows])
-        return [MeasuredFrf(f, h, p.name, None)]
+        rows = read_csv_rows(p, "files")
+        re_col = next((c for c in rows[0][1] if c.startswith("re_")), None)
+        im_col = next((c for c in rows[0][1] if c.startswith("im_")), None)
+        if "freq_hz" not in rows[0][1] or re_col is None or im_col is None:
+            raise EmaError("an FRF CSV needs freq_hz, re_<unit> and im_<unit> columns", file=p)
+        values = np.empty((len(rows), 3))
+        for k, (line, r) in enumerate(rows):
+            for j, col in enumerate(("freq_hz", re_col, im_col)):
+                try:
+                    values[k, j] = float(r[col])
+                except ValueError:
+                    raise EmaError("not a number", parameter=col, value=r[col], file=p, row=line) from None
+                if not math.isfinite(values[k, j]):
+                    raise EmaError("must be finite", parameter=col, value=r[col], file=p, row=line)
+        _check_frequencies(values[:, 0], p, [line for line, _ in rows])
+        return [MeasuredFrf(values[:, 0], values[:, 1] + 1j * values[:, 2], p.name, None)]
     import pyuff
 
     try:
@@ -125,7 +176,13 @@ def read_frfs(path: str | Path) -> list[MeasuredFrf]:
         pose = (float(m.group(1)), float(m.group(2)), float(m.group(3))) if m else None
         w = _WINDOW_RE.search(str(d.get("id5", "")))
         tau = float(w.group(1)) if w else None
-        out.append(MeasuredFrf(np.asarray(d["x"], float), np.asarray(d["data"], complex), f"{p.name}#{i}", pose, tau))
+        frf = MeasuredFrf(np.asarray(d["x"], float), np.asarray(d["data"], complex), f"{p.name}#{i}", pose, tau)
+        bad = ~(np.isfinite(frf.freq_hz) & np.isfinite(frf.h))
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise EmaError(f"record {i}, line {k + 1}: the frequency or FRF value is not finite", file=p)
+        _check_frequencies(frf.freq_hz, p, None, record=i)
+        out.append(frf)
     if not out:
         raise EmaError(f"{p}: no type-58 (function) record")
     return out
@@ -201,7 +258,8 @@ def remove_window_decay(
         raise EmaError(
             f"{source}: the pole at {freq_hz[k]:.4g} Hz decays at {xi[k] * wn[k]:.4g} 1/s, slower than the exponential "
             f"window's 1/tau = {1.0 / window_tau_s:.4g} 1/s alone: the window's time constant "
-            f"({window_tau_s:.4g} s) is wrong (--exp-window-tau-s)"
+            f"({window_tau_s:.4g} s) is wrong",
+            parameter="window_tau_s",
         )
     wn_true = np.hypot(sigma, wd)
     return wn_true / (2.0 * np.pi), sigma / wn_true
@@ -220,7 +278,9 @@ def write_modes_csv(estimates: Sequence[ModalEstimate], path: str | Path, *, hea
         w.writerow(cols)
         for e in estimates:
             if e.pose_mm_rad is None:
-                raise EmaError(f"{e.source}: the pose of this FRF is unknown; give it (--x-mm/--y-mm/--phi-rad)")
+                raise EmaError(
+                    f"{e.source}: the pose of this FRF is unknown", parameter="pose_mm_rad", hint="give it"
+                )
             f = [f"{v:.6g}" for v in e.freq_hz] + [""] * (n - len(e.freq_hz))
             z = [f"{v:.5g}" for v in e.damping] + [""] * (n - len(e.damping))
             w.writerow([f"{v:.6g}" for v in e.pose_mm_rad] + f + z + [e.mode_label or "", e.source])

@@ -167,6 +167,39 @@ class Problem:
         return [o.describe() for o in self.observations] + [f"rig {t.label}" for t in self.subsystem_tests]
 
 
+def check_problem(problem: Problem) -> None:
+    """Refuse a problem that cannot be fitted: fewer data than free parameters (the fit would report an optimum
+    and uncertainties that the data do not determine), or a measured pose the start description cannot reach
+    (its residual would be NaN). Raises :class:`IdentificationError` naming the file and row."""
+    n_free, n_data = len(problem.parameters.parameters), len(problem.observations) + len(problem.subsystem_tests)
+    if n_data < n_free:
+        raise IdentificationError(
+            f"{n_data} measured value(s) for {n_free} free parameters ({', '.join(problem.parameters.names)})",
+            parameter="measured",
+            hint="measure more poses or modes, or free fewer parameters",
+        )
+    obs = problem.observations
+    if not obs:
+        return
+    asm = assemble_many(
+        problem.parameters.start.geometry,
+        [o.pose.x_m for o in obs],
+        [o.pose.y_m for o in obs],
+        [o.pose.phi_rad for o in obs],
+    )
+    bad = [o for o, ok in zip(obs, asm.reachable) if not ok]
+    if bad:
+        o = bad[0]
+        where = f"row {o.line}" if o.line is not None else o.describe()
+        raise IdentificationError(
+            f"{o.source}: {where}: the pose (x = {o.pose.x_m * 1e3:g} mm, y = {o.pose.y_m * 1e3:g} mm, phi = "
+            f"{o.pose.phi_rad:g} rad) is unreachable for the start description"
+            + (f" ({len(bad)} such rows)" if len(bad) > 1 else ""),
+            parameter="measured",
+            hint="check the pose columns (x_mm, y_mm in mm, phi_rad in rad) or the start description",
+        )
+
+
 def workspace_measures(problem: Problem, config: Manipulator) -> np.ndarray:
     """The singularity measure of each ``problem.workspace`` pose under ``config`` (NaN where unreachable)."""
     ws = problem.workspace
@@ -381,6 +414,40 @@ class Identification:
             "seconds": self.seconds,
         }
 
+    def table(self) -> str:
+        """The fit (cost, chi^2 per degree of freedom) and each parameter's value +- one standard deviation."""
+        lines = [
+            f"identified {len(self.names)} parameters in {self.seconds:.0f} s (cost {self.cost:.4g}, "
+            f"chi2/dof {self.chi2_per_dof:.3g})"
+        ]
+        for n, v, s in zip(self.names, self.values, self.std):
+            lines.append(f"  {n:<42} {v:>12.5g} +- {s:.3g}" + ("  (at bound)" if n in self.at_bound else ""))
+        return "\n".join(lines)
+
+    def plot(self, ax: Any = None, *, cv: CrossValidation | None = None) -> Any:
+        """Model against measured frequency (Hz) of every measured pose, by data source (with ``cv``: also the
+        cross-validated predictions); returns the ``Figure``."""
+        import matplotlib.pyplot as plt
+
+        if ax is None:
+            _, ax = plt.subplots(figsize=(5.5, 5), constrained_layout=True)
+        p = self.problem
+        n_obs = len(p.observations)
+        meas, pred = self.measured[:n_obs], self.predicted[:n_obs]
+        sources = [o.source for o in p.observations]
+        for s in sorted(set(sources)):
+            m = np.array([x == s for x in sources])
+            ax.errorbar(meas[m], pred[m], xerr=p.sigma[:n_obs][m], fmt="o", label=f"{s} (in-sample)", alpha=0.8)
+            if cv is not None:
+                ax.plot(meas[m], cv.predicted[m], "x", label=f"{s} (cross-validated)")
+        if n_obs:
+            lim = [np.nanmin(meas) * 0.9, np.nanmax(meas) * 1.1]
+            ax.plot(lim, lim, "k--", lw=0.8)
+        ax.set_xlabel("measured (Hz)")
+        ax.set_ylabel("model (Hz)")
+        ax.legend(fontsize=7)
+        return ax.figure
+
 
 def _least_squares_z(fun: Any, z0: np.ndarray, max_nfev: int) -> Any:
     """Bounded least squares (trust-region reflective) in parameters normalised to their bounds, ``z in [0, 1]``;
@@ -424,7 +491,9 @@ def _surrogate_starts(
     ps = obj.ps
     gi = [i for i, p in enumerate(ps.parameters) if p.group in GEOMETRY_GROUPS]
     if not gi:
-        raise IdentificationError("--global surrogate-de needs the geometry group free (--free geometry)")
+        raise IdentificationError(
+            "surrogate-de needs the geometry group free", parameter="global_method", hint="add geometry to free"
+        )
     first = [k for k, o in enumerate(obj.obs) if o.mode == 1 and o.label in (None, "in_plane")]
     poses = [obj.obs[k].pose for k in first]
     logf = np.log([obj.obs[k].freq_hz for k in first])
@@ -662,9 +731,15 @@ def identify(problem: Problem, *, options: IdentifyOptions | None = None, progre
 
     opts = options or IdentifyOptions()
     if opts.global_method not in GLOBAL_METHODS:
-        raise IdentificationError(f"--global {opts.global_method!r}: choose from {', '.join(GLOBAL_METHODS)}")
+        raise IdentificationError(
+            "unknown global method",
+            parameter="global_method",
+            value=opts.global_method,
+            hint=f"choose from {', '.join(GLOBAL_METHODS)}",
+        )
     if not problem.observations and not problem.subsystem_tests:
-        raise IdentificationError("no data: give --measured FILE.csv and/or --subsystems FILE.csv")
+        raise IdentificationError("no data", parameter="measured", hint="give measured and/or subsystems data")
+    check_problem(problem)
     t_start = time.time()
     history: list[SearchStep] = []
     ps = problem.parameters
@@ -816,11 +891,42 @@ class CrossValidation:
             "seconds": self.seconds,
         }
 
+    def table(self) -> str:
+        """Each observation's measured and cross-validated frequency (Hz), and the mean error per source."""
+        lines = [f"{self.folds}-fold cross-validation ({self.seconds:.0f} s)"]
+        lines.append(f"  {'data':<36} {'measured Hz':>11} {'CV Hz':>9} {'err %':>7}")
+        for lab, m, p, e in zip(self.labels, self.measured, self.predicted, self.error_pct()):
+            lines.append(f"  {lab:<36} {m:>11.3f} {p:>9.3f} {e:>+7.2f}")
+        for s in sorted(set(self.sources)):
+            lines.append(f"  {s}: mean |err| {self.mean_abs_pct(s):.2f} %")
+        return "\n".join(lines)
+
+    def plot(self, ax: Any = None) -> Any:
+        """Cross-validated prediction against measured frequency (Hz), by source; returns the ``Figure``."""
+        import matplotlib.pyplot as plt
+
+        if ax is None:
+            _, ax = plt.subplots(figsize=(5.5, 5), constrained_layout=True)
+        for s in sorted(set(self.sources)):
+            m = np.array([x == s for x in self.sources])
+            ax.plot(self.measured[m], self.predicted[m], "x", label=f"{s} ({self.mean_abs_pct(s):.2f} % mean |err|)")
+        ok = np.isfinite(self.measured)
+        if ok.any():
+            lim = [np.min(self.measured[ok]) * 0.9, np.max(self.measured[ok]) * 1.1]
+            ax.plot(lim, lim, "k--", lw=0.8)
+        ax.set_xlabel("measured (Hz)")
+        ax.set_ylabel("cross-validated model (Hz)")
+        ax.set_title(f"{self.folds}-fold cross-validation", fontsize=9)
+        ax.legend(fontsize=7)
+        return ax.figure
+
 
 def fold_assignment(n_poses: int, folds: int, seed: int) -> np.ndarray:
     """Fold (0 .. folds-1) of each of ``n_poses`` poses: a seeded permutation dealt round-robin."""
     if not 2 <= folds <= n_poses:
-        raise IdentificationError(f"--folds must be between 2 and the number of poses ({n_poses}), got {folds}")
+        raise IdentificationError(
+            f"must be between 2 and the number of poses ({n_poses})", parameter="folds", value=folds
+        )
     perm = np.random.default_rng(seed).permutation(n_poses)
     out = np.empty(n_poses, int)
     out[perm] = np.arange(n_poses) % folds

@@ -275,7 +275,9 @@ def _offsets(cfg: Manipulator) -> list[FreeParameter]:
 def _rig(cfg: Manipulator) -> list[FreeParameter]:
     rig = cfg.rig
     if rig is None:
-        raise ParameterError("--free rig needs a [rig] table in the start description (--config)")
+        raise ParameterError(
+            "the group 'rig' needs a [rig] table in the start description", parameter="free", hint="add one to config"
+        )
 
     # build(rig, value) -> the new value of the one RigConfig field named by the keyword (Any: its type
     # depends on that field).
@@ -375,13 +377,15 @@ def parameter_set(start: Manipulator, groups: Sequence[str]) -> ParameterSet:
     params: list[FreeParameter] = []
     for g in groups:
         if g not in _BUILDERS:
-            raise ParameterError(f"--free: unknown parameter group {g!r}; choose from {', '.join(GROUPS)}")
+            raise ParameterError(
+                "unknown parameter group", parameter="free", value=g, hint=f"choose from {', '.join(GROUPS)}"
+            )
         params += _BUILDERS[g](start)
     for a, b in (GEOMETRY_GROUPS, ("section", "section-height")):
         if a in groups and b in groups:
-            raise ParameterError(f"--free: {a} and {b} overlap; choose one of them")
+            raise ParameterError(f"{a} and {b} overlap", parameter="free", hint="choose one of them")
     if not params:
-        raise ParameterError("--free: no parameter group given")
+        raise ParameterError("no parameter group given", parameter="free")
     try:
         ParameterSet(start, params).apply([p.start for p in params])
     except ConfigError as exc:

@@ -240,18 +240,7 @@ def plot_figures(result: Identification, cv: CrossValidation | None, folder: Pat
     p = result.problem
     n_obs = len(p.observations)
     meas, pred = result.measured[:n_obs], result.predicted[:n_obs]
-    sources = [o.source for o in p.observations]
-    fig, ax = plt.subplots(figsize=(5.5, 5), constrained_layout=True)
-    for s in sorted(set(sources)):
-        m = np.array([x == s for x in sources])
-        ax.errorbar(meas[m], pred[m], xerr=p.sigma[:n_obs][m], fmt="o", label=f"{s} (in-sample)", alpha=0.8)
-        if cv is not None:
-            ax.plot(meas[m], cv.predicted[m], "x", label=f"{s} (cross-validated)")
-    lim = [np.nanmin(meas) * 0.9, np.nanmax(meas) * 1.1]
-    ax.plot(lim, lim, "k--", lw=0.8)
-    ax.set_xlabel("measured (Hz)")
-    ax.set_ylabel("model (Hz)")
-    ax.legend(fontsize=7)
+    fig = result.plot(cv=cv)
     fig.savefig(folder / "measured_vs_predicted.png", dpi=120)
     plt.close(fig)
     fig, ax = plt.subplots(figsize=(6, 5), constrained_layout=True)

@@ -8,7 +8,7 @@ import pytest
 from fpm_sim.batch.engine import EngineOptions
 from fpm_sim.batch.pose_loop import fast_options
 from fpm_sim.cli.main import main
-from fpm_sim.design import DesignError, design_study, factorial, moving_mass_kg, parse_spec, parse_vary
+from fpm_sim.designs import DesignError, design_study, factorial, moving_mass_kg, parse_spec, parse_vary
 from fpm_sim.kinematics import Pose
 from fpm_sim.study.poses import study_poses
 
@@ -81,11 +81,14 @@ def test_factorial_dataset_and_summary(default_manip):
         engine=EngineOptions(scheduler="serial"),
     )  # fmt: skip
     ds = res.dataset
-    assert ds["frequency_hz"].dims == ("section.thickness_m", "hardware.payload.mass_kg", "pose", "mode")
-    assert ds["frequency_hz"].shape == (3, 2, 6, 3)
+    assert ds["freq_hz"].dims == ("section.thickness_m", "hardware.payload.mass_kg", "pose", "mode")
+    assert ds["freq_hz"].shape == (3, 2, 6, 3)
     # the dataset's cells are the designs' results, in factorial order
-    f = ds["frequency_hz"].sel({"section.thickness_m": 0.02, "hardware.payload.mass_kg": 1.0}).values
+    f = ds["freq_hz"].sel({"section.thickness_m": 0.02, "hardware.payload.mass_kg": 1.0}).values
     np.testing.assert_array_equal(f, res.frequencies_hz[3])
+    st = ds["status"].sel({"section.thickness_m": 0.02, "hardware.payload.mass_kg": 1.0}).values
+    assert list(st) == list(res.status[3])  # status per design and pose, a coordinate as in every frequency dataset
+    assert ds["x_mm"].dims == ("pose",)
     rows = res.summary()
     assert [(r["section.thickness_m"], r["hardware.payload.mass_kg"]) for r in rows] == [
         (t, m) for t in (0.01, 0.02, 0.03) for m in (0.0, 1.0)
@@ -146,7 +149,7 @@ def test_bad_inputs_name_the_option(default_manip, tmp_path, capsys):
         design_study(default_manip, poses=[Pose(0, 0, 0)], vary={"section.thickness_m": [-0.01]})
     code = main(["design", "--vary", "nope.field=1", "--out", str(tmp_path / "x")])
     assert code == 2
-    assert "--vary nope.field" in capsys.readouterr().err
+    assert "error: --vary: field 'nope.field'" in capsys.readouterr().err
     assert moving_mass_kg(default_manip) > 0
 
 

@@ -34,8 +34,9 @@ from fpm_sim.batch.pose_loop import (
 )
 from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError, FpmSimWarning
+from fpm_sim.figures import wrap_title
 from fpm_sim.kinematics import Pose
-from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.options import ModelOptions, resolution_footer
 
 __all__ = [
     "COMPUTED",
@@ -64,7 +65,7 @@ class DesignError(FpmSimError):
 # ----------------------------------------------------------------------------------------------- inputs
 
 
-def parse_spec(spec: str, *, name: str = "SPEC") -> list[float]:
+def parse_spec(spec: str, *, name: str = "SPEC", parameter: str | None = None) -> list[float]:
     """Values of ``a,b,c`` (a list) or ``start:stop:count`` (``count`` values from ``start`` to ``stop``)."""
     text = spec.strip()
     try:
@@ -79,34 +80,45 @@ def parse_spec(spec: str, *, name: str = "SPEC") -> list[float]:
         values = [float(v) for v in text.split(",") if v.strip()]
     except ValueError:
         raise DesignError(
-            f"{name} {spec!r}: give a list a,b,c or a range start:stop:count (count an integer >= 1)"
+            f"{name} {spec!r}: give a list a,b,c or a range start:stop:count (count an integer >= 1)",
+            parameter=parameter,
         ) from None
     if not values:
-        raise DesignError(f"{name} {spec!r} is empty: give a list a,b,c or a range start:stop:count")
+        raise DesignError(
+            f"{name} {spec!r} is empty: give a list a,b,c or a range start:stop:count", parameter=parameter
+        )
+    if not all(math.isfinite(v) for v in values):
+        raise DesignError(f"{name} {spec!r}: every value must be finite", parameter=parameter)
     return values
 
 
-def _check_field(config: Manipulator, name: str) -> None:
+def _check_field(config: Manipulator, name: str, parameter: str = "vary") -> None:
+    """Raise :class:`DesignError` naming ``parameter`` (``vary`` or ``designs``) unless ``name`` is a settable
+    numeric field of ``config``."""
     try:
         parameter_value(config, name)
-    except ValueError as exc:
+    except FpmSimError as exc:
         raise DesignError(
-            f"--vary {name}: {exc}; fields are dotted paths of the description, e.g. section.thickness_m, "
-            "hardware.payload.mass_kg, geometry.distal_length_m (see `fpm-sim config`)"
+            f"field {name!r}: {exc.message}",
+            parameter=parameter,
+            hint=f"{exc.hint + '; ' if exc.hint else ''}fields are dotted paths of the description "
+            "(see `fpm-sim config`)",
         ) from None
 
 
 def parse_vary(items: Sequence[str], config: Manipulator) -> dict[str, list[float]]:
-    """``["FIELD=SPEC", ...]`` (the ``--vary`` options) as ``{field: values}``, fields checked on ``config``."""
+    """``["FIELD=SPEC", ...]`` (the ``vary`` items) as ``{field: values}``, fields checked on ``config``."""
     out: dict[str, list[float]] = {}
     for item in items:
         if "=" not in item:
-            raise DesignError(f"--vary {item!r}: write FIELD=SPEC, e.g. section.thickness_m=0.005:0.03:6")
+            raise DesignError(
+                "write FIELD=SPEC", parameter="vary", value=item, hint="e.g. section.thickness_m=0.005:0.03:6"
+            )
         name, spec = (s.strip() for s in item.split("=", 1))
         _check_field(config, name)
         if name in out:
-            raise DesignError(f"--vary {name} given twice; give all its values in one SPEC")
-        out[name] = parse_spec(spec, name=f"--vary {name}")
+            raise DesignError(f"{name} given twice", parameter="vary", hint="give all its values in one SPEC")
+        out[name] = parse_spec(spec, name=name, parameter="vary")
     return out
 
 
@@ -120,17 +132,37 @@ def read_designs_csv(path: str | Path, config: Manipulator) -> list[dict[str, fl
     """Designs from a CSV file: one column per dotted field, one row per design."""
     p = Path(path)
     if not p.is_file():
-        raise DesignError(f"--designs {p}: no such file")
-    with open(p, newline="") as fh:
-        rows = list(csv.DictReader(fh))
-    if not rows:
-        raise DesignError(f"--designs {p}: no rows (write a header of dotted fields, then one design per row)")
-    for name in rows[0]:
-        _check_field(config, name)
-    try:
-        return [{k: float(v) for k, v in r.items()} for r in rows]
-    except (TypeError, ValueError):
-        raise DesignError(f"--designs {p}: every cell must be a number (SI units, as the field's name says)") from None
+        raise DesignError(f"{p}: no such file", parameter="designs")
+    with open(p, newline="", encoding="utf-8-sig") as fh:
+        reader = csv.reader(fh)
+        header = [h.strip() for h in next(reader, [])]
+        rows = [r for r in reader if any(c.strip() for c in r)]
+    if not header or not rows:
+        raise DesignError(
+            f"{p}: no rows", parameter="designs", hint="write a header of dotted fields, then one design per row"
+        )
+    if len(set(header)) != len(header) or "" in header:
+        raise DesignError(f"{p}: the header {header} has an empty or repeated column", parameter="designs")
+    for name in header:
+        _check_field(config, name, "designs")
+    designs: list[dict[str, float]] = []
+    for line, r in enumerate(rows, start=2):
+        if len(r) != len(header):
+            raise DesignError(
+                f"{p}: row {line} has {len(r)} cells for {len(header)} columns", parameter="designs"
+            )
+        try:
+            values = [float(v) for v in r]
+        except ValueError:
+            raise DesignError(
+                f"{p}: row {line}: every cell must be a number (SI units, as the field's name says)",
+                parameter="designs",
+                value=r,
+            ) from None
+        if not all(math.isfinite(v) for v in values):
+            raise DesignError(f"{p}: row {line}: cells must be finite", parameter="designs", value=r)
+        designs.append(dict(zip(header, values)))
+    return designs
 
 
 def apply_design(config: Manipulator, values: Mapping[str, float]) -> Manipulator:
@@ -287,6 +319,7 @@ class DesignResult:
                 f"{r['moving_mass_kg']:.4f}",
             ]
             lines.append("  ".join(c.rjust(w) for c, w in zip(cells, width)))
+        lines.append(resolution_footer(self.options))
         return "\n".join(lines)
 
     def to_dict(self) -> dict[str, Any]:
@@ -309,33 +342,30 @@ class DesignResult:
 
     @property
     def dataset(self) -> Any:
-        """An :class:`xarray.Dataset`: dimensions each varied field (a factorial study) or ``design``
-        (a list of designs), ``pose`` and ``mode``; variables ``frequency_hz``, ``in_plane_mode1``,
-        ``singularity``, ``status``, ``link_mass_kg``, ``moving_mass_kg``; pose coordinates ``x_mm``,
-        ``y_mm``, ``phi_rad``."""
-        import xarray as xr
+        """:meth:`to_xarray` (the name this result has had)."""
+        return self.to_xarray()
 
-        n_d, n_p, n_m = self.frequencies_hz.shape
-        coords: dict[str, Any] = {
-            "design": np.arange(n_d),
-            "pose": np.arange(n_p),
-            "mode": np.arange(1, n_m + 1),
-            "x_mm": ("pose", np.array([p.x_m * 1e3 for p in self.poses])),
-            "y_mm": ("pose", np.array([p.y_m * 1e3 for p in self.poses])),
-            "phi_rad": ("pose", np.array([p.phi_rad for p in self.poses])),
-        }
-        for f in self.fields:
-            coords[f] = ("design", np.array([d[f] for d in self.designs]))
-        ds = xr.Dataset(
-            {
-                "frequency_hz": (("design", "pose", "mode"), self.frequencies_hz),
+    def to_xarray(self) -> Any:
+        """The frequencies over designs x poses (:func:`fpm_sim.results.frequencies_dataset`): ``freq_hz`` with
+        dimensions each varied field (a factorial study) or ``design`` (a list of designs), ``pose`` and
+        ``mode``; ``status`` per design and pose; pose coordinates ``x_mm``, ``y_mm``, ``phi_rad``; variables
+        ``in_plane_mode1``, ``singularity``, ``link_mass_kg``, ``moving_mass_kg``."""
+        from fpm_sim.results import frequencies_dataset
+
+        ds = frequencies_dataset(
+            self.frequencies_hz,
+            x_mm=[p.x_m * 1e3 for p in self.poses],
+            y_mm=[p.y_m * 1e3 for p in self.poses],
+            phi_rad=[p.phi_rad for p in self.poses],
+            status=self.status,
+            leading={"design": np.arange(len(self.designs))},
+            coords={f: ("design", np.array([d[f] for d in self.designs])) for f in self.fields},
+            data_vars={
                 "in_plane_mode1": (("design", "pose"), self.in_plane),
                 "singularity": (("design", "pose"), self.singularity),
-                "status": (("design", "pose"), self.status.astype(str)),
                 "link_mass_kg": ("design", self.link_mass_kg),
                 "moving_mass_kg": ("design", self.moving_mass_kg),
             },
-            coords=coords,
             attrs={
                 "config": self.config.name,
                 "f_min_hz": math.nan if self.f_min_hz is None else self.f_min_hz,
@@ -434,7 +464,7 @@ class DesignResult:
             a.grid(alpha=0.3)
             if any(line.get_label() and not line.get_label().startswith("_") for line in a.get_lines()):
                 a.legend(fontsize=7)
-        fig.suptitle(f"{self.config.name}: weakest pose per design", fontsize=9)
+        fig.suptitle(wrap_title(f"{self.config.name}: weakest pose per design", fig, 9), fontsize=9)
         return fig
 
     def plot_maps(self, max_designs: int = 12) -> Any:
@@ -462,11 +492,17 @@ class DesignResult:
             ok = np.isfinite(f1[d])
             sc = a.scatter(x[ok], y[ok], c=f1[d, ok], s=max(4.0, 2000.0 / max(len(x), 1)), vmin=vmin, vmax=vmax)
             a.scatter(x[~ok], y[~ok], marker="x", s=6, color="0.7")
-            a.set_title(", ".join(f"{k}={v:g}" for k, v in self.designs[d].items()) or "design", fontsize=7)
+            a.set_title("\n".join(f"{k}={v:g}" for k, v in self.designs[d].items()) or "design", fontsize=7)
             a.set_aspect("equal")
             a.tick_params(labelsize=6)
+            a.set_xlabel("x (mm)", fontsize=7)
+            a.set_ylabel("y (mm)", fontsize=7)
         if sc is not None:
             fig.colorbar(sc, ax=axes, label="f1 (Hz)", shrink=0.8)
+        shown = f"designs 1-{n} of {len(self.designs)} (the rest in design.csv)" if n < len(self.designs) else (
+            f"all {n} designs"
+        )
+        fig.suptitle(f"f1 over the poses, {shown}; small grey marks: no f1 (out of reach or failed)", fontsize=9)
         return fig
 
     def plot_tradeoff(self) -> Any:
@@ -475,14 +511,20 @@ class DesignResult:
 
         rows = self.summary()
         fig, ax = plt.subplots(figsize=(5, 4), constrained_layout=True)
-        ax.scatter([r["moving_mass_kg"] for r in rows], [r["min_f1_hz"] for r in rows])
+        # the y axis is summary.csv's min_f1_ok_hz (the weakest pose away from singularities), as labelled
+        ax.scatter([r["moving_mass_kg"] for r in rows], [r["min_f1_ok_hz"] for r in rows])
         for r in rows:
-            ax.annotate(", ".join(f"{r[f]:g}" for f in self.fields), (r["moving_mass_kg"], r["min_f1_hz"]), fontsize=6)
+            ax.annotate(
+                ", ".join(f"{r[f]:g}" for f in self.fields), (r["moving_mass_kg"], r["min_f1_ok_hz"]), fontsize=6
+            )
         if self.f_min_hz is not None:
-            ax.axhline(self.f_min_hz, color="red", ls="--", lw=1)
+            ax.axhline(self.f_min_hz, color="red", ls="--", lw=1, label=f"f_min {self.f_min_hz:g} Hz")
+            ax.legend(fontsize=7)
         ax.set_xlabel("moving mass (kg)")
         ax.set_ylabel("minimum f1 over the ok poses (Hz)")
-        ax.set_title(f"trade-off ({', '.join(self.fields)})", fontsize=8)
+        ax.set_title(
+            f"trade-off; labels: {', '.join(self.fields)}\n(near-singular poses excluded: min_f1_ok_hz)", fontsize=8
+        )
         ax.grid(alpha=0.3)
         return fig
 
@@ -570,26 +612,29 @@ def design_study(
         Unknown field, invalid value, both or neither of ``vary``/``designs``, no poses.
     """
     if (vary is None) == (designs is None):
-        raise DesignError("give either vary (--vary FIELD=SPEC) or designs (--designs FILE.csv), not both or neither")
+        raise DesignError(
+            "give either vary (FIELD=SPEC items) or designs (rows of field values), not both or neither",
+            parameter="vary",
+        )
     if n_modes < 1:
-        raise DesignError(f"--n-modes must be >= 1, got {n_modes}")
+        raise DesignError("must be >= 1", parameter="n_modes", value=n_modes)
     if f_min_hz is not None and not f_min_hz >= 0:
-        raise DesignError(f"--f-min-hz must be >= 0, got {f_min_hz}")
+        raise DesignError("must be >= 0", parameter="f_min_hz", value=f_min_hz)
     poses = list(poses)
     if not poses:
-        raise DesignError("no poses: give --grid or --poses")
+        raise DesignError("no poses", parameter="poses", hint="give a grid or poses")
     if vary is not None:
         levels = {k: [float(v) for v in vals] for k, vals in vary.items()}
         for name, vals in levels.items():
             _check_field(config, name)
             if not vals:
-                raise DesignError(f"--vary {name}: no values")
+                raise DesignError(f"{name}: no values", parameter="vary")
         design_list = factorial(levels)
         is_factorial = True
     else:
         design_list = [{k: float(v) for k, v in d.items()} for d in designs or []]
         if not design_list:
-            raise DesignError("--designs: no designs")
+            raise DesignError("no designs", parameter="designs")
         levels = {k: sorted({d[k] for d in design_list}) for k in design_list[0]}
         is_factorial = False
     fields = list(levels)

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from fpm_sim.frf import FrfError, LinkPoint, half_power_damping, locate, modal_frf, pick_peaks, point_row
 from fpm_sim.kinematics import Pose
 from fpm_sim.linear.equilibrium import static_equilibrium
 from fpm_sim.linear.modal import NULLSPACE_RCOND, damping_matrix, equality_jacobian, mass_matrix, stiffness_matrix
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import ModelOptions
+from fpm_sim.response import FrfError, LinkPoint, half_power_damping, locate, modal_frf, pick_peaks, point_row
 from fpm_sim.rom.reduction import modal_system
 
 POSE = Pose(0.05, -0.05, 0.1)  # off-centre and rotated: no symmetry to hide errors behind

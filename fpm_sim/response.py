@@ -39,6 +39,7 @@ from typing import Any
 import mujoco
 import numpy as np
 import scipy.signal
+from numpy.typing import ArrayLike
 
 from fpm_sim.errors import FpmSimError
 from fpm_sim.model.options import BuiltModel
@@ -52,6 +53,7 @@ __all__ = [
     "LinkPoint",
     "MaterialPoint",
     "Peak",
+    "frf_grid",
     "half_power_damping",
     "locate",
     "material_point",
@@ -96,13 +98,16 @@ class LinkPoint:
             return f"platform/{self.axis}"
         return f"{self.link}@{self.fraction:g}/{self.axis}"
 
-    def check(self, built: BuiltModel) -> None:
+    def check(self, built: BuiltModel, role: str = "") -> None:
+        """Raise :class:`FrfError` for a point the model does not have; ``role`` (``input``/``output``) names
+        the fraction parameter ``<role>_fraction``."""
         if self.link != "platform" and self.link not in built.links:
             raise FrfError(f"unknown link {self.link!r}; choose one of platform, {', '.join(sorted(built.links))}")
         if not (0.0 <= self.fraction <= 1.0) or not math.isfinite(self.fraction):
             raise FrfError(
-                f"fraction must lie in [0, 1] (position along {self.link}; --input-fraction or --output-fraction on "
-                f"the command line), got {self.fraction!r}"
+                f"the fraction must lie in [0, 1] (position along {self.link})",
+                parameter=f"{role}_fraction" if role else "fraction",
+                value=self.fraction,
             )
         if self.axis not in AXES:
             raise FrfError(f"axis must be one of {', '.join(AXES)}, got {self.axis!r}")
@@ -370,24 +375,28 @@ class FrequencyResponse:
     ) -> Any:
         """Magnitude (dB) and phase against frequency; returns the ``Figure``.
 
-        ``ax`` (or ``axes``): two axes (magnitude, phase) to draw on; default a new figure.
+        ``ax``: one axes (the magnitude alone) or two (magnitude, phase); ``axes``: two axes; default a new
+        figure with both.
         """
         import matplotlib.pyplot as plt
 
         axes = ax if ax is not None else axes
         if axes is None:
             _, axes = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True, gridspec_kw={"height_ratios": [2, 1]})
-        ax, axp = axes
+        ax, axp = (axes, None) if not np.iterable(axes) else axes
         ax.plot(self.freq_hz, 20 * np.log10(np.maximum(self.magnitude, 1e-300)), lw=1.2, label=label)
-        axp.plot(self.freq_hz, np.degrees(np.angle(self.h)), lw=1.0)
+        if axp is not None:
+            axp.plot(self.freq_hz, np.degrees(np.angle(self.h)), lw=1.0)
+            axp.set_ylabel("phase (deg)")
+            axp.set_xlabel("frequency (Hz)")
+        else:
+            ax.set_xlabel("frequency (Hz)")
         if modal_lines:
             for f in self.modal_freq_hz:
                 if self.freq_hz[0] <= f <= self.freq_hz[-1]:
                     ax.axvline(f, color="0.8", lw=0.7, zorder=0)
         ax.set_ylabel(f"|H| (dB re 1 {self.unit})")
         ax.set_title(f"{self.quantity}: {self.excitation} -> {self.response}", fontsize=10)
-        axp.set_ylabel("phase (deg)")
-        axp.set_xlabel("frequency (Hz)")
         if label:
             ax.legend(fontsize=8)
         return ax.figure
@@ -406,6 +415,27 @@ def _damping(system: ModalSystem, damping_ratio: float | Sequence[float] | None)
     if np.any(~np.isfinite(z)) or np.any(z < 0.0) or np.any(z >= 1.0):
         raise FrfError(f"damping ratios must lie in [0, 1), got {damping_ratio!r}")
     return z[:n]
+
+
+def frf_grid(f_min_hz: float, f_max_hz: float, df_hz: float, modal_freq_hz: ArrayLike) -> np.ndarray:
+    """Make a frequency grid (Hz) from ``f_min_hz`` to ``f_max_hz`` by ``df_hz``, plus the natural frequencies.
+
+    The natural frequencies inside the band are added so that every resonance peak is sampled at its top.
+    """
+    need = "need 0 <= f_min_hz < f_max_hz and df_hz > 0"
+    if not 0.0 <= f_min_hz < math.inf:
+        raise FrfError(need, parameter="f_min_hz", value=f_min_hz)
+    if not f_min_hz < f_max_hz < math.inf:
+        raise FrfError(need, parameter="f_max_hz", value=f_max_hz)
+    if not df_hz > 0:
+        raise FrfError(need, parameter="df_hz", value=df_hz)
+    if (f_max_hz - f_min_hz) / df_hz > 1e6:
+        raise FrfError(
+            "the band holds more than 1e6 frequencies", parameter="df_hz", value=df_hz, hint="use a larger one"
+        )
+    freq = np.arange(f_min_hz, f_max_hz + df_hz / 2, df_hz)
+    fm = np.asarray(modal_freq_hz, float)
+    return np.unique(np.concatenate([freq, fm[(fm >= freq[0]) & (fm <= freq[-1])]]))
 
 
 def modal_frf(
