@@ -404,6 +404,8 @@ def rollout(
     accel_fraction: float | None = 0.5,
     options: ModelOptions | None = None,
     progress: bool = False,
+    integrator: str = "discrete",
+    band_hz: float | None = None,
 ) -> RolloutResult:
     """Nonlinear simulation of the full manipulator from its static equilibrium (``fpm-sim rollout``).
 
@@ -428,6 +430,9 @@ def rollout(
         Model options (as :func:`modes`).
     progress
         Show a progress bar.
+    integrator, band_hz
+        ``"discrete"`` (default) at the step of the band ``band_hz`` (Hz; default 5 x f1), or ``"explicit"``:
+        :func:`fpm_sim.sim.stepping.choose_stepping`.
     """
     from fpm_sim.model.manipulator import build_manipulator
     from fpm_sim.model.options import ModelOptions
@@ -447,6 +452,8 @@ def rollout(
         motor_torque=constant(*motor_torque_nm) if any(motor_torque_nm) else None,
         accel_sites=accel_site_names(built, accel_fraction) if accel_fraction is not None else [],
         progress=progress,
+        integrator=integrator,
+        band_hz=band_hz,
     )
 
 

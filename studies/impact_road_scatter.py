@@ -72,14 +72,16 @@ def main() -> None:
     truth = start.with_section(**road.TRUTH_SECTION_M)
     opts = ModelOptions(segments=road.SEGMENTS, axial=False, gravity=False)
     pf = pose_frequencies(truth, [Pose.from_mm(*p) for p in road.POSES_MM], n_modes=6, options=opts)
-    records, target = {}, {}
+    records, target, steps = {}, {}, {}
     for i, pose_mm in enumerate(road.POSES_MM):
         built = build_manipulator(truth, Pose.from_mm(*pose_mm), opts)
         in_plane = pf.in_plane[i] > 0.5
         for axis, kind in road.AXES.items():
             p = LinkPoint("distal_0", 0.5, axis)
             setup = ImpactSetup(impact=p, accelerometer=p, record_s=args.record_s, n_impacts=1, f_max_hz=400.0)
-            records[(pose_mm, axis)] = virtual_impact_test(built, setup).records[0]
+            res = virtual_impact_test(built, setup)
+            records[(pose_mm, axis)] = res.records[0]
+            steps[(pose_mm, axis)] = res.discrete_step_s
             target[(pose_mm, kind)] = pf.frequencies_hz[i][in_plane if kind == "in_plane" else ~in_plane][0]
     ways = {"window removed": (), "window kept": ("--exp-window-tau-s", "inf")}
     ema_err = {(w, k): [] for w in ways for k in road.AXES.values()}
@@ -99,7 +101,13 @@ def main() -> None:
                     )
                     frf = FrequencyResponse(f, h, "accelerance", "m/s^2/N", "hammer", "accel")
                     tau_s = exp_window_tau_s(float(r.t_s[-1]), WINDOW_END)
-                    uff = write_uff58(frf, d / f"{pose_mm}_{axis}.uff", pose_mm_rad=pose_mm, window_tau_s=tau_s)
+                    uff = write_uff58(
+                        frf,
+                        d / f"{pose_mm}_{axis}.uff",
+                        pose_mm_rad=pose_mm,
+                        window_tau_s=tau_s,
+                        discrete_step_s=steps[(pose_mm, axis)],
+                    )
                     files[axis].append(str(uff))
             row = []
             for way, extra in ways.items():

@@ -245,7 +245,9 @@ def test_modes_plot_has_a_legend_and_the_equilibrium_shape():
     import fpm_sim as fs
 
     with pytest.warns(ResolutionWarning):  # 3 segments: coarse on purpose (the layout does not depend on it)
-        res = fs.modes(fs.default_config(), fs.Pose.from_mm(50, -50, 0.0), options=fs.ModelOptions(segments=SEG), n_modes=2)
+        res = fs.modes(
+            fs.default_config(), fs.Pose.from_mm(50, -50, 0.0), options=fs.ModelOptions(segments=SEG), n_modes=2
+        )
     fig = res.plot(n_modes=2)
     check_figure(fig)
     for a in fig.axes:

@@ -60,6 +60,7 @@ def cmd_ema(args: argparse.Namespace) -> int:
         f"{e.source} at {e.pose_mm_rad}: "
         + ", ".join(f"{f:.3f} Hz ({100 * z:.2f} %)" for f, z in zip(e.freq_hz, e.damping))
         + (f" (window tau {e.window_tau_s:.4g} s removed)" if e.window_tau_s is not None else "")
+        + (f" (discrete integrator step {e.discrete_step_s:.4g} s removed)" if e.discrete_step_s is not None else "")
         for e in estimates
     ]
     lines.append(f"wrote {args.out / 'modes.csv'} (give it to fpm-sim identify --measured)")

@@ -21,6 +21,7 @@ from fpm_sim.cli.common import (
 )
 from fpm_sim.cli.frf import LinkPointDefault, add_point_args, point_of
 from fpm_sim.cli.main import PLOT_SUFFIXES, save_figure
+from fpm_sim.cli.rollout import add_stepping_args, stepping_kwargs
 
 __all__ = ["register"]
 
@@ -48,6 +49,9 @@ def cmd_impact(args: argparse.Namespace) -> int:
                 f"--implicit-step-s {args.implicit_step_s:g} must lie in (0, {top:g}] s: at most the "
                 f"{ImpactSetup.sample_s * 1e3:g} ms sampling interval and a tenth of --pulse-ms"
             )
+    stepping = stepping_kwargs(args)
+    if args.integrator == "explicit" and args.implicit_step_s is not None:
+        raise CliError("--implicit-step-s sets the discrete integrator's step; drop it with --integrator explicit")
     opts = model_options(args)
     segments = resolve_segments(segments=opts.segments, link_model=opts.link_model)  # ModelOptions resolved it
     if segments < 2:
@@ -68,6 +72,8 @@ def cmd_impact(args: argparse.Namespace) -> int:
         seed=args.seed,
         f_max_hz=args.f_max_hz,
         timestep_s=args.implicit_step_s,
+        integrator=stepping["integrator"],
+        band_hz=stepping["band_hz"],
     )
     res = virtual_impact_test(built, setup, progress=not args.json)
     if args.csv:
@@ -83,6 +89,7 @@ def cmd_impact(args: argparse.Namespace) -> int:
                 tmp,
                 pose_mm_rad=(pose.x_m * 1e3, pose.y_m * 1e3, pose.phi_rad),
                 window_tau_s=res.window_tau_s,
+                discrete_step_s=res.discrete_step_s,
             )
     if args.plot:
         save_figure(args.plot, res.plot)
@@ -126,10 +133,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--implicit-step-s",
         type=float,
         default=None,
-        help="run the rollouts with MuJoCo's discrete integrator (springs and welds implicit) at this step (s), "
-        "instead of the model's own explicit-spring step (5 us at 3 segments, ~0.4 us at 12): e.g. 2e-5 runs 12 "
-        "segments ~50x faster; adds ~pi f h of damping to a mode at f (default: the model's own step)",
+        help="the discrete integrator's step (s) instead of the band's (--band-hz); it adds ~pi f h of damping to "
+        "a mode at f, which the result and fpm-sim ema (from the UFF record) remove",
     )
+    add_stepping_args(p)
     add_resolution_args(p, axial=False)
     p.add_argument(
         "--gravity", action=argparse.BooleanOptionalAction, default=True, help="gravity along the motor axes"
@@ -138,8 +145,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--uff",
         type=Path,
-        help="write the H1 FRF as a Universal File type-58 record (for fpm-sim ema; it carries the pose and the "
-        "exponential window's time constant, which fpm-sim ema removes from the poles)",
+        help="write the H1 FRF as a Universal File type-58 record (for fpm-sim ema; it carries the pose, the "
+        "exponential window's time constant and the discrete integrator's step, whose effects fpm-sim ema removes "
+        "from the poles)",
     )
     p.add_argument("--plot", type=Path, help="H1 magnitude/phase/coherence plot (.png, .pdf, .svg)")
     add_pose_args(p)

@@ -64,6 +64,7 @@ COMMAND_MODULES: list[str] = [
     "fpm_sim.cli.rollout",
     "fpm_sim.cli.reduce",
     "fpm_sim.cli.transient",
+    "fpm_sim.cli.move",
     "fpm_sim.cli.frf",
     "fpm_sim.cli.impact",
     "fpm_sim.cli.readability",

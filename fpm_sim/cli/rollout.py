@@ -23,7 +23,42 @@ from fpm_sim.cli.common import (
 )
 from fpm_sim.cli.main import PLOT_SUFFIXES, save_figure
 
-__all__ = ["add_motor_args", "apply_motor_args", "equilibrium_hint", "register"]
+__all__ = ["add_motor_args", "add_stepping_args", "apply_motor_args", "equilibrium_hint", "register", "stepping_kwargs"]
+
+INTEGRATORS = ("discrete", "explicit")
+""":data:`fpm_sim.sim.stepping.INTEGRATORS` (a test checks they agree; the parser imports no MuJoCo)."""
+BAND_F1_MULTIPLE = 5.0
+""":data:`fpm_sim.sim.stepping.BAND_F1_MULTIPLE` (checked by a test)."""
+MAX_NUMERICAL_DAMPING = 0.02
+""":data:`fpm_sim.sim.stepping.MAX_NUMERICAL_DAMPING` (checked by a test)."""
+
+
+def add_stepping_args(p: argparse.ArgumentParser, *, band_flag: str = "--band-hz") -> None:
+    """``--integrator`` and the band the step is chosen from (``band_flag``)."""
+    g = p.add_argument_group("time stepping (docs/time_domain.md)")
+    g.add_argument(
+        "--integrator",
+        choices=INTEGRATORS,
+        default=INTEGRATORS[0],
+        help="discrete (default): MuJoCo's implicit discrete integrator at the band's step; explicit: the model's "
+        "own explicit-spring step (0.4-0.8 us at 12 segments, ~50x slower), the reference",
+    )
+    g.add_argument(
+        band_flag,
+        dest="step_band_hz",
+        type=float,
+        default=None,
+        help=f"band (Hz) the result must be right in: the discrete step keeps the numerical damping at its top <= "
+        f"{100 * MAX_NUMERICAL_DAMPING:g} %% (period error <= 0.05 %%); default {BAND_F1_MULTIPLE:g} x the model's f1",
+    )
+
+
+def stepping_kwargs(args: argparse.Namespace, band_flag: str = "--band-hz") -> dict[str, Any]:
+    """The rollout keywords of :func:`add_stepping_args`'s options (validated here: named errors)."""
+    v = args.step_band_hz
+    if v is not None and not (v > 0 and v != float("inf")):
+        raise CliError(f"{band_flag} must be a positive finite frequency (Hz), got {v!r}")
+    return {"integrator": args.integrator, "band_hz": v}
 
 
 def equilibrium_hint(exc: Exception, args: argparse.Namespace) -> str:
@@ -89,7 +124,13 @@ def cmd_rollout(args: argparse.Namespace) -> int:
     pose = pose_of(args)
     if not args.output_step_s > 0:
         raise CliError(f"--output-step-s must be positive, got {args.output_step_s!r}")
-    opts = model_options(args)
+    stepping = stepping_kwargs(args)
+    discrete = args.integrator == "discrete"
+    if discrete and args.timestep_s is not None:
+        if not args.timestep_s > 0:
+            raise CliError(f"--timestep-s must be positive, got {args.timestep_s!r}")
+        stepping["step_s"] = args.timestep_s  # the discrete step; the model keeps its automatic one (weld stiffness)
+    opts = model_options(args, timestep_s=None) if discrete else model_options(args)
     warn_if_coarse(opts)
     # timestep rounded down so that the output step is a whole number of steps
     built = build_manipulator(manip, pose, aligned_options(manip, pose, opts, args.output_step_s))
@@ -111,6 +152,7 @@ def cmd_rollout(args: argparse.Namespace) -> int:
             motor_torque=torque,
             accel_sites=sites,
             progress=not args.json,
+            **stepping,
         )
     except EquilibriumError as exc:
         raise EquilibriumError(equilibrium_hint(exc, args)) from exc
@@ -137,10 +179,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="headless nonlinear simulation from the static equilibrium under end-effector and motor loads",
         description=(
             "Steps the full MuJoCo model from its static equilibrium under gravity. Loads are held over each "
-            "output step. The default resolution (fidelity standard: 12 segments, axial springs) needs ~1 us steps: "
-            "for long rollouts use e.g. --fidelity fast --no-axial. Motor torques need --motors servo (locked motors "
-            "have no "
-            "joint). Writes a CSV/NPZ of end-effector pose, displacement, deflection (pose minus rigid-link "
+            "output step, at the default resolution (fidelity standard: 12 segments): MuJoCo's implicit discrete "
+            "integrator at the step of the band (--band-hz, default 5 x f1; the numerical damping and period error in "
+            "the band are printed); --integrator explicit: the explicit-spring reference (~1 us steps, ~50x slower). "
+            "Motor torques need --motors servo (locked motors have no joint). Writes a CSV/NPZ of end-effector "
+            "pose, displacement, deflection (pose minus rigid-link "
             "kinematics), motor angles, loads and accelerations, and a plot."
         ),
     )
@@ -163,5 +206,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_pose_args(p)
     add_config_args(p)
     add_model_args(p)
+    add_stepping_args(p)
     add_output_args(p)
     p.set_defaults(func=cmd_rollout)

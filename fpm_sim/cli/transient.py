@@ -22,6 +22,7 @@ from fpm_sim.cli.common import (
     resolution_line,
     with_resolution,
 )
+from fpm_sim.cli.rollout import add_stepping_args
 
 __all__ = ["register"]
 
@@ -36,7 +37,7 @@ DEFAULT_BAND_HZ = 500.0
 
 
 def cmd_transient(args: argparse.Namespace) -> int:
-    from fpm_sim.cli.rollout import equilibrium_hint
+    from fpm_sim.cli.rollout import equilibrium_hint, stepping_kwargs
     from fpm_sim.linear.equilibrium import EquilibriumError
     from fpm_sim.model.options import resolve_segments, warn_if_coarse
     from fpm_sim.outputs import atomic_dir
@@ -60,6 +61,7 @@ def cmd_transient(args: argparse.Namespace) -> int:
     if segments < 2:
         raise CliError(f"--segments must be >= 2 for a flexible transient, got {segments}")
     warn_if_coarse(opts)
+    stepping = stepping_kwargs(args, "--step-band-hz")
     try:
         res = study_transient(
             manip,
@@ -73,6 +75,8 @@ def cmd_transient(args: argparse.Namespace) -> int:
             band_hz=None if args.modes else args.band_hz,
             n_modes=args.modes,
             progress=not args.json,
+            integrator=stepping["integrator"],
+            step_band_hz=stepping["band_hz"],
         )
     except EquilibriumError as exc:
         raise EquilibriumError(equilibrium_hint(exc, args)) from exc
@@ -93,7 +97,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="full nonlinear rollout vs reduced model under a constant end-effector force (the study's check)",
         description=(
             "Constant end-effector force in x, then in y, from the static equilibrium under gravity; the full "
-            "nonlinear MuJoCo model and the reduced modal model share one discretisation. --study: pose (0,0), "
+            "nonlinear MuJoCo model (discrete integrator at the step of --step-band-hz, default 5 x f1; --integrator "
+            "explicit: the reference) and the reduced modal model share one discretisation. --study: pose (0,0), "
             f"links 5 mm thick, motors locked, {STUDY_DURATION_S:g} s at a "
             f"{STUDY_OUTPUT_STEP_S * 1e3:g} ms output step, {STUDY_FORCE_N:g} N (assumed magnitude)."
         ),
@@ -116,6 +121,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     g = p.add_mutually_exclusive_group()
     g.add_argument("--band-hz", type=float, default=DEFAULT_BAND_HZ, help="keep modes up to this frequency (Hz)")
     g.add_argument("--modes", type=count_arg("--modes"), help="keep this many modes instead of a band")
+    add_stepping_args(p, band_flag="--step-band-hz")
     add_pose_args(p)
     add_config_args(p)
     add_output_args(p)

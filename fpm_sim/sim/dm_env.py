@@ -9,8 +9,11 @@ Model
     spring-damper about the assembled motor angle (:data:`DEFAULT_SERVO_STIFFNESS_NM_PER_RAD`,
     :data:`DEFAULT_SERVO_DAMPING_NMS_PER_RAD` unless the configuration is already in servo mode); one
     MuJoCo ``motor`` actuator per motor hinge adds the agent's torque on top (gear 1, ``ctrlrange``
-    +-``max_torque_nm``). The MJCF is the generated model plus those actuators and the sensors below,
-    and the timestep is the automatic one rounded down to divide the control step.
+    +-``max_torque_nm``). The MJCF is the generated model plus those actuators and the sensors below. The
+    physics runs on MuJoCo's ``discrete`` integrator at the step of :mod:`fpm_sim.sim.stepping` (band 5 x f1
+    unless ``band_hz`` is given) rounded down to divide the control step (``env.parameters["stepping"]`` has
+    the step and its numerical damping and period error in the band); ``integrator="explicit"``: the automatic
+    explicit-spring step rounded down the same way.
 
 Actions
     ``(3,)`` motor torques (N m), bounded by ``max_torque_nm``.
@@ -43,12 +46,18 @@ from typing import TYPE_CHECKING, Any
 import mujoco
 import numpy as np
 
-from fpm_sim.config import Manipulator, Motors, default_config
+from fpm_sim.config import Manipulator, default_config
 from fpm_sim.kinematics import Pose
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.rom.reduction import END_EFFECTOR_SITE, accel_site_names, modal_system
 from fpm_sim.sim.rollout import aligned_options
+from fpm_sim.sim.stepping import DEFAULT_INTEGRATOR, choose_stepping
+from fpm_sim.sim.trajectory import (
+    DEFAULT_SERVO_DAMPING_NMS_PER_RAD,
+    DEFAULT_SERVO_STIFFNESS_NM_PER_RAD,
+    with_servo_motors,
+)
 
 if TYPE_CHECKING:
     from dm_control import mujoco as dm_mujoco
@@ -63,25 +72,8 @@ __all__ = [
     "regulation_env",
 ]
 
-DEFAULT_SERVO_STIFFNESS_NM_PER_RAD = 500.0
-"""Assumed position-loop stiffness of each motor servo (N m/rad): a geared servo motor; the study's
-motors were locked during its tests and no servo gains are given."""
-DEFAULT_SERVO_DAMPING_NMS_PER_RAD = 1.0
-"""Assumed velocity-loop damping of each servo (N m s/rad)."""
 HOME_POSE = Pose(0.0, 0.0, 0.0)
 OBSERVATION_KEYS = ("ee_disp", "ee_vel", "motor_angle", "motor_velocity", "link_accel")
-
-
-def _servo(manip: Manipulator) -> Manipulator:
-    if manip.motors.mode == "servo":
-        return manip
-    return manip.replace(
-        motors=Motors(
-            mode="servo",
-            servo_stiffness_nm_per_rad=DEFAULT_SERVO_STIFFNESS_NM_PER_RAD,
-            servo_damping_nms_per_rad=DEFAULT_SERVO_DAMPING_NMS_PER_RAD,
-        )
-    )
 
 
 def _env_xml(xml: str, accel_sites: list[str], max_torque_nm: float) -> str:
@@ -234,6 +226,7 @@ def _task_class() -> type:
             assert self._target is not None
             e = self._ee(physics)[:2] - self._target[:2]
             return float(math.exp(-float(e @ e) / self._scale**2))
+
     return FlexibleRegulation
 
 
@@ -256,6 +249,8 @@ def regulation_env(
     disturbance_force_n: float = 10.0,
     reward_scale_m: float = 1e-3,
     seed: int | None = None,
+    integrator: str = DEFAULT_INTEGRATOR,
+    band_hz: float | None = None,
 ) -> control.Environment:
     """The regulation environment (see module docstring).
 
@@ -279,8 +274,11 @@ def regulation_env(
         Action bound (N m), largest initial static force (N), reward length scale (m).
     seed
         Seed of the task's random initial disturbances.
+    integrator, band_hz
+        ``"discrete"`` (default) at the step of the band ``band_hz`` (Hz; default 5 x f1), or ``"explicit"``
+        (:func:`fpm_sim.sim.stepping.choose_stepping`).
     """
-    manip = _servo(manip or default_config())
+    manip = with_servo_motors(manip or default_config())
     if thickness_m is not None:
         manip = manip.with_section(thickness_m=thickness_m)
     for name, v in (
@@ -297,10 +295,19 @@ def regulation_env(
     opts = aligned_options(manip, pose, ModelOptions(segments=segments, axial=axial), control_timestep_s)
     built = build_manipulator(manip, pose, opts)
     system = modal_system(built)
+    stepping = choose_stepping(
+        built,
+        integrator=integrator,
+        band_hz=band_hz,
+        divides_s=control_timestep_s,
+        f1_hz=float(system.frequencies_hz[0]),
+    )
     accel_sites = accel_site_names(built, 0.5)
     physics = dm_mujoco.Physics.from_xml_string(_env_xml(built.to_xml(), accel_sites, max_torque_nm))
-    # the MJCF prints the timestep with 6 significant digits; restore it exactly (control step multiple)
-    physics.model.opt.timestep = built.model.opt.timestep
+    # the MJCF prints the timestep with 6 significant digits; set it exactly (control step multiple)
+    physics.model.opt.timestep = stepping.step_s
+    if stepping.integrator == "discrete":
+        physics.model.opt.integrator = mujoco.mjtIntegrator.mjINT_DISCRETE
     if physics.model.nv != built.model.nv:  # pragma: no cover - a guard on the MJCF round trip
         raise RuntimeError("the environment's MJCF does not reproduce the generated model")
     task = _task_class()(
@@ -319,5 +326,6 @@ def regulation_env(
         "control_timestep_s": control_timestep_s,
         "time_limit_s": time_limit_s,
         "accel_sites": accel_sites,
+        "stepping": stepping.to_dict(),
     }
     return env

@@ -11,8 +11,8 @@ Procedure (:func:`virtual_impact_test`), per impact, from rest at the static equ
    millisecond to ~1 ms, whose spectrum is flat within 3 dB up to about ``0.6 / T``, here 600 Hz, well
    above the band of the first modes) at the impact point, along the impact axis (the axis follows
    the link as it moves), applied at every integrator step (``mj_applyFT`` into ``qfrc_applied``);
-2. the full nonlinear model is stepped (``mj_step``, the model's own integrator and timestep) for
-   ``record_s``, and the accelerometer signal (the material point's acceleration along its axis,
+2. the full nonlinear model is stepped (``mj_step``; integrator and step below) for ``record_s``, and the
+   accelerometer signal (the material point's acceleration along its axis,
    gravity excluded) and the hammer force are sampled every ``sample_s``;
 3. optional Gaussian noise of standard deviation ``noise_m_s2`` is added to the accelerometer signal.
 
@@ -32,14 +32,16 @@ first mode at every study pose is out-of-plane bending, which an in-plane impact
 all (the structure is symmetric about its plane, so in-plane and out-of-plane motions decouple but for
 the small coupling of the gravity sag). Choose ``axis="normal"`` for an in-plane test.
 
-Integration step. By default the rollouts use the model's own integrator and step (``implicitfast``,
-``h = 0.5 / omega_max``, :mod:`fpm_sim.model.options`): its spring hinges are integrated explicitly, so the step
-is set by the stiffest spring's highest mode, a discretisation mode far above any band of interest, and shrinks
-as ``1 / segments^2`` (3 segments: 5-7 us; 12 segments: 0.3-0.4 us, about 40 min of CPU per simulated second).
-``ImpactSetup.timestep_s`` instead runs them with MuJoCo's ``discrete`` integrator (MuJoCo >= 3.13: springs,
-dampers and the loop-closing welds implicit in one solve, stable at any step) at the given step, chosen for the
-band: the implicit step damps a mode at ``f`` by about ``pi f h`` (the read damping then includes it) and moves
-its frequency by ``O((2 pi f h)^2)``. Measured at pose (0, 0, 0.2) with ``h = 20 us``
+Integration step. By default the rollouts run on MuJoCo's ``discrete`` integrator (springs, dampers and the
+loop-closing welds implicit in one solve, stable at any step) at the step of :mod:`fpm_sim.sim.stepping`: from
+the band ``ImpactSetup.band_hz`` (default 5 x f1: numerical damping at most 2 % at its top), at most a tenth of
+the pulse, dividing ``sample_s``; ``ImpactSetup.timestep_s`` gives the step instead. The step damps a mode at
+``f`` by ``zeta_num ~ pi f h`` and lengthens its period by ``~ (2 pi f h)^2 / 3``, both known exactly
+(:func:`fpm_sim.sim.stepping.discrete_pole`): :attr:`ImpactTestResult.identified_damping_ratio` subtracts it as
+it subtracts the window's, and :func:`write_uff58` writes the step into the UFF record, from which ``fpm-sim
+ema`` inverts it exactly (:func:`fpm_sim.sim.stepping.remove_integrator_effect`). ``integrator="explicit"``: the
+model's own ``implicitfast`` integrator and automatic step (explicit springs: 5-7 us at 3 segments, 0.3-0.8 us at
+12, about 50 times slower), the reference. Measured at pose (0, 0, 0.2) with ``h = 20 us``
 (``scripts/benchmark_impact_timestep.py``): 12 segments run 46-54x faster, 3 segments 2.4-2.9x, and the EMA
 reads the same frequencies from both FRFs to 0.04 % (12 segments, 0.1 s records) and 0.005 % (3 segments,
 0.5 s records).
@@ -50,11 +52,10 @@ discretisation and timestep) at the same equilibrium.
 
 from __future__ import annotations
 
-import copy
 import math
 import time
 import warnings
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -74,6 +75,7 @@ from fpm_sim.response import (
     modal_frf,
 )
 from fpm_sim.rom.reduction import ModalSystem, modal_system
+from fpm_sim.sim.stepping import DEFAULT_INTEGRATOR, Stepping, SteppingError, apply_stepping, choose_stepping
 
 __all__ = [
     "PEAK_FORCE_N",
@@ -131,8 +133,12 @@ class ImpactSetup:
     min_prominence_db
         Prominence a peak needs (dB).
     timestep_s
-        Integrator step of the rollouts (s). ``None``: the model's own step and integrator. Given: MuJoCo's
-        ``discrete`` integrator at this step (module docstring); at most ``sample_s`` and ``pulse_s / 10``.
+        Discrete integrator step of the rollouts (s) instead of the band's (module docstring); at most
+        ``sample_s`` and ``pulse_s / 10``.
+    integrator
+        ``"discrete"`` (default) or ``"explicit"`` (the model's own step; the reference).
+    band_hz
+        Band (Hz) the discrete step is chosen for (default 5 x f1; :mod:`fpm_sim.sim.stepping`).
     """
 
     impact: LinkPoint = STUDY_IMPACT_POINT
@@ -151,6 +157,8 @@ class ImpactSetup:
     f_max_hz: float = 1000.0
     min_prominence_db: float = DEFAULT_MIN_PROMINENCE_DB
     timestep_s: float | None = None
+    integrator: str = DEFAULT_INTEGRATOR
+    band_hz: float | None = None
 
     def check(self) -> None:
         positive = ("pulse_s", "peak_force_n", "record_s", "sample_s", "pad_s", "f_max_hz")
@@ -168,6 +176,8 @@ class ImpactSetup:
             raise FrfError(f"pulse_s ({self.pulse_s:g} s) must be shorter than record_s ({self.record_s:g} s)")
         if self.pad_s < self.record_s:
             raise FrfError(f"pad_s ({self.pad_s:g} s) must be at least record_s ({self.record_s:g} s)")
+        if self.integrator == "explicit" and self.timestep_s is not None:
+            raise FrfError("timestep_s (--implicit-step-s) sets the discrete integrator's step; drop it with explicit")
         if self.timestep_s is not None:
             h = self.timestep_s
             if not (math.isfinite(h) and h > 0):
@@ -363,6 +373,20 @@ class ImpactTestResult:
                 "another axis: fpm-sim readability ranks the points)"
             )
         return text
+    stepping: Stepping | None = None
+    """How the rollouts were stepped; its ``step_s`` travels in the UFF record (``discrete_step_s``)."""
+
+    @property
+    def numerical_damping(self) -> float:
+        """Damping ratio the integrator adds at the first peak (0 for the explicit reference)."""
+        if self.stepping is None or not math.isfinite(self.first_peak_hz):
+            return 0.0
+        return self.stepping.damping_at(self.first_peak_hz)
+
+    @property
+    def discrete_step_s(self) -> float | None:
+        """The discrete integrator's step (s), or ``None`` (explicit reference): what the EMA must invert."""
+        return self.stepping.step_s if self.stepping is not None and self.stepping.integrator == "discrete" else None
 
     @property
     def first_peak_mode(self) -> int:
@@ -375,9 +399,9 @@ class ImpactTestResult:
     @property
     def identified_damping_ratio(self) -> float:
         """Damping ratio of the first mode identified from the test: the half-power reading minus the damping
-        the exponential window adds (pass it to :func:`fpm_sim.response.modal_frf` or ``fpm-sim frf
+        the exponential window and the integrator add (pass it to :func:`fpm_sim.response.modal_frf` or ``fpm-sim frf
         --damping-ratio``)."""
-        return self.damping_half_power - self.window_damping
+        return self.damping_half_power - self.window_damping - self.numerical_damping
 
     @property
     def relative_error(self) -> float:
@@ -402,6 +426,9 @@ class ImpactTestResult:
             "damping_ratio_half_power": self.damping_half_power,
             "window_added_damping_at_first_peak": self.window_damping,
             "window_tau_s": self.window_tau_s if math.isfinite(self.window_tau_s) else None,
+            "numerical_damping_at_first_peak": self.numerical_damping,
+            "discrete_step_s": self.discrete_step_s,
+            "stepping": self.stepping.to_dict() if self.stepping is not None else None,
             "identified_damping_ratio": self.identified_damping_ratio,
             "min_coherence_in_band": float(np.min(self.frf.coherence[band & (self.frf.freq_hz >= self.setup.f_min_hz)]))
             if self.frf.coherence.size
@@ -424,7 +451,9 @@ class ImpactTestResult:
             f"  modal f1         {self.modal_f1_hz:10.3f} Hz   (difference {self.relative_error * 100:+.3f} %)",
             "  first peak is mode 1" if self.first_peak_mode == 1 else f"  {self.mode1_note()}",
             f"  half-power zeta  {self.damping_half_power:10.4f}     (includes {self.window_damping:.4f} from the "
-            f"exponential window: identified {self.identified_damping_ratio:.4f})",
+            f"exponential window and {self.numerical_damping:.4f} from the integrator: identified "
+            f"{self.identified_damping_ratio:.4f})",
+            *([f"  {self.stepping.line()}"] if self.stepping is not None else []),
             f"{'peak':>6}  {'freq (Hz)':>10}  {'prominence (dB)':>16}",
         ]
         for i, p in enumerate(d["peaks"], 1):
@@ -477,9 +506,8 @@ def virtual_impact_test(
     Parameters
     ----------
     built
-        The full model; its own timestep and integrator are used unless ``setup.timestep_s`` is given (then a
-        copy runs on the ``discrete`` integrator; ``built`` is not changed). ``sample_s`` is rounded to a whole
-        number of steps.
+        The full model; a copy runs on the ``discrete`` integrator unless ``setup.integrator`` is ``"explicit"``
+        (``built`` is not changed). ``sample_s`` is rounded to a whole number of steps.
     setup
         Test settings (default :class:`ImpactSetup`).
     system
@@ -493,7 +521,19 @@ def virtual_impact_test(
     setup.accelerometer.check(built)
     q_eq = static_equilibrium(built.model, mujoco.MjData(built.model)) if system is None else system.qpos
     system = system or modal_system(built, qpos=q_eq)
-    rollout = built if setup.timestep_s is None else _with_discrete_step(built, setup.timestep_s)
+    try:
+        stepping = choose_stepping(
+            built,
+            integrator=setup.integrator,
+            band_hz=setup.band_hz,
+            step_s=setup.timestep_s,
+            divides_s=setup.sample_s,
+            max_step_s=setup.pulse_s / 10,
+            f1_hz=float(system.frequencies_hz[0]),
+        )
+    except SteppingError as e:
+        raise FrfError(str(e)) from None
+    rollout = apply_stepping(built, stepping)
     h = float(rollout.model.opt.timestep)
     n_sub = max(1, round(setup.sample_s / h))
     dt = n_sub * h
@@ -547,6 +587,7 @@ def virtual_impact_test(
         window_damping=window_zeta,
         window_tau_s=tau,
         setup=setup,
+        stepping=stepping,
         parameters={
             **built.parameters,
             "sample_s": dt,
@@ -563,22 +604,12 @@ def virtual_impact_test(
     return result
 
 
-def _with_discrete_step(built: BuiltModel, timestep_s: float) -> BuiltModel:
-    """A copy of ``built`` integrated by MuJoCo's ``discrete`` integrator at ``timestep_s`` (module docstring).
-
-    The welds keep the time constant they were compiled with (``2 h`` of the model's own step): the discrete
-    integrator treats them implicitly, so they stay as stiff as in the modal reference at any step.
-    """
-    model = copy.copy(built.model)
-    model.opt.integrator = mujoco.mjtIntegrator.mjINT_DISCRETE
-    model.opt.timestep = timestep_s
-    return replace(built, model=model)
-
-
 UFF_POSE_TAG = "fpm-sim pose"
 """Prefix of the UFF 58 ``id4`` record that carries the pose (``fpm-sim pose x_mm=.. y_mm=.. phi_rad=..``)."""
 UFF_WINDOW_TAG = "fpm-sim exp-window"
 """Prefix of the UFF 58 ``id5`` record that carries the exponential window (``fpm-sim exp-window tau_s=..``)."""
+UFF_STEP_TAG = "discrete-step_s"
+"""Key of the discrete integrator's step in the UFF 58 ``id5`` record (``discrete-step_s=..``)."""
 
 
 def write_uff58(
@@ -592,6 +623,7 @@ def write_uff58(
     reference_dir: int = 3,
     description: str = "fpm-sim virtual impact test",
     window_tau_s: float | None = None,
+    discrete_step_s: float | None = None,
 ) -> Path:
     """Write an FRF as a Universal File Format type-58 record (ASCII) with :mod:`pyuff`.
 
@@ -600,7 +632,9 @@ def write_uff58(
     written into ``id4`` so that :func:`fpm_sim.study.identify.ema.read_frfs` knows where the test was;
     directions follow UFF (1 = x, 2 = y, 3 = z; negative for the opposite sense). ``window_tau_s`` (s), the
     time constant of the exponential window the FRF was computed with, is written into ``id5``, so that
-    ``fpm-sim ema`` removes the decay it added (None or ``inf``: no window). Overwrites ``path``.
+    ``fpm-sim ema`` removes the decay it added (None or ``inf``: no window); ``discrete_step_s`` (s), the discrete
+    integrator's step of the rollouts, joins it there (``discrete-step_s=..``) so that the EMA inverts the step's
+    numerical damping and period error (None: explicit reference, nothing to invert). Overwrites ``path``.
     """
     import pyuff
 
@@ -616,7 +650,10 @@ def write_uff58(
         else (f"{UFF_POSE_TAG} x_mm={pose_mm_rad[0]:.6g} y_mm={pose_mm_rad[1]:.6g} phi_rad={pose_mm_rad[2]:.6g}")
     )
     windowed = window_tau_s is not None and math.isfinite(window_tau_s)
-    id5 = f"{UFF_WINDOW_TAG} tau_s={window_tau_s:.9g}" if windowed else "NONE"
+    parts = [f"{UFF_WINDOW_TAG} tau_s={window_tau_s:.9g}"] if windowed else []
+    if discrete_step_s is not None:
+        parts.append(f"fpm-sim {UFF_STEP_TAG}={discrete_step_s:.9g}")
+    id5 = " ".join(parts) or "NONE"
     ds = pyuff.prepare_58(
         binary=0,
         id1=description[:80],

@@ -35,6 +35,14 @@ def test_specs(env):
     # the physics step divides the control step exactly
     n = env.control_timestep() / env.physics.timestep()
     assert abs(n - round(n)) < 1e-6
+    # on the discrete integrator at the band's step (default 5 x f1; numerical damping <= 2 % at its top)
+    import mujoco
+
+    st = env.parameters["stepping"]
+    assert env.physics.model.opt.integrator == mujoco.mjtIntegrator.mjINT_DISCRETE
+    assert st["integrator"] == "discrete"
+    assert env.physics.timestep() == pytest.approx(st["step_s"], rel=1e-12)
+    assert st["numerical_damping_at_band_top"] <= 0.02
 
 
 def test_episode_starts_deflected_and_vibrates(env):

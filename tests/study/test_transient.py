@@ -56,8 +56,30 @@ def test_files(short, tmp_path):
 
 @pytest.mark.slow
 def test_study_transient(default_manip):
-    """The study's transient as shipped (6 segments, 0.2 s at 0.1 ms): about 25 s."""
+    """The study's transient as shipped (12 segments, discrete integrator, 0.2 s at 0.1 ms): about 18 s."""
     res = study_transient(default_manip)
+    assert res.parameters["segments"] == 12
+    assert res.stepping.integrator == "discrete"
     for c in res.cases:
-        assert c.nrms <= 0.05  # the issue's target; measured 1.6 % (x) and 2.0 % (y)
+        assert c.nrms <= 0.05  # the issue's target; measured 1.3 % (x) and 1.7 % (y)
         assert len(c.t_s) == 2001
+
+
+def test_discrete_and_explicit_agree_at_3_segments(default_manip):
+    """The default (discrete) full model against the explicit reference, 3 segments, 40 ms (fast)."""
+    runs = [study_transient(default_manip, segments=3, duration_s=0.04, integrator=i) for i in ("explicit", "discrete")]
+    assert runs[1].stepping.step_s > 5 * runs[0].stepping.step_s
+    for a in ("x", "y"):
+        # measured 0.14 % (x) and 0.13 % (y); 1 % is the issue's bound at 12 segments
+        assert nrms_error(runs[0].case(a).disp_full_m, runs[1].case(a).disp_full_m) <= 0.01
+
+
+@pytest.mark.slow
+def test_discrete_matches_the_explicit_reference_at_12_segments(default_manip):
+    """The issue's check: the study transient at the standard 12 segments, discrete (default band 5 x f1: the
+    0.1 ms output step) against the explicit reference (0.81 us steps; 4-12 min a load axis on the shared
+    machine), NRMS <= 1 % on both axes. Measured 0.473 % (x) and 0.451 % (y), 192x faster
+    (scripts/benchmark_integrators.py)."""
+    runs = [study_transient(default_manip, integrator=i) for i in ("explicit", "discrete")]
+    for a in ("x", "y"):
+        assert nrms_error(runs[0].case(a).disp_full_m, runs[1].case(a).disp_full_m) <= 0.01

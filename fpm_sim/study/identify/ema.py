@@ -19,6 +19,11 @@ frequency ``|pole|`` slightly high. Given ``tau`` (``window_tau_s``; ``fpm-sim i
 the record's ``id5``, ``fpm-sim exp-window tau_s=..``, which :func:`read_frfs` reads back), each pole's real part
 is corrected by ``1 / tau`` before its frequency and damping are reported: the standard correction of
 exponential-window damping, exact for a pole model of the windowed FRF.
+
+**Discrete integrator.** A virtual impact test stepped by MuJoCo's ``discrete`` integrator at the step ``h``
+reads every mode with the step's numerical damping (``~ pi f h``) and period error (``~ (2 pi f h)^2 / 3``);
+``fpm-sim impact --uff`` writes ``h`` into ``id5`` (``discrete-step_s=..``), and after the window's decay the
+step's effect is inverted exactly (:func:`fpm_sim.sim.stepping.remove_integrator_effect`).
 """
 
 from __future__ import annotations
@@ -64,6 +69,9 @@ class MeasuredFrf:
     window_tau_s: float | None = None
     """Time constant (s) of the exponential response window the FRF was computed with; None: no window, or
     the file does not say."""
+    discrete_step_s: float | None = None
+    """Step (s) of the discrete integrator that computed the FRF (a virtual test); None: a measurement, the
+    explicit reference, or the file does not say."""
 
 
 @dataclass
@@ -79,6 +87,8 @@ class ModalEstimate:
     along the motor axes sees only out-of-plane modes of a planar structure); written to the ``mode`` column."""
     window_tau_s: float | None = None
     """The exponential window's time constant (s) removed from the poles; None: no correction."""
+    discrete_step_s: float | None = None
+    """The discrete integrator's step (s) whose effect was removed from the poles; None: no correction."""
 
     def table(self) -> str:
         """Each estimated mode's frequency (Hz) and damping ratio, with where the FRF was measured."""
@@ -105,6 +115,7 @@ class ModalEstimate:
         return {
             "mode_label": self.mode_label,
             "window_tau_s": self.window_tau_s,
+            "discrete_step_s": self.discrete_step_s,
             "source": self.source,
             "pose_mm_rad": self.pose_mm_rad,
             "freq_hz": self.freq_hz.tolist(),
@@ -114,6 +125,7 @@ class ModalEstimate:
 
 _POSE_RE = re.compile(r"x_mm=([-+0-9.eE]+)\s+y_mm=([-+0-9.eE]+)\s+phi_rad=([-+0-9.eE]+)")
 _WINDOW_RE = re.compile(r"fpm-sim exp-window tau_s=([-+0-9.eE]+)")
+_STEP_RE = re.compile(r"discrete-step_s=([-+0-9.eE]+)")
 
 
 def _check_frequencies(freq_hz: np.ndarray, path: Path, lines: list[int] | None, record: int | None = None) -> None:
@@ -176,7 +188,9 @@ def read_frfs(path: str | Path) -> list[MeasuredFrf]:
         pose = (float(m.group(1)), float(m.group(2)), float(m.group(3))) if m else None
         w = _WINDOW_RE.search(str(d.get("id5", "")))
         tau = float(w.group(1)) if w else None
-        frf = MeasuredFrf(np.asarray(d["x"], float), np.asarray(d["data"], complex), f"{p.name}#{i}", pose, tau)
+        st = _STEP_RE.search(str(d.get("id5", "")))
+        step = float(st.group(1)) if st else None
+        frf = MeasuredFrf(np.asarray(d["x"], float), np.asarray(d["data"], complex), f"{p.name}#{i}", pose, tau, step)
         bad = ~(np.isfinite(frf.freq_hz) & np.isfinite(frf.h))
         if bad.any():
             k = int(np.argmax(bad))
@@ -199,12 +213,14 @@ def estimate_modes(
     xi_tol: float = 0.05,
     min_prominence_db: float = 3.0,
     window_tau_s: float | None = None,
+    discrete_step_s: float | None = None,
 ) -> ModalEstimate:
     """LSCF poles (sdypy-EMA) at the ``n_modes`` lowest FRF peaks in ``[f_lower_hz, f_upper_hz]``.
 
     ``window_tau_s`` (s): the exponential response window's time constant, removed from every pole
     (:func:`remove_window_decay`); None takes the FRF's own (``frf.window_tau_s``, read from the file); ``inf``:
-    no window.
+    no window. ``discrete_step_s`` (s): the discrete integrator's step, whose effect is then inverted
+    (:func:`fpm_sim.sim.stepping.remove_integrator_effect`); None takes the FRF's own; 0: none.
     """
     import contextlib
 
@@ -234,8 +250,16 @@ def estimate_modes(
     tau = None if tau == np.inf else tau  # an infinite time constant: no window
     if tau is not None:
         fn, xi = remove_window_decay(fn, xi, window_tau_s=tau, source=frf.source)
+    step = frf.discrete_step_s if discrete_step_s is None else (discrete_step_s or None)
+    if step is not None:
+        from fpm_sim.sim.stepping import SteppingError, remove_integrator_effect
+
+        try:
+            fn, xi = remove_integrator_effect(fn, xi, step_s=step, source=frf.source)
+        except SteppingError as e:
+            raise EmaError(str(e)) from None
     order = np.argsort(fn)
-    return ModalEstimate(frf.source, frf.pose_mm_rad, fn[order], xi[order], window_tau_s=tau)
+    return ModalEstimate(frf.source, frf.pose_mm_rad, fn[order], xi[order], window_tau_s=tau, discrete_step_s=step)
 
 
 def remove_window_decay(

@@ -1,0 +1,598 @@
+"""Point-to-point moves of the flexible manipulator: servo tracking, residual vibration and input shaping.
+
+The end effector is commanded along a path ``pose(t)`` (:class:`MovePath`): a straight move in ``(x, y, phi)`` from
+the start pose to the end pose with a motion profile ``s(t / T)`` (``trapezoidal``: a third accelerating, a
+third cruising, a third braking; ``s-curve``: the same with the acceleration ramped over a third of each
+accelerating phase, jerk-limited; ``minimum-jerk``: ``10 u^3 - 15 u^4 + 6 u^5``), or the samples of a CSV
+``t_s, x_mm, y_mm, phi_rad`` (linear interpolation; the last row is held).
+
+Each motor follows the rigid inverse kinematics (:func:`fpm_sim.kinematics.inverse_kinematics`) of the commanded
+pose through its position servo. The servo is the description's (``motors.mode = "servo"``: stiffness ``k`` and
+damping ``c``) or, for locked motors, the stated defaults :data:`DEFAULT_SERVO_STIFFNESS_NM_PER_RAD` and
+:data:`DEFAULT_SERVO_DAMPING_NMS_PER_RAD` (shared with the dm_control environment). The servo hinge is a
+spring-damper about the assembled angle; the command moves the spring's set point (``k theta_ref``) and feeds the
+reference velocity forward through the damper (``c dtheta_ref / dt``), so that the motor torque is the PD law
+``k (theta_ref - theta) + c (dtheta_ref / dt - dtheta / dt)``.
+
+The full nonlinear model is stepped by :func:`fpm_sim.sim.rollout.rollout` (discrete integrator at the step of
+the band, :mod:`fpm_sim.sim.stepping`). Reported (:class:`MoveResult`): the tracking error (end-effector pose
+minus the commanded pose) and the deflection (pose minus the rigid-link pose of the motor angles: what link
+bending adds), the residual vibration after the move (peak, settling time to a tolerance, dominant frequency
+compared with the modal f1 and the dominant in-plane mode at the end pose) and the motor torques.
+
+**Input shaping** (:func:`shaper`). ZV and ZVD shapers (Singer & Seering 1990) designed from the frequency
+``f`` and damping ratio ``zeta`` of the end pose's dominant in-plane mode (the mode with the largest share of
+the end effector's in-plane static compliance): with ``K = exp(-zeta pi / sqrt(1 - zeta^2))`` and the damped
+half period ``T_d / 2``, ZV is the impulses ``(1, K) / (1 + K)`` at ``(0, T_d / 2)``, ZVD ``(1, 2K, K^2) /
+(1 + K)^2`` at ``(0, T_d / 2, T_d)``; the shaped command is the profile convolved with them (the move lasts
+``T_d / 2`` or ``T_d`` longer).
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fpm_sim.config import Manipulator, Motors
+from fpm_sim.errors import FpmSimError
+from fpm_sim.kinematics import Pose, inverse_kinematics
+from fpm_sim.model.options import ModelOptions
+from fpm_sim.sim.stepping import DEFAULT_INTEGRATOR, Stepping
+
+__all__ = [
+    "DEFAULT_SERVO_DAMPING_NMS_PER_RAD",
+    "DEFAULT_SERVO_STIFFNESS_NM_PER_RAD",
+    "DEFAULT_SETTLE_TOL_M",
+    "PROFILES",
+    "SHAPERS",
+    "MoveError",
+    "MovePath",
+    "MoveResult",
+    "ResidualVibration",
+    "dominant_frequency_hz",
+    "profile",
+    "read_path_csv",
+    "residual_vibration",
+    "settling_time_s",
+    "shaper",
+    "simulate_move",
+    "with_servo_motors",
+]
+
+PROFILES = ("trapezoidal", "s-curve", "minimum-jerk")
+SHAPERS = ("none", "zv", "zvd")
+DEFAULT_SETTLE_TOL_M = 20e-6
+"""Settling tolerance (m) on the end effector's in-plane residual vibration: 20 um, a precision-positioning
+tolerance for 228 mm links (assumed; the default 30 mm move leaves 0.7 mm unshaped, 0.04 mm with ZVD)."""
+
+
+DEFAULT_SERVO_STIFFNESS_NM_PER_RAD = 500.0
+"""Assumed position-loop stiffness of each motor servo (N m/rad): a geared servo motor; the study's
+motors were locked during its tests and no servo gains are given."""
+DEFAULT_SERVO_DAMPING_NMS_PER_RAD = 1.0
+"""Assumed velocity-loop damping of each servo (N m s/rad)."""
+
+
+class MoveError(FpmSimError):
+    """A bad move (profile, path file, duration, shaper), named in the message."""
+
+
+# ---------------------------------------------------------------------------------------------
+# profiles and paths
+
+
+def _s_curve() -> Any:
+    """``s(u)`` of the jerk-limited profile, exact: the acceleration is piecewise linear (trapezoids over the first
+    and last third, ramped over a third of each), integrated twice as a piecewise polynomial."""
+    from scipy.interpolate import PPoly
+
+    knots = np.arange(10) / 9.0
+    acc = np.array([0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, -1.0, -1.0, 0.0])
+    slope = np.diff(acc) / np.diff(knots)
+    pos = PPoly(np.vstack([slope, acc[:-1]]), knots).antiderivative(2)
+    return lambda u: pos(u) / pos(1.0)
+
+
+_S_CURVE: Any = None
+
+
+def profile(kind: str, u: np.ndarray | float) -> np.ndarray:
+    """Normalised motion profile ``s(u)``, ``u = t / T`` clipped to [0, 1]; ``s(0) = 0``, ``s(1) = 1``."""
+    global _S_CURVE
+    x = np.clip(np.asarray(u, float), 0.0, 1.0)
+    if kind == "minimum-jerk":
+        return np.asarray(10 * x**3 - 15 * x**4 + 6 * x**5)
+    if kind == "trapezoidal":
+        ta = 1.0 / 3.0
+        v = 1.0 / (1.0 - ta)  # cruise speed (units of distance / T)
+        a = v / ta
+        return np.where(
+            x < ta, 0.5 * a * x**2, np.where(x <= 1 - ta, 0.5 * a * ta**2 + v * (x - ta), 1.0 - 0.5 * a * (1 - x) ** 2)
+        )
+    if kind == "s-curve":
+        if _S_CURVE is None:
+            _S_CURVE = _s_curve()
+        return np.asarray(_S_CURVE(x))
+    raise MoveError(f"profile (--profile) must be one of {', '.join(PROFILES)}, got {kind!r}")
+
+
+def shaper(kind: str, freq_hz: float, damping: float) -> tuple[np.ndarray, np.ndarray]:
+    """Impulse amplitudes and times (s) of a ZV or ZVD shaper for a mode of ``freq_hz`` and ``damping`` (module
+    docstring); ``"none"``: one unit impulse at 0."""
+    if kind == "none":
+        return np.array([1.0]), np.array([0.0])
+    if not (math.isfinite(freq_hz) and freq_hz > 0 and 0 <= damping < 1):
+        raise MoveError(f"a shaper needs a positive frequency and a damping in [0, 1), got {freq_hz!r}, {damping!r}")
+    k = math.exp(-damping * math.pi / math.sqrt(1 - damping**2))
+    half = 0.5 / (freq_hz * math.sqrt(1 - damping**2))
+    if kind == "zv":
+        return np.array([1.0, k]) / (1 + k), np.array([0.0, half])
+    if kind == "zvd":
+        return np.array([1.0, 2 * k, k * k]) / (1 + k) ** 2, np.array([0.0, half, 2 * half])
+    raise MoveError(f"shaper (--shaper) must be one of {', '.join(SHAPERS)}, got {kind!r}")
+
+
+@dataclass(frozen=True)
+class MovePath:
+    """A commanded end-effector path: ``pose(t)`` for ``0 <= t`` (held after :attr:`duration_s`).
+
+    Either a profile move (``start``, ``end``, ``move_s``, ``kind``) or samples (``samples``: ``(n, 4)`` rows
+    ``t_s, x_m, y_m, phi_rad``); ``impulses`` (amplitudes, times) shape the profile (:func:`shaper`).
+    """
+
+    start: Pose
+    end: Pose
+    move_s: float
+    kind: str = "minimum-jerk"
+    samples: np.ndarray | None = None
+    impulses: tuple[np.ndarray, np.ndarray] = field(default_factory=lambda: (np.array([1.0]), np.array([0.0])))
+
+    def check(self) -> None:
+        if self.samples is None:
+            profile(self.kind, 0.0)
+            if not (math.isfinite(self.move_s) and self.move_s > 0):
+                raise MoveError(f"the move time (--move-s) must be positive, got {self.move_s!r}")
+
+    @property
+    def duration_s(self) -> float:
+        """When the command stops changing (s): the move plus the shaper's last impulse time."""
+        if self.samples is not None:
+            return float(self.samples[-1, 0])
+        return self.move_s + float(self.impulses[1][-1])
+
+    def poses(self, t_s: np.ndarray) -> np.ndarray:
+        """``(n, 3)`` commanded ``x, y, phi`` (m, m, rad) at ``t_s``."""
+        t = np.asarray(t_s, float)
+        if self.samples is not None:
+            return np.column_stack([np.interp(t, self.samples[:, 0], self.samples[:, k]) for k in (1, 2, 3)])
+        amps, times = self.impulses
+        s = sum(a * profile(self.kind, (t - t0) / self.move_s) for a, t0 in zip(amps, times))
+        a0, a1 = self.start.as_array(), self.end.as_array()
+        return a0[None, :] + np.asarray(s)[:, None] * (a1 - a0)[None, :]
+
+
+def read_path_csv(path: str | Path) -> np.ndarray:
+    """Rows ``t_s, x_mm, y_mm, phi_rad`` of a path CSV (header row) as ``(n, 4)`` in SI (m, rad)."""
+    p = Path(path)
+    if not p.is_file():
+        raise MoveError(f"path CSV not found: {p} (--path-csv)")
+    with p.open(newline="") as f:
+        rows = [r for r in csv.reader(f) if r and not r[0].lstrip().startswith("#")]
+    if not rows or [c.strip() for c in rows[0]] != ["t_s", "x_mm", "y_mm", "phi_rad"]:
+        raise MoveError(f"{p}: the first row must be the header t_s,x_mm,y_mm,phi_rad (--path-csv)")
+    try:
+        data = np.array([[float(c) for c in r] for r in rows[1:]], float)
+    except ValueError as e:
+        raise MoveError(f"{p}: a value is not a number ({e}) (--path-csv)") from None
+    if data.ndim != 2 or data.shape[0] < 2 or data.shape[1] != 4:
+        raise MoveError(f"{p}: needs at least two rows of 4 values t_s,x_mm,y_mm,phi_rad (--path-csv)")
+    if not np.all(np.isfinite(data)):
+        raise MoveError(f"{p}: every value must be finite (--path-csv)")
+    if data[0, 0] != 0.0 or np.any(np.diff(data[:, 0]) <= 0):
+        raise MoveError(f"{p}: t_s must start at 0 and increase strictly (--path-csv)")
+    data[:, 1:3] *= 1e-3
+    return data
+
+
+# ---------------------------------------------------------------------------------------------
+# servos, modes, residual vibration
+
+
+def with_servo_motors(manip: Manipulator) -> Manipulator:
+    """``manip`` with position servos: its own if ``motors.mode = "servo"``, else the stated defaults
+    (:data:`DEFAULT_SERVO_STIFFNESS_NM_PER_RAD`, :data:`DEFAULT_SERVO_DAMPING_NMS_PER_RAD`)."""
+    if manip.motors.mode == "servo":
+        return manip
+    return manip.replace(
+        motors=Motors(
+            mode="servo",
+            servo_stiffness_nm_per_rad=DEFAULT_SERVO_STIFFNESS_NM_PER_RAD,
+            servo_damping_nms_per_rad=DEFAULT_SERVO_DAMPING_NMS_PER_RAD,
+        )
+    )
+
+
+def dominant_inplane_mode(system: Any) -> tuple[int, float, float]:
+    """Index, frequency (Hz) and damping ratio of the mode with the largest share of the end effector's in-plane
+    static compliance (``|C_xy phi_r|^2 / omega_r^2``) of a :class:`fpm_sim.rom.reduction.ModalSystem`."""
+    share = np.sum((system.c_q[:2] @ system.phi) ** 2, axis=0) / system.omega_rad_s**2
+    r = int(np.argmax(share))
+    w = float(system.omega_rad_s[r])
+    return r, w / (2 * math.pi), float(system.xi[r, r] / (2 * w))
+
+
+def dominant_frequency_hz(t_s: np.ndarray, x: np.ndarray, *, f_min_hz: float = 1.0) -> float:
+    """Frequency (Hz) of the largest spectral peak of ``x(t)`` above ``f_min_hz`` (Hann window, zero padding to
+    ~0.01 Hz lines, parabolic interpolation of the log magnitude); NaN for fewer than 8 samples."""
+    if len(t_s) < 8:
+        return math.nan
+    dt = float(t_s[1] - t_s[0])
+    y = (x - np.mean(x)) * np.hanning(len(x))
+    n = int(2 ** math.ceil(math.log2(max(len(x), 100.0 / dt))))
+    mag = np.abs(np.fft.rfft(y, n))
+    f = np.fft.rfftfreq(n, dt)
+    mag[f < f_min_hz] = 0.0
+    k = int(np.argmax(mag))
+    if 0 < k < len(mag) - 1 and mag[k - 1] > 0 and mag[k + 1] > 0:
+        a, b, c = np.log(mag[k - 1 : k + 2])
+        k_off = 0.5 * (a - c) / (a - 2 * b + c)
+        return float((k + k_off) * (f[1] - f[0]))
+    return float(f[k])
+
+
+def settling_time_s(t_s: np.ndarray, magnitude: np.ndarray, tol: float, t0_s: float, hold_s: float = 0.0) -> float:
+    """Time after ``t0_s`` from which ``magnitude`` stays within ``tol`` (0 if it always is); ``inf`` when it is
+    above within the last ``hold_s`` of the record (an oscillation passes through zero: give it a period)."""
+    after = t_s >= t0_s
+    above = np.flatnonzero(after & (magnitude > tol))
+    if above.size == 0:
+        return 0.0
+    if above[-1] == len(t_s) - 1 or t_s[above[-1]] > t_s[-1] - hold_s:
+        return math.inf
+    return float(t_s[above[-1] + 1] - t0_s)
+
+
+@dataclass
+class ResidualVibration:
+    """The end effector's in-plane residual vibration after the move (SI units)."""
+
+    peak_m: float
+    settling_time_s: float
+    tol_m: float
+    dominant_hz: float
+    modal_f1_hz: float
+    inplane_mode_hz: float
+    inplane_mode_damping: float
+    final_offset_m: np.ndarray
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "peak_m": self.peak_m,
+            "settling_time_s": self.settling_time_s if math.isfinite(self.settling_time_s) else None,
+            "settled": math.isfinite(self.settling_time_s),
+            "tol_m": self.tol_m,
+            "dominant_hz": self.dominant_hz,
+            "modal_f1_hz": self.modal_f1_hz,
+            "dominant_over_modal_f1": self.dominant_hz / self.modal_f1_hz,
+            "inplane_mode_hz": self.inplane_mode_hz,
+            "inplane_mode_damping": self.inplane_mode_damping,
+            "dominant_over_inplane_mode": self.dominant_hz / self.inplane_mode_hz,
+            "final_offset_m": self.final_offset_m.tolist(),
+        }
+
+
+def residual_vibration(
+    t_s: np.ndarray, error_xy: np.ndarray, t_end_s: float, tol_m: float, modes: tuple[float, float, float]
+) -> ResidualVibration:
+    """Residual vibration of the in-plane tracking error ``(n, 2)`` after ``t_end_s``: about its final offset (the
+    mean over the last half of the record after the move), its peak, settling time to ``tol_m`` and dominant
+    frequency (settled: within ``tol_m`` for at least the last period of it); ``modes`` = (modal f1, dominant
+    in-plane mode's frequency and damping) at the end pose."""
+    after = t_s >= t_end_s
+    if after.sum() < 8:
+        raise MoveError("no residual vibration to analyse: give a longer settle time (--settle-s)")
+    ta = t_s[after]
+    tail = after & (t_s >= ta[0] + 0.5 * (ta[-1] - ta[0]))
+    offset = error_xy[tail].mean(axis=0)
+    r = error_xy - offset
+    mag = np.linalg.norm(r, axis=1)
+    k = int(np.argmax(np.var(r[after], axis=0)))
+    f_dom = dominant_frequency_hz(ta, r[after, k])
+    return ResidualVibration(
+        peak_m=float(mag[after].max()),
+        settling_time_s=settling_time_s(t_s, mag, tol_m, t_end_s, 1.0 / f_dom if f_dom > 0 else 0.0),
+        tol_m=tol_m,
+        dominant_hz=f_dom,
+        modal_f1_hz=modes[0],
+        inplane_mode_hz=modes[1],
+        inplane_mode_damping=modes[2],
+        final_offset_m=offset,
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# the move
+
+
+@dataclass
+class MoveResult:
+    """A simulated move (SI units; see the module docstring).
+
+    Attributes
+    ----------
+    t_s
+        Sample times (s).
+    command
+        ``(n, 3)`` commanded end-effector ``x, y, phi``.
+    ee_pose
+        ``(n, 3)`` simulated end-effector pose.
+    deflection
+        ``(n, 3)`` pose minus the rigid-link pose of the motor angles (link bending).
+    motor_ref_rad, motor_angles_rad
+        ``(n, 3)`` motor reference and motor angles (rad, absolute).
+    motor_torque_nm
+        ``(n, 3)`` servo torques ``k (ref - theta) + c (dref/dt - dtheta/dt)`` (N m).
+    residual
+        The residual vibration after the move.
+    move_end_s
+        When the command stops changing (s).
+    shaper
+        ``none``, ``zv`` or ``zvd``, with its impulses.
+    stepping
+        How the model was stepped.
+    """
+
+    t_s: np.ndarray
+    command: np.ndarray
+    ee_pose: np.ndarray
+    deflection: np.ndarray
+    motor_ref_rad: np.ndarray
+    motor_angles_rad: np.ndarray
+    motor_torque_nm: np.ndarray
+    residual: ResidualVibration
+    move_end_s: float
+    shaper: str
+    impulses: tuple[np.ndarray, np.ndarray]
+    stepping: Stepping | None
+    wall_s: float
+    parameters: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def tracking_error(self) -> np.ndarray:
+        """``(n, 3)`` end-effector pose minus the commanded pose."""
+        return self.ee_pose - self.command
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """Flat name -> column (units in the names)."""
+        cols: dict[str, np.ndarray] = {"t_s": self.t_s}
+        names = ("x_m", "y_m", "phi_rad")
+        for prefix, arr in (
+            ("command", self.command),
+            ("ee", self.ee_pose),
+            ("error", self.tracking_error),
+            ("deflection", self.deflection),
+        ):
+            for k, n in enumerate(names):
+                cols[f"{prefix}_{n}"] = arr[:, k]
+        for i in range(3):
+            cols[f"motor_{i}_ref_rad"] = self.motor_ref_rad[:, i]
+            cols[f"motor_{i}_rad"] = self.motor_angles_rad[:, i]
+            cols[f"motor_{i}_torque_nm"] = self.motor_torque_nm[:, i]
+        return cols
+
+    def save(self, path: str | Path) -> Path:
+        """Write ``.csv`` (one column per signal) or ``.npz`` by suffix."""
+        from fpm_sim.sim.rollout import save_columns
+
+        return save_columns(path, self.columns(), MoveError)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary: tracking error and deflection peaks, residual vibration, torques, stepping."""
+        moving = self.t_s <= self.move_end_s
+        err = np.linalg.norm(self.tracking_error[:, :2], axis=1)
+        defl = np.linalg.norm(self.deflection[:, :2], axis=1)
+        return {
+            "move_end_s": self.move_end_s,
+            "duration_s": float(self.t_s[-1]),
+            "shaper": self.shaper,
+            "shaper_impulses": {"amplitudes": self.impulses[0].tolist(), "times_s": self.impulses[1].tolist()},
+            "peak_tracking_error_m": float(err[moving].max()),
+            "peak_deflection_m": float(defl[moving].max()),
+            "peak_motor_torque_nm": np.abs(self.motor_torque_nm).max(axis=0).tolist(),
+            "residual": self.residual.to_dict(),
+            "stepping": self.stepping.to_dict() if self.stepping is not None else None,
+            "wall_s": self.wall_s,
+            "parameters": self.parameters,
+        }
+
+    def table(self) -> str:
+        """The summary in mm, ms and Hz."""
+        d = self.to_dict()
+        r = self.residual
+        settle = f"{r.settling_time_s * 1e3:.1f} ms" if math.isfinite(r.settling_time_s) else "not within the record"
+        lines = [
+            f"move {self.move_end_s * 1e3:.1f} ms (shaper {self.shaper}) + "
+            f"{(self.t_s[-1] - self.move_end_s) * 1e3:.0f} ms settling, wall {self.wall_s:.1f} s",
+            f"  peak tracking error       {d['peak_tracking_error_m'] * 1e3:10.4f} mm (pose minus command, moving)",
+            f"  peak deflection           {d['peak_deflection_m'] * 1e3:10.4f} mm (pose minus rigid-link pose)",
+            f"  residual vibration peak   {r.peak_m * 1e3:10.4f} mm after the move",
+            f"  settling time             {settle} (to {r.tol_m * 1e3:g} mm)",
+            f"  dominant frequency        {r.dominant_hz:10.2f} Hz: {r.dominant_hz / r.modal_f1_hz:.3f} x modal f1 "
+            f"({r.modal_f1_hz:.2f} Hz), {r.dominant_hz / r.inplane_mode_hz:.3f} x the dominant in-plane mode "
+            f"({r.inplane_mode_hz:.2f} Hz, zeta {r.inplane_mode_damping:.4f}) at the end pose",
+            "  peak motor torque         " + ", ".join(f"{v:.3g}" for v in d["peak_motor_torque_nm"]) + " N m",
+        ]
+        if self.stepping is not None:
+            lines.append("  " + self.stepping.line())
+        return "\n".join(lines)
+
+    def plot(self, ax: Any = None) -> Any:
+        """Commanded and simulated path, tracking error and deflection, residual vibration; the ``Figure``."""
+        import matplotlib.pyplot as plt
+
+        if ax is None:
+            fig = plt.figure(figsize=(10, 7))
+            axes = [fig.add_subplot(2, 2, 1), fig.add_subplot(2, 2, 2), fig.add_subplot(2, 1, 2)]
+        else:
+            axes = list(ax)
+        a = axes[0]
+        a.plot(self.command[:, 0] * 1e3, self.command[:, 1] * 1e3, "k--", lw=1, label="command")
+        a.plot(self.ee_pose[:, 0] * 1e3, self.ee_pose[:, 1] * 1e3, lw=1, label="simulated")
+        a.set_xlabel("x (mm)")
+        a.set_ylabel("y (mm)")
+        a.set_title("end-effector path", fontsize=9)
+        a.axis("equal")
+        a.legend(fontsize=8)
+        a = axes[1]
+        a.plot(self.t_s * 1e3, np.linalg.norm(self.tracking_error[:, :2], axis=1) * 1e3, label="|pose - command|")
+        a.plot(self.t_s * 1e3, np.linalg.norm(self.deflection[:, :2], axis=1) * 1e3, label="|deflection|")
+        a.axvline(self.move_end_s * 1e3, color="0.5", ls=":", lw=1)
+        a.set_xlabel("t (ms)")
+        a.set_ylabel("mm")
+        a.set_title("tracking error and link deflection", fontsize=9)
+        a.legend(fontsize=8)
+        a = axes[2]
+        r = self.residual
+        after = self.t_s >= self.move_end_s
+        res = np.linalg.norm(self.tracking_error[:, :2] - r.final_offset_m, axis=1)
+        a.plot(self.t_s[after] * 1e3, res[after] * 1e3, lw=1, label=f"shaper {self.shaper}")
+        a.axhline(r.tol_m * 1e3, color="r", ls="--", lw=0.8, label=f"tolerance {r.tol_m * 1e3:g} mm")
+        a.set_xlabel("t (ms)")
+        a.set_ylabel("residual (mm)")
+        a.set_title(
+            f"residual vibration: peak {r.peak_m * 1e3:.4f} mm, {r.dominant_hz:.1f} Hz "
+            f"(modal f1 {r.modal_f1_hz:.1f} Hz, in-plane {r.inplane_mode_hz:.1f} Hz)",
+            fontsize=9,
+        )
+        a.legend(fontsize=8)
+        out: Any = axes[0].figure
+        out.tight_layout()
+        return out
+
+
+def simulate_move(
+    manip: Manipulator,
+    path: MovePath,
+    *,
+    settle_s: float = 0.3,
+    options: ModelOptions | None = None,
+    output_step_s: float = 1e-4,
+    shaper_kind: str = "none",
+    settle_tol_m: float = DEFAULT_SETTLE_TOL_M,
+    integrator: str = DEFAULT_INTEGRATOR,
+    band_hz: float | None = None,
+    progress: bool = False,
+) -> MoveResult:
+    """Simulate the move ``path`` on the full flexible model (module docstring).
+
+    Parameters
+    ----------
+    manip
+        The description; locked motors get the default servos (:func:`with_servo_motors`).
+    path
+        The commanded path (its ``impulses`` are replaced by the shaper's).
+    settle_s
+        Simulated time after the command stops changing (s).
+    options
+        Model options (default: the standard resolution, no axial springs).
+    output_step_s
+        Sample period (s); the command is held over it.
+    shaper_kind
+        ``"none"``, ``"zv"`` or ``"zvd"``, designed at the end pose (:func:`shaper`).
+    settle_tol_m
+        Settling tolerance (m) on the in-plane residual.
+    integrator, band_hz
+        Time stepping (:func:`fpm_sim.sim.stepping.choose_stepping`); the default band is 5 x f1 at the end pose.
+    """
+    from fpm_sim.model.manipulator import build_manipulator
+    from fpm_sim.rom.reduction import modal_system
+    from fpm_sim.sim.rollout import aligned_options, rollout
+
+    path.check()
+    for name, v in (("settle_s (--settle-s)", settle_s), ("settle_tol_m (--settle-tol-mm)", settle_tol_m)):
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            raise MoveError(f"{name} must be positive, got {v!r}")
+    if shaper_kind not in SHAPERS:
+        raise MoveError(f"shaper (--shaper) must be one of {', '.join(SHAPERS)}, got {shaper_kind!r}")
+    if shaper_kind != "none" and path.samples is not None:
+        raise MoveError("a shaper shapes a profile move; a CSV path is commanded as it is (drop --shaper)")
+    manip = with_servo_motors(manip)
+    opts = options or ModelOptions(axial=False)
+    end = path.end if path.samples is None else Pose(*path.samples[-1, 1:])
+    start = path.start if path.samples is None else Pose(*path.samples[0, 1:])
+    # the end pose's modes: f1 (the default band, the comparison) and the dominant in-plane mode (the shaper)
+    end_system = modal_system(build_manipulator(manip, end, opts))
+    f1_end = float(end_system.frequencies_hz[0])
+    _, f_in, z_in = dominant_inplane_mode(end_system)
+    impulses = shaper(shaper_kind, f_in, z_in)
+    if path.samples is None:
+        path = dataclasses.replace(path, impulses=impulses)
+    built = build_manipulator(manip, start, aligned_options(manip, start, opts, output_step_s))
+    g = manip.geometry
+    theta0 = np.asarray(inverse_kinematics(g, start).motor_angles_rad, float)
+    duration = path.duration_s + settle_s
+    n = round(duration / output_step_s)
+    t = np.arange(n + 1) * output_step_s
+    cmd = path.poses(t)
+    try:
+        ref = np.array([inverse_kinematics(g, Pose(*c), check_singularity=False).motor_angles_rad for c in cmd])
+    except FpmSimError as e:
+        raise MoveError(f"the commanded path leaves the workspace: {e}") from None
+    ref = theta0 + np.unwrap(ref - theta0, axis=0)
+    dref = np.gradient(ref, output_step_s, axis=0)
+    k, c = manip.motors.servo_stiffness_nm_per_rad, manip.motors.servo_damping_nms_per_rad
+
+    def sample(arr: np.ndarray) -> Any:
+        return lambda tt: arr[min(round(tt / output_step_s), n)]
+
+    start_wall = time.perf_counter()
+    res = rollout(
+        built,
+        manip,
+        duration_s=duration,
+        output_step_s=output_step_s,
+        motor_reference=sample(ref - theta0),
+        motor_torque=sample(c * dref),
+        integrator=integrator,
+        band_hz=band_hz,
+        f1_hz=f1_end,
+        progress=progress,
+    )
+    wall = time.perf_counter() - start_wall
+    m = len(res.t_s)
+    angles = res.motor_angles_rad
+    torque = k * (ref[:m] - angles) + c * (dref[:m] - np.gradient(angles, output_step_s, axis=0))
+    err = res.ee_pose - cmd[:m]
+    residual = residual_vibration(res.t_s, err[:, :2], path.duration_s, settle_tol_m, (f1_end, f_in, z_in))
+    return MoveResult(
+        t_s=res.t_s,
+        command=cmd[:m],
+        ee_pose=res.ee_pose,
+        deflection=res.deflection,
+        motor_ref_rad=ref[:m],
+        motor_angles_rad=angles,
+        motor_torque_nm=torque,
+        residual=residual,
+        move_end_s=path.duration_s,
+        shaper=shaper_kind,
+        impulses=impulses,
+        stepping=res.stepping,
+        wall_s=wall,
+        parameters={
+            **res.parameters,
+            "start": dataclasses.asdict(start),
+            "end": dataclasses.asdict(end),
+            "profile": path.kind if path.samples is None else "csv",
+            "move_s": path.move_s,
+            "settle_s": settle_s,
+            "servo_stiffness_nm_per_rad": k,
+            "servo_damping_nms_per_rad": c,
+        },
+    )
