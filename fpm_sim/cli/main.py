@@ -7,7 +7,7 @@ with one line, a closed pipe -> quiet, anything else -> its traceback and a line
 Warnings print as one ``warning: ...`` line.
 
 Heavy modules (MuJoCo models, SciPy, matplotlib) are imported inside the commands, so that
-``fpm-sim --help`` and ``fpm-sim config`` start quickly (``scripts/benchmark_startup.py``).
+``fpm-sim --help`` and ``fpm-sim config`` start quickly (``benchmarks/startup.py``, an asv benchmark).
 """
 
 from __future__ import annotations
