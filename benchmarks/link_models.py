@@ -9,7 +9,8 @@ The flex runs only with ``FPM_SIM_BENCH_FULL=1``, and fails there today: at its 
 linearised step map of the symmetric manipulator has growing modes (``UnstableModelError``: 19 modes, the fastest
 at 6.6e5 Hz, timestep 7.6e-7 s; measured 2 Dec 2026), where the history measured 2.33 s per pose. Its constrained
 eigen-solve works (f1 46.19 Hz without gravity, as the history's 46.19 Hz) but took 239 s against 4.9 s for the
-segments on the loaded machine, so it is no stand-in for a quick run.
+segments on the loaded machine, so it is no stand-in for a quick run. With the flex's bending damping scaled
+(main, 0d12151) one growing mode is left: damping ratio -1.9e-6 at 48.9 Hz, still refused.
 """
 
 from __future__ import annotations
