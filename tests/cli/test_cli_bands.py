@@ -83,8 +83,8 @@ def test_sweep_prints_bands_and_names_where_to_measure_next(post, capsys, tmp_pa
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["modes", "--posterior", "nope.nc"], "nope.nc: file not found"),
-        (["modes", "--posterior", "{junk}"], "is not an ArviZ InferenceData"),
+        (["modes", "--posterior", "nope.nc"], "error: --posterior: file not found, got 'nope.nc'"),
+        (["modes", "--posterior", "{junk}"], "junk.nc: not an ArviZ InferenceData"),
         (["modes", "--posterior", "{post}", "--config", "x.toml"], "--config and --posterior"),
         (["sweep", "--posterior", "{post}", "--thickness-mm", "10"], "--thickness-mm and --posterior"),
         (["modes", "--posterior", "{post}", "--draws", "0"], "--draws must be in"),
