@@ -76,7 +76,7 @@ def test_bad_requests(post_file):
     post = Posterior.from_netcdf(post_file)
     with pytest.raises(DesignError, match="not both or neither"):
         design_over_draws(post.configs(2), poses=POSES, f_min_hz=10.0)
-    with pytest.raises(DesignError, match="f_min_hz: must be >= 0, got -1.0"):
+    with pytest.raises(DesignError, match=r"f_min_hz: must be >= 0, got -1\.0"):
         design_over_draws(post.configs(2), poses=POSES, f_min_hz=-1.0, vary=VARY)
 
 
