@@ -29,7 +29,7 @@ from fpm_sim.batch.pose_loop import STATUS_OK, STATUS_UNREACHABLE, fast_options,
 from fpm_sim.config import Manipulator
 from fpm_sim.designs.study import DesignError, apply_design, check_request, factorial
 from fpm_sim.kinematics import Pose
-from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.options import ModelOptions, resolution_summary
 
 __all__ = ["DesignBands", "design_over_draws"]
 
@@ -148,6 +148,7 @@ class DesignBands:
             "n_draws": self.n_draws,
             "summary": self.summary(),
             "min_f1_ok_hz": np.where(np.isfinite(m), m, np.array(None)).tolist(),
+            "resolution": resolution_summary(self.options),
             "elapsed_s": self.elapsed_s,
         }
 

@@ -44,7 +44,8 @@ from fpm_sim.batch.pose_loop import STATUS_NEAR, STATUS_OK, STATUS_UNREACHABLE, 
 from fpm_sim.config import ConfigError, Manipulator, parse_config
 from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose
-from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.options import ModelOptions, resolution_summary
+from fpm_sim.results import frequencies_dataset
 from fpm_sim.study.identify.parameters import ParameterSet, parameter_set
 from fpm_sim.study.poses import TableReading
 from fpm_sim.study.tables import measured_table, withheld_cells
@@ -498,6 +499,7 @@ class PredictiveBands:
             "frequencies_hz": np.where(np.isfinite(self.frequencies_hz), self.frequencies_hz, np.array(None)).tolist(),
             "status": self.status.tolist(),
             "segments": self.options.segments,
+            "resolution": resolution_summary(self.options),
             "elapsed_s": self.elapsed_s,
         }
 
@@ -506,24 +508,18 @@ class PredictiveBands:
         """An :class:`xarray.Dataset`: ``freq_hz`` over ``(draw, pose, mode)``, ``freq_quantile_hz`` over
         ``(quantile, pose, mode)`` and ``computed_fraction`` over ``pose``; coordinates ``x_mm``, ``y_mm``,
         ``phi_rad`` (on ``pose``) and ``status`` (on ``draw, pose``)."""
-        import xarray as xr
-
-        return xr.Dataset(
-            {
-                "freq_hz": (("draw", "pose", "mode"), self.frequencies_hz),
+        return frequencies_dataset(
+            self.frequencies_hz,
+            x_mm=[p.x_m * 1e3 for p in self.poses],
+            y_mm=[p.y_m * 1e3 for p in self.poses],
+            phi_rad=[p.phi_rad for p in self.poses],
+            status=self.status.astype(str),
+            leading={"draw": self.draw_index},
+            data_vars={
                 "freq_quantile_hz": (("quantile", "pose", "mode"), self.quantiles_hz),
                 "computed_fraction": ("pose", self.computed_fraction),
             },
-            coords={
-                "draw": self.draw_index,
-                "pose": np.arange(len(self.poses)),
-                "mode": np.arange(1, self.n_modes + 1),
-                "quantile": np.array(QUANTILES),
-                "x_mm": ("pose", np.array([p.x_m * 1e3 for p in self.poses])),
-                "y_mm": ("pose", np.array([p.y_m * 1e3 for p in self.poses])),
-                "phi_rad": ("pose", np.array([p.phi_rad for p in self.poses])),
-                "status": (("draw", "pose"), self.status.astype(str)),
-            },
+            coords={"quantile": np.array(QUANTILES)},
             attrs={"config": self.name, "segments": int(self.options.segments or 0)},
         )
 
@@ -764,7 +760,13 @@ class StudyBands:
         for r, f, w in zip(rows, self.measured_hz, self.withheld):
             r["measured_hz"] = float(f) if math.isfinite(f) else None
             r["withheld"] = bool(w)
-        return {"reading": self.reading, "n_draws": self.bands.n_draws, "coverage": self.coverage(), "poses": rows}
+        return {
+            "reading": self.reading,
+            "n_draws": self.bands.n_draws,
+            "coverage": self.coverage(),
+            "poses": rows,
+            "resolution": resolution_summary(self.bands.options),
+        }
 
     def write(self, out_dir: str | Path, *, stem: str = "bands") -> list[Path]:
         """Write ``<stem>.nc`` and ``<stem>.csv`` (the bands, with the measured value and the withheld flag per

@@ -1,21 +1,18 @@
 """``--posterior PATH [--draws N]`` on modes, sweep and reproduce: bands printed, in the JSON, written; bad
 posterior files exit 2 with one error line. The posterior is the synthetic one of
-tests/study/test_posterior_bands.py (six draws of the default description, 4 segments)."""
+tests/helpers/posterior.py (six draws of the default description, 4 segments)."""
 
 from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from fpm_sim.cli.main import main
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "study"))
-from test_posterior_bands import write_posterior
+from tests.helpers.posterior import write_posterior
 
 
 @pytest.fixture(scope="module")
