@@ -1,1 +1,1 @@
-"""Helpers shared by several test modules (``from tests.helpers.posterior import write_posterior``)."""
+"""Helpers shared by the tests and the studies (``studies/``): truths and settings, no tests of their own."""
