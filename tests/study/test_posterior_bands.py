@@ -148,12 +148,18 @@ def test_result_outputs(bands, tmp_path):
 
 
 def test_bad_posterior_files_say_what_is_wrong(tmp_path):
-    with pytest.raises(PosteriorError, match=r"posterior: file not found, got '.*nope\.nc'"):
+    with pytest.raises(PosteriorError, match=r"posterior: file not found, got '.*nope\.nc'") as missing:
         Posterior.from_netcdf(tmp_path / "nope.nc")
+    # the error contract: the library's parameter and the value (the command line shows its --posterior option)
+    assert (missing.value.parameter, missing.value.value) == ("posterior", str(tmp_path / "nope.nc"))
     junk = tmp_path / "junk.nc"
     junk.write_text("not a netcdf file")
-    with pytest.raises(PosteriorError, match=r"junk\.nc: not an ArviZ"):
+    with pytest.raises(PosteriorError, match=r"junk\.nc: not an ArviZ") as unreadable:
         Posterior.from_netcdf(junk)
+    assert unreadable.value.file == str(junk)  # a file's content is wrong: the error names the file
+    with pytest.raises(PosteriorError, match=r"fpm_sim_segments: must be an integer, got 'four'") as seg:
+        Posterior.from_netcdf(write_posterior(tmp_path / "s.nc", attrs={"fpm_sim_segments": "four"}))
+    assert (seg.value.parameter, seg.value.file) == ("fpm_sim_segments", str(tmp_path / "s.nc"))
     with pytest.raises(PosteriorError, match=r"lacks the attribute.*fpm_sim_free_groups"):
         Posterior.from_netcdf(write_posterior(tmp_path / "a.nc", attrs={"fpm_sim_free_groups": None}))
     with pytest.raises(PosteriorError, match=r"unknown: section\.width_m"):
