@@ -838,6 +838,8 @@ def predict_bands(
 
     The posterior is ``posterior.nc`` of ``fpm-sim calibrate``; the result holds every draw's frequencies and
     their median and 5/25/75/95 % quantiles per pose (:class:`fpm_sim.study.posterior.PredictiveBands`).
+    A posterior is a set of descriptions (one per draw): it stands where the other entry points take the
+    description, and its poses where they take the pose.
 
     Parameters
     ----------

@@ -242,6 +242,22 @@ def reproduce_posterior(args: argparse.Namespace) -> tuple[Posterior | None, str
     return load_posterior(args, path), f"bands from the shipped posterior {path.name}"
 
 
+def reproduce_pointer(posterior: Posterior, bands: Any, files: list[str]) -> str:
+    """What the report's verdict says about the posterior used (:attr:`fpm_sim.study.reproduce.StudyReproduction.
+    posterior`): the file, the draws, where the bands are and how many measured f1 they cover."""
+    c = bands.coverage()
+    cover = (
+        f"; {100 * c['in_90_band']:.0f} % of the {c['measured_poses']} measured f1 inside the 90 % band"
+        if c["measured_poses"]
+        else ""
+    )
+    source = posterior.source.name if posterior.source is not None else "a posterior in memory"
+    return (
+        f"{source}, {bands.bands.n_draws} of {posterior.n_draws} draws, free groups {','.join(posterior.groups)}; "
+        f"the bands of f1 at the measured and withheld poses are in {', '.join(files)}{cover}"
+    )
+
+
 def reproduce_bands(args: argparse.Namespace, posterior: Posterior, reading: Any) -> Any:
     """``reproduce`` with a posterior: bands and in-sample coverage at the 12 measured poses, predictive bands at
     the six withheld poses (:func:`fpm_sim.study.posterior.study_bands`)."""

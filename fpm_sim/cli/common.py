@@ -136,6 +136,7 @@ OPTION_NAMES: dict[str, tuple[str, float]] = {
     "global_method": ("--global", 1.0),
     "folds": ("--folds", 1.0),
     "window_tau_s": ("--exp-window-tau-s", 1.0),
+    "posterior": ("--posterior", 1.0),
 }
 """The one map from the library's parameter names (:attr:`FpmSimError.parameter`) to the command line's option
 names, with the factor that converts a value to the option's unit. Only options the command has are used."""

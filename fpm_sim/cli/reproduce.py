@@ -11,6 +11,7 @@ from fpm_sim.cli.bands import (
     posterior_line,
     posterior_payload,
     reproduce_bands,
+    reproduce_pointer,
     reproduce_posterior,
 )
 from fpm_sim.cli.common import (
@@ -109,9 +110,10 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     )
     bands = reproduce_bands(args, posterior, reading) if posterior is not None else None
     with atomic_dir(out, overwrite=args.overwrite) as tmp:
-        paths = [out / p.name for p in rep.write(tmp)]
-        if bands is not None:
-            paths += [out / p.name for p in bands.write(tmp)]
+        band_files = [p.name for p in bands.write(tmp)] if bands is not None else []
+        if bands is not None and posterior is not None:
+            rep.posterior = reproduce_pointer(posterior, bands, band_files)  # the report's verdict points to them
+        paths = [out / p.name for p in rep.write(tmp)] + [out / n for n in band_files]
     finish_store(out)
     lines = [rep.table()]
     if bands is not None and posterior is not None:

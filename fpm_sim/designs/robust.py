@@ -27,9 +27,9 @@ import numpy as np
 from fpm_sim.batch.engine import EngineOptions
 from fpm_sim.batch.pose_loop import STATUS_OK, STATUS_UNREACHABLE, fast_options, solve_configs
 from fpm_sim.config import Manipulator
-from fpm_sim.designs.study import DesignError, apply_design, factorial
+from fpm_sim.designs.study import DesignError, apply_design, check_request, factorial
 from fpm_sim.kinematics import Pose
-from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.options import ModelOptions, resolution_summary
 
 __all__ = ["DesignBands", "design_over_draws"]
 
@@ -148,6 +148,7 @@ class DesignBands:
             "n_draws": self.n_draws,
             "summary": self.summary(),
             "min_f1_ok_hz": np.where(np.isfinite(m), m, np.array(None)).tolist(),
+            "resolution": resolution_summary(self.options),
             "elapsed_s": self.elapsed_s,
         }
 
@@ -222,18 +223,13 @@ def design_over_draws(
         Both or neither of ``vary``/``designs``, no draws, no poses, a bad target or a design value a draw
         cannot take.
     """
-    if (vary is None) == (designs is None):
-        raise DesignError("give either vary (--vary FIELD=SPEC) or designs (--designs FILE.csv), not both or neither")
-    if not f_min_hz >= 0:
-        raise DesignError(f"--f-min-hz must be >= 0, got {f_min_hz}")
-    draws, poses = list(draws), list(poses)
+    poses = check_request(vary, designs, n_modes=n_modes, f_min_hz=f_min_hz, poses=poses)
+    draws = list(draws)
     if not draws:
-        raise DesignError("no posterior draws")
-    if not poses:
-        raise DesignError("no poses: give --grid or --poses")
+        raise DesignError("no posterior draws", parameter="draws", hint="give at least one draw's description")
     design_list = factorial(vary) if vary is not None else [dict(d) for d in designs or []]
     if not design_list:
-        raise DesignError("no designs")
+        raise DesignError("no designs", parameter="vary" if vary is not None else "designs")
     fields = list(design_list[0])
     configs = [apply_design(c, d) for d in design_list for c in draws]
     opts = options or fast_options()

@@ -565,6 +565,32 @@ def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
 # ----------------------------------------------------------------------------------------------- the loop
 
 
+def check_request(
+    vary: Mapping[str, Sequence[float]] | None,
+    designs: Sequence[Mapping[str, float]] | None,
+    *,
+    n_modes: int,
+    f_min_hz: float | None,
+    poses: Sequence[Pose],
+) -> list[Pose]:
+    """The checks of a design study's request (:func:`design_study`, :func:`fpm_sim.designs.robust.design_over_draws`):
+    exactly one of ``vary``/``designs``, ``n_modes >= 1``, ``f_min_hz >= 0`` (when given), at least one pose.
+    Returns the poses as a list."""
+    if (vary is None) == (designs is None):
+        raise DesignError(
+            "give either vary (FIELD=SPEC items) or designs (rows of field values), not both or neither",
+            parameter="vary",
+        )
+    if n_modes < 1:
+        raise DesignError("must be >= 1", parameter="n_modes", value=n_modes)
+    if f_min_hz is not None and not f_min_hz >= 0:
+        raise DesignError("must be >= 0", parameter="f_min_hz", value=f_min_hz)
+    out = list(poses)
+    if not out:
+        raise DesignError("no poses", parameter="poses", hint="give a grid or poses")
+    return out
+
+
 def design_study(
     config: Manipulator,
     *,
@@ -605,18 +631,7 @@ def design_study(
     DesignError
         Unknown field, invalid value, both or neither of ``vary``/``designs``, no poses.
     """
-    if (vary is None) == (designs is None):
-        raise DesignError(
-            "give either vary (FIELD=SPEC items) or designs (rows of field values), not both or neither",
-            parameter="vary",
-        )
-    if n_modes < 1:
-        raise DesignError("must be >= 1", parameter="n_modes", value=n_modes)
-    if f_min_hz is not None and not f_min_hz >= 0:
-        raise DesignError("must be >= 0", parameter="f_min_hz", value=f_min_hz)
-    poses = list(poses)
-    if not poses:
-        raise DesignError("no poses", parameter="poses", hint="give a grid or poses")
+    poses = check_request(vary, designs, n_modes=n_modes, f_min_hz=f_min_hz, poses=poses)
     if vary is not None:
         levels = {k: [float(v) for v in vals] for k, vals in vary.items()}
         for name, vals in levels.items():

@@ -44,7 +44,8 @@ from fpm_sim.batch.pose_loop import STATUS_NEAR, STATUS_OK, STATUS_UNREACHABLE, 
 from fpm_sim.config import ConfigError, Manipulator, parse_config
 from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose
-from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.options import ModelOptions, resolution_summary
+from fpm_sim.results import frequencies_dataset
 from fpm_sim.study.identify.parameters import ParameterSet, parameter_set
 from fpm_sim.study.poses import TableReading
 from fpm_sim.study.tables import measured_table, withheld_cells
@@ -76,6 +77,7 @@ DEFAULT_POSTERIOR_NAME = "default_posterior.nc"
 QUANTILES = (0.05, 0.25, 0.5, 0.75, 0.95)
 """The quantiles of the bands: the 90 % band (5-95 %), the 50 % band (25-75 %) and the median."""
 COMPUTED = (STATUS_OK, STATUS_NEAR)
+WRITTEN_BY = "give the posterior.nc written by 'fpm-sim calibrate'"
 
 
 class PosteriorError(FpmSimError):
@@ -130,21 +132,30 @@ class Posterior:
 
     def __post_init__(self) -> None:
         self.values = np.atleast_2d(np.asarray(self.values, dtype=float))
-        where = f"posterior {self.source}" if self.source else "posterior"
         if self.values.shape[1] != len(self.names):
-            raise PosteriorError(f"{where}: {self.values.shape[1]} values per draw for {len(self.names)} parameters")
+            raise self._error(
+                f"{self.values.shape[1]} values per draw for {len(self.names)} parameters", parameter="values"
+            )
         if self.values.shape[0] < 1:
-            raise PosteriorError(f"{where}: no draws")
+            raise self._error("no draws", parameter="values")
         if not np.isfinite(self.values).all():
-            raise PosteriorError(f"{where}: draws with non-finite values; write finite draws only")
+            raise self._error("draws with non-finite values", parameter="values", hint="write finite draws only")
         if self.elbow_branch is not None:
             eb = np.asarray(self.elbow_branch)
             if eb.shape != (self.values.shape[0], 3) or not np.isin(eb, (-1, 1)).all():
-                raise PosteriorError(
-                    f"{where}: {ELBOW_BRANCH_VAR} must hold +1 or -1 per draw and arm (dims chain, draw, arm of 3)"
+                raise self._error(
+                    "must hold +1 or -1 per draw and arm",
+                    parameter=ELBOW_BRANCH_VAR,
+                    hint="dims chain, draw, arm (3 arms)",
                 )
             self.elbow_branch = eb.astype(int)
         self._ps = self._parameter_set()
+
+    def _error(self, message: str, **fields: Any) -> PosteriorError:
+        """A :class:`PosteriorError` naming the file read (when built in memory: the parameter, else ``posterior``)."""
+        if self.source is None:
+            fields.setdefault("parameter", "posterior")
+        return PosteriorError(message, file=self.source, **fields)
 
     @property
     def parameter_set(self) -> ParameterSet:
@@ -152,19 +163,19 @@ class Posterior:
         return self._ps
 
     def _parameter_set(self) -> ParameterSet:
-        where = f"posterior {self.source}" if self.source else "posterior"
+        groups = ",".join(self.groups)
         try:
             ps = parameter_set(self.base, list(self.groups))
         except FpmSimError as exc:
-            raise PosteriorError(f"{where}: free groups {','.join(self.groups)!r} unusable: {exc}") from None
+            raise self._error(f"free groups unusable ({exc})", parameter=GROUPS_ATTR, value=groups) from None
         unknown = [n for n in self.names if n not in ps.names]
         missing = [n for n in ps.names if n not in self.names]
         if unknown or missing:
-            raise PosteriorError(
-                f"{where}: the draws' parameters do not match the free groups {','.join(self.groups)!r}"
+            raise self._error(
+                f"the draws' parameters do not match the free groups {groups!r}"
                 + (f"; unknown: {', '.join(unknown)}" if unknown else "")
-                + (f"; missing: {', '.join(missing)}" if missing else "")
-                + f" (expected {', '.join(ps.names)})"
+                + (f"; missing: {', '.join(missing)}" if missing else ""),
+                hint=f"expected {', '.join(ps.names)}",
             )
         return ps
 
@@ -186,46 +197,46 @@ class Posterior:
         """
         p = Path(path)
         if p.is_dir():
-            raise PosteriorError(f"--posterior {p} is a folder; give the posterior.nc written by 'fpm-sim calibrate'")
+            raise PosteriorError("is a folder", parameter="posterior", value=str(p), hint=WRITTEN_BY)
         if not p.is_file():
-            raise PosteriorError(
-                f"--posterior {p}: file not found; give the posterior.nc written by 'fpm-sim calibrate'"
-            )
+            raise PosteriorError("file not found", parameter="posterior", value=str(p), hint=WRITTEN_BY)
         import arviz as az
 
         try:
             idata = az.from_netcdf(p)
         except Exception as exc:  # any reader failure (not HDF5/netCDF, damaged) is this file's problem: name it
             raise PosteriorError(
-                f"--posterior {p} is not an ArviZ InferenceData netCDF file ({type(exc).__name__}: {exc}); give the "
-                "posterior.nc written by 'fpm-sim calibrate'"
+                f"not an ArviZ InferenceData netCDF file ({type(exc).__name__}: {exc})", file=p, hint=WRITTEN_BY
             ) from None
         if "posterior" not in idata.groups():
-            raise PosteriorError(
-                f"--posterior {p} has no 'posterior' group; give the posterior.nc of 'fpm-sim calibrate'"
-            )
+            raise PosteriorError("no 'posterior' group", file=p, hint=WRITTEN_BY)
         post = idata.posterior
         missing = [a for a in REQUIRED_ATTRS if a not in post.attrs]
         if missing:
             raise PosteriorError(
-                f"--posterior {p}: the posterior group lacks the attribute(s) {', '.join(missing)} "
-                "(the base description, free groups, resolution and command; see docs/identification.md)"
+                f"the posterior group lacks the attribute(s) {', '.join(missing)}",
+                file=p,
+                hint="it needs the base description, free groups, resolution and command; see docs/identification.md",
             )
         if post.sizes.get("chain", 1) != 1:
             raise PosteriorError(
-                f"--posterior {p}: {post.sizes['chain']} chains; the format holds one chain of equal-weight draws"
+                "more than one chain",
+                parameter="chain",
+                value=int(post.sizes["chain"]),
+                file=p,
+                hint="the format holds one chain of equal-weight draws",
             )
         try:
             base = parse_config(tomllib.loads(str(post.attrs[BASE_CONFIG_ATTR])), source=f"posterior: {p.name}")
         except (tomllib.TOMLDecodeError, ConfigError) as exc:
-            raise PosteriorError(
-                f"--posterior {p}: attribute {BASE_CONFIG_ATTR} is not a valid description ({exc})"
-            ) from None
+            raise PosteriorError(f"not a valid description ({exc})", parameter=BASE_CONFIG_ATTR, file=p) from None
         groups = tuple(g.strip() for g in str(post.attrs[GROUPS_ATTR]).split(",") if g.strip())
         try:
             segments = int(post.attrs[SEGMENTS_ATTR])
         except (TypeError, ValueError):
-            raise PosteriorError(f"--posterior {p}: attribute {SEGMENTS_ATTR} must be an integer") from None
+            raise PosteriorError(
+                "must be an integer", parameter=SEGMENTS_ATTR, value=post.attrs[SEGMENTS_ATTR], file=p
+            ) from None
 
         def flat(name: str) -> np.ndarray:
             var = post[name]
@@ -238,11 +249,13 @@ class Posterior:
         try:
             ps_names = parameter_set(base, list(groups)).names
         except FpmSimError as exc:
-            raise PosteriorError(f"--posterior {p}: free groups {','.join(groups)!r} unusable: {exc}") from None
+            raise PosteriorError(
+                f"free groups unusable ({exc})", parameter=GROUPS_ATTR, value=",".join(groups), file=p
+            ) from None
         names = [n for n in ps_names if n in names] + [n for n in names if n not in ps_names]  # set order first
         if not names:
             raise PosteriorError(
-                f"--posterior {p}: the posterior group holds no parameter variables (expected {', '.join(ps_names)})"
+                "the posterior group holds no parameter variables", file=p, hint=f"expected {', '.join(ps_names)}"
             )
         values = np.column_stack([flat(n).astype(float) for n in names])
         branch = flat(ELBOW_BRANCH_VAR) if ELBOW_BRANCH_VAR in post.data_vars else None
@@ -269,7 +282,7 @@ class Posterior:
         if n is None or n >= self.n_draws:
             return np.arange(self.n_draws)
         if n < 1:
-            raise PosteriorError(f"--draws must be >= 1, got {n}")
+            raise PosteriorError("must be >= 1", parameter="n_draws", value=n, hint="or None for all draws")
         return np.sort(np.random.default_rng(seed).choice(self.n_draws, size=n, replace=False))
 
     def config(self, i: int) -> Manipulator:
@@ -301,8 +314,7 @@ class Posterior:
         try:
             cfg = ps.apply(np.asarray(x)[order], base=base)
         except ConfigError as exc:
-            where = f"posterior {self.source}" if self.source else "posterior"
-            raise PosteriorError(f"{where}: {label} is not a valid description ({exc})") from None
+            raise self._error(f"{label} is not a valid description ({exc})") from None
         return dataclasses.replace(cfg, name=f"{self.base.name} [posterior {label}]")
 
     def summary(self) -> list[dict[str, Any]]:
@@ -386,7 +398,7 @@ class PredictiveBands:
     def quantile_hz(self, q: float) -> np.ndarray:
         """``(n_poses, n_modes)`` quantile ``q`` (one of :data:`QUANTILES`)."""
         if q not in QUANTILES:
-            raise FpmSimError(f"quantile {q} is not one of the bands' {QUANTILES}")
+            raise FpmSimError("not a quantile of the bands", parameter="q", value=q, hint=f"one of {QUANTILES}")
         return self.quantiles_hz[QUANTILES.index(q)]
 
     @property
@@ -487,6 +499,7 @@ class PredictiveBands:
             "frequencies_hz": np.where(np.isfinite(self.frequencies_hz), self.frequencies_hz, np.array(None)).tolist(),
             "status": self.status.tolist(),
             "segments": self.options.segments,
+            "resolution": resolution_summary(self.options),
             "elapsed_s": self.elapsed_s,
         }
 
@@ -495,24 +508,18 @@ class PredictiveBands:
         """An :class:`xarray.Dataset`: ``freq_hz`` over ``(draw, pose, mode)``, ``freq_quantile_hz`` over
         ``(quantile, pose, mode)`` and ``computed_fraction`` over ``pose``; coordinates ``x_mm``, ``y_mm``,
         ``phi_rad`` (on ``pose``) and ``status`` (on ``draw, pose``)."""
-        import xarray as xr
-
-        return xr.Dataset(
-            {
-                "freq_hz": (("draw", "pose", "mode"), self.frequencies_hz),
+        return frequencies_dataset(
+            self.frequencies_hz,
+            x_mm=[p.x_m * 1e3 for p in self.poses],
+            y_mm=[p.y_m * 1e3 for p in self.poses],
+            phi_rad=[p.phi_rad for p in self.poses],
+            status=self.status.astype(str),
+            leading={"draw": self.draw_index},
+            data_vars={
                 "freq_quantile_hz": (("quantile", "pose", "mode"), self.quantiles_hz),
                 "computed_fraction": ("pose", self.computed_fraction),
             },
-            coords={
-                "draw": self.draw_index,
-                "pose": np.arange(len(self.poses)),
-                "mode": np.arange(1, self.n_modes + 1),
-                "quantile": np.array(QUANTILES),
-                "x_mm": ("pose", np.array([p.x_m * 1e3 for p in self.poses])),
-                "y_mm": ("pose", np.array([p.y_m * 1e3 for p in self.poses])),
-                "phi_rad": ("pose", np.array([p.phi_rad for p in self.poses])),
-                "status": (("draw", "pose"), self.status.astype(str)),
-            },
+            coords={"quantile": np.array(QUANTILES)},
             attrs={"config": self.name, "segments": int(self.options.segments or 0)},
         )
 
@@ -651,12 +658,14 @@ def predict_bands(
         Optional names of the poses (tables and figures).
     """
     if n_modes < 1:
-        raise FpmSimError(f"--n-modes must be >= 1, got {n_modes}")
+        raise FpmSimError("must be >= 1", parameter="n_modes", value=n_modes)
     poses = list(poses)
     if not poses:
-        raise FpmSimError("no poses to predict at")
+        raise FpmSimError("no poses to predict at", parameter="poses", hint="give at least one pose")
     if labels is not None and len(labels) != len(poses):
-        raise FpmSimError(f"{len(labels)} labels for {len(poses)} poses")
+        raise FpmSimError(
+            f"{len(labels)} labels for {len(poses)} poses", parameter="labels", hint="give one label per pose"
+        )
     index = posterior.draws(n_draws, seed)
     configs = [posterior.config(int(i)) for i in index]
     opts = options or (fast_options(segments=posterior.segments) if posterior.segments else fast_options())
@@ -751,7 +760,13 @@ class StudyBands:
         for r, f, w in zip(rows, self.measured_hz, self.withheld):
             r["measured_hz"] = float(f) if math.isfinite(f) else None
             r["withheld"] = bool(w)
-        return {"reading": self.reading, "n_draws": self.bands.n_draws, "coverage": self.coverage(), "poses": rows}
+        return {
+            "reading": self.reading,
+            "n_draws": self.bands.n_draws,
+            "coverage": self.coverage(),
+            "poses": rows,
+            "resolution": resolution_summary(self.bands.options),
+        }
 
     def write(self, out_dir: str | Path, *, stem: str = "bands") -> list[Path]:
         """Write ``<stem>.nc`` and ``<stem>.csv`` (the bands, with the measured value and the withheld flag per

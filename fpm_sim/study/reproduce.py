@@ -150,9 +150,10 @@ class StudyReproduction:
     notes: list[str] = field(default_factory=list)
     readability: list[Any] = field(default_factory=list)
     """Mode-1 readability tables (:class:`fpm_sim.study.readability.ReadabilityTable`), one per hammer axis."""
-    posterior: Any = None
-    """The Bayesian calibration whose bands the report shows, or ``None``: the numbers are one identified
-    description's (a point estimate)."""
+    posterior: str | None = None
+    """The Bayesian calibration whose bands come with the report, in words (the file, the draws used, the band
+    files and their coverage: ``fpm-sim reproduce --posterior`` fills it), or ``None``: the numbers are one
+    identified description's (a point estimate)."""
 
     @classmethod
     def from_sweep(cls, sweep: WorkspaceSweep, reading: TableReading | None = None) -> StudyReproduction:

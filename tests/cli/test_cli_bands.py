@@ -1,21 +1,18 @@
 """``--posterior PATH [--draws N]`` on modes, sweep and reproduce: bands printed, in the JSON, written; bad
 posterior files exit 2 with one error line. The posterior is the synthetic one of
-tests/study/test_posterior_bands.py (six draws of the default description, 4 segments)."""
+tests/helpers/posterior.py (six draws of the default description, 4 segments)."""
 
 from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from fpm_sim.cli.main import main
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "study"))
-from test_posterior_bands import write_posterior
+from tests.helpers.posterior import write_posterior
 
 
 @pytest.fixture(scope="module")
@@ -83,8 +80,8 @@ def test_sweep_prints_bands_and_names_where_to_measure_next(post, capsys, tmp_pa
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["modes", "--posterior", "nope.nc"], "nope.nc: file not found"),
-        (["modes", "--posterior", "{junk}"], "is not an ArviZ InferenceData"),
+        (["modes", "--posterior", "nope.nc"], "error: --posterior: file not found, got 'nope.nc'"),
+        (["modes", "--posterior", "{junk}"], "junk.nc: not an ArviZ InferenceData"),
         (["modes", "--posterior", "{post}", "--config", "x.toml"], "--config and --posterior"),
         (["sweep", "--posterior", "{post}", "--thickness-mm", "10"], "--thickness-mm and --posterior"),
         (["modes", "--posterior", "{post}", "--draws", "0"], "--draws must be in"),
@@ -138,3 +135,31 @@ def test_reproduce_with_a_posterior_writes_bands_and_coverage(post, capsys, tmp_
     inside = np.mean([r["f1_q05_hz"] <= r["measured_hz"] <= r["f1_q95_hz"] for r in rows[:12]])
     assert cov["in_90_band"] == inside
     assert {"bands.nc", "bands.csv", "bands.png", "poses.csv"} <= {p.name for p in out_dir.iterdir()}
+    # the report's verdict says a posterior was used and where its bands are
+    report = (out_dir / "report.md").read_text()
+    verdict = report[report.index("**Uncertainty bands.**") :].split("\n")[0]
+    assert "a posterior was used (posterior.nc, 6 of 6 draws" in verdict
+    assert "bands.nc, bands.csv, bands.png" in verdict
+    assert f"{100 * inside:.0f} % of the 12 measured f1 inside the 90 % band" in verdict
+
+
+def test_the_reports_pointer_names_the_file_the_draws_the_band_files_and_the_coverage(post):
+    from fpm_sim.batch.engine import EngineOptions
+    from fpm_sim.batch.pose_loop import fast_options
+    from fpm_sim.cli.bands import reproduce_pointer
+    from fpm_sim.kinematics import Pose
+    from fpm_sim.study.posterior import Posterior, StudyBands, predict_bands
+
+    posterior = Posterior.from_netcdf(post)
+    poses = [Pose.from_mm(0, 0, 0), Pose.from_mm(40, -30, 0.1)]
+    bands = predict_bands(
+        posterior, poses, n_draws=2, n_modes=1, options=fast_options(segments=3), engine=EngineOptions(workers=1)
+    )
+    q = bands.quantiles_hz[:, :, 0]
+    measured_hz = np.array([q[2, 0], 2 * q[4, 1]])  # the median at the first pose (inside), far above at the second
+    sb = StudyBands(bands=bands, measured_hz=measured_hz, withheld=np.array([False, False]), reading="x+")
+    line = reproduce_pointer(posterior, sb, ["bands.nc", "bands.csv", "bands.png"])
+    assert line == (
+        "posterior.nc, 2 of 6 draws, free groups section-height,hardware; the bands of f1 at the measured and "
+        "withheld poses are in bands.nc, bands.csv, bands.png; 50 % of the 2 measured f1 inside the 90 % band"
+    )

@@ -13,55 +13,13 @@ from fpm_sim.batch.engine import EngineOptions
 from fpm_sim.batch.frequencies import pose_frequencies
 from fpm_sim.batch.pose_loop import fast_options
 from fpm_sim.config import default_config
-from fpm_sim.config.schema import config_to_toml
 from fpm_sim.kinematics import Pose
 from fpm_sim.study.identify.parameters import parameter_set
 from fpm_sim.study.posterior import QUANTILES, Posterior, PosteriorError, predict_bands, study_bands
+from tests.helpers.posterior import GROUPS, HEIGHTS_M, PLATFORM_KG, SEGMENTS, write_posterior
 
-SEGMENTS = 4
-GROUPS = ("section-height", "hardware")
-HEIGHTS_M = np.array([0.0150, 0.0155, 0.0160, 0.0145, 0.0158, 0.0152])
-PLATFORM_KG = np.array([4.2, 4.6, 4.4, 4.0, 4.8, 4.5])
 POSES = [Pose.from_mm(0.0, 0.0, 0.0), Pose.from_mm(40.0, -30.0, 0.1), Pose.from_mm(5000.0, 0.0, 0.0)]
 """Two reachable poses and one that no draw reaches (5 m away)."""
-
-
-def write_posterior(path, *, draws=None, attrs=None, branch=None, drop=()):
-    """A posterior.nc in the calibration's format: one chain, one variable per free parameter (named as the
-    parameter set names them), the four attributes; ``draws`` overrides values by name."""
-    import arviz as az
-
-    base = default_config()
-    ps = parameter_set(base, list(GROUPS))
-    n = len(HEIGHTS_M)
-    values = {name: np.full(n, x) for name, x in zip(ps.names, ps.x0)}
-    values["section.height_m"] = HEIGHTS_M.copy()
-    values["hardware.platform.mass_kg"] = PLATFORM_KG.copy()
-    values.update(draws or {})
-    for name in drop:
-        values.pop(name)
-    post = {k: np.asarray(v, float)[None, :] for k, v in values.items()}
-    post["likelihood.discrepancy_rel"] = np.linspace(0.02, 0.04, n)[None, :]
-    dims = {}
-    if branch is not None:
-        post["geometry.elbow_branch"] = np.asarray(branch, np.int8)[None, :, :]
-        dims["geometry.elbow_branch"] = ["arm"]
-    idata = az.from_dict(posterior=post, dims=dims)
-    idata.posterior.attrs.update(
-        {
-            "fpm_sim_base_config": config_to_toml(base),
-            "fpm_sim_free_groups": ",".join(GROUPS),
-            "fpm_sim_segments": SEGMENTS,
-            "fpm_sim_command": "test fixture",
-        }
-    )
-    for key in attrs or {}:
-        if attrs[key] is None:
-            del idata.posterior.attrs[key]
-        else:
-            idata.posterior.attrs[key] = attrs[key]
-    idata.to_netcdf(str(path))
-    return path
 
 
 @pytest.fixture(scope="module")
@@ -111,7 +69,7 @@ def test_thinning_is_a_seeded_subset_without_repeats(posterior):
     np.testing.assert_array_equal(a, posterior.draws(4, seed=1))
     np.testing.assert_array_equal(posterior.draws(None), np.arange(6))
     np.testing.assert_array_equal(posterior.draws(60), np.arange(6))
-    with pytest.raises(PosteriorError, match="--draws"):
+    with pytest.raises(PosteriorError, match="n_draws: must be >= 1, got 0"):
         posterior.draws(0)
 
 
@@ -190,12 +148,18 @@ def test_result_outputs(bands, tmp_path):
 
 
 def test_bad_posterior_files_say_what_is_wrong(tmp_path):
-    with pytest.raises(PosteriorError, match=r"nope\.nc: file not found"):
+    with pytest.raises(PosteriorError, match=r"posterior: file not found, got '.*nope\.nc'") as missing:
         Posterior.from_netcdf(tmp_path / "nope.nc")
+    # the error contract: the library's parameter and the value (the command line shows its --posterior option)
+    assert (missing.value.parameter, missing.value.value) == ("posterior", str(tmp_path / "nope.nc"))
     junk = tmp_path / "junk.nc"
     junk.write_text("not a netcdf file")
-    with pytest.raises(PosteriorError, match=r"junk\.nc is not an ArviZ"):
+    with pytest.raises(PosteriorError, match=r"junk\.nc: not an ArviZ") as unreadable:
         Posterior.from_netcdf(junk)
+    assert unreadable.value.file == str(junk)  # a file's content is wrong: the error names the file
+    with pytest.raises(PosteriorError, match=r"fpm_sim_segments: must be an integer, got 'four'") as seg:
+        Posterior.from_netcdf(write_posterior(tmp_path / "s.nc", attrs={"fpm_sim_segments": "four"}))
+    assert (seg.value.parameter, seg.value.file) == ("fpm_sim_segments", str(tmp_path / "s.nc"))
     with pytest.raises(PosteriorError, match=r"lacks the attribute.*fpm_sim_free_groups"):
         Posterior.from_netcdf(write_posterior(tmp_path / "a.nc", attrs={"fpm_sim_free_groups": None}))
     with pytest.raises(PosteriorError, match=r"unknown: section\.width_m"):
