@@ -25,6 +25,7 @@ else keyword-only; the model options are one ``options=fs.ModelOptions(...)``::
     fs.reproduce(cfg)                         # the study's tests and 25 poses
     fs.export_mjcf(cfg, pose)                 # the generated MJCF
     fs.check_requirements(fs.load_requirements("fpm-requirements.toml"), cfg)  # docs/testing.md
+    fs.predict_bands("posterior.nc", pose)    # median and 5-95 % bands over a posterior's draws
 
 Every result keeps :class:`fpm_sim.results.Result`: ``.to_dict()`` (JSON-ready), ``.table()`` (text) and
 ``.plot(ax=None)`` (a ``matplotlib`` ``Figure``); frequencies over poses are ``.to_xarray()``.
@@ -64,6 +65,7 @@ _API = {
     "export_mjcf": "fpm_sim.api",
     "load_requirements": "fpm_sim.study.requirements",
     "check_requirements": "fpm_sim.study.requirements",
+    "predict_bands": "fpm_sim.api",
 }
 
 __all__ = ["__version__", *_API]

@@ -53,6 +53,7 @@ __all__ = [
     "impact",
     "modes",
     "move",
+    "predict_bands",
     "readability",
     "reduce",
     "reproduce",
@@ -967,3 +968,62 @@ def export_mjcf(
         RigSetup(rig, angle_deg=angle_deg), piece or rig_piece(cfg), _options(options), compliance=cfg.compliance
     )
     return built.to_xml()
+
+
+# ----------------------------------------------------------------------------------------------- predictions with bands
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+    from fpm_sim.study.posterior import Posterior, PredictiveBands
+
+def predict_bands(
+    posterior: Posterior | str | Path,
+    poses: Pose | Sequence[Pose] | None = None,
+    *,
+    draws: int | None = 100,
+    n_modes: int = 3,
+    options: ModelOptions | None = None,
+    workers: int | None = None,
+    seed: int = 0,
+) -> PredictiveBands:
+    """Predictions with bands: frequencies at ``poses`` over the draws of a posterior, and their quantiles.
+
+    The posterior is ``posterior.nc`` of ``fpm-sim calibrate``; the result holds every draw's frequencies and
+    their median and 5/25/75/95 % quantiles per pose (:class:`fpm_sim.study.posterior.PredictiveBands`).
+    A posterior is a set of descriptions (one per draw): it stands where the other entry points take the
+    description, and its poses where they take the pose.
+
+    Parameters
+    ----------
+    posterior
+        A :class:`fpm_sim.study.posterior.Posterior` or the path of its file.
+    poses
+        One pose or several (default: the origin).
+    draws
+        Posterior draws to use (a seeded random subset; ``None``: all).
+    n_modes
+        Modes per pose.
+    options
+        Pose-loop model options; default: the posterior's own resolution (that of its likelihood), inextensible
+        links, gravity off (the pose loop's).
+    workers
+        Local Dask workers of the pose loop (default: the CPU count; small runs stay in this process).
+    seed
+        Which draws (:meth:`fpm_sim.study.posterior.Posterior.draws`).
+    """
+    from fpm_sim.batch.engine import EngineOptions
+    from fpm_sim.kinematics import Pose
+    from fpm_sim.model.options import ModelOptions
+    from fpm_sim.study import posterior as study_posterior
+
+    post = (
+        posterior
+        if isinstance(posterior, study_posterior.Posterior)
+        else study_posterior.Posterior.from_netcdf(posterior)
+    )
+    opts = _options(options) or ModelOptions(segments=post.segments, axial=False, gravity=False)
+    pose_list = [_pose(None)] if poses is None else [poses] if isinstance(poses, Pose) else list(poses)
+    return study_posterior.predict_bands(
+        post, pose_list, n_draws=draws, seed=seed, n_modes=n_modes, options=opts, engine=EngineOptions(workers=workers)
+    )

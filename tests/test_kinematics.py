@@ -4,7 +4,6 @@ import warnings
 import numpy as np
 import pytest
 
-from fpm_sim.config import Geometry
 from fpm_sim.kinematics import (
     NEAR_SINGULAR_WARN,
     NearSingularityWarning,
@@ -15,6 +14,7 @@ from fpm_sim.kinematics import (
     inverse_kinematics,
     jacobians,
 )
+from tests.helpers.truths import REFERENCE_GEOMETRY  # the geometry these tests measured their numbers on
 
 GRID = [Pose.from_mm(x, y, 0.2 if y == 0 else 0.0) for x in (-100, -50, 0, 50, 100) for y in (-100, -50, 0, 50, 100)]
 
@@ -69,19 +69,6 @@ def test_elbow_branch_changes_solution(default_manip):
     b = inverse_kinematics(replace(g, elbow_branch=(-g.elbow_branch[0], *g.elbow_branch[1:])), Pose(0, 0, 0))
     assert not np.allclose(a.b[0], b.b[0])
     assert np.allclose(a.b[1:], b.b[1:])
-
-
-# The geometry these tests measured their numbers on (the embedded default before the identify re-run):
-# the tests are about kinematics and the surrogate, not about whichever geometry the default holds now.
-REFERENCE_GEOMETRY = Geometry(
-    0.1526,
-    tuple(math.radians(a) for a in (150.8546, -89.1454, 30.8546)),
-    0.1515,
-    0.1535,
-    0.0874,
-    tuple(math.radians(a) for a in (-178.6021, -58.6021, 61.3979)),
-    (-1, -1, -1),
-)
 
 
 def _stretched_pose(g):

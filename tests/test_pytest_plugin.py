@@ -154,7 +154,8 @@ def test_helper_fails(fpm_config, fpm_sweep):
 
 def test_fixtures_marker_and_explained_failures(pytester):
     pytester.makeconftest(CONFTEST)
-    pytester.makepyfile(test_design=TESTS)
+    # a name no test module of this suite has: pytester runs in this process, where `test_design` is imported
+    pytester.makepyfile(test_cell_requirements=TESTS)
     junit = pytester.path / "junit.xml"
     result = pytester.runpytest("-q", "--fpm-segments", "3", f"--junit-xml={junit}", "-p", "no:randomly")
     result.assert_outcomes(passed=4, failed=3)

@@ -110,6 +110,42 @@ def _reproduction():
     return StudyReproduction.from_sweep(_sweep("paper"), None)
 
 
+@functools.cache
+def _posterior():
+    import tempfile
+    from pathlib import Path
+
+    from fpm_sim.study.posterior import Posterior
+    from tests.helpers.posterior import write_posterior
+
+    return Posterior.from_netcdf(write_posterior(Path(tempfile.mkdtemp()) / "posterior.nc"))
+
+
+@_quiet
+def _bands():
+    return fs.predict_bands(_posterior(), POSES, draws=3, n_modes=2, options=LOOP, workers=1)
+
+
+def _study_bands():
+    from fpm_sim.study.posterior import StudyBands
+
+    f1 = float(_bands().median_hz[0, 0])  # a measured pose (at the median) and a withheld one
+    measured_hz, withheld = np.array([f1, np.nan]), np.array([False, True])
+    return StudyBands(bands=_bands(), measured_hz=measured_hz, withheld=withheld, reading="x+")
+
+
+@_quiet
+def _design_bands():
+    from fpm_sim.batch.engine import EngineOptions
+    from fpm_sim.designs.robust import design_over_draws
+
+    draws = _posterior().configs(2)
+    vary = {"section.thickness_m": [0.02, 0.03]}
+    return design_over_draws(
+        draws, poses=POSES, f_min_hz=5.0, vary=vary, options=LOOP, engine=EngineOptions(scheduler="serial")
+    )
+
+
 BUILDERS = {
     "ModalResult": lambda: _quiet_call(fs.modes, options=TINY, n_modes=3),
     "ModalComparison": lambda: _quiet_call(fs.modes, options=TINY, n_modes=3, method="both"),
@@ -135,6 +171,9 @@ BUILDERS = {
     "DesignResult": lambda: _quiet_call(
         fs.design, poses=POSES, vary={"hardware.payload.mass_kg": [0.0, 0.5]}, options=LOOP
     ),
+    "PredictiveBands": _bands,
+    "StudyBands": _study_bands,
+    "DesignBands": _design_bands,
     "ModalAtlas": lambda: _quiet_call(fs.atlas, x_m=[0.0, 0.02], y_m=[0.0], n_modes=2, n_extra=1, options=LOOP),
     "ReadabilityTable": _readability,
     "TransientResult": lambda: _quiet_call(
@@ -264,6 +303,16 @@ def test_design_and_atlas_share_the_dataset_shape():
     poses = atlas.poses()
     f = np.array([[atlas.nodes["label_freq_hz"][i, 0, 0, k] for k in range(2)] for i in range(2)])
     check_frequency_dataset(ds, f, poses, ["ok"] * len(poses))
+
+
+def test_posterior_bands_share_the_dataset_shape():
+    b = _bands()
+    ds = b.dataset
+    assert ds["freq_hz"].dims == ("draw", "pose", "mode")
+    for d in range(b.n_draws):
+        check_frequency_dataset(ds.isel(draw=d), b.frequencies_hz[d], b.poses, b.status[d])
+    np.testing.assert_array_equal(ds["freq_quantile_hz"].values, b.quantiles_hz)
+    assert list(ds["draw"].values) == b.draw_index.tolist()
 
 
 def test_frequencies_dataset_with_a_draw_dimension_and_its_checks():

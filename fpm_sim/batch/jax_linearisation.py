@@ -17,7 +17,7 @@ then ``Z = null(J)``, ``Z'KZ x = w^2 Z'MZ x`` for the lowest modes, batched over
 Why its own formulas and not MJX's pipeline (``mjx.kinematics``/``crb``/``rne``, the ``mjx`` backend):
 MJX's tree scans unroll one stage per tree depth level, and a segment chain has one level per body, so
 its XLA compile grows with the segment count (the batched solve of the 25 study poses at 6 segments per
-link compiled in 186 s through MJX against 10.6 s here, one run of ``scripts/benchmark_backends.py`` on
+link compiled in 186 s through MJX against 10.6 s here, one run of what is now ``benchmarks/backends.py`` on
 the shared 2-core reference CPU). Here the same formulas are written over the model's arrays with one ``lax.scan`` over
 bodies, so compile time barely grows with the segment count. The per-pose models share one structure
 (topology), which is static; their array fields (:data:`PARAM_FIELDS`) are stacked along a leading pose

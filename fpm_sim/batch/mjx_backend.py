@@ -21,12 +21,12 @@ solver (:func:`fpm_sim.batch.jax_linearisation.reduced_modes`). The three backen
 ``mjx``) solve the same discrete eigenproblem and agree to round-off (``tests/batch/test_mjx_pipeline.py``).
 
 Cost: MJX walks the kinematic tree level by level, so its XLA compile grows with the chain depth
-(``scripts/benchmark_backends.py``, ``docs/benchmarks.md``); on a CPU the ``jax`` backend compiles faster.
+(``benchmarks/backends.py``, ``docs/benchmarks.md``); on a CPU the ``jax`` backend compiles faster.
 With a GPU, this is the path to measure.
 
 The rigs are refused (:func:`check_mjx_model`): their kinematic tree is one serial chain, and
 ``jit(mjx.kinematics)`` of the two-link chain rig runs for minutes per call on the CPU (XLA:CPU's code for
-a tree level of one body; ``docs/mjx_chain_rig.md``, ``scripts/repro_mjx_chain_rig.py``).
+a tree level of one body; ``docs/mjx_chain_rig.md``, ``studies/repro_mjx_chain_rig.py``).
 """
 
 from __future__ import annotations
@@ -69,7 +69,7 @@ SERIAL_DOF_LIMIT = 9
 
 MJX's tree scan processes the bodies of one tree level together; where a level holds a single body, XLA:CPU
 (jax 0.10.2, its fusion emitters) turns the chain into code whose every call takes seconds to minutes
-although it does ~1e4 flops (``docs/mjx_chain_rig.md``). Measured with ``scripts/repro_mjx_chain_rig.py``,
+although it does ~1e4 flops (``docs/mjx_chain_rig.md``). Measured with ``studies/repro_mjx_chain_rig.py``,
 3-hinge bodies in series: 9 dofs 10-20 ms per ``mjx.kinematics`` call, 12 dofs 1.4 s, 12 dofs and a
 jointless tip 4-5 s; the chain rig at 2 segments (17 dofs) 81-324 s. The same chain twice side by side
 (two bodies per level, as the manipulator's three legs) runs in 1-5 ms."""

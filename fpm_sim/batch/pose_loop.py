@@ -80,6 +80,7 @@ __all__ = [
     "plane_blocks",
     "pose_assembly",
     "read_poses_csv",
+    "solve_configs",
     "solve_poses",
 ]
 
@@ -564,6 +565,41 @@ def cpu_backend(
         options=eng,
     )
     return merge(parts)
+
+
+def _config_chunk(item: tuple[Manipulator, list[Pose]], *, n_modes: int, options: ModelOptions) -> PoseFrequencies:
+    config, poses = item
+    return solve_poses(config, poses, n_modes=n_modes, options=options)
+
+
+def solve_configs(
+    configs: Sequence[Manipulator],
+    poses: Sequence[Pose],
+    *,
+    n_modes: int,
+    options: ModelOptions,
+    engine: EngineOptions | None = None,
+) -> list[PoseFrequencies]:
+    """:func:`solve_poses` for every description x pose, on the engine (:mod:`fpm_sim.batch.engine`).
+
+    Every task is one description and one chunk of ``poses``; each worker compiles one model per description
+    (:class:`PoseModel`) and re-poses it. Returns one :class:`PoseFrequencies` per description, in order (the
+    loop of the design studies and of the predictions over a posterior's draws).
+    """
+    configs, poses = list(configs), list(poses)
+    eng = engine or EngineOptions()
+    size = eng.chunk or chunk_size(len(poses) * len(configs), eng.n_workers)
+    pose_chunks = split(poses, size)
+    items = [(c, chunk) for c in configs for chunk in pose_chunks]
+    parts = run_chunks(
+        _config_chunk,
+        items,
+        kwargs={"n_modes": n_modes, "options": options},
+        weights=[len(chunk) for _, chunk in items],
+        options=eng,
+    )
+    per = len(pose_chunks)
+    return [merge(parts[d * per : (d + 1) * per]) for d in range(len(configs))]
 
 
 class PosesFileError(FpmSimError):

@@ -136,6 +136,7 @@ OPTION_NAMES: dict[str, tuple[str, float]] = {
     "global_method": ("--global", 1.0),
     "folds": ("--folds", 1.0),
     "window_tau_s": ("--exp-window-tau-s", 1.0),
+    "posterior": ("--posterior", 1.0),
     # time domain (fpm_sim.sim.stepping, fpm_sim.sim.trajectory)
     "integrator": ("--integrator", 1.0),
     "step_band_hz": ("--step-band-hz", 1.0),

@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from fpm_sim.cli.bands import add_posterior_args, band_options, design_bands, load_posterior
 from fpm_sim.cli.common import (
     CliError,
     add_config_args,
@@ -45,7 +46,8 @@ def cmd_design(args: argparse.Namespace) -> int:
     from fpm_sim.model.options import warn_if_coarse
     from fpm_sim.outputs import atomic_dir
 
-    config = load_manipulator(args)
+    posterior = load_posterior(args)  # --posterior: designs over its draws (fpm_sim.cli.bands)
+    config = posterior.median_config() if posterior is not None else load_manipulator(args)
     if bool(args.vary) == bool(args.designs):
         raise CliError("give --vary FIELD=SPEC (one or more) or --designs FILE.csv, not both and not neither")
     out = args.out
@@ -55,8 +57,10 @@ def cmd_design(args: argparse.Namespace) -> int:
     vary = parse_vary(args.vary, config) if args.vary else None
     designs = read_designs_csv(args.designs, config) if args.designs else None
     poses, grid = _poses(args, config)
-    opts = model_options(args, gravity=False)
+    opts = band_options(args, posterior) if posterior is not None else model_options(args, gravity=False)
     warn_if_coarse(opts)
+    if posterior is not None:
+        return design_bands(args, posterior, vary, designs, poses, grid, opts)
     result = design_study(
         config,
         poses=poses,
@@ -110,6 +114,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--f-min-hz", type=float, default=None, help="summary: share of the workspace with f1 >= this")
     add_resolution_args(p, axial=False)
     add_config_args(p)
+    add_posterior_args(p, what="min f1 per design, and P(min f1 >= --f-min-hz) over the draws")
     add_engine_args(p, workers=True)
     add_overwrite_arg(p)
     p.add_argument("--out", type=Path, default=Path("out/design"), help="output folder (default out/design)")

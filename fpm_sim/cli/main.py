@@ -7,7 +7,7 @@ with one line, a closed pipe -> quiet, anything else -> its traceback and a line
 Warnings print as one ``warning: ...`` line.
 
 Heavy modules (MuJoCo models, SciPy, matplotlib) are imported inside the commands, so that
-``fpm-sim --help`` and ``fpm-sim config`` start quickly (``scripts/benchmark_startup.py``).
+``fpm-sim --help`` and ``fpm-sim config`` start quickly (``benchmarks/startup.py``, an asv benchmark).
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, Any, NoReturn
 from fpm_sim import __version__
 
 try:  # Ctrl-C while the modules load (a second or so): one line and 130, as at any later moment
+    from fpm_sim.cli.bands import add_posterior_args
     from fpm_sim.cli.common import (
         OPTION_NAMES,
         CliError,
@@ -152,6 +153,18 @@ def cmd_modes(args: argparse.Namespace) -> int:
     from fpm_sim.model.options import warn_if_coarse
 
     check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
+    if args.posterior is not None:  # predictions with bands (fpm_sim.cli.bands)
+        from fpm_sim.cli.bands import modes_bands
+
+        if args.shapes:
+            raise CliError("--shapes draws one description's mode shapes; drop it with --posterior (bands only)")
+
+        bands, payload, text = modes_bands(args)
+        if args.plot:
+            save_figure(args.plot, bands.plot)
+            text += f"\nbands plotted to {args.plot}"
+        emit(args, payload, text)
+        return 0
     manip = load_manipulator(args)
     pose = pose_of(args)
     opts = model_options(args)
@@ -363,6 +376,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="with --json: Cartesian mode shapes of points along each link",
     )
     p.add_argument("--plot", type=Path, help="save the first mode shapes (3D view) to this image (.png, .pdf, .svg)")
+    add_posterior_args(p)
     add_output_args(p)
     p.set_defaults(func=cmd_modes)
 

@@ -6,6 +6,14 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from fpm_sim.cli.bands import (
+    add_posterior_args,
+    posterior_line,
+    posterior_payload,
+    reproduce_bands,
+    reproduce_pointer,
+    reproduce_posterior,
+)
 from fpm_sim.cli.common import (
     WORKERS_HELP,
     CliError,
@@ -84,7 +92,9 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     from fpm_sim.study.reproduce import reproduce_study
 
     reading = parse_reading(args.reading)
-    manip = study_manipulator(args)
+    posterior, note = reproduce_posterior(args)  # --posterior, or the shipped default's (fpm_sim.cli.bands)
+    explicit = args.posterior is not None and posterior is not None
+    manip = posterior.median_config() if explicit and posterior is not None else study_manipulator(args)
     opts = study_options(args)
     out = args.out or default_out("reproduce", manip, args.reading)
     check_output_dir(out, "--out", overwrite=args.overwrite)
@@ -98,12 +108,21 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         progress=not args.json,
         engine=engine_options(args, out) if args.backend == "cpu" else None,
     )
+    bands = reproduce_bands(args, posterior, reading) if posterior is not None else None
     with atomic_dir(out, overwrite=args.overwrite) as tmp:
-        paths = [out / p.name for p in rep.write(tmp)]
+        band_files = [p.name for p in bands.write(tmp)] if bands is not None else []
+        if bands is not None and posterior is not None:
+            rep.posterior = reproduce_pointer(posterior, bands, band_files)  # the report's verdict points to them
+        paths = [out / p.name for p in rep.write(tmp)] + [out / n for n in band_files]
     finish_store(out)
     lines = [rep.table()]
+    if bands is not None and posterior is not None:
+        lines += [posterior_line(posterior, bands.bands.n_draws), bands.table()]
+    lines += [note] if note else []
     lines.append("wrote " + ", ".join(str(p) for p in paths))
     payload = with_resolution(rep.to_dict(), opts)
+    payload["bands"] = bands.to_dict() if bands is not None else None
+    payload["posterior"] = posterior_payload(posterior) if posterior is not None else (note or None)
     payload["files"] = [str(p) for p in paths]
     emit(args, payload, "\n".join(lines))
     return 0
@@ -118,6 +137,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     add_config_args(p)
     add_study_args(p)
+    add_posterior_args(
+        p,
+        what="f1 at the 12 measured poses (with in-sample coverage) and the six withheld ones (default: the shipped "
+        "default posterior, if any, for the embedded description)",
+    )
     add_engine_args(p)
     p.add_argument(
         "--out", type=Path, default=None, help="output folder (default out/reproduce_<thickness>mm_<reading>)"

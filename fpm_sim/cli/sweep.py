@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from fpm_sim.cli.bands import add_posterior_args, sweep_bands
 from fpm_sim.cli.common import (
     add_config_args,
     add_engine_args,
@@ -27,6 +28,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from fpm_sim.study.poses import parse_reading
     from fpm_sim.study.sweep import sweep_workspace
 
+    if args.posterior is not None:  # predictions with bands (fpm_sim.cli.bands)
+        return sweep_bands(args)
     reading = parse_reading(args.reading)
     manip = study_manipulator(args)
     opts = study_options(args)
@@ -100,6 +103,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_config_args(p)
     p.add_argument("--poses", type=Path, help="CSV of poses (columns x_mm,y_mm,phi_rad) instead of --grid")
     add_study_args(p)
+    add_posterior_args(p, what="the first three frequencies at each pose")
     add_engine_args(p)
     p.add_argument(
         "--out",

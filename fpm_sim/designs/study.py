@@ -22,15 +22,14 @@ from typing import Any
 
 import numpy as np
 
-from fpm_sim.batch.engine import EngineOptions, chunk_size, run_chunks, split
+from fpm_sim.batch.engine import EngineOptions
 from fpm_sim.batch.jax_backend import parameter_value, with_parameter
 from fpm_sim.batch.pose_loop import (
     STATUS_UNREACHABLE,
     PoseFrequencies,
     fast_options,
-    merge,
     read_poses_csv,
-    solve_poses,
+    solve_configs,
 )
 from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError, FpmSimWarning
@@ -566,9 +565,30 @@ def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
 # ----------------------------------------------------------------------------------------------- the loop
 
 
-def _design_chunk(item: tuple[Manipulator, list[Pose]], *, n_modes: int, options: ModelOptions) -> PoseFrequencies:
-    config, poses = item
-    return solve_poses(config, poses, n_modes=n_modes, options=options)
+def check_request(
+    vary: Mapping[str, Sequence[float]] | None,
+    designs: Sequence[Mapping[str, float]] | None,
+    *,
+    n_modes: int,
+    f_min_hz: float | None,
+    poses: Sequence[Pose],
+) -> list[Pose]:
+    """The checks of a design study's request (:func:`design_study`, :func:`fpm_sim.designs.robust.design_over_draws`):
+    exactly one of ``vary``/``designs``, ``n_modes >= 1``, ``f_min_hz >= 0`` (when given), at least one pose.
+    Returns the poses as a list."""
+    if (vary is None) == (designs is None):
+        raise DesignError(
+            "give either vary (FIELD=SPEC items) or designs (rows of field values), not both or neither",
+            parameter="vary",
+        )
+    if n_modes < 1:
+        raise DesignError("must be >= 1", parameter="n_modes", value=n_modes)
+    if f_min_hz is not None and not f_min_hz >= 0:
+        raise DesignError("must be >= 0", parameter="f_min_hz", value=f_min_hz)
+    out = list(poses)
+    if not out:
+        raise DesignError("no poses", parameter="poses", hint="give a grid or poses")
+    return out
 
 
 def design_study(
@@ -611,18 +631,7 @@ def design_study(
     DesignError
         Unknown field, invalid value, both or neither of ``vary``/``designs``, no poses.
     """
-    if (vary is None) == (designs is None):
-        raise DesignError(
-            "give either vary (FIELD=SPEC items) or designs (rows of field values), not both or neither",
-            parameter="vary",
-        )
-    if n_modes < 1:
-        raise DesignError("must be >= 1", parameter="n_modes", value=n_modes)
-    if f_min_hz is not None and not f_min_hz >= 0:
-        raise DesignError("must be >= 0", parameter="f_min_hz", value=f_min_hz)
-    poses = list(poses)
-    if not poses:
-        raise DesignError("no poses", parameter="poses", hint="give a grid or poses")
+    poses = check_request(vary, designs, n_modes=n_modes, f_min_hz=f_min_hz, poses=poses)
     if vary is not None:
         levels = {k: [float(v) for v in vals] for k, vals in vary.items()}
         for name, vals in levels.items():
@@ -642,20 +651,9 @@ def design_study(
     opts = options or fast_options()
     eng = engine or EngineOptions()
     eng = dataclasses.replace(eng, desc="design x poses" if eng.desc == "poses" else eng.desc)
-    size = eng.chunk or chunk_size(len(poses) * len(configs), eng.n_workers)
-    pose_chunks = split(poses, size)
-    items = [(c, chunk) for c in configs for chunk in pose_chunks]
     t0 = time.perf_counter()
-    parts = run_chunks(
-        _design_chunk,
-        items,
-        kwargs={"n_modes": n_modes, "options": opts},
-        weights=[len(chunk) for _, chunk in items],
-        options=eng,
-    )
+    merged = solve_configs(configs, poses, n_modes=n_modes, options=opts, engine=eng)
     elapsed = time.perf_counter() - t0
-    per = len(pose_chunks)
-    merged = [merge(parts[d * per : (d + 1) * per]) for d in range(len(configs))]
     return DesignResult(
         config=config,
         fields=fields,

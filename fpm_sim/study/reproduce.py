@@ -77,7 +77,7 @@ DEFAULT_OPTIMA_SPREAD_PCT = {
     (-100.0, -50.0): 16.0,
 }
 """For the embedded default only: at each withheld pose ``(row_mm, col_mm)``, the median |deviation| (%) of the
-predicted f1 of the competing identified descriptions from their median (``scripts/optima_predictions.py`` over
+predicted f1 of the competing identified descriptions from their median (``studies/optima_predictions.py`` over
 the thirteen identify folders of docs/identification.md, "What the competing optima agree on"). Small: the data
 pin the prediction down whatever the layout; large: the prediction depends on which optimum the search found."""
 """Spring locations per link for the subsystem rigs (cantilever mode 1 within +0.2 % of Euler-Bernoulli)."""
@@ -150,9 +150,10 @@ class StudyReproduction:
     notes: list[str] = field(default_factory=list)
     readability: list[Any] = field(default_factory=list)
     """Mode-1 readability tables (:class:`fpm_sim.study.readability.ReadabilityTable`), one per hammer axis."""
-    posterior: Any = None
-    """The Bayesian calibration whose bands the report shows, or ``None``: the numbers are one identified
-    description's (a point estimate)."""
+    posterior: str | None = None
+    """The Bayesian calibration whose bands come with the report, in words (the file, the draws used, the band
+    files and their coverage: ``fpm-sim reproduce --posterior`` fills it), or ``None``: the numbers are one
+    identified description's (a point estimate)."""
 
     @classmethod
     def from_sweep(cls, sweep: WorkspaceSweep, reading: TableReading | None = None) -> StudyReproduction:
@@ -608,7 +609,7 @@ class StudyReproduction:
                 lines += [
                     "Last column: how far the competing optima of the identification (descriptions that fit the data "
                     "about equally well) predict apart here, median |deviation| from their median "
-                    "(`scripts/optima_predictions.py`, docs/identification.md): a few per cent, the data determine "
+                    "(`studies/optima_predictions.py`, docs/identification.md): a few per cent, the data determine "
                     "the prediction; tens of per cent, they leave it open.",
                     "",
                 ]

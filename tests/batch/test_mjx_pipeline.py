@@ -29,7 +29,7 @@ def test_mjx_backend_matches_jax_and_cpu_backends_at_the_25_study_poses(referenc
     assert np.array_equal(np.isfinite(mjx.frequencies_hz), np.isfinite(cpu.frequencies_hz))
     # The bound is 1e-6 relative. All three solve the same discrete eigenproblem and differ in
     # round-off only: measured at 2 segments, max relative difference 5.6e-12 (mjx vs cpu) and 7.7e-12
-    # (mjx vs jax); at 6 segments 5.6e-10 (scripts/benchmark_backends.py). 1e-8 keeps the test sharp.
+    # (mjx vs jax); at 6 segments 5.6e-10 (benchmarks/backends.py). 1e-8 keeps the test sharp.
     np.testing.assert_allclose(mjx.frequencies_hz[ok], cpu.frequencies_hz[ok], rtol=1e-8)
     np.testing.assert_allclose(mjx.frequencies_hz[ok], jax_.frequencies_hz[ok], rtol=1e-8)
     np.testing.assert_allclose(mjx.in_plane[ok], cpu.in_plane[ok], rtol=0, atol=1e-8)

@@ -17,7 +17,6 @@ import json
 
 import numpy as np
 import pytest
-from test_identify_uff import reference_config  # the tests' reference geometry, shared with the modal-FRF road
 
 from fpm_sim.batch.frequencies import pose_frequencies
 from fpm_sim.cli.main import main
@@ -27,25 +26,15 @@ from fpm_sim.model.options import ModelOptions
 from fpm_sim.response import FrequencyResponse
 from fpm_sim.sim.impact import write_uff58
 from fpm_sim.study.identify import read_measured_csv
-
-SEGMENTS = 3
-POSES_MM = [(0.0, 0.0, 0.2), (-100.0, -50.0, 0.0), (50.0, 100.0, 0.0), (100.0, 100.0, 0.0)]
-"""Poses where a driving-point test at mid-span of distal_0 sees the truth's first mode of each kind as its first
-FRF peak, that mode at least 25 Hz from any other (screened with the modal FRF). Not every pose is like this: at
-(-50, 50, 0) mm the first in-plane mode (34 Hz) rises only 1.8 dB out of the accelerance there, below the EMA's
-3 dB prominence, and the first in-plane peak read is the second in-plane mode (159 Hz), 1 Hz from an
-out-of-plane one: a lab has to check what the first peak of a test is before labelling it. At (0, 100, 0) mm the
-first in-plane mode (40 Hz) rises 5 dB: read, but noise moves it by up to +0.6 % (0.01 m/s^2, 5 seeds)."""
-AXES = {"normal": "in_plane", "z": "out_of_plane"}
-"""Hammer and accelerometer axis -> the kind of modes that test sees (in the plane, normal to the link / along the
-motor axes: the structure is planar, the two families decouple without gravity)."""
-TRUTH_SECTION_M = {"thickness_m": 0.0265, "height_m": 0.0162}
-"""The hidden truth: the reference description with these links (start: 28.65 mm x 14.80 mm, i.e. -7.5 % and
-+9.5 %); the identification starts from the reference and never sees these values."""
-NOISE_M_S2 = 0.01
-"""Accelerometer noise (m/s^2 rms per 0.1 ms sample; the 20 N tap peaks at ~11 m/s^2): a good accelerometer's floor."""
-SIGMA_PCT = 0.2
-"""Relative std given to each EMA frequency: the EMA's scatter measured at these settings (below), in-plane."""
+from tests.helpers.truths import (  # the truth, poses and settings, shared with studies/impact_road_scatter.py
+    AXES,
+    NOISE_M_S2,
+    POSES_MM,
+    SEGMENTS,
+    SIGMA_PCT,
+    TRUTH_SECTION_M,
+    reference_config,
+)
 
 
 def _cli(capsys, *argv: str):
@@ -105,7 +94,7 @@ def test_impact_uff_ema_identify_recovers_the_hidden_section(tmp_path, capsys):
     # (not from the rollouts). The exponential window adds the decay rate 1/tau to every pole, which keeps the damped
     # frequency and raises |pole| (the natural frequency LSCF reports) by about (zeta_total^2 - zeta^2) / 2, 0.06 %
     # at 59 Hz (zeta 1.1 % own + 2.5 % window); the UFF records carry tau and fpm-sim ema removes it. Measured with
-    # 0.01 m/s^2 noise on one impact (scripts/impact_road_scatter.py --seeds 8, which runs the EMA with and without
+    # 0.01 m/s^2 noise on one impact (studies/impact_road_scatter.py --seeds 8, which runs the EMA with and without
     # the correction): window removed, in-plane -0.025..+0.119 %, out-of-plane -0.034..-0.001 %; window kept
     # +0.041..+0.195 % and -0.006..+0.031 % (17 earlier draws, window kept: up to +0.27 % and +0.08 %, so about
     # +0.20 % and +0.045 % with it removed). Bounds: about 2x those; a wrong peak is >= 25 Hz off.
@@ -127,7 +116,7 @@ def test_impact_uff_ema_identify_recovers_the_hidden_section(tmp_path, capsys):
         argv += ["--measured", f"{c},sigma_pct={SIGMA_PCT}"]
     argv += ["--segments", str(SEGMENTS), "--quiet", "--out", str(tmp_path / "ident")]
     res = _cli(capsys, *argv)["result"]["parameters"]
-    # Measured over 8 noise draws with the window removed (scripts/impact_road_scatter.py --seeds 8): thickness
+    # Measured over 8 noise draws with the window removed (studies/impact_road_scatter.py --seeds 8): thickness
     # +0.001..+0.055 %, height -0.015..-0.032 %, |error| / reported std up to 0.66 and 0.35; with the window kept
     # the thickness comes out +0.040..+0.093 % (24 earlier draws: up to +0.127 %), biased high by the window, as the
     # in-plane frequencies rise with it. Bounds: about 2x the worst relative error expected over more draws, and 2

@@ -5,7 +5,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from fpm_sim.config import LumpedMass, load_config
+from fpm_sim.config import LumpedMass
 from fpm_sim.kinematics import Pose
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import ModelOptions
@@ -14,7 +14,7 @@ from fpm_sim.rom.reduction import modal_system
 from fpm_sim.sim.impact import write_uff58
 from fpm_sim.study.identify import IdentifyOptions, Problem, identify, parameter_set, read_measured_csv
 from fpm_sim.study.identify.ema import EmaError, estimate_modes, read_frfs, write_modes_csv
-from tests.conftest import PREVIOUS_DEFAULT_CONFIG
+from tests.helpers.truths import reference_config  # the tests' reference geometry, shared with the impact road
 
 SEGMENTS = 3
 # What LSCF with sdypy-EMA's stabilisation chart promises on a noise-free rational FRF. The reported pole is the
@@ -59,27 +59,6 @@ def test_ema_refuses_a_band_without_peaks():
     f = np.linspace(0, 100, 401)
     with pytest.raises(EmaError, match="no FRF peak"):
         estimate_modes(MeasuredFrf(f, np.ones_like(f) + 0j, "flat", None), f_lower_hz=5, f_upper_hz=90)
-
-
-def reference_config():
-    """The tests' own manipulator (shared with the impact road test)."""
-    # the tests' own geometry (the default before its identify re-run): away from singularities at POSES_MM
-    import math
-
-    from fpm_sim.config import Geometry
-
-    geo = Geometry(
-        0.1526,
-        tuple(math.radians(a) for a in (150.8546, -89.1454, 30.8546)),
-        0.1515,
-        0.1535,
-        0.0874,
-        tuple(math.radians(a) for a in (-178.6021, -58.6021, 61.3979)),
-        (-1, -1, -1),
-    )
-    cfg = load_config(PREVIOUS_DEFAULT_CONFIG)  # frozen: re-identifying the embedded default must not move it
-    plat = LumpedMass(4.79, (4.79e-3, 4.79e-3, 9.58e-3 * (1 - 1e-6)))
-    return cfg.replace(geometry=geo, hardware=dataclasses.replace(cfg.hardware, platform=plat))
 
 
 def _truth():

@@ -1,24 +1,11 @@
-import math
-
 import numpy as np
 
 from fpm_sim.batch.frequencies import pose_frequencies
 from fpm_sim.batch.pose_loop import fast_options
-from fpm_sim.config import Geometry, Section
+from fpm_sim.config import Section
 from fpm_sim.kinematics import Pose
 from fpm_sim.study.inplane_surrogate import inplane_first_frequencies
-
-# The geometry these tests measured their numbers on (the embedded default before the identify re-run):
-# the tests are about kinematics and the surrogate, not about whichever geometry the default holds now.
-REFERENCE_GEOMETRY = Geometry(
-    0.1526,
-    tuple(math.radians(a) for a in (150.8546, -89.1454, 30.8546)),
-    0.1515,
-    0.1535,
-    0.0874,
-    tuple(math.radians(a) for a in (-178.6021, -58.6021, 61.3979)),
-    (-1, -1, -1),
-)
+from tests.helpers.truths import REFERENCE_GEOMETRY  # the geometry these tests measured their numbers on
 
 
 def test_inplane_surrogate_tracks_the_segment_model(previous_default_manip):

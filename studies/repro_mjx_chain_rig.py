@@ -7,9 +7,9 @@ compiled ``mjx.kinematics``, plus its largest deviation from C MuJoCo's ``mj_kin
 
 Usage::
 
-    python scripts/repro_mjx_chain_rig.py                 # every variant, 120 s limit each
-    python scripts/repro_mjx_chain_rig.py --limit 60 --variants hinge_chain,jointless_leaf
-    python scripts/repro_mjx_chain_rig.py --one jointless_leaf --x64 0   # one variant in this process
+    python studies/repro_mjx_chain_rig.py                 # every variant, 120 s limit each
+    python studies/repro_mjx_chain_rig.py --limit 60 --variants hinge_chain,jointless_leaf
+    python studies/repro_mjx_chain_rig.py --one jointless_leaf --x64 0   # one variant in this process
 
 Findings and numbers: ``docs/mjx_chain_rig.md``.
 """

@@ -1,6 +1,6 @@
 """Predicted f1 of several identified descriptions at the study's six withheld poses, and their spread.
 
-    python scripts/optima_predictions.py out/identify_study out/id_hub2_s0 out/id_rand_s1 ...
+    python studies/optima_predictions.py out/identify_study out/id_hub2_s0 out/id_rand_s1 ...
 
 Each argument is an ``fpm-sim identify`` output folder (its ``config.toml`` and ``identify.json``). Competing
 optima that fit the data about equally well can predict unmeasured poses very differently; this prints, per

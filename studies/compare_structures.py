@@ -1,6 +1,6 @@
 """Compare model structures by cross-validated prediction error, all refined from one identified optimum.
 
-    nice python scripts/compare_structures.py out/identify_study --out out/structures [--folds 4]
+    nice python studies/compare_structures.py out/identify_study --out out/structures [--folds 4]
 
 Each structure (a set of ``--free`` groups and model options) is fitted with ``fpm-sim identify --global
 none`` from the same start, the optimum of a shipped identification run (``FOLDER/config.toml``), on the

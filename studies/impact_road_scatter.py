@@ -9,9 +9,10 @@ twice: with the exponential window's decay removed by the EMA (the UFF records c
 ``fpm-sim impact --uff`` writes them) and without (``fpm-sim ema --exp-window-tau-s inf``), so the window's bias
 shows as the difference.
 
-    python scripts/impact_road_scatter.py [--seeds 12] [--noise-m-s2 0.01] [--record-s 0.5]
+    python studies/impact_road_scatter.py [--seeds 12] [--noise-m-s2 0.01] [--record-s 0.5]
 
-(A developer script: it imports the test module for its truth and poses, so run it from a source checkout.)
+(A study: it takes the test's truth, poses and settings from ``tests/helpers/truths.py``, shared with the test,
+so run it from a source checkout.)
 """
 
 from __future__ import annotations
@@ -44,9 +45,8 @@ from fpm_sim.sim.impact import (
     write_uff58,
 )
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the tests package the test module imports
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "study"))
-import test_identify_impact_road as road
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the source checkout: tests/helpers
+from tests.helpers import truths as road  # the road test's truth, poses and settings
 
 WINDOW_END = ImpactSetup.window_end
 """The exponential window at the record's end: fpm-sim impact's default."""

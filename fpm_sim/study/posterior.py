@@ -1,0 +1,825 @@
+"""Predictions with bands: the frequencies of every draw of a posterior over the identified parameters.
+
+Twelve measured first frequencies do not single out one description (``docs/identification.md``): several
+optima fit about equally well and predict unmeasured poses far apart. ``fpm-sim calibrate`` samples the
+posterior of the free parameters and writes ``posterior.nc`` (an ArviZ ``InferenceData``, format below);
+here it is read (:class:`Posterior`) and pushed through the pose loop, draw by draw
+(:func:`predict_bands`): the robust prediction of Beck & Au (2002) is the average over the posterior, and
+its quantiles over the draws give the bands.
+
+The file (the contract with the calibration):
+
+- group ``posterior``: equal-weight draws, dims ``("chain", "draw")`` with one chain; one float64 variable per
+  free parameter, named as :attr:`fpm_sim.study.identify.parameters.ParameterSet.names` (SI units); an
+  optional int8 ``geometry.elbow_branch`` with dims ``("chain", "draw", "arm")`` (+1 / -1 per chain);
+  likelihood hyperparameters prefixed ``likelihood.``;
+- attributes of ``posterior``: ``fpm_sim_base_config`` (TOML of the description the parameters are applied to),
+  ``fpm_sim_free_groups`` (comma-separated groups of :func:`~fpm_sim.study.identify.parameters.parameter_set`),
+  ``fpm_sim_segments`` (the likelihood's resolution), ``fpm_sim_command``;
+- optional groups ``sample_stats``, ``observed_data`` (``f_hz`` over ``obs`` with ``x_mm``, ``y_mm``,
+  ``phi_rad``, ``label``) and ``posterior_predictive``.
+
+The bands are the quantiles (:data:`QUANTILES`) over the draws of each frequency at each pose. A draw that
+cannot reach a pose (or meets a singularity there) has no frequency there: it is left out of that pose's
+quantiles and counted (:attr:`PredictiveBands.computed_fraction`).
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import math
+import time
+import tomllib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fpm_sim.batch.engine import EngineOptions
+from fpm_sim.batch.pose_loop import STATUS_NEAR, STATUS_OK, STATUS_UNREACHABLE, fast_options, solve_configs
+from fpm_sim.config import ConfigError, Manipulator, parse_config
+from fpm_sim.errors import FpmSimError
+from fpm_sim.kinematics import Pose
+from fpm_sim.model.options import ModelOptions, resolution_summary
+from fpm_sim.results import frequencies_dataset
+from fpm_sim.study.identify.parameters import ParameterSet, parameter_set
+from fpm_sim.study.poses import TableReading
+from fpm_sim.study.tables import measured_table, withheld_cells
+
+__all__ = [
+    "BASE_CONFIG_ATTR",
+    "DEFAULT_POSTERIOR_NAME",
+    "ELBOW_BRANCH_VAR",
+    "QUANTILES",
+    "Posterior",
+    "PosteriorError",
+    "PredictiveBands",
+    "StudyBands",
+    "default_posterior_path",
+    "predict_bands",
+    "study_bands",
+]
+
+BASE_CONFIG_ATTR = "fpm_sim_base_config"
+GROUPS_ATTR = "fpm_sim_free_groups"
+SEGMENTS_ATTR = "fpm_sim_segments"
+COMMAND_ATTR = "fpm_sim_command"
+REQUIRED_ATTRS = (BASE_CONFIG_ATTR, GROUPS_ATTR, SEGMENTS_ATTR, COMMAND_ATTR)
+ELBOW_BRANCH_VAR = "geometry.elbow_branch"
+LIKELIHOOD_PREFIX = "likelihood."
+DEFAULT_POSTERIOR_NAME = "default_posterior.nc"
+"""The embedded default's posterior in ``fpm_sim/data`` (written by the calibration; may be absent)."""
+
+QUANTILES = (0.05, 0.25, 0.5, 0.75, 0.95)
+"""The quantiles of the bands: the 90 % band (5-95 %), the 50 % band (25-75 %) and the median."""
+COMPUTED = (STATUS_OK, STATUS_NEAR)
+WRITTEN_BY = "give the posterior.nc written by 'fpm-sim calibrate'"
+
+
+class PosteriorError(FpmSimError):
+    """A posterior file cannot be used (missing, not an ArviZ posterior, incomplete); names the file."""
+
+
+def default_posterior_path() -> Path | None:
+    """The embedded default's posterior (``fpm_sim/data/default_posterior.nc``), or ``None`` if none is shipped."""
+    ref = resources.files("fpm_sim.data").joinpath(DEFAULT_POSTERIOR_NAME)
+    return Path(str(ref)) if ref.is_file() else None
+
+
+# ----------------------------------------------------------------------------------------------- posterior
+
+
+@dataclass
+class Posterior:
+    """Equal-weight draws of the free parameters over a base description (:meth:`from_netcdf`).
+
+    Attributes
+    ----------
+    base
+        The description the parameters are applied to.
+    groups
+        The free parameter groups (:func:`~fpm_sim.study.identify.parameters.parameter_set`).
+    names
+        The free parameters, in the parameter set's order (SI units in the names).
+    values
+        ``(n_draws, n_parameters)``.
+    elbow_branch
+        ``(n_draws, 3)`` elbow branches (+1 / -1) when they were sampled, else ``None`` (the base's).
+    segments
+        Resolution (spring locations per link) of the likelihood.
+    command
+        The command that wrote the file.
+    likelihood
+        The likelihood hyperparameters' draws, by name (``likelihood.`` prefix kept).
+    source
+        The file read (``None`` when built in memory).
+    """
+
+    base: Manipulator
+    groups: tuple[str, ...]
+    names: list[str]
+    values: np.ndarray
+    elbow_branch: np.ndarray | None = None
+    segments: int | None = None
+    command: str = ""
+    likelihood: dict[str, np.ndarray] = field(default_factory=dict)
+    source: Path | None = None
+    _ps: ParameterSet = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        self.values = np.atleast_2d(np.asarray(self.values, dtype=float))
+        if self.values.shape[1] != len(self.names):
+            raise self._error(
+                f"{self.values.shape[1]} values per draw for {len(self.names)} parameters", parameter="values"
+            )
+        if self.values.shape[0] < 1:
+            raise self._error("no draws", parameter="values")
+        if not np.isfinite(self.values).all():
+            raise self._error("draws with non-finite values", parameter="values", hint="write finite draws only")
+        if self.elbow_branch is not None:
+            eb = np.asarray(self.elbow_branch)
+            if eb.shape != (self.values.shape[0], 3) or not np.isin(eb, (-1, 1)).all():
+                raise self._error(
+                    "must hold +1 or -1 per draw and arm",
+                    parameter=ELBOW_BRANCH_VAR,
+                    hint="dims chain, draw, arm (3 arms)",
+                )
+            self.elbow_branch = eb.astype(int)
+        self._ps = self._parameter_set()
+
+    def _error(self, message: str, **fields: Any) -> PosteriorError:
+        """A :class:`PosteriorError` naming the file read (when built in memory: the parameter, else ``posterior``)."""
+        if self.source is None:
+            fields.setdefault("parameter", "posterior")
+        return PosteriorError(message, file=self.source, **fields)
+
+    @property
+    def parameter_set(self) -> ParameterSet:
+        """``parameter_set(base, groups)`` (its names are :attr:`names`, checked when built)."""
+        return self._ps
+
+    def _parameter_set(self) -> ParameterSet:
+        groups = ",".join(self.groups)
+        try:
+            ps = parameter_set(self.base, list(self.groups))
+        except FpmSimError as exc:
+            raise self._error(f"free groups unusable ({exc})", parameter=GROUPS_ATTR, value=groups) from None
+        unknown = [n for n in self.names if n not in ps.names]
+        missing = [n for n in ps.names if n not in self.names]
+        if unknown or missing:
+            raise self._error(
+                f"the draws' parameters do not match the free groups {groups!r}"
+                + (f"; unknown: {', '.join(unknown)}" if unknown else "")
+                + (f"; missing: {', '.join(missing)}" if missing else ""),
+                hint=f"expected {', '.join(ps.names)}",
+            )
+        return ps
+
+    @property
+    def n_draws(self) -> int:
+        return int(self.values.shape[0])
+
+    # ----------------------------------------------------------------------------------------- reading
+
+    @classmethod
+    def from_netcdf(cls, path: str | Path) -> Posterior:
+        """Read ``posterior.nc`` (module docstring).
+
+        Raises
+        ------
+        PosteriorError
+            Naming the file: missing, not an ArviZ ``InferenceData`` with a ``posterior`` group, an attribute
+            missing, more than one chain, parameters unknown to the free groups, or an invalid draw.
+        """
+        p = Path(path)
+        if p.is_dir():
+            raise PosteriorError("is a folder", parameter="posterior", value=str(p), hint=WRITTEN_BY)
+        if not p.is_file():
+            raise PosteriorError("file not found", parameter="posterior", value=str(p), hint=WRITTEN_BY)
+        import arviz as az
+
+        try:
+            idata = az.from_netcdf(p)
+        except Exception as exc:  # any reader failure (not HDF5/netCDF, damaged) is this file's problem: name it
+            raise PosteriorError(
+                f"not an ArviZ InferenceData netCDF file ({type(exc).__name__}: {exc})", file=p, hint=WRITTEN_BY
+            ) from None
+        if "posterior" not in idata.groups():
+            raise PosteriorError("no 'posterior' group", file=p, hint=WRITTEN_BY)
+        post = idata.posterior
+        missing = [a for a in REQUIRED_ATTRS if a not in post.attrs]
+        if missing:
+            raise PosteriorError(
+                f"the posterior group lacks the attribute(s) {', '.join(missing)}",
+                file=p,
+                hint="it needs the base description, free groups, resolution and command; see docs/identification.md",
+            )
+        if post.sizes.get("chain", 1) != 1:
+            raise PosteriorError(
+                "more than one chain",
+                parameter="chain",
+                value=int(post.sizes["chain"]),
+                file=p,
+                hint="the format holds one chain of equal-weight draws",
+            )
+        try:
+            base = parse_config(tomllib.loads(str(post.attrs[BASE_CONFIG_ATTR])), source=f"posterior: {p.name}")
+        except (tomllib.TOMLDecodeError, ConfigError) as exc:
+            raise PosteriorError(f"not a valid description ({exc})", parameter=BASE_CONFIG_ATTR, file=p) from None
+        groups = tuple(g.strip() for g in str(post.attrs[GROUPS_ATTR]).split(",") if g.strip())
+        try:
+            segments = int(post.attrs[SEGMENTS_ATTR])
+        except (TypeError, ValueError):
+            raise PosteriorError(
+                "must be an integer", parameter=SEGMENTS_ATTR, value=post.attrs[SEGMENTS_ATTR], file=p
+            ) from None
+
+        def flat(name: str) -> np.ndarray:
+            var = post[name]
+            extra = [d for d in var.dims if d not in ("chain", "draw")]
+            return np.asarray(var.transpose("chain", "draw", *extra).values).reshape((-1, *var.shape[2:]))
+
+        names = [
+            str(n) for n in post.data_vars if str(n) != ELBOW_BRANCH_VAR and not str(n).startswith(LIKELIHOOD_PREFIX)
+        ]
+        try:
+            ps_names = parameter_set(base, list(groups)).names
+        except FpmSimError as exc:
+            raise PosteriorError(
+                f"free groups unusable ({exc})", parameter=GROUPS_ATTR, value=",".join(groups), file=p
+            ) from None
+        names = [n for n in ps_names if n in names] + [n for n in names if n not in ps_names]  # set order first
+        if not names:
+            raise PosteriorError(
+                "the posterior group holds no parameter variables", file=p, hint=f"expected {', '.join(ps_names)}"
+            )
+        values = np.column_stack([flat(n).astype(float) for n in names])
+        branch = flat(ELBOW_BRANCH_VAR) if ELBOW_BRANCH_VAR in post.data_vars else None
+        likelihood = {
+            str(n): flat(str(n)).astype(float) for n in post.data_vars if str(n).startswith(LIKELIHOOD_PREFIX)
+        }
+        return cls(
+            base=base,
+            groups=groups,
+            names=names,
+            values=values,
+            elbow_branch=branch,
+            segments=segments,
+            command=str(post.attrs[COMMAND_ATTR]),
+            likelihood=likelihood,
+            source=p,
+        )
+
+    # ----------------------------------------------------------------------------------------- draws
+
+    def draws(self, n: int | None = None, seed: int = 0) -> np.ndarray:
+        """Indices of ``n`` draws (all when ``n`` is ``None`` or at least :attr:`n_draws`): a random subset
+        without replacement (``seed``), in increasing order. Thinning equal-weight draws keeps them equal-weight."""
+        if n is None or n >= self.n_draws:
+            return np.arange(self.n_draws)
+        if n < 1:
+            raise PosteriorError("must be >= 1", parameter="n_draws", value=n, hint="or None for all draws")
+        return np.sort(np.random.default_rng(seed).choice(self.n_draws, size=n, replace=False))
+
+    def config(self, i: int) -> Manipulator:
+        """The description of draw ``i``: the base with the draw's elbow branches and parameter values."""
+        base = self.base
+        if self.elbow_branch is not None:
+            b0, b1, b2 = (int(b) for b in self.elbow_branch[i])
+            branch = (b0, b1, b2)
+            base = dataclasses.replace(base, geometry=dataclasses.replace(base.geometry, elbow_branch=branch))
+        return self._apply(self.values[i], base, f"draw {i}")
+
+    def configs(self, n: int | None = None, seed: int = 0) -> list[Manipulator]:
+        """The descriptions of :meth:`draws` ``(n, seed)``."""
+        return [self.config(int(i)) for i in self.draws(n, seed)]
+
+    def median_config(self) -> Manipulator:
+        """The base with each parameter at its posterior median (and the most frequent elbow-branch combination)."""
+        base = self.base
+        if self.elbow_branch is not None:
+            combos, counts = np.unique(self.elbow_branch, axis=0, return_counts=True)
+            b0, b1, b2 = (int(b) for b in combos[int(np.argmax(counts))])
+            branch = (b0, b1, b2)
+            base = dataclasses.replace(base, geometry=dataclasses.replace(base.geometry, elbow_branch=branch))
+        return self._apply(np.median(self.values, axis=0), base, "median")
+
+    def _apply(self, x: np.ndarray, base: Manipulator, label: str) -> Manipulator:
+        ps = self.parameter_set
+        order = [self.names.index(n) for n in ps.names]
+        try:
+            cfg = ps.apply(np.asarray(x)[order], base=base)
+        except ConfigError as exc:
+            raise self._error(f"{label} is not a valid description ({exc})") from None
+        return dataclasses.replace(cfg, name=f"{self.base.name} [posterior {label}]")
+
+    def summary(self) -> list[dict[str, Any]]:
+        """Per parameter: median, 5 % and 95 % quantiles over the draws."""
+        q = np.quantile(self.values, (0.05, 0.5, 0.95), axis=0)
+        return [
+            {"name": n, "median": float(q[1, j]), "q05": float(q[0, j]), "q95": float(q[2, j])}
+            for j, n in enumerate(self.names)
+        ]
+
+
+# ----------------------------------------------------------------------------------------------- bands
+
+
+@dataclass
+class PredictiveBands:
+    """Frequencies of the posterior's draws at poses, and their quantiles (:func:`predict_bands`).
+
+    Attributes
+    ----------
+    name
+        The base description's name.
+    poses
+        The poses.
+    draw_index
+        ``(n_draws,)`` index of each draw in the posterior.
+    frequencies_hz
+        ``(n_draws, n_poses, n_modes)``; NaN where a draw cannot reach the pose or meets a singularity.
+    status
+        ``(n_draws, n_poses)`` ``ok``, ``near_singular``, ``singular`` or ``unreachable``.
+    options
+        The pose loop's model options.
+    labels
+        Optional name of each pose (e.g. the study's cell ``row, col``).
+    elapsed_s
+        Wall time.
+    """
+
+    name: str
+    poses: list[Pose]
+    draw_index: np.ndarray
+    frequencies_hz: np.ndarray
+    status: np.ndarray
+    options: ModelOptions = field(default_factory=fast_options)
+    labels: list[str] | None = None
+    elapsed_s: float = 0.0
+
+    @property
+    def n_draws(self) -> int:
+        return int(self.frequencies_hz.shape[0])
+
+    @property
+    def n_modes(self) -> int:
+        return int(self.frequencies_hz.shape[2])
+
+    @property
+    def computed(self) -> np.ndarray:
+        """``(n_draws, n_poses)``: the draw has frequencies at the pose."""
+        return np.isin(self.status, COMPUTED) & np.isfinite(self.frequencies_hz[:, :, 0])
+
+    @property
+    def computed_fraction(self) -> np.ndarray:
+        """``(n_poses,)`` share of the draws with frequencies at each pose (the quantiles are over these)."""
+        return self.computed.mean(axis=0)
+
+    @property
+    def unreachable_fraction(self) -> np.ndarray:
+        """``(n_poses,)`` share of the draws that cannot reach each pose."""
+        return (self.status == STATUS_UNREACHABLE).mean(axis=0)
+
+    @property
+    def quantiles_hz(self) -> np.ndarray:
+        """``(len(QUANTILES), n_poses, n_modes)`` quantiles over the computed draws (NaN where none is)."""
+        f = np.where(self.computed[:, :, None], self.frequencies_hz, np.nan)
+        out = np.full((len(QUANTILES), *f.shape[1:]), np.nan)
+        has = self.computed.any(axis=0)
+        if has.any():
+            out[:, has, :] = np.nanquantile(f[:, has, :], QUANTILES, axis=0)
+        return out
+
+    def quantile_hz(self, q: float) -> np.ndarray:
+        """``(n_poses, n_modes)`` quantile ``q`` (one of :data:`QUANTILES`)."""
+        if q not in QUANTILES:
+            raise FpmSimError("not a quantile of the bands", parameter="q", value=q, hint=f"one of {QUANTILES}")
+        return self.quantiles_hz[QUANTILES.index(q)]
+
+    @property
+    def median_hz(self) -> np.ndarray:
+        return self.quantile_hz(0.5)
+
+    @property
+    def relative_width(self) -> np.ndarray:
+        """``(n_poses, n_modes)`` width of the 90 % band over the median."""
+        q = self.quantiles_hz
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return (q[-1] - q[0]) / q[2]
+
+    def widest(self, mode: int = 1) -> int | None:
+        """Index of the pose with the widest relative 90 % band of mode ``mode`` (``None`` if none computed):
+        the pose where one more measurement says most ("measure here next"). Only poses that every draw
+        reaches away from singularities (status ``ok``) are candidates, where any is: near a singularity f1
+        dives to zero and a band's width says more about the locus than about the machine."""
+        w = self.relative_width[:, mode - 1].copy()
+        all_ok = np.all(self.status == STATUS_OK, axis=0) & np.isfinite(w)
+        if all_ok.any():
+            w[~all_ok] = np.nan
+        return int(np.nanargmax(w)) if np.isfinite(w).any() else None
+
+    def probability_above(self, f_min_hz: float, mode: int = 1) -> np.ndarray:
+        """``(n_poses,)`` share of all draws with frequency ``mode`` at least ``f_min_hz`` (a draw without
+        frequencies at the pose counts as below)."""
+        f = np.where(self.computed, self.frequencies_hz[:, :, mode - 1], -np.inf)
+        return (f >= f_min_hz).mean(axis=0)
+
+    def label(self, i: int) -> str:
+        if self.labels is not None:
+            return self.labels[i]
+        p = self.poses[i]
+        return f"({p.x_m * 1e3:g}, {p.y_m * 1e3:g}) mm, {p.phi_rad:g} rad"
+
+    def rows(self) -> list[dict[str, Any]]:
+        """One row per pose: coordinates, shares of computed and unreachable draws, and per mode the median and
+        the 5/25/75/95 % quantiles (Hz)."""
+        q = self.quantiles_hz
+        comp, unreach = self.computed_fraction, self.unreachable_fraction
+        out = []
+        for i, p in enumerate(self.poses):
+            row: dict[str, Any] = {
+                "x_mm": round(p.x_m * 1e3, 6),
+                "y_mm": round(p.y_m * 1e3, 6),
+                "phi_rad": p.phi_rad,
+            }
+            if self.labels is not None:
+                row["label"] = self.labels[i]
+            row.update({"computed_fraction": float(comp[i]), "unreachable_fraction": float(unreach[i])})
+            for k in range(self.n_modes):
+                for j, level in enumerate(QUANTILES):
+                    row[f"f{k + 1}_q{round(100 * level):02d}_hz"] = float(q[j, i, k])
+            out.append(row)
+        return out
+
+    def table(self) -> str:
+        """Per pose and mode: median, 50 % band, 90 % band, and the share of draws computed."""
+        q = self.quantiles_hz
+        comp = self.computed_fraction
+        heads = ["pose", "mode", "median Hz", "25-75 % Hz", "5-95 % Hz", "90 % width", "draws"]
+        cells = []
+        for i in range(len(self.poses)):
+            for k in range(self.n_modes):
+                m = q[2, i, k]
+                cells.append(
+                    [
+                        self.label(i) if k == 0 else "",
+                        str(k + 1),
+                        f"{m:.2f}",
+                        f"{q[1, i, k]:.2f} .. {q[3, i, k]:.2f}",
+                        f"{q[0, i, k]:.2f} .. {q[4, i, k]:.2f}",
+                        f"{100 * (q[4, i, k] - q[0, i, k]) / m:.1f} %" if m > 0 else "-",
+                        f"{round(comp[i] * self.n_draws)}/{self.n_draws}" if k == 0 else "",
+                    ]
+                )
+        width = [max(len(h), *(len(c[j]) for c in cells)) if cells else len(h) for j, h in enumerate(heads)]
+        lines = ["  ".join(h.rjust(w) for h, w in zip(heads, width))]
+        lines += ["  ".join(c.rjust(w) for c, w in zip(row, width)) for row in cells]
+        lines.append(
+            f"{self.n_draws} posterior draws; median and quantiles over the draws that reach each pose "
+            "(draws: computed/all)"
+        )
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: quantile levels, per-pose rows (bands), and every draw's frequencies and status."""
+        w = self.widest()
+        return {
+            "config": self.name,
+            "n_draws": self.n_draws,
+            "n_modes": self.n_modes,
+            "quantiles": list(QUANTILES),
+            "draw_index": self.draw_index.tolist(),
+            "bands": self.rows(),
+            "widest_relative_band_pose": w,
+            "frequencies_hz": np.where(np.isfinite(self.frequencies_hz), self.frequencies_hz, np.array(None)).tolist(),
+            "status": self.status.tolist(),
+            "segments": self.options.segments,
+            "resolution": resolution_summary(self.options),
+            "elapsed_s": self.elapsed_s,
+        }
+
+    @property
+    def dataset(self) -> Any:
+        """An :class:`xarray.Dataset`: ``freq_hz`` over ``(draw, pose, mode)``, ``freq_quantile_hz`` over
+        ``(quantile, pose, mode)`` and ``computed_fraction`` over ``pose``; coordinates ``x_mm``, ``y_mm``,
+        ``phi_rad`` (on ``pose``) and ``status`` (on ``draw, pose``)."""
+        return frequencies_dataset(
+            self.frequencies_hz,
+            x_mm=[p.x_m * 1e3 for p in self.poses],
+            y_mm=[p.y_m * 1e3 for p in self.poses],
+            phi_rad=[p.phi_rad for p in self.poses],
+            status=self.status.astype(str),
+            leading={"draw": self.draw_index},
+            data_vars={
+                "freq_quantile_hz": (("quantile", "pose", "mode"), self.quantiles_hz),
+                "computed_fraction": ("pose", self.computed_fraction),
+            },
+            coords={"quantile": np.array(QUANTILES)},
+            attrs={"config": self.name, "segments": int(self.options.segments or 0)},
+        )
+
+    def write(self, out_dir: str | Path, *, stem: str = "bands", figures: bool = True) -> list[Path]:
+        """Write ``<stem>.nc`` (:attr:`dataset`, netCDF-4), ``<stem>.csv`` (:meth:`rows`) and the figures
+        ``<stem>.png`` (:meth:`plot`) and ``<stem>_map.png`` (:meth:`plot_map`); returns the paths."""
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        paths = [out / f"{stem}.nc", out / f"{stem}.csv"]
+        self.dataset.to_netcdf(paths[0], engine="h5netcdf")
+        _write_rows(paths[1], self.rows())
+        if figures:
+            import matplotlib.pyplot as plt
+
+            # the per-pose band figure only where its pose labels stay readable
+            todo: list[tuple[str, Callable[[], Any]]] = [(f"{stem}.png", self.plot)] if len(self.poses) <= 60 else []
+            for name, draw in [*todo, (f"{stem}_map.png", self.plot_map)]:
+                fig = draw()
+                fig.savefig(out / name, dpi=110)
+                plt.close(fig)
+                paths.append(out / name)
+        return paths
+
+    # ------------------------------------------------------------------------------------------ figures
+
+    def plot(self, ax: Any = None, *, mode: int = 1, measured_hz: Sequence[float] | np.ndarray | None = None) -> Any:
+        """Median and bands of frequency ``mode`` at each pose (thick: 25-75 %, thin: 5-95 %), with
+        ``measured_hz`` (NaN: none) as crosses; at a single pose, every mode side by side. Returns the
+        ``Figure``."""
+        import matplotlib.pyplot as plt
+
+        per_mode = len(self.poses) == 1 and measured_hz is None
+        n = self.n_modes if per_mode else len(self.poses)
+        if ax is None:
+            fig, ax = plt.subplots(figsize=(max(5.0, 0.45 * n + 2), 3.8), constrained_layout=True)
+        else:
+            fig = ax.figure
+        q = self.quantiles_hz[:, 0, :] if per_mode else self.quantiles_hz[:, :, mode - 1]
+        x = np.arange(n)
+        ax.vlines(x, q[0], q[4], color="C0", lw=1.2, label="5-95 %")
+        ax.vlines(x, q[1], q[3], color="C0", lw=5, alpha=0.6, label="25-75 %")
+        ax.plot(x, q[2], "o", color="C0", ms=4, label="median")
+        if measured_hz is not None:
+            ax.plot(x, np.asarray(measured_hz, float), "x", color="C3", ms=7, mew=1.5, label="measured")
+        if per_mode:
+            ax.set_xticks(x, [f"mode {k + 1}" for k in x])
+            ax.set_ylabel("frequency (Hz)")
+            what = f"at {self.label(0)}"
+        else:
+            ax.set_xticks(x, [self.label(i) for i in range(n)], rotation=60, ha="right", fontsize=6)
+            ax.set_ylabel(f"f{mode} (Hz)")
+            what = f"f{mode}"
+        ax.set_title(f"{_short(self.name)}: {what}, {self.n_draws} posterior draws", fontsize=8)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+        return fig
+
+    def plot_map(self, mode: int = 1) -> Any:
+        """Two maps over the poses: the median of frequency ``mode`` and the relative width of its 90 % band;
+        the pose of the widest band is marked "measure here next". Returns the ``Figure``."""
+        import matplotlib.pyplot as plt
+
+        x = np.array([p.x_m * 1e3 for p in self.poses])
+        y = np.array([p.y_m * 1e3 for p in self.poses])
+        med = self.median_hz[:, mode - 1]
+        width = 100 * self.relative_width[:, mode - 1]
+        fig, axes = plt.subplots(1, 2, figsize=(10, 4.4), constrained_layout=True)
+        size = max(6.0, 3000.0 / max(len(x), 1))
+        for a, v, lab in ((axes[0], med, f"median f{mode} (Hz)"), (axes[1], width, "90 % band width / median (%)")):
+            ok = np.isfinite(v)
+            sc = a.scatter(x[ok], y[ok], c=v[ok], s=size, marker="s")
+            a.scatter(x[~ok], y[~ok], marker="x", s=8, color="0.7")
+            fig.colorbar(sc, ax=a, label=lab, shrink=0.85)
+            a.set_aspect("equal")
+            a.set_xlabel("x (mm)")
+            a.set_ylabel("y (mm)")
+        title = "relative width of the 90 % band"
+        w = self.widest(mode)
+        if w is not None:
+            axes[1].plot(x[w], y[w], ls="", marker="*", ms=16, color="red", mec="k", label="measure here next")
+            axes[1].legend(fontsize=7, loc="lower right")
+            title += f"\nmeasure here next: ({x[w]:g}, {y[w]:g}) mm, band {width[w]:.1f} % of the median"
+        axes[0].set_title(f"{_short(self.name)}: median over {self.n_draws} draws", fontsize=8)
+        axes[1].set_title(title, fontsize=8)
+        return fig
+
+
+def _write_rows(path: Path, rows: list[dict[str, Any]]) -> None:
+    """``rows`` as CSV (header from the first row); NaN and ``None`` as empty cells."""
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(
+            {k: "" if v is None or (isinstance(v, float) and not math.isfinite(v)) else v for k, v in r.items()}
+            for r in rows
+        )
+
+
+def _short(name: str, n: int = 40) -> str:
+    return name if len(name) <= n else name[: n - 3] + "..."
+
+
+def predict_bands(
+    posterior: Posterior,
+    poses: Sequence[Pose],
+    *,
+    n_draws: int | None = 100,
+    seed: int = 0,
+    n_modes: int = 3,
+    options: ModelOptions | None = None,
+    engine: EngineOptions | None = None,
+    labels: Sequence[str] | None = None,
+) -> PredictiveBands:
+    """Lowest ``n_modes`` frequencies of ``n_draws`` posterior draws (:meth:`Posterior.draws`) at ``poses``,
+    with their quantiles.
+
+    The loop over draws x poses runs on the engine exactly as a design study's designs x poses
+    (:func:`fpm_sim.batch.pose_loop.solve_configs`).
+
+    Parameters
+    ----------
+    posterior
+        The posterior (:meth:`Posterior.from_netcdf`).
+    poses
+        The poses.
+    n_draws, seed
+        How many draws (``None``: all) and which (:meth:`Posterior.draws`).
+    n_modes
+        Modes per pose.
+    options
+        Discretisation (default: the pose loop's options at the likelihood's resolution,
+        ``fast_options(segments=posterior.segments)``).
+    engine
+        Where the chunks run (:class:`fpm_sim.batch.engine.EngineOptions`).
+    labels
+        Optional names of the poses (tables and figures).
+    """
+    if n_modes < 1:
+        raise FpmSimError("must be >= 1", parameter="n_modes", value=n_modes)
+    poses = list(poses)
+    if not poses:
+        raise FpmSimError("no poses to predict at", parameter="poses", hint="give at least one pose")
+    if labels is not None and len(labels) != len(poses):
+        raise FpmSimError(
+            f"{len(labels)} labels for {len(poses)} poses", parameter="labels", hint="give one label per pose"
+        )
+    index = posterior.draws(n_draws, seed)
+    configs = [posterior.config(int(i)) for i in index]
+    opts = options or (fast_options(segments=posterior.segments) if posterior.segments else fast_options())
+    eng = engine or EngineOptions()
+    eng = dataclasses.replace(eng, desc="draws x poses" if eng.desc == "poses" else eng.desc)
+    t0 = time.perf_counter()
+    parts = solve_configs(configs, poses, n_modes=n_modes, options=opts, engine=eng)
+    return PredictiveBands(
+        name=posterior.base.name,
+        poses=poses,
+        draw_index=index,
+        frequencies_hz=np.stack([m.frequencies_hz for m in parts]),
+        status=np.array([m.status for m in parts], dtype=object),
+        options=opts,
+        labels=list(labels) if labels is not None else None,
+        elapsed_s=time.perf_counter() - t0,
+    )
+
+
+# ----------------------------------------------------------------------------------------------- the study
+
+
+@dataclass
+class StudyBands:
+    """Bands at the study's poses (:func:`study_bands`): the measured ones, with the measured first frequency
+    (in-sample coverage: the posterior was conditioned on them), then the withheld ones (predictions only:
+    their measurements are not in the project)."""
+
+    bands: PredictiveBands
+    measured_hz: np.ndarray
+    """``(n_poses,)`` measured f1 (NaN at the withheld poses)."""
+    withheld: np.ndarray
+    """``(n_poses,)`` True at the withheld poses."""
+    reading: str
+
+    def coverage(self) -> dict[str, float]:
+        """At the measured poses: the share of measured f1 inside the 90 % and the 50 % bands, and the mean
+        absolute error of the median (%)."""
+        m = ~self.withheld & np.isfinite(self.measured_hz)
+        q = self.bands.quantiles_hz[:, m, 0]
+        f = self.measured_hz[m]
+        n = int(m.sum())
+        if n == 0:
+            return {"measured_poses": 0, "in_90_band": math.nan, "in_50_band": math.nan, "median_error_pct": math.nan}
+        with np.errstate(invalid="ignore"):
+            return {
+                "measured_poses": n,
+                "in_90_band": float(np.mean((f >= q[0]) & (f <= q[4]))),
+                "in_50_band": float(np.mean((f >= q[1]) & (f <= q[3]))),
+                "median_error_pct": float(np.nanmean(np.abs(q[2] / f - 1.0)) * 100),
+            }
+
+    def table(self) -> str:
+        """Measured poses (median, bands, measured, inside which band) and withheld poses (median, bands)."""
+        q = self.bands.quantiles_hz[:, :, 0]
+        comp = self.bands.computed_fraction
+        n = self.bands.n_draws
+        lines = [
+            f"f1 over {n} posterior draws, reading {self.reading}",
+            f"{'cell':>10}  {'median Hz':>9}  {'25-75 % Hz':>15}  {'5-95 % Hz':>15}  {'measured Hz':>11}  "
+            f"{'in':>4}  draws",
+        ]
+        for group, title in ((False, "measured poses (in-sample)"), (True, "withheld poses (predictions only)")):
+            lines.append(f"  {title}")
+            for i in np.flatnonzero(self.withheld == group):
+                f = self.measured_hz[i]
+                inside = (
+                    "-"
+                    if not math.isfinite(f)
+                    else "50"
+                    if q[1, i] <= f <= q[3, i]
+                    else "90"
+                    if q[0, i] <= f <= q[4, i]
+                    else "out"
+                )
+                lines.append(
+                    f"{self.bands.label(int(i)):>10}  {q[2, i]:>9.2f}  {q[1, i]:>6.2f} .. {q[3, i]:>6.2f}  "
+                    f"{q[0, i]:>6.2f} .. {q[4, i]:>6.2f}  {'' if not math.isfinite(f) else f'{f:.2f}':>11}  "
+                    f"{inside:>4}  {round(comp[i] * n)}/{n}"
+                )
+        c = self.coverage()
+        lines.append(
+            f"coverage at the {c['measured_poses']} measured poses: {100 * c['in_90_band']:.0f} % inside the 90 % "
+            "band, "
+            f"{100 * c['in_50_band']:.0f} % inside the 50 % band; median off by {c['median_error_pct']:.1f} % (mean)"
+        )
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: coverage, and per pose the bands, the measured value (``None``: withheld) and the flag."""
+        rows = self.bands.rows()
+        for r, f, w in zip(rows, self.measured_hz, self.withheld):
+            r["measured_hz"] = float(f) if math.isfinite(f) else None
+            r["withheld"] = bool(w)
+        return {
+            "reading": self.reading,
+            "n_draws": self.bands.n_draws,
+            "coverage": self.coverage(),
+            "poses": rows,
+            "resolution": resolution_summary(self.bands.options),
+        }
+
+    def write(self, out_dir: str | Path, *, stem: str = "bands") -> list[Path]:
+        """Write ``<stem>.nc`` and ``<stem>.csv`` (the bands, with the measured value and the withheld flag per
+        pose) and ``<stem>.png`` (:meth:`plot`); returns the paths."""
+        import matplotlib.pyplot as plt
+
+        out = Path(out_dir)
+        paths = self.bands.write(out, stem=stem, figures=False)
+        _write_rows(paths[1], self.to_dict()["poses"])
+        fig = self.plot()
+        fig.savefig(out / f"{stem}.png", dpi=110)
+        plt.close(fig)
+        return [*paths, out / f"{stem}.png"]
+
+    def plot(self, ax: Any = None) -> Any:
+        """The bands of f1 at the measured poses (with the measured values) and the withheld ones (shaded)."""
+        fig = self.bands.plot(ax, measured_hz=self.measured_hz)
+        a = fig.axes[0] if ax is None else ax
+        w = np.flatnonzero(self.withheld)
+        if w.size:
+            a.axvspan(w.min() - 0.5, w.max() + 0.5, color="0.9", zorder=0, label="withheld: predictions only")
+            a.legend(fontsize=7)
+        a.set_xlabel("study cell (row, col) mm")
+        return fig
+
+
+def study_bands(
+    posterior: Posterior,
+    *,
+    reading: TableReading | None = None,
+    n_draws: int | None = 100,
+    seed: int = 0,
+    options: ModelOptions | None = None,
+    engine: EngineOptions | None = None,
+) -> StudyBands:
+    """Bands of f1 at the study's measured poses (:func:`fpm_sim.study.tables.measured_table`) and at its
+    withheld poses (:func:`fpm_sim.study.tables.withheld_cells`: coordinates only) under ``reading``."""
+    rd = reading or TableReading()
+    measured = [(m.row_mm, m.col_mm, m.measured_hz) for m in measured_table() if m.readable]
+    cells = [(r, c, f) for r, c, f in measured] + [(r, c, math.nan) for r, c in withheld_cells()]
+    bands = predict_bands(
+        posterior,
+        [rd.pose(r, c) for r, c, _ in cells],
+        n_draws=n_draws,
+        seed=seed,
+        n_modes=1,
+        options=options,
+        engine=engine,
+        labels=[f"{r:g},{c:g}" for r, c, _ in cells],
+    )
+    return StudyBands(
+        bands=bands,
+        measured_hz=np.array([f for _, _, f in cells]),
+        withheld=np.array([i >= len(measured) for i in range(len(cells))]),
+        reading=rd.name,
+    )

@@ -1,0 +1,1 @@
+"""Helpers shared by the tests and the studies (``studies/``): truths and settings, no tests of their own."""

@@ -1,0 +1,216 @@
+"""Predictions with bands from a posterior (fpm_sim.study.posterior): a tiny synthetic posterior.nc written with
+ArviZ in the calibration's format (six perturbed copies of the default description), read back and pushed
+through the pose loop; the bands are checked against the draws computed one by one."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from fpm_sim.batch.engine import EngineOptions
+from fpm_sim.batch.frequencies import pose_frequencies
+from fpm_sim.batch.pose_loop import fast_options
+from fpm_sim.config import default_config
+from fpm_sim.kinematics import Pose
+from fpm_sim.study.identify.parameters import parameter_set
+from fpm_sim.study.posterior import QUANTILES, Posterior, PosteriorError, predict_bands, study_bands
+from tests.helpers.posterior import GROUPS, HEIGHTS_M, PLATFORM_KG, SEGMENTS, write_posterior
+
+POSES = [Pose.from_mm(0.0, 0.0, 0.0), Pose.from_mm(40.0, -30.0, 0.1), Pose.from_mm(5000.0, 0.0, 0.0)]
+"""Two reachable poses and one that no draw reaches (5 m away)."""
+
+
+@pytest.fixture(scope="module")
+def posterior_file(tmp_path_factory):
+    return write_posterior(tmp_path_factory.mktemp("post") / "posterior.nc")
+
+
+@pytest.fixture(scope="module")
+def posterior(posterior_file):
+    return Posterior.from_netcdf(posterior_file)
+
+
+@pytest.fixture(scope="module")
+def bands(posterior):
+    return predict_bands(posterior, POSES, n_draws=None, n_modes=2, engine=EngineOptions(scheduler="serial"))
+
+
+def test_reads_the_format(posterior):
+    assert posterior.n_draws == 6
+    assert posterior.groups == GROUPS
+    assert posterior.segments == SEGMENTS
+    assert posterior.names == parameter_set(default_config(), list(GROUPS)).names
+    assert posterior.elbow_branch is None
+    np.testing.assert_array_equal(posterior.likelihood["likelihood.discrepancy_rel"], np.linspace(0.02, 0.04, 6))
+
+
+def test_a_draws_config_has_exactly_the_draws_values(posterior):
+    configs = posterior.configs()
+    assert len(configs) == 6
+    base = default_config()
+    for i, c in enumerate(configs):
+        assert c.section.height_m == HEIGHTS_M[i]
+        assert c.hardware.platform.mass_kg == PLATFORM_KG[i]
+        # everything the draw does not hold is the base's
+        assert c.section.thickness_m == base.section.thickness_m
+        assert c.geometry == base.geometry
+        assert c.hardware.elbow_joint.mass_kg == pytest.approx(base.hardware.elbow_joint.mass_kg, rel=1e-12)
+    med = posterior.median_config()
+    assert med.section.height_m == np.median(HEIGHTS_M)
+    assert med.hardware.platform.mass_kg == np.median(PLATFORM_KG)
+
+
+def test_thinning_is_a_seeded_subset_without_repeats(posterior):
+    a = posterior.draws(4, seed=1)
+    assert len(set(a.tolist())) == 4
+    assert list(a) == sorted(a)
+    np.testing.assert_array_equal(a, posterior.draws(4, seed=1))
+    np.testing.assert_array_equal(posterior.draws(None), np.arange(6))
+    np.testing.assert_array_equal(posterior.draws(60), np.arange(6))
+    with pytest.raises(PosteriorError, match="n_draws: must be >= 1, got 0"):
+        posterior.draws(0)
+
+
+def test_elbow_branches_replace_the_base_ones(tmp_path):
+    branch = np.ones((6, 3), int)
+    branch[2] = (1, -1, 1)
+    branch[4] = (1, -1, 1)
+    branch[5] = (1, -1, 1)
+    post = Posterior.from_netcdf(write_posterior(tmp_path / "p.nc", branch=branch))
+    assert post.config(2).geometry.elbow_branch == (1, -1, 1)
+    assert post.config(0).geometry.elbow_branch == (1, 1, 1)
+    assert post.median_config().geometry.elbow_branch == (1, -1, 1)  # the most frequent combination
+
+
+def test_the_band_brackets_each_draws_own_frequency(posterior, bands):
+    # two draws computed directly with the pose loop at the same resolution: their frequencies are the band's
+    # draws bit for bit (the same solve), and each lies within the band's 0-100 % range
+    for i in (1, 4):
+        own = pose_frequencies(posterior.config(i), POSES, n_modes=2, options=fast_options(segments=SEGMENTS))
+        np.testing.assert_array_equal(bands.frequencies_hz[i], own.frequencies_hz)
+        assert np.isnan(own.frequencies_hz[2]).all()  # nobody reaches the far pose
+        f = own.frequencies_hz[:2]
+        assert np.all((f >= bands.frequencies_hz[:, :2].min(axis=0)) & (f <= bands.frequencies_hz[:, :2].max(axis=0)))
+    # the median lies inside both bands, the 50 % band inside the 90 % band
+    q = bands.quantiles_hz[:, :2]
+    assert np.all(np.diff(q, axis=0) >= 0)
+    # the draws differ (height 14.5-16 mm, platform 4.0-4.8 kg): a 90 % band of f1 of 8.7 % of the median at
+    # the centre (measured at 4 segments; the bounds only say the band is neither empty nor absurd)
+    assert 0.05 < bands.relative_width[0, 0] < 0.15
+
+
+def test_quantiles_equal_numpys_over_the_draws(bands):
+    f = bands.frequencies_hz[:, :2, :]  # the two reachable poses: every draw computed
+    np.testing.assert_allclose(bands.quantiles_hz[:, :2, :], np.quantile(f, QUANTILES, axis=0), rtol=0, atol=0)
+    np.testing.assert_array_equal(bands.median_hz[:2], np.median(f, axis=0))
+
+
+def test_unreachable_draws_are_counted_not_banded(bands):
+    np.testing.assert_array_equal(bands.computed_fraction, [1.0, 1.0, 0.0])
+    np.testing.assert_array_equal(bands.unreachable_fraction, [0.0, 0.0, 1.0])
+    assert np.isnan(bands.quantiles_hz[:, 2]).all()
+    rows = bands.rows()
+    assert rows[2]["unreachable_fraction"] == 1.0
+    assert rows[0]["f1_q50_hz"] == bands.median_hz[0, 0]
+    assert bands.probability_above(0.0).tolist() == [1.0, 1.0, 0.0]
+
+
+def test_partly_unreachable_pose_uses_the_reaching_draws(bands):
+    masked = dataclasses.replace(bands, status=bands.status.copy(), frequencies_hz=bands.frequencies_hz.copy())
+    masked.status[:2, 1] = "unreachable"
+    masked.frequencies_hz[:2, 1] = np.nan
+    assert masked.computed_fraction[1] == pytest.approx(4 / 6)
+    np.testing.assert_array_equal(
+        masked.quantiles_hz[:, 1, 0], np.quantile(bands.frequencies_hz[2:, 1, 0], QUANTILES)
+    )
+
+
+def test_result_outputs(bands, tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    d = bands.to_dict()
+    assert d["n_draws"] == 6
+    assert d["quantiles"] == list(QUANTILES)
+    assert len(d["bands"]) == 3
+    assert d["frequencies_hz"][0][2] == [None, None]
+    table = bands.table()
+    assert "5-95 %" in table
+    assert "0/6" in table  # the unreachable pose
+    ds = bands.dataset
+    assert ds["freq_hz"].dims == ("draw", "pose", "mode")
+    assert set(ds["x_mm"].dims) == {"pose"}
+    assert bands.plot().axes
+    assert bands.plot_map().axes
+    assert bands.widest() in (0, 1)
+
+
+def test_bad_posterior_files_say_what_is_wrong(tmp_path):
+    with pytest.raises(PosteriorError, match=r"posterior: file not found, got '.*nope\.nc'") as missing:
+        Posterior.from_netcdf(tmp_path / "nope.nc")
+    # the error contract: the library's parameter and the value (the command line shows its --posterior option)
+    assert (missing.value.parameter, missing.value.value) == ("posterior", str(tmp_path / "nope.nc"))
+    junk = tmp_path / "junk.nc"
+    junk.write_text("not a netcdf file")
+    with pytest.raises(PosteriorError, match=r"junk\.nc: not an ArviZ") as unreadable:
+        Posterior.from_netcdf(junk)
+    assert unreadable.value.file == str(junk)  # a file's content is wrong: the error names the file
+    with pytest.raises(PosteriorError, match=r"fpm_sim_segments: must be an integer, got 'four'") as seg:
+        Posterior.from_netcdf(write_posterior(tmp_path / "s.nc", attrs={"fpm_sim_segments": "four"}))
+    assert (seg.value.parameter, seg.value.file) == ("fpm_sim_segments", str(tmp_path / "s.nc"))
+    with pytest.raises(PosteriorError, match=r"lacks the attribute.*fpm_sim_free_groups"):
+        Posterior.from_netcdf(write_posterior(tmp_path / "a.nc", attrs={"fpm_sim_free_groups": None}))
+    with pytest.raises(PosteriorError, match=r"unknown: section\.width_m"):
+        Posterior.from_netcdf(write_posterior(tmp_path / "b.nc", draws={"section.width_m": np.ones(6)}))
+    with pytest.raises(PosteriorError, match=r"missing: hardware\.elbow_joint\.mass_kg"):
+        Posterior.from_netcdf(write_posterior(tmp_path / "c.nc", drop=("hardware.elbow_joint.mass_kg",)))
+    with pytest.raises(PosteriorError, match="unknown parameter group"):
+        Posterior.from_netcdf(write_posterior(tmp_path / "d.nc", attrs={"fpm_sim_free_groups": "bogus"}))
+    bad = write_posterior(tmp_path / "e.nc", draws={"section.height_m": -HEIGHTS_M})
+    with pytest.raises(PosteriorError, match="draw 0 is not a valid description"):
+        Posterior.from_netcdf(bad).config(0)
+
+
+def test_study_bands_cover_the_measured_poses_and_predict_the_withheld(posterior):
+    from fpm_sim.study.tables import measured_table, withheld_cells
+
+    sb = study_bands(posterior, n_draws=None, engine=EngineOptions(scheduler="serial"))
+    n_measured = sum(m.readable for m in measured_table())
+    assert n_measured == 12
+    assert len(withheld_cells()) == 6
+    assert sb.withheld.tolist() == [False] * 12 + [True] * 6
+    assert np.isnan(sb.measured_hz[12:]).all()  # never a value at the withheld poses
+    # coverage counted by hand from the quantiles
+    q = sb.bands.quantiles_hz[:, :12, 0]
+    f = sb.measured_hz[:12]
+    c = sb.coverage()
+    assert c["measured_poses"] == 12
+    assert c["in_90_band"] == np.mean((f >= q[0]) & (f <= q[4]))
+    assert c["in_50_band"] == np.mean((f >= q[1]) & (f <= q[3]))
+    assert "withheld poses (predictions only)" in sb.table()
+    d = sb.to_dict()
+    assert [r["measured_hz"] is None for r in d["poses"]] == [False] * 12 + [True] * 6
+
+
+@pytest.mark.filterwarnings("ignore:coarse resolution")
+def test_api_entry_point_gives_the_same_bands(posterior_file, bands):
+    import fpm_sim as fs
+
+    res = fs.predict_bands(posterior_file, POSES[:2], draws=None, n_modes=2, workers=1)
+    np.testing.assert_array_equal(res.frequencies_hz, bands.frequencies_hz[:, :2])
+    assert res.options.segments == SEGMENTS  # the posterior's resolution by default
+    one = fs.predict_bands(Posterior.from_netcdf(posterior_file), POSES[0], draws=3, n_modes=1, workers=1)
+    assert one.frequencies_hz.shape == (3, 1, 1)
+
+
+def test_measure_here_next_prefers_poses_every_draw_reaches_away_from_singularities(bands):
+    two = dataclasses.replace(bands, status=bands.status.copy(), frequencies_hz=bands.frequencies_hz.copy())
+    assert two.widest() == int(np.argmax(two.relative_width[:2, 0]))
+    w = 1 - two.widest()  # make the other reachable pose the widest, through one near-singular draw
+    two.frequencies_hz[0, w, 0] = 1.0
+    two.status[0, w] = "near_singular"
+    assert np.nanargmax(two.relative_width[:, 0]) == w
+    assert two.widest() == 1 - w  # not there: the widest band among the poses all draws reach as ok
+    assert set(two.dataset["status"].dims) == {"draw", "pose"}
