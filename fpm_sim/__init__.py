@@ -14,6 +14,8 @@ else keyword-only; the model options are one ``options=fs.ModelOptions(...)``::
     fs.reduce(cfg, pose, n_modes=6)           # reduced-order state-space model
     fs.frf(cfg, pose, excitation=fs.LinkPoint("distal_0", 0.5, "z"))
     fs.rollout(cfg, pose, force_x_n=1.0)      # nonlinear simulation
+    fs.move(cfg, pose, end=fs.Pose.from_mm(80, -20, 0.1))  # point-to-point move: residual vibration
+    fs.batched_rollouts(cfg, pose, wrenches=[[1, 0, 0], [0, 1, 0]])  # many loads in mujoco.rollout's threads
     fs.impact(cfg, pose)                      # virtual hammer test
     fs.transient(cfg)                         # the study's transient: full model vs reduced model
     fs.readability(cfg)                       # mode-1 readability at the study's poses
@@ -51,6 +53,8 @@ _API = {
     "reduce": "fpm_sim.api",
     "frf": "fpm_sim.api",
     "rollout": "fpm_sim.api",
+    "move": "fpm_sim.api",
+    "batched_rollouts": "fpm_sim.api",
     "impact": "fpm_sim.api",
     "transient": "fpm_sim.api",
     "readability": "fpm_sim.api",

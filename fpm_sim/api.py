@@ -31,8 +31,10 @@ if TYPE_CHECKING:
     from fpm_sim.response import FrequencyResponse, LinkPoint
     from fpm_sim.rom.atlas import ModalAtlas
     from fpm_sim.rom.reduction import ReducedModel
+    from fpm_sim.sim.batched import BatchedRollouts
     from fpm_sim.sim.impact import ImpactSetup, ImpactTestResult
     from fpm_sim.sim.rollout import RolloutResult
+    from fpm_sim.sim.trajectory import MoveResult
     from fpm_sim.study.identify import Identification, IdentifyOptions
     from fpm_sim.study.identify.ema import ModalEstimate
     from fpm_sim.study.readability import ReadabilityTable
@@ -42,6 +44,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "atlas",
+    "batched_rollouts",
     "design",
     "ema",
     "export_mjcf",
@@ -49,6 +52,7 @@ __all__ = [
     "identify",
     "impact",
     "modes",
+    "move",
     "predict_bands",
     "readability",
     "reduce",
@@ -85,6 +89,19 @@ def _built(config: Manipulator | None, pose: Pose | None, options: ModelOptions 
     from fpm_sim.model.manipulator import build_manipulator
 
     return build_manipulator(_config(config), _pose(pose), _options(options, stacklevel=4))
+
+
+def _aligned(
+    config: Manipulator | None, pose: Pose | None, options: ModelOptions | None, output_step_s: float
+) -> tuple[Manipulator, BuiltModel]:
+    """Return the description and its model for a rollout (the timestep rounded down to divide the output step)."""
+    from fpm_sim.model.manipulator import build_manipulator
+    from fpm_sim.model.options import ModelOptions
+    from fpm_sim.sim.rollout import aligned_options
+
+    manip, p = _config(config), _pose(pose)
+    opts = _options(options, stacklevel=4) or ModelOptions()
+    return manip, build_manipulator(manip, p, aligned_options(manip, p, opts, output_step_s))
 
 
 @overload
@@ -407,6 +424,7 @@ def rollout(
     progress: bool = False,
     integrator: str = "discrete",
     band_hz: float | None = None,
+    step_s: float | None = None,
 ) -> RolloutResult:
     """Nonlinear simulation of the full manipulator from its static equilibrium (``fpm-sim rollout``).
 
@@ -431,18 +449,16 @@ def rollout(
         Model options (as :func:`modes`).
     progress
         Show a progress bar.
-    integrator, band_hz
-        ``"discrete"`` (default) at the step of the band ``band_hz`` (Hz; default 5 x f1), or ``"explicit"``:
-        :func:`fpm_sim.sim.stepping.choose_stepping`.
+    integrator, band_hz, step_s
+        ``"discrete"`` (default) at the step of the band ``band_hz`` (Hz; default 5 x f1) or at ``step_s`` (s;
+        ``fpm-sim rollout --timestep-s``), or ``"explicit"``: the model's own step
+        (:func:`fpm_sim.sim.stepping.choose_stepping`).
     """
-    from fpm_sim.model.manipulator import build_manipulator
-    from fpm_sim.model.options import ModelOptions
     from fpm_sim.rom.reduction import accel_site_names
-    from fpm_sim.sim.rollout import aligned_options, constant
+    from fpm_sim.sim.rollout import constant
     from fpm_sim.sim.rollout import rollout as _rollout
 
-    manip, p = _config(config), _pose(pose)
-    built = build_manipulator(manip, p, aligned_options(manip, p, _options(options) or ModelOptions(), output_step_s))
+    manip, built = _aligned(config, pose, options, output_step_s)
     wrench = (force_x_n, force_y_n, moment_z_nm)
     return _rollout(
         built,
@@ -455,6 +471,136 @@ def rollout(
         progress=progress,
         integrator=integrator,
         band_hz=band_hz,
+        step_s=step_s,
+    )
+
+
+def batched_rollouts(
+    config: Manipulator | None = None,
+    pose: Pose | None = None,
+    *,
+    wrenches: Sequence[Sequence[float]],
+    duration_s: float = 0.2,
+    output_step_s: float = 1e-4,
+    threads: int = 1,
+    options: ModelOptions | None = None,
+    integrator: str = "discrete",
+    band_hz: float | None = None,
+) -> BatchedRollouts:
+    """Many constant end-effector loads on one model, stepped in ``mujoco.rollout``'s threads.
+
+    Each row of ``wrenches`` (``F_x, F_y`` in N, ``M_z`` in N m) is one rollout from the static equilibrium under
+    gravity, as :func:`rollout` with that constant load (:mod:`fpm_sim.sim.batched`); no command of its own.
+
+    Parameters
+    ----------
+    config, pose
+        As :func:`modes`.
+    wrenches
+        ``(n, 3)`` constant end-effector loads, one rollout each.
+    duration_s, output_step_s
+        Simulated time (s) and sample period (s).
+    threads
+        Threads of the rollout pool.
+    options
+        Model options (as :func:`rollout`).
+    integrator, band_hz
+        As :func:`rollout`.
+
+    Returns
+    -------
+    BatchedRollouts
+        ``.to_xarray()`` (``ee_disp`` over ``rollout`` x ``time`` x ``axis``), ``.to_dict()``, ``.table()``,
+        ``.plot()``.
+    """
+    from fpm_sim.sim.batched import BatchedRollouts
+    from fpm_sim.sim.batched import batched_rollouts as _batched
+
+    manip, built = _aligned(config, pose, options, output_step_s)
+    ds = _batched(
+        built,
+        manip,
+        wrenches,
+        duration_s=duration_s,
+        output_step_s=output_step_s,
+        threads=threads,
+        integrator=integrator,
+        band_hz=band_hz,
+    )
+    return BatchedRollouts(ds)
+
+
+def move(
+    config: Manipulator | None = None,
+    pose: Pose | None = None,
+    *,
+    end: Pose | None = None,
+    move_s: float = 0.3,
+    profile: str = "minimum-jerk",
+    path_csv: str | Path | None = None,
+    shaper: str = "none",
+    settle_s: float = 0.3,
+    settle_tol_m: float | None = None,
+    output_step_s: float = 1e-4,
+    options: ModelOptions | None = None,
+    integrator: str = "discrete",
+    band_hz: float | None = None,
+    progress: bool = False,
+) -> MoveResult:
+    """Simulate a point-to-point move of the end effector tracked by the motor servos (``fpm-sim move``).
+
+    The full flexible model follows the commanded path; reported: tracking error, link deflection, residual
+    vibration after the move (peak, settling time, dominant frequency against the modal f1 at the end pose),
+    motor torques (:mod:`fpm_sim.sim.trajectory`). Locked motors get the stated default servos.
+
+    Parameters
+    ----------
+    config
+        As :func:`modes`.
+    pose, end
+        Start and end pose (m, m, rad); ``None``: ``(0, 0, 0)`` and ``(30 mm, 0, 0)``.
+    move_s, profile
+        Move time (s) and motion profile (``"trapezoidal"``, ``"s-curve"``, ``"minimum-jerk"``).
+    path_csv
+        A commanded path ``t_s, x_mm, y_mm, phi_rad`` instead of a profile move (then no ``pose``/``end``).
+    shaper
+        Input shaper for the end pose's dominant in-plane mode: ``"none"``, ``"zv"`` or ``"zvd"``.
+    settle_s, settle_tol_m
+        Simulated time after the move (s) and settling tolerance on the in-plane residual (m; ``None``: 20 um).
+    output_step_s
+        Sample period (s).
+    options
+        Model options; ``None``: the standard resolution, inextensible links.
+    integrator, band_hz
+        As :func:`rollout` (default band: 5 x f1 at the end pose).
+    progress
+        Show a progress bar.
+    """
+    from fpm_sim.kinematics import Pose
+    from fpm_sim.sim import trajectory as tj
+
+    if path_csv is not None:
+        if pose is not None or end is not None:
+            raise tj.MoveError(
+                "a sampled path sets its own start and end poses",
+                parameter="path_csv",
+                value=str(path_csv),
+                hint="give either a path CSV or the start and end poses",
+            )
+        path = tj.MovePath.from_csv(path_csv)
+    else:
+        path = tj.MovePath(_pose(pose), Pose.from_mm(30.0, 0.0, 0.0) if end is None else end, move_s, kind=profile)
+    return tj.simulate_move(
+        _config(config),
+        path,
+        settle_s=settle_s,
+        options=_options(options),
+        output_step_s=output_step_s,
+        shaper_kind=shaper,
+        settle_tol_m=tj.DEFAULT_SETTLE_TOL_M if settle_tol_m is None else settle_tol_m,
+        integrator=integrator,
+        band_hz=band_hz,
+        progress=progress,
     )
 
 
@@ -499,6 +645,8 @@ def transient(
     n_modes: int | None = None,
     options: ModelOptions | None = None,
     progress: bool = False,
+    integrator: str = "discrete",
+    step_band_hz: float | None = None,
 ) -> TransientResult:
     """Run the study's transient, or a variant of it (``fpm-sim transient``).
 
@@ -522,6 +670,9 @@ def transient(
         study transient's 6 segments, inextensible links.
     progress
         Show progress bars.
+    integrator, step_band_hz
+        How the full model is stepped: ``"discrete"`` (default) at the step of the band ``step_band_hz`` (Hz;
+        default 5 x f1), or ``"explicit"`` (as :func:`rollout`'s ``integrator``, ``band_hz``).
     """
     from fpm_sim.model.options import resolve_segments
     from fpm_sim.study import transient as tr
@@ -541,6 +692,8 @@ def transient(
         band_hz=tr.DEFAULT_BAND_HZ if band_hz is None and n_modes is None else band_hz,
         n_modes=n_modes,
         progress=progress,
+        integrator=integrator,
+        step_band_hz=step_band_hz,
     )
 
 

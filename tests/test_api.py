@@ -39,6 +39,8 @@ FACADE = {
     "reduce",
     "frf",
     "rollout",
+    "move",
+    "batched_rollouts",
     "impact",
     "ema",
     "identify",
@@ -169,6 +171,68 @@ def test_rollout_builds_its_own_model():
     d = check_result(res)
     assert d["n_samples"] == len(res.t_s) == 3
     assert d["parameters"]["pose"] == {"x_m": 0.0, "y_m": 0.0, "phi_rad": 0.0}
+
+
+def test_rollout_stepping_options():
+    """The facade's stepping keywords reach the rollout: the band, a given discrete step, the explicit reference."""
+    kw = {"duration_s": 0.002, "output_step_s": 1e-3, "force_x_n": 1.0, "options": fs.ModelOptions(segments=SEG)}
+    band = fs.rollout(band_hz=300.0, **kw).to_dict()["stepping"]
+    assert (band["integrator"], band["band_hz"], band["band_source"]) == ("discrete", 300.0, "given")
+    assert fs.rollout(step_s=5e-5, **kw).stepping.step_s == 5e-5
+    assert fs.rollout(integrator="explicit", **kw).stepping.integrator == "explicit"
+    with pytest.raises(fs.FpmSimError, match=r"^step_s: sets the discrete integrator's step"):
+        fs.rollout(integrator="explicit", step_s=5e-5, **kw)
+
+
+def test_batched_rollouts_are_the_single_rollouts():
+    """Each row of fs.batched_rollouts is fs.rollout under that constant load (same model, same steps)."""
+    import numpy as np
+
+    kw = {"duration_s": 0.003, "output_step_s": 1e-3, "options": fs.ModelOptions(segments=SEG, axial=False)}
+    wrenches = [[1.0, 0.0, 0.0], [0.0, 2.0, 0.1]]
+    res = fs.batched_rollouts(None, fs.Pose.from_mm(10, 0, 0), wrenches=wrenches, threads=2, **kw)
+    d = check_result(res)
+    assert [r["wrench"] for r in d["rollouts"]] == [
+        {"fx_n": 1.0, "fy_n": 0.0, "mz_nm": 0.0},
+        {"fx_n": 0.0, "fy_n": 2.0, "mz_nm": 0.1},
+    ]
+    disp = res.to_xarray()["ee_disp"].values
+    for w, row in zip(wrenches, disp):
+        single = fs.rollout(
+            None, fs.Pose.from_mm(10, 0, 0), force_x_n=w[0], force_y_n=w[1], moment_z_nm=w[2], accel_fraction=None, **kw
+        )
+        assert single.stepping.to_dict() == d["stepping"]
+        # same model and steps, mujoco.rollout against mj_step: round-off only (tests/sim/test_batched.py: 1.6e-15 m)
+        assert np.abs(single.ee_disp - row).max() < 1e-12
+        assert np.abs(row).max() > 1e-7  # the load moved it
+    with pytest.raises(fs.FpmSimError, match=r"^threads: must be an integer >= 1, got 0$"):
+        fs.batched_rollouts(wrenches=wrenches, threads=0, **kw)
+
+
+def test_move_is_the_library_move(tmp_path):
+    """fs.move is simulate_move on the same path; a CSV of its commanded path commands the same path."""
+    import numpy as np
+
+    from fpm_sim.sim.trajectory import MovePath, simulate_move
+
+    cfg = fs.default_config()
+    opts = fs.ModelOptions(segments=SEG, axial=False)
+    end = fs.Pose.from_mm(5, 0, 0)
+    kw = {"settle_s": 0.003, "output_step_s": 1e-4, "options": opts}
+    res = fs.move(cfg, None, end=end, move_s=0.01, **kw)
+    d = check_result(res)
+    assert d["move_end_s"] == 0.01
+    ref = simulate_move(cfg, MovePath(fs.Pose(0.0, 0.0, 0.0), end, 0.01), **kw)
+    np.testing.assert_array_equal(res.ee_pose, ref.ee_pose)
+    csv = tmp_path / "path.csv"
+    rows = [",".join(f"{v:.17g}" for v in (t, c[0] * 1e3, c[1] * 1e3, c[2])) for t, c in zip(res.t_s, res.command)]
+    csv.write_text("t_s,x_mm,y_mm,phi_rad\n" + "\n".join(rows) + "\n")
+    sampled = fs.move(cfg, path_csv=csv, **kw)
+    n = len(res.t_s)
+    np.testing.assert_allclose(sampled.command[:n], res.command, rtol=0, atol=1e-15)  # mm -> m rounding only
+    assert sampled.to_dict()["parameters"]["profile"] == "csv"
+    with pytest.raises(fs.FpmSimError, match=r"^path_csv: a sampled path sets its own start and end poses"):
+        fs.move(cfg, fs.Pose(0.0, 0.0, 0.0), path_csv=csv)
 
 
 @pytest.mark.slow

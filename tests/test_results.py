@@ -156,6 +156,15 @@ BUILDERS = {
         fs.rollout, duration_s=0.002, output_step_s=1e-3, force_x_n=1.0, options=fs.ModelOptions(segments=SEG)
     ),
     "ImpactTestResult": _impact,
+    "BatchedRollouts": lambda: _quiet_call(
+        fs.batched_rollouts,
+        wrenches=[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        duration_s=0.002,
+        output_step_s=1e-3,
+        options=fs.ModelOptions(segments=SEG),
+    ),
+    "MoveResult": lambda: _move(),
+    "Stepping": lambda: _move().stepping,
     "WorkspaceSweep": _sweep,
     "PoseFrequencies": lambda: _sweep().frequencies,
     "StudyReproduction": _reproduction,
@@ -175,6 +184,12 @@ BUILDERS = {
     "ModalEstimate": _ema,
     "CheckReport": lambda: _check_report(),
 }
+
+
+@_quiet
+def _move():
+    opts = fs.ModelOptions(segments=SEG, axial=False)
+    return fs.move(end=fs.Pose.from_mm(5, 0, 0), move_s=0.01, settle_s=0.003, options=opts)
 
 
 @_quiet

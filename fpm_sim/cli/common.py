@@ -137,6 +137,22 @@ OPTION_NAMES: dict[str, tuple[str, float]] = {
     "folds": ("--folds", 1.0),
     "window_tau_s": ("--exp-window-tau-s", 1.0),
     "posterior": ("--posterior", 1.0),
+    # time domain (fpm_sim.sim.stepping, fpm_sim.sim.trajectory)
+    "integrator": ("--integrator", 1.0),
+    "step_band_hz": ("--step-band-hz", 1.0),
+    "rollout:step_s": ("--timestep-s", 1.0),
+    "impact:step_s": ("--implicit-step-s", 1.0),
+    "output_step_s": ("--output-step-s", 1.0),
+    "move_s": ("--move-s", 1.0),
+    "profile": ("--profile", 1.0),
+    "shaper": ("--shaper", 1.0),
+    "path_csv": ("--path-csv", 1.0),
+    "settle_s": ("--settle-s", 1.0),
+    "settle_tol_m": ("--settle-tol-mm", 1e3),
+    "n_impacts": ("--impacts", 1.0),
+    "record_s": ("--record-s", 1.0),
+    "peak_force_n": ("--peak-force-n", 1.0),
+    "noise_m_s2": ("--noise-m-s2", 1.0),
 }
 """The one map from the library's parameter names (:attr:`FpmSimError.parameter`) to the command line's option
 names, with the factor that converts a value to the option's unit. Only options the command has are used."""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 from fpm_sim.cli.common import (
@@ -42,6 +43,8 @@ def cmd_impact(args: argparse.Namespace) -> int:
     check_output_file(args.csv, "--csv", (".csv",))
     check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
     check_output_file(args.uff, "--uff", (".uff", ".unv"))
+    if not (math.isfinite(args.pulse_ms) and args.pulse_ms > 0):
+        raise CliError(f"--pulse-ms: must be a positive pulse length (ms), got {args.pulse_ms:g}")
     if args.implicit_step_s is not None:
         top = min(ImpactSetup.sample_s, args.pulse_ms * 1e-4)  # the sampling interval; a tenth of the pulse
         if not 0.0 < args.implicit_step_s <= top:

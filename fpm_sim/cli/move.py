@@ -38,7 +38,7 @@ def cmd_move(args: argparse.Namespace) -> int:
     from fpm_sim.kinematics import Pose
     from fpm_sim.model.options import warn_if_coarse
     from fpm_sim.outputs import atomic_file
-    from fpm_sim.sim.trajectory import MovePath, read_path_csv, simulate_move
+    from fpm_sim.sim.trajectory import MovePath, simulate_move
 
     check_output_file(args.out, "--out", (".csv", ".npz"))
     check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
@@ -55,8 +55,7 @@ def cmd_move(args: argparse.Namespace) -> int:
     start = pose_of(args)
     end = Pose.from_mm(args.to_x_mm, args.to_y_mm, args.to_phi_rad)
     if args.path_csv is not None:
-        samples = read_path_csv(args.path_csv)
-        path = MovePath(Pose(*samples[0, 1:]), Pose(*samples[-1, 1:]), float(samples[-1, 0]), samples=samples)
+        path = MovePath.from_csv(args.path_csv)
     else:
         path = MovePath(start, end, args.move_s, kind=args.profile)
     opts = model_options(args)

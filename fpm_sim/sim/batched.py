@@ -31,13 +31,96 @@ from fpm_sim.linear.equilibrium import static_equilibrium
 from fpm_sim.model.options import BuiltModel
 from fpm_sim.rom.reduction import END_EFFECTOR_SITE
 from fpm_sim.sim.rollout import end_effector_pose
-from fpm_sim.sim.stepping import DEFAULT_INTEGRATOR, apply_stepping, choose_stepping
+from fpm_sim.sim.stepping import DEFAULT_INTEGRATOR, SteppingError, apply_stepping, choose_stepping, reraise_as
 
-__all__ = ["BatchedRolloutError", "batched_rollouts"]
+__all__ = ["BatchedRolloutError", "BatchedRollouts", "batched_rollouts"]
 
 
 class BatchedRolloutError(FpmSimError):
     """Bad batched-rollout input (named in the message) or a diverging rollout."""
+
+
+class BatchedRollouts:
+    """The result of :func:`batched_rollouts` as a :class:`fpm_sim.results.Result` (``fs.batched_rollouts``).
+
+    ``dataset`` is the :class:`xarray.Dataset` (:meth:`to_xarray`): ``wrench`` (rollout, load) and ``ee_disp``
+    (rollout, time, axis), the stepping and the timing in its attributes.
+    """
+
+    def __init__(self, dataset: Any) -> None:
+        self.dataset = dataset
+
+    def to_xarray(self) -> Any:
+        """The :class:`xarray.Dataset` (``to_netcdf`` writes it)."""
+        return self.dataset
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: per rollout the wrench, the final and peak end-effector displacement; stepping, timing,
+        resolution."""
+        from fpm_sim.model.options import resolution_of_parameters
+
+        ds = self.dataset
+        disp = np.asarray(ds["ee_disp"].values)
+        axes = ("x_m", "y_m", "phi_rad")
+        parameters = json.loads(ds.attrs["parameters"])
+        return {
+            "rollouts": [
+                {
+                    "wrench": dict(zip(("fx_n", "fy_n", "mz_nm"), map(float, w))),
+                    "final_disp": dict(zip(axes, map(float, d[-1]))),
+                    "peak_abs_disp": dict(zip(axes, map(float, np.abs(d).max(axis=0)))),
+                }
+                for w, d in zip(np.asarray(ds["wrench"].values), disp)
+            ],
+            "duration_s": float(ds["time"].values[-1]),
+            "n_samples": int(disp.shape[1]),
+            "n_steps_per_rollout": int(ds.attrs["n_steps_per_rollout"]),
+            "threads": int(ds.attrs["threads"]),
+            "wall_s": float(ds.attrs["wall_s"]),
+            "stepping": json.loads(ds.attrs["stepping"]),
+            "pose": json.loads(ds.attrs["pose"]),
+            "parameters": parameters,
+            "resolution": resolution_of_parameters(parameters),
+        }
+
+    def table(self) -> str:
+        """One row per rollout: wrench (N, N, N m), final and peak in-plane displacement (um), final rotation."""
+        d = self.to_dict()
+        lines = [
+            f"{len(d['rollouts'])} rollouts of {d['duration_s']:.4g} s in {d['threads']} thread(s), "
+            f"wall {d['wall_s']:.2f} s",
+            f"{'F_x (N)':>9} {'F_y (N)':>9} {'M_z (N m)':>10} {'final x (um)':>13} {'final y (um)':>13} "
+            f"{'peak |xy| (um)':>15} {'final phi (urad)':>17}",
+        ]
+        disp = np.asarray(self.dataset["ee_disp"].values)
+        for r, dd in zip(d["rollouts"], disp):
+            w, f = r["wrench"], r["final_disp"]
+            peak = float(np.linalg.norm(dd[:, :2], axis=1).max())
+            lines.append(
+                f"{w['fx_n']:9.3g} {w['fy_n']:9.3g} {w['mz_nm']:10.3g} {f['x_m'] * 1e6:13.4g} {f['y_m'] * 1e6:13.4g} "
+                f"{peak * 1e6:15.4g} {f['phi_rad'] * 1e6:17.4g}"
+            )
+        st = d["stepping"]
+        lines.append(f"integrator {st['integrator']}, step {st['step_s']:.3g} s, band {st['band_hz']:.4g} Hz")
+        return "\n".join(lines)
+
+    def plot(self, ax: Any = None) -> Any:
+        """In-plane end-effector displacement magnitude over time, one line per rollout; the ``Figure``."""
+        import matplotlib.pyplot as plt
+
+        if ax is None:
+            _, ax = plt.subplots(figsize=(7, 4))
+        ds = self.dataset
+        t_ms = np.asarray(ds["time"].values) * 1e3
+        for w, d in zip(np.asarray(ds["wrench"].values), np.asarray(ds["ee_disp"].values)):
+            label = f"F = ({w[0]:g}, {w[1]:g}) N, M = {w[2]:g} N m"
+            ax.plot(t_ms, np.linalg.norm(d[:, :2], axis=1) * 1e6, lw=1, label=label)
+        ax.set_xlabel("t (ms)")
+        ax.set_ylabel("|end-effector displacement| (um)")
+        ax.set_title(f"{ds.sizes['rollout']} batched rollouts from the static equilibrium", fontsize=9)
+        ax.legend(fontsize=8)
+        ax.figure.tight_layout()
+        return ax.figure
 
 
 def batched_rollouts(
@@ -63,16 +146,21 @@ def batched_rollouts(
 
     w = np.atleast_2d(np.asarray(wrenches, float))
     if w.ndim != 2 or w.shape[1] != 3 or w.shape[0] < 1 or not np.all(np.isfinite(w)):
-        raise BatchedRolloutError(f"wrenches must be finite (n, 3) rows F_x, F_y, M_z, got shape {w.shape}")
-    if not (isinstance(threads, int) and threads >= 1):
-        raise BatchedRolloutError(f"threads (--threads) must be an integer >= 1, got {threads!r}")
+        raise BatchedRolloutError(
+            "must be finite (n, 3) rows F_x, F_y, M_z", parameter="wrenches", value=f"shape {w.shape}"
+        )
+    if not (isinstance(threads, int) and not isinstance(threads, bool) and threads >= 1):
+        raise BatchedRolloutError("must be an integer >= 1", parameter="threads", value=threads)
     for name, v in (("duration_s", duration_s), ("output_step_s", output_step_s)):
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-            raise BatchedRolloutError(f"{name} must be a positive finite time, got {v!r}")
+            raise BatchedRolloutError("must be a positive finite time", parameter=name, value=v)
     q0 = static_equilibrium(built.model, mujoco.MjData(built.model))
-    stepping = choose_stepping(
-        built, integrator=integrator, band_hz=band_hz, divides_s=output_step_s, f1_hz=f1_hz, qpos=q0
-    )
+    try:
+        stepping = choose_stepping(
+            built, integrator=integrator, band_hz=band_hz, divides_s=output_step_s, f1_hz=f1_hz, qpos=q0
+        )
+    except SteppingError as e:
+        raise reraise_as(BatchedRolloutError, e) from None
     model = apply_stepping(built, stepping).model
     h = float(model.opt.timestep)
     n_sub = max(1, round(output_step_s / h))
@@ -115,7 +203,8 @@ def batched_rollouts(
             disp[i, k] = end_effector_pose(model, probe) - ee0
         if not np.all(np.isfinite(state)) or np.abs(disp[:, k, :2]).max() > model.stat.extent:
             raise BatchedRolloutError(
-                f"a rollout diverged by t = {k * n_sub * h:.4g} s; reduce the wrenches or the band (--band-hz)"
+                f"a rollout diverged by t = {k * n_sub * h:.4g} s",
+                hint="reduce the loads (wrenches) or the band (band_hz)",
             )
     wall = time.perf_counter() - start
     t = np.arange(n_out + 1) * n_sub * h

@@ -75,7 +75,14 @@ from fpm_sim.response import (
     modal_frf,
 )
 from fpm_sim.rom.reduction import ModalSystem, modal_system
-from fpm_sim.sim.stepping import DEFAULT_INTEGRATOR, Stepping, SteppingError, apply_stepping, choose_stepping
+from fpm_sim.sim.stepping import (
+    DEFAULT_INTEGRATOR,
+    Stepping,
+    SteppingError,
+    apply_stepping,
+    choose_stepping,
+    reraise_as,
+)
 
 __all__ = [
     "PEAK_FORCE_N",
@@ -165,19 +172,26 @@ class ImpactSetup:
         for name in positive:
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
-                raise FrfError(f"{name} must be positive, got {v!r}")
+                raise FrfError("must be positive", parameter=name, value=v)
         if not (isinstance(self.n_impacts, int) and self.n_impacts >= 1):
-            raise FrfError(f"n_impacts must be an integer >= 1, got {self.n_impacts!r}")
+            raise FrfError("must be an integer >= 1", parameter="n_impacts", value=self.n_impacts)
         if not (0.0 < self.window_end <= 1.0):
-            raise FrfError(f"window_end must lie in (0, 1], got {self.window_end!r}")
-        if not (self.noise_m_s2 >= 0.0 and 0.0 <= self.force_spread < 1.0):
-            raise FrfError("noise_m_s2 must be >= 0 and force_spread in [0, 1)")
+            raise FrfError("must lie in (0, 1]", parameter="window_end", value=self.window_end)
+        if not self.noise_m_s2 >= 0.0:
+            raise FrfError("must be >= 0", parameter="noise_m_s2", value=self.noise_m_s2)
+        if not 0.0 <= self.force_spread < 1.0:
+            raise FrfError("must lie in [0, 1)", parameter="force_spread", value=self.force_spread)
         if self.pulse_s >= self.record_s:
             raise FrfError(f"pulse_s ({self.pulse_s:g} s) must be shorter than record_s ({self.record_s:g} s)")
         if self.pad_s < self.record_s:
             raise FrfError(f"pad_s ({self.pad_s:g} s) must be at least record_s ({self.record_s:g} s)")
         if self.integrator == "explicit" and self.timestep_s is not None:
-            raise FrfError("timestep_s (--implicit-step-s) sets the discrete integrator's step; drop it with explicit")
+            raise FrfError(
+                "sets the discrete integrator's step",
+                parameter="timestep_s",
+                value=self.timestep_s,
+                hint="drop it with the explicit integrator (it runs at the model's own step)",
+            )
         if self.timestep_s is not None:
             h = self.timestep_s
             if not (math.isfinite(h) and h > 0):
@@ -373,6 +387,7 @@ class ImpactTestResult:
                 "another axis: fpm-sim readability ranks the points)"
             )
         return text
+
     stepping: Stepping | None = None
     """How the rollouts were stepped; its ``step_s`` travels in the UFF record (``discrete_step_s``)."""
 
@@ -532,7 +547,7 @@ def virtual_impact_test(
             f1_hz=float(system.frequencies_hz[0]),
         )
     except SteppingError as e:
-        raise FrfError(str(e)) from None
+        raise reraise_as(FrfError, e) from None
     rollout = apply_stepping(built, stepping)
     h = float(rollout.model.opt.timestep)
     n_sub = max(1, round(setup.sample_s / h))

@@ -52,7 +52,14 @@ from fpm_sim.linear.equilibrium import static_equilibrium
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import BuiltModel, ModelOptions, check_finite, mujoco_messages, open_for_writing
 from fpm_sim.rom.reduction import END_EFFECTOR_SITE, motor_dofs
-from fpm_sim.sim.stepping import DEFAULT_INTEGRATOR, Stepping, SteppingError, apply_stepping, choose_stepping
+from fpm_sim.sim.stepping import (
+    DEFAULT_INTEGRATOR,
+    Stepping,
+    SteppingError,
+    apply_stepping,
+    choose_stepping,
+    reraise_as,
+)
 
 __all__ = [
     "RolloutError",
@@ -99,7 +106,7 @@ def _finite(name: str, value: Any) -> np.ndarray:
     try:
         return check_finite(name, value)
     except FpmSimError as e:
-        raise RolloutError(e.message, parameter=e.parameter, value=e.value, hint=e.hint) from None
+        raise reraise_as(RolloutError, e) from None
 
 
 def constant(*values: float) -> Profile:
@@ -362,7 +369,7 @@ def rollout(
             built, integrator=integrator, band_hz=band_hz, step_s=step_s, divides_s=output_step_s, f1_hz=f1_hz, qpos=q0
         )
     except SteppingError as e:
-        raise RolloutError(str(e)) from None
+        raise reraise_as(RolloutError, e) from None
     model = apply_stepping(built, stepping).model
     h = float(model.opt.timestep)
     if not (output_step_s >= h * (1 - 1e-9)):

@@ -27,7 +27,7 @@ read from a discrete-integrator response is inverted exactly (:func:`remove_inte
 impact test's EMA removes the numerical damping as it removes the response window's.
 
 **The step from the band** (:func:`choose_stepping`). The user names the band the result must be right in
-(``band_hz``, ``--band-hz``); by default :data:`BAND_F1_MULTIPLE` times the model's first natural frequency at
+(``band_hz``); by default :data:`BAND_F1_MULTIPLE` times the model's first natural frequency at
 the pose (a modal analysis; the first few modes carry nearly all of the response to loads and moves that are
 slow against them). The step is the largest with a numerical damping ratio of at most
 :data:`MAX_NUMERICAL_DAMPING` at the band's top, ``h = zeta_max / (pi f_band)`` (``a / 2 >= zeta_num``, so the
@@ -69,6 +69,7 @@ __all__ = [
     "numerical_damping",
     "period_error",
     "remove_integrator_effect",
+    "reraise_as",
 ]
 
 INTEGRATORS = ("discrete", "explicit")
@@ -121,18 +122,20 @@ def _explicit_period_error(freq_hz: float, step_s: float) -> float:
 
 
 def remove_integrator_effect(
-    freq_hz: ArrayLike, damping: ArrayLike, *, step_s: float, source: str = "FRF"
+    freq_hz: ArrayLike, damping: ArrayLike, *, step_s: float, source: str = "FRF", parameter: str = "step_s"
 ) -> tuple[np.ndarray, np.ndarray]:
     """Natural frequencies (Hz) and damping ratios of the modes whose ``discrete``-integrator response was read
     as ``freq_hz`` / ``damping`` (``|s| / 2 pi`` and ``-Re s / |s|`` of the fitted pole ``s``) at ``step_s`` (s).
 
     The exact inverse of :func:`discrete_pole`: with ``z = exp(s h)``, ``(h c) (z^2 - z) + a^2 z^2 = -(z - 1)^2``
     is two real linear equations in ``h c`` and ``a^2``. Raises :class:`SteppingError` for a pole less damped than
-    half of what the step alone adds (no fit error does that: the step is wrong); a slightly negative damping
-    (a fit error on an undamped mode) is returned as it is.
+    half of what the step alone adds (no fit error does that: the step is wrong), naming ``parameter`` (the
+    caller's name of ``step_s``); a slightly negative damping (a fit error on an undamped mode) is returned as it is.
     """
     if not (isinstance(step_s, (int, float)) and math.isfinite(step_s) and step_s > 0):
-        raise SteppingError(f"{source}: the integrator step must be a positive time (s), got {step_s!r}")
+        raise SteppingError(
+            f"{source}: the integrator step must be a positive time (s)", parameter=parameter, value=step_s
+        )
     wn = 2.0 * np.pi * np.atleast_1d(np.asarray(freq_hz, float))
     xi = np.atleast_1d(np.asarray(damping, float))
     s = -xi * wn + 1j * wn * np.sqrt(np.clip(1.0 - xi**2, 0.0, None))
@@ -149,8 +152,11 @@ def remove_integrator_effect(
         k = int(np.flatnonzero(bad)[0])
         raise SteppingError(
             f"{source}: the pole at {wn[k] / 2 / np.pi:.4g} Hz (damping {xi[k]:.3g}) is less damped than the "
-            f"discrete integrator at a {step_s:.4g} s step alone makes it "
-            f"({float(numerical_damping(wn[k] / 2 / np.pi, step_s)):.3g}): the step is wrong (--discrete-step-s)"
+            f"discrete integrator at this step alone makes it "
+            f"({float(numerical_damping(wn[k] / 2 / np.pi, step_s)):.3g}): the step is wrong",
+            parameter=parameter,
+            value=step_s,
+            hint="give the step the response was computed with",
         )
     return a / (2.0 * np.pi * step_s), zeta
 
@@ -247,9 +253,15 @@ class Stepping:
 
 
 def _check_positive(name: str, value: Any) -> float:
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-        raise SteppingError(f"{name} must be a positive finite number, got {value!r}")
+    if not (isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value > 0):
+        raise SteppingError("must be a positive finite number", parameter=name, value=value)
     return float(value)
+
+
+def reraise_as(error: type[FpmSimError], exc: FpmSimError) -> FpmSimError:
+    """``exc`` as an ``error`` with the same message, parameter, value, hint, file and row (for ``raise ... from
+    None``: a module's own error type around a lower layer's, keeping the contract's fields)."""
+    return error(exc.message, parameter=exc.parameter, value=exc.value, hint=exc.hint, file=exc.file, row=exc.row)
 
 
 def choose_stepping(
@@ -268,9 +280,9 @@ def choose_stepping(
     Parameters
     ----------
     integrator
-        ``"discrete"`` (default) or ``"explicit"`` (``--integrator``).
+        ``"discrete"`` (default) or ``"explicit"``.
     band_hz
-        Top of the band (Hz, ``--band-hz``); default :data:`BAND_F1_MULTIPLE` times f1 (a modal analysis
+        Top of the band (Hz); default :data:`BAND_F1_MULTIPLE` times f1 (a modal analysis
         unless ``f1_hz`` is given).
     divides_s
         The output or control step (s) the step must divide (rounded down to it).
@@ -282,14 +294,24 @@ def choose_stepping(
         The model's first frequency if known; the state to compute it at (default the equilibrium).
     """
     if integrator not in INTEGRATORS:
-        raise SteppingError(f"integrator (--integrator) must be one of {', '.join(INTEGRATORS)}, got {integrator!r}")
+        raise SteppingError(
+            "unknown integrator",
+            parameter="integrator",
+            value=integrator,
+            hint=f"choose one of {', '.join(INTEGRATORS)}",
+        )
     if band_hz is not None:
-        band_hz = _check_positive("band_hz (--band-hz)", band_hz)
+        band_hz = _check_positive("band_hz", band_hz)
     if step_s is not None:
-        step_s = _check_positive("step_s (--step-s)", step_s)
+        step_s = _check_positive("step_s", step_s)
     if integrator == "explicit":
         if step_s is not None:
-            raise SteppingError("step_s (--step-s) sets the discrete integrator's step; drop it with explicit")
+            raise SteppingError(
+                "sets the discrete integrator's step",
+                parameter="step_s",
+                value=step_s,
+                hint="drop it with the explicit integrator (it runs at the model's own step)",
+            )
         h = float(built.model.opt.timestep)
         if band_hz is not None:
             return Stepping("explicit", h, band_hz, "given", f1_hz, 0.0)
@@ -304,14 +326,21 @@ def choose_stepping(
     h = step_s if step_s is not None else min(MAX_STEP_S, MAX_NUMERICAL_DAMPING / (math.pi * band_hz))
     if max_step_s is not None:
         h = min(h, max_step_s)
-    if divides_s is not None:
-        h = divides_s / math.ceil(divides_s / h * (1 - 1e-12))
     h_explicit = float(built.model.opt.timestep)
+    # the culprit: the step (or band) itself, or the output step it must divide
+    given, value = ("step_s", step_s) if step_s is not None else ("band_hz", band_hz)
+    remedy = "a larger step" if step_s is not None else "a lower band"
+    if divides_s is not None:
+        if h >= h_explicit * (1 - 1e-9):
+            given, value, remedy = "output_step_s", divides_s, "a larger output step"
+        h = divides_s / math.ceil(divides_s / h * (1 - 1e-12))
     if h < h_explicit * (1 - 1e-9):
         raise SteppingError(
-            f"the discrete step would be {h:.3g} s, below the explicit reference's own {h_explicit:.3g} s, which is "
-            "then both cheaper and exact in the band: use integrator='explicit' (--integrator explicit), or a larger "
-            "output step (output_step_s, --output-step-s) or a lower band (band_hz, --band-hz)"
+            f"the discrete step from it, {h:.3g} s, is below the explicit reference's own {h_explicit:.3g} s (which "
+            "is then both cheaper and exact in the band)",
+            parameter=given,
+            value=value,
+            hint=f"use the explicit integrator, or {remedy}",
         )
     return Stepping("discrete", h, band_hz, source, f1_hz)
 

@@ -120,7 +120,9 @@ def profile(kind: str, u: np.ndarray | float) -> np.ndarray:
         if _S_CURVE is None:
             _S_CURVE = _s_curve()
         return np.asarray(_S_CURVE(x))
-    raise MoveError(f"profile (--profile) must be one of {', '.join(PROFILES)}, got {kind!r}")
+    raise MoveError(
+        "unknown motion profile", parameter="profile", value=kind, hint=f"choose one of {', '.join(PROFILES)}"
+    )
 
 
 def shaper(kind: str, freq_hz: float, damping: float) -> tuple[np.ndarray, np.ndarray]:
@@ -129,14 +131,19 @@ def shaper(kind: str, freq_hz: float, damping: float) -> tuple[np.ndarray, np.nd
     if kind == "none":
         return np.array([1.0]), np.array([0.0])
     if not (math.isfinite(freq_hz) and freq_hz > 0 and 0 <= damping < 1):
-        raise MoveError(f"a shaper needs a positive frequency and a damping in [0, 1), got {freq_hz!r}, {damping!r}")
+        raise MoveError(
+            "a shaper needs a positive frequency and a damping ratio in [0, 1)",
+            parameter="shaper",
+            value=(freq_hz, damping),
+            hint="design it for a vibrating mode",
+        )
     k = math.exp(-damping * math.pi / math.sqrt(1 - damping**2))
     half = 0.5 / (freq_hz * math.sqrt(1 - damping**2))
     if kind == "zv":
         return np.array([1.0, k]) / (1 + k), np.array([0.0, half])
     if kind == "zvd":
         return np.array([1.0, 2 * k, k * k]) / (1 + k) ** 2, np.array([0.0, half, 2 * half])
-    raise MoveError(f"shaper (--shaper) must be one of {', '.join(SHAPERS)}, got {kind!r}")
+    raise MoveError("unknown input shaper", parameter="shaper", value=kind, hint=f"choose one of {', '.join(SHAPERS)}")
 
 
 @dataclass(frozen=True)
@@ -154,11 +161,20 @@ class MovePath:
     samples: np.ndarray | None = None
     impulses: tuple[np.ndarray, np.ndarray] = field(default_factory=lambda: (np.array([1.0]), np.array([0.0])))
 
+    @classmethod
+    def from_csv(cls, path: str | Path) -> MovePath:
+        """The sampled path of a CSV ``t_s, x_mm, y_mm, phi_rad`` (:func:`read_path_csv`); it starts at its first
+        row's pose and ends at its last."""
+        samples = read_path_csv(path)
+        return cls(Pose(*samples[0, 1:]), Pose(*samples[-1, 1:]), float(samples[-1, 0]), samples=samples)
+
     def check(self) -> None:
         if self.samples is None:
             profile(self.kind, 0.0)
             if not (math.isfinite(self.move_s) and self.move_s > 0):
-                raise MoveError(f"the move time (--move-s) must be positive, got {self.move_s!r}")
+                raise MoveError(
+                    "the move time must be a positive finite time (s)", parameter="move_s", value=self.move_s
+                )
 
     @property
     def duration_s(self) -> float:
@@ -182,21 +198,48 @@ def read_path_csv(path: str | Path) -> np.ndarray:
     """Rows ``t_s, x_mm, y_mm, phi_rad`` of a path CSV (header row) as ``(n, 4)`` in SI (m, rad)."""
     p = Path(path)
     if not p.is_file():
-        raise MoveError(f"path CSV not found: {p} (--path-csv)")
-    with p.open(newline="") as f:
-        rows = [r for r in csv.reader(f) if r and not r[0].lstrip().startswith("#")]
-    if not rows or [c.strip() for c in rows[0]] != ["t_s", "x_mm", "y_mm", "phi_rad"]:
-        raise MoveError(f"{p}: the first row must be the header t_s,x_mm,y_mm,phi_rad (--path-csv)")
-    try:
-        data = np.array([[float(c) for c in r] for r in rows[1:]], float)
-    except ValueError as e:
-        raise MoveError(f"{p}: a value is not a number ({e}) (--path-csv)") from None
-    if data.ndim != 2 or data.shape[0] < 2 or data.shape[1] != 4:
-        raise MoveError(f"{p}: needs at least two rows of 4 values t_s,x_mm,y_mm,phi_rad (--path-csv)")
-    if not np.all(np.isfinite(data)):
-        raise MoveError(f"{p}: every value must be finite (--path-csv)")
-    if data[0, 0] != 0.0 or np.any(np.diff(data[:, 0]) <= 0):
-        raise MoveError(f"{p}: t_s must start at 0 and increase strictly (--path-csv)")
+        raise MoveError("path CSV not found", parameter="path_csv", value=str(p), hint="give an existing file")
+    header = "t_s,x_mm,y_mm,phi_rad"
+    with p.open(newline="") as f:  # (row number in the file, cells); comment and blank lines are skipped
+        rows = [(i, r) for i, r in enumerate(csv.reader(f), 1) if r and not r[0].lstrip().startswith("#")]
+    if not rows or [c.strip() for c in rows[0][1]] != header.split(","):
+        raise MoveError(
+            "the first row must be the header",
+            parameter="path_csv",
+            value=",".join(rows[0][1]) if rows else "",
+            hint=f"write {header}",
+            file=p,
+            row=rows[0][0] if rows else None,
+        )
+    values: list[list[float]] = []
+    for i, r in rows[1:]:
+        if len(r) != 4:
+            raise MoveError(
+                "needs 4 values per row", parameter="path_csv", value=",".join(r), hint=header, file=p, row=i
+            )
+        try:
+            v = [float(c) for c in r]
+        except ValueError:
+            raise MoveError("a value is not a number", parameter="path_csv", value=",".join(r), file=p, row=i) from None
+        if not all(math.isfinite(x) for x in v):
+            raise MoveError("every value must be finite", parameter="path_csv", value=",".join(r), file=p, row=i)
+        if values and not v[0] > values[-1][0]:
+            raise MoveError(
+                "t_s must increase strictly",
+                parameter="path_csv",
+                value=v[0],
+                hint="sort the rows by time",
+                file=p,
+                row=i,
+            )
+        if not values and v[0] != 0.0:
+            raise MoveError("t_s must start at 0", parameter="path_csv", value=v[0], file=p, row=i)
+        values.append(v)
+    if len(values) < 2:
+        raise MoveError(
+            "needs at least two rows of 4 values after the header", parameter="path_csv", value=len(values), file=p
+        )
+    data = np.array(values, float)
     data[:, 1:3] *= 1e-3
     return data
 
@@ -297,7 +340,11 @@ def residual_vibration(
     in-plane mode's frequency and damping) at the end pose."""
     after = t_s >= t_end_s
     if after.sum() < 8:
-        raise MoveError("no residual vibration to analyse: give a longer settle time (--settle-s)")
+        raise MoveError(
+            "no residual vibration to analyse: fewer than 8 samples after the move",
+            parameter="settle_s",
+            hint="give a longer settle time",
+        )
     ta = t_s[after]
     tail = after & (t_s >= ta[0] + 0.5 * (ta[-1] - ta[0]))
     offset = error_xy[tail].mean(axis=0)
@@ -394,7 +441,10 @@ class MoveResult:
         return save_columns(path, self.columns(), MoveError)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready summary: tracking error and deflection peaks, residual vibration, torques, stepping."""
+        """JSON-ready summary: tracking error and deflection peaks, residual vibration, torques, stepping,
+        resolution."""
+        from fpm_sim.model.options import resolution_of_parameters
+
         moving = self.t_s <= self.move_end_s
         err = np.linalg.norm(self.tracking_error[:, :2], axis=1)
         defl = np.linalg.norm(self.deflection[:, :2], axis=1)
@@ -410,6 +460,7 @@ class MoveResult:
             "stepping": self.stepping.to_dict() if self.stepping is not None else None,
             "wall_s": self.wall_s,
             "parameters": self.parameters,
+            "resolution": resolution_of_parameters(self.parameters),
         }
 
     def table(self) -> str:
@@ -434,12 +485,19 @@ class MoveResult:
         return "\n".join(lines)
 
     def plot(self, ax: Any = None) -> Any:
-        """Commanded and simulated path, tracking error and deflection, residual vibration; the ``Figure``."""
+        """Commanded and simulated path, tracking error and deflection, residual vibration; the ``Figure``.
+
+        ``ax``: ``None`` (a new figure of the three panels), three axes, or one axes (the main panel: the
+        residual vibration).
+        """
         import matplotlib.pyplot as plt
 
         if ax is None:
             fig = plt.figure(figsize=(10, 7))
             axes = [fig.add_subplot(2, 2, 1), fig.add_subplot(2, 2, 2), fig.add_subplot(2, 1, 2)]
+        elif hasattr(ax, "plot"):
+            self._plot_residual(ax)
+            return ax.figure
         else:
             axes = list(ax)
         a = axes[0]
@@ -458,7 +516,12 @@ class MoveResult:
         a.set_ylabel("mm")
         a.set_title("tracking error and link deflection", fontsize=9)
         a.legend(fontsize=8)
-        a = axes[2]
+        self._plot_residual(axes[2])
+        out: Any = axes[0].figure
+        out.tight_layout()
+        return out
+
+    def _plot_residual(self, a: Any) -> None:
         r = self.residual
         after = self.t_s >= self.move_end_s
         res = np.linalg.norm(self.tracking_error[:, :2] - r.final_offset_m, axis=1)
@@ -467,14 +530,11 @@ class MoveResult:
         a.set_xlabel("t (ms)")
         a.set_ylabel("residual (mm)")
         a.set_title(
-            f"residual vibration: peak {r.peak_m * 1e3:.4f} mm, {r.dominant_hz:.1f} Hz "
+            f"residual vibration: peak {r.peak_m * 1e3:.4f} mm, {r.dominant_hz:.1f} Hz\n"
             f"(modal f1 {r.modal_f1_hz:.1f} Hz, in-plane {r.inplane_mode_hz:.1f} Hz)",
             fontsize=9,
         )
         a.legend(fontsize=8)
-        out: Any = axes[0].figure
-        out.tight_layout()
-        return out
 
 
 def simulate_move(
@@ -516,13 +576,20 @@ def simulate_move(
     from fpm_sim.sim.rollout import aligned_options, rollout
 
     path.check()
-    for name, v in (("settle_s (--settle-s)", settle_s), ("settle_tol_m (--settle-tol-mm)", settle_tol_m)):
-        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-            raise MoveError(f"{name} must be positive, got {v!r}")
+    for name, v in (("settle_s", settle_s), ("settle_tol_m", settle_tol_m), ("output_step_s", output_step_s)):
+        if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0):
+            raise MoveError("must be a positive finite number", parameter=name, value=v)
     if shaper_kind not in SHAPERS:
-        raise MoveError(f"shaper (--shaper) must be one of {', '.join(SHAPERS)}, got {shaper_kind!r}")
+        raise MoveError(
+            "unknown input shaper", parameter="shaper", value=shaper_kind, hint=f"choose one of {', '.join(SHAPERS)}"
+        )
     if shaper_kind != "none" and path.samples is not None:
-        raise MoveError("a shaper shapes a profile move; a CSV path is commanded as it is (drop --shaper)")
+        raise MoveError(
+            "a shaper shapes a profile move; a sampled (CSV) path is commanded as it is",
+            parameter="shaper",
+            value=shaper_kind,
+            hint="drop the shaper ('none') or give a profile move",
+        )
     manip = with_servo_motors(manip)
     opts = options or ModelOptions(axial=False)
     end = path.end if path.samples is None else Pose(*path.samples[-1, 1:])

@@ -37,7 +37,7 @@ from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import DEFAULT_SEGMENTS, ModelOptions
 from fpm_sim.results import to_jsonable
 from fpm_sim.rom.reduction import ReducedModel, reduce_model
-from fpm_sim.sim.rollout import aligned_options, constant, rollout
+from fpm_sim.sim.rollout import RolloutError, aligned_options, constant, rollout
 from fpm_sim.sim.stepping import DEFAULT_INTEGRATOR, Stepping
 
 __all__ = [
@@ -315,18 +315,23 @@ def study_transient(
         k = "xy".index(a)
         wrench = [0.0, 0.0, 0.0]
         wrench[k] = force_n
-        full = rollout(
-            built,
-            manip,
-            duration_s=duration_s,
-            output_step_s=output_step_s,
-            ee_wrench=constant(*wrench),
-            qpos=rom.qpos,
-            progress=progress,
-            integrator=integrator,
-            band_hz=step_band_hz,
-            f1_hz=float(rom.frequencies_hz[0]),
-        )
+        try:
+            full = rollout(
+                built,
+                manip,
+                duration_s=duration_s,
+                output_step_s=output_step_s,
+                ee_wrench=constant(*wrench),
+                qpos=rom.qpos,
+                progress=progress,
+                integrator=integrator,
+                band_hz=step_band_hz,
+                f1_hz=float(rom.frequencies_hz[0]),
+            )
+        except RolloutError as e:
+            if e.parameter == "band_hz":  # the stepping's band is this function's step_band_hz
+                e.parameter = "step_band_hz"
+            raise
         stepping = full.stepping
         u = np.zeros((len(full.t_s), len(rom.input_names)))
         u[:, k] = force_n

@@ -97,11 +97,11 @@ CASES: list[tuple[str, list[str], str]] = [
     ("frf-fraction", ["frf", "--input-fraction", "1.5", *S3], "input-fraction"),
     ("frf-n-modes-zero", ["frf", "--n-modes", "0", *S3], "n-modes"),
     # impact
-    ("impact-impacts-zero", ["impact", "--impacts", "0", *S3], "impacts"),
-    ("impact-pulse-negative", ["impact", "--pulse-ms", "-1", *S3], "pulse"),
-    ("impact-record-zero", ["impact", "--record-s", "0", *S3], "record"),
-    ("impact-noise-negative", ["impact", "--noise-m-s2", "-1", *S3], "noise"),
-    ("impact-force-nan", ["impact", "--peak-force-n", "nan", *S3], "peak-force"),
+    ("impact-impacts-zero", ["impact", "--impacts", "0", *S3], "error: --impacts: must be an integer >= 1, got 0"),
+    ("impact-pulse-negative", ["impact", "--pulse-ms", "-1", *S3], "error: --pulse-ms: must be a positive"),
+    ("impact-record-zero", ["impact", "--record-s", "0", *S3], "error: --record-s: must be positive, got 0"),
+    ("impact-noise-negative", ["impact", "--noise-m-s2", "-1", *S3], "error: --noise-m-s2: must be >= 0, got -1"),
+    ("impact-force-nan", ["impact", "--peak-force-n", "nan", *S3], "error: --peak-force-n: must be positive, got nan"),
     ("impact-implicit-step-too-long", ["impact", "--implicit-step-s", "1e-3", *S3], "implicit-step-s"),
     # study commands
     ("reproduce-reading", ["reproduce", "--reading", "bogus", "--out", "{tmp}/r"], "reading"),

@@ -71,6 +71,18 @@ def test_move_errors_name_the_option(capsys, extra, option):
     assert option in err
 
 
+def test_move_path_csv_errors_name_the_file_and_row(capsys, tmp_path):
+    bad = tmp_path / "path.csv"
+    bad.write_text("t_s,x_mm,y_mm,phi_rad\n0,0,0,0\n0.1,nan,0,0\n")
+    code, _, err = run(capsys, "move", "--segments", "3", "--path-csv", str(bad))
+    assert code == 2
+    assert err.splitlines()[-1] == f"error: {bad}: row 3: path_csv: every value must be finite, got '0.1,nan,0,0'"
+    bad.write_text("t_s,x_mm,y_mm,phi_rad\n0,0,0,0\n0.1,1,0,0\n")  # a good path cannot be shaped
+    code, _, err = run(capsys, "move", "--segments", "3", "--path-csv", str(bad), "--shaper", "zv")
+    assert code == 2
+    assert err.splitlines()[-1].startswith("error: --shaper: a shaper shapes a profile move")
+
+
 def test_rollout_integrator_option(capsys):
     base = ["rollout", "--segments", "3", "--no-axial", "--thickness-mm", "5", "--duration-s", "0.003", "--json"]
     code, out, err = run(capsys, *base, "--force-x-n", "1", "--integrator", "explicit")
@@ -90,7 +102,12 @@ def test_rollout_integrator_option(capsys):
     assert json.loads(out)["stepping"]["step_s"] == 5e-5
     code, _, err = run(capsys, *base, "--band-hz", "1e6")
     assert code == 2
-    assert "--integrator explicit" in err
+    line = err.splitlines()[-1]
+    assert line.startswith("error: --band-hz: the discrete step from it, ")
+    assert line.endswith(", got 1000000.0; use the explicit integrator, or a lower band")
+    code, _, err = run(capsys, *base, "--timestep-s", "1e-9")  # the discrete step itself
+    assert code == 2
+    assert err.splitlines()[-1].startswith("error: --timestep-s: the discrete step from it, 1e-09 s, is below the ")
 
 
 def test_transient_and_impact_integrator_options(capsys):
@@ -100,6 +117,10 @@ def test_transient_and_impact_integrator_options(capsys):
     d = json.loads(out)
     assert d["stepping"]["band_hz"] == 300.0
     assert d["stepping"]["band_source"] == "given"
+    # the stepping's band is transient's --step-band-hz (its --band-hz is the reduced model's band)
+    code, _, err = run(capsys, *argv[:-2], "--step-band-hz", "1e6")
+    assert code == 2
+    assert err.splitlines()[-1].startswith("error: --step-band-hz: the discrete step from it, ")
     code, _, err = run(capsys, "impact", "--segments", "3", "--integrator", "explicit", "--implicit-step-s", "1e-5")
     assert code == 2
     assert "--implicit-step-s" in err

@@ -49,7 +49,8 @@ def test_batched_rows_are_the_single_rollouts(model, tmp_path):
     [
         ({"wrenches": [[1.0, 2.0]]}, "wrenches"),
         ({"wrenches": [[np.nan, 0.0, 0.0]]}, "wrenches"),
-        ({"threads": 0}, "--threads"),
+        ({"threads": 0}, "^threads: must be an integer >= 1, got 0"),
+        ({"band_hz": -1.0}, "^band_hz: must be a positive finite number"),
         ({"duration_s": -1.0}, "duration_s"),
     ],
 )

@@ -189,9 +189,9 @@ def test_point_acceleration_is_rigid_body_kinematics(symmetric_manip):
         ({"timestep_s": 2e-4}, "sample_s"),
         ({"timestep_s": 5e-5, "pulse_s": 2e-4}, "pulse_s / 10"),
         ({"timestep_s": -1e-5}, "timestep_s must be positive"),
-        ({"timestep_s": 1e-5, "integrator": "explicit"}, "drop it with explicit"),
-        ({"integrator": "rk4"}, "--integrator"),
-        ({"band_hz": 0.0}, "--band-hz"),
+        ({"timestep_s": 1e-5, "integrator": "explicit"}, "^timestep_s: .*; drop it with the explicit integrator"),
+        ({"integrator": "rk4"}, "^integrator: unknown integrator, got 'rk4'"),
+        ({"band_hz": 0.0}, "^band_hz: must be a positive finite number, got 0.0"),
         ({"impact": LinkPoint("distal_9", 0.5, "z")}, "unknown link"),
     ],
 )

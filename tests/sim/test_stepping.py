@@ -105,15 +105,23 @@ def test_step_rule_meets_the_bound(flexible_small):
     assert choose_stepping(built, band_hz=400.0, f1_hz=f1).step_s == pytest.approx(
         MAX_NUMERICAL_DAMPING / (math.pi * 400.0)
     )
-    for kw, match in (
-        ({"integrator": "rk4"}, "--integrator"),
-        ({"band_hz": -5.0}, "--band-hz"),
-        ({"band_hz": float("nan")}, "--band-hz"),
-        ({"integrator": "explicit", "step_s": 1e-5}, "--step-s"),
-        ({"band_hz": 1e5}, "--integrator explicit"),
+    for kw, parameter, match in (
+        ({"integrator": "rk4"}, "integrator", "^integrator: unknown integrator, got 'rk4'; choose one of discrete"),
+        ({"band_hz": -5.0}, "band_hz", "^band_hz: must be a positive finite number, got -5.0"),
+        ({"band_hz": float("nan")}, "band_hz", "^band_hz: must be a positive"),
+        ({"integrator": "explicit", "step_s": 1e-5}, "step_s", "^step_s: sets the discrete integrator's step"),
+        ({"band_hz": 1e5}, "band_hz", "below the explicit reference's own .*; use the explicit .* a lower band$"),
+        ({"step_s": 1e-9}, "step_s", "below the explicit reference's own .* a larger step$"),
     ):
-        with pytest.raises(SteppingError, match=match):
+        with pytest.raises(SteppingError, match=match) as exc:
             choose_stepping(built, f1_hz=f1, **kw)
+        assert exc.value.parameter == parameter
+        given = kw[parameter]
+        assert exc.value.value == given or (math.isnan(given) and math.isnan(exc.value.value))
+    # a band that allows a step the output step is too short for: the output step is named
+    with pytest.raises(SteppingError, match=r"; use the explicit integrator, or a larger output step$") as exc:
+        choose_stepping(built, f1_hz=f1, divides_s=1e-9)
+    assert (exc.value.parameter, exc.value.value) == ("output_step_s", 1e-9)
 
 
 @pytest.fixture(scope="module")

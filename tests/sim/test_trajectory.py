@@ -62,7 +62,7 @@ def test_shaper_cancels_the_mode(kind, zeta):
     assert abs(np.sum(amps * np.exp((zeta * w - 1j * wd) * times))) < 1e-12
     if kind == "zvd":
         assert abs(np.sum(amps * times * np.exp((zeta * w - 1j * wd) * times))) < 1e-12
-    with pytest.raises(MoveError, match="--shaper"):
+    with pytest.raises(MoveError, match=r"^shaper: unknown input shaper, got 'zvdd'; choose one of none, zv, zvd"):
         shaper("zvdd", f, zeta)
 
 
@@ -89,19 +89,25 @@ def test_path_csv(tmp_path):
     path = MovePath(Pose(0, 0), Pose(0.01, 0.002, 0.01), 0.2, samples=data)
     assert path.duration_s == 0.2
     assert np.allclose(path.poses(np.array([0.05, 1.0])), [[0.0025, 0.0, 0.0], [0.010, 0.002, 0.01]])
-    for text, match in (
-        ("x,y\n1,2\n", "header"),
-        ("t_s,x_mm,y_mm,phi_rad\n0,0,0,0\n", "two rows"),
-        ("t_s,x_mm,y_mm,phi_rad\n0,0,0,0\n0,1,0,0\n", "increase"),
-        ("t_s,x_mm,y_mm,phi_rad\n0,0,0,0\n0.1,a,0,0\n", "not a number"),
-        ("t_s,x_mm,y_mm,phi_rad\n0,0,0,0\n0.1,nan,0,0\n", "finite"),
+    for text, match, row in (
+        ("x,y\n1,2\n", "header", 1),
+        ("# a comment\n\nt_s,x_mm,y_mm,phi_rad\n0,0,0,0\n", "two rows", None),
+        ("t_s,x_mm,y_mm,phi_rad\n0,0,0,0\n0,1,0,0\n", "increase", 3),
+        ("t_s,x_mm,y_mm,phi_rad\n0.1,0,0,0\n0.2,1,0,0\n", "start at 0", 2),
+        ("t_s,x_mm,y_mm,phi_rad\n0,0,0,0\n# skipped\n0.1,a,0,0\n", "not a number", 4),
+        ("t_s,x_mm,y_mm,phi_rad\n0,0,0,0\n0.1,nan,0,0\n", "finite", 3),
+        ("t_s,x_mm,y_mm,phi_rad\n0,0,0,0\n0.1,1,0\n", "4 values", 3),
     ):
         bad = tmp_path / "bad.csv"
         bad.write_text(text)
-        with pytest.raises(MoveError, match=match):
+        with pytest.raises(MoveError, match=match) as exc:
             read_path_csv(bad)
-    with pytest.raises(MoveError, match="not found"):
+        # the contract: the parameter, the file and the row of the bad value (row numbers count every line)
+        assert (exc.value.parameter, exc.value.file, exc.value.row) == ("path_csv", str(bad), row)
+        assert str(exc.value).startswith(f"{bad}: " + (f"row {row}: " if row else ""))
+    with pytest.raises(MoveError, match="not found") as exc:
         read_path_csv(tmp_path / "nowhere.csv")
+    assert (exc.value.parameter, exc.value.value) == ("path_csv", str(tmp_path / "nowhere.csv"))
 
 
 SHORT_MOVE = MovePath(Pose(0.0, 0.0, 0.0), Pose.from_mm(10.0, 0.0, 0.0), 0.15)
@@ -152,20 +158,26 @@ def test_move_outputs(short_moves, tmp_path):
     assert "residual vibration" in res.table()
     fig = res.plot()
     assert len(fig.axes) == 3
-    with pytest.raises(MoveError, match="--out"):
+    with pytest.raises(MoveError, match=r"^out: output file .* must end in \.csv or \.npz") as exc:
         res.save(tmp_path / "m.txt")
+    assert exc.value.parameter == "out"  # the command line names its --out
 
 
 def test_bad_moves(default_manip):
     opts = ModelOptions(segments=3, axial=False)
     path = MovePath(Pose(0.0, 0.0, 0.0), Pose.from_mm(10.0, 0.0, 0.0), 0.15)
-    with pytest.raises(MoveError, match="--profile"):
+    with pytest.raises(MoveError, match=r"^profile: unknown motion profile, got 'cubic'"):
         simulate_move(default_manip, MovePath(path.start, path.end, 0.15, kind="cubic"), options=opts)
-    with pytest.raises(MoveError, match="--move-s"):
+    with pytest.raises(MoveError, match=r"^move_s: the move time must be a positive finite time \(s\), got -1.0"):
         simulate_move(default_manip, MovePath(path.start, path.end, -1.0), options=opts)
-    with pytest.raises(MoveError, match="--settle-s"):
+    with pytest.raises(MoveError, match=r"^settle_s: must be a positive finite number, got 0.0"):
         simulate_move(default_manip, path, settle_s=0.0, options=opts)
-    with pytest.raises(MoveError, match="--shaper"):
+    with pytest.raises(MoveError, match=r"^settle_tol_m: must be a positive finite number, got nan"):
+        simulate_move(default_manip, path, settle_tol_m=math.nan, options=opts)
+    with pytest.raises(MoveError, match=r"^shaper: unknown input shaper"):
         simulate_move(default_manip, path, shaper_kind="zvdd", options=opts)
+    sampled = MovePath(path.start, path.end, 0.15, samples=np.array([[0.0, 0, 0, 0], [0.15, 0.01, 0, 0]]))
+    with pytest.raises(MoveError, match=r"^shaper: a shaper shapes a profile move.*; drop the shaper"):
+        simulate_move(default_manip, sampled, shaper_kind="zv", options=opts)
     with pytest.raises(FpmSimError, match="unreachable"):
         simulate_move(default_manip, MovePath(path.start, Pose(2.0, 0.0), 0.15), options=opts)

@@ -252,12 +252,12 @@ def estimate_modes(
         fn, xi = remove_window_decay(fn, xi, window_tau_s=tau, source=frf.source)
     step = frf.discrete_step_s if discrete_step_s is None else (discrete_step_s or None)
     if step is not None:
-        from fpm_sim.sim.stepping import SteppingError, remove_integrator_effect
+        from fpm_sim.sim.stepping import SteppingError, remove_integrator_effect, reraise_as
 
         try:
-            fn, xi = remove_integrator_effect(fn, xi, step_s=step, source=frf.source)
+            fn, xi = remove_integrator_effect(fn, xi, step_s=step, source=frf.source, parameter="discrete_step_s")
         except SteppingError as e:
-            raise EmaError(str(e)) from None
+            raise reraise_as(EmaError, e) from None
     order = np.argsort(fn)
     return ModalEstimate(frf.source, frf.pose_mm_rad, fn[order], xi[order], window_tau_s=tau, discrete_step_s=step)
 
@@ -302,9 +302,7 @@ def write_modes_csv(estimates: Sequence[ModalEstimate], path: str | Path, *, hea
         w.writerow(cols)
         for e in estimates:
             if e.pose_mm_rad is None:
-                raise EmaError(
-                    f"{e.source}: the pose of this FRF is unknown", parameter="pose_mm_rad", hint="give it"
-                )
+                raise EmaError(f"{e.source}: the pose of this FRF is unknown", parameter="pose_mm_rad", hint="give it")
             f = [f"{v:.6g}" for v in e.freq_hz] + [""] * (n - len(e.freq_hz))
             z = [f"{v:.5g}" for v in e.damping] + [""] * (n - len(e.damping))
             w.writerow([f"{v:.6g}" for v in e.pose_mm_rad] + f + z + [e.mode_label or "", e.source])
