@@ -52,7 +52,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         path, file_opts = parse_measured_arg(m)
         rd_text = file_opts.get("reading", args.reading)
         reading = parse_reading(rd_text) if rd_text else None
-        datasets.append(read_measured_csv(path, reading=reading, sigma_pct=float(file_opts.get("sigma_pct", args.sigma_pct))))
+        datasets.append(
+            read_measured_csv(path, reading=reading, sigma_pct=float(file_opts.get("sigma_pct", args.sigma_pct)))
+        )
     tests = read_subsystems_csv(args.subsystems) if args.subsystems else []
     observations = [o for ds in datasets for o in ds.observations]
     if not observations and not tests:
@@ -76,6 +78,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         seed=args.seed,
         workers=args.workers,
         sample=args.sample,
+        walks=args.walks,
         max_calls=args.max_calls,
         draws=args.draws,
     )
@@ -143,12 +146,17 @@ def register(sub: argparse._SubParsersAction) -> None:
         help=f"default relative sd (%%) of a measured frequency (default {DEFAULT_SIGMA_PCT:g})",
     )
     p.add_argument("--live-points", type=int, default=250, help="nested sampling live points (default 250)")
-    p.add_argument("--dlogz", type=float, default=0.5, help="stop when the remaining evidence is below this (default 0.5)")
+    p.add_argument(
+        "--dlogz", type=float, default=0.5, help="stop when the remaining evidence is below this (default 0.5)"
+    )
     p.add_argument(
         "--sample",
         default="rwalk",
         choices=("rwalk", "rslice", "unif"),
         help="dynesty's proposal (default rwalk: random walks, robust in 10-20 dimensions)",
+    )
+    p.add_argument(
+        "--walks", type=int, default=None, help="rwalk: steps per random walk (default: dynesty's, 20 + dimensions)"
     )
     p.add_argument("--max-calls", type=int, default=None, help="stop after this many likelihood calls (not converged)")
     p.add_argument("--draws", type=int, default=1000, help="equal-weight draws written to posterior.nc (default 1000)")

@@ -66,7 +66,7 @@ def inference_data(cal: Calibration, *, command: str, idx: np.ndarray | None = N
     post: dict[str, Any] = {}
     for i, name in enumerate(p.names):
         if name == BRANCH_PARAMETER:
-            br = np.array([ELBOW_BRANCHES[int(round(v))] for v in draws[:, i]], dtype=np.int8)
+            br = np.array([ELBOW_BRANCHES[round(v)] for v in draws[:, i]], dtype=np.int8)
             post[name] = xr.DataArray(br[None], dims=("chain", "draw", "arm"))
         else:
             post[name] = xr.DataArray(draws[None, :, i].astype(np.float64), dims=("chain", "draw"))

@@ -36,6 +36,7 @@ inverse CDF (:meth:`Prior.transform`), as nested sampling needs.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 from collections.abc import Mapping, Sequence
@@ -118,7 +119,7 @@ class SingularAtPhi0:
     (``phi = 0``), is near a parallel singularity, and the turn ``turn_rad`` moves it away.
 
     Per pose, the probability the statement holds under a layout is
-    ``sigmoid((near - m_par(phi=0)) / width) * sigmoid((m(turn) - near) / width)`` (``m_par``: the parallel
+    ``sigmoid(min(near - m_par(phi=0), m(turn) - near) / width)`` (both thresholds passed; the smaller margin counts) (``m_par``: the parallel
     measure, ``m``: min of serial and parallel, :mod:`fpm_sim.kinematics`; unreachable counts as not
     holding); the likelihood term is ``log(eps + (1 - eps) P)``: the statement is itself uncertain (it may
     be wrong with probability ``eps``), so it bends the posterior, it does not cut it.
@@ -213,10 +214,12 @@ def _prior(name: str, tbl: Any, where: str) -> Prior:
 def _statement(cls: type, tbl: Any, where: str) -> Any:
     if not isinstance(tbl, Mapping):
         raise PriorError(f"{where}: expected a table")
-    fields_ = {f for f in cls.__dataclass_fields__ if f != "reason"}
+    fields_ = {f.name for f in dataclasses.fields(cls) if f.name != "reason"}
     extra = set(tbl) - fields_ - {"enabled", "reason"}
     if extra:
-        raise PriorError(f"{where}: unknown key(s) {sorted(extra)}; it takes enabled, reason, {', '.join(sorted(fields_))}")
+        raise PriorError(
+            f"{where}: unknown key(s) {sorted(extra)}; it takes enabled, reason, {', '.join(sorted(fields_))}"
+        )
     enabled = tbl.get("enabled", True)
     if not isinstance(enabled, bool):
         raise PriorError(f"{where}.enabled: true or false, got {enabled!r}")
@@ -262,31 +265,37 @@ def read_priors(source: str | Path, free: Sequence[str], *, text: str | None = N
         raise PriorError(f"{where}: not valid TOML: {exc}") from exc
     unknown = set(doc) - {"parameters", "likelihood", "statements"}
     if unknown:
-        raise PriorError(f"{where}: unknown section(s) {sorted(unknown)}; use [parameters.*], [likelihood], [statements.*]")
+        raise PriorError(
+            f"{where}: unknown section(s) {sorted(unknown)}; use [parameters.*], [likelihood], [statements.*]"
+        )
     ptab = doc.get("parameters", {})
     names = list(free)
     stray = [k for k in ptab if k not in names and k != BRANCH_PARAMETER]
     if stray:
         raise PriorError(
-            f"{where}: [parameters.\"{stray[0]}\"] is not a free parameter of this run; the free ones are "
+            f'{where}: [parameters."{stray[0]}"] is not a free parameter of this run; the free ones are '
             f"{', '.join(names)} (and {BRANCH_PARAMETER}); remove it or free its group (--free)"
         )
     missing = [n for n in names if n not in ptab]
     if missing:
-        raise PriorError(f"{where}: no prior for the free parameter(s) {', '.join(missing)}; add [parameters.\"{missing[0]}\"]")
-    params = tuple(_prior(n, ptab[n], f"{where} [parameters.\"{n}\"]") for n in names)
+        raise PriorError(
+            f'{where}: no prior for the free parameter(s) {", ".join(missing)}; add [parameters."{missing[0]}"]'
+        )
+    params = tuple(_prior(n, ptab[n], f'{where} [parameters."{n}"]') for n in names)
     sample_branches, branch_reason = False, "fixed: the base description's elbow branches"
     if BRANCH_PARAMETER in ptab:
         t = ptab[BRANCH_PARAMETER]
-        w = f"{where} [parameters.\"{BRANCH_PARAMETER}\"]"
+        w = f'{where} [parameters."{BRANCH_PARAMETER}"]'
         d = t.get("dist") if isinstance(t, Mapping) else None
         if d not in ("branches", "fixed"):
-            raise PriorError(f"{w}.dist: {d!r}; use \"branches\" (uniform over the 8 combinations) or \"fixed\"")
+            raise PriorError(f'{w}.dist: {d!r}; use "branches" (uniform over the 8 combinations) or "fixed"')
         sample_branches, branch_reason = d == "branches", _reason(t, w)
     lik = doc.get("likelihood", {})
     unknown = set(lik) - {"discrepancy_rel", "rig_sigma_pct"}
     if unknown:
-        raise PriorError(f"{where} [likelihood]: unknown key(s) {sorted(unknown)}; it takes discrepancy_rel, rig_sigma_pct")
+        raise PriorError(
+            f"{where} [likelihood]: unknown key(s) {sorted(unknown)}; it takes discrepancy_rel, rig_sigma_pct"
+        )
     disc: Prior | None = None
     disc_fixed = 0.0
     d_tbl = lik.get("discrepancy_rel", {"value": 0.0, "reason": "no discrepancy term"})
@@ -302,8 +311,14 @@ def read_priors(source: str | Path, free: Sequence[str], *, text: str | None = N
     st = doc.get("statements", {})
     unknown = set(st) - {"singular_at_phi0", "measured_poses_clear"}
     if unknown:
-        raise PriorError(f"{where}: unknown statement(s) {sorted(unknown)}; known: singular_at_phi0, measured_poses_clear")
-    a = _statement(SingularAtPhi0, st["singular_at_phi0"], f"{where} [statements.singular_at_phi0]") if "singular_at_phi0" in st else None
+        raise PriorError(
+            f"{where}: unknown statement(s) {sorted(unknown)}; known: singular_at_phi0, measured_poses_clear"
+        )
+    a = (
+        _statement(SingularAtPhi0, st["singular_at_phi0"], f"{where} [statements.singular_at_phi0]")
+        if "singular_at_phi0" in st
+        else None
+    )
     b = (
         _statement(MeasuredPosesClear, st["measured_poses_clear"], f"{where} [statements.measured_poses_clear]")
         if "measured_poses_clear" in st

@@ -83,7 +83,9 @@ class CalibrationProblem:
                 f"({', '.join(free)}); read them with read_priors(path, parameter_set(base, groups).names)"
             )
         if any(p.subsystem for p in self.parameters.parameters) and not self.rig_tests:
-            raise CalibrationError("--free rig needs --subsystems FILE.csv (the rig parameters are seen only by rig tests)")
+            raise CalibrationError(
+                "--free rig needs --subsystems FILE.csv (the rig parameters are seen only by rig tests)"
+            )
 
     # -- pickling: the cached parameter set holds closures; drop it, rebuild on use
     def __getstate__(self) -> dict[str, Any]:
@@ -165,7 +167,7 @@ class CalibrationProblem:
             k += 1
         branch = self.base.geometry.elbow_branch
         if self.priors.sample_branches:
-            branch = ELBOW_BRANCHES[int(round(float(theta[k])))]
+            branch = ELBOW_BRANCHES[round(float(theta[k]))]
         return x, d, branch
 
     def config(self, theta: np.ndarray) -> Manipulator:
@@ -187,7 +189,10 @@ class CalibrationProblem:
         if self.rig_tests:
             from fpm_sim.study.reproduce import subsystem_frequencies
 
-            rigs = [r.ours_hz for r in subsystem_frequencies(cfg, segments=self.subsystem_segments, tests=list(self.rig_tests))]
+            rigs = [
+                r.ours_hz
+                for r in subsystem_frequencies(cfg, segments=self.subsystem_segments, tests=list(self.rig_tests))
+            ]
             f = np.concatenate([f, np.asarray(rigs, float)])
         return f
 
@@ -236,4 +241,3 @@ class CalibrationProblem:
         r = (f - self._measured) / s
         ll = float(-0.5 * np.sum(r**2) - np.sum(np.log(s)) - 0.5 * len(r) * math.log(2 * math.pi))
         return ll + self.statements_log_likelihood(cfg)
-

@@ -75,7 +75,9 @@ def render_report(cal: Calibration, *, command: str, data_note: str) -> str:
         "## Diagnostics",
         "",
         f"- nested sampling (dynesty, {cal.options.live_points} live points, stop at dlogz {cal.options.dlogz:g}, "
-        f"proposal {cal.options.sample}, seed {cal.options.seed}): {cal.n_iterations} iterations, "
+        f"proposal {cal.options.sample}"
+        + (f" with {cal.options.walks} steps per walk" if cal.options.walks else "")
+        + f", seed {cal.options.seed}): {cal.n_iterations} iterations, "
         f"{cal.n_calls} likelihood calls, {cal.seconds:.0f} s"
         + ("" if cal.converged else " -- STOPPED ON --max-calls, NOT CONVERGED"),
         f"- log-evidence ln Z = {cal.log_evidence:.3f} +- {cal.log_evidence_err:.3f}",

@@ -63,6 +63,8 @@ class SamplerOptions:
     seed: int = 0
     workers: int = 1
     sample: str = "rwalk"
+    walks: int | None = None
+    """``rwalk``: steps of each random walk (dynesty's default when None: 20 + ndim)."""
     max_calls: int | None = None
     draws: int = 1000
     """Equal-weight draws resampled from the weighted samples for the posterior file."""
@@ -75,6 +77,8 @@ class SamplerOptions:
             raise CalibrationError(f"--dlogz must be > 0, got {self.dlogz}")
         if self.workers < 1:
             raise CalibrationError(f"--workers must be >= 1, got {self.workers}")
+        if self.walks is not None and self.walks < 2:
+            raise CalibrationError(f"--walks must be >= 2, got {self.walks}")
         if self.draws < 1:
             raise CalibrationError(f"--draws must be >= 1, got {self.draws}")
         if self.max_calls is not None and self.max_calls < self.live_points:
@@ -177,7 +181,7 @@ class Calibration:
             "coverage50": float(np.mean(self.coverage(0.5))),
             "coverage90": float(np.mean(self.coverage(0.9))),
             "data": data,
-            "options": {k: getattr(self.options, k) for k in ("live_points", "dlogz", "seed", "sample", "max_calls")},
+            "options": {k: getattr(self.options, k) for k in ("live_points", "dlogz", "seed", "sample", "walks", "max_calls")},
         }
 
     def table(self) -> str:
@@ -277,6 +281,7 @@ def run_calibration(
                 problem.ndim,
                 nlive=opts.live_points,
                 sample=opts.sample,
+                walks=opts.walks,
                 rstate=np.random.default_rng(opts.seed),
                 pool=pool,
                 queue_size=opts.workers if pool is not None else None,
