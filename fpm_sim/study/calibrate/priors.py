@@ -119,10 +119,10 @@ class SingularAtPhi0:
     (``phi = 0``), is near a parallel singularity, and the turn ``turn_rad`` moves it away.
 
     Per pose, the probability the statement holds under a layout is
-    ``sigmoid(min(near - m_par(phi=0), m(turn) - near) / width)`` (both thresholds passed; the smaller margin counts) (``m_par``: the parallel
-    measure, ``m``: min of serial and parallel, :mod:`fpm_sim.kinematics`; unreachable counts as not
-    holding); the likelihood term is ``log(eps + (1 - eps) P)``: the statement is itself uncertain (it may
-    be wrong with probability ``eps``), so it bends the posterior, it does not cut it.
+    ``P = sigmoid(min(near - m_par(phi=0), m(turn) - near) / width)`` (both thresholds passed; the smaller
+    margin counts; ``m_par``: the parallel measure, ``m``: min of serial and parallel, :mod:`fpm_sim.kinematics`;
+    unreachable counts as not holding); the likelihood term is ``log(eps + (1 - eps) P)``: the statement is
+    itself uncertain (it may be wrong with probability ``eps``), so it bends the posterior, it does not cut it.
     """
 
     poses_mm: tuple[tuple[float, float], ...] = ((100.0, 0.0), (50.0, 0.0), (0.0, 0.0), (-50.0, 0.0), (-100.0, 0.0))
@@ -157,7 +157,7 @@ class Priors:
     rig_sigma_pct: float
     singular_at_phi0: SingularAtPhi0 | None
     measured_poses_clear: MeasuredPosesClear | None
-    source: str = ""
+    source: str = field(default="", repr=False)
     text: str = field(default="", repr=False)
 
     @property

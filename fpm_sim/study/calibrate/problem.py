@@ -37,9 +37,12 @@ from fpm_sim.study.calibrate.priors import Priors
 from fpm_sim.study.identify.data import Observation
 from fpm_sim.study.identify.engine import ELBOW_BRANCHES, predict_observations
 from fpm_sim.study.identify.parameters import ParameterSet, parameter_set
+from fpm_sim.study.inplane_surrogate import inplane_first_frequencies
 from fpm_sim.study.tables import SubsystemTest
 
-__all__ = ["CalibrationError", "CalibrationProblem", "log_sigmoid_soft"]
+__all__ = ["MODELS", "CalibrationError", "CalibrationProblem", "log_sigmoid_soft"]
+
+MODELS = ("segments", "inplane")
 
 
 class CalibrationError(FpmSimError):
@@ -70,8 +73,20 @@ class CalibrationProblem:
     rig_tests: tuple[SubsystemTest, ...] = ()
     segments: int = 4
     subsystem_segments: int = 8
+    model: str = "segments"
+    """``"segments"``: the segment model (:func:`predict_observations`); ``"inplane"``: the analytic in-plane
+    surrogate (:mod:`fpm_sim.study.inplane_surrogate`; first frequencies only, no rig tests): thousands of times
+    cheaper, for checks of the sampler itself (simulation-based calibration), never for a reported result."""
 
     def __post_init__(self) -> None:
+        if self.model not in MODELS:
+            raise CalibrationError(f"model must be one of {', '.join(MODELS)}, got {self.model!r}")
+        if self.model == "inplane" and (
+            self.rig_tests or any(o.mode != 1 or o.label == "out_of_plane" for o in self.observations)
+        ):
+            raise CalibrationError(
+                "the in-plane surrogate gives first in-plane frequencies only: no rig tests, f1 only"
+            )
         if not self.observations and not self.rig_tests:
             raise CalibrationError("no data: give --measured FILE.csv and/or --subsystems FILE.csv")
         if self.segments < 1:
@@ -185,6 +200,8 @@ class CalibrationProblem:
                 cfg = self.config(theta)
             except (ConfigError, ValueError):
                 return np.full(self.n_data, np.nan)
+        if self.model == "inplane":
+            return inplane_first_frequencies(cfg, [o.pose for o in self.observations])
         f = predict_observations(cfg, list(self.observations), options=fast_options(segments=self.segments))
         if self.rig_tests:
             from fpm_sim.study.reproduce import subsystem_frequencies

@@ -7,10 +7,10 @@ module-level :func:`_worker_log_likelihood` / :func:`_worker_prior_transform`; n
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import math
 import multiprocessing
-import pickle
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -49,8 +49,10 @@ def _worker_predict(theta: np.ndarray) -> np.ndarray:
 
 
 def problem_digest(problem: CalibrationProblem) -> str:
-    """A fingerprint of the problem (its pickled data), stored beside a checkpoint to refuse a mismatched resume."""
-    return hashlib.sha256(pickle.dumps(problem, protocol=4)).hexdigest()[:16]
+    """A fingerprint of the problem's data (the repr of its fields: deterministic, unlike a pickle's bytes),
+    stored beside a checkpoint to refuse a mismatched resume."""
+    fields = tuple(getattr(problem, f.name) for f in dataclasses.fields(problem))
+    return hashlib.sha256(repr(fields).encode()).hexdigest()[:16]
 
 
 @dataclass(frozen=True)
@@ -181,7 +183,9 @@ class Calibration:
             "coverage50": float(np.mean(self.coverage(0.5))),
             "coverage90": float(np.mean(self.coverage(0.9))),
             "data": data,
-            "options": {k: getattr(self.options, k) for k in ("live_points", "dlogz", "seed", "sample", "walks", "max_calls")},
+            "options": {
+                k: getattr(self.options, k) for k in ("live_points", "dlogz", "seed", "sample", "walks", "max_calls")
+            },
         }
 
     def table(self) -> str:
