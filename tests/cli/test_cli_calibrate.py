@@ -34,7 +34,8 @@ def files(tmp_path):
 def _argv(d, *extra):
     return [
         "calibrate", "--measured", str(d / "m.csv"), "--priors", str(d / "p.toml"), "--free", "section-height",
-        "--segments", "3", "--live-points", "6", "--dlogz", "10", "--sample", "unif", "--quiet", "--out", str(d / "out"), *extra,
+        "--segments", "3", "--live-points", "6", "--dlogz", "10", "--sample", "unif", "--quiet",
+        "--out", str(d / "out"), *extra,
     ]  # fmt: skip
 
 
