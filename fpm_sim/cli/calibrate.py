@@ -17,7 +17,7 @@ from fpm_sim.cli.common import (
     emit,
     load_manipulator,
 )
-from fpm_sim.cli.identify import DEFAULT_SIGMA_PCT, GROUPS, parse_measured_arg
+from fpm_sim.cli.identify import DEFAULT_SIGMA_PCT, GROUPS, read_data_args
 
 __all__ = ["cmd_calibrate", "register"]
 
@@ -34,8 +34,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from fpm_sim.study.calibrate.posterior import thin, write_config, write_posterior
     from fpm_sim.study.calibrate.report import write_report
     from fpm_sim.study.calibrate.sampler import problem_digest
-    from fpm_sim.study.identify import parameter_set, read_measured_csv, read_subsystems_csv
-    from fpm_sim.study.poses import parse_reading
+    from fpm_sim.study.identify import parameter_set
 
     out = Path(args.out)
     if args.resume:
@@ -44,21 +43,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     else:
         check_output_dir(out, "--out", overwrite=args.overwrite)
     start = load_manipulator(args)
-    groups = [g.strip() for g in args.free.split(",") if g.strip()]
-    if args.subsystems and "rig" not in groups:
-        groups.append("rig")
-    datasets = []
-    for m in args.measured or []:
-        path, file_opts = parse_measured_arg(m)
-        rd_text = file_opts.get("reading", args.reading)
-        reading = parse_reading(rd_text) if rd_text else None
-        datasets.append(
-            read_measured_csv(path, reading=reading, sigma_pct=float(file_opts.get("sigma_pct", args.sigma_pct)))
-        )
-    tests = read_subsystems_csv(args.subsystems) if args.subsystems else []
+    groups, datasets, tests = read_data_args(args)
     observations = [o for ds in datasets for o in ds.observations]
-    if not observations and not tests:
-        raise CliError("no data: give --measured FILE.csv (repeatable) and/or --subsystems FILE.csv")
     ps = parameter_set(start, groups)
     priors = read_priors(args.priors, ps.names)
     problem = CalibrationProblem(

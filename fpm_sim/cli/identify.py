@@ -6,6 +6,7 @@ import argparse
 import shlex
 import sys
 from pathlib import Path
+from typing import Any
 
 from fpm_sim.cli.common import (
     CliError,
@@ -17,7 +18,7 @@ from fpm_sim.cli.common import (
     load_manipulator,
 )
 
-__all__ = ["cmd_identify", "parse_measured_arg", "register"]
+__all__ = ["cmd_identify", "parse_measured_arg", "read_data_args", "register"]
 
 GROUPS = (
     "geometry",
@@ -52,21 +53,12 @@ def parse_measured_arg(text: str) -> tuple[Path, dict[str, str]]:
     return Path(parts[0]), opts
 
 
-def cmd_identify(args: argparse.Namespace) -> int:
-    from fpm_sim.study.identify import (
-        IdentifyOptions,
-        Problem,
-        cross_validate,
-        identify,
-        parameter_set,
-        read_measured_csv,
-        read_subsystems_csv,
-    )
-    from fpm_sim.study.identify.report import summary, write_identification
+def read_data_args(args: argparse.Namespace) -> tuple[list[str], list[Any], list[Any]]:
+    """``--free``, ``--measured`` (with ``--reading``, ``--sigma-pct``) and ``--subsystems`` -> the free groups
+    (``rig`` added with rig tests), the data sets and the rig tests; no data at all is refused."""
+    from fpm_sim.study.identify import read_measured_csv, read_subsystems_csv
     from fpm_sim.study.poses import parse_reading
 
-    check_output_dir(args.out, "--out", overwrite=args.overwrite)
-    start = load_manipulator(args)
     groups = [g.strip() for g in args.free.split(",") if g.strip()]
     if args.subsystems and "rig" not in groups:
         groups.append("rig")
@@ -78,9 +70,25 @@ def cmd_identify(args: argparse.Namespace) -> int:
         sigma = float(file_opts.get("sigma_pct", args.sigma_pct))
         datasets.append(read_measured_csv(path, reading=reading, sigma_pct=sigma))
     tests = read_subsystems_csv(args.subsystems) if args.subsystems else []
-    observations = [o for ds in datasets for o in ds.observations]
-    if not observations and not tests:
+    if not any(ds.observations for ds in datasets) and not tests:
         raise CliError("no data: give --measured FILE.csv (repeatable) and/or --subsystems FILE.csv")
+    return groups, datasets, tests
+
+
+def cmd_identify(args: argparse.Namespace) -> int:
+    from fpm_sim.study.identify import (
+        IdentifyOptions,
+        Problem,
+        cross_validate,
+        identify,
+        parameter_set,
+    )
+    from fpm_sim.study.identify.report import summary, write_identification
+
+    check_output_dir(args.out, "--out", overwrite=args.overwrite)
+    start = load_manipulator(args)
+    groups, datasets, tests = read_data_args(args)
+    observations = [o for ds in datasets for o in ds.observations]
     ps = parameter_set(start, groups)
     if any(p.subsystem for p in ps.parameters) and not tests:
         raise CliError("--free rig needs --subsystems FILE.csv (the rig parameters are seen only by rig tests)")
