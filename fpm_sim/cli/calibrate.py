@@ -81,11 +81,13 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         if problem_digest(saved.problem) != problem_digest(problem):
             raise CliError(f"--resume: {run_file} belongs to another problem; run without --resume (and --overwrite)")
         cal = saved
+    command = "fpm-sim " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     if cal is None:
         cal = run_calibration(problem, opts, checkpoint=out / CHECKPOINT, resume=args.resume, progress=not args.quiet)
+        cal.extra["command"] = command  # the sampling run's command, kept when --resume rewrites the outputs
         with atomic_file(run_file) as tmp:
             tmp.write_bytes(pickle.dumps(cal, protocol=4))
-    command = "fpm-sim " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    command = cal.extra.get("command", command)
     data_note = ", ".join([ds.source for ds in datasets] + ([Path(args.subsystems).name] if tests else []))
     write_posterior(cal, out / "posterior.nc", command=command)
     if args.thin:
