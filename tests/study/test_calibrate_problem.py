@@ -1,6 +1,7 @@
 """The calibration problem: it pickles, a spawn pool's workers compute the same log-likelihood as this
 process, the likelihood is the stated Gaussian (checked with scipy.stats), impossible descriptions are -inf."""
 
+import dataclasses
 import math
 import multiprocessing
 import pickle
@@ -94,3 +95,31 @@ def test_priors_that_do_not_match_the_free_groups_are_refused(default_manip):
     prob = _problem(default_manip)
     with pytest.raises(CalibrationError, match="do not match the free parameters"):
         CalibrationProblem(default_manip, ("section-height",), prob.priors, prob.observations)
+
+
+def test_the_statements_terms_follow_their_stated_formula(default_manip):
+    from fpm_sim.kinematics import inverse_kinematics
+    from fpm_sim.study.calibrate.priors import MeasuredPosesClear, SingularAtPhi0
+
+    prob = _problem(default_manip)
+    a, b = SingularAtPhi0(reason="r"), MeasuredPosesClear(reason="r")
+    priors = dataclasses.replace(prob.priors, singular_at_phi0=a, measured_poses_clear=b)
+    with_statements = dataclasses.replace(prob, priors=priors)
+    g = default_manip.geometry
+
+    def soft(z, eps):
+        return math.log(eps + (1 - eps) / (1 + math.exp(-z)))
+
+    expected = 0.0
+    for x, y in a.poses_mm:  # pose by pose through the single-pose kinematics (not the vectorised call)
+        m0 = inverse_kinematics(g, Pose.from_mm(x, y, 0.0), check_singularity=False).singularity
+        mt = inverse_kinematics(g, Pose.from_mm(x, y, a.turn_rad), check_singularity=False).singularity
+        expected += soft(min(a.near - m0.parallel, min(mt.serial, mt.parallel) - a.near) / a.width, a.eps)
+    for o in prob.observations:
+        m = inverse_kinematics(g, o.pose, check_singularity=False).singularity
+        expected += soft((min(m.serial, m.parallel) - b.min_measure) / b.width, b.eps)
+    got = with_statements.statements_log_likelihood(default_manip)
+    assert got == pytest.approx(expected, rel=1e-9)
+    # the shipped default contradicts statement (a) at some (x, 0) pose (issue 23): the term is far below 0
+    assert got < -5.0
+    assert prob.statements_log_likelihood(default_manip) == 0.0  # none enabled
