@@ -280,7 +280,12 @@ def run_calibration(
                     "base description or segments differ); run without --resume (and --overwrite)"
                 )
             sampler = dynesty.NestedSampler.restore(str(checkpoint), pool=pool)
-            sampler.run_nested(dlogz=opts.dlogz, maxcall=opts.max_calls, print_progress=progress, resume=True, **kw)
+            # a run interrupted mid-way continues (resume=True); one that ended on max_calls has its final live
+            # points added to the results, which dynesty takes out again and continues from with resume=False
+            finished = bool(getattr(sampler, "added_live", False))
+            sampler.run_nested(
+                dlogz=opts.dlogz, maxcall=opts.max_calls, print_progress=progress, resume=not finished, **kw
+            )
         else:
             if checkpoint is not None:
                 digest_file.write_text(digest)
