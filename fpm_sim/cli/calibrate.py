@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import shlex
 import sys
 import warnings
@@ -81,6 +82,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         if problem_digest(saved.problem) != problem_digest(problem):
             raise CliError(f"--resume: {run_file} belongs to another problem; run without --resume (and --overwrite)")
         cal = saved
+        if math.isnan(cal.start_log_likelihood):  # saved before the start check existed
+            cal.start_log_likelihood = problem.start_log_likelihood()
     command = "fpm-sim " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     if cal is None:
         cal = run_calibration(problem, opts, checkpoint=out / CHECKPOINT, resume=args.resume, progress=not args.quiet)

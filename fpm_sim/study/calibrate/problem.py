@@ -240,6 +240,23 @@ class CalibrationProblem:
             total += float(np.sum(log_sigmoid_soft((m - b.min_measure) / b.width, b.eps)))
         return total
 
+    def start_log_likelihood(self) -> float:
+        """``log L`` at the base description (its own elbow branches), the discrepancy at its best on a grid
+        over its prior (when sampled): a check of the sampler. A posterior whose draws all fit worse than the
+        start missed the start's region (nested sampling with too few live points misses narrow modes)."""
+        x0 = self.parameters.x0
+        theta = list(x0)
+        ds = [self.priors.discrepancy_fixed]
+        if self.priors.discrepancy is not None:
+            ds = [float(self.priors.discrepancy.transform(u)) for u in np.linspace(0.01, 0.99, 25)]
+        best = -math.inf
+        for d in ds:
+            t = theta + ([d] if self.priors.discrepancy is not None else [])
+            if self.priors.sample_branches:
+                t.append(float(ELBOW_BRANCHES.index(self.base.geometry.elbow_branch)))
+            best = max(best, self.log_likelihood(np.asarray(t)))
+        return best
+
     def log_likelihood(self, theta: np.ndarray) -> float:
         """``log L(theta)`` (module docstring); ``-inf`` for an impossible description."""
         try:

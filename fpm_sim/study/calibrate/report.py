@@ -80,7 +80,15 @@ def render_report(cal: Calibration, *, command: str, data_note: str) -> str:
         + f", seed {cal.options.seed}): {cal.n_iterations} iterations, "
         f"{cal.n_calls} likelihood calls, {cal.seconds:.0f} s"
         + ("" if cal.converged else " -- STOPPED ON --max-calls, NOT CONVERGED"),
-        f"- log-evidence ln Z = {cal.log_evidence:.3f} +- {cal.log_evidence_err:.3f}",
+        f"- log-evidence ln Z = {cal.log_evidence:.3f} +- {cal.log_evidence_err:.3f} (the error is nested "
+        "sampling's statistical one; a mode the live points never entered is not in it)",
+        f"- best log-likelihood among the draws {np.max(cal.log_likelihood):.2f}; at the start description "
+        f"(discrepancy at its best) {cal.start_log_likelihood:.2f}"
+        + (
+            " -- **the sampler missed the start's region: this posterior is incomplete; rerun with more live points**"
+            if cal.missed_start
+            else ""
+        ),
         f"- effective sample size (Kish) of the weighted samples: {cal.ess_kish:.0f}; equal-weight draws written: "
         f"{len(cal.draws)} ({len(np.unique(cal.draws, axis=0))} distinct)",
         "",

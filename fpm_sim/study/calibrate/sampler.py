@@ -111,7 +111,15 @@ class Calibration:
     f_noisy: np.ndarray
     """``(n_draws, n_data)`` ``f_pred`` plus one draw of the likelihood's noise (``s_i``): the predictive of a
     new measurement, what coverage is checked against."""
+    start_log_likelihood: float = math.nan
+    """:meth:`CalibrationProblem.start_log_likelihood`: compare with ``log_likelihood.max()``."""
     extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def missed_start(self) -> bool:
+        """The start description fits better (by more than 1 in log L) than every draw: the sampler missed its
+        region, the posterior is incomplete (more live points needed)."""
+        return bool(self.start_log_likelihood > float(np.max(self.log_likelihood)) + 1.0)
 
     @property
     def names(self) -> list[str]:
@@ -180,6 +188,9 @@ class Calibration:
             "n_draws": len(self.draws),
             "seconds": self.seconds,
             "converged": self.converged,
+            "start_log_likelihood": self.start_log_likelihood,
+            "max_log_likelihood": float(np.max(self.log_likelihood)),
+            "missed_start": self.missed_start,
             "coverage50": float(np.mean(self.coverage(0.5))),
             "coverage90": float(np.mean(self.coverage(0.9))),
             "data": data,
@@ -194,6 +205,13 @@ class Calibration:
             f"log-evidence {self.log_evidence:.2f} +- {self.log_evidence_err:.2f}; {self.n_calls} likelihood calls, "
             f"{self.n_iterations} iterations, Kish ESS {self.ess_kish:.0f}, {self.seconds:.0f} s"
             + ("" if self.converged else " (stopped on --max-calls: NOT converged)"),
+            f"best log-likelihood among the draws {np.max(self.log_likelihood):.2f}; at the start description "
+            f"{self.start_log_likelihood:.2f}"
+            + (
+                " -- the sampler MISSED the start's region: posterior incomplete, use more live points"
+                if self.missed_start
+                else ""
+            ),
             f"{'parameter':<40} {'5 %':>11} {'50 %':>11} {'95 %':>11}",
         ]
         for i, n in enumerate(self.names):
@@ -328,6 +346,7 @@ def run_calibration(
             pool.join()
     sd = np.stack([problem.noise_sd(f, problem.split(t)[1]) for f, t in zip(f_pred, draws)])
     f_noisy = f_pred + sd * rng.standard_normal(f_pred.shape)
+    start_ll = problem.start_log_likelihood()
     if print_func is not None:
         print_func(f"nested sampling: {n_calls} calls, log Z = {logz:.2f} +- {logzerr:.2f}")
     return Calibration(
@@ -344,4 +363,5 @@ def run_calibration(
         converged=converged,
         f_pred=f_pred,
         f_noisy=f_noisy,
+        start_log_likelihood=start_ll,
     )
