@@ -18,7 +18,7 @@ from fpm_sim.cli.common import (
     emit,
     load_manipulator,
 )
-from fpm_sim.cli.identify import DEFAULT_SIGMA_PCT, GROUPS, read_data_args
+from fpm_sim.cli.identify import GROUPS, add_data_args, read_data_args
 
 __all__ = ["cmd_calibrate", "register"]
 
@@ -115,26 +115,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "model-discrepancy term, by nested sampling (dynesty). Writes OUT/posterior.nc (ArviZ), OUT/report.md, "
         "OUT/config.toml (the posterior median) and figures; checkpoints to OUT/checkpoint.dynesty (--resume).",
     )
-    p.add_argument(
-        "--measured",
-        action="append",
-        metavar="FILE[,sigma_pct=P][,reading=R]",
-        help="measured frequencies (repeatable), as fpm-sim identify reads them",
-    )
-    p.add_argument("--subsystems", type=Path, help="rig tests CSV (rig,setting,experimental_hz); frees the rig group")
+    add_data_args(p)
     p.add_argument("--priors", type=Path, required=True, help="priors TOML (e.g. fpm_sim/data/study_priors.toml)")
     add_config_args(p)
     p.add_argument(
         "--free",
         default="geometry,hardware,section-height",
         help=f"comma-separated parameter groups: {', '.join(GROUPS)} (default geometry,hardware,section-height)",
-    )
-    p.add_argument("--reading", default=None, help="how to read row_mm,col_mm files: x+, x-, y+ or y-")
-    p.add_argument(
-        "--sigma-pct",
-        type=float,
-        default=DEFAULT_SIGMA_PCT,
-        help=f"default relative sd (%%) of a measured frequency (default {DEFAULT_SIGMA_PCT:g})",
     )
     p.add_argument("--live-points", type=int, default=250, help="nested sampling live points (default 250)")
     p.add_argument(

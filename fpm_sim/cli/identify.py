@@ -18,7 +18,7 @@ from fpm_sim.cli.common import (
     load_manipulator,
 )
 
-__all__ = ["cmd_identify", "parse_measured_arg", "read_data_args", "register"]
+__all__ = ["add_data_args", "cmd_identify", "parse_measured_arg", "read_data_args", "register"]
 
 GROUPS = (
     "geometry",
@@ -51,6 +51,25 @@ def parse_measured_arg(text: str) -> tuple[Path, dict[str, str]]:
             raise CliError(f"--measured {text!r}: unknown option {k!r}; use sigma_pct= or reading=")
         opts[k] = v
     return Path(parts[0]), opts
+
+
+def add_data_args(p: argparse.ArgumentParser) -> None:
+    """``--measured``, ``--subsystems``, ``--reading``, ``--sigma-pct`` (read by :func:`read_data_args`)."""
+    p.add_argument(
+        "--measured",
+        action="append",
+        metavar="FILE[,sigma_pct=P][,reading=R]",
+        help="measured frequencies (repeatable); sigma_pct: relative std of its values where no sigma_hz column "
+        "(default --sigma-pct); reading: for row_mm,col_mm files",
+    )
+    p.add_argument("--subsystems", type=Path, help="rig tests CSV (rig,setting,experimental_hz), frees the rig group")
+    p.add_argument("--reading", default=None, help="how to read row_mm,col_mm files: x+, x-, y+ or y-")
+    p.add_argument(
+        "--sigma-pct",
+        type=float,
+        default=DEFAULT_SIGMA_PCT,
+        help=f"default relative std (%%) of a measured frequency (default {DEFAULT_SIGMA_PCT:g})",
+    )
 
 
 def read_data_args(args: argparse.Namespace) -> tuple[list[str], list[Any], list[Any]]:
@@ -172,14 +191,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "tests; global search then bounded least squares; writes OUT/config.toml (usable with --config), "
         "OUT/identify.json, OUT/report.md and figures. Only the data named here is used.",
     )
-    p.add_argument(
-        "--measured",
-        action="append",
-        metavar="FILE[,sigma_pct=P][,reading=R]",
-        help="measured frequencies (repeatable); sigma_pct: relative std of its values where no sigma_hz column "
-        "(default --sigma-pct); reading: for row_mm,col_mm files",
-    )
-    p.add_argument("--subsystems", type=Path, help="rig tests CSV (rig,setting,experimental_hz), frees the rig group")
+    add_data_args(p)
     add_config_args(p)
     p.add_argument(
         "--free",
@@ -200,13 +212,6 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=0.05,
         help="smallest singularity measure accepted at a --workspace pose (default 0.05, the near-singularity "
         "warning's threshold)",
-    )
-    p.add_argument("--reading", default=None, help="how to read row_mm,col_mm files: x+, x-, y+ or y-")
-    p.add_argument(
-        "--sigma-pct",
-        type=float,
-        default=DEFAULT_SIGMA_PCT,
-        help=f"default relative std (%%) of a measured frequency (default {DEFAULT_SIGMA_PCT:g})",
     )
     p.add_argument("--subsystem-sigma-pct", type=float, default=1.0, help="relative std (%%) of a rig test (default 1)")
     p.add_argument(
