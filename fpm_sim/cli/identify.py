@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 from fpm_sim.cli.common import (
     WORKERS_HELP,
@@ -17,7 +18,7 @@ from fpm_sim.cli.common import (
     workers_of,
 )
 
-__all__ = ["cmd_identify", "parse_measured_arg", "register"]
+__all__ = ["add_data_args", "cmd_identify", "parse_measured_arg", "read_data_args", "register"]
 
 GROUPS = (
     "geometry",
@@ -52,21 +53,31 @@ def parse_measured_arg(text: str) -> tuple[Path, dict[str, str]]:
     return Path(parts[0]), opts
 
 
-def cmd_identify(args: argparse.Namespace) -> int:
-    from fpm_sim.study.identify import (
-        IdentifyOptions,
-        Problem,
-        cross_validate,
-        identify,
-        parameter_set,
-        read_measured_csv,
-        read_subsystems_csv,
+def add_data_args(p: argparse.ArgumentParser) -> None:
+    """``--measured``, ``--subsystems``, ``--reading``, ``--sigma-pct`` (read by :func:`read_data_args`)."""
+    p.add_argument(
+        "--measured",
+        action="append",
+        metavar="FILE[,sigma_pct=P][,reading=R]",
+        help="measured frequencies (repeatable); sigma_pct: relative std of its values where no sigma_hz column "
+        "(default --sigma-pct); reading: for row_mm,col_mm files",
     )
-    from fpm_sim.study.identify.report import summary, write_identification
+    p.add_argument("--subsystems", type=Path, help="rig tests CSV (rig,setting,experimental_hz), frees the rig group")
+    p.add_argument("--reading", default=None, help="how to read row_mm,col_mm files: x+, x-, y+ or y-")
+    p.add_argument(
+        "--sigma-pct",
+        type=float,
+        default=DEFAULT_SIGMA_PCT,
+        help=f"default relative std (%%) of a measured frequency (default {DEFAULT_SIGMA_PCT:g})",
+    )
+
+
+def read_data_args(args: argparse.Namespace) -> tuple[list[str], list[Any], list[Any]]:
+    """``--free``, ``--measured`` (with ``--reading``, ``--sigma-pct``) and ``--subsystems`` -> the free groups
+    (``rig`` added with rig tests), the data sets and the rig tests; no data at all is refused."""
+    from fpm_sim.study.identify import read_measured_csv, read_subsystems_csv
     from fpm_sim.study.poses import parse_reading
 
-    check_output_dir(args.out, "--out", overwrite=args.overwrite)
-    start = load_manipulator(args)
     groups = [g.strip() for g in args.free.split(",") if g.strip()]
     if args.subsystems and "rig" not in groups:
         groups.append("rig")
@@ -78,9 +89,25 @@ def cmd_identify(args: argparse.Namespace) -> int:
         sigma = float(file_opts.get("sigma_pct", args.sigma_pct))
         datasets.append(read_measured_csv(path, reading=reading, sigma_pct=sigma))
     tests = read_subsystems_csv(args.subsystems) if args.subsystems else []
-    observations = [o for ds in datasets for o in ds.observations]
-    if not observations and not tests:
+    if not any(ds.observations for ds in datasets) and not tests:
         raise CliError("no data: give --measured FILE.csv (repeatable) and/or --subsystems FILE.csv")
+    return groups, datasets, tests
+
+
+def cmd_identify(args: argparse.Namespace) -> int:
+    from fpm_sim.study.identify import (
+        IdentifyOptions,
+        Problem,
+        cross_validate,
+        identify,
+        parameter_set,
+    )
+    from fpm_sim.study.identify.report import summary, write_identification
+
+    check_output_dir(args.out, "--out", overwrite=args.overwrite)
+    start = load_manipulator(args)
+    groups, datasets, tests = read_data_args(args)
+    observations = [o for ds in datasets for o in ds.observations]
     ps = parameter_set(start, groups)
     if any(p.subsystem for p in ps.parameters) and not tests:
         raise CliError("--free rig needs --subsystems FILE.csv (the rig parameters are seen only by rig tests)")
@@ -160,14 +187,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "tests; global search then bounded least squares; writes OUT/config.toml (usable with --config), "
         "OUT/identify.json, OUT/report.md and figures. Only the data named here is used.",
     )
-    p.add_argument(
-        "--measured",
-        action="append",
-        metavar="FILE[,sigma_pct=P][,reading=R]",
-        help="measured frequencies (repeatable); sigma_pct: relative std of its values where no sigma_hz column "
-        "(default --sigma-pct); reading: for row_mm,col_mm files",
-    )
-    p.add_argument("--subsystems", type=Path, help="rig tests CSV (rig,setting,experimental_hz), frees the rig group")
+    add_data_args(p)
     add_config_args(p)
     p.add_argument(
         "--free",
@@ -188,13 +208,6 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=0.05,
         help="smallest singularity measure accepted at a --workspace pose (default 0.05, the near-singularity "
         "warning's threshold)",
-    )
-    p.add_argument("--reading", default=None, help="how to read row_mm,col_mm files: x+, x-, y+ or y-")
-    p.add_argument(
-        "--sigma-pct",
-        type=float,
-        default=DEFAULT_SIGMA_PCT,
-        help=f"default relative std (%%) of a measured frequency (default {DEFAULT_SIGMA_PCT:g})",
     )
     p.add_argument("--subsystem-sigma-pct", type=float, default=1.0, help="relative std (%%) of a rig test (default 1)")
     p.add_argument(

@@ -71,6 +71,7 @@ COMMAND_MODULES: list[str] = [
     "fpm_sim.cli.readability",
     "fpm_sim.cli.atlas",
     "fpm_sim.cli.design",
+    "fpm_sim.cli.calibrate",
     "fpm_sim.cli.identify",
     "fpm_sim.cli.ema",
     "fpm_sim.cli.check",

@@ -1,0 +1,155 @@
+"""``fpm-sim calibrate``: Bayesian model updating (nested sampling) from measured natural frequencies."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import shlex
+import sys
+import warnings
+from pathlib import Path
+
+from fpm_sim.cli.common import (
+    CliError,
+    add_config_args,
+    add_output_args,
+    add_overwrite_arg,
+    check_output_dir,
+    emit,
+    load_manipulator,
+)
+from fpm_sim.cli.identify import GROUPS, add_data_args, read_data_args
+
+__all__ = ["cmd_calibrate", "register"]
+
+CHECKPOINT = "checkpoint.dynesty"
+RUN_FILE = "calibration.pkl"
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    import pickle
+
+    from fpm_sim.errors import FpmSimWarning
+    from fpm_sim.outputs import atomic_file
+    from fpm_sim.study.calibrate import CalibrationProblem, SamplerOptions, read_priors, run_calibration
+    from fpm_sim.study.calibrate.posterior import thin, write_config, write_posterior
+    from fpm_sim.study.calibrate.report import write_report
+    from fpm_sim.study.calibrate.sampler import problem_digest
+    from fpm_sim.study.identify import parameter_set
+
+    out = Path(args.out)
+    if args.resume:
+        if not (out / CHECKPOINT).exists() and not (out / RUN_FILE).exists():
+            raise CliError(f"--resume: {out} holds no checkpoint ({CHECKPOINT}); run without --resume first")
+    else:
+        check_output_dir(out, "--out", overwrite=args.overwrite)
+    start = load_manipulator(args)
+    groups, datasets, tests = read_data_args(args)
+    observations = [o for ds in datasets for o in ds.observations]
+    ps = parameter_set(start, groups)
+    priors = read_priors(args.priors, ps.names)
+    problem = CalibrationProblem(
+        start, tuple(groups), priors, tuple(observations), tuple(tests), segments=args.segments
+    )
+    if problem.n_data < len(ps.names):
+        warnings.warn(
+            f"{problem.n_data} data for {len(ps.names)} free parameters: the data cannot determine them all; the "
+            "posterior of the undetermined combinations is their prior (read report.md's marginals against the "
+            "priors before using any value)",
+            FpmSimWarning,
+            stacklevel=1,
+        )
+    opts = SamplerOptions(
+        live_points=args.live_points,
+        dlogz=args.dlogz,
+        seed=args.seed,
+        workers=args.workers,
+        sample=args.sample,
+        walks=args.walks,
+        max_calls=args.max_calls,
+        draws=args.draws,
+    )
+    opts.check()
+    out.mkdir(parents=True, exist_ok=True)
+    if args.overwrite and not args.resume:
+        for name in (CHECKPOINT, CHECKPOINT + ".digest", RUN_FILE):
+            (out / name).unlink(missing_ok=True)
+    run_file = out / RUN_FILE
+    cal = None
+    if args.resume and run_file.exists():
+        with run_file.open("rb") as fh:
+            saved = pickle.load(fh)
+        if problem_digest(saved.problem) != problem_digest(problem):
+            raise CliError(f"--resume: {run_file} belongs to another problem; run without --resume (and --overwrite)")
+        cal = saved
+        if math.isnan(cal.start_log_likelihood):  # saved before the start check existed
+            cal.start_log_likelihood = problem.start_log_likelihood()
+    command = "fpm-sim " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    if cal is None:
+        cal = run_calibration(problem, opts, checkpoint=out / CHECKPOINT, resume=args.resume, progress=not args.quiet)
+        cal.extra["command"] = command  # the sampling run's command, kept when --resume rewrites the outputs
+        with atomic_file(run_file) as tmp:
+            tmp.write_bytes(pickle.dumps(cal, protocol=4))
+    command = cal.extra.get("command", command)
+    data_note = ", ".join([ds.source for ds in datasets] + ([Path(args.subsystems).name] if tests else []))
+    write_posterior(cal, out / "posterior.nc", command=command)
+    if args.thin:
+        write_posterior(cal, out / "posterior_thin.nc", command=command, idx=thin(cal, args.thin, seed=args.seed))
+    write_config(cal, out / "config.toml", data_note=data_note, command=command)
+    write_report(cal, out, command=command, data_note=data_note)
+    emit(
+        args,
+        {"result": cal.to_dict(), "out": str(out)},
+        cal.table() + f"\nwrote {out}/posterior.nc, config.toml, report.md, figures",
+    )
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "calibrate",
+        help="Bayesian calibration: a posterior over the unknowns from measured frequencies (nested sampling)",
+        description="Samples the posterior of the free parameter groups of a description given measured natural "
+        "frequencies (and rig tests), priors from a TOML file (one distribution per free parameter, each with its "
+        "reason; the study's statements as soft likelihood terms) and a Gaussian likelihood with a relative "
+        "model-discrepancy term, by nested sampling (dynesty). Writes OUT/posterior.nc (ArviZ), OUT/report.md, "
+        "OUT/config.toml (the posterior median) and figures; checkpoints to OUT/checkpoint.dynesty (--resume).",
+    )
+    add_data_args(p)
+    p.add_argument("--priors", type=Path, required=True, help="priors TOML (e.g. fpm_sim/data/study_priors.toml)")
+    add_config_args(p)
+    p.add_argument(
+        "--free",
+        default="geometry,hardware,section-height",
+        help=f"comma-separated parameter groups: {', '.join(GROUPS)} (default geometry,hardware,section-height)",
+    )
+    p.add_argument("--live-points", type=int, default=250, help="nested sampling live points (default 250)")
+    p.add_argument(
+        "--dlogz", type=float, default=0.5, help="stop when the remaining evidence is below this (default 0.5)"
+    )
+    p.add_argument(
+        "--sample",
+        default="rwalk",
+        choices=("rwalk", "rslice", "unif"),
+        help="dynesty's proposal (default rwalk: random walks, robust in 10-20 dimensions)",
+    )
+    p.add_argument(
+        "--walks", type=int, default=None, help="rwalk: steps per random walk (default: dynesty's, 20 + dimensions)"
+    )
+    p.add_argument("--max-calls", type=int, default=None, help="stop after this many likelihood calls (not converged)")
+    p.add_argument("--draws", type=int, default=1000, help="equal-weight draws written to posterior.nc (default 1000)")
+    p.add_argument("--thin", type=int, default=0, help="also write posterior_thin.nc with this many draws (0: no)")
+    p.add_argument("--segments", type=int, default=4, help="spring locations per link of the model (default 4)")
+    p.add_argument("--workers", type=int, default=1, help="processes evaluating the likelihood (default 1)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the sampler (default 0)")
+    p.add_argument(
+        "--resume",
+        action=argparse.BooleanOptionalAction,
+        default=False,
+        help="continue from OUT/checkpoint.dynesty (or rewrite the outputs of a finished run)",
+    )
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    add_overwrite_arg(p)
+    p.add_argument("--quiet", action=argparse.BooleanOptionalAction, default=False, help="no progress line")
+    add_output_args(p)
+    p.set_defaults(func=cmd_calibrate)

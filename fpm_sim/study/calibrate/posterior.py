@@ -1,0 +1,167 @@
+"""Writing a calibration: ``posterior.nc`` (ArviZ ``InferenceData``, the format shared with the band
+predictions) and ``config.toml`` (the posterior median with its provenance).
+
+``posterior.nc`` groups (see ``docs/identification.md``, "Bayesian updating"):
+
+- ``posterior``: one chain of equal-weight draws; one float64 variable per free parameter, named as
+  :attr:`fpm_sim.study.identify.parameters.ParameterSet.names`; ``likelihood.discrepancy_rel``; when the
+  elbow branches are sampled, ``geometry.elbow_branch`` (int8, dims ``chain, draw, arm``, values +-1).
+  Attributes ``fpm_sim_base_config`` (TOML), ``fpm_sim_free_groups``, ``fpm_sim_segments``, ``fpm_sim_command``;
+- ``sample_stats``: ``log_likelihood`` per draw; attributes ``log_evidence``, ``log_evidence_err``,
+  ``n_calls``, ``ess_kish``;
+- ``observed_data``: ``f_hz`` (dim ``obs``; coordinates ``x_mm``, ``y_mm``, ``phi_rad``, ``label``);
+- ``posterior_predictive``: ``f_hz`` (the model's frequencies at each draw) and ``f_hz_measurement`` (plus
+  one draw of the likelihood's noise), dims ``chain, draw, obs``.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fpm_sim.config import Manipulator, config_to_toml
+from fpm_sim.outputs import atomic_file
+from fpm_sim.study.calibrate.priors import BRANCH_PARAMETER
+from fpm_sim.study.calibrate.sampler import Calibration
+from fpm_sim.study.identify.engine import ELBOW_BRANCHES
+
+__all__ = ["inference_data", "median_config", "thin", "write_config", "write_posterior"]
+
+
+def _import_arviz() -> Any:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)  # arviz 0.23 announces its 1.0 refactor on import
+        import arviz
+
+    return arviz
+
+
+def _obs_coords(cal: Calibration) -> dict[str, Any]:
+    p = cal.problem
+    xs = [o.pose.x_m * 1e3 for o in p.observations] + [math.nan] * len(p.rig_tests)
+    ys = [o.pose.y_m * 1e3 for o in p.observations] + [math.nan] * len(p.rig_tests)
+    ph = [o.pose.phi_rad for o in p.observations] + [math.nan] * len(p.rig_tests)
+    return {
+        "obs": np.arange(p.n_data),
+        "x_mm": ("obs", np.array(xs)),
+        "y_mm": ("obs", np.array(ys)),
+        "phi_rad": ("obs", np.array(ph)),
+        "label": ("obs", np.array(p.labels, dtype=str)),
+    }
+
+
+def inference_data(cal: Calibration, *, command: str, idx: np.ndarray | None = None) -> Any:
+    """The calibration as an ArviZ ``InferenceData`` (module docstring); ``idx``: a subset of the draws."""
+    az = _import_arviz()
+    import xarray as xr
+
+    sel = np.arange(len(cal.draws)) if idx is None else np.asarray(idx)
+    draws = cal.draws[sel]
+    p = cal.problem
+    n = len(sel)
+    post: dict[str, Any] = {}
+    for i, name in enumerate(p.names):
+        if name == BRANCH_PARAMETER:
+            br = np.array([ELBOW_BRANCHES[round(v)] for v in draws[:, i]], dtype=np.int8)
+            post[name] = xr.DataArray(br[None], dims=("chain", "draw", "arm"))
+        else:
+            post[name] = xr.DataArray(draws[None, :, i].astype(np.float64), dims=("chain", "draw"))
+    coords = {"chain": [0], "draw": np.arange(n), "arm": [0, 1, 2]}
+    posterior = xr.Dataset(post, coords=coords if BRANCH_PARAMETER in p.names else {"chain": [0], "draw": np.arange(n)})
+    posterior.attrs.update(
+        fpm_sim_base_config=config_to_toml(p.base, default_source="start description"),
+        fpm_sim_free_groups=",".join(p.groups),
+        fpm_sim_segments=int(p.segments),
+        fpm_sim_command=command,
+    )
+    oc = _obs_coords(cal)
+    stats = xr.Dataset(
+        {"log_likelihood": xr.DataArray(cal.log_likelihood[sel][None], dims=("chain", "draw"))},
+        coords={"chain": [0], "draw": np.arange(n)},
+    )
+    stats.attrs.update(
+        log_evidence=cal.log_evidence,
+        log_evidence_err=cal.log_evidence_err,
+        n_calls=cal.n_calls,
+        n_iterations=cal.n_iterations,
+        ess_kish=cal.ess_kish,
+        converged=int(cal.converged),
+    )
+    observed = xr.Dataset({"f_hz": xr.DataArray(p.measured, dims=("obs",))}, coords=oc)
+    observed["sigma_hz"] = xr.DataArray(p.sigma, dims=("obs",))
+    ppc = xr.Dataset(
+        {
+            "f_hz": xr.DataArray(cal.f_pred[sel][None], dims=("chain", "draw", "obs")),
+            "f_hz_measurement": xr.DataArray(cal.f_noisy[sel][None], dims=("chain", "draw", "obs")),
+        },
+        coords={"chain": [0], "draw": np.arange(n), **oc},
+    )
+    return az.InferenceData(posterior=posterior, sample_stats=stats, observed_data=observed, posterior_predictive=ppc)
+
+
+def thin(cal: Calibration, n: int, *, seed: int = 0) -> np.ndarray:
+    """Indices of ``n`` draws picked at random without replacement (all when there are fewer)."""
+    rng = np.random.default_rng(seed)
+    k = len(cal.draws)
+    return np.sort(rng.choice(k, size=min(n, k), replace=False))
+
+
+def write_posterior(cal: Calibration, path: str | Path, *, command: str, idx: np.ndarray | None = None) -> None:
+    """``posterior.nc`` (atomically)."""
+    idata = inference_data(cal, command=command, idx=idx)
+    with atomic_file(path) as tmp:
+        idata.to_netcdf(str(tmp))
+
+
+def _fmt(v: float) -> str:
+    return f"{v:.4g}"
+
+
+def median_config(cal: Calibration, *, data_note: str) -> Manipulator:
+    """The description at the posterior median of every continuous parameter (the most frequent elbow-branch
+    class among the draws), each set value's provenance
+    ``identified: posterior median +- sd (fpm-sim calibrate, DATA)``."""
+    from fpm_sim.study.identify.report import provenance_key
+
+    p = cal.problem
+    theta = np.median(cal.draws, axis=0)
+    if p.priors.sample_branches:
+        k = p.names.index(BRANCH_PARAMETER)
+        classes, counts = np.unique(np.round(cal.draws[:, k]).astype(int), return_counts=True)
+        theta[k] = float(classes[np.argmax(counts)])
+    cfg = p.config(theta)
+    prov = dict(cfg.provenance)
+    n_free = len(p.priors.parameters)
+    for i, name in enumerate(p.names[:n_free]):
+        col = cal.draws[:, i]
+        key = provenance_key(name)
+        prov[key] = (
+            f"identified: posterior median +- sd (fpm-sim calibrate, {data_note}); {name} = "
+            f"{_fmt(float(np.median(col)))} +- {_fmt(float(np.std(col)))}"
+        )
+        if key.startswith(("hardware.", "rig.chain_hinge")) and key.endswith(".mass_kg"):
+            prov[key.replace("mass_kg", "inertia_kg_m2")] = "identified: scaled with the identified mass"
+    if p.priors.sample_branches:
+        k = p.names.index(BRANCH_PARAMETER)
+        share = float(np.mean(np.round(cal.draws[:, k]) == theta[k]))
+        prov["geometry.elbow_branch"] = (
+            f"identified: the most frequent elbow-branch class of the posterior ({100 * share:.0f} % of the draws; "
+            f"fpm-sim calibrate, {data_note})"
+        )
+    return cfg.replace(provenance=prov)
+
+
+def write_config(cal: Calibration, path: str | Path, *, data_note: str, command: str) -> Manipulator:
+    """``config.toml``: :func:`median_config`, atomically."""
+    cfg = median_config(cal, data_note=data_note)
+    hdr = (
+        "fpm-sim calibrate: the posterior median of every free parameter (a summary of the posterior, not a fit;\n"
+        "the posterior itself is posterior.nc beside this file)\n" + f"Reproduce: {command}"
+    )
+    with atomic_file(path) as tmp:
+        tmp.write_text(config_to_toml(cfg, header=hdr, default_source="start description"))
+    return cfg

@@ -1,0 +1,277 @@
+"""The calibration problem: a picklable description of what is sampled and its likelihood.
+
+Coordinates ``theta`` (in the order of :attr:`CalibrationProblem.names`): the free parameters of
+``parameter_set(base, groups)`` (SI, as named), then ``likelihood.discrepancy_rel`` when it has a prior,
+then the elbow-branch class index (0..7 into :data:`ELBOW_BRANCHES`) when the branches are sampled.
+
+Likelihood (independent Gaussian errors)::
+
+    log L = sum_i [ -0.5 (f_i - y_i)^2 / s_i^2 - 0.5 log(2 pi s_i^2) ] + statements
+    s_i^2 = sigma_i^2 + (d f_i)^2      at the measured poses (sigma_i: the data file's sd, d: discrepancy)
+    s_i^2 = sigma_i^2                  for a rig test (sigma_i = rig_sigma_pct of the value)
+
+The discrepancy is the manipulator model's (joint hardware, unmodelled compliance): it multiplies the
+prediction, so it scales with the frequency as the model's relative errors do. The rig tests are beams and a
+hinge with their own parameters, and get none.
+
+A description that is invalid, or under which a measured pose is unreachable or a frequency cannot be given,
+has ``log L = -inf``: the machine was measured there, so such a description is impossible (dynesty treats
+``-inf`` as outside the prior's support).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from fpm_sim.batch.pose_loop import fast_options
+from fpm_sim.config import ConfigError, Manipulator
+from fpm_sim.errors import FpmSimError
+from fpm_sim.kinematics import assemble_many
+from fpm_sim.study.calibrate.priors import Priors
+from fpm_sim.study.identify.data import Observation
+from fpm_sim.study.identify.engine import ELBOW_BRANCHES, predict_observations
+from fpm_sim.study.identify.parameters import ParameterSet, parameter_set
+from fpm_sim.study.inplane_surrogate import inplane_first_frequencies
+from fpm_sim.study.tables import SubsystemTest
+
+__all__ = ["MODELS", "CalibrationError", "CalibrationProblem", "log_sigmoid_soft"]
+
+MODELS = ("segments", "inplane")
+
+
+class CalibrationError(FpmSimError):
+    """The calibration cannot run as asked (no data, a checkpoint that does not match, ...)."""
+
+
+def log_sigmoid_soft(z: np.ndarray, eps: float) -> np.ndarray:
+    """``log(eps + (1 - eps) sigmoid(z))`` elementwise (NaN counts as ``sigmoid = 0``)."""
+    z = np.where(np.isfinite(z), z, -np.inf)
+    with np.errstate(over="ignore"):
+        s = 1.0 / (1.0 + np.exp(-z))
+    out: np.ndarray = np.log(eps + (1.0 - eps) * s)
+    return out
+
+
+@dataclass(frozen=True)
+class CalibrationProblem:
+    """Base description, free groups, priors, data and likelihood settings (see module docstring).
+
+    Picklable (plain data; the parameter set with its setter closures is rebuilt on first use in each
+    process), so a ``spawn`` pool can be given one in its initializer.
+    """
+
+    base: Manipulator
+    groups: tuple[str, ...]
+    priors: Priors
+    observations: tuple[Observation, ...]
+    rig_tests: tuple[SubsystemTest, ...] = ()
+    segments: int = 4
+    subsystem_segments: int = 8
+    model: str = "segments"
+    """``"segments"``: the segment model (:func:`predict_observations`); ``"inplane"``: the analytic in-plane
+    surrogate (:mod:`fpm_sim.study.inplane_surrogate`; first frequencies only, no rig tests): thousands of times
+    cheaper, for checks of the sampler itself (simulation-based calibration), never for a reported result."""
+
+    def __post_init__(self) -> None:
+        if self.model not in MODELS:
+            raise CalibrationError(f"model must be one of {', '.join(MODELS)}, got {self.model!r}")
+        if self.model == "inplane" and (
+            self.rig_tests or any(o.mode != 1 or o.label == "out_of_plane" for o in self.observations)
+        ):
+            raise CalibrationError(
+                "the in-plane surrogate gives first in-plane frequencies only: no rig tests, f1 only"
+            )
+        if not self.observations and not self.rig_tests:
+            raise CalibrationError("no data: give --measured FILE.csv and/or --subsystems FILE.csv")
+        if self.segments < 1:
+            raise CalibrationError(f"--segments must be >= 1, got {self.segments}")
+        free = self.parameters.names
+        if [p.name for p in self.priors.parameters] != free:
+            raise CalibrationError(
+                f"the priors ({', '.join(p.name for p in self.priors.parameters)}) do not match the free parameters "
+                f"({', '.join(free)}); read them with read_priors(path, parameter_set(base, groups).names)"
+            )
+        if any(p.subsystem for p in self.parameters.parameters) and not self.rig_tests:
+            raise CalibrationError(
+                "--free rig needs --subsystems FILE.csv (the rig parameters are seen only by rig tests)"
+            )
+
+    # -- pickling: the cached parameter set holds closures; drop it, rebuild on use
+    def __getstate__(self) -> dict[str, Any]:
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        for k, v in state.items():
+            object.__setattr__(self, k, v)
+
+    @functools.cached_property
+    def parameters(self) -> ParameterSet:
+        return parameter_set(self.base, list(self.groups))
+
+    @functools.cached_property
+    def _measured(self) -> np.ndarray:
+        return np.array([o.freq_hz for o in self.observations] + [t.experimental_hz for t in self.rig_tests])
+
+    @functools.cached_property
+    def _sigma(self) -> np.ndarray:
+        return np.array(
+            [o.sigma_hz for o in self.observations]
+            + [t.experimental_hz * self.priors.rig_sigma_pct / 100.0 for t in self.rig_tests]
+        )
+
+    @functools.cached_property
+    def _pose_array(self) -> np.ndarray:
+        """``(n, 3)`` the distinct measured poses (x_m, y_m, phi_rad)."""
+        return np.array(sorted({(o.pose.x_m, o.pose.y_m, o.pose.phi_rad) for o in self.observations}))
+
+    @property
+    def names(self) -> list[str]:
+        """The sampled coordinates (module docstring)."""
+        return self.priors.names
+
+    @property
+    def ndim(self) -> int:
+        return len(self.names)
+
+    @property
+    def n_data(self) -> int:
+        return len(self.observations) + len(self.rig_tests)
+
+    @property
+    def measured(self) -> np.ndarray:
+        return self._measured.copy()
+
+    @property
+    def sigma(self) -> np.ndarray:
+        return self._sigma.copy()
+
+    @property
+    def labels(self) -> list[str]:
+        return [o.describe() for o in self.observations] + [f"rig {t.label}" for t in self.rig_tests]
+
+    # -- the unit cube -> parameters
+    def prior_transform(self, u: np.ndarray) -> np.ndarray:
+        """Unit-cube point -> ``theta`` (each prior's inverse CDF; the branch class ``floor(8 u)``)."""
+        u = np.asarray(u, float)
+        theta = np.empty(self.ndim)
+        k = 0
+        for p in self.priors.parameters:
+            theta[k] = p.transform(u[k])
+            k += 1
+        if self.priors.discrepancy is not None:
+            theta[k] = self.priors.discrepancy.transform(u[k])
+            k += 1
+        if self.priors.sample_branches:
+            theta[k] = float(min(int(u[k] * len(ELBOW_BRANCHES)), len(ELBOW_BRANCHES) - 1))
+        return theta
+
+    def split(self, theta: np.ndarray) -> tuple[np.ndarray, float, tuple[int, int, int]]:
+        """``theta`` -> (free-parameter values, discrepancy, elbow branches)."""
+        n = len(self.priors.parameters)
+        x = np.asarray(theta[:n], float)
+        k = n
+        d = self.priors.discrepancy_fixed
+        if self.priors.discrepancy is not None:
+            d = float(theta[k])
+            k += 1
+        branch = self.base.geometry.elbow_branch
+        if self.priors.sample_branches:
+            branch = ELBOW_BRANCHES[round(float(theta[k]))]
+        return x, d, branch
+
+    def config(self, theta: np.ndarray) -> Manipulator:
+        """The description at ``theta``. Raises :class:`ConfigError` for an impossible one."""
+        x, _, branch = self.split(theta)
+        base = self.base
+        if branch != base.geometry.elbow_branch:
+            base = base.replace(geometry=dataclasses.replace(base.geometry, elbow_branch=branch))
+        return self.parameters.apply(x, base=base)
+
+    def predict(self, theta: np.ndarray, cfg: Manipulator | None = None) -> np.ndarray:
+        """The model's frequency (Hz) at every observation, then every rig test (NaN where it has none)."""
+        if cfg is None:
+            try:
+                cfg = self.config(theta)
+            except (ConfigError, ValueError):
+                return np.full(self.n_data, np.nan)
+        if self.model == "inplane":
+            return inplane_first_frequencies(cfg, [o.pose for o in self.observations])
+        f = predict_observations(cfg, list(self.observations), options=fast_options(segments=self.segments))
+        if self.rig_tests:
+            from fpm_sim.study.reproduce import subsystem_frequencies
+
+            rigs = [
+                r.ours_hz
+                for r in subsystem_frequencies(cfg, segments=self.subsystem_segments, tests=list(self.rig_tests))
+            ]
+            f = np.concatenate([f, np.asarray(rigs, float)])
+        return f
+
+    def noise_sd(self, f_pred: np.ndarray, discrepancy: float) -> np.ndarray:
+        """``s_i`` of the module docstring at predictions ``f_pred``."""
+        s2 = self._sigma**2
+        n = len(self.observations)
+        s2[:n] += (discrepancy * f_pred[:n]) ** 2
+        sd: np.ndarray = np.sqrt(s2)
+        return sd
+
+    def statements_log_likelihood(self, cfg: Manipulator) -> float:
+        """The enabled study statements' soft terms (:mod:`.priors`) under ``cfg``."""
+        total = 0.0
+        a = self.priors.singular_at_phi0
+        g = cfg.geometry
+        if a is not None:
+            xy = np.asarray(a.poses_mm, float) * 1e-3
+            at0 = assemble_many(g, xy[:, 0], xy[:, 1], 0.0)
+            turned = assemble_many(g, xy[:, 0], xy[:, 1], a.turn_rad)
+            z = np.minimum((a.near - at0.parallel) / a.width, (turned.singularity - a.near) / a.width)
+            # the product of two sigmoids, bounded by the smaller: the min keeps one soft threshold per pose
+            total += float(np.sum(log_sigmoid_soft(z, a.eps)))
+        b = self.priors.measured_poses_clear
+        if b is not None and self.observations:
+            p = self._pose_array
+            m = assemble_many(g, p[:, 0], p[:, 1], p[:, 2]).singularity
+            total += float(np.sum(log_sigmoid_soft((m - b.min_measure) / b.width, b.eps)))
+        return total
+
+    def start_log_likelihood(self) -> float:
+        """``log L`` at the base description (its own elbow branches), the discrepancy at its best on a grid
+        over its prior (when sampled): a check of the sampler. A posterior whose draws all fit worse than the
+        start missed the start's region (nested sampling with too few live points misses narrow modes)."""
+        x0 = self.parameters.x0
+        theta = list(x0)
+        ds = [self.priors.discrepancy_fixed]
+        if self.priors.discrepancy is not None:
+            ds = [float(self.priors.discrepancy.transform(u)) for u in np.linspace(0.01, 0.99, 25)]
+        best = -math.inf
+        for d in ds:
+            t = theta + ([d] if self.priors.discrepancy is not None else [])
+            if self.priors.sample_branches:
+                t.append(float(ELBOW_BRANCHES.index(self.base.geometry.elbow_branch)))
+            best = max(best, self.log_likelihood(np.asarray(t)))
+        return best
+
+    def log_likelihood(self, theta: np.ndarray) -> float:
+        """``log L(theta)`` (module docstring); ``-inf`` for an impossible description."""
+        try:
+            cfg = self.config(theta)
+        except (ConfigError, ValueError):
+            return -math.inf
+        if self.observations:  # an unreachable measured pose: -inf before any model is built (cheap)
+            xyz = self._pose_array
+            if not assemble_many(cfg.geometry, xyz[:, 0], xyz[:, 1], xyz[:, 2]).reachable.all():
+                return -math.inf
+        f = self.predict(theta, cfg)
+        if not np.all(np.isfinite(f)):
+            return -math.inf
+        _, d, _ = self.split(theta)
+        s = self.noise_sd(f, d)
+        r = (f - self._measured) / s
+        ll = float(-0.5 * np.sum(r**2) - np.sum(np.log(s)) - 0.5 * len(r) * math.log(2 * math.pi))
+        return ll + self.statements_log_likelihood(cfg)

@@ -1,0 +1,159 @@
+"""``report.md`` and figures of a calibration: diagnostics, marginals against priors, the discrepancy,
+a corner plot, predicted-vs-measured with 50/90 % bands and per-datum coverage."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fpm_sim.outputs import atomic_file
+from fpm_sim.study.calibrate.priors import BRANCH_PARAMETER, DISCREPANCY_PARAMETER
+from fpm_sim.study.calibrate.sampler import Calibration
+from fpm_sim.study.identify.engine import ELBOW_BRANCHES
+
+__all__ = ["corner_figure", "render_report", "write_report"]
+
+
+def corner_figure(cal: Calibration, *, max_points: int = 1500) -> Any:
+    """Pairwise scatter of the continuous coordinates (diagonal: histograms), the draws coloured by branch class."""
+    import matplotlib.pyplot as plt
+
+    names = [n for n in cal.names if n != BRANCH_PARAMETER]
+    idx = [cal.names.index(n) for n in names]
+    d = cal.draws[: min(max_points, len(cal.draws))]
+    colour = d[:, cal.names.index(BRANCH_PARAMETER)] if BRANCH_PARAMETER in cal.names else np.zeros(len(d))
+    k = len(names)
+    fig, axes = plt.subplots(k, k, figsize=(1.35 * k + 1, 1.35 * k + 1), squeeze=False)
+    for i in range(k):
+        for j in range(k):
+            ax = axes[i, j]
+            if j > i:
+                ax.set_visible(False)
+                continue
+            if i == j:
+                ax.hist(d[:, idx[i]], bins=25, color="tab:blue", alpha=0.8)
+                ax.set_yticks([])
+            else:
+                ax.scatter(d[:, idx[j]], d[:, idx[i]], s=2, c=colour, cmap="tab10", vmin=0, vmax=9, alpha=0.6)
+            ax.tick_params(labelsize=5)
+            if i == k - 1:
+                ax.set_xlabel(names[j].replace("geometry.", "").replace("hardware.", ""), fontsize=6)
+            else:
+                ax.set_xticklabels([])
+            if j == 0 and i > 0:
+                ax.set_ylabel(names[i].replace("geometry.", "").replace("hardware.", ""), fontsize=6)
+            elif j > 0:
+                ax.set_yticklabels([])
+    fig.suptitle("posterior draws (colour: elbow-branch class)" if BRANCH_PARAMETER in cal.names else "posterior draws")
+    fig.tight_layout()
+    return fig
+
+
+def _prior_of(cal: Calibration, name: str) -> str:
+    pr = cal.problem.priors
+    for p in pr.parameters:
+        if p.name == name:
+            return p.describe()
+    if name == DISCREPANCY_PARAMETER and pr.discrepancy is not None:
+        return pr.discrepancy.describe()
+    return ""
+
+
+def render_report(cal: Calibration, *, command: str, data_note: str) -> str:
+    """The text of ``report.md``."""
+    p = cal.problem
+    q = cal.quantiles((0.05, 0.5, 0.95))
+    lines = [
+        "# fpm-sim calibrate: Bayesian model updating",
+        "",
+        f"Data: {data_note}. Free groups: {', '.join(p.groups)}; {p.segments} segments per link.",
+        "",
+        f"Reproduce: `{command}`",
+        "",
+        "## Diagnostics",
+        "",
+        f"- nested sampling (dynesty, {cal.options.live_points} live points, stop at dlogz {cal.options.dlogz:g}, "
+        f"proposal {cal.options.sample}"
+        + (f" with {cal.options.walks} steps per walk" if cal.options.walks else "")
+        + f", seed {cal.options.seed}): {cal.n_iterations} iterations, "
+        f"{cal.n_calls} likelihood calls, {cal.seconds:.0f} s"
+        + ("" if cal.converged else " -- STOPPED ON --max-calls, NOT CONVERGED"),
+        f"- log-evidence ln Z = {cal.log_evidence:.3f} +- {cal.log_evidence_err:.3f} (the error is nested "
+        "sampling's statistical one; a mode the live points never entered is not in it)",
+        f"- best log-likelihood among the draws {np.max(cal.log_likelihood):.2f}; at the start description "
+        f"(discrepancy at its best) {cal.start_log_likelihood:.2f}"
+        + (
+            " -- **the sampler missed the start's region: this posterior is incomplete; rerun with more live points**"
+            if cal.missed_start
+            else ""
+        ),
+        f"- effective sample size (Kish) of the weighted samples: {cal.ess_kish:.0f}; equal-weight draws written: "
+        f"{len(cal.draws)} ({len(np.unique(cal.draws, axis=0))} distinct)",
+        "",
+        "## Marginals (5 / 50 / 95 %) and priors",
+        "",
+        "| parameter | 5 % | 50 % | 95 % | sd | prior |",
+        "|---|---|---|---|---|---|",
+    ]
+    for i, n in enumerate(cal.names):
+        if n == BRANCH_PARAMETER:
+            continue
+        lines.append(
+            f"| `{n}` | {q[i, 0]:.4g} | {q[i, 1]:.4g} | {q[i, 2]:.4g} | {np.std(cal.draws[:, i]):.3g} | "
+            f"{_prior_of(cal, n)} |"
+        )
+    if BRANCH_PARAMETER in cal.names:
+        k = cal.names.index(BRANCH_PARAMETER)
+        classes, counts = np.unique(np.round(cal.draws[:, k]).astype(int), return_counts=True)
+        lines += ["", "Elbow-branch classes (prior: uniform over the 8):", ""]
+        for c, m in sorted(zip(classes, counts), key=lambda t: -t[1]):
+            lines.append(f"- {ELBOW_BRANCHES[c]}: {100.0 * m / len(cal.draws):.1f} % of the draws")
+    if DISCREPANCY_PARAMETER in cal.names:
+        i = cal.names.index(DISCREPANCY_PARAMETER)
+        lines += [
+            "",
+            f"Model discrepancy (relative sd of the model at a pose): median {100 * q[i, 1]:.2g} %, "
+            f"90 % interval {100 * q[i, 0]:.2g}-{100 * q[i, 2]:.2g} % (prior {_prior_of(cal, DISCREPANCY_PARAMETER)}).",
+        ]
+    st = [s for s in (p.priors.singular_at_phi0, p.priors.measured_poses_clear) if s is not None]
+    lines += ["", "Study statements in the likelihood: " + ("; ".join(s.reason for s in st) if st else "none") + "."]
+    lo50, hi50 = cal.bands(0.5)
+    lo90, hi90 = cal.bands(0.9)
+    med = np.median(cal.f_pred, axis=0)
+    c50, c90 = cal.coverage(0.5), cal.coverage(0.9)
+    lines += [
+        "",
+        "## Predicted vs measured (posterior predictive of a new measurement: model, discrepancy and noise)",
+        "",
+        f"Coverage: {c50.sum()}/{len(c50)} measured values inside their 50 % band, {c90.sum()}/{len(c90)} inside "
+        "their 90 % band (in-sample: these data shaped the posterior).",
+        "",
+        "| datum | measured (Hz) | model median (Hz) | 50 % band | 90 % band | in 90 % |",
+        "|---|---|---|---|---|---|",
+    ]
+    for lab, y, m, a, b, c, d, ok in zip(p.labels, p.measured, med, lo50, hi50, lo90, hi90, c90):
+        lines.append(f"| {lab} | {y:.4g} | {m:.4g} | {a:.4g}-{b:.4g} | {c:.4g}-{d:.4g} | {'yes' if ok else 'NO'} |")
+    lines += ["", "Figures: `corner.png` (pairwise draws), `predicted_vs_measured.png`.", ""]
+    return "\n".join(lines)
+
+
+def _save(fig: Any, path: Path) -> None:
+    import matplotlib.pyplot as plt
+
+    with atomic_file(path) as tmp:
+        fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+
+
+def write_report(cal: Calibration, out: str | Path, *, command: str, data_note: str) -> None:
+    """``report.md``, ``corner.png`` and ``predicted_vs_measured.png`` in ``out`` (each atomically)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    out = Path(out)
+    _save(corner_figure(cal), out / "corner.png")
+    _save(cal.plot(), out / "predicted_vs_measured.png")
+    with atomic_file(out / "report.md") as tmp:
+        tmp.write_text(render_report(cal, command=command, data_note=data_note))

@@ -1,0 +1,47 @@
+"""The sampler's checkpoint: a run stopped early resumes from its checkpoint file to convergence, and a
+checkpoint is refused for another problem."""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from fpm_sim.kinematics import Pose
+from fpm_sim.study.calibrate import CalibrationError, CalibrationProblem, SamplerOptions, read_priors, run_calibration
+from fpm_sim.study.identify import Observation
+
+PRIORS = """
+[parameters."hardware.platform.mass_kg"]
+dist = "loguniform"
+lower = 0.5
+upper = 5.0
+reason = "assumed: test"
+"""
+
+
+@pytest.mark.slow  # ~10-30 s of wall time on a shared machine (two short sampling runs)
+def test_a_stopped_run_resumes_from_its_checkpoint(default_manip, tmp_path):
+    base = default_manip
+    obs = tuple(Observation(Pose.from_mm(x, y, 0.0), 1, 60.0, 1.0, None, "t") for x, y in ((0, -50), (50, 50)))
+    # the hardware group frees three masses; the two hinge masses get narrow priors
+    names = ["hardware.platform.mass_kg", "hardware.elbow_joint.mass_kg", "hardware.platform_joint.mass_kg"]
+    text = PRIORS + "".join(
+        f'[parameters."{n}"]\ndist = "uniform"\nlower = 0.3\nupper = 0.31\nreason = "assumed: test"\n'
+        for n in names[1:]
+    )
+    pr = read_priors("p.toml", names, text=text)
+    prob = CalibrationProblem(base, ("hardware",), pr, obs, model="inplane")
+    ck = tmp_path / "ck.dynesty"
+    opts = SamplerOptions(live_points=20, dlogz=0.5, sample="unif", checkpoint_every_s=0.0, max_calls=150)
+    first = run_calibration(prob, opts, checkpoint=ck, progress=False)
+    assert not first.converged
+    assert ck.exists()
+    done = run_calibration(prob, dataclasses.replace(opts, max_calls=None), checkpoint=ck, resume=True, progress=False)
+    assert done.converged
+    assert done.n_calls > first.n_calls
+    assert math.isfinite(done.log_evidence)
+    assert np.all(np.isfinite(done.f_pred))
+    other = dataclasses.replace(prob, observations=obs[:1])
+    with pytest.raises(CalibrationError, match="belongs to another problem"):
+        run_calibration(other, opts, checkpoint=ck, resume=True, progress=False)
