@@ -183,7 +183,33 @@ BUILDERS = {
     "CrossValidation": _cross_validation,
     "ModalEstimate": _ema,
     "CheckReport": lambda: _check_report(),
+    "Calibration": lambda: _calibration(),
 }
+
+
+@_quiet
+def _calibration():
+    """A few live points on the in-plane surrogate (no MuJoCo model): well under a second of sampling."""
+    import dataclasses
+
+    from fpm_sim.study.calibrate import CalibrationProblem, SamplerOptions, read_priors, run_calibration
+    from fpm_sim.study.identify import Observation
+
+    names = ["hardware.platform.mass_kg", "hardware.elbow_joint.mass_kg", "hardware.platform_joint.mass_kg"]
+    priors = read_priors(
+        "p.toml",
+        names,
+        text="".join(
+            f'[parameters."{n}"]\ndist = "uniform"\nlower = {lo}\nupper = {hi}\nreason = "assumed: test"\n'
+            for n, lo, hi in zip(names, (0.5, 0.3, 0.3), (5.0, 0.31, 0.31))
+        ),
+    )
+    obs = tuple(Observation(p, 1, 1.0, 1.0, None, "t") for p in POSES)
+    prob = CalibrationProblem(fs.default_config(), ("hardware",), priors, obs, model="inplane")
+    f_hz = prob.predict(np.array([1.5, 0.305, 0.305]))  # a synthetic truth's frequencies as the data
+    obs = tuple(dataclasses.replace(o, freq_hz=float(f)) for o, f in zip(obs, f_hz))
+    prob = dataclasses.replace(prob, observations=obs)
+    return run_calibration(prob, SamplerOptions(live_points=8, dlogz=10.0, sample="unif", draws=20), progress=False)
 
 
 @_quiet

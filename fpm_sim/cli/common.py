@@ -137,6 +137,13 @@ OPTION_NAMES: dict[str, tuple[str, float]] = {
     "folds": ("--folds", 1.0),
     "window_tau_s": ("--exp-window-tau-s", 1.0),
     "posterior": ("--posterior", 1.0),
+    # Bayesian calibration (fpm_sim.study.calibrate)
+    "priors": ("--priors", 1.0),
+    "live_points": ("--live-points", 1.0),
+    "dlogz": ("--dlogz", 1.0),
+    "walks": ("--walks", 1.0),
+    "max_calls": ("--max-calls", 1.0),
+    "calibrate:draws": ("--draws", 1.0),
     # time domain (fpm_sim.sim.stepping, fpm_sim.sim.trajectory)
     "integrator": ("--integrator", 1.0),
     "step_band_hz": ("--step-band-hz", 1.0),

@@ -97,6 +97,28 @@ def test_resume_without_a_checkpoint_and_no_data_exit_2(files, capsys):
     assert "no data" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize(
+    ("option", "value", "line"),
+    [
+        ("--live-points", "1", "error: --live-points: must be >= 2, got 1"),
+        ("--dlogz", "0", "error: --dlogz: must be > 0, got 0.0"),
+        ("--walks", "1", "error: --walks: must be >= 2, got 1"),
+        ("--draws", "0", "error: --draws: must be >= 1, got 0"),
+        ("--max-calls", "3", "error: --max-calls: must be >= the number of live points (6), got 3; "),
+    ],
+)
+def test_bad_sampler_settings_exit_2_naming_the_option(files, capsys, option, value, line):
+    # the library names its parameter (live_points, max_calls, ...); the one error path shows the option
+    argv = _argv(files)
+    if option in argv:
+        argv[argv.index(option) + 1] = value
+    else:
+        argv += [option, value]
+    assert main(argv) == 2
+    assert capsys.readouterr().err.startswith(line)
+    assert not (files / "out").exists()
+
+
 @pytest.mark.slow  # samples (tiny), ~20 s of wall time on a shared machine
 def test_fewer_data_than_free_parameters_warns_loudly(files, capsys):
     (files / "m.csv").write_text("x_mm,y_mm,phi_rad,f1_hz\n0,-50,0,54\n")

@@ -256,9 +256,13 @@ def read_priors(source: str | Path, free: Sequence[str], *, text: str | None = N
         try:
             text = Path(source).read_text()
         except FileNotFoundError as exc:
-            raise PriorError(f"priors file not found: {source} (--priors)") from exc
+            raise PriorError(
+                "priors file not found", parameter="priors", value=str(source), hint="give a priors TOML file"
+            ) from exc
         except IsADirectoryError as exc:
-            raise PriorError(f"--priors {source} is a folder; give a TOML file") from exc
+            raise PriorError(
+                "is a folder", parameter="priors", value=str(source), hint="give a priors TOML file"
+            ) from exc
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -274,7 +278,7 @@ def read_priors(source: str | Path, free: Sequence[str], *, text: str | None = N
     if stray:
         raise PriorError(
             f'{where}: [parameters."{stray[0]}"] is not a free parameter of this run; the free ones are '
-            f"{', '.join(names)} (and {BRANCH_PARAMETER}); remove it or free its group (--free)"
+            f"{', '.join(names)} (and {BRANCH_PARAMETER}); remove it or add its group to the free groups (free)"
         )
     missing = [n for n in names if n not in ptab]
     if missing:

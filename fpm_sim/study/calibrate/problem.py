@@ -88,9 +88,13 @@ class CalibrationProblem:
                 "the in-plane surrogate gives first in-plane frequencies only: no rig tests, f1 only"
             )
         if not self.observations and not self.rig_tests:
-            raise CalibrationError("no data: give --measured FILE.csv and/or --subsystems FILE.csv")
+            raise CalibrationError(
+                "no data",
+                parameter="measured",
+                hint="give measured frequencies (a CSV file) and/or rig tests (subsystems, a CSV file)",
+            )
         if self.segments < 1:
-            raise CalibrationError(f"--segments must be >= 1, got {self.segments}")
+            raise CalibrationError("must be >= 1", parameter="segments", value=self.segments)
         free = self.parameters.names
         if [p.name for p in self.priors.parameters] != free:
             raise CalibrationError(
@@ -99,7 +103,10 @@ class CalibrationProblem:
             )
         if any(p.subsystem for p in self.parameters.parameters) and not self.rig_tests:
             raise CalibrationError(
-                "--free rig needs --subsystems FILE.csv (the rig parameters are seen only by rig tests)"
+                "the free group rig needs rig tests",
+                parameter="subsystems",
+                hint="give rig tests (a CSV file; the rig parameters are seen only by rig tests) "
+                "or remove rig from the free groups",
             )
 
     # -- pickling: the cached parameter set holds closures; drop it, rebuild on use

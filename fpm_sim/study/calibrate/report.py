@@ -79,7 +79,7 @@ def render_report(cal: Calibration, *, command: str, data_note: str) -> str:
         + (f" with {cal.options.walks} steps per walk" if cal.options.walks else "")
         + f", seed {cal.options.seed}): {cal.n_iterations} iterations, "
         f"{cal.n_calls} likelihood calls, {cal.seconds:.0f} s"
-        + ("" if cal.converged else " -- STOPPED ON --max-calls, NOT CONVERGED"),
+        + ("" if cal.converged else " -- stopped on the likelihood-call limit (max_calls): NOT converged"),
         f"- log-evidence ln Z = {cal.log_evidence:.3f} +- {cal.log_evidence_err:.3f} (the error is nested "
         "sampling's statistical one; a mode the live points never entered is not in it)",
         f"- best log-likelihood among the draws {np.max(cal.log_likelihood):.2f}; at the start description "

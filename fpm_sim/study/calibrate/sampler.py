@@ -74,17 +74,22 @@ class SamplerOptions:
 
     def check(self) -> None:
         if self.live_points < 2:
-            raise CalibrationError(f"--live-points must be >= 2, got {self.live_points}")
+            raise CalibrationError("must be >= 2", parameter="live_points", value=self.live_points)
         if not self.dlogz > 0:
-            raise CalibrationError(f"--dlogz must be > 0, got {self.dlogz}")
+            raise CalibrationError("must be > 0", parameter="dlogz", value=self.dlogz)
         if self.workers < 1:
-            raise CalibrationError(f"--workers must be >= 1, got {self.workers}")
+            raise CalibrationError("must be >= 1", parameter="workers", value=self.workers)
         if self.walks is not None and self.walks < 2:
-            raise CalibrationError(f"--walks must be >= 2, got {self.walks}")
+            raise CalibrationError("must be >= 2", parameter="walks", value=self.walks)
         if self.draws < 1:
-            raise CalibrationError(f"--draws must be >= 1, got {self.draws}")
+            raise CalibrationError("must be >= 1", parameter="draws", value=self.draws)
         if self.max_calls is not None and self.max_calls < self.live_points:
-            raise CalibrationError(f"--max-calls must be >= --live-points ({self.live_points}), got {self.max_calls}")
+            raise CalibrationError(
+                f"must be >= the number of live points ({self.live_points})",
+                parameter="max_calls",
+                value=self.max_calls,
+                hint="allow more likelihood calls or use fewer live points",
+            )
 
 
 @dataclass
@@ -204,7 +209,7 @@ class Calibration:
         lines = [
             f"log-evidence {self.log_evidence:.2f} +- {self.log_evidence_err:.2f}; {self.n_calls} likelihood calls, "
             f"{self.n_iterations} iterations, Kish ESS {self.ess_kish:.0f}, {self.seconds:.0f} s"
-            + ("" if self.converged else " (stopped on --max-calls: NOT converged)"),
+            + ("" if self.converged else " (stopped on the likelihood-call limit (max_calls): NOT converged)"),
             f"best log-likelihood among the draws {np.max(self.log_likelihood):.2f}; at the start description "
             f"{self.start_log_likelihood:.2f}"
             + (
@@ -291,11 +296,19 @@ def run_calibration(
         digest_file = Path(str(checkpoint) + ".digest")
         if resume:
             if checkpoint is None or not Path(checkpoint).exists():
-                raise CalibrationError(f"--resume: no checkpoint file {checkpoint}; run without --resume first")
+                raise CalibrationError(
+                    "no checkpoint file to resume from",
+                    parameter="resume",
+                    value=None if checkpoint is None else str(checkpoint),
+                    hint="start a fresh run (resume off) first",
+                )
             if not digest_file.exists() or digest_file.read_text().strip() != digest:
                 raise CalibrationError(
-                    f"--resume: the checkpoint {checkpoint} belongs to another problem (data, priors, free groups, "
-                    "base description or segments differ); run without --resume (and --overwrite)"
+                    "the checkpoint belongs to another problem (data, priors, free groups, base description or "
+                    "segments differ)",
+                    parameter="resume",
+                    file=checkpoint,
+                    hint="start a fresh run (resume off) into an empty or overwritten output folder",
                 )
             sampler = dynesty.NestedSampler.restore(str(checkpoint), pool=pool)
             # a run interrupted mid-way continues (resume=True); one that ended on max_calls has its final live
