@@ -80,7 +80,7 @@ def test_impact_json(capsys, tmp_path):
 def test_impact_errors(capsys):
     code, _, err = run(capsys, "impact", "--segments", "3", "--impacts", "0")
     assert code == 2
-    assert "n_impacts" in err
+    assert "--impacts" in err  # the CLI names its option for the parameter n_impacts
     code, _, err = run(capsys, "impact", "--segments", "1")
     assert code == 2
     assert "--segments" in err
