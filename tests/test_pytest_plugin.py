@@ -168,7 +168,8 @@ def test_fixtures_marker_and_explained_failures(pytester):
         ]
     )
     # once per failing comparison in the tracebacks ("E" lines; the short summary repeats it in full where CI is set)
-    explained = [ln for ln in result.stdout.lines if ln.startswith("E ") and "f1 >= 1000 Hz fails at 2 of 2 poses" in ln]
+    message = "f1 >= 1000 Hz fails at 2 of 2 poses"
+    explained = [ln for ln in result.stdout.lines if ln.startswith("E ") and message in ln]
     assert len(explained) == 2
     # the helper's message, its own frames hidden
     result.stdout.fnmatch_lines(["*AssertionError: requirement 'fast enough' (min_frequency*FAILED: worst mode 1*"])
