@@ -71,6 +71,8 @@ COMMAND_ATTR = "fpm_sim_command"
 REQUIRED_ATTRS = (BASE_CONFIG_ATTR, GROUPS_ATTR, SEGMENTS_ATTR, COMMAND_ATTR)
 ELBOW_BRANCH_VAR = "geometry.elbow_branch"
 LIKELIHOOD_PREFIX = "likelihood."
+DISCREPANCY = "likelihood.discrepancy_rel"
+"""The relative model discrepancy of ``fpm-sim calibrate``'s likelihood (:class:`PredictiveBands`)."""
 DEFAULT_POSTERIOR_NAME = "default_posterior.nc"
 """The embedded default's posterior in ``fpm_sim/data`` (written by the calibration; may be absent)."""
 
@@ -329,6 +331,48 @@ class Posterior:
 # ----------------------------------------------------------------------------------------------- bands
 
 
+def _predictive_quantiles(f: np.ndarray, d: np.ndarray, levels: Sequence[float]) -> np.ndarray:
+    """Exact quantiles of the mixture over draws ``i`` of ``f_i (1 + d_i z)``, ``z`` standard normal.
+
+    ``f``: ``(n_draws, ...)`` with NaN where a draw has no value; ``d``: ``(n_draws,)``, >= 0. The mixture's
+    CDF ``mean_i Phi((x / f_i - 1) / d_i)`` over the draws with a value is inverted by bisection (80 halvings
+    of a bracket 12 standard deviations wide: to round-off). Returns ``(len(levels), ...)``; NaN where no draw
+    has a value.
+    """
+    from scipy.special import ndtr
+
+    valid = np.isfinite(f)
+    n = valid.sum(axis=0)
+    fz = np.where(valid, f, 1.0)
+    dd = np.asarray(d, float).reshape((-1,) + (1,) * (f.ndim - 1))
+    spread = np.where(valid, np.abs(fz) * dd, 0.0).max(axis=0)
+    lo = np.where(valid, fz, np.inf).min(axis=0) - 12.0 * spread - 1e-12
+    hi = np.where(valid, fz, -np.inf).max(axis=0) + 12.0 * spread + 1e-12
+    q = np.asarray(levels, float).reshape((-1,) + (1,) * (f.ndim - 1))
+    lo = np.broadcast_to(lo, (len(q), *lo.shape)).copy()
+    hi = np.broadcast_to(hi, (len(q), *hi.shape)).copy()
+    with np.errstate(invalid="ignore", divide="ignore"):
+        for _ in range(80):
+            x = 0.5 * (lo + hi)
+            z = (x[None] / fz[:, None] - 1.0) / dd[:, None]
+            step = np.where(x[None] >= fz[:, None], 1.0, 0.0)  # a draw without discrepancy: a step at f_i
+            p = np.where(valid[:, None], np.where(dd[:, None] > 0, ndtr(z), step), 0.0).sum(axis=0) / n
+            below = p < q
+            lo = np.where(below, x, lo)
+            hi = np.where(below, hi, x)
+    out: np.ndarray = np.where(n > 0, 0.5 * (lo + hi), np.nan)
+    return out
+
+
+def _quantiles(f: np.ndarray) -> np.ndarray:
+    """:data:`QUANTILES` of ``f`` over its first axis, ignoring NaN (NaN where a column has no value)."""
+    out = np.full((len(QUANTILES), *f.shape[1:]), np.nan)
+    has = np.isfinite(f).any(axis=0)
+    if has.any():
+        out[:, has] = np.nanquantile(f[:, has], QUANTILES, axis=0)
+    return out
+
+
 @dataclass
 class PredictiveBands:
     """Frequencies of the posterior's draws at poses, and their quantiles (:func:`predict_bands`).
@@ -351,6 +395,12 @@ class PredictiveBands:
         Optional name of each pose (e.g. the study's cell ``row, col``).
     elapsed_s
         Wall time.
+    discrepancy_rel
+        ``(n_draws,)`` each draw's relative model discrepancy ``d`` (the posterior's
+        ``likelihood.discrepancy_rel``), or ``None`` when the posterior has none. With it the bands are
+        *predictive*: a measured frequency is ``f (1 + d z)``, ``z`` standard normal, as in the likelihood
+        that made the posterior, so the band holds the model's own error besides the parameters' spread
+        (Kennedy & O'Hagan). :attr:`parameter_quantiles_hz` keeps the parameters' spread alone.
     """
 
     name: str
@@ -361,6 +411,7 @@ class PredictiveBands:
     options: ModelOptions = field(default_factory=fast_options)
     labels: list[str] | None = None
     elapsed_s: float = 0.0
+    discrepancy_rel: np.ndarray | None = None
 
     @property
     def n_draws(self) -> int:
@@ -386,14 +437,21 @@ class PredictiveBands:
         return (self.status == STATUS_UNREACHABLE).mean(axis=0)
 
     @property
-    def quantiles_hz(self) -> np.ndarray:
-        """``(len(QUANTILES), n_poses, n_modes)`` quantiles over the computed draws (NaN where none is)."""
+    def parameter_quantiles_hz(self) -> np.ndarray:
+        """``(len(QUANTILES), n_poses, n_modes)`` quantiles of the model's frequencies over the computed draws
+        (the parameters' spread alone; NaN where no draw is computed)."""
         f = np.where(self.computed[:, :, None], self.frequencies_hz, np.nan)
-        out = np.full((len(QUANTILES), *f.shape[1:]), np.nan)
-        has = self.computed.any(axis=0)
-        if has.any():
-            out[:, has, :] = np.nanquantile(f[:, has, :], QUANTILES, axis=0)
-        return out
+        return _quantiles(f)
+
+    @property
+    def quantiles_hz(self) -> np.ndarray:
+        """``(len(QUANTILES), n_poses, n_modes)`` quantiles of the prediction: with a model discrepancy, of the
+        posterior predictive ``f (1 + d z)`` over the computed draws (exact, :func:`_predictive_quantiles`);
+        without one, :attr:`parameter_quantiles_hz`."""
+        if self.discrepancy_rel is None:
+            return self.parameter_quantiles_hz
+        f = np.where(self.computed[:, :, None], self.frequencies_hz, np.nan)
+        return _predictive_quantiles(f, np.asarray(self.discrepancy_rel, float), QUANTILES)
 
     def quantile_hz(self, q: float) -> np.ndarray:
         """``(n_poses, n_modes)`` quantile ``q`` (one of :data:`QUANTILES`)."""
@@ -483,7 +541,19 @@ class PredictiveBands:
             f"{self.n_draws} posterior draws; median and quantiles over the draws that reach each pose "
             "(draws: computed/all)"
         )
+        lines.append(self.kind_line())
         return "\n".join(lines)
+
+    def kind_line(self) -> str:
+        """What the bands hold: the parameters' spread alone, or the prediction with the model discrepancy."""
+        if self.discrepancy_rel is None:
+            return "bands: the parameters' spread only (the posterior has no model-discrepancy term)"
+        d = np.asarray(self.discrepancy_rel, float)
+        return (
+            "bands: predictive, the parameters' spread and the model's own error f (1 + d z) of the likelihood "
+            f"(discrepancy d: median {100 * np.median(d):.0f} %, 5-95 % {100 * np.quantile(d, 0.05):.0f}-"
+            f"{100 * np.quantile(d, 0.95):.0f} %)"
+        )
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: quantile levels, per-pose rows (bands), and every draw's frequencies and status."""
@@ -501,6 +571,8 @@ class PredictiveBands:
             "segments": self.options.segments,
             "resolution": resolution_summary(self.options),
             "elapsed_s": self.elapsed_s,
+            "bands_kind": self.kind_line(),
+            "discrepancy_rel": None if self.discrepancy_rel is None else np.asarray(self.discrepancy_rel).tolist(),
         }
 
     @property
@@ -682,6 +754,9 @@ def predict_bands(
         options=opts,
         labels=list(labels) if labels is not None else None,
         elapsed_s=time.perf_counter() - t0,
+        discrepancy_rel=(
+            np.asarray(posterior.likelihood[DISCREPANCY], float)[index] if DISCREPANCY in posterior.likelihood else None
+        ),
     )
 
 
@@ -752,6 +827,7 @@ class StudyBands:
             "band, "
             f"{100 * c['in_50_band']:.0f} % inside the 50 % band; median off by {c['median_error_pct']:.1f} % (mean)"
         )
+        lines.append(self.bands.kind_line())
         return "\n".join(lines)
 
     def to_dict(self) -> dict[str, Any]:

@@ -39,7 +39,8 @@ def test_modes_prints_bands_of_each_frequency(post, capsys, tmp_path):
     assert d["n_draws"] == 4
     row = d["bands"][0]
     f1 = np.array(d["frequencies_hz"])[:, 0, 0].astype(float)
-    assert row["f1_q50_hz"] == pytest.approx(np.median(f1), rel=1e-12)
+    # the predictive median (parameters + the posterior's model discrepancy), near the draws' median
+    assert row["f1_q50_hz"] == pytest.approx(np.median(f1), rel=0.05)
     assert row["f1_q05_hz"] <= row["f1_q25_hz"] <= row["f1_q50_hz"] <= row["f1_q75_hz"] <= row["f1_q95_hz"]
     assert d["posterior"]["free_groups"] == ["section-height", "hardware"]
 
