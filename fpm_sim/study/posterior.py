@@ -646,7 +646,7 @@ class PredictiveBands:
             what = f"f{mode}"
         ax.set_title(f"{_short(self.name)}: {what}, {self.n_draws} posterior draws", fontsize=8)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7)
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))  # beside the axes: covers no band
         return fig
 
     def plot_map(self, mode: int = 1) -> Any:
@@ -864,7 +864,7 @@ class StudyBands:
         w = np.flatnonzero(self.withheld)
         if w.size:
             a.axvspan(w.min() - 0.5, w.max() + 0.5, color="0.9", zorder=0, label="withheld: predictions only")
-            a.legend(fontsize=7)
+            a.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
         a.set_xlabel("study cell (row, col) mm")
         return fig
 
