@@ -10,6 +10,7 @@ import warnings
 from pathlib import Path
 
 from fpm_sim.cli.common import (
+    WORKERS_HELP,
     CliError,
     add_config_args,
     add_output_args,
@@ -17,6 +18,7 @@ from fpm_sim.cli.common import (
     check_output_dir,
     emit,
     load_manipulator,
+    workers_of,
 )
 from fpm_sim.cli.identify import GROUPS, add_data_args, read_data_args
 
@@ -63,7 +65,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         live_points=args.live_points,
         dlogz=args.dlogz,
         seed=args.seed,
-        workers=args.workers,
+        workers=workers_of(args),
         sample=args.sample,
         walks=args.walks,
         max_calls=args.max_calls,
@@ -140,7 +142,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--draws", type=int, default=1000, help="equal-weight draws written to posterior.nc (default 1000)")
     p.add_argument("--thin", type=int, default=0, help="also write posterior_thin.nc with this many draws (0: no)")
     p.add_argument("--segments", type=int, default=4, help="spring locations per link of the model (default 4)")
-    p.add_argument("--workers", type=int, default=1, help="processes evaluating the likelihood (default 1)")
+    likelihood_workers = WORKERS_HELP.replace("for the pose loop", "evaluating the likelihood")
+    p.add_argument("--workers", type=int, default=None, help=likelihood_workers)
     p.add_argument("--seed", type=int, default=0, help="seed of the sampler (default 0)")
     p.add_argument(
         "--resume",
