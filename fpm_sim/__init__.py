@@ -22,6 +22,7 @@ else keyword-only; the model options are one ``options=fs.ModelOptions(...)``::
     fs.atlas(cfg, x_m=[-0.05, 0, 0.05], y_m=[0.0])  # modal atlas (.query(pose))
     fs.ema("frfs.uff", f_lower_hz=5, f_upper_hz=200)  # modes from measured FRFs
     fs.identify(cfg, measured=["f.csv"])      # model updating
+    fs.calibrate(cfg, priors="p.toml", measured=["f.csv"])  # Bayesian updating: a posterior
     fs.reproduce(cfg)                         # the study's tests and 25 poses
     fs.export_mjcf(cfg, pose)                 # the generated MJCF
     fs.check_requirements(fs.load_requirements("fpm-requirements.toml"), cfg)  # docs/testing.md
@@ -61,6 +62,7 @@ _API = {
     "atlas": "fpm_sim.api",
     "ema": "fpm_sim.api",
     "identify": "fpm_sim.api",
+    "calibrate": "fpm_sim.api",
     "reproduce": "fpm_sim.api",
     "export_mjcf": "fpm_sim.api",
     "load_requirements": "fpm_sim.study.requirements",

@@ -35,6 +35,7 @@ if TYPE_CHECKING:
     from fpm_sim.sim.impact import ImpactSetup, ImpactTestResult
     from fpm_sim.sim.rollout import RolloutResult
     from fpm_sim.sim.trajectory import MoveResult
+    from fpm_sim.study.calibrate import Calibration, SamplerOptions
     from fpm_sim.study.identify import Identification, IdentifyOptions
     from fpm_sim.study.identify.ema import ModalEstimate
     from fpm_sim.study.readability import ReadabilityTable
@@ -44,6 +45,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "atlas",
+    "calibrate",
     "batched_rollouts",
     "design",
     "ema",
@@ -892,6 +894,61 @@ def identify(
         min_singularity=min_singularity,
     )
     return idf.identify(problem, options=settings, progress=progress)
+
+
+def calibrate(
+    config: Manipulator | None = None,
+    *,
+    priors: str | Path,
+    measured: Sequence[str | Path] = (),
+    subsystems: str | Path | None = None,
+    free: Sequence[str] = ("geometry", "hardware", "section-height"),
+    reading: str | None = None,
+    sigma_pct: float | None = None,
+    segments: int = 4,
+    sampler: SamplerOptions | None = None,
+    progress: bool = False,
+) -> Calibration:
+    """Bayesian calibration of the description's free parameters by nested sampling (``fpm-sim calibrate``).
+
+    Parameters
+    ----------
+    config
+        The base description the free parameters are applied to; ``None``: the embedded one.
+    priors
+        The priors TOML file (one distribution and reason per free parameter; e.g.
+        ``fpm_sim/data/study_priors.toml``).
+    measured, subsystems, reading, sigma_pct
+        The data, as :func:`identify` reads them (the ``rig`` group is freed when rig tests are given).
+    free
+        Parameter groups sampled (:data:`fpm_sim.study.identify.GROUPS`).
+    segments
+        Resolution (spring locations per link) of the likelihood's model.
+    sampler
+        Live points, stopping, workers, seed (:class:`fpm_sim.study.calibrate.SamplerOptions`).
+    progress
+        Show dynesty's progress line.
+    """
+    from fpm_sim.study import identify as idf
+    from fpm_sim.study.calibrate import CalibrationProblem, read_priors, run_calibration
+    from fpm_sim.study.poses import parse_reading
+
+    start = _config(config)
+    rd = parse_reading(reading) if reading else None
+    sigma = idf.DEFAULT_SIGMA_PCT if sigma_pct is None else sigma_pct
+    datasets = [idf.read_measured_csv(p, reading=rd, sigma_pct=sigma) for p in measured]
+    tests = idf.read_subsystems_csv(subsystems) if subsystems is not None else []
+    groups = list(free) + (["rig"] if tests and "rig" not in free else [])
+    names = idf.parameter_set(start, groups).names
+    problem = CalibrationProblem(
+        start,
+        tuple(groups),
+        read_priors(priors, names),
+        tuple(o for ds in datasets for o in ds.observations),
+        tuple(tests),
+        segments=segments,
+    )
+    return run_calibration(problem, sampler, progress=progress)
 
 
 def reproduce(

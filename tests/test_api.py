@@ -44,6 +44,7 @@ FACADE = {
     "impact",
     "ema",
     "identify",
+    "calibrate",
     "predict_bands",
     "reproduce",
     "transient",
@@ -67,13 +68,12 @@ def test_public_names_are_lazy_and_listed():
 
 
 def test_every_command_has_its_facade_function():
-    """One function per command that computes (config and the atlas's query are not computations of their own;
-    check and calibrate are other helpers' commands)."""
+    """One function per command that computes (config and the atlas's query are not computations of their own)."""
     from fpm_sim.cli.main import build_parser
 
     sub = next(a for a in build_parser()._actions if a.dest == "command")
-    commands = {c.replace("-", "_") for c in sub.choices} - {"config", "check", "calibrate"}
-    renamed = {"rig": "rig_modes"}
+    commands = {c.replace("-", "_") for c in sub.choices} - {"config"}
+    renamed = {"rig": "rig_modes", "check": "check_requirements"}
     assert {renamed.get(c, c) for c in commands} <= set(dir(fs))
     for name in FACADE - {"Result", "FpmSimError", "Pose", "ModelOptions", "LinkPoint"}:
         assert callable(getattr(fs, name))
@@ -97,6 +97,9 @@ def test_facade_signatures_put_config_first_and_options_once():
         positional = [rename.get(p.name, p.name) for p in params if p.kind is p.POSITIONAL_OR_KEYWORD]
         assert positional in (["config"], ["config", "pose"], ["config", "rig"]), (name, positional)
         names = {p.name for p in params}
+        if name == "calibrate":  # the likelihood's model is the pose loop's at one resolution, the fit's setting
+            assert names & {"options", "fidelity", "link_model", "axial", "gravity"} == set(), name
+            continue
         assert not names & {"fidelity", "segments", "link_model", "axial", "gravity"}, name
         if name != "identify":  # identify's fitted model: its own settings (segments, Timoshenko links)
             assert "options" in names, name
@@ -309,3 +312,25 @@ def test_design_and_sweep_agree_at_the_same_poses():
                     options=loop)  # fmt: skip
     np.testing.assert_allclose(des.frequencies_hz[0], sw.frequencies.frequencies_hz, rtol=1e-12)
     assert np.all(des.frequencies_hz[1, :, 0] < des.frequencies_hz[0, :, 0])  # a heavier payload: lower f1
+
+
+def test_calibrate_is_the_library_calibration():
+    """fs.calibrate reads the data and priors as the CLI does and samples (a few calls: the wiring, not the
+    posterior; the sampler's accuracy is tests/study/test_calibrate_*)."""
+    from importlib import resources
+
+    from fpm_sim.study.calibrate import Calibration, SamplerOptions
+
+    data = resources.files("fpm_sim.data")
+    cal = fs.calibrate(
+        priors=str(data / "study_priors.toml"),
+        measured=[str(data / "measured_table4_train.csv")],
+        reading="x+",
+        segments=2,
+        sampler=SamplerOptions(live_points=14, max_calls=40, walks=2, draws=5),
+    )
+    assert isinstance(cal, Calibration)
+    assert cal.problem.names[:2] == ["geometry.base_radius_m", "geometry.platform_radius_m"]
+    assert len(cal.problem.observations) == 12
+    with pytest.raises(fs.FpmSimError, match="priors"):
+        fs.calibrate(priors="no_such_priors.toml", measured=[str(data / "measured_table4_train.csv")], reading="x+")

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import shlex
-import sys
 import warnings
 from pathlib import Path
 
@@ -86,7 +84,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         cal = saved
         if math.isnan(cal.start_log_likelihood):  # saved before the start check existed
             cal.start_log_likelihood = problem.start_log_likelihood()
-    command = "fpm-sim " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    command = args.command_line  # set by main(argv): the command that ran, also when run from Python
     if cal is None:
         cal = run_calibration(problem, opts, checkpoint=out / CHECKPOINT, resume=args.resume, progress=not args.quiet)
         cal.extra["command"] = command  # the sampling run's command, kept when --resume rewrites the outputs
