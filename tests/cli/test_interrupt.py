@@ -19,7 +19,8 @@ from pathlib import Path
 
 import pytest
 
-FILES = {"poses.csv", "report.md", "heatmaps.png", "subsystems.png"}
+# the report and figures, and the bands of the shipped default posterior (fpm_sim/data/default_posterior.nc)
+FILES = {"poses.csv", "report.md", "heatmaps.png", "subsystems.png", "bands.nc", "bands.csv", "bands.png"}
 READING_LINE = {"x+": "row=x,phi=+0.2", "y-": "row=y,phi=-0.2"}
 
 
