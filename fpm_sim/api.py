@@ -45,8 +45,8 @@ if TYPE_CHECKING:
 
 __all__ = [
     "atlas",
-    "calibrate",
     "batched_rollouts",
+    "calibrate",
     "design",
     "ema",
     "export_mjcf",

@@ -41,11 +41,44 @@ POSTERIOR_MESSAGE = "probability= needs a posterior (fpm-sim calibrate)"
 
 
 def _no_posterior(probability: float | None, posterior: Any) -> None:
+    """The helpers other than :func:`assert_min_frequency` check the description's own values only."""
     if probability is not None or posterior is not None:
         raise FpmSimError(
-            f"{POSTERIOR_MESSAGE}; calibration is not available in this version: leave probability= and "
-            "posterior= out to check the description's own values"
+            "this helper checks the description's own values; a requirement with a posterior probability is "
+            "assert_min_frequency(..., probability=, posterior=)",
+            parameter="probability",
+            value=probability,
         )
+
+
+def _min_frequency_probability(
+    posterior: Any, poses: list[Pose], at_least_hz: float, mode: int, segments: int | None
+) -> tuple[float, np.ndarray, Any]:
+    """Posterior probability that mode ``mode`` is at least ``at_least_hz`` at every pose, and per pose.
+
+    Over the posterior's draws (all of them): a draw's machine has ``f (1 + d z)`` at each pose (the predictive
+    model of the calibration, ``d`` its model discrepancy, ``z`` standard normal and independent between poses,
+    as in its likelihood), so a draw meets the requirement with probability ``prod_p Phi((1 - L / f_p) / d)``;
+    without a discrepancy, 1 when every ``f_p >= L``. A draw that cannot reach a pose fails there.
+    """
+    from scipy.special import ndtr
+
+    from fpm_sim.batch.pose_loop import fast_options
+    from fpm_sim.study.posterior import Posterior, predict_bands
+
+    post = posterior if isinstance(posterior, Posterior) else Posterior.from_netcdf(posterior)
+    opts = fast_options(segments=segments) if segments is not None else None
+    bands = predict_bands(post, poses, n_draws=None, n_modes=mode, options=opts)
+    f = np.where(bands.computed, bands.frequencies_hz[:, :, mode - 1], np.nan)
+    if bands.discrepancy_rel is None:
+        per = np.where(np.isfinite(f), (f >= at_least_hz).astype(float), 0.0)
+    else:
+        d = np.asarray(bands.discrepancy_rel, float)[:, None]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            z = np.where(d > 0, (1.0 - at_least_hz / f) / d, np.where(f >= at_least_hz, np.inf, -np.inf))
+        per = np.where(np.isfinite(f), ndtr(z), 0.0)
+    return float(np.prod(per, axis=1).mean()), per.mean(axis=0), bands
+
 
 
 def pose_spec_of(poses: Any, grid: Any) -> tuple[Any, list[Pose] | None]:
@@ -142,17 +175,47 @@ def assert_min_frequency(
     segments
         Resolution per link (default: the shared default fidelity).
     probability, posterior
-        Need a posterior from Bayesian calibration; not available yet: both raise ``FpmSimError``.
+        With a posterior (``posterior.nc`` of ``fpm-sim calibrate`` or a
+        :class:`fpm_sim.study.posterior.Posterior`): assert that the requirement holds at every pose with at
+        least this posterior probability (the predictive model ``f (1 + d z)`` over all draws; see
+        :func:`_min_frequency_probability`). Payload ranges are not combined with a posterior (refused).
     name
         The requirement's name in the message (default: ``"f<mode> >= <at_least_hz> Hz"``).
     cache
         A :class:`fpm_sim.study.requirements.SweepCache` shared between calls (the plugin's ``fpm_sweep``).
     """
     __tracebackhide__ = True
-    from fpm_sim.study.requirements import Requirement
+    from fpm_sim.model.options import resolution_summary, resolution_text
+    from fpm_sim.study.requirements import Requirement, pose_text
 
-    _no_posterior(probability, posterior)
     spec, explicit = pose_spec_of(poses, grid)
+    if probability is not None or posterior is not None:
+        if posterior is None or probability is None or not 0.0 < probability < 1.0:
+            raise FpmSimError(
+                POSTERIOR_MESSAGE if posterior is None else "must be a probability strictly between 0 and 1",
+                parameter="posterior" if posterior is None else "probability",
+                value=posterior if posterior is None else probability,
+                hint="give both probability= (e.g. 0.95) and posterior= (posterior.nc of fpm-sim calibrate)",
+            )
+        if payload_kg is not None:
+            raise FpmSimError(
+                "a payload is not combined with a posterior's draws",
+                parameter="payload_kg",
+                value=payload_kg,
+                hint="calibrate with the payload in the description, or leave payload_kg out",
+            )
+        pose_list = spec.resolve(config, name or "assert_min_frequency")
+        prob, per_pose, bands = _min_frequency_probability(posterior, pose_list, at_least_hz, mode, segments)
+        if prob < probability:
+            worst = int(np.argmin(per_pose))
+            raise AssertionError(
+                f"requirement {name or f'f{mode} >= {at_least_hz:g} Hz'!r} (min_frequency: f{mode} >= "
+                f"{at_least_hz:g} Hz with posterior probability >= {probability:g}) FAILED: the probability is "
+                f"{prob:.3g} over {bands.n_draws} draws at {len(pose_list)} poses; least likely at pose "
+                f"{pose_text(pose_list[worst])} ({per_pose[worst]:.3g}); {bands.kind_line()}; resolution: "
+                f"{resolution_text(resolution_summary(bands.options))}"
+            )
+        return
     req = Requirement(
         name=name or f"f{mode} >= {at_least_hz:g} Hz",
         kind="min_frequency",

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import fpm_sim as fs
 from fpm_sim.batch.frequencies import pose_frequencies
 from fpm_sim.batch.pose_loop import fast_options
 from fpm_sim.errors import FpmSimError
@@ -177,10 +178,37 @@ def test_frequencies_close_on_arrays_and_shape_errors():
 # --------------------------------------------------------------------------------------------- bad input
 
 
-def test_probability_and_posterior_need_calibration(default_manip):
-    for kw in ({"probability": 0.95}, {"posterior": object()}):
-        with pytest.raises(FpmSimError, match=r"probability= needs a posterior \(fpm-sim calibrate\)"):
-            assert_min_frequency(default_manip, 40.0, poses=POSES_MM, **kw)
+def test_probability_needs_a_posterior_and_a_probability(default_manip):
+    with pytest.raises(FpmSimError, match=r"probability= needs a posterior \(fpm-sim calibrate\)"):
+        assert_min_frequency(default_manip, 40.0, poses=POSES_MM, probability=0.95)
+    for p in (None, 1.0, 0.0):
+        with pytest.raises(FpmSimError, match="probability"):
+            assert_min_frequency(default_manip, 40.0, poses=POSES_MM, probability=p, posterior="post.nc")
+
+
+def test_min_frequency_with_a_posterior_probability(default_manip, tmp_path):
+    """The posterior probability against a Monte Carlo of the predictive model the calibration states (each
+    draw's f (1 + d z), z independent per pose), and the pass/fail verdicts either side of it."""
+    from fpm_sim.study.posterior import Posterior
+    from fpm_sim.testing import _min_frequency_probability
+    from tests.helpers.posterior import write_posterior
+
+    post = Posterior.from_netcdf(write_posterior(tmp_path / "post.nc"))
+    poses = [fs.Pose.from_mm(*p) for p in POSES_MM]
+    _, _, bands = _min_frequency_probability(post, poses, 1.0, 1, 4)
+    level = 0.97 * float(np.median(bands.frequencies_hz[:, :, 0], axis=0).min())  # inside the predictive spread
+    prob, _, bands = _min_frequency_probability(post, poses, level, 1, 4)
+    rng = np.random.default_rng(1)
+    f = bands.frequencies_hz[:, :, 0]
+    d = np.asarray(bands.discrepancy_rel)[:, None, None]
+    z = rng.standard_normal((*f.shape, 20_000))
+    meets = (f[:, :, None] * (1 + d * z) >= level).all(axis=1)  # (draw, sample)
+    assert prob == pytest.approx(meets.mean(), abs=0.01)  # Monte Carlo error ~0.002
+    assert 0.05 < prob < 0.95  # the level sits inside the predictive spread (else the check is empty)
+    assert_min_frequency(default_manip, level, poses=POSES_MM, probability=prob * 0.9, posterior=post, segments=4)
+    with pytest.raises(AssertionError, match=r"FAILED: the probability is .* over 6 draws at 3 poses; least likely"):
+        assert_min_frequency(default_manip, level, poses=POSES_MM, probability=min(0.99, prob * 1.1 + 0.01),
+                             posterior=post, segments=4)  # fmt: skip
 
 
 def test_unreachable_and_empty_pose_sets_are_errors_not_failures(default_manip):
