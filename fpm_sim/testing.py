@@ -58,27 +58,17 @@ def _min_frequency_probability(
 
     Over the posterior's draws (all of them): a draw's machine has ``f (1 + d z)`` at each pose (the predictive
     model of the calibration, ``d`` its model discrepancy, ``z`` standard normal and independent between poses,
-    as in its likelihood), so a draw meets the requirement with probability ``prod_p Phi((1 - L / f_p) / d)``;
-    without a discrepancy, 1 when every ``f_p >= L``. A draw that cannot reach a pose fails there.
+    as in its likelihood), so a draw meets the requirement with the product over poses of
+    :meth:`fpm_sim.study.posterior.PredictiveBands.meet_probability`. A draw that cannot reach a pose fails there.
     """
-    from scipy.special import ndtr
-
     from fpm_sim.batch.pose_loop import fast_options
     from fpm_sim.study.posterior import Posterior, predict_bands
 
     post = posterior if isinstance(posterior, Posterior) else Posterior.from_netcdf(posterior)
     opts = fast_options(segments=segments) if segments is not None else None
     bands = predict_bands(post, poses, n_draws=None, n_modes=mode, options=opts)
-    f = np.where(bands.computed, bands.frequencies_hz[:, :, mode - 1], np.nan)
-    if bands.discrepancy_rel is None:
-        per = np.where(np.isfinite(f), (f >= at_least_hz).astype(float), 0.0)
-    else:
-        d = np.asarray(bands.discrepancy_rel, float)[:, None]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            z = np.where(d > 0, (1.0 - at_least_hz / f) / d, np.where(f >= at_least_hz, np.inf, -np.inf))
-        per = np.where(np.isfinite(f), ndtr(z), 0.0)
+    per = bands.meet_probability(at_least_hz, mode)
     return float(np.prod(per, axis=1).mean()), per.mean(axis=0), bands
-
 
 
 def pose_spec_of(poses: Any, grid: Any) -> tuple[Any, list[Pose] | None]:

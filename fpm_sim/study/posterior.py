@@ -487,6 +487,22 @@ class PredictiveBands:
         f = np.where(self.computed, self.frequencies_hz[:, :, mode - 1], -np.inf)
         return (f >= f_min_hz).mean(axis=0)
 
+    def meet_probability(self, level_hz: float, mode: int = 1) -> np.ndarray:
+        """``(n_draws, n_poses)`` probability that each draw's machine has frequency ``mode`` at least
+        ``level_hz`` at each pose, under the predictive model of :attr:`quantiles_hz`: ``Phi((1 - L / f) / d)``
+        with a model discrepancy ``d``, else 1 where ``f >= L``; 0 where the draw has no frequency there."""
+        f = np.where(self.computed, self.frequencies_hz[:, :, mode - 1], np.nan)
+        if self.discrepancy_rel is None:
+            out: np.ndarray = np.where(np.isfinite(f), (f >= level_hz).astype(float), 0.0)
+            return out
+        from scipy.special import ndtr
+
+        d = np.asarray(self.discrepancy_rel, float)[:, None]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            z = np.where(d > 0, (1.0 - level_hz / f) / d, np.where(f >= level_hz, np.inf, -np.inf))
+        out = np.where(np.isfinite(f), ndtr(z), 0.0)
+        return out
+
     def label(self, i: int) -> str:
         if self.labels is not None:
             return self.labels[i]
