@@ -36,11 +36,12 @@ if TYPE_CHECKING:
     from fpm_sim.sim.rollout import RolloutResult
     from fpm_sim.sim.trajectory import MoveResult
     from fpm_sim.study.calibrate import Calibration, SamplerOptions
-    from fpm_sim.study.identify import Identification, IdentifyOptions
+    from fpm_sim.study.identify import Identification, IdentifyOptions, Observation
     from fpm_sim.study.identify.ema import ModalEstimate
     from fpm_sim.study.readability import ReadabilityTable
     from fpm_sim.study.reproduce import StudyReproduction
     from fpm_sim.study.sweep import WorkspaceSweep
+    from fpm_sim.study.tables import SubsystemTest
     from fpm_sim.study.transient import TransientResult
 
 __all__ = [
@@ -835,6 +836,29 @@ def ema(
     ]
 
 
+def _measured_data(
+    measured: Sequence[str | Path],
+    subsystems: str | Path | None,
+    free: Sequence[str],
+    reading: str | None,
+    sigma_pct: float | None,
+) -> tuple[list[Observation], list[SubsystemTest], list[str]]:
+    """Read the data of :func:`identify` and :func:`calibrate`.
+
+    Returns the observations of the measured CSV files, the rig tests and the free groups (``rig`` added when
+    rig tests are given).
+    """
+    from fpm_sim.study import identify as idf
+    from fpm_sim.study.poses import parse_reading
+
+    rd = parse_reading(reading) if reading else None
+    sigma = idf.DEFAULT_SIGMA_PCT if sigma_pct is None else sigma_pct
+    datasets = [idf.read_measured_csv(p, reading=rd, sigma_pct=sigma) for p in measured]
+    tests = idf.read_subsystems_csv(subsystems) if subsystems is not None else []
+    groups = list(free) + (["rig"] if tests and "rig" not in free else [])
+    return [o for ds in datasets for o in ds.observations], tests, groups
+
+
 def identify(
     config: Manipulator | None = None,
     *,
@@ -877,17 +901,12 @@ def identify(
         Show progress lines.
     """
     from fpm_sim.study import identify as idf
-    from fpm_sim.study.poses import parse_reading
 
     start = _config(config)
-    rd = parse_reading(reading) if reading else None
-    sigma = idf.DEFAULT_SIGMA_PCT if sigma_pct is None else sigma_pct
-    datasets = [idf.read_measured_csv(p, reading=rd, sigma_pct=sigma) for p in measured]
-    tests = idf.read_subsystems_csv(subsystems) if subsystems is not None else []
-    groups = list(free) + (["rig"] if tests and "rig" not in free else [])
+    observations, tests, groups = _measured_data(measured, subsystems, free, reading, sigma_pct)
     problem = idf.Problem(
         idf.parameter_set(start, groups),
-        [o for ds in datasets for o in ds.observations],
+        observations,
         tests,
         subsystem_sigma_pct=subsystem_sigma_pct,
         workspace=list(workspace),
@@ -931,20 +950,15 @@ def calibrate(
     """
     from fpm_sim.study import identify as idf
     from fpm_sim.study.calibrate import CalibrationProblem, read_priors, run_calibration
-    from fpm_sim.study.poses import parse_reading
 
     start = _config(config)
-    rd = parse_reading(reading) if reading else None
-    sigma = idf.DEFAULT_SIGMA_PCT if sigma_pct is None else sigma_pct
-    datasets = [idf.read_measured_csv(p, reading=rd, sigma_pct=sigma) for p in measured]
-    tests = idf.read_subsystems_csv(subsystems) if subsystems is not None else []
-    groups = list(free) + (["rig"] if tests and "rig" not in free else [])
+    observations, tests, groups = _measured_data(measured, subsystems, free, reading, sigma_pct)
     names = idf.parameter_set(start, groups).names
     problem = CalibrationProblem(
         start,
         tuple(groups),
         read_priors(priors, names),
-        tuple(o for ds in datasets for o in ds.observations),
+        tuple(observations),
         tuple(tests),
         segments=segments,
     )
