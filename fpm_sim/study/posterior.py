@@ -46,13 +46,16 @@ from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose
 from fpm_sim.model.options import ModelOptions, resolution_summary
 from fpm_sim.results import frequencies_dataset
+from fpm_sim.study.discrepancy import LENGTH_SCALE_PARAMETER, conditional, pose_features
 from fpm_sim.study.identify.parameters import ParameterSet, parameter_set
+from fpm_sim.study.loo import LeaveOneOut, leave_one_out
 from fpm_sim.study.poses import TableReading
 from fpm_sim.study.tables import measured_table, withheld_cells
 
 __all__ = [
     "BASE_CONFIG_ATTR",
     "DEFAULT_POSTERIOR_NAME",
+    "CalibrationData",
     "ELBOW_BRANCH_VAR",
     "QUANTILES",
     "Posterior",
@@ -95,6 +98,59 @@ def default_posterior_path() -> Path | None:
 # ----------------------------------------------------------------------------------------------- posterior
 
 
+@dataclass(frozen=True)
+class CalibrationData:
+    """The measured poses a posterior was conditioned on, with every draw's model frequency there (the file's
+    ``observed_data`` and ``posterior_predictive`` groups, rig tests left out): what the leave-one-out checks
+    and a Gaussian-process discrepancy's predictions need.
+
+    Attributes
+    ----------
+    measured_hz, sigma_hz, x_m, y_m, phi_rad
+        ``(n,)`` the data, their sd and their poses.
+    labels
+        ``(n,)`` names.
+    f_hz
+        ``(n_draws, n)`` each draw's model frequency at each datum.
+    """
+
+    measured_hz: np.ndarray
+    sigma_hz: np.ndarray
+    x_m: np.ndarray
+    y_m: np.ndarray
+    phi_rad: np.ndarray
+    labels: list[str]
+    f_hz: np.ndarray
+
+    @property
+    def features(self) -> np.ndarray:
+        return pose_features(self.x_m, self.y_m, self.phi_rad)
+
+    @classmethod
+    def from_idata(cls, idata: Any, n_draws: int) -> CalibrationData | None:
+        """From an ``InferenceData`` with ``observed_data`` and ``posterior_predictive``; ``None`` without them
+        or when their sizes do not match the draws."""
+        if "observed_data" not in idata.groups() or "posterior_predictive" not in idata.groups():
+            return None
+        obs, ppc = idata.observed_data, idata.posterior_predictive
+        if "f_hz" not in obs or "sigma_hz" not in obs or "f_hz" not in ppc:
+            return None
+        f = np.asarray(ppc["f_hz"].transpose("chain", "draw", "obs").values, float).reshape(-1, obs.sizes["obs"])
+        if f.shape[0] != n_draws:
+            return None
+        x = np.asarray(obs["x_mm"].values, float)
+        keep = np.isfinite(x)  # poses only (rig tests have no pose)
+        return cls(
+            measured_hz=np.asarray(obs["f_hz"].values, float)[keep],
+            sigma_hz=np.asarray(obs["sigma_hz"].values, float)[keep],
+            x_m=x[keep] * 1e-3,
+            y_m=np.asarray(obs["y_mm"].values, float)[keep] * 1e-3,
+            phi_rad=np.asarray(obs["phi_rad"].values, float)[keep],
+            labels=[str(v) for v in np.asarray(obs["label"].values)[keep]],
+            f_hz=f[:, keep],
+        )
+
+
 @dataclass
 class Posterior:
     """Equal-weight draws of the free parameters over a base description (:meth:`from_netcdf`).
@@ -119,6 +175,8 @@ class Posterior:
         The likelihood hyperparameters' draws, by name (``likelihood.`` prefix kept).
     source
         The file read (``None`` when built in memory).
+    data
+        The measured poses and every draw's frequency there (:class:`CalibrationData`), when the file has them.
     """
 
     base: Manipulator
@@ -130,6 +188,7 @@ class Posterior:
     command: str = ""
     likelihood: dict[str, np.ndarray] = field(default_factory=dict)
     source: Path | None = None
+    data: CalibrationData | None = None
     _ps: ParameterSet = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -274,6 +333,7 @@ class Posterior:
             command=str(post.attrs[COMMAND_ATTR]),
             likelihood=likelihood,
             source=p,
+            data=CalibrationData.from_idata(idata, values.shape[0]),
         )
 
     # ----------------------------------------------------------------------------------------- draws
@@ -319,6 +379,57 @@ class Posterior:
             raise self._error(f"{label} is not a valid description ({exc})") from None
         return dataclasses.replace(cfg, name=f"{self.base.name} [posterior {label}]")
 
+    @property
+    def length_scale_m(self) -> np.ndarray | None:
+        """``(n_draws,)`` the Gaussian-process discrepancy's correlation length (m), or ``None`` (independent)."""
+        v = self.likelihood.get(LENGTH_SCALE_PARAMETER)
+        return None if v is None else np.asarray(v, float)
+
+    def discrepancy_at(self, index: np.ndarray, poses: Sequence[Pose]) -> tuple[np.ndarray, np.ndarray] | None:
+        """The model discrepancy at ``poses`` for draws ``index``: ``(shift, sd)``, each ``(len(index),
+        len(poses))`` relative (a frequency is ``f (1 + shift + sd z)``), or ``None`` without a discrepancy.
+
+        Independent discrepancy: shift 0, sd ``d``. Gaussian process: the conditional given the draw's residuals
+        at the measured poses (:func:`fpm_sim.study.discrepancy.conditional`)."""
+        if DISCREPANCY not in self.likelihood:
+            return None
+        d = np.asarray(self.likelihood[DISCREPANCY], float)[index]
+        shape = (len(index), len(poses))
+        ls = self.length_scale_m
+        if ls is None:
+            return np.zeros(shape), np.broadcast_to(d[:, None], shape).copy()
+        if self.data is None:
+            raise self._error(
+                "a Gaussian-process discrepancy needs the data it was conditioned on",
+                parameter="observed_data",
+                hint="the file's observed_data and posterior_predictive groups, as 'fpm-sim calibrate' writes them",
+            )
+        new = pose_features(
+            np.array([p.x_m for p in poses]), np.array([p.y_m for p in poses]), np.array([p.phi_rad for p in poses])
+        )
+        dat = self.data
+        shift, sd = np.zeros(shape), np.zeros(shape)
+        for row, i in enumerate(index):
+            shift[row], sd[row] = conditional(
+                dat.f_hz[i], dat.measured_hz, dat.sigma_hz, dat.features, new, float(d[row]), float(ls[i])
+            )
+        return shift, sd
+
+    def leave_one_out(self) -> LeaveOneOut | None:
+        """PSIS leave-one-out predictive of the measured poses (:mod:`fpm_sim.study.loo`); ``None`` when the file
+        has no data groups or no discrepancy."""
+        if self.data is None or DISCREPANCY not in self.likelihood or self.data.measured_hz.size < 2:
+            return None
+        return leave_one_out(
+            self.data.f_hz,
+            self.data.measured_hz,
+            self.data.sigma_hz,
+            np.asarray(self.likelihood[DISCREPANCY], float),
+            features=self.data.features,
+            length_scale_m=self.length_scale_m,
+            labels=self.data.labels,
+        )
+
     def summary(self) -> list[dict[str, Any]]:
         """Per parameter: median, 5 % and 95 % quantiles over the draws."""
         q = np.quantile(self.values, (0.05, 0.5, 0.95), axis=0)
@@ -331,31 +442,37 @@ class Posterior:
 # ----------------------------------------------------------------------------------------------- bands
 
 
-def _predictive_quantiles(f: np.ndarray, d: np.ndarray, levels: Sequence[float]) -> np.ndarray:
-    """Exact quantiles of the mixture over draws ``i`` of ``f_i (1 + d_i z)``, ``z`` standard normal.
+def _predictive_quantiles(
+    f: np.ndarray, d: np.ndarray, levels: Sequence[float], shift: np.ndarray | None = None
+) -> np.ndarray:
+    """Exact quantiles of the mixture over draws ``i`` of ``f_i (1 + shift_i + d_i z)``, ``z`` standard normal.
 
-    ``f``: ``(n_draws, ...)`` with NaN where a draw has no value; ``d``: ``(n_draws,)``, >= 0. The mixture's
-    CDF ``mean_i Phi((x / f_i - 1) / d_i)`` over the draws with a value is inverted by bisection (80 halvings
-    of a bracket 12 standard deviations wide: to round-off). Returns ``(len(levels), ...)``; NaN where no draw
-    has a value.
+    ``f``: ``(n_draws, n_poses, n_modes)`` (or ``(n_draws, ...)``) with NaN where a draw has no value; ``d``:
+    ``(n_draws,)`` or ``(n_draws, n_poses)``, >= 0; ``shift`` (default 0): as ``d``. The mixture's CDF
+    ``mean_i Phi((x / f_i - 1 - shift_i) / d_i)`` over the draws with a value is inverted by bisection (80
+    halvings of a bracket 12 standard deviations wide: to round-off). Returns ``(len(levels), ...)``; NaN where
+    no draw has a value.
     """
     from scipy.special import ndtr
 
     valid = np.isfinite(f)
     n = valid.sum(axis=0)
+    d_arr = np.asarray(d, float)
+    dd = d_arr.reshape(d_arr.shape + (1,) * (f.ndim - d_arr.ndim))
+    sh = np.zeros_like(dd) if shift is None else np.asarray(shift, float).reshape(dd.shape)
     fz = np.where(valid, f, 1.0)
-    dd = np.asarray(d, float).reshape((-1,) + (1,) * (f.ndim - 1))
+    centre = fz * (1.0 + sh)
     spread = np.where(valid, np.abs(fz) * dd, 0.0).max(axis=0)
-    lo = np.where(valid, fz, np.inf).min(axis=0) - 12.0 * spread - 1e-12
-    hi = np.where(valid, fz, -np.inf).max(axis=0) + 12.0 * spread + 1e-12
+    lo = np.where(valid, centre, np.inf).min(axis=0) - 12.0 * spread - 1e-12
+    hi = np.where(valid, centre, -np.inf).max(axis=0) + 12.0 * spread + 1e-12
     q = np.asarray(levels, float).reshape((-1,) + (1,) * (f.ndim - 1))
     lo = np.broadcast_to(lo, (len(q), *lo.shape)).copy()
     hi = np.broadcast_to(hi, (len(q), *hi.shape)).copy()
     with np.errstate(invalid="ignore", divide="ignore"):
         for _ in range(80):
             x = 0.5 * (lo + hi)
-            z = (x[None] / fz[:, None] - 1.0) / dd[:, None]
-            step = np.where(x[None] >= fz[:, None], 1.0, 0.0)  # a draw without discrepancy: a step at f_i
+            z = (x[None] / fz[:, None] - 1.0 - sh[:, None]) / dd[:, None]
+            step = np.where(x[None] >= centre[:, None], 1.0, 0.0)  # a draw without discrepancy: a step
             p = np.where(valid[:, None], np.where(dd[:, None] > 0, ndtr(z), step), 0.0).sum(axis=0) / n
             below = p < q
             lo = np.where(below, x, lo)
@@ -397,10 +514,14 @@ class PredictiveBands:
         Wall time.
     discrepancy_rel
         ``(n_draws,)`` each draw's relative model discrepancy ``d`` (the posterior's
-        ``likelihood.discrepancy_rel``), or ``None`` when the posterior has none. With it the bands are
-        *predictive*: a measured frequency is ``f (1 + d z)``, ``z`` standard normal, as in the likelihood
-        that made the posterior, so the band holds the model's own error besides the parameters' spread
-        (Kennedy & O'Hagan). :attr:`parameter_quantiles_hz` keeps the parameters' spread alone.
+        ``likelihood.discrepancy_rel``), or ``(n_draws, n_poses)`` its sd at each pose (a Gaussian-process
+        discrepancy conditioned on the data), or ``None`` when the posterior has none. With it the bands are
+        *predictive*: a measured frequency is ``f (1 + shift + d z)``, ``z`` standard normal, as in the
+        likelihood that made the posterior, so the band holds the model's own error besides the parameters'
+        spread (Kennedy & O'Hagan). :attr:`parameter_quantiles_hz` keeps the parameters' spread alone.
+    discrepancy_shift
+        ``(n_draws, n_poses)`` the Gaussian-process discrepancy's conditional mean at each pose (relative: the
+        correction the measured poses imply), or ``None`` (zero: an independent discrepancy).
     """
 
     name: str
@@ -412,6 +533,7 @@ class PredictiveBands:
     labels: list[str] | None = None
     elapsed_s: float = 0.0
     discrepancy_rel: np.ndarray | None = None
+    discrepancy_shift: np.ndarray | None = None
 
     @property
     def n_draws(self) -> int:
@@ -451,7 +573,7 @@ class PredictiveBands:
         if self.discrepancy_rel is None:
             return self.parameter_quantiles_hz
         f = np.where(self.computed[:, :, None], self.frequencies_hz, np.nan)
-        return _predictive_quantiles(f, np.asarray(self.discrepancy_rel, float), QUANTILES)
+        return _predictive_quantiles(f, np.asarray(self.discrepancy_rel, float), QUANTILES, self.discrepancy_shift)
 
     def quantile_hz(self, q: float) -> np.ndarray:
         """``(n_poses, n_modes)`` quantile ``q`` (one of :data:`QUANTILES`)."""
@@ -497,9 +619,11 @@ class PredictiveBands:
             return out
         from scipy.special import ndtr
 
-        d = np.asarray(self.discrepancy_rel, float)[:, None]
+        d = np.asarray(self.discrepancy_rel, float)
+        d = d[:, None] if d.ndim == 1 else d
+        sh = 0.0 if self.discrepancy_shift is None else np.asarray(self.discrepancy_shift, float)
         with np.errstate(invalid="ignore", divide="ignore"):
-            z = np.where(d > 0, (1.0 - level_hz / f) / d, np.where(f >= level_hz, np.inf, -np.inf))
+            z = np.where(d > 0, (1.0 + sh - level_hz / f) / d, np.where(f * (1.0 + sh) >= level_hz, np.inf, -np.inf))
         out = np.where(np.isfinite(f), ndtr(z), 0.0)
         return out
 
@@ -565,6 +689,13 @@ class PredictiveBands:
         if self.discrepancy_rel is None:
             return "bands: the parameters' spread only (the posterior has no model-discrepancy term)"
         d = np.asarray(self.discrepancy_rel, float)
+        if self.discrepancy_shift is not None:
+            return (
+                "bands: predictive, the parameters' spread and the model's own error as a Gaussian process over "
+                "the pose conditioned on the measured poses, f (1 + shift + sd z) (discrepancy sd at these poses: "
+                f"median {100 * np.median(d):.0f} %, 5-95 % {100 * np.quantile(d, 0.05):.0f}-"
+                f"{100 * np.quantile(d, 0.95):.0f} %)"
+            )
         return (
             "bands: predictive, the parameters' spread and the model's own error f (1 + d z) of the likelihood "
             f"(discrepancy d: median {100 * np.median(d):.0f} %, 5-95 % {100 * np.quantile(d, 0.05):.0f}-"
@@ -589,6 +720,7 @@ class PredictiveBands:
             "elapsed_s": self.elapsed_s,
             "bands_kind": self.kind_line(),
             "discrepancy_rel": None if self.discrepancy_rel is None else np.asarray(self.discrepancy_rel).tolist(),
+            "discrepancy_shift": None if self.discrepancy_shift is None else np.asarray(self.discrepancy_shift).tolist(),
         }
 
     @property
@@ -761,6 +893,7 @@ def predict_bands(
     eng = dataclasses.replace(eng, desc="draws x poses" if eng.desc == "poses" else eng.desc)
     t0 = time.perf_counter()
     parts = solve_configs(configs, poses, n_modes=n_modes, options=opts, engine=eng)
+    disc = posterior.discrepancy_at(index, poses)
     return PredictiveBands(
         name=posterior.base.name,
         poses=poses,
@@ -770,9 +903,8 @@ def predict_bands(
         options=opts,
         labels=list(labels) if labels is not None else None,
         elapsed_s=time.perf_counter() - t0,
-        discrepancy_rel=(
-            np.asarray(posterior.likelihood[DISCREPANCY], float)[index] if DISCREPANCY in posterior.likelihood else None
-        ),
+        discrepancy_rel=None if disc is None else (disc[1] if posterior.length_scale_m is not None else disc[1][:, 0]),
+        discrepancy_shift=None if disc is None or posterior.length_scale_m is None else disc[0],
     )
 
 

@@ -90,6 +90,17 @@ def test_the_transform_is_the_stated_distributions_quantile_function(table, froz
         ("[statements.measured_poses_clear]\nmin_measure = 0.1", [], "measured_poses_clear]: give a 'reason'"),
         ("[statements.measured_poses_clear]\nthreshold = 0.1\nreason = 'r'", [], "'threshold'"),
         ("[likelihood]\nsigma = 2", [], "[likelihood]: unknown key(s) ['sigma']"),
+        (
+            '[likelihood.length_scale_m]\ndist = "uniform"\nlower = 0.1\nupper = 1\nreason = "r"',
+            [],
+            "a correlation length needs a discrepancy",
+        ),
+        (
+            '[likelihood.discrepancy_rel]\nvalue = 0.1\nreason = "r"\n'
+            '[likelihood.length_scale_m]\ndist = "uniform"\nlower = -0.1\nupper = 1\nreason = "r"',
+            [],
+            "must be > 0 over the whole prior",
+        ),
         ('[parameters."geometry.elbow_branch"]\ndist = "uniform"\nreason = "r"', [], '"branches"'),
         ("[parameters", ["x_m"], "not valid TOML"),
     ],

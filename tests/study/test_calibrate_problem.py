@@ -123,3 +123,25 @@ def test_the_statements_terms_follow_their_stated_formula(default_manip):
     # the shipped default contradicts statement (a) at some (x, 0) pose (issue 23): the term is far below 0
     assert got < -5.0
     assert prob.statements_log_likelihood(default_manip) == 0.0  # none enabled
+
+
+def test_a_gaussian_process_discrepancy_is_the_stated_multivariate_normal(default_manip):
+    """With [likelihood.length_scale_m] the poses' errors are jointly normal with covariance
+    diag(sigma^2) + d^2 diag(f) K diag(f), K the squared-exponential correlation of (x, y, 0.1 m x phi)."""
+    names = parameter_set(default_manip, list(GROUPS)).names
+    base = _problem(default_manip)
+    gp_text = base.priors.text + (
+        '\n[likelihood.length_scale_m]\ndist = "loguniform"\nlower = 0.02\nupper = 1.0\nreason = "assumed: r"\n'
+    )
+    prob = dataclasses.replace(base, priors=read_priors("p.toml", names, text=gp_text))
+    assert prob.names[-1] == "likelihood.length_scale_m"
+    theta = prob.prior_transform(np.full(prob.ndim, 0.5))
+    f = prob.predict(theta)
+    d, ell = theta[-2], theta[-1]
+    xyz = np.array([[o.pose.x_m, o.pose.y_m, 0.1 * o.pose.phi_rad] for o in prob.observations])
+    k = np.exp(-0.5 * np.sum((xyz[:, None] - xyz[None]) ** 2, axis=-1) / ell**2)
+    cov = np.diag(prob.sigma**2) + d**2 * np.outer(f, f) * k
+    expected = stats.multivariate_normal(f, cov).logpdf(prob.measured)
+    assert prob.log_likelihood(theta) == pytest.approx(expected, rel=1e-12)
+    # the same problem without a correlation length: the independent likelihood, which differs here
+    assert base.log_likelihood(theta[:-1]) != pytest.approx(expected, rel=1e-3)

@@ -135,6 +135,24 @@ def test_predictive_bands_hold_the_model_discrepancy(bands):
     assert "predictive" in bands.table()
 
 
+def test_a_gaussian_process_discrepancy_shifts_and_narrows_each_draws_prediction(bands):
+    """Per draw and pose f (1 + shift + sd z): the quantiles of that mixture against a Monte Carlo of it."""
+    rng = np.random.default_rng(1)
+    n = bands.n_draws
+    shift = rng.uniform(-0.1, 0.1, (n, 3))
+    sd = rng.uniform(0.02, 0.08, (n, 3))
+    gp = dataclasses.replace(bands, discrepancy_rel=sd, discrepancy_shift=shift)
+    f0 = bands.frequencies_hz[:, 1, 0]
+    z = rng.standard_normal((n, 100_000))
+    sample = (f0[:, None] * (1 + shift[:, 1, None] + sd[:, 1, None] * z)).ravel()
+    # 6e5 samples: the quantiles' sampling error is below 0.1 %
+    np.testing.assert_allclose(gp.quantiles_hz[:, 1, 0], np.quantile(sample, QUANTILES), rtol=3e-3)
+    p = gp.meet_probability(float(np.median(f0)), mode=1)[:, 1]
+    np.testing.assert_allclose(p, (f0[:, None] * (1 + shift[:, 1, None] + sd[:, 1, None] * z) >= np.median(f0)).mean(1),
+                               atol=5e-3)  # fmt: skip
+    assert "Gaussian process" in gp.kind_line()
+
+
 def test_unreachable_draws_are_counted_not_banded(bands):
     np.testing.assert_array_equal(bands.computed_fraction, [1.0, 1.0, 0.0])
     np.testing.assert_array_equal(bands.unreachable_fraction, [0.0, 0.0, 1.0])

@@ -19,6 +19,12 @@ File layout (every table's ``reason`` is required, in the provenance style ``"st
     upper = 0.5
     reason = "..."
 
+    [likelihood.length_scale_m]   # optional: the discrepancy is a Gaussian process over the pose with this
+    dist = "loguniform"           # correlation length (m) (fpm_sim.study.discrepancy); absent: independent
+    lower = 0.02
+    upper = 1.0
+    reason = "..."
+
     [likelihood]
     rig_sigma_pct = 1.0         # rig tests' relative sd (%)
 
@@ -48,11 +54,13 @@ import numpy as np
 from scipy.special import ndtr, ndtri
 
 from fpm_sim.errors import FpmSimError
+from fpm_sim.study.discrepancy import LENGTH_SCALE_PARAMETER
 
 __all__ = [
     "BRANCH_PARAMETER",
     "DISCREPANCY_PARAMETER",
     "DISTRIBUTIONS",
+    "LENGTH_SCALE_PARAMETER",
     "MeasuredPosesClear",
     "Prior",
     "PriorError",
@@ -159,13 +167,20 @@ class Priors:
     measured_poses_clear: MeasuredPosesClear | None
     source: str = field(default="", repr=False)
     text: str = field(default="", repr=False)
+    length_scale: Prior | None = None
+    """The Gaussian-process discrepancy's correlation length (m) prior; ``None``: independent discrepancy."""
+
+    @property
+    def hyperpriors(self) -> tuple[Prior, ...]:
+        """The likelihood's sampled hyperparameters, in the order of :attr:`names`."""
+        return tuple(p for p in (self.discrepancy, self.length_scale) if p is not None)
 
     @property
     def names(self) -> list[str]:
-        """The sampled coordinates, in order: parameters, then the discrepancy, then the branch class."""
+        """The sampled coordinates, in order: parameters, then the discrepancy and the correlation length (when
+        sampled), then the branch class."""
         out = [p.name for p in self.parameters]
-        if self.discrepancy is not None:
-            out.append(DISCREPANCY_PARAMETER)
+        out += [p.name for p in self.hyperpriors]
         if self.sample_branches:
             out.append(BRANCH_PARAMETER)
         return out
@@ -295,10 +310,11 @@ def read_priors(source: str | Path, free: Sequence[str], *, text: str | None = N
             raise PriorError(f'{w}.dist: {d!r}; use "branches" (uniform over the 8 combinations) or "fixed"')
         sample_branches, branch_reason = d == "branches", _reason(t, w)
     lik = doc.get("likelihood", {})
-    unknown = set(lik) - {"discrepancy_rel", "rig_sigma_pct"}
+    unknown = set(lik) - {"discrepancy_rel", "rig_sigma_pct", "length_scale_m"}
     if unknown:
         raise PriorError(
-            f"{where} [likelihood]: unknown key(s) {sorted(unknown)}; it takes discrepancy_rel, rig_sigma_pct"
+            f"{where} [likelihood]: unknown key(s) {sorted(unknown)}; it takes discrepancy_rel, length_scale_m, "
+            "rig_sigma_pct"
         )
     disc: Prior | None = None
     disc_fixed = 0.0
@@ -328,4 +344,18 @@ def read_priors(source: str | Path, free: Sequence[str], *, text: str | None = N
         if "measured_poses_clear" in st
         else None
     )
-    return Priors(params, sample_branches, branch_reason, disc, disc_fixed, rig_sigma, a, b, where, text)
+    length = _length_scale(lik, disc, disc_fixed, where)
+    return Priors(params, sample_branches, branch_reason, disc, disc_fixed, rig_sigma, a, b, where, text, length)
+
+
+def _length_scale(lik: Mapping[str, Any], disc: Prior | None, disc_fixed: float, where: str) -> Prior | None:
+    """The ``[likelihood.length_scale_m]`` prior (a Gaussian-process discrepancy), or ``None``."""
+    if "length_scale_m" not in lik:
+        return None
+    w = f"{where} [likelihood.length_scale_m]"
+    if disc is None and disc_fixed <= 0:
+        raise PriorError(f"{w}: a correlation length needs a discrepancy; give [likelihood.discrepancy_rel]")
+    prior = _prior(LENGTH_SCALE_PARAMETER, lik["length_scale_m"], w)
+    if not prior.transform(1e-9) > 0:
+        raise PriorError(f"{w}: the correlation length must be > 0 over the whole prior (lower > 0)")
+    return prior

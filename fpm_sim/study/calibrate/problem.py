@@ -1,8 +1,9 @@
 """The calibration problem: a picklable description of what is sampled and its likelihood.
 
 Coordinates ``theta`` (in the order of :attr:`CalibrationProblem.names`): the free parameters of
-``parameter_set(base, groups)`` (SI, as named), then ``likelihood.discrepancy_rel`` when it has a prior,
-then the elbow-branch class index (0..7 into :data:`ELBOW_BRANCHES`) when the branches are sampled.
+``parameter_set(base, groups)`` (SI, as named), then ``likelihood.discrepancy_rel`` when it has a prior and
+``likelihood.length_scale_m`` when the discrepancy is a Gaussian process, then the elbow-branch class index
+(0..7 into :data:`ELBOW_BRANCHES`) when the branches are sampled.
 
 Likelihood (independent Gaussian errors)::
 
@@ -12,7 +13,9 @@ Likelihood (independent Gaussian errors)::
 
 The discrepancy is the manipulator model's (joint hardware, unmodelled compliance): it multiplies the
 prediction, so it scales with the frequency as the model's relative errors do. The rig tests are beams and a
-hinge with their own parameters, and get none.
+hinge with their own parameters, and get none. With a correlation length ``l`` (a Gaussian-process
+discrepancy, :mod:`fpm_sim.study.discrepancy`) the measured poses' errors are jointly Gaussian,
+``log L = log N(y - f | 0, diag(sigma^2) + d^2 diag(f) K_l diag(f))`` over the poses, the rig tests as above.
 
 A description that is invalid, or under which a measured pose is unreachable or a frequency cannot be given,
 has ``log L = -inf``: the machine was measured there, so such a description is impossible (dynesty treats
@@ -34,6 +37,7 @@ from fpm_sim.config import ConfigError, Manipulator
 from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import assemble_many
 from fpm_sim.study.calibrate.priors import Priors
+from fpm_sim.study.discrepancy import covariance, gaussian_log_likelihood, pose_features
 from fpm_sim.study.identify.data import Observation
 from fpm_sim.study.identify.engine import ELBOW_BRANCHES, predict_observations
 from fpm_sim.study.identify.parameters import ParameterSet, parameter_set
@@ -137,6 +141,14 @@ class CalibrationProblem:
         """``(n, 3)`` the distinct measured poses (x_m, y_m, phi_rad)."""
         return np.array(sorted({(o.pose.x_m, o.pose.y_m, o.pose.phi_rad) for o in self.observations}))
 
+    @functools.cached_property
+    def features(self) -> np.ndarray:
+        """``(n_observations, 3)`` pose features of the observations (:func:`pose_features`)."""
+        o = self.observations
+        return pose_features(
+            np.array([x.pose.x_m for x in o]), np.array([x.pose.y_m for x in o]), np.array([x.pose.phi_rad for x in o])
+        )
+
     @property
     def names(self) -> list[str]:
         """The sampled coordinates (module docstring)."""
@@ -171,8 +183,8 @@ class CalibrationProblem:
         for p in self.priors.parameters:
             theta[k] = p.transform(u[k])
             k += 1
-        if self.priors.discrepancy is not None:
-            theta[k] = self.priors.discrepancy.transform(u[k])
+        for h in self.priors.hyperpriors:
+            theta[k] = h.transform(u[k])
             k += 1
         if self.priors.sample_branches:
             theta[k] = float(min(int(u[k] * len(ELBOW_BRANCHES)), len(ELBOW_BRANCHES) - 1))
@@ -187,10 +199,18 @@ class CalibrationProblem:
         if self.priors.discrepancy is not None:
             d = float(theta[k])
             k += 1
+        if self.priors.length_scale is not None:
+            k += 1
         branch = self.base.geometry.elbow_branch
         if self.priors.sample_branches:
             branch = ELBOW_BRANCHES[round(float(theta[k]))]
         return x, d, branch
+
+    def length_scale_m(self, theta: np.ndarray) -> float | None:
+        """The Gaussian-process discrepancy's correlation length (m) at ``theta``; ``None``: independent."""
+        if self.priors.length_scale is None:
+            return None
+        return float(theta[len(self.priors.parameters) + (self.priors.discrepancy is not None)])
 
     def config(self, theta: np.ndarray) -> Manipulator:
         """The description at ``theta``. Raises :class:`ConfigError` for an impossible one."""
@@ -228,6 +248,18 @@ class CalibrationProblem:
         sd: np.ndarray = np.sqrt(s2)
         return sd
 
+    def simulate_measurement(self, f: np.ndarray, theta: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """One draw of the likelihood's measurement at model frequencies ``f`` (the posterior predictive)."""
+        _, d, _ = self.split(theta)
+        length = self.length_scale_m(theta)
+        sd = self.noise_sd(f, d)
+        out: np.ndarray = f + sd * rng.standard_normal(f.shape)
+        n = len(self.observations)
+        if length is not None and n and np.all(np.isfinite(f[:n])):
+            cov = covariance(f[:n], self._sigma[:n], self.features, d, length)
+            out[:n] = f[:n] + np.linalg.cholesky(cov) @ rng.standard_normal(n)
+        return out
+
     def statements_log_likelihood(self, cfg: Manipulator) -> float:
         """The enabled study statements' soft terms (:mod:`.priors`) under ``cfg``."""
         total = 0.0
@@ -256,9 +288,10 @@ class CalibrationProblem:
         ds = [self.priors.discrepancy_fixed]
         if self.priors.discrepancy is not None:
             ds = [float(self.priors.discrepancy.transform(u)) for u in np.linspace(0.01, 0.99, 25)]
+        ls = [] if self.priors.length_scale is None else [float(self.priors.length_scale.transform(0.01))]
         best = -math.inf
-        for d in ds:
-            t = theta + ([d] if self.priors.discrepancy is not None else [])
+        for d in ds:  # (the shortest correlation length: nearest to the independent model)
+            t = theta + ([d] if self.priors.discrepancy is not None else []) + ls
             if self.priors.sample_branches:
                 t.append(float(ELBOW_BRANCHES.index(self.base.geometry.elbow_branch)))
             best = max(best, self.log_likelihood(np.asarray(t)))
@@ -278,7 +311,16 @@ class CalibrationProblem:
         if not np.all(np.isfinite(f)):
             return -math.inf
         _, d, _ = self.split(theta)
+        return self.data_log_likelihood(f, d, self.length_scale_m(theta)) + self.statements_log_likelihood(cfg)
+
+    def data_log_likelihood(self, f: np.ndarray, d: float, length_scale_m: float | None) -> float:
+        """The data's ``log L`` at model frequencies ``f`` (module docstring), without the statements."""
         s = self.noise_sd(f, d)
         r = (f - self._measured) / s
-        ll = float(-0.5 * np.sum(r**2) - np.sum(np.log(s)) - 0.5 * len(r) * math.log(2 * math.pi))
-        return ll + self.statements_log_likelihood(cfg)
+        n = len(self.observations)
+        if length_scale_m is None or n == 0:
+            return float(-0.5 * np.sum(r**2) - np.sum(np.log(s)) - 0.5 * len(r) * math.log(2 * math.pi))
+        cov = covariance(f[:n], self._sigma[:n], self.features, d, length_scale_m)
+        rigs = r[n:]
+        ll_rig = float(-0.5 * np.sum(rigs**2) - np.sum(np.log(s[n:])) - 0.5 * len(rigs) * math.log(2 * math.pi))
+        return gaussian_log_likelihood(f[:n] - self._measured[:n], cov) + ll_rig

@@ -56,8 +56,9 @@ def _prior_of(cal: Calibration, name: str) -> str:
     for p in pr.parameters:
         if p.name == name:
             return p.describe()
-    if name == DISCREPANCY_PARAMETER and pr.discrepancy is not None:
-        return pr.discrepancy.describe()
+    for h in pr.hyperpriors:
+        if h.name == name:
+            return h.describe()
     return ""
 
 
@@ -135,8 +136,26 @@ def render_report(cal: Calibration, *, command: str, data_note: str) -> str:
     ]
     for lab, y, m, a, b, c, d, ok in zip(p.labels, p.measured, med, lo50, hi50, lo90, hi90, c90):
         lines.append(f"| {lab} | {y:.4g} | {m:.4g} | {a:.4g}-{b:.4g} | {c:.4g}-{d:.4g} | {'yes' if ok else 'NO'} |")
-    lines += ["", "Figures: `corner.png` (pairwise draws), `predicted_vs_measured.png`.", ""]
+    lines += _loo_lines(cal)
+    lines += ["", "Figures: `corner.png` (pairwise draws), `predicted_vs_measured.png`, `leave_one_out.png`.", ""]
     return "\n".join(lines)
+
+
+def _loo_lines(cal: Calibration) -> list[str]:
+    """The leave-one-out section: how the posterior predicts each measured pose it was not given."""
+    if len(cal.problem.observations) < 2:
+        return []
+    loo = cal.leave_one_out()
+    return [
+        "",
+        "## Leave-one-out predictions (PSIS-LOO: the posterior without each measured pose, by importance sampling)",
+        "",
+        loo.summary_line() + ".",
+        "",
+        "```",
+        loo.table(),
+        "```",
+    ]
 
 
 def _save(fig: Any, path: Path) -> None:
@@ -148,12 +167,15 @@ def _save(fig: Any, path: Path) -> None:
 
 
 def write_report(cal: Calibration, out: str | Path, *, command: str, data_note: str) -> None:
-    """``report.md``, ``corner.png`` and ``predicted_vs_measured.png`` in ``out`` (each atomically)."""
+    """``report.md``, ``corner.png``, ``predicted_vs_measured.png`` and ``leave_one_out.png`` in ``out`` (each
+    atomically)."""
     import matplotlib
 
     matplotlib.use("Agg")
     out = Path(out)
     _save(corner_figure(cal), out / "corner.png")
     _save(cal.plot(), out / "predicted_vs_measured.png")
+    if len(cal.problem.observations) > 1:
+        _save(cal.leave_one_out().plot(), out / "leave_one_out.png")
     with atomic_file(out / "report.md") as tmp:
         tmp.write_text(render_report(cal, command=command, data_note=data_note))

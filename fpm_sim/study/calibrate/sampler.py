@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from fpm_sim.study.loo import LeaveOneOut, leave_one_out
 from fpm_sim.study.calibrate.problem import CalibrationError, CalibrationProblem
 
 __all__ = ["Calibration", "SamplerOptions", "problem_digest", "run_calibration"]
@@ -153,11 +154,26 @@ class Calibration:
         inside: np.ndarray = (y >= lo) & (y <= hi)
         return inside
 
+    def leave_one_out(self) -> LeaveOneOut:
+        """PSIS leave-one-out predictive of every measured pose (:mod:`fpm_sim.study.loo`; rig tests aside)."""
+        p = self.problem
+        n = len(p.observations)
+        d = np.array([p.split(t)[1] for t in self.draws])
+        ls = None if p.priors.length_scale is None else np.array([p.length_scale_m(t) for t in self.draws])
+        return leave_one_out(
+            self.f_pred[:, :n],
+            p.measured[:n],
+            p.sigma[:n],
+            d,
+            features=p.features,
+            length_scale_m=ls,
+            labels=p.labels[:n],
+        )
+
     def to_dict(self) -> dict[str, Any]:
         q = self.quantiles()
         pri = {p.name: p for p in self.problem.priors.parameters}
-        if self.problem.priors.discrepancy is not None:
-            pri[self.problem.priors.discrepancy.name] = self.problem.priors.discrepancy
+        pri.update({h.name: h for h in self.problem.priors.hyperpriors})
         params = {}
         for i, n in enumerate(self.names):
             params[n] = {
@@ -198,6 +214,7 @@ class Calibration:
             "missed_start": self.missed_start,
             "coverage50": float(np.mean(self.coverage(0.5))),
             "coverage90": float(np.mean(self.coverage(0.9))),
+            "leave_one_out": self.leave_one_out().to_dict() if len(self.problem.observations) > 1 else None,
             "data": data,
             "options": {
                 k: getattr(self.options, k) for k in ("live_points", "dlogz", "seed", "sample", "walks", "max_calls")
@@ -357,8 +374,7 @@ def run_calibration(
         if pool is not None:
             pool.close()
             pool.join()
-    sd = np.stack([problem.noise_sd(f, problem.split(t)[1]) for f, t in zip(f_pred, draws)])
-    f_noisy = f_pred + sd * rng.standard_normal(f_pred.shape)
+    f_noisy = np.stack([problem.simulate_measurement(f, t, rng) for f, t in zip(f_pred, draws)])
     start_ll = problem.start_log_likelihood()
     if print_func is not None:
         print_func(f"nested sampling: {n_calls} calls, log Z = {logz:.2f} +- {logzerr:.2f}")

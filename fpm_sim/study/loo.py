@@ -1,0 +1,270 @@
+"""Leave-one-out predictive checks of a calibration, by Pareto-smoothed importance sampling (PSIS-LOO).
+
+How well does the posterior predict a measured pose it was not given? Refitting once per pose (twelve nested
+sampling runs) answers it exactly; PSIS-LOO (Vehtari, Gelman & Gabry 2017) answers it from the one posterior:
+the draws re-weighted by ``1 / p(y_i | y_-i, theta_s)`` are draws of the posterior without datum ``i``, and
+the Pareto-smoothed weights say when that is reliable (``k < 0.7``; above it, refit). For a Gaussian-process
+discrepancy the data are not independent given ``theta``, and the pointwise term is the exact conditional
+``p(y_i | y_-i, theta)`` of the multivariate normal (Buerkner, Gabry & Vehtari 2021).
+
+Per held-out datum ``i`` the leave-one-out predictive is the weighted mixture over draws ``s`` of
+``N(f_is + m_is, v_is)``: the model's frequency, the discrepancy's conditional mean given the other data (zero
+for an independent discrepancy) and the variance of a new measurement (discrepancy and measurement noise).
+:func:`leave_one_out` returns its 5/25/50/75/95 % quantiles (exact: bisection of the mixture's CDF), whether
+the measured value lies in the 50 % and 90 % bands, the median's error and the expected log predictive
+density ``elpd_loo`` with its standard error (the quantity to compare models by, beside the evidence).
+
+The inputs are one posterior's arrays (:class:`fpm_sim.study.posterior.Posterior` and ``fpm-sim calibrate``
+hold them); this module needs NumPy, SciPy and ArviZ (its ``psislw``) only.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from fpm_sim.errors import FpmSimError
+from fpm_sim.study.discrepancy import covariance, loo_conditionals
+
+__all__ = ["LOO_QUANTILES", "PARETO_K_LIMIT", "LeaveOneOut", "leave_one_out"]
+
+LOO_QUANTILES = (0.05, 0.25, 0.5, 0.75, 0.95)
+PARETO_K_LIMIT = 0.7
+"""Above it the importance weights of a datum are unreliable (Vehtari et al. 2017: refit without the datum)."""
+
+
+@dataclass
+class LeaveOneOut:
+    """PSIS-LOO predictive of every datum (:func:`leave_one_out`).
+
+    Attributes
+    ----------
+    labels
+        The data's names.
+    measured_hz
+        ``(n,)`` measured values.
+    quantiles_hz
+        ``(n, 5)`` the leave-one-out predictive's :data:`LOO_QUANTILES`.
+    pointwise_elpd
+        ``(n,)`` ``log p(y_i | y_-i)`` estimated by PSIS.
+    pareto_k
+        ``(n,)`` the Pareto shape of each datum's importance weights.
+    """
+
+    labels: list[str]
+    measured_hz: np.ndarray
+    quantiles_hz: np.ndarray
+    pointwise_elpd: np.ndarray
+    pareto_k: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return int(self.measured_hz.size)
+
+    @property
+    def median_hz(self) -> np.ndarray:
+        return self.quantiles_hz[:, 2]
+
+    def inside(self, level: float) -> np.ndarray:
+        """Per datum: the measured value lies in the central ``level`` band (0.5 or 0.9)."""
+        lo, hi = {0.5: (1, 3), 0.9: (0, 4)}[level]
+        y = self.measured_hz
+        out: np.ndarray = (y >= self.quantiles_hz[:, lo]) & (y <= self.quantiles_hz[:, hi])
+        return out
+
+    @property
+    def relative_error(self) -> np.ndarray:
+        """``(n,)`` (median - measured) / measured."""
+        out: np.ndarray = (self.median_hz - self.measured_hz) / self.measured_hz
+        return out
+
+    @property
+    def mean_abs_error(self) -> float:
+        """Mean |relative error| of the leave-one-out median (the point prediction)."""
+        return float(np.mean(np.abs(self.relative_error)))
+
+    @property
+    def half_width(self) -> np.ndarray:
+        """``(n,)`` half the 90 % band over the median."""
+        out: np.ndarray = 0.5 * (self.quantiles_hz[:, 4] - self.quantiles_hz[:, 0]) / self.median_hz
+        return out
+
+    @property
+    def elpd(self) -> float:
+        return float(np.sum(self.pointwise_elpd))
+
+    @property
+    def elpd_se(self) -> float:
+        return float(math.sqrt(self.n * np.var(self.pointwise_elpd)))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "n": self.n,
+            "inside90": int(self.inside(0.9).sum()),
+            "inside50": int(self.inside(0.5).sum()),
+            "mean_abs_error": self.mean_abs_error,
+            "median_half_width90": float(np.median(self.half_width)),
+            "elpd_loo": self.elpd,
+            "elpd_loo_se": self.elpd_se,
+            "max_pareto_k": float(np.max(self.pareto_k)),
+            "data": [
+                {
+                    "label": lab,
+                    "measured_hz": float(y),
+                    **{f"q{round(100 * q):02d}_hz": float(v) for q, v in zip(LOO_QUANTILES, qs)},
+                    "pareto_k": float(k),
+                }
+                for lab, y, qs, k in zip(self.labels, self.measured_hz, self.quantiles_hz, self.pareto_k)
+            ],
+        }
+
+    def summary_line(self) -> str:
+        """One sentence with the headline numbers."""
+        return (
+            f"leave-one-out (PSIS): {self.inside(0.9).sum()}/{self.n} measured values inside their 90 % band "
+            f"({self.inside(0.5).sum()}/{self.n} in the 50 %), median half-width of the 90 % band "
+            f"{100 * np.median(self.half_width):.1f} %, mean error of the median {100 * self.mean_abs_error:.1f} %, "
+            f"elpd_loo {self.elpd:.1f} +- {self.elpd_se:.1f}, max Pareto k {np.max(self.pareto_k):.2f}"
+            + (" (above 0.7: unreliable there)" if np.max(self.pareto_k) > PARETO_K_LIMIT else "")
+        )
+
+    def table(self) -> str:
+        lines = [
+            self.summary_line(),
+            f"{'datum':<34} {'measured':>9} {'5 %':>7} {'50 %':>7} {'95 %':>7} {'error':>7} {'k':>5}",
+        ]
+        for i, lab in enumerate(self.labels):
+            lab = lab[lab.find("(") :] if "(" in lab else lab  # the pose, without the file name
+            q = self.quantiles_hz[i]
+            flag = "" if self.inside(0.9)[i] else "  outside 90 %"
+            lines.append(
+                f"{lab[:34]:<34} {self.measured_hz[i]:>9.1f} {q[0]:>7.1f} {q[2]:>7.1f} {q[4]:>7.1f} "
+                f"{100 * self.relative_error[i]:>+6.1f}% {self.pareto_k[i]:>5.2f}{flag}"
+            )
+        return "\n".join(lines)
+
+    def plot(self, ax: Any = None) -> Any:
+        """Leave-one-out median and 50/90 % bands against the measured values."""
+        import matplotlib.pyplot as plt
+
+        fig = ax.figure if ax is not None else plt.figure(figsize=(6.5, 5.5))
+        ax = ax if ax is not None else fig.add_subplot(111)
+        y = self.measured_hz
+        xs = y.astype(float).copy()
+        for v in np.unique(y):  # equal measured values side by side
+            k = np.flatnonzero(y == v)
+            xs[k] = v + 0.6 * (np.arange(len(k)) - 0.5 * (len(k) - 1))
+        q = self.quantiles_hz
+        ax.vlines(xs, q[:, 0], q[:, 4], color="tab:green", alpha=0.35, lw=4, label="90 % leave-one-out band")
+        ax.vlines(xs, q[:, 1], q[:, 3], color="tab:green", alpha=0.9, lw=4, label="50 % leave-one-out band")
+        ax.plot(xs, q[:, 2], "k_", ms=9, label="leave-one-out median")
+        lim = [0.9 * float(min(y.min(), q[:, 0].min())), 1.1 * float(max(y.max(), q[:, 4].max()))]
+        ax.plot(lim, lim, color="0.5", lw=0.8, ls="--", label="predicted = measured")
+        ax.set_xlim(lim)
+        ax.set_ylim(lim)
+        ax.set_xlabel("measured frequency (Hz)")
+        ax.set_ylabel("predicted without that datum (Hz)")
+        ax.set_title(f"leave-one-out predictions (PSIS; {self.inside(0.9).sum()}/{self.n} inside 90 %)")
+        ax.legend(loc="upper left", fontsize=8)
+        return fig
+
+
+def _mixture_quantiles(w: np.ndarray, mu: np.ndarray, sd: np.ndarray, levels: tuple[float, ...]) -> np.ndarray:
+    """Quantiles of ``sum_s w_s N(mu_s, sd_s^2)`` (weights summing to 1), by bisection to round-off."""
+    from scipy.special import ndtr
+
+    lo = float(np.min(mu - 12 * sd))
+    hi = float(np.max(mu + 12 * sd))
+    out = []
+    for q in levels:
+        a, b = lo, hi
+        for _ in range(80):
+            x = 0.5 * (a + b)
+            if float(np.sum(w * ndtr((x - mu) / sd))) < q:
+                a = x
+            else:
+                b = x
+        out.append(0.5 * (a + b))
+    return np.array(out)
+
+
+def leave_one_out(
+    f_hz: np.ndarray,
+    measured_hz: np.ndarray,
+    sigma_hz: np.ndarray,
+    discrepancy_rel: np.ndarray,
+    *,
+    features: np.ndarray | None = None,
+    length_scale_m: np.ndarray | None = None,
+    labels: list[str] | None = None,
+) -> LeaveOneOut:
+    """PSIS leave-one-out predictive of every datum of a posterior (module docstring).
+
+    Parameters
+    ----------
+    f_hz
+        ``(n_draws, n)`` each equal-weight draw's model frequency at each datum (Hz).
+    measured_hz, sigma_hz
+        ``(n,)`` the data and their measurement sd (Hz).
+    discrepancy_rel
+        ``(n_draws,)`` each draw's relative discrepancy sd ``d``.
+    features, length_scale_m
+        For a Gaussian-process discrepancy: the data's pose features ``(n, 3)``
+        (:func:`fpm_sim.study.discrepancy.pose_features`) and each draw's correlation length ``(n_draws,)`` (m).
+    labels
+        The data's names.
+    """
+    import arviz as az
+
+    f = np.asarray(f_hz, float)
+    y = np.asarray(measured_hz, float)
+    sig = np.asarray(sigma_hz, float)
+    d = np.asarray(discrepancy_rel, float)
+    n_draws, n = f.shape
+    if y.shape != (n,) or sig.shape != (n,) or d.shape != (n_draws,):
+        raise FpmSimError(
+            f"shapes do not agree: f {f.shape}, measured {y.shape}, sigma {sig.shape}, discrepancy {d.shape}",
+            parameter="f_hz",
+        )
+    if n_draws < 10 or not np.isfinite(f).all():
+        raise FpmSimError(
+            "needs at least 10 draws with a finite frequency at every datum",
+            parameter="f_hz",
+            value=f"{n_draws} draws",
+        )
+    mean = np.zeros_like(f)
+    sd = np.sqrt(sig[None] ** 2 + (d[:, None] * f) ** 2)
+    if length_scale_m is not None:
+        if features is None:
+            raise FpmSimError("a correlation length needs the data's pose features", parameter="features")
+        ls = np.asarray(length_scale_m, float)
+        for s in range(n_draws):
+            cov = covariance(f[s], sig, features, float(d[s]), float(ls[s]))
+            mean[s], sd[s] = loo_conditionals(y - f[s], cov)
+    from scipy.stats import norm
+
+    loglik = norm.logpdf(y[None], f + mean, sd)  # (n_draws, n): log p(y_i | y_-i, theta_s)
+    q = np.zeros((n, len(LOO_QUANTILES)))
+    elpd = np.zeros(n)
+    kk = np.zeros(n)
+    for i in range(n):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # arviz warns about k > 0.7: reported in pareto_k instead
+            lw, k = az.psislw(-loglik[:, i])
+        lw = np.asarray(lw, float)
+        w = np.exp(lw - np.max(lw))
+        w /= w.sum()
+        kk[i] = float(k)
+        elpd[i] = float(np.log(np.sum(w * np.exp(loglik[:, i] - loglik[:, i].max()))) + loglik[:, i].max())
+        q[i] = _mixture_quantiles(w, f[:, i] + mean[:, i], sd[:, i], LOO_QUANTILES)
+    return LeaveOneOut(
+        labels=list(labels) if labels is not None else [f"datum {i}" for i in range(n)],
+        measured_hz=y,
+        quantiles_hz=q,
+        pointwise_elpd=elpd,
+        pareto_k=kk,
+    )
