@@ -79,6 +79,7 @@ __all__ = [
     "merge",
     "plane_blocks",
     "pose_assembly",
+    "pose_model",
     "read_poses_csv",
     "solve_configs",
     "solve_poses",
@@ -301,12 +302,18 @@ class PoseModel:
     def solve(self, asm: Assembly, n_modes: int) -> tuple[np.ndarray, np.ndarray, bool]:
         """``(frequencies_hz, in_plane, deficient)`` of the lowest ``n_modes`` modes at ``asm`` (see
         :meth:`PlaneSplit.modes`)."""
+        freq, frac, deficient, _ = self.solve_shapes(asm, n_modes)
+        return freq, frac, deficient
+
+    def solve_shapes(self, asm: Assembly, n_modes: int) -> tuple[np.ndarray, np.ndarray, bool, np.ndarray]:
+        """:meth:`solve` and the mode shapes (:meth:`PlaneSplit.modes_and_shapes`); afterwards :attr:`data`
+        holds the pose's kinematics (``xpos``, ``xmat``: e.g. for point Jacobians)."""
         self.set_pose(asm)
         mujoco.mj_fwdPosition(self.model, self.data)
         if self.scales is None:  # structural: which rows are weld rotations, which dofs translate
             self.scales = unit_scales(self.model, self.data, structural_length_m(self.model))
         jac = equality_jacobian(self.model, self.data)
-        return self.split.modes(mass_matrix(self.model, self.data), jac, n_modes, scales=self.scales)
+        return self.split.modes_and_shapes(mass_matrix(self.model, self.data), jac, n_modes, scales=self.scales)
 
 
 def structural_length_m(model: mujoco.MjModel) -> float:
@@ -401,6 +408,19 @@ class PlaneSplit:
         exactly decoupled, else on the whole matrices. The passive hinges among the in-plane degrees of
         freedom have no spring, so the energy share counts the springs of :data:`IN_PLANE_KINDS`.
         """
+        freq, frac, deficient, _ = self.modes_and_shapes(mass, jac, n_modes, scales=scales)
+        return freq, frac, deficient
+
+    def modes_and_shapes(
+        self,
+        mass: np.ndarray,
+        jac: np.ndarray,
+        n_modes: int,
+        *,
+        scales: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, bool, np.ndarray]:
+        """:meth:`modes` and the mode shapes: ``(nv, m)`` mass-normalised generalised velocities (``m <= n_modes``
+        columns, in the order of the frequencies)."""
         nv = self.in_plane.size
         problems = self.blocks(mass, jac, scales)
         if problems is None:
@@ -426,7 +446,7 @@ class PlaneSplit:
         energy = self.stiffness[:, None] * v**2
         tot = energy.sum(axis=0)
         frac[:n] = np.where(tot > 0, energy[self.in_plane].sum(axis=0) / np.where(tot > 0, tot, 1.0), np.nan)
-        return freq, frac, deficient
+        return freq, frac, deficient, v
 
 
 def plane_blocks(mass: np.ndarray, jac: np.ndarray, in_plane: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]] | None:
@@ -442,7 +462,8 @@ _POSE_MODELS: dict[str, PoseModel] = {}
 """Per-process cache of re-posable models by configuration and options (workers reuse them across chunks)."""
 
 
-def _pose_model(config: Manipulator, options: ModelOptions, reference: Assembly) -> PoseModel:
+def pose_model(config: Manipulator, options: ModelOptions, reference: Assembly) -> PoseModel:
+    """The process's cached :class:`PoseModel` of ``config`` (compiled at ``reference`` on first use)."""
     key = repr((config, options))
     pm = _POSE_MODELS.get(key)
     if pm is None:
@@ -488,7 +509,7 @@ def solve_poses(
                 continue
             asm = many.assembly(i, pose)
             if reposable:
-                pm = pm or _pose_model(config, options, asm)
+                pm = pm or pose_model(config, options, asm)
                 f, s, deficient = pm.solve(asm, n_modes)
             else:
                 built = build_manipulator(config, pose, options, assembly=asm)

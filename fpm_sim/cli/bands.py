@@ -252,9 +252,10 @@ def reproduce_pointer(posterior: Posterior, bands: Any, files: list[str]) -> str
         else ""
     )
     source = posterior.source.name if posterior.source is not None else "a posterior in memory"
+    loo = f"; {bands.loo.summary_line()}" if bands.loo is not None else ""
     return (
         f"{source}, {bands.bands.n_draws} of {posterior.n_draws} draws, free groups {','.join(posterior.groups)}; "
-        f"the bands of f1 at the measured and withheld poses are in {', '.join(files)}{cover}"
+        f"the bands of f1 at the measured and withheld poses are in {', '.join(files)}{cover}{loo}"
     )
 
 

@@ -923,6 +923,10 @@ class StudyBands:
     withheld: np.ndarray
     """``(n_poses,)`` True at the withheld poses."""
     reading: str
+    loo: LeaveOneOut | None = None
+    """The posterior's leave-one-out predictive of the measured poses it was conditioned on
+    (:meth:`Posterior.leave_one_out`; ``None`` when the file lacks the data groups): out-of-sample, unlike the
+    in-sample coverage."""
 
     def coverage(self) -> dict[str, float]:
         """At the measured poses: the share of measured f1 inside the 90 % and the 50 % bands, and the mean
@@ -975,6 +979,8 @@ class StudyBands:
             "band, "
             f"{100 * c['in_50_band']:.0f} % inside the 50 % band; median off by {c['median_error_pct']:.1f} % (mean)"
         )
+        if self.loo is not None:
+            lines.append(self.loo.summary_line())
         lines.append(self.bands.kind_line())
         return "\n".join(lines)
 
@@ -988,6 +994,7 @@ class StudyBands:
             "reading": self.reading,
             "n_draws": self.bands.n_draws,
             "coverage": self.coverage(),
+            "leave_one_out": None if self.loo is None else self.loo.to_dict(),
             "poses": rows,
             "resolution": resolution_summary(self.bands.options),
         }
@@ -1046,4 +1053,5 @@ def study_bands(
         measured_hz=np.array([f for _, _, f in cells]),
         withheld=np.array([i >= len(measured) for i in range(len(cells))]),
         reading=rd.name,
+        loo=posterior.leave_one_out(),
     )

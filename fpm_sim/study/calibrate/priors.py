@@ -25,6 +25,13 @@ File layout (every table's ``reason`` is required, in the provenance style ``"st
     upper = 1.0
     reason = "..."
 
+    [likelihood.mode_read]        # optional: the mode behind each measured f1 is latent (fpm_sim.study.readout)
+    enabled = true
+    modes = 3                     # the lowest modes the first clear peak may be
+    height_db = -20.0             # a peak this far below the highest is lost (soft, width_db wide)
+    width_db = 3.0
+    reason = "..."
+
     [likelihood]
     rig_sigma_pct = 1.0         # rig tests' relative sd (%)
 
@@ -55,6 +62,7 @@ from scipy.special import ndtr, ndtri
 
 from fpm_sim.errors import FpmSimError
 from fpm_sim.study.discrepancy import LENGTH_SCALE_PARAMETER
+from fpm_sim.study.readout import ModeRead
 
 __all__ = [
     "BRANCH_PARAMETER",
@@ -169,6 +177,9 @@ class Priors:
     text: str = field(default="", repr=False)
     length_scale: Prior | None = None
     """The Gaussian-process discrepancy's correlation length (m) prior; ``None``: independent discrepancy."""
+    mode_read: ModeRead | None = None
+    """The latent-mode model of the measured first frequencies (:mod:`fpm_sim.study.readout`); ``None``: each
+    measured f1 is mode 1."""
 
     @property
     def hyperpriors(self) -> tuple[Prior, ...]:
@@ -310,11 +321,11 @@ def read_priors(source: str | Path, free: Sequence[str], *, text: str | None = N
             raise PriorError(f'{w}.dist: {d!r}; use "branches" (uniform over the 8 combinations) or "fixed"')
         sample_branches, branch_reason = d == "branches", _reason(t, w)
     lik = doc.get("likelihood", {})
-    unknown = set(lik) - {"discrepancy_rel", "rig_sigma_pct", "length_scale_m"}
+    unknown = set(lik) - {"discrepancy_rel", "rig_sigma_pct", "length_scale_m", "mode_read"}
     if unknown:
         raise PriorError(
             f"{where} [likelihood]: unknown key(s) {sorted(unknown)}; it takes discrepancy_rel, length_scale_m, "
-            "rig_sigma_pct"
+            "mode_read, rig_sigma_pct"
         )
     disc: Prior | None = None
     disc_fixed = 0.0
@@ -345,7 +356,37 @@ def read_priors(source: str | Path, free: Sequence[str], *, text: str | None = N
         else None
     )
     length = _length_scale(lik, disc, disc_fixed, where)
-    return Priors(params, sample_branches, branch_reason, disc, disc_fixed, rig_sigma, a, b, where, text, length)
+    read = _mode_read(lik.get("mode_read"), f"{where} [likelihood.mode_read]")
+    if read is not None and length is not None:
+        raise PriorError(
+            f"{where} [likelihood]: mode_read and length_scale_m cannot be combined (a mixture per pose is not "
+            "jointly Gaussian); choose one"
+        )
+    return Priors(
+        params, sample_branches, branch_reason, disc, disc_fixed, rig_sigma, a, b, where, text, length, read
+    )
+
+
+def _mode_read(tbl: Any, where: str) -> ModeRead | None:
+    """The ``[likelihood.mode_read]`` table, or ``None`` (absent or ``enabled = false``)."""
+    if tbl is None:
+        return None
+    if not isinstance(tbl, Mapping):
+        raise PriorError(f"{where}: expected a table")
+    extra = set(tbl) - {"enabled", "modes", "height_db", "width_db", "reason"}
+    if extra:
+        raise PriorError(f"{where}: unknown key(s) {sorted(extra)}; it takes enabled, modes, height_db, width_db, reason")
+    reason = _reason(tbl, where)
+    if not tbl.get("enabled", True):
+        return None
+    modes = tbl.get("modes", 3)
+    if isinstance(modes, bool) or not isinstance(modes, int) or not 1 <= modes <= 6:
+        raise PriorError(f"{where}.modes: an integer 1-6, got {modes!r}")
+    height = _number(tbl, "height_db", where) if "height_db" in tbl else -20.0
+    width = _number(tbl, "width_db", where) if "width_db" in tbl else 3.0
+    if not width > 0:
+        raise PriorError(f"{where}.width_db: must be > 0, got {width:g}")
+    return ModeRead(modes=modes, reference_modes=max(6, modes), height_db=height, width_db=width, reason=reason)
 
 
 def _length_scale(lik: Mapping[str, Any], disc: Prior | None, disc_fixed: float, where: str) -> Prior | None:

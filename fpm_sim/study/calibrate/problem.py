@@ -38,6 +38,7 @@ from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import assemble_many
 from fpm_sim.study.calibrate.priors import Priors
 from fpm_sim.study.discrepancy import covariance, gaussian_log_likelihood, pose_features
+from fpm_sim.study.readout import mixture_log_likelihood, read_probabilities, sensor_residues
 from fpm_sim.study.identify.data import Observation
 from fpm_sim.study.identify.engine import ELBOW_BRANCHES, predict_observations
 from fpm_sim.study.identify.parameters import ParameterSet, parameter_set
@@ -90,6 +91,15 @@ class CalibrationProblem:
         ):
             raise CalibrationError(
                 "the in-plane surrogate gives first in-plane frequencies only: no rig tests, f1 only"
+            )
+        if self.priors.mode_read is not None and (
+            self.model != "segments" or any(o.mode != 1 or o.label is not None for o in self.observations)
+        ):
+            raise CalibrationError(
+                "the latent-mode model ([likelihood.mode_read]) reads unlabelled first frequencies on the segment "
+                "model only",
+                parameter="mode_read",
+                hint="give f1 only, without a mode label, or switch mode_read off",
             )
         if not self.observations and not self.rig_tests:
             raise CalibrationError(
@@ -231,14 +241,15 @@ class CalibrationProblem:
             return inplane_first_frequencies(cfg, [o.pose for o in self.observations])
         f = predict_observations(cfg, list(self.observations), options=fast_options(segments=self.segments))
         if self.rig_tests:
-            from fpm_sim.study.reproduce import subsystem_frequencies
-
-            rigs = [
-                r.ours_hz
-                for r in subsystem_frequencies(cfg, segments=self.subsystem_segments, tests=list(self.rig_tests))
-            ]
-            f = np.concatenate([f, np.asarray(rigs, float)])
+            f = np.concatenate([f, self._rig_predictions(cfg)])
         return f
+
+    def _rig_predictions(self, cfg: Manipulator) -> np.ndarray:
+        """The rig tests' frequencies (Hz) under ``cfg``."""
+        from fpm_sim.study.reproduce import subsystem_frequencies
+
+        rigs = [r.ours_hz for r in subsystem_frequencies(cfg, segments=self.subsystem_segments, tests=list(self.rig_tests))]
+        return np.asarray(rigs, float)
 
     def noise_sd(self, f_pred: np.ndarray, discrepancy: float) -> np.ndarray:
         """``s_i`` of the module docstring at predictions ``f_pred``."""
@@ -307,11 +318,43 @@ class CalibrationProblem:
             xyz = self._pose_array
             if not assemble_many(cfg.geometry, xyz[:, 0], xyz[:, 1], xyz[:, 2]).reachable.all():
                 return -math.inf
+        _, d, _ = self.split(theta)
+        if self.priors.mode_read is not None:
+            return self._mixture_log_likelihood(cfg, d)
         f = self.predict(theta, cfg)
         if not np.all(np.isfinite(f)):
             return -math.inf
-        _, d, _ = self.split(theta)
         return self.data_log_likelihood(f, d, self.length_scale_m(theta)) + self.statements_log_likelihood(cfg)
+
+    def read_modes(self, cfg: Manipulator) -> tuple[np.ndarray, np.ndarray]:
+        """Under the latent-mode model: ``(freq_hz, probs)``, the lowest ``modes`` frequencies at every
+        observation ``(n, modes)`` and the probability that each is the first clear peak ``(n_setups, n, modes)``
+        (:mod:`fpm_sim.study.readout`)."""
+        read = self.priors.mode_read
+        assert read is not None
+        freq, res = sensor_residues(
+            cfg,
+            [o.pose for o in self.observations],
+            n_modes=read.reference_modes,
+            points=read.points,
+            options=fast_options(segments=self.segments),
+        )
+        return freq[:, : read.modes], read_probabilities(np.transpose(res, (1, 0, 2)), read)
+
+    def _mixture_log_likelihood(self, cfg: Manipulator, d: float) -> float:
+        n = len(self.observations)
+        freq, probs = self.read_modes(cfg)
+        if not np.all(np.isfinite(freq)) or not np.all(np.isfinite(probs)):
+            return -math.inf
+        ll = mixture_log_likelihood(self._measured[:n], self._sigma[:n], freq, probs, d)
+        if self.rig_tests:
+            f_rig = self._rig_predictions(cfg)
+            if not np.all(np.isfinite(f_rig)):
+                return -math.inf
+            s = self._sigma[n:]
+            r = (f_rig - self._measured[n:]) / s
+            ll += float(-0.5 * np.sum(r**2) - np.sum(np.log(s)) - 0.5 * len(r) * math.log(2 * math.pi))
+        return ll + self.statements_log_likelihood(cfg)
 
     def data_log_likelihood(self, f: np.ndarray, d: float, length_scale_m: float | None) -> float:
         """The data's ``log L`` at model frequencies ``f`` (module docstring), without the statements."""
