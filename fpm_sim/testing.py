@@ -319,7 +319,7 @@ def assert_frequencies_close(
     """Assert ``|result - expected| <= atol_hz + rtol * |expected|`` for every pose and mode given.
 
     ``result``: a :class:`~fpm_sim.batch.pose_loop.PoseFrequencies`, a
-    :class:`~fpm_sim.study.sweep.WorkspaceSweep`, a :class:`~fpm_sim.linear.modal.ModalResult` or an array
+    :class:`~fpm_sim.study.sweep.WorkspaceSweep`, a :class:`~fpm_sim.linear.modes.ModalResult` or an array
     ``(n_poses, n_modes)``; ``expected_hz`` broadcasts against its first ``expected`` modes (NaN: not checked).
     The message names the worst pose (mm, rad) and mode, both values, the difference (Hz, %) and the resolution.
     """

@@ -105,7 +105,7 @@ def _clamped_link_frequencies(length_m, section, material, *, segments, hub_m, n
     import mujoco
     import scipy.linalg
 
-    from fpm_sim.linear.modal import mass_matrix
+    from fpm_sim.linear.matrices import mass_matrix
     from fpm_sim.model.links import add_link
     from fpm_sim.model.options import compile_model, dof_stiffness, new_spec
 

@@ -47,7 +47,7 @@ from fpm_sim.batch.pose_loop import (
 from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError, FpmSimWarning
 from fpm_sim.kinematics import Pose
-from fpm_sim.linear.modal import constraint_rank
+from fpm_sim.linear.nullspace import constraint_rank
 from fpm_sim.model.options import BuiltModel, ModelOptions
 
 __all__ = [
@@ -256,7 +256,7 @@ def frequencies_from_modes(
     ``w2`` ``(B, n)`` eigenvalues (rad^2/s^2), ``shapes`` ``(B, nv, n)`` full-space M-normalised modes,
     ``k_diag`` ``(B, nv)`` spring stiffness per dof (strain energy of the mode character), ``sv_ratio``
     ``(B,)`` smallest-to-largest singular value of the weld Jacobian (unscaled; kept for diagnostics). A pose
-    whose weld Jacobian is rank-deficient in consistent units (:func:`fpm_sim.linear.modal.constraint_rank`)
+    whose weld Jacobian is rank-deficient in consistent units (:func:`fpm_sim.linear.nullspace.constraint_rank`)
     is reported ``singular`` with NaN frequencies and a warning.
     """
     poses, status = assembled.poses, list(assembled.status)
@@ -332,7 +332,7 @@ def jax_pose_frequencies(
     its threads risks deadlocks, and ``forkserver`` or ``spawn`` workers re-import the caller's main
     module), and the solve of all poses is one vectorised JAX computation. The compiled function is kept
     per model structure, batch size and ``n_modes`` (at most :data:`COMPILE_CACHE_SIZE`). A pose whose weld
-    Jacobian is rank-deficient in consistent units (:func:`fpm_sim.linear.modal.constraint_rank`, the one rank
+    Jacobian is rank-deficient in consistent units (:func:`fpm_sim.linear.nullspace.constraint_rank`, the one rank
     decision of the package) is reported ``singular`` with NaN frequencies and a warning.
 
     Raises

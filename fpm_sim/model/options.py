@@ -10,7 +10,7 @@ Every generated model shares these settings:
 - the timestep ``h`` is chosen from the model's highest natural frequency (unconstrained spring
   stiffness over mass), ``h = TIMESTEP_SAFETY / omega_max`` capped at :data:`TIMESTEP_MAX_S`: the
   spring hinges are integrated explicitly and are unstable for ``omega h > 2``, and the linearised
-  frequencies carry an error that grows as ``(omega h)^2`` (see :mod:`fpm_sim.linear.modal`).
+  frequencies carry an error that grows as ``(omega h)^2`` (see :mod:`fpm_sim.linear.solvers`).
 """
 
 from __future__ import annotations

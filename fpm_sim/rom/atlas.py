@@ -68,7 +68,7 @@ from tqdm import tqdm
 from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError, FpmSimWarning
 from fpm_sim.kinematics import Pose
-from fpm_sim.linear.modal import system_damping_matrix
+from fpm_sim.linear.matrices import system_damping_matrix
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import ModelOptions, check_count, open_for_writing
 from fpm_sim.rom.reduction import ModalSystem, ReducedModel, modal_system

@@ -104,7 +104,8 @@ def test_smooth_terms_match_mujoco_away_from_qpos0_with_gravity_and_slides():
     import mujoco
 
     from fpm_sim.batch import jax_linearisation as jl
-    from fpm_sim.linear.modal import equality_jacobian, mass_matrix
+    from fpm_sim.linear.equilibrium import equality_jacobian
+    from fpm_sim.linear.matrices import mass_matrix
     from fpm_sim.model.manipulator import build_manipulator
 
     built = build_manipulator(default_config(), Pose(0.0, 0.0, 0.0), ModelOptions(segments=2, axial=True))
@@ -211,7 +212,7 @@ def test_linearise_with_gravity_and_geometric_term_matches_finite_differences_of
     import mujoco
 
     from fpm_sim.batch import jax_linearisation as jl
-    from fpm_sim.linear.modal import equality_jacobian
+    from fpm_sim.linear.equilibrium import equality_jacobian
     from fpm_sim.model.manipulator import build_manipulator
 
     built = build_manipulator(default_config(), Pose(0.0, 0.0, 0.0), ModelOptions(segments=2, axial=False))

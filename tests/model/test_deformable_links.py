@@ -10,7 +10,7 @@ import pytest
 from fpm_sim.beam_theory import euler_bernoulli_hz
 from fpm_sim.config import Section
 from fpm_sim.kinematics import Pose
-from fpm_sim.linear.modal import modes_constrained, modes_transition_fd
+from fpm_sim.linear.solvers import modes_constrained, modes_transition_fd
 from fpm_sim.model.deformable_links import DampingWarning, SectionWarning
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import FlexDampingWarning, ModelOptions

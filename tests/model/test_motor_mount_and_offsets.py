@@ -17,7 +17,7 @@ from fpm_sim.beam_theory import spring_held_torsion_hz, spring_hinged_cantilever
 from fpm_sim.config import Compliance, Manipulator, Material, Section
 from fpm_sim.kinematics import Pose, inverse_kinematics
 from fpm_sim.linear.equilibrium import equality_jacobian
-from fpm_sim.linear.modal import modes_constrained
+from fpm_sim.linear.solvers import modes_constrained
 from fpm_sim.model.links import add_link
 from fpm_sim.model.manipulator import add_motor_mount, build_manipulator, dof_kinds_of
 from fpm_sim.model.options import BuiltModel, ModelOptions, compile_model, dof_stiffness, new_spec
