@@ -58,7 +58,7 @@ def _before_solve_pose(manip, pose, opts, n_modes):
     from fpm_sim.linear.equilibrium import equality_jacobian
     from fpm_sim.linear.matrices import mass_matrix
     from fpm_sim.linear.nullspace import NULLSPACE_RCOND
-    from fpm_sim.model.options import dof_stiffness
+    from fpm_sim.model.passive import dof_stiffness
 
     nan = np.full(n_modes, np.nan)
     built, singularity, status = assemble_pose(manip, pose, opts)

@@ -107,7 +107,8 @@ def _clamped_link_frequencies(length_m, section, material, *, segments, hub_m, n
 
     from fpm_sim.linear.matrices import mass_matrix
     from fpm_sim.model.links import add_link
-    from fpm_sim.model.options import compile_model, dof_stiffness, new_spec
+    from fpm_sim.model.passive import dof_stiffness
+    from fpm_sim.model.spec import compile_model, new_spec
 
     spec = new_spec("hub_test", gravity=False)
     build = add_link(

@@ -58,7 +58,9 @@ from fpm_sim.linear.nullspace import NULLSPACE_RCOND, scaled_null_space, unit_sc
 from fpm_sim.linear.solvers import reduced_eigenproblem
 from fpm_sim.linear.threads import blas_threads
 from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import BuiltModel, ModelOptions, dof_stiffness, resolve_segments
+from fpm_sim.model.options import ModelOptions, resolve_segments
+from fpm_sim.model.passive import dof_stiffness
+from fpm_sim.model.spec import BuiltModel
 
 __all__ = [
     "FAST_SEGMENTS",

@@ -7,7 +7,7 @@ import mujoco
 import numpy as np
 
 from fpm_sim.linear.equilibrium import equality_jacobian
-from fpm_sim.model.options import (
+from fpm_sim.model.passive import (
     dof_stiffness,
     has_internal_elasticity,
     passive_damping_matrix,
@@ -82,7 +82,7 @@ def energy_stiffness(model: mujoco.MjModel) -> np.ndarray:
 def system_damping_matrix(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
     """The model's full viscous damping ``-d qfrc_passive / d qdot`` at ``qpos``: the joint dampers
     (:func:`damping_matrix`), or for ``cable``/``flex`` links the differentiated passive forces (the
-    cable joints' and the flex's own damping), as :func:`modes_constrained` uses."""
+    cable joints' and the flex's own damping), as :func:`~fpm_sim.linear.solvers.modes_constrained` uses."""
     if has_internal_elasticity(model):
         return passive_damping_matrix(model, qpos)
     return damping_matrix(model)

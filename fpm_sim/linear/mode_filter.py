@@ -16,8 +16,8 @@ stiffness ~ measure^2) and must be reported, with a :class:`~fpm_sim.kinematics.
   kinematics accept (a pose refused below singularity measure 1e-3 keeps ``f1 >= ~2.5e-3 f_normal``)
   and far above the exact zeros of a floating rig's rigid-body motions;
 - ``constraint``: the shape violates the loop closure, ``|J v| / (|J|_2 |v|) > max_constraint_ratio``,
-  ``J`` with its rows in consistent units (:func:`constraint_rank`): motions of the soft weld itself
-  (constraint stabilisation), not of the structure. Measured: lightly damped physical modes up to
+  ``J`` with its rows in consistent units (:func:`~fpm_sim.linear.nullspace.constraint_rank`): motions of the
+  soft weld itself (constraint stabilisation), not of the structure. Measured: lightly damped physical modes up to
   7.3e-4 (the flex chain rig's highest modes; the manipulator's ~1e-8), the welds' own motions from
   2.9e-3 (segment chain rig) to 0.3; the default 1.5e-3 sits at their geometric mean;
 - ``overdamped``: damping ratio above ``max_damping_ratio``.
@@ -101,7 +101,8 @@ class ModeFilter:
 
 def reference_frequency_hz(model: mujoco.MjModel, mass: np.ndarray) -> float:
     """The model's own frequency scale (Hz): the lowest uncoupled spring frequency ``min sqrt(k_i / M_ii) / 2 pi``
-    over the degrees of freedom that carry a spring (:func:`energy_stiffness`); 0 without springs.
+    over the degrees of freedom that carry a spring (:func:`~fpm_sim.linear.matrices.energy_stiffness`); 0 without
+    springs.
 
     Measured: 51 Hz for the manipulator at 12 segments (first mode 70-75 Hz), 28 Hz at 3 segments,
     401 Hz for the cantilever rig (first mode 221 Hz), 281 Hz for the free-free bar (985 Hz).

@@ -9,9 +9,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from fpm_sim.model.options import (
-    BuiltModel,
-)
+from fpm_sim.model.spec import BuiltModel
 
 __all__ = [
     "ModalResult",

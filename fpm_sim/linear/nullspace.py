@@ -159,8 +159,8 @@ def constraint_rank(
     dimensionless ``R J C``: position rows divided by ``L``, rotation rows by ``torquescale``,
     translational columns multiplied by ``L``, with ``L = model.stat.extent`` (m, the model's size);
     a direction counts when its singular value exceeds ``rcond`` times the largest. This is the one
-    rank decision of the package: the ``cpu`` path (:func:`reduced_eigenproblem`) and the ``mjx``
-    backend both use it.
+    rank decision of the package: the ``cpu`` path (:func:`~fpm_sim.linear.solvers.reduced_eigenproblem`) and the
+    ``mjx`` backend both use it.
 
     Directions below ``rcond`` are not imposed (they are redundant to first order, e.g. the axial row
     of a straight inextensible clamped-clamped chain); when such a direction is not an exact

@@ -32,6 +32,7 @@ import mujoco
 import numpy as np
 import scipy.linalg
 
+from fpm_sim.config.checks import check_count
 from fpm_sim.errors import FpmSimError, FpmSimWarning
 from fpm_sim.kinematics import NEAR_SINGULAR_WARN, NearSingularityWarning
 from fpm_sim.linear.equilibrium import static_equilibrium
@@ -47,13 +48,8 @@ from fpm_sim.linear.mode_filter import (
 )
 from fpm_sim.linear.modes import ModalResult, Mode, real_shape, strain_energy_character
 from fpm_sim.linear.nullspace import constraint_rank, constraint_ratio, scaled_jacobian
-from fpm_sim.model.options import (
-    BuiltModel,
-    check_count,
-    dof_stiffness,
-    has_internal_elasticity,
-    passive_stiffness_matrix,
-)
+from fpm_sim.model.passive import dof_stiffness, has_internal_elasticity, passive_stiffness_matrix
+from fpm_sim.model.spec import BuiltModel
 
 __all__ = [
     "OMEGA_H_WARN",
@@ -222,7 +218,8 @@ def modes_constrained(
     Raises
     ------
     UnstableModelError
-        A stiffness eigenvalue below ``-w2_tol`` (:func:`noise_w2`): the equilibrium is unstable.
+        A stiffness eigenvalue below ``-w2_tol`` (:func:`~fpm_sim.linear.mode_filter.noise_w2`): the equilibrium is
+        unstable.
     """
     filt = filt or ModeFilter()
     model = built.model
@@ -270,8 +267,8 @@ def reduced_eigenproblem(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The constrained generalised eigenproblem ``Z'KZ x = w^2 Z'MZ x`` on the admissible motions ``Z``.
 
-    ``basis`` is ``Z``: :attr:`ConstraintRank.basis` from :func:`constraint_rank` (the one rank
-    decision), or the identity for an unconstrained model. ``n_modes``: only the lowest ``n_modes``
+    ``basis`` is ``Z``: :attr:`ConstraintRank.basis` from :func:`~fpm_sim.linear.nullspace.constraint_rank` (the one
+    rank decision), or the identity for an unconstrained model. ``n_modes``: only the lowest ``n_modes``
     eigenpairs (LAPACK's subset driver; the pose loop's floor); default all.
 
     Returns ``(z, kr, mr, w2, x)``: the null-space basis, the symmetrised reduced stiffness and mass,

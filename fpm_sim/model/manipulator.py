@@ -36,8 +36,9 @@ import numpy as np
 from fpm_sim.config import Compliance, LumpedMass, Manipulator
 from fpm_sim.kinematics import Assembly, Pose, inverse_kinematics
 from fpm_sim.model.links import add_link
-from fpm_sim.model.options import BuiltModel, ModelOptions, add_weld, compile_model, new_spec
+from fpm_sim.model.options import ModelOptions
 from fpm_sim.model.parts import add_compliance_springs, add_hinge, half_lump, lump_part, quat_z, set_inertial
+from fpm_sim.model.spec import BuiltModel, add_weld, compile_model, new_spec
 
 __all__ = ["MIN_PIN_MASS_KG", "add_motor_mount", "build_manipulator"]
 

@@ -27,8 +27,9 @@ from fpm_sim.config import Compliance, LumpedMass, Manipulator, Material, RigCon
 from fpm_sim.errors import FpmSimError
 from fpm_sim.model.links import add_link
 from fpm_sim.model.manipulator import dof_kinds_of
-from fpm_sim.model.options import BuiltModel, ModelOptions, add_weld, compile_model, new_spec
+from fpm_sim.model.options import ModelOptions
 from fpm_sim.model.parts import add_compliance_springs, add_hinge, half_lump, lump_part, set_inertial
+from fpm_sim.model.spec import BuiltModel, add_weld, compile_model, new_spec
 
 __all__ = ["RIGS", "RigError", "RigSetup", "build_rig", "rig_piece"]
 

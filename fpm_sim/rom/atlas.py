@@ -66,11 +66,13 @@ import scipy.optimize
 from tqdm import tqdm
 
 from fpm_sim.config import Manipulator
+from fpm_sim.config.checks import check_count
 from fpm_sim.errors import FpmSimError, FpmSimWarning
 from fpm_sim.kinematics import Pose
 from fpm_sim.linear.matrices import system_damping_matrix
 from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import ModelOptions, check_count, open_for_writing
+from fpm_sim.model.options import ModelOptions
+from fpm_sim.outputs import open_for_writing
 from fpm_sim.rom.reduction import ModalSystem, ReducedModel, modal_system
 
 __all__ = [

@@ -59,7 +59,8 @@ from fpm_sim.linear.mode_filter import ModeFilter, check_stable, eigenvalue_tole
 from fpm_sim.linear.nullspace import constraint_rank
 from fpm_sim.linear.solvers import reduced_eigenproblem
 from fpm_sim.linear.threads import blas_threads
-from fpm_sim.model.options import BuiltModel, open_for_writing
+from fpm_sim.model.spec import BuiltModel
+from fpm_sim.outputs import open_for_writing
 from fpm_sim.results import to_jsonable
 
 __all__ = [

@@ -28,7 +28,7 @@ from numpy.typing import ArrayLike
 from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError
 from fpm_sim.linear.equilibrium import static_equilibrium
-from fpm_sim.model.options import BuiltModel
+from fpm_sim.model.spec import BuiltModel
 from fpm_sim.rom.reduction import END_EFFECTOR_SITE
 from fpm_sim.sim.rollout import end_effector_pose
 from fpm_sim.sim.stepping import DEFAULT_INTEGRATOR, SteppingError, apply_stepping, choose_stepping, reraise_as

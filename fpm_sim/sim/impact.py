@@ -64,7 +64,7 @@ import numpy as np
 
 from fpm_sim.errors import FpmSimWarning
 from fpm_sim.linear.equilibrium import static_equilibrium
-from fpm_sim.model.options import BuiltModel
+from fpm_sim.model.spec import BuiltModel
 from fpm_sim.response import (
     DEFAULT_MIN_PROMINENCE_DB,
     FrequencyResponse,

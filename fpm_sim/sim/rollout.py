@@ -27,7 +27,7 @@ or huge value in QACC" MuJoCo resets the state to ``qpos0``, which would otherwi
 displacement), when the state is not finite, or when the end effector has moved more than the model's
 size (``model.stat.extent``: a flexible manipulator that far from its equilibrium has left the linear,
 small-deflection regime the model is built for, i.e. its energy has grown without bound). MuJoCo's
-messages are collected (:func:`fpm_sim.model.options.mujoco_messages`), never written to
+messages are collected (:func:`fpm_sim.model.mujoco_log.mujoco_messages`), never written to
 ``MUJOCO_LOG.TXT``.
 """
 
@@ -46,11 +46,15 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from fpm_sim.config import Manipulator
+from fpm_sim.config.checks import check_finite
 from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose, forward_kinematics, inverse_kinematics
 from fpm_sim.linear.equilibrium import static_equilibrium
 from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import BuiltModel, ModelOptions, check_finite, mujoco_messages, open_for_writing
+from fpm_sim.model.mujoco_log import mujoco_messages
+from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.spec import BuiltModel
+from fpm_sim.outputs import open_for_writing
 from fpm_sim.rom.reduction import END_EFFECTOR_SITE, motor_dofs
 from fpm_sim.sim.stepping import (
     DEFAULT_INTEGRATOR,

@@ -20,7 +20,9 @@ from fpm_sim.linear.equilibrium import equality_jacobian
 from fpm_sim.linear.solvers import modes_constrained
 from fpm_sim.model.links import add_link
 from fpm_sim.model.manipulator import add_motor_mount, build_manipulator, dof_kinds_of
-from fpm_sim.model.options import BuiltModel, ModelOptions, compile_model, dof_stiffness, new_spec
+from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.passive import dof_stiffness
+from fpm_sim.model.spec import BuiltModel, compile_model, new_spec
 
 SECTION = Section(0.02865, 0.0148)  # the default links' section: out-of-plane bending well apart from in-plane
 STEEL = Material(200e9, 0.3, 7850.0)
