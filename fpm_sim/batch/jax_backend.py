@@ -44,7 +44,7 @@ from fpm_sim.batch.pose_loop import (
     assemble_pose,
     fast_options,
 )
-from fpm_sim.config import Manipulator
+from fpm_sim.config import Manipulator, parameter_value, with_parameter
 from fpm_sim.errors import FpmSimError, FpmSimWarning
 from fpm_sim.kinematics import Pose
 from fpm_sim.linear.nullspace import constraint_rank
@@ -65,9 +65,7 @@ __all__ = [
     "frequencies_from_modes",
     "frequency_gradients",
     "jax_pose_frequencies",
-    "parameter_value",
     "pose_frequency_gradients",
-    "with_parameter",
     "x64",
 ]
 
@@ -424,37 +422,6 @@ GRADIENT_PARAMETERS = (
 _GEOMETRY_FIELDS = ("body_pos", "body_quat", "jnt_pos", "jnt_axis", "qpos0", "qpos_spring", "eq_data")
 
 
-def parameter_value(config: Manipulator, name: str) -> float:
-    """The value (SI) of a dotted parameter name, e.g. ``section.thickness_m``."""
-    obj: Any = config
-    for part in name.split("."):
-        settable = [f.name for f in dataclasses.fields(obj)] if dataclasses.is_dataclass(obj) else []
-        if part not in settable:
-            what = "a derived value, not a settable field" if hasattr(obj, part) else "not a field"
-            raise FpmSimError(
-                f"unknown parameter: {part!r} is {what}",
-                parameter=name,
-                hint=f"settable here: {', '.join(settable) or 'none'}; e.g. {', '.join(GRADIENT_PARAMETERS)}",
-            )
-        obj = getattr(obj, part)
-    if not isinstance(obj, (int, float)) or isinstance(obj, bool):
-        raise FpmSimError("is not a number", parameter=name)
-    return float(obj)
-
-
-def with_parameter(config: Manipulator, name: str, value: float) -> Manipulator:
-    """A copy of ``config`` with the dotted parameter ``name`` set to ``value`` (validated)."""
-    parameter_value(config, name)
-    parts = name.split(".")
-
-    def rebuild(obj: Any, path: list[str]) -> Any:
-        if len(path) == 1:
-            return dataclasses.replace(obj, **{path[0]: value})
-        return dataclasses.replace(obj, **{path[0]: rebuild(getattr(obj, path[0]), path[1:])})
-
-    return rebuild(config, parts).replace()
-
-
 @dataclass
 class FrequencyGradients:
     """Frequencies at one pose and their derivatives with respect to model parameters.
@@ -582,7 +549,7 @@ def pose_frequency_gradients(
         raise FpmSimError("parameters: give at least one name")
     if not poses:
         raise FpmSimError("poses: give at least one pose")
-    values = np.array([parameter_value(config, n) for n in names])
+    values = np.array([parameter_value(config, n, examples=GRADIENT_PARAMETERS) for n in names])
     for name, v in zip(names, values):
         if not v > 0:
             raise FpmSimError(f"parameter {name!r} = {v}: gradients need a positive value (relative step)")
