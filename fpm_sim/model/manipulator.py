@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -37,7 +38,7 @@ from fpm_sim.config import Compliance, LumpedMass, Manipulator
 from fpm_sim.kinematics import Assembly, Pose, inverse_kinematics
 from fpm_sim.model.links import add_link
 from fpm_sim.model.options import ModelOptions
-from fpm_sim.model.parts import add_compliance_springs, add_hinge, half_lump, lump_part, quat_z, set_inertial
+from fpm_sim.model.parts import LinkSpec, add_compliance_springs, add_hinge, half_lump, lump_part, quat_z, set_inertial
 from fpm_sim.model.spec import BuiltModel, add_weld, compile_model, new_spec
 
 __all__ = ["MIN_PIN_MASS_KG", "add_motor_mount", "build_manipulator"]
@@ -89,7 +90,7 @@ def build_manipulator(
     world = spec.worldbody
     kinds: dict[str, str] = {}
     links: dict[str, list[str]] = {}
-    link_kw = dict(
+    link_kw: dict[str, Any] = dict(
         section=manip.section,
         material=manip.material,
         link_model=opts.link_model,
@@ -99,17 +100,15 @@ def build_manipulator(
         shear=opts.shear,
         hub_length_m=g.hub_length_m,
         damping_beta_s=beta,
-        spec=spec,
     )
     pins: list[mujoco.MjsBody] = []
     for i in range(3):
         a, b, c = asm.a[i], asm.b[i], asm.c[i]
         ang_p = math.atan2(*(b - a)[::-1])
         ang_d = math.atan2(*(c - b)[::-1])
-        prox = add_link(
-            world,
+        prox_spec = LinkSpec(
             name=f"proximal_{i}",
-            pos=np.array([a[0], a[1], 0.0]),
+            pos_m=(float(a[0]), float(a[1]), 0.0),
             angle_rad=ang_p,
             length_m=g.proximal_length_per_chain[i],
             start_lumps=(hw.motor_flange,),
@@ -117,6 +116,7 @@ def build_manipulator(
             rgba=(0.25, 0.45, 0.8, 1.0),
             **link_kw,
         )
+        prox = add_link(spec, world, prox_spec)
         add_motor_mount(prox.first, f"motor_{i}", manip.compliance, beta, kinds)
         if manip.motors.mode == "servo":
             k, c_damp = manip.motors.servo_stiffness_nm_per_rad, manip.motors.servo_damping_nms_per_rad
@@ -126,16 +126,16 @@ def build_manipulator(
             k = manip.compliance.motor_clamp_nm_per_rad
             add_hinge(prox.first, f"motor_{i}", [0, 0, 1], k, beta * k)
             kinds[f"motor_{i}"] = "clamp"
-        dist = add_link(
-            prox.last,
+        dist_spec = LinkSpec(
             name=f"distal_{i}",
-            pos=np.array([prox.last_length_m, 0.0, g.distal_offset_per_chain[i]]),
+            pos_m=(prox.last_length_m, 0.0, g.distal_offset_per_chain[i]),
             angle_rad=ang_d - ang_p,
             length_m=g.distal_length_per_chain[i],
             start_lumps=(half_lump(hw.elbow_joint),),
             rgba=(0.85, 0.45, 0.2, 1.0),
             **link_kw,
         )
+        dist = add_link(spec, prox.last, dist_spec)
         _add_passive_joint(dist.first, f"elbow_{i}", manip, kinds)
         for lb in (prox, dist):
             kinds.update(dict(lb.joints))

@@ -19,6 +19,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -28,7 +29,7 @@ from fpm_sim.errors import FpmSimError
 from fpm_sim.model.links import add_link
 from fpm_sim.model.manipulator import dof_kinds_of
 from fpm_sim.model.options import ModelOptions
-from fpm_sim.model.parts import add_compliance_springs, add_hinge, half_lump, lump_part, set_inertial
+from fpm_sim.model.parts import LinkSpec, add_compliance_springs, add_hinge, half_lump, lump_part, set_inertial
 from fpm_sim.model.spec import BuiltModel, add_weld, compile_model, new_spec
 
 __all__ = ["RIGS", "RigError", "RigSetup", "build_rig", "rig_piece"]
@@ -81,7 +82,7 @@ def build_rig(
     spec = new_spec(f"fpm_rig_{setup.rig.replace('-', '_')}", gravity=gravity)
     kinds: dict[str, str] = {}
     links: dict[str, list[str]] = {}
-    kw = dict(
+    kw: dict[str, Any] = dict(
         section=piece.section,
         material=piece.material,
         link_model=opts.link_model,
@@ -90,19 +91,21 @@ def build_rig(
         rotary_inertia=opts.rotary_inertia,
         shear=opts.shear,
         damping_beta_s=setup.damping_beta_s,
-        spec=spec,
     )
     hinge = piece.chain_hinge if setup.rig == "chain" else LumpedMass()
     first = add_link(
+        spec,
         spec.worldbody,
-        name="link_0",
-        pos=np.zeros(3),
-        angle_rad=0.0,
-        length_m=free_len,
-        end_lumps=(half_lump(hinge),) if hinge.mass_kg > 0 else (),
-        free_start=setup.rig == "free-free",
-        free_end=setup.rig != "chain",
-        **kw,
+        LinkSpec(
+            name="link_0",
+            pos_m=(0.0, 0.0, 0.0),
+            angle_rad=0.0,
+            length_m=free_len,
+            end_lumps=(half_lump(hinge),) if hinge.mass_kg > 0 else (),
+            free_start=setup.rig == "free-free",
+            free_end=setup.rig != "chain",
+            **kw,
+        ),
     )
     links[first.name] = first.sites
     kinds.update(dict(first.joints))
@@ -114,14 +117,17 @@ def build_rig(
     if setup.rig == "chain":
         turn = math.pi - math.radians(setup.angle_deg)
         second = add_link(
+            spec,
             first.last,
-            name="link_1",
-            pos=np.array([first.last_length_m, 0.0, 0.0]),
-            angle_rad=turn,
-            length_m=free_len,
-            start_lumps=(half_lump(hinge),) if hinge.mass_kg > 0 else (),
-            free_end=False,
-            **kw,
+            LinkSpec(
+                name="link_1",
+                pos_m=(first.last_length_m, 0.0, 0.0),
+                angle_rad=turn,
+                length_m=free_len,
+                start_lumps=(half_lump(hinge),) if hinge.mass_kg > 0 else (),
+                free_end=False,
+                **kw,
+            ),
         )
         add_hinge(second.first, "hinge", [0, 0, 1])
         kinds["hinge"] = "passive"

@@ -21,6 +21,7 @@ from fpm_sim.linear.solvers import modes_constrained
 from fpm_sim.model.links import add_link
 from fpm_sim.model.manipulator import add_motor_mount, build_manipulator, dof_kinds_of
 from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.parts import LinkSpec
 from fpm_sim.model.passive import dof_stiffness
 from fpm_sim.model.spec import BuiltModel, compile_model, new_spec
 
@@ -44,17 +45,19 @@ def _mounted_cantilever(k_nm_per_rad: float, segments: int, *, rotary_inertia: b
     """One link on a motor mount: the manipulator's own mount code (add_motor_mount) on a link fixed to the world."""
     spec = new_spec("motor_mount", gravity=False)
     link = add_link(
+        spec,
         spec.worldbody,
-        name="link",
-        pos=np.zeros(3),
-        angle_rad=0.0,
-        length_m=LENGTH_M,
-        section=SECTION,
-        material=STEEL,
-        segments=segments,
-        axial=False,
-        rotary_inertia=rotary_inertia,
-        spec=spec,
+        LinkSpec(
+            name="link",
+            pos_m=(0.0, 0.0, 0.0),
+            angle_rad=0.0,
+            length_m=LENGTH_M,
+            section=SECTION,
+            material=STEEL,
+            segments=segments,
+            axial=False,
+            rotary_inertia=rotary_inertia,
+        ),
     )
     kinds = dict(link.joints)
     add_motor_mount(link.first, "motor_0", Compliance(motor_mount_tilt_nm_per_rad=k_nm_per_rad), 0.0, kinds)
