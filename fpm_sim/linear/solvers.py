@@ -154,6 +154,34 @@ def modes_transition_fd(
             "the linearised step map has non-finite entries (the simulation diverges at the equilibrium); "
             "check the description (thickness, Young's modulus, masses) or pass a smaller timestep_s"
         )
+    modes, dropped = _step_map_modes(built, a, jac, jnorm, w_tol, filt)
+    h = model.opt.timestep
+    result = _finish(ModalResult("transition_fd", built, q_eq, modes, dropped), n_modes, stacklevel=3)
+    if result.modes:
+        w_top = 2 * np.pi * result.modes[-1].frequency_hz
+        if w_top * h > OMEGA_H_WARN:
+            warnings.warn(
+                f"timestep_s={h:.3g} s is coarse for the reported band up to {result.modes[-1].frequency_hz:.0f} Hz "
+                f"(omega*h = {w_top * h:.2f} > {OMEGA_H_WARN}); pass a smaller timestep_s (<= "
+                f"{OMEGA_H_WARN / w_top:.2g} s) or report fewer modes",
+                TimestepWarning,
+                stacklevel=2,
+            )
+    return result
+
+
+def _step_map_modes(
+    built: BuiltModel, a: np.ndarray, jac: np.ndarray, jnorm: float, w_tol: float, filt: ModeFilter
+) -> tuple[list[Mode], dict[str, int]]:
+    """The physical modes of the step map ``a`` (one of each conjugate pair, by ascending ``|s|``) and the count
+    of each dropped kind.
+
+    Raises
+    ------
+    UnstableModelError
+        A mode grows: a real eigenvalue above ``w_tol`` or a damping ratio below ``-NEGATIVE_DAMPING_TOL``.
+    """
+    model = built.model
     lam, vec = np.linalg.eig(a)
     h = model.opt.timestep
     with np.errstate(divide="ignore", invalid="ignore"):  # lambda = 0: an infinitely damped state, s = -inf
@@ -192,18 +220,7 @@ def modes_transition_fd(
             f"is unstable or timestep_s={h:.3g} s is too coarse for the stiffest springs; check the description "
             "(section thickness, Young's modulus, masses) or pass a smaller timestep_s"
         )
-    result = _finish(ModalResult("transition_fd", built, q_eq, modes, dropped), n_modes, stacklevel=3)
-    if result.modes:
-        w_top = 2 * np.pi * result.modes[-1].frequency_hz
-        if w_top * h > OMEGA_H_WARN:
-            warnings.warn(
-                f"timestep_s={h:.3g} s is coarse for the reported band up to {result.modes[-1].frequency_hz:.0f} Hz "
-                f"(omega*h = {w_top * h:.2f} > {OMEGA_H_WARN}); pass a smaller timestep_s (<= "
-                f"{OMEGA_H_WARN / w_top:.2g} s) or report fewer modes",
-                TimestepWarning,
-                stacklevel=2,
-            )
-    return result
+    return modes, dropped
 
 
 def modes_constrained(
