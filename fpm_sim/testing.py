@@ -173,6 +173,9 @@ def assert_min_frequency(
         The requirement's name in the message (default: ``"f<mode> >= <at_least_hz> Hz"``).
     cache
         A :class:`fpm_sim.study.requirements.SweepCache` shared between calls (the plugin's ``fpm_sweep``).
+
+    Long because: the signature and the documentation of its options are half of it; the body (checks, sweep,
+    verdict, message) is about 40 lines.
     """
     __tracebackhide__ = True
     from fpm_sim.model.options import resolution_summary, resolution_text
