@@ -127,6 +127,7 @@ class Gradients:
         """(poses, modes, parameters)."""
         from fpm_sim.batch import jax_backend
         from fpm_sim.batch.frequencies import pose_frequencies
+        from fpm_sim.config import parameter_value, with_parameter
 
         kw = {"n_modes": N_MODES, "options": self.opts}
         if way == "jax":
@@ -137,10 +138,10 @@ class Gradients:
             return np.stack([r.gradient for r in res])
         cols = []
         for name in GRADIENT_PARAMETERS:
-            v = jax_backend.parameter_value(self.config, name)
+            v = parameter_value(self.config, name)
             h = 1e-4 * v
             up, down = (
-                pose_frequencies(jax_backend.with_parameter(self.config, name, v + s * h), self.poses, **kw)
+                pose_frequencies(with_parameter(self.config, name, v + s * h), self.poses, **kw)
                 for s in (1.0, -1.0)
             )
             cols.append((up.frequencies_hz - down.frequencies_hz) / (2 * h))

@@ -21,7 +21,7 @@ def warm_imports() -> None:
     import fpm_sim.batch.frequencies
     import fpm_sim.batch.pose_loop
     import fpm_sim.linear.equilibrium
-    import fpm_sim.linear.modal
+    import fpm_sim.linear.solvers
     import fpm_sim.model.manipulator
     import fpm_sim.rom.atlas
     import fpm_sim.rom.reduction  # noqa: F401

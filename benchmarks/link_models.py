@@ -22,7 +22,7 @@ from benchmarks.common import require_full, symmetric_config, warm_imports
 
 def _pose(link_model: str):
     from fpm_sim.kinematics import Pose
-    from fpm_sim.linear.modal import modes_transition_fd
+    from fpm_sim.linear.solvers import modes_transition_fd
     from fpm_sim.model.manipulator import build_manipulator
     from fpm_sim.model.options import ModelOptions
 

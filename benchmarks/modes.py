@@ -55,12 +55,12 @@ class Methods:
     timeout = 300.0
 
     def setup(self, segments: int, method: str) -> None:
-        from fpm_sim.linear import modal
+        from fpm_sim.linear import solvers
         from fpm_sim.linear.equilibrium import static_equilibrium
 
         self.built = _built(segments)
         self.qpos = static_equilibrium(self.built.model, mujoco.MjData(self.built.model))
-        self.modes = {"transition_fd": modal.modes_transition_fd, "constrained": modal.modes_constrained}[method]
+        self.modes = {"transition_fd": solvers.modes_transition_fd, "constrained": solvers.modes_constrained}[method]
         self.modes(self.built, n_modes=6, qpos=self.qpos)  # warm-up: what the first call initialises lazily
 
     def time_modes(self, segments: int, method: str) -> None:

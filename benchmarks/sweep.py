@@ -55,8 +55,10 @@ def _grid(step_mm: float):
 
 def _before_solve_pose(manip, pose, opts, n_modes):
     from fpm_sim.batch.pose_loop import IN_PLANE_KINDS, assemble_pose
-    from fpm_sim.linear.modal import NULLSPACE_RCOND, equality_jacobian, mass_matrix
-    from fpm_sim.model.options import dof_stiffness
+    from fpm_sim.linear.equilibrium import equality_jacobian
+    from fpm_sim.linear.matrices import mass_matrix
+    from fpm_sim.linear.nullspace import NULLSPACE_RCOND
+    from fpm_sim.model.passive import dof_stiffness
 
     nan = np.full(n_modes, np.nan)
     built, singularity, status = assemble_pose(manip, pose, opts)
@@ -106,7 +108,9 @@ def _before(cfg, poses, opts, workers: int) -> np.ndarray:
 def _matrices(cfg, poses, opts) -> list:
     """Every computed pose's mass, stiffness, weld Jacobian, its unit scales and its plane blocks."""
     from fpm_sim.batch.pose_loop import PoseModel, plane_blocks, pose_assembly, structural_length_m
-    from fpm_sim.linear.modal import equality_jacobian, mass_matrix, unit_scales
+    from fpm_sim.linear.equilibrium import equality_jacobian
+    from fpm_sim.linear.matrices import mass_matrix
+    from fpm_sim.linear.nullspace import unit_scales
 
     mats = []
     pm = None
@@ -126,7 +130,8 @@ def _matrices(cfg, poses, opts) -> list:
 
 
 def _floor(mats: list, way: str) -> None:
-    from fpm_sim.linear.modal import reduced_eigenproblem, scaled_null_space
+    from fpm_sim.linear.nullspace import scaled_null_space
+    from fpm_sim.linear.solvers import reduced_eigenproblem
 
     for m, k, j, rs, cs, sub in mats:
         if way == "floor: eigen-solves in blocks":

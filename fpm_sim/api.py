@@ -26,8 +26,9 @@ if TYPE_CHECKING:
     from fpm_sim.designs.study import DesignResult
     from fpm_sim.kinematics import Pose
     from fpm_sim.linear.analysis import ModalComparison
-    from fpm_sim.linear.modal import ModalResult
-    from fpm_sim.model.options import BuiltModel, ModelOptions
+    from fpm_sim.linear.modes import ModalResult
+    from fpm_sim.model.options import ModelOptions
+    from fpm_sim.model.spec import BuiltModel
     from fpm_sim.response import FrequencyResponse, LinkPoint
     from fpm_sim.rom.atlas import ModalAtlas
     from fpm_sim.rom.reduction import ReducedModel

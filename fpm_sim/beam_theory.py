@@ -184,6 +184,39 @@ def timoshenko_simply_supported_hz(
     return math.sqrt(w2) / (2.0 * math.pi)
 
 
+def _timoshenko_element(h: float, ei: float, rho_a: float, kga: float) -> tuple[np.ndarray, np.ndarray]:
+    """Stiffness and consistent translational mass of a two-node beam element of length ``h`` (m), dofs
+    ``(w1, theta1, w2, theta2)``: the exact static stiffness of a shear-flexible beam (``phi = 12 EI / (kappa G A
+    h^2)``; ``kga = inf``: no shear, Euler-Bernoulli)."""
+    phi = 12.0 * ei / (kga * h * h)
+    ke = (
+        ei
+        / ((1.0 + phi) * h**3)
+        * np.array(
+            [
+                [12.0, 6 * h, -12.0, 6 * h],
+                [6 * h, (4 + phi) * h * h, -6 * h, (2 - phi) * h * h],
+                [-12.0, -6 * h, 12.0, -6 * h],
+                [6 * h, (2 - phi) * h * h, -6 * h, (4 + phi) * h * h],
+            ]
+        )
+    )
+    me = (
+        rho_a
+        * h
+        / 420.0
+        * np.array(
+            [
+                [156.0, 22 * h, 54.0, -13 * h],
+                [22 * h, 4 * h * h, 13 * h, -3 * h * h],
+                [54.0, 13 * h, 156.0, -22 * h],
+                [-13 * h, -3 * h * h, -22 * h, 4 * h * h],
+            ]
+        )
+    )
+    return ke, me
+
+
 def timoshenko_beam_hz(
     boundary: str,
     *,
@@ -217,32 +250,7 @@ def timoshenko_beam_hz(
     if not span > 0:
         raise ValueError(f"hub_length_m {hub_length_m} leaves no elastic span on a {length_m} m beam")
     h = span / elements
-    phi = 12.0 * ei / (kga * h * h) if shear else 0.0
-    ke = (
-        ei
-        / ((1.0 + phi) * h**3)
-        * np.array(
-            [
-                [12.0, 6 * h, -12.0, 6 * h],
-                [6 * h, (4 + phi) * h * h, -6 * h, (2 - phi) * h * h],
-                [-12.0, -6 * h, 12.0, -6 * h],
-                [6 * h, (2 - phi) * h * h, -6 * h, (4 + phi) * h * h],
-            ]
-        )
-    )
-    me = (
-        rho_a
-        * h
-        / 420.0
-        * np.array(
-            [
-                [156.0, 22 * h, 54.0, -13 * h],
-                [22 * h, 4 * h * h, 13 * h, -3 * h * h],
-                [54.0, 13 * h, 156.0, -22 * h],
-                [-13 * h, -3 * h * h, -22 * h, 4 * h * h],
-            ]
-        )
-    )
+    ke, me = _timoshenko_element(h, ei, rho_a, kga if shear else math.inf)
     if rotary_inertia:
         me = me + np.diag([0.0, rho_i * h / 2.0, 0.0, rho_i * h / 2.0])
     n = 2 * (elements + 1)

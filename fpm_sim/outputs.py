@@ -14,10 +14,11 @@ import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import IO
 
 from fpm_sim.errors import FpmSimError
 
-__all__ = ["OutputError", "atomic_dir", "atomic_file", "prove_creatable"]
+__all__ = ["OutputError", "atomic_dir", "atomic_file", "open_for_writing", "prove_creatable"]
 
 
 class OutputError(FpmSimError):
@@ -136,3 +137,38 @@ def atomic_file(target: str | Path) -> Iterator[Path]:
     finally:
         if tmp.exists():
             tmp.unlink()
+
+
+@contextmanager
+def open_for_writing(
+    path: str | Path, *, parameter: str = "out", error: type[FpmSimError] = FpmSimError
+) -> Iterator[IO[bytes]]:
+    """Open ``path`` for binary writing, parent folders created.
+
+    A failure (a read-only place, a folder in the way, ...) becomes ``error`` naming the file and
+    ``parameter`` instead of a library's own message.
+
+    Parameters
+    ----------
+    path
+        The file to write.
+    parameter
+        The parameter the path came from (named in the error).
+    error
+        The :class:`~fpm_sim.errors.FpmSimError` subclass raised on failure.
+
+    Yields
+    ------
+    IO[bytes]
+        The open file, closed when the ``with`` block ends.
+    """
+    p = Path(path)
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+        handle = open(p, "wb")  # closed below
+    except OSError as e:
+        raise error(
+            f"cannot write {str(p)!r} ({e.strerror or e})", parameter=parameter, hint="choose a writable path"
+        ) from e
+    with handle:
+        yield handle

@@ -42,7 +42,7 @@ import scipy.signal
 from numpy.typing import ArrayLike
 
 from fpm_sim.errors import FpmSimError
-from fpm_sim.model.options import BuiltModel
+from fpm_sim.model.spec import BuiltModel
 from fpm_sim.rom.reduction import ModalSystem
 
 __all__ = [

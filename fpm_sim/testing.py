@@ -173,6 +173,9 @@ def assert_min_frequency(
         The requirement's name in the message (default: ``"f<mode> >= <at_least_hz> Hz"``).
     cache
         A :class:`fpm_sim.study.requirements.SweepCache` shared between calls (the plugin's ``fpm_sweep``).
+
+    Long because: the signature and the documentation of its options are half of it; the body (checks, sweep,
+    verdict, message) is about 40 lines.
     """
     __tracebackhide__ = True
     from fpm_sim.model.options import resolution_summary, resolution_text
@@ -319,7 +322,7 @@ def assert_frequencies_close(
     """Assert ``|result - expected| <= atol_hz + rtol * |expected|`` for every pose and mode given.
 
     ``result``: a :class:`~fpm_sim.batch.pose_loop.PoseFrequencies`, a
-    :class:`~fpm_sim.study.sweep.WorkspaceSweep`, a :class:`~fpm_sim.linear.modal.ModalResult` or an array
+    :class:`~fpm_sim.study.sweep.WorkspaceSweep`, a :class:`~fpm_sim.linear.modes.ModalResult` or an array
     ``(n_poses, n_modes)``; ``expected_hz`` broadcasts against its first ``expected`` modes (NaN: not checked).
     The message names the worst pose (mm, rad) and mode, both values, the difference (Hz, %) and the resolution.
     """

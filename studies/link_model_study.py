@@ -29,7 +29,7 @@ from tqdm import tqdm
 from fpm_sim.beam_theory import euler_bernoulli_hz
 from fpm_sim.config import Manipulator, Material, RigConfig, Section, default_config, load_config
 from fpm_sim.kinematics import Pose
-from fpm_sim.linear.modal import modes_constrained, modes_transition_fd
+from fpm_sim.linear.solvers import modes_constrained, modes_transition_fd
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.model.rigs import RigSetup, build_rig

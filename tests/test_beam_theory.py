@@ -105,23 +105,27 @@ def _clamped_link_frequencies(length_m, section, material, *, segments, hub_m, n
     import mujoco
     import scipy.linalg
 
-    from fpm_sim.linear.modal import mass_matrix
+    from fpm_sim.linear.matrices import mass_matrix
     from fpm_sim.model.links import add_link
-    from fpm_sim.model.options import compile_model, dof_stiffness, new_spec
+    from fpm_sim.model.parts import LinkSpec
+    from fpm_sim.model.passive import dof_stiffness
+    from fpm_sim.model.spec import compile_model, new_spec
 
     spec = new_spec("hub_test", gravity=False)
     build = add_link(
+        spec,
         spec.worldbody,
-        name="link",
-        pos=np.zeros(3),
-        angle_rad=0.0,
-        length_m=length_m,
-        section=section,
-        material=material,
-        segments=segments,
-        axial=False,
-        hub_length_m=hub_m,
-        spec=spec,
+        LinkSpec(
+            name="link",
+            pos_m=(0.0, 0.0, 0.0),
+            angle_rad=0.0,
+            length_m=length_m,
+            section=section,
+            material=material,
+            segments=segments,
+            axial=False,
+            hub_length_m=hub_m,
+        ),
     )
     model = compile_model(spec, timestep_s=None)
     data = mujoco.MjData(model)

@@ -15,11 +15,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from fpm_sim.config import default_config
+from fpm_sim.config.checks import check_count, check_finite
 from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose
-from fpm_sim.linear.modal import ModeFilter, modes_constrained
+from fpm_sim.linear.mode_filter import ModeFilter
+from fpm_sim.linear.solvers import modes_constrained
 from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import ModelOptions, check_count, check_finite
+from fpm_sim.model.options import ModelOptions
 
 FAST = settings(
     max_examples=8,

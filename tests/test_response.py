@@ -11,8 +11,9 @@ import pytest
 import scipy.linalg
 
 from fpm_sim.kinematics import Pose
-from fpm_sim.linear.equilibrium import static_equilibrium
-from fpm_sim.linear.modal import NULLSPACE_RCOND, damping_matrix, equality_jacobian, mass_matrix, stiffness_matrix
+from fpm_sim.linear.equilibrium import equality_jacobian, static_equilibrium
+from fpm_sim.linear.matrices import damping_matrix, mass_matrix, stiffness_matrix
+from fpm_sim.linear.nullspace import NULLSPACE_RCOND
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.response import FrfError, LinkPoint, half_power_damping, locate, modal_frf, pick_peaks, point_row

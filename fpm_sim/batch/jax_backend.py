@@ -44,11 +44,12 @@ from fpm_sim.batch.pose_loop import (
     assemble_pose,
     fast_options,
 )
-from fpm_sim.config import Manipulator
+from fpm_sim.config import Manipulator, parameter_value, with_parameter
 from fpm_sim.errors import FpmSimError, FpmSimWarning
 from fpm_sim.kinematics import Pose
-from fpm_sim.linear.modal import constraint_rank
-from fpm_sim.model.options import BuiltModel, ModelOptions
+from fpm_sim.linear.nullspace import constraint_rank
+from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.spec import BuiltModel
 
 __all__ = [
     "GRADIENT_PARAMETERS",
@@ -64,9 +65,7 @@ __all__ = [
     "frequencies_from_modes",
     "frequency_gradients",
     "jax_pose_frequencies",
-    "parameter_value",
     "pose_frequency_gradients",
-    "with_parameter",
     "x64",
 ]
 
@@ -256,7 +255,7 @@ def frequencies_from_modes(
     ``w2`` ``(B, n)`` eigenvalues (rad^2/s^2), ``shapes`` ``(B, nv, n)`` full-space M-normalised modes,
     ``k_diag`` ``(B, nv)`` spring stiffness per dof (strain energy of the mode character), ``sv_ratio``
     ``(B,)`` smallest-to-largest singular value of the weld Jacobian (unscaled; kept for diagnostics). A pose
-    whose weld Jacobian is rank-deficient in consistent units (:func:`fpm_sim.linear.modal.constraint_rank`)
+    whose weld Jacobian is rank-deficient in consistent units (:func:`fpm_sim.linear.nullspace.constraint_rank`)
     is reported ``singular`` with NaN frequencies and a warning.
     """
     poses, status = assembled.poses, list(assembled.status)
@@ -332,7 +331,7 @@ def jax_pose_frequencies(
     its threads risks deadlocks, and ``forkserver`` or ``spawn`` workers re-import the caller's main
     module), and the solve of all poses is one vectorised JAX computation. The compiled function is kept
     per model structure, batch size and ``n_modes`` (at most :data:`COMPILE_CACHE_SIZE`). A pose whose weld
-    Jacobian is rank-deficient in consistent units (:func:`fpm_sim.linear.modal.constraint_rank`, the one rank
+    Jacobian is rank-deficient in consistent units (:func:`fpm_sim.linear.nullspace.constraint_rank`, the one rank
     decision of the package) is reported ``singular`` with NaN frequencies and a warning.
 
     Raises
@@ -421,37 +420,6 @@ GRADIENT_PARAMETERS = (
 ``material.density_kg_m3``, ``material.poisson``."""
 
 _GEOMETRY_FIELDS = ("body_pos", "body_quat", "jnt_pos", "jnt_axis", "qpos0", "qpos_spring", "eq_data")
-
-
-def parameter_value(config: Manipulator, name: str) -> float:
-    """The value (SI) of a dotted parameter name, e.g. ``section.thickness_m``."""
-    obj: Any = config
-    for part in name.split("."):
-        settable = [f.name for f in dataclasses.fields(obj)] if dataclasses.is_dataclass(obj) else []
-        if part not in settable:
-            what = "a derived value, not a settable field" if hasattr(obj, part) else "not a field"
-            raise FpmSimError(
-                f"unknown parameter: {part!r} is {what}",
-                parameter=name,
-                hint=f"settable here: {', '.join(settable) or 'none'}; e.g. {', '.join(GRADIENT_PARAMETERS)}",
-            )
-        obj = getattr(obj, part)
-    if not isinstance(obj, (int, float)) or isinstance(obj, bool):
-        raise FpmSimError("is not a number", parameter=name)
-    return float(obj)
-
-
-def with_parameter(config: Manipulator, name: str, value: float) -> Manipulator:
-    """A copy of ``config`` with the dotted parameter ``name`` set to ``value`` (validated)."""
-    parameter_value(config, name)
-    parts = name.split(".")
-
-    def rebuild(obj: Any, path: list[str]) -> Any:
-        if len(path) == 1:
-            return dataclasses.replace(obj, **{path[0]: value})
-        return dataclasses.replace(obj, **{path[0]: rebuild(getattr(obj, path[0]), path[1:])})
-
-    return rebuild(config, parts).replace()
 
 
 @dataclass
@@ -581,7 +549,7 @@ def pose_frequency_gradients(
         raise FpmSimError("parameters: give at least one name")
     if not poses:
         raise FpmSimError("poses: give at least one pose")
-    values = np.array([parameter_value(config, n) for n in names])
+    values = np.array([parameter_value(config, n, examples=GRADIENT_PARAMETERS) for n in names])
     for name, v in zip(names, values):
         if not v > 0:
             raise FpmSimError(f"parameter {name!r} = {v}: gradients need a positive value (relative step)")

@@ -48,7 +48,8 @@ from fpm_sim.batch.jax_backend import (
 from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose
-from fpm_sim.model.options import BuiltModel, ModelOptions
+from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.spec import BuiltModel
 
 __all__ = [
     "SERIAL_DOF_LIMIT",

@@ -6,7 +6,7 @@ constrained eigenproblem at the assembled configuration with gravity off:
 
 ``M`` from ``mj_fullM`` at ``qpos0``, ``K = diag(joint spring stiffness)``, the weld Jacobian ``J``
 from the position stage; ``Z = null(J)``, ``Z'KZ x = w^2 Z'MZ x``
-(:func:`fpm_sim.linear.modal.reduced_eigenproblem`).
+(:func:`fpm_sim.linear.solvers.reduced_eigenproblem`).
 
 The model is compiled once per structure and configuration (:class:`PoseModel`) and re-posed in place
 for every pose: nine body orientations and the welds' relative poses, set as the compiler sets them, so
@@ -52,17 +52,15 @@ from fpm_sim.kinematics import (
     assemble_many,
     checked_pose_mm,
 )
-from fpm_sim.linear.modal import (
-    NULLSPACE_RCOND,
-    equality_jacobian,
-    mass_matrix,
-    reduced_eigenproblem,
-    scaled_null_space,
-    unit_scales,
-)
+from fpm_sim.linear.equilibrium import equality_jacobian
+from fpm_sim.linear.matrices import mass_matrix
+from fpm_sim.linear.nullspace import NULLSPACE_RCOND, scaled_null_space, unit_scales
+from fpm_sim.linear.solvers import reduced_eigenproblem
 from fpm_sim.linear.threads import blas_threads
 from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import BuiltModel, ModelOptions, dof_stiffness, resolve_segments
+from fpm_sim.model.options import ModelOptions, resolve_segments
+from fpm_sim.model.passive import dof_stiffness
+from fpm_sim.model.spec import BuiltModel
 
 __all__ = [
     "FAST_SEGMENTS",
@@ -258,7 +256,7 @@ class PoseModel:
     the bodies at ``qpos0``. The model is compiled once, at ``reference`` (an assembled pose of the same
     configuration); :meth:`solve` sets the orientations, recomputes the weld relative poses as the
     compiler does, runs the position stage (``mj_fwdPosition``: kinematics, mass matrix, constraint
-    Jacobian) and solves the constrained eigenproblem (:func:`fpm_sim.linear.modal.reduced_eigenproblem`).
+    Jacobian) and solves the constrained eigenproblem (:func:`fpm_sim.linear.solvers.reduced_eigenproblem`).
 
     Parameters
     ----------
@@ -322,8 +320,8 @@ def structural_length_m(model: mujoco.MjModel) -> float:
 
     It is structural: the same at every pose of a re-posed model and of a model compiled per pose, so the
     loop's results do not depend on which pose a worker compiled its model at (``model.stat.extent``, the
-    length :func:`fpm_sim.linear.modal.constraint_rank` uses, does). The rank decision itself is the same
-    function (:func:`fpm_sim.linear.modal.scaled_null_space`); its threshold is far from both lengths'
+    length :func:`fpm_sim.linear.nullspace.constraint_rank` uses, does). The rank decision itself is the same
+    function (:func:`fpm_sim.linear.nullspace.scaled_null_space`); its threshold is far from both lengths'
     scaled singular values (0.14-0.17 vs 1e-4).
     """
     if model.nbody < 2:
@@ -348,7 +346,7 @@ class PlaneSplit:
     smaller eigenproblems then give the same modes at a third of the cost. :meth:`blocks` checks the exact
     zeros at every pose and refuses the split (``None``) unless it keeps exactly the constraint directions
     the whole problem keeps: the singular values of a block-diagonal ``J`` are those of its blocks, and
-    :func:`fpm_sim.linear.modal.reduced_eigenproblem` drops those below ``NULLSPACE_RCOND`` times the largest.
+    :func:`fpm_sim.linear.solvers.reduced_eigenproblem` drops those below ``NULLSPACE_RCOND`` times the largest.
 
     Parameters
     ----------
@@ -374,9 +372,9 @@ class PlaneSplit:
     ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, int, int, np.ndarray]] | None:
         """``[(dofs, M_block, K_block, n_rows, rank, basis)]`` of the two decoupled problems, or ``None``.
 
-        ``rank`` and ``basis`` are the block's :func:`fpm_sim.linear.modal.scaled_null_space` (one SVD per block,
+        ``rank`` and ``basis`` are the block's :func:`fpm_sim.linear.nullspace.scaled_null_space` (one SVD per block,
         used both for the acceptance check and for the solve). ``scales`` are
-        :func:`fpm_sim.linear.modal.unit_scales` (default: none, unit factors).
+        :func:`fpm_sim.linear.nullspace.unit_scales` (default: none, unit factors).
         """
         if not self.usable or np.any(mass[self._cross] != 0.0):
             return None
@@ -404,7 +402,7 @@ class PlaneSplit:
     ) -> tuple[np.ndarray, np.ndarray, bool]:
         """Lowest ``n_modes`` constrained modes: frequencies (Hz) and in-plane strain-energy share (NaN-padded).
 
-        The eigenproblem is :func:`fpm_sim.linear.modal.reduced_eigenproblem`, on the two blocks when they are
+        The eigenproblem is :func:`fpm_sim.linear.solvers.reduced_eigenproblem`, on the two blocks when they are
         exactly decoupled, else on the whole matrices. The passive hinges among the in-plane degrees of
         freedom have no spring, so the energy share counts the springs of :data:`IN_PLANE_KINDS`.
         """

@@ -112,19 +112,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     if any(p.subsystem for p in ps.parameters) and not tests:
         raise CliError("--free rig needs --subsystems FILE.csv (the rig parameters are seen only by rig tests)")
     args.workers = workers_of(args)
-    counts = (
-        ("--workers", args.workers),
-        ("--segments", args.segments),
-        ("--generations", args.generations),
-        ("--popsize", args.popsize),
-        ("--refine", args.refine),
-        ("--refine-per-class", args.refine_per_class),
-    )
-    for flag, value in counts:
-        if value < 1:
-            raise CliError(f"{flag} must be >= 1, got {value}")
-    if args.surrogate_seeds < 0:
-        raise CliError(f"--surrogate-seeds must be >= 0, got {args.surrogate_seeds}")
+    _check_counts(args)
     opts = IdentifyOptions(
         segments=args.segments,
         global_method=args.global_method,
@@ -166,6 +154,29 @@ def cmd_identify(args: argparse.Namespace) -> int:
     data_note = ", ".join([ds.source for ds in datasets] + ([Path(args.subsystems).name] if tests else []))
     write_identification(args.out, result, cv, command=command, data_files=files, data_note=data_note)
     summ = summary(result, cv)
+    emit(args, {"summary": summ, "result": result.to_dict(), "out": str(args.out)}, _summary_text(args, result, summ))
+    return 0
+
+
+def _check_counts(args: argparse.Namespace) -> None:
+    """The identification's counts must be >= 1 (``--surrogate-seeds`` >= 0)."""
+    counts = (
+        ("--workers", args.workers),
+        ("--segments", args.segments),
+        ("--generations", args.generations),
+        ("--popsize", args.popsize),
+        ("--refine", args.refine),
+        ("--refine-per-class", args.refine_per_class),
+    )
+    for flag, value in counts:
+        if value < 1:
+            raise CliError(f"{flag} must be >= 1, got {value}")
+    if args.surrogate_seeds < 0:
+        raise CliError(f"--surrogate-seeds must be >= 0, got {args.surrogate_seeds}")
+
+
+def _summary_text(args: argparse.Namespace, result: Any, summ: dict[str, Any]) -> str:
+    """The result's table, the in-sample (and cross-validated) mean error per data source, what was written."""
     lines = [result.table()]
     for src, st in summ.items():
         i, c = st["in_sample"], st.get("cross_validated")
@@ -174,11 +185,14 @@ def cmd_identify(args: argparse.Namespace) -> int:
             + (f", {args.folds}-fold CV {c.get('mean_abs_pct', float('nan')):.2f} %" if c else "")
         )
     lines.append(f"  wrote {args.out}/config.toml, identify.json, report.md, figures")
-    emit(args, {"summary": summ, "result": result.to_dict(), "out": str(args.out)}, "\n".join(lines))
-    return 0
+    return "\n".join(lines)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Declare ``fpm-sim identify`` and its options.
+
+    Long because: the command's options, declared one after another in the order ``--help`` lists them.
+    """
     p = sub.add_parser(
         "identify",
         help="identify the manipulator from measured natural frequencies (model updating)",

@@ -54,8 +54,8 @@ except KeyboardInterrupt:
 if TYPE_CHECKING:
     from fpm_sim.config import Manipulator
     from fpm_sim.linear.analysis import ModalComparison
-    from fpm_sim.linear.modal import ModalResult
-    from fpm_sim.model.options import BuiltModel
+    from fpm_sim.linear.modes import ModalResult
+    from fpm_sim.model.spec import BuiltModel
 
 __all__ = ["COMMAND_MODULES", "build_parser", "main", "save_figure"]
 

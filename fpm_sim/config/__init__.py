@@ -1,8 +1,10 @@
-"""The manipulator description: schema (dataclasses), TOML reading, validation, provenance.
+"""The manipulator description: schema (dataclasses), TOML reading, validation, provenance, and the
+dotted-name editor (``parameter_value``, ``with_parameter``).
 
 The embedded default lives in ``fpm_sim/data/default_3rrr.toml`` (data only, no code).
 """
 
+from fpm_sim.config.edit import EXAMPLE_PARAMETERS, parameter_value, with_parameter
 from fpm_sim.config.schema import (
     DEFAULT_CONFIG_NAME,
     Compliance,
@@ -26,6 +28,7 @@ from fpm_sim.config.schema import (
 
 __all__ = [
     "DEFAULT_CONFIG_NAME",
+    "EXAMPLE_PARAMETERS",
     "Compliance",
     "ConfigError",
     "Damping",
@@ -41,6 +44,8 @@ __all__ = [
     "default_config",
     "default_config_text",
     "load_config",
+    "parameter_value",
     "parse_config",
     "validate",
+    "with_parameter",
 ]

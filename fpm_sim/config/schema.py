@@ -383,15 +383,8 @@ def _material(r: _Reader, t: dict[str, Any], path: str) -> Material:
     )
 
 
-def parse_config(data: dict[str, Any], *, source: str = "user") -> Manipulator:
-    """Build a validated :class:`Manipulator` from parsed TOML data."""
-    r = _Reader(default_source=source)
-    _check_keys(
-        data,
-        "<top>",
-        {"name", "geometry", "section", "material", "hardware", "compliance", "motors", "damping", "rig"},
-    )
-    g = r.table(data, "", "geometry")
+def _geometry(r: _Reader, g: dict[str, Any]) -> Geometry:
+    """The ``[geometry]`` table (angles in degrees, lengths in metres, one value or one per chain)."""
     _check_keys(
         g,
         "geometry",
@@ -411,7 +404,7 @@ def parse_config(data: dict[str, Any], *, source: str = "user") -> Manipulator:
     branch = r.get(g, "geometry", "elbow_branch", [1, 1, 1])
     if not isinstance(branch, (list, tuple)) or len(branch) != 3 or any(b not in (1, -1) for b in branch):
         raise ConfigError("must be three values each +1 or -1", parameter="geometry.elbow_branch", value=branch)
-    geometry = Geometry(
+    return Geometry(
         base_radius_m=r.number_or_triple(g, "geometry", "base_radius_m"),
         base_angles_rad=_radians3(r.triple(g, "geometry", "base_angles_deg")),
         proximal_length_m=r.number_or_triple(g, "geometry", "proximal_length_m"),
@@ -423,6 +416,31 @@ def parse_config(data: dict[str, Any], *, source: str = "user") -> Manipulator:
         distal_offset_m=r.number_or_triple(g, "geometry", "distal_offset_m", 0.0),
         platform_offset_m=r.number_or_triple(g, "geometry", "platform_offset_m", 0.0),
     )
+
+
+def _rig(r: _Reader, rt: dict[str, Any], material: Material) -> RigConfig:
+    """The ``[rig]`` table: the test piece (its material defaults to the links' ``material``)."""
+    _check_keys(rt, "rig", {"length_m", "clamped_length_m", "section", "material", "chain_hinge"})
+    return RigConfig(
+        length_m=r.number(rt, "rig", "length_m"),
+        section=_section(r, r.table(rt, "rig", "section"), "rig.section"),
+        material=_material(r, r.table(rt, "rig", "material"), "rig.material") if "material" in rt else material,
+        clamped_length_m=r.number(rt, "rig", "clamped_length_m", 0.0),
+        chain_hinge=_lump(r, r.table(rt, "rig", "chain_hinge"), "rig.chain_hinge")
+        if "chain_hinge" in rt
+        else LumpedMass(),
+    )
+
+
+def parse_config(data: dict[str, Any], *, source: str = "user") -> Manipulator:
+    """Build a validated :class:`Manipulator` from parsed TOML data."""
+    r = _Reader(default_source=source)
+    _check_keys(
+        data,
+        "<top>",
+        {"name", "geometry", "section", "material", "hardware", "compliance", "motors", "damping", "rig"},
+    )
+    geometry = _geometry(r, r.table(data, "", "geometry"))
     s = r.table(data, "", "section")
     _check_keys(s, "section", {"thickness_m", "height_m"})
     m = r.table(data, "", "material")
@@ -444,19 +462,7 @@ def parse_config(data: dict[str, Any], *, source: str = "user") -> Manipulator:
     _check_keys(dmp, "damping", {"stiffness_proportional_s"})
     damping = Damping(stiffness_proportional_s=r.number(dmp, "damping", "stiffness_proportional_s", 0.0))
     material = _material(r, m, "material")
-    rig = None
-    if "rig" in data:
-        rt = r.table(data, "", "rig")
-        _check_keys(rt, "rig", {"length_m", "clamped_length_m", "section", "material", "chain_hinge"})
-        rig = RigConfig(
-            length_m=r.number(rt, "rig", "length_m"),
-            section=_section(r, r.table(rt, "rig", "section"), "rig.section"),
-            material=_material(r, r.table(rt, "rig", "material"), "rig.material") if "material" in rt else material,
-            clamped_length_m=r.number(rt, "rig", "clamped_length_m", 0.0),
-            chain_hinge=_lump(r, r.table(rt, "rig", "chain_hinge"), "rig.chain_hinge")
-            if "chain_hinge" in rt
-            else LumpedMass(),
-        )
+    rig = _rig(r, r.table(data, "", "rig"), material) if "rig" in data else None
     manip = Manipulator(
         name=str(data.get("name", "unnamed 3RRR")),
         geometry=geometry,

@@ -23,7 +23,6 @@ from typing import Any
 import numpy as np
 
 from fpm_sim.batch.engine import EngineOptions
-from fpm_sim.batch.jax_backend import parameter_value, with_parameter
 from fpm_sim.batch.pose_loop import (
     STATUS_UNREACHABLE,
     PoseFrequencies,
@@ -31,7 +30,7 @@ from fpm_sim.batch.pose_loop import (
     read_poses_csv,
     solve_configs,
 )
-from fpm_sim.config import Manipulator
+from fpm_sim.config import Manipulator, parameter_value, with_parameter
 from fpm_sim.errors import FpmSimError, FpmSimWarning
 from fpm_sim.figures import wrap_title
 from fpm_sim.kinematics import Pose

@@ -16,11 +16,13 @@ from fpm_sim.config import Manipulator, RigConfig, default_config
 from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose
 from fpm_sim.linear.equilibrium import static_equilibrium
-from fpm_sim.linear.modal import Method, ModalResult, modes_constrained, modes_transition_fd
+from fpm_sim.linear.modes import ModalResult
+from fpm_sim.linear.solvers import Method, modes_constrained, modes_transition_fd
 from fpm_sim.linear.threads import blas_threads
 from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import BuiltModel, ModelOptions
+from fpm_sim.model.options import ModelOptions
 from fpm_sim.model.rigs import RigSetup, build_rig, rig_piece
+from fpm_sim.model.spec import BuiltModel
 
 __all__ = ["ModalComparison", "analyse", "compare_methods", "manipulator_modes", "rig_modes"]
 

@@ -24,7 +24,7 @@ import mujoco
 import numpy as np
 
 from fpm_sim.errors import FpmSimError
-from fpm_sim.model.options import tangent_jacobian
+from fpm_sim.model.passive import tangent_jacobian
 
 __all__ = ["EquilibriumError", "applied_forces", "equality_jacobian", "force_jacobian", "static_equilibrium"]
 

@@ -1,9 +1,9 @@
 """Links as MuJoCo's own deformables: the ``cable`` plugin and the 1D ``flex`` rod.
 
-Both builders have the interface of :func:`fpm_sim.model.links.add_link` (which dispatches to them) and
-fill the same :class:`fpm_sim.model.links.LinkBuild`: the caller adds the joint of the link's start to
-``build.first`` (none = clamped), and attaches whatever follows the link (next link, pin, far clamp)
-to ``build.last`` at ``build.last_length_m`` along its x axis.
+Both builders take a :class:`~fpm_sim.model.parts.LinkSpec`, as :func:`fpm_sim.model.links.add_link` (which
+dispatches to them by link model) does, and fill the same :class:`fpm_sim.model.parts.LinkBuild`: the caller
+adds the joint of the link's start to ``build.first`` (none = clamped), and attaches whatever follows the link
+(next link, pin, far clamp) to ``build.last`` at ``build.last_length_m`` along its x axis.
 
 ``cable`` (``mujoco.elasticity.cable`` plugin)
     The segment chain's layout: ``n`` elastic joints at the centres of ``n`` equal parts of length
@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
@@ -62,6 +63,7 @@ from fpm_sim.errors import FpmSimWarning
 from fpm_sim.model.parts import (
     LinkBuild,
     LinkModelError,
+    LinkSpec,
     add_box_geom,
     box_part,
     lump_part,
@@ -117,27 +119,11 @@ def _check_engine(link_model: str) -> None:
         )
 
 
-def add_cable_link(
-    spec: mujoco.MjSpec,
-    parent: mujoco.MjsBody,
-    *,
-    name: str,
-    pos: np.ndarray,
-    angle_rad: float,
-    length_m: float,
-    section: Section,
-    material: Material,
-    segments: int,
-    axial: bool,
-    rotary_inertia: bool,
-    damping_beta_s: float,
-    start_lumps: tuple[LumpedMass, ...],
-    end_lumps: tuple[LumpedMass, ...],
-    rgba: tuple[float, float, float, float],
-) -> LinkBuild:
-    """Add a cable-plugin link (see module docstring); arguments as :func:`fpm_sim.model.links.add_link`."""
+def add_cable_link(spec: mujoco.MjSpec, parent: mujoco.MjsBody, link: LinkSpec) -> LinkBuild:
+    """Add a cable-plugin link (see module docstring) to ``parent``, a body of ``spec``."""
     _check_engine("cable")
-    n = segments
+    name, length_m, section, material = link.name, link.length_m, link.section, link.material
+    damping_beta_s, n = link.damping_beta_s, link.segments
     l_seg = length_m / n
     lengths = [l_seg / 2.0] + [l_seg] * (n - 1) + [l_seg / 2.0]
     plugin = _cable_plugin(spec, name, material)
@@ -147,7 +133,7 @@ def add_cable_link(
     body = parent
     for j, piece in enumerate(lengths):
         if j == 0:
-            body = parent.add_body(name=f"{name}_b0", pos=list(pos), quat=quat_z(angle_rad))
+            body = parent.add_body(name=f"{name}_b0", pos=list(link.pos), quat=quat_z(link.angle_rad))
             anchor = body.add_body(name=f"{name}_anchor", pos=[-l_seg / 2.0, 0.0, 0.0])
             # the plugin reads the section from the first geom of each plugin body
             add_box_geom(anchor, f"{name}_ganchor", l_seg / 2.0, section, l_seg / 2.0, (0, 0, 0, 0))
@@ -157,7 +143,7 @@ def add_cable_link(
             # joint's origin distance is l); every body origin sits at its proximal joint
             chain_parent = anchor if j == 1 else body
             body = chain_parent.add_body(name=f"{name}_b{j}", pos=[l_seg, 0.0, 0.0])
-            if axial:
+            if link.axial:
                 jn = f"{name}_s{j}_axial"
                 ja = body.add_joint(name=jn, type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[1, 0, 0])
                 ja.stiffness = [k_axial, 0.0, 0.0]
@@ -170,12 +156,12 @@ def add_cable_link(
             build.joints.append((jn, "ball"))
             body.plugin = plugin
         # the first piece's frame is at the link start; every later piece's at its proximal joint
-        add_box_geom(body, f"{name}_g{j}", piece, section, 0.0, rgba)
-        parts = [box_part(piece, section, material, 0.0, rotary_inertia=rotary_inertia)]
+        add_box_geom(body, f"{name}_g{j}", piece, section, 0.0, link.rgba)
+        parts = [box_part(piece, section, material, 0.0, rotary_inertia=link.rotary_inertia)]
         if j == 0:
-            parts += [lump_part(lump, np.zeros(3)) for lump in start_lumps if lump.mass_kg > 0]
+            parts += [lump_part(lump, np.zeros(3)) for lump in link.start_lumps if lump.mass_kg > 0]
         if j == len(lengths) - 1:
-            parts += [lump_part(lump, np.array([piece, 0.0, 0.0])) for lump in end_lumps if lump.mass_kg > 0]
+            parts += [lump_part(lump, np.array([piece, 0.0, 0.0])) for lump in link.end_lumps if lump.mass_kg > 0]
         set_inertial(body, parts)
         site = f"{name}_p{j}"
         body.add_site(name=site, pos=[0.0, 0.0, 0.0], size=[0.002, 0, 0])
@@ -209,26 +195,20 @@ def flex_spacing_m(length_m: float, segments: int, *, free_start: bool, free_end
     return length_m / (segments - (0.0 if free_start else 0.5) - (0.0 if free_end else 0.5))
 
 
-def add_flex_link(
-    spec: mujoco.MjSpec,
-    parent: mujoco.MjsBody,
-    *,
-    name: str,
-    pos: np.ndarray,
-    angle_rad: float,
-    length_m: float,
-    section: Section,
-    material: Material,
-    segments: int,
-    axial: bool,
-    damping_beta_s: float,
-    start_lumps: tuple[LumpedMass, ...],
-    end_lumps: tuple[LumpedMass, ...],
-    rgba: tuple[float, float, float, float],
-    free_start: bool,
-    free_end: bool,
-) -> LinkBuild:
-    """Add a 1D-flex link (see module docstring); arguments as :func:`fpm_sim.model.links.add_link`.
+@dataclass
+class _FlexVertices:
+    """The flex's vertices as they are added: the body of each and its position in that body (m, x y z)."""
+
+    bodies: list[str] = field(default_factory=list)
+    pos_m: list[float] = field(default_factory=list)
+
+
+def add_flex_link(spec: mujoco.MjSpec, parent: mujoco.MjsBody, link: LinkSpec) -> LinkBuild:
+    """Add a 1D-flex link (see module docstring) to ``parent``, a body of ``spec``.
+
+    A constrained start is a host body on ``parent`` carrying the first two vertices, the free vertices are
+    bodies on the world with three slides each, and a constrained end is a hub body (three slides and three
+    hinges) carrying the last two; ``link.free_start`` / ``link.free_end`` replace host or hub by a free vertex.
 
     Warns
     -----
@@ -238,6 +218,46 @@ def add_flex_link(
         If ``damping_beta_s > 0``: bending is damped only along the current curvature.
     """
     _check_engine("flex")
+    _warn_if_not_square(link.section)
+    n = link.segments
+    l_v = flex_spacing_m(link.length_m, n, free_start=link.free_start, free_end=link.free_end)
+    s0 = 0.0 if link.free_start else -l_v / 2.0
+    s = s0 + l_v * np.arange(n + 1)  # arc length of each vertex from the link start
+    m_l = link.material.density_kg_m3 * link.section.area_m2 * l_v
+    t, h = link.section.thickness_m, link.section.height_m
+    # an end body carries its vertex cell (length l, mass rho A l) with the cell's own inertia about
+    # its centre: free vertices are points, but without it a hub's twist would have no inertia and
+    # a weld on it would be soft (MuJoCo scales constraint stiffness with the effective mass)
+    cell = m_l * np.array([min(t**2 + h**2, 2 * l_v**2), l_v**2, l_v**2]) / 12.0
+    build = LinkBuild(name=link.name, bodies=[], piece_lengths_m=[])
+    verts = _FlexVertices()
+    # world position of the link start (the parent frame may be moving but is at its qpos0 pose)
+    start_w, rot_w = _world_pose(parent, link.pos, link.angle_rad)
+    first_free = 0
+    if not link.free_start:
+        _add_flex_host(parent, link, (m_l, np.array([s[1], 0.0, 0.0]), np.diag(cell)), build)
+        verts.bodies += [build.last.name, build.last.name]
+        verts.pos_m += [s[0], 0.0, 0.0, s[1], 0.0, 0.0]
+        first_free = 2
+    last_free = n if link.free_end else n - 2
+    for k in range(first_free, last_free + 1):
+        _add_flex_vertex(spec.worldbody, link, k, start_w + s[k] * rot_w[:, 0], m_l, build)
+        verts.bodies.append(build.last.name)
+        verts.pos_m += [0.0, 0.0, 0.0]
+    if not link.free_end:
+        cell_end = (m_l, np.array([s[n - 1] - link.length_m, 0.0, 0.0]), np.diag(cell))
+        _add_flex_hub(spec.worldbody, link, start_w + link.length_m * rot_w[:, 0], rot_w, cell_end, build)
+        verts.bodies += [build.last.name, build.last.name]
+        verts.pos_m += [s[n - 1] - link.length_m, 0.0, 0.0, s[n] - link.length_m, 0.0, 0.0]
+    _add_flex(spec, link, l_v, verts)
+    build.piece_lengths_m = [l_v] * n  # the edges
+    # a hub's origin is the link's end; a free end vertex is the end itself
+    build.end_offset_m = 0.0
+    return build
+
+
+def _warn_if_not_square(section: Section) -> None:
+    """:class:`SectionWarning` when ``thickness_m != height_m`` (the flex bends with the weaker axis in both planes)."""
     t, h = section.thickness_m, section.height_m
     i_in, i_out = section.i_inplane_m4, section.i_outofplane_m4
     if not math.isclose(t, h, rel_tol=1e-9):
@@ -249,126 +269,121 @@ def add_flex_link(
             f"{max(i_in, i_out) / min(i_in, i_out):.2f}x; "
             "use link_model 'segments' or 'cable' for such sections",
             SectionWarning,
-            stacklevel=3,
+            stacklevel=4,
         )
-    n = segments
-    l_v = flex_spacing_m(length_m, n, free_start=free_start, free_end=free_end)
-    s0 = 0.0 if free_start else -l_v / 2.0
-    s = s0 + l_v * np.arange(n + 1)  # arc length of each vertex from the link start
-    m_l = material.density_kg_m3 * section.area_m2 * l_v
-    # an end body carries its vertex cell (length l, mass rho A l) with the cell's own inertia about
-    # its centre: free vertices are points, but without it a hub's twist would have no inertia and
-    # a weld on it would be soft (MuJoCo scales constraint stiffness with the effective mass)
-    cell = m_l * np.array([min(t**2 + h**2, 2 * l_v**2), l_v**2, l_v**2]) / 12.0
-    build = LinkBuild(name=name, bodies=[], piece_lengths_m=[])
-    vert_bodies: list[str] = []
-    vert_pos: list[float] = []
-    quat = quat_z(angle_rad)
-    # world position of the link start (the parent frame may be moving but is at its qpos0 pose)
-    start_w, rot_w = _world_pose(parent, np.asarray(pos, float), angle_rad)
 
-    def world_at(arc: float) -> np.ndarray:
-        return start_w + arc * rot_w[:, 0]
 
-    first_free = 0
-    if not free_start:
-        host = parent.add_body(name=f"{name}_b0", pos=list(pos), quat=quat)
-        # the rod between the start point and the first free vertex's cell: vertex v1 (at +l/2)
-        # carries rho A l, as every interior vertex; hardware lumps sit at the start point
-        parts = [(m_l, np.array([s[1], 0.0, 0.0]), np.diag(cell))]
-        parts += [lump_part(lump, np.zeros(3)) for lump in start_lumps if lump.mass_kg > 0]
-        parts.append((0.0, np.zeros(3), np.eye(3) * _HUB_INERTIA_KG_M2))
-        _set_parts(host, parts)
-        vert_bodies += [host.name, host.name]
-        vert_pos += [s[0], 0.0, 0.0, s[1], 0.0, 0.0]
-        host.add_site(name=f"{name}_p0", pos=[0.0, 0.0, 0.0], size=[0.002, 0, 0])
-        build.sites.append(f"{name}_p0")
-        build.bodies.append(host)
-        first_free = 2
-    last_free = n if free_end else n - 2
-    world = spec.worldbody
-    for k in range(first_free, last_free + 1):
-        vb = world.add_body(name=f"{name}_v{k}", pos=list(world_at(s[k])))
-        for ax_name, axis in zip("xyz", np.eye(3)):
-            jn = f"{name}_v{k}_{ax_name}"
-            vb.add_joint(name=jn, type=mujoco.mjtJoint.mjJNT_SLIDE, axis=list(axis))
-            build.joints.append((jn, "flex_out" if ax_name == "z" else "flex_in"))
-        mass = m_l
-        lumps: tuple[LumpedMass, ...] = ()
-        if k == 0:
-            mass, lumps = m_l / 2.0, start_lumps
-        elif k == n:
-            mass, lumps = m_l / 2.0, end_lumps
-        # a vertex is a point: hardware inertia cannot be carried, only its mass
-        point = mass + sum(lump.mass_kg for lump in lumps)
-        set_inertial(vb, [(point, np.zeros(3), np.eye(3) * _VERTEX_INERTIA_KG_M2)])
-        vb.add_site(name=f"{name}_p{k}", pos=[0.0, 0.0, 0.0], size=[0.002, 0, 0])
-        build.sites.append(f"{name}_p{k}")
-        build.bodies.append(vb)
-        vert_bodies.append(vb.name)
-        vert_pos += [0.0, 0.0, 0.0]
-    if not free_end:
-        end_w = world_at(length_m)
-        hub = world.add_body(name=f"{name}_hub", pos=list(end_w), quat=_quat_of(rot_w))
-        for ax_name, axis in zip("xyz", np.eye(3)):
-            jn = f"{name}_hub_t{ax_name}"
-            hub.add_joint(name=jn, type=mujoco.mjtJoint.mjJNT_SLIDE, axis=list(axis))
-            build.joints.append((jn, "flex_out" if ax_name == "z" else "flex_in"))
-        for ax_name, axis in zip("xyz", np.eye(3)):
-            jn = f"{name}_hub_r{ax_name}"
-            hub.add_joint(name=jn, type=mujoco.mjtJoint.mjJNT_HINGE, axis=list(axis))
-            build.joints.append((jn, "flex_in" if ax_name == "z" else "flex_out"))
-        parts = [(m_l, np.array([s[n - 1] - length_m, 0.0, 0.0]), np.diag(cell))]
-        parts += [lump_part(lump, np.zeros(3)) for lump in end_lumps if lump.mass_kg > 0]
-        parts.append((0.0, np.zeros(3), np.eye(3) * _HUB_INERTIA_KG_M2))
-        _set_parts(hub, parts)
-        vert_bodies += [hub.name, hub.name]
-        vert_pos += [s[n - 1] - length_m, 0.0, 0.0, s[n] - length_m, 0.0, 0.0]
-        hub.add_site(name=f"{name}_p{n}", pos=[0.0, 0.0, 0.0], size=[0.002, 0, 0])
-        build.sites.append(f"{name}_p{n}")
-        build.bodies.append(hub)
-    nvert = len(vert_bodies)
+def _add_flex_host(
+    parent: mujoco.MjsBody, link: LinkSpec, cell: tuple[float, np.ndarray, np.ndarray], build: LinkBuild
+) -> None:
+    """The body on ``parent`` that holds a constrained start (vertices 0 and 1)."""
+    host = parent.add_body(name=f"{link.name}_b0", pos=list(link.pos), quat=quat_z(link.angle_rad))
+    # the rod between the start point and the first free vertex's cell: vertex v1 (at +l/2)
+    # carries rho A l, as every interior vertex; hardware lumps sit at the start point
+    parts = [cell]
+    parts += [lump_part(lump, np.zeros(3)) for lump in link.start_lumps if lump.mass_kg > 0]
+    parts.append((0.0, np.zeros(3), np.eye(3) * _HUB_INERTIA_KG_M2))
+    _set_parts(host, parts)
+    host.add_site(name=f"{link.name}_p0", pos=[0.0, 0.0, 0.0], size=[0.002, 0, 0])
+    build.sites.append(f"{link.name}_p0")
+    build.bodies.append(host)
+
+
+def _add_flex_vertex(
+    world: mujoco.MjsBody, link: LinkSpec, k: int, pos_w: np.ndarray, m_l: float, build: LinkBuild
+) -> None:
+    """Free vertex ``k``: a point mass on three slides at ``pos_w`` (world, m)."""
+    name, n = link.name, link.segments
+    vb = world.add_body(name=f"{name}_v{k}", pos=list(pos_w))
+    for ax_name, axis in zip("xyz", np.eye(3)):
+        jn = f"{name}_v{k}_{ax_name}"
+        vb.add_joint(name=jn, type=mujoco.mjtJoint.mjJNT_SLIDE, axis=list(axis))
+        build.joints.append((jn, "flex_out" if ax_name == "z" else "flex_in"))
+    mass = m_l
+    lumps: tuple[LumpedMass, ...] = ()
+    if k == 0:
+        mass, lumps = m_l / 2.0, link.start_lumps
+    elif k == n:
+        mass, lumps = m_l / 2.0, link.end_lumps
+    # a vertex is a point: hardware inertia cannot be carried, only its mass
+    point = mass + sum(lump.mass_kg for lump in lumps)
+    set_inertial(vb, [(point, np.zeros(3), np.eye(3) * _VERTEX_INERTIA_KG_M2)])
+    vb.add_site(name=f"{name}_p{k}", pos=[0.0, 0.0, 0.0], size=[0.002, 0, 0])
+    build.sites.append(f"{name}_p{k}")
+    build.bodies.append(vb)
+
+
+def _add_flex_hub(
+    world: mujoco.MjsBody,
+    link: LinkSpec,
+    end_w: np.ndarray,
+    rot_w: np.ndarray,
+    cell: tuple[float, np.ndarray, np.ndarray],
+    build: LinkBuild,
+) -> None:
+    """The body at the link's end ``end_w`` (world, m) that holds a constrained end (the last two vertices)."""
+    name, n = link.name, link.segments
+    hub = world.add_body(name=f"{name}_hub", pos=list(end_w), quat=_quat_of(rot_w))
+    for ax_name, axis in zip("xyz", np.eye(3)):
+        jn = f"{name}_hub_t{ax_name}"
+        hub.add_joint(name=jn, type=mujoco.mjtJoint.mjJNT_SLIDE, axis=list(axis))
+        build.joints.append((jn, "flex_out" if ax_name == "z" else "flex_in"))
+    for ax_name, axis in zip("xyz", np.eye(3)):
+        jn = f"{name}_hub_r{ax_name}"
+        hub.add_joint(name=jn, type=mujoco.mjtJoint.mjJNT_HINGE, axis=list(axis))
+        build.joints.append((jn, "flex_in" if ax_name == "z" else "flex_out"))
+    parts = [cell]
+    parts += [lump_part(lump, np.zeros(3)) for lump in link.end_lumps if lump.mass_kg > 0]
+    parts.append((0.0, np.zeros(3), np.eye(3) * _HUB_INERTIA_KG_M2))
+    _set_parts(hub, parts)
+    hub.add_site(name=f"{name}_p{n}", pos=[0.0, 0.0, 0.0], size=[0.002, 0, 0])
+    build.sites.append(f"{name}_p{n}")
+    build.bodies.append(hub)
+
+
+def _add_flex(spec: mujoco.MjSpec, link: LinkSpec, l_v: float, verts: _FlexVertices) -> None:
+    """The 1D flex through ``verts``: bending from the section, edges as axial springs (or held rigid without
+    ``axial``), the flex's own damping (with its :class:`DampingWarning`)."""
+    section, material = link.section, link.material
+    t, h = section.thickness_m, section.height_m
+    nvert = len(verts.bodies)
     flex = spec.add_flex(
-        name=f"{name}_flex",
+        name=f"{link.name}_flex",
         dim=1,
         radius=min(t, h) / 2.0,
         young=material.young_pa,
         poisson=material.poisson,
         section=int(mujoco.mjtFlexSection.mjFLEXSECTION_BOX),
         sectionsize=[t / 2.0, h / 2.0],
-        vertbody=vert_bodies,
-        vert=vert_pos,
+        vertbody=verts.bodies,
+        vert=verts.pos_m,
         elem=[int(v) for i in range(nvert - 1) for v in (i, i + 1)],
         contype=0,
         conaffinity=0,
-        rgba=list(rgba),
+        rgba=list(link.rgba),
     )
-    if axial:
+    if link.axial:
         # the edges are axial springs E A / l, left undamped: MuJoCo 3.17 applies flex edge damping
         # explicitly, and beta * E A / l on the light vertices (c h / m ~ 2.3 at the automatic
         # timestep) made the discrete map unstable and gave the manipulator spurious undamped modes
         # (32.8 / 34.4 / 38.8 Hz against 46.3 / 49.0 / 49.0 Hz without it, segments = 8)
         flex.edgestiffness = material.young_pa * section.area_m2 / l_v
     else:
-        eq = spec.add_equality(name=f"{name}_edges", type=mujoco.mjtEq.mjEQ_FLEX, objtype=mujoco.mjtObj.mjOBJ_FLEX)
+        eq = spec.add_equality(name=f"{link.name}_edges", type=mujoco.mjtEq.mjEQ_FLEX, objtype=mujoco.mjtObj.mjOBJ_FLEX)
         eq.name1 = flex.name
     # the flex's own damping is stiffness-proportional on its bending forces, but in 3.17, linearised
     # about a bent rod, it acts only along the existing curvature (measured on the cantilever:
     # straight, zeta = beta omega / 2 in both planes; sagged by gravity out of plane, by micrometres,
     # zeta = 0 in plane)
-    flex.damping = damping_beta_s
-    if damping_beta_s > 0:
+    flex.damping = link.damping_beta_s
+    if link.damping_beta_s > 0:
         warnings.warn(
             "link model 'flex' damps bending only along the rod's current curvature (MuJoCo 3.17's 1D flex "
             "damping): at an equilibrium sagged out of plane by gravity its in-plane modes come out undamped; "
             "use link_model 'segments' or 'cable' for modal damping ratios",
             DampingWarning,
-            stacklevel=3,
+            stacklevel=4,
         )
-    build.piece_lengths_m = [l_v] * n  # the edges
-    # a hub's origin is the link's end; a free end vertex is the end itself
-    build.end_offset_m = 0.0
-    return build
 
 
 def _set_parts(body: mujoco.MjsBody, parts: list[tuple[float, np.ndarray, np.ndarray]]) -> None:

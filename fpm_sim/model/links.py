@@ -30,17 +30,18 @@ states what each can and cannot represent. Their ``segments`` is the number of e
 
 from __future__ import annotations
 
-from typing import TypedDict
+from collections.abc import Callable
 
 import mujoco
 import numpy as np
 
 from fpm_sim.beam_theory import shear_coefficient_rectangle
-from fpm_sim.config import LumpedMass, Material, Section
+from fpm_sim.config import Material, Section
 from fpm_sim.model.deformable_links import add_cable_link, add_flex_link
 from fpm_sim.model.parts import (
     LinkBuild,
     LinkModelError,
+    LinkSpec,
     add_box_geom,
     box_part,
     check_link_model,
@@ -49,7 +50,7 @@ from fpm_sim.model.parts import (
     set_inertial,
 )
 
-__all__ = ["add_link"]
+__all__ = ["LINK_BUILDERS", "LinkBuilder", "LinkSpec", "add_link", "add_segment_link", "check_link_spec"]
 
 
 def _add_spring(body: mujoco.MjsBody, name: str, kind: str, stiffness: float, beta: float) -> None:
@@ -69,130 +70,91 @@ def _add_spring(body: mujoco.MjsBody, name: str, kind: str, stiffness: float, be
     j.damping = [beta * stiffness, 0.0, 0.0]
 
 
-class _DeformableLinkArgs(TypedDict):
-    """The keywords :func:`add_link` passes on to both ``add_cable_link`` and ``add_flex_link``."""
+def check_link_spec(link: LinkSpec) -> None:
+    """Refuse what the link model cannot build: hubs on deformables, no flexible span, shear off ``segments``.
 
-    name: str
-    pos: np.ndarray
-    angle_rad: float
-    length_m: float
-    section: Section
-    material: Material
-    segments: int
-    axial: bool
-    damping_beta_s: float
-    start_lumps: tuple[LumpedMass, ...]
-    end_lumps: tuple[LumpedMass, ...]
-    rgba: tuple[float, float, float, float]
+    Raises
+    ------
+    LinkModelError
+        Naming what the link model cannot represent.
+    """
+    check_link_model(link.link_model, link.segments)
+    if link.hub_length_m and link.link_model in ("cable", "flex"):
+        raise LinkModelError(
+            "rigid hubs (geometry.hub_length_m) exist only for link_model 'segments' or 'rigid', "
+            f"not {link.link_model!r}"
+        )
+    if not 0.0 <= 2.0 * link.hub_length_m < link.length_m:
+        raise LinkModelError(f"hub_length_m {link.hub_length_m} m leaves no flexible span on a {link.length_m} m link")
+    if link.shear and link.link_model != "segments":
+        raise LinkModelError(f"shear springs exist only for link_model 'segments', not {link.link_model!r}")
 
 
-def add_link(
-    parent: mujoco.MjsBody,
-    *,
-    name: str,
-    pos: np.ndarray,
-    angle_rad: float,
-    length_m: float,
-    section: Section,
-    material: Material,
-    link_model: str = "segments",
-    segments: int = 12,
-    axial: bool = True,
-    rotary_inertia: bool = False,
-    shear: bool = False,
-    hub_length_m: float = 0.0,
-    damping_beta_s: float = 0.0,
-    start_lumps: tuple[LumpedMass, ...] = (),
-    end_lumps: tuple[LumpedMass, ...] = (),
-    rgba: tuple[float, float, float, float] = (0.3, 0.5, 0.8, 1.0),
-    spec: mujoco.MjSpec | None = None,
-    free_start: bool = False,
-    free_end: bool = False,
-) -> LinkBuild:
-    """Add a straight link starting at ``pos`` (parent frame), pointing at ``angle_rad`` about z.
+def add_link(spec: mujoco.MjSpec, parent: mujoco.MjsBody, link: LinkSpec) -> LinkBuild:
+    """Add the straight link ``link`` to ``parent`` (a body of ``spec``), built by its link model's builder.
 
-    The first body's frame sits at the link start with x along the link; the caller adds the joint
-    connecting it to ``parent`` (none = clamped). Lumped masses are placed at the link's start and end.
+    The first body's frame sits at the link start (``link.pos_m`` in the parent frame, turned by
+    ``link.angle_rad`` about z) with x along the link; the caller adds the joint connecting it to ``parent``
+    (none = clamped). Lumped masses are placed at the link's start and end.
 
     ``shear`` (``segments`` only) adds two slide springs at each spring location, across the link in
     the plane (``shear_in``) and out of it (``shear_out``), of stiffness ``kappa G A / l`` (Cowper's
     ``kappa``, :func:`fpm_sim.beam_theory.shear_coefficient_rectangle`): with ``rotary_inertia`` the
     chain then converges to a Timoshenko beam (tested against :func:`fpm_sim.beam_theory.timoshenko_beam_hz`).
 
-    ``hub_length_m`` (``segments`` and ``rigid`` only): a rigid length at each end; the springs are
-    spread over the flexible span ``length_m - 2 hub_length_m`` only (pieces ``hub + l/2, l, ..., l,
-    l/2 + hub`` with ``l`` the span over ``segments``); mass stays uniform along the whole link.
-
-    ``spec`` (the spec ``parent`` belongs to) is needed by ``cable`` and ``flex``. ``free_start``
-    and ``free_end`` say that nothing holds the link's start (the caller gives the chain models a
-    free joint; ``flex`` then starts on a free vertex and ``build.first`` is that vertex's body) or
-    attaches to ``build.last`` (``flex`` then ends on a free vertex instead of a hub); the chain
-    models ignore both.
+    Raises
+    ------
+    LinkModelError
+        What the link model cannot build (:func:`check_link_spec`).
     """
-    check_link_model(link_model, segments)
-    if hub_length_m and link_model in ("cable", "flex"):
-        raise LinkModelError(
-            f"rigid hubs (geometry.hub_length_m) exist only for link_model 'segments' or 'rigid', not {link_model!r}"
-        )
-    if not 0.0 <= 2.0 * hub_length_m < length_m:
-        raise LinkModelError(f"hub_length_m {hub_length_m} m leaves no flexible span on a {length_m} m link")
-    if shear and link_model != "segments":
-        raise LinkModelError(f"shear springs exist only for link_model 'segments', not {link_model!r}")
-    if link_model in ("cable", "flex"):
-        if spec is None:
-            raise TypeError(f"add_link(link_model={link_model!r}) needs spec= (the MjSpec of parent)")
-        common = _DeformableLinkArgs(
-            name=name,
-            pos=pos,
-            angle_rad=angle_rad,
-            length_m=length_m,
-            section=section,
-            material=material,
-            segments=segments,
-            axial=axial,
-            damping_beta_s=damping_beta_s,
-            start_lumps=start_lumps,
-            end_lumps=end_lumps,
-            rgba=rgba,
-        )
-        if link_model == "flex":
-            return add_flex_link(spec, parent, free_start=free_start, free_end=free_end, **common)
-        return add_cable_link(spec, parent, rotary_inertia=rotary_inertia, **common)
-    if link_model == "rigid":
+    check_link_spec(link)
+    return LINK_BUILDERS[link.link_model](spec, parent, link)
+
+
+def _segment_stiffness(section: Section, material: Material) -> dict[str, float]:
+    """Stiffness times length of each spring kind (N m^2 for rotations, N for slides; divide by the spacing)."""
+    shear_ga = shear_coefficient_rectangle(material.poisson) * material.shear_pa * section.area_m2
+    return {
+        "bend_in": material.young_pa * section.i_inplane_m4,
+        "bend_out": material.young_pa * section.i_outofplane_m4,
+        "twist": material.shear_pa * section.torsion_constant_m4,
+        "axial": material.young_pa * section.area_m2,
+        "shear_in": shear_ga,
+        "shear_out": shear_ga,
+    }
+
+
+def add_segment_link(spec: mujoco.MjSpec, parent: mujoco.MjsBody, link: LinkSpec) -> LinkBuild:
+    """Add a ``segments`` link (rigid pieces joined by spring locations; see module docstring), or a ``rigid``
+    one (one piece). ``spec`` is unused: the builders of :data:`LINK_BUILDERS` share one signature."""
+    name, length_m, hub_m, sec, mat = link.name, link.length_m, link.hub_length_m, link.section, link.material
+    if link.link_model == "rigid":
         lengths = [length_m]
     else:
-        l_seg = (length_m - 2.0 * hub_length_m) / segments
-        lengths = [hub_length_m + l_seg / 2.0] + [l_seg] * (segments - 1) + [l_seg / 2.0 + hub_length_m]
-    sec, mat = section, material
-    k = {
-        "bend_in": mat.young_pa * sec.i_inplane_m4,
-        "bend_out": mat.young_pa * sec.i_outofplane_m4,
-        "twist": mat.shear_pa * sec.torsion_constant_m4,
-        "axial": mat.young_pa * sec.area_m2,
-        "shear_in": shear_coefficient_rectangle(mat.poisson) * mat.shear_pa * sec.area_m2,
-        "shear_out": shear_coefficient_rectangle(mat.poisson) * mat.shear_pa * sec.area_m2,
-    }
+        l_seg = (length_m - 2.0 * hub_m) / link.segments
+        lengths = [hub_m + l_seg / 2.0] + [l_seg] * (link.segments - 1) + [l_seg / 2.0 + hub_m]
+    k = _segment_stiffness(sec, mat)
+    kinds = ["bend_in", "bend_out", "twist"] + (["axial"] if link.axial else [])
+    kinds += ["shear_in", "shear_out"] if link.shear else []
     build = LinkBuild(name=name, bodies=[], piece_lengths_m=lengths)
     body = parent
     for j, piece in enumerate(lengths):
         if j == 0:
-            body = body.add_body(name=f"{name}_b0", pos=list(pos), quat=quat_z(angle_rad))
+            body = body.add_body(name=f"{name}_b0", pos=list(link.pos), quat=quat_z(link.angle_rad))
         else:
             body = body.add_body(name=f"{name}_b{j}", pos=[lengths[j - 1], 0.0, 0.0])
-            l_spring = (length_m - 2.0 * hub_length_m) / segments
-            kinds = ["bend_in", "bend_out", "twist"] + (["axial"] if axial else [])
-            kinds += ["shear_in", "shear_out"] if shear else []
+            l_spring = (length_m - 2.0 * hub_m) / link.segments
             for kind in kinds:
                 jn = f"{name}_s{j}_{kind}"
-                _add_spring(body, jn, kind, k[kind] / l_spring, damping_beta_s)
+                _add_spring(body, jn, kind, k[kind] / l_spring, link.damping_beta_s)
                 build.joints.append((jn, kind))
-        parts = [box_part(piece, sec, mat, 0.0, rotary_inertia=rotary_inertia)]
+        parts = [box_part(piece, sec, mat, 0.0, rotary_inertia=link.rotary_inertia)]
         if j == 0:
-            parts += [lump_part(lump, np.zeros(3)) for lump in start_lumps if lump.mass_kg > 0]
+            parts += [lump_part(lump, np.zeros(3)) for lump in link.start_lumps if lump.mass_kg > 0]
         if j == len(lengths) - 1:
-            parts += [lump_part(lump, np.array([piece, 0.0, 0.0])) for lump in end_lumps if lump.mass_kg > 0]
+            parts += [lump_part(lump, np.array([piece, 0.0, 0.0])) for lump in link.end_lumps if lump.mass_kg > 0]
         set_inertial(body, parts)
-        add_box_geom(body, f"{name}_g{j}", piece, sec, 0.0, rgba)
+        add_box_geom(body, f"{name}_g{j}", piece, sec, 0.0, link.rgba)
         site = f"{name}_p{j}"
         body.add_site(name=site, pos=[0.0, 0.0, 0.0], size=[0.002, 0, 0])
         build.sites.append(site)
@@ -201,3 +163,14 @@ def add_link(
     body.add_site(name=end_site, pos=[lengths[-1], 0.0, 0.0], size=[0.002, 0, 0])
     build.sites.append(end_site)
     return build
+
+
+LinkBuilder = Callable[[mujoco.MjSpec, mujoco.MjsBody, LinkSpec], LinkBuild]
+
+LINK_BUILDERS: dict[str, LinkBuilder] = {
+    "segments": add_segment_link,
+    "rigid": add_segment_link,
+    "cable": add_cable_link,
+    "flex": add_flex_link,
+}
+"""The builder of each link model (``rigid`` is the segment chain's one-piece case)."""

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -36,8 +37,9 @@ import numpy as np
 from fpm_sim.config import Compliance, LumpedMass, Manipulator
 from fpm_sim.kinematics import Assembly, Pose, inverse_kinematics
 from fpm_sim.model.links import add_link
-from fpm_sim.model.options import BuiltModel, ModelOptions, add_weld, compile_model, new_spec
-from fpm_sim.model.parts import add_compliance_springs, add_hinge, half_lump, lump_part, quat_z, set_inertial
+from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.parts import LinkSpec, add_compliance_springs, add_hinge, half_lump, lump_part, quat_z, set_inertial
+from fpm_sim.model.spec import BuiltModel, add_weld, compile_model, new_spec
 
 __all__ = ["MIN_PIN_MASS_KG", "add_motor_mount", "build_manipulator"]
 
@@ -82,13 +84,11 @@ def build_manipulator(
     opts = options or ModelOptions()
     g = manip.geometry
     asm = assembly if assembly is not None else inverse_kinematics(g, pose)
-    hw = manip.hardware
     beta = manip.damping.stiffness_proportional_s
     spec = new_spec("fpm_3rrr", gravity=opts.gravity)
-    world = spec.worldbody
     kinds: dict[str, str] = {}
     links: dict[str, list[str]] = {}
-    link_kw = dict(
+    link_kw: dict[str, Any] = dict(
         section=manip.section,
         material=manip.material,
         link_model=opts.link_model,
@@ -98,78 +98,9 @@ def build_manipulator(
         shear=opts.shear,
         hub_length_m=g.hub_length_m,
         damping_beta_s=beta,
-        spec=spec,
     )
-    pins: list[mujoco.MjsBody] = []
-    for i in range(3):
-        a, b, c = asm.a[i], asm.b[i], asm.c[i]
-        ang_p = math.atan2(*(b - a)[::-1])
-        ang_d = math.atan2(*(c - b)[::-1])
-        prox = add_link(
-            world,
-            name=f"proximal_{i}",
-            pos=np.array([a[0], a[1], 0.0]),
-            angle_rad=ang_p,
-            length_m=g.proximal_length_per_chain[i],
-            start_lumps=(hw.motor_flange,),
-            end_lumps=(half_lump(hw.elbow_joint),),
-            rgba=(0.25, 0.45, 0.8, 1.0),
-            **link_kw,
-        )
-        add_motor_mount(prox.first, f"motor_{i}", manip.compliance, beta, kinds)
-        if manip.motors.mode == "servo":
-            k, c_damp = manip.motors.servo_stiffness_nm_per_rad, manip.motors.servo_damping_nms_per_rad
-            add_hinge(prox.first, f"motor_{i}", [0, 0, 1], k, c_damp)
-            kinds[f"motor_{i}"] = "motor"
-        elif math.isfinite(manip.compliance.motor_clamp_nm_per_rad):
-            k = manip.compliance.motor_clamp_nm_per_rad
-            add_hinge(prox.first, f"motor_{i}", [0, 0, 1], k, beta * k)
-            kinds[f"motor_{i}"] = "clamp"
-        dist = add_link(
-            prox.last,
-            name=f"distal_{i}",
-            pos=np.array([prox.last_length_m, 0.0, g.distal_offset_per_chain[i]]),
-            angle_rad=ang_d - ang_p,
-            length_m=g.distal_length_per_chain[i],
-            start_lumps=(half_lump(hw.elbow_joint),),
-            rgba=(0.85, 0.45, 0.2, 1.0),
-            **link_kw,
-        )
-        _add_passive_joint(dist.first, f"elbow_{i}", manip, kinds)
-        for lb in (prox, dist):
-            kinds.update(dict(lb.joints))
-            links[lb.name] = lb.sites
-        pin = dist.last.add_body(
-            name=f"pin_{i}",
-            pos=[dist.last_length_m, 0.0, g.platform_offset_per_chain[i]],
-            quat=quat_z(pose.phi_rad - ang_d),
-        )
-        pin_lump = hw.platform_joint
-        if pin_lump.mass_kg <= 0.0:
-            pin_lump = LumpedMass(MIN_PIN_MASS_KG, (1e-9, 1e-9, 1e-9))
-        set_inertial(pin, [lump_part(pin_lump, np.zeros(3))])
-        _add_passive_joint(pin, f"platform_joint_{i}", manip, kinds)
-        pin.add_site(name=f"pin_{i}_site", pos=[0, 0, 0], size=[0.003, 0, 0])
-        pins.append(pin)
-
-    ang0 = g.platform_angles_rad[0]
-    r_p0 = g.platform_radius_per_chain[0]
-    platform = pins[0].add_body(
-        name="platform",
-        pos=[-r_p0 * math.cos(ang0), -r_p0 * math.sin(ang0), 0.0],
-    )
-    set_inertial(platform, [lump_part(hw.platform, np.zeros(3)), lump_part(hw.payload, np.zeros(3))])
-    platform.add_geom(
-        name="platform_g",
-        type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-        size=[max(max(g.platform_radius_per_chain), 0.01), 0.005, 0],
-        rgba=[0.3, 0.7, 0.3, 1.0],
-        contype=0,
-        conaffinity=0,
-    )
-    platform.add_site(name="platform_center", pos=[0, 0, 0], size=[0.004, 0, 0])
-    for i in (1, 2):
-        add_weld(spec, f"loop_{i}", f"pin_{i}", "platform")
+    pins = [_add_chain(spec, i, manip, pose, asm, link_kw, kinds, links) for i in range(3)]
+    _add_platform(spec, pins, manip)
 
     model = compile_model(spec, timestep_s=opts.timestep_s)
     return BuiltModel(
@@ -188,6 +119,99 @@ def build_manipulator(
             "singularity_measure": asm.singularity.value,
         },
     )
+
+
+def _add_chain(
+    spec: mujoco.MjSpec,
+    i: int,
+    manip: Manipulator,
+    pose: Pose,
+    asm: Assembly,
+    link_kw: dict[str, Any],
+    kinds: dict[str, str],
+    links: dict[str, list[str]],
+) -> mujoco.MjsBody:
+    """Chain ``i``: the proximal link on its motor mount, the distal link on the elbow, the platform pin at its
+    end; records joint kinds and link sites, returns the pin body."""
+    g, hw = manip.geometry, manip.hardware
+    beta = manip.damping.stiffness_proportional_s
+    a, b, c = asm.a[i], asm.b[i], asm.c[i]
+    ang_p = math.atan2(*(b - a)[::-1])
+    ang_d = math.atan2(*(c - b)[::-1])
+    prox_spec = LinkSpec(
+        name=f"proximal_{i}",
+        pos_m=(float(a[0]), float(a[1]), 0.0),
+        angle_rad=ang_p,
+        length_m=g.proximal_length_per_chain[i],
+        start_lumps=(hw.motor_flange,),
+        end_lumps=(half_lump(hw.elbow_joint),),
+        rgba=(0.25, 0.45, 0.8, 1.0),
+        **link_kw,
+    )
+    prox = add_link(spec, spec.worldbody, prox_spec)
+    add_motor_mount(prox.first, f"motor_{i}", manip.compliance, beta, kinds)
+    _add_motor_joint(prox.first, f"motor_{i}", manip, kinds)
+    dist_spec = LinkSpec(
+        name=f"distal_{i}",
+        pos_m=(prox.last_length_m, 0.0, g.distal_offset_per_chain[i]),
+        angle_rad=ang_d - ang_p,
+        length_m=g.distal_length_per_chain[i],
+        start_lumps=(half_lump(hw.elbow_joint),),
+        rgba=(0.85, 0.45, 0.2, 1.0),
+        **link_kw,
+    )
+    dist = add_link(spec, prox.last, dist_spec)
+    _add_passive_joint(dist.first, f"elbow_{i}", manip, kinds)
+    for lb in (prox, dist):
+        kinds.update(dict(lb.joints))
+        links[lb.name] = lb.sites
+    pin = dist.last.add_body(
+        name=f"pin_{i}",
+        pos=[dist.last_length_m, 0.0, g.platform_offset_per_chain[i]],
+        quat=quat_z(pose.phi_rad - ang_d),
+    )
+    pin_lump = hw.platform_joint
+    if pin_lump.mass_kg <= 0.0:
+        pin_lump = LumpedMass(MIN_PIN_MASS_KG, (1e-9, 1e-9, 1e-9))
+    set_inertial(pin, [lump_part(pin_lump, np.zeros(3))])
+    _add_passive_joint(pin, f"platform_joint_{i}", manip, kinds)
+    pin.add_site(name=f"pin_{i}_site", pos=[0, 0, 0], size=[0.003, 0, 0])
+    return pin
+
+
+def _add_motor_joint(body: mujoco.MjsBody, name: str, manip: Manipulator, kinds: dict[str, str]) -> None:
+    """The motor hinge: a servo (``motors.mode = 'servo'``), a finite clamp stiffness, or none (locked)."""
+    if manip.motors.mode == "servo":
+        k, c_damp = manip.motors.servo_stiffness_nm_per_rad, manip.motors.servo_damping_nms_per_rad
+        add_hinge(body, name, [0, 0, 1], k, c_damp)
+        kinds[name] = "motor"
+    elif math.isfinite(manip.compliance.motor_clamp_nm_per_rad):
+        k = manip.compliance.motor_clamp_nm_per_rad
+        add_hinge(body, name, [0, 0, 1], k, manip.damping.stiffness_proportional_s * k)
+        kinds[name] = "clamp"
+
+
+def _add_platform(spec: mujoco.MjSpec, pins: list[mujoco.MjsBody], manip: Manipulator) -> None:
+    """The platform on chain 0's pin, welded to the other two pins (the loop closures)."""
+    g, hw = manip.geometry, manip.hardware
+    ang0 = g.platform_angles_rad[0]
+    r_p0 = g.platform_radius_per_chain[0]
+    platform = pins[0].add_body(
+        name="platform",
+        pos=[-r_p0 * math.cos(ang0), -r_p0 * math.sin(ang0), 0.0],
+    )
+    set_inertial(platform, [lump_part(hw.platform, np.zeros(3)), lump_part(hw.payload, np.zeros(3))])
+    platform.add_geom(
+        name="platform_g",
+        type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+        size=[max(max(g.platform_radius_per_chain), 0.01), 0.005, 0],
+        rgba=[0.3, 0.7, 0.3, 1.0],
+        contype=0,
+        conaffinity=0,
+    )
+    platform.add_site(name="platform_center", pos=[0, 0, 0], size=[0.004, 0, 0])
+    for i in (1, 2):
+        add_weld(spec, f"loop_{i}", f"pin_{i}", "platform")
 
 
 def dof_kinds_of(model: mujoco.MjModel, kinds: dict[str, str]) -> list[str]:

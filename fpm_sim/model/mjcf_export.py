@@ -12,8 +12,8 @@ from pathlib import Path
 from fpm_sim.config import default_config
 from fpm_sim.kinematics import Pose
 from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import BuiltModel
 from fpm_sim.model.rigs import RigSetup, build_rig, rig_piece
+from fpm_sim.model.spec import BuiltModel
 
 __all__ = ["REFERENCE_MODELS", "write_reference_mjcf"]
 

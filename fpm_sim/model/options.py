@@ -1,31 +1,15 @@
-"""Common model plumbing: options, the spec skeleton, compilation and the timestep rule.
+"""How a model is discretised and simulated (:class:`ModelOptions`) and the one resolution policy of every
+command (fidelity presets, segments per link, the estimated discretisation error every result states).
 
-Every generated model shares these settings:
-
-- ``implicitfast`` integrator, contacts disabled (links pass through each other; only the joints
-  and equality constraints act), dense constraint Jacobian (small constraint count);
-- gravity along the motor axes (``-z``) unless switched off;
-- loops closed by ``weld`` equalities at the stiff limit: ``solref = (2 h, 1)`` (time constant twice
-  the timestep, MuJoCo's smallest safe value) and ``solimp = (0.9999, 0.9999, 0.001, 0.5, 2)``;
-- the timestep ``h`` is chosen from the model's highest natural frequency (unconstrained spring
-  stiffness over mass), ``h = TIMESTEP_SAFETY / omega_max`` capped at :data:`TIMESTEP_MAX_S`: the
-  spring hinges are integrated explicitly and are unstable for ``omega h > 2``, and the linearised
-  frequencies carry an error that grows as ``(omega h)^2`` (see :mod:`fpm_sim.linear.modal`).
+The spec skeleton, compilation and the timestep rule are in :mod:`fpm_sim.model.spec`.
 """
 
 from __future__ import annotations
 
-import contextlib
 import math
 import warnings
-from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import IO, Any
-
-import mujoco
-import numpy as np
-import scipy.linalg
+from typing import Any
 
 from fpm_sim.errors import FpmSimError, FpmSimWarning
 from fpm_sim.model.parts import DEFAULT_RESOLUTION, check_link_model
@@ -38,34 +22,16 @@ __all__ = [
     "FIDELITY_RESOLUTION",
     "FIDELITY_SCALE",
     "RESOLUTION_WARN",
-    "TIMESTEP_MAX_S",
-    "TIMESTEP_SAFETY",
-    "WELD_SOLIMP",
-    "BuiltModel",
     "ModelOptions",
-    "MujocoWarning",
     "ResolutionWarning",
     "TimestepError",
-    "check_count",
-    "check_finite",
-    "compile_model",
     "discretisation_error",
-    "dof_stiffness",
-    "has_internal_elasticity",
-    "highest_frequency_rad_s",
-    "mujoco_messages",
-    "new_spec",
-    "open_for_writing",
-    "passive_damping_matrix",
-    "passive_stiffness_matrix",
     "resolution_footer",
     "resolution_label",
     "resolution_of_parameters",
     "resolution_summary",
     "resolution_text",
     "resolve_segments",
-    "route_mujoco_warnings",
-    "tangent_jacobian",
     "warn_if_coarse",
 ]
 
@@ -73,13 +39,15 @@ DEFAULT_SEGMENTS = DEFAULT_RESOLUTION["segments"]
 """Default spring locations per link (fidelity ``standard``): the 10 x 10 x 228 mm steel cantilever's
 first three bending frequencies are then +0.16, +0.56, +0.91 % from Euler-Bernoulli (error ~ 1/n^2; see docs)."""
 
-# ---------------------------------------------------------------------------------------------
-# The one resolution policy of every command (``--fidelity`` / ``--segments``)
 
 FIDELITIES = ("fast", "standard", "fine")
 """Named resolutions; ``--segments N`` overrides them."""
+
+
 DEFAULT_FIDELITY = "standard"
 """Every command's default: the same model, hence the same first frequency, whatever the command."""
+
+
 FIDELITY_RESOLUTION = {
     "segments": {"fast": 8, "standard": DEFAULT_RESOLUTION["segments"], "fine": 24},
     "cable": {"fast": 8, "standard": DEFAULT_RESOLUTION["cable"], "fine": 24},
@@ -90,7 +58,10 @@ FIDELITY_RESOLUTION = {
 :data:`fpm_sim.model.parts.DEFAULT_RESOLUTION`). ``fast`` is the coarsest resolution whose estimated f1 error
 stays below :data:`RESOLUTION_WARN` (8: 0.64 %; the old pose-loop default 6 gives 1.1 %); ``fine`` halves
 the spacing of ``standard`` (error / 4)."""
+
+
 FIDELITY_SCALE = FIDELITY_RESOLUTION["segments"]
+
 
 DISCRETISATION_COEFF = {"segments": 0.41, "cable": 0.41}
 """``c`` in the relative error of the first frequency ``e(n) ~ c / n^2`` (n per link), per link model.
@@ -100,6 +71,7 @@ f1 = 73.5026 Hz at n = 6 and 72.8808 Hz at n = 12; Richardson's extrapolation wi
 72.674 Hz, so e(12) = 0.285 % and c = 0.285 % * 144 = 0.41 (e(6) = 1.14 %). ``cable`` is the same linear
 model as ``segments`` (agreement 5e-10). ``flex`` converges differently (from below, docs/link_models.md)
 and gets no estimate; ``rigid`` has no discretisation."""
+
 
 RESOLUTION_WARN = 0.01
 """Estimated relative discretisation error of f1 above which a :class:`ResolutionWarning` is issued."""
@@ -237,21 +209,6 @@ def warn_if_coarse(options: ModelOptions, *, stacklevel: int = 2) -> None:
             stacklevel=stacklevel + 1,
         )
 
-TIMESTEP_MAX_S = 1e-4
-"""Largest timestep the automatic rule picks (s)."""
-TIMESTEP_SAFETY = 0.5
-"""Automatic timestep: ``h = TIMESTEP_SAFETY / omega_max`` (explicit springs are stable below 2)."""
-WELD_SOLIMP = (0.9999, 0.9999, 0.001, 0.5, 2.0)
-
-
-FLEX_DAMPING_LIMIT = 1.0
-"""Largest ``mu_max h`` of the flexes' explicit bending damping (:func:`_limit_flex_damping`): at 1 the
-stiffest damped motion is removed in one step; beyond it the explicit step flips its sign, beyond 2 it grows."""
-
-
-class FlexDampingWarning(FpmSimWarning):
-    """A flex's bending damping was lowered to keep the step stable (MuJoCo applies it explicitly)."""
-
 
 class TimestepError(FpmSimError):
     """The requested timestep cannot integrate the model's stiffest spring stably."""
@@ -289,7 +246,7 @@ class ModelOptions:
     gravity
         Gravity (9.81 m/s^2) along ``-z``, the motor axes.
     timestep_s
-        Simulation step; ``None`` picks it from the highest natural frequency (see module doc).
+        Simulation step; ``None`` picks it from the highest natural frequency (see :mod:`fpm_sim.model.spec`).
     """
 
     link_model: str = "segments"
@@ -321,327 +278,3 @@ class ModelOptions:
         check_link_model(self.link_model, self.segments)
         if self.timestep_s is not None and not (0.0 < self.timestep_s <= 1e-2):
             raise TimestepError("must be in (0, 0.01] s", parameter="timestep_s", value=self.timestep_s)
-
-
-@dataclass
-class BuiltModel:
-    """A compiled model with the bookkeeping the analyses need.
-
-    Attributes
-    ----------
-    model
-        The compiled :class:`mujoco.MjModel`; ``qpos0`` is the assembled configuration at rest.
-    spec
-        The :class:`mujoco.MjSpec` it came from (``spec.to_xml()`` gives the MJCF).
-    name
-        ``"manipulator"`` or the rig name.
-    links
-        Link name -> site names from the link's start to its end (points for Cartesian mode shapes).
-    dof_kinds
-        Per degree of freedom: ``bend_in``, ``bend_out``, ``twist``, ``axial``, ``passive``,
-        ``tilt``, ``motor``, ``clamp`` or ``free``.
-    parameters
-        What was used to build it (JSON-ready).
-    """
-
-    model: mujoco.MjModel
-    spec: mujoco.MjSpec
-    name: str
-    links: dict[str, list[str]]
-    dof_kinds: list[str]
-    parameters: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def floating(self) -> bool:
-        return bool(np.any(self.model.jnt_type == mujoco.mjtJoint.mjJNT_FREE))
-
-    @property
-    def timestep_s(self) -> float:
-        return float(self.model.opt.timestep)
-
-    def to_xml(self) -> str:
-        xml: str = self.spec.to_xml()
-        return xml
-
-
-def new_spec(model_name: str, *, gravity: bool) -> mujoco.MjSpec:
-    """A spec with the project's common options (see module docstring)."""
-    spec = mujoco.MjSpec()
-    spec.modelname = model_name
-    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
-    spec.compiler.degree = False
-    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
-    spec.option.jacobian = mujoco.mjtJacobian.mjJAC_DENSE
-    spec.option.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
-    spec.option.gravity = [0.0, 0.0, -9.81] if gravity else [0.0, 0.0, 0.0]
-    spec.visual.global_.offwidth = 640
-    return spec
-
-
-def add_weld(spec: mujoco.MjSpec, name: str, body1: str, body2: str) -> None:
-    """Weld two bodies in their relative pose at ``qpos0`` (stiff limit; solref set at compile)."""
-    eq = spec.add_equality(name=name, type=mujoco.mjtEq.mjEQ_WELD, objtype=mujoco.mjtObj.mjOBJ_BODY)
-    eq.name1 = body1
-    eq.name2 = body2
-    # data = anchor (3, on body2, at its origin), relpose pos (3) and quat (4; all zeros = "as at
-    # qpos0"), torquescale, unused. The spec's default anchor (0, 1, 0) would measure the position
-    # error a metre away from the joint.
-    eq.data = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0])
-    eq.solimp = list(WELD_SOLIMP)
-
-
-def dof_stiffness(model: mujoco.MjModel) -> np.ndarray:
-    """Linear spring stiffness of each degree of freedom (0 for free joints)."""
-    k = np.zeros(model.nv)
-    one_dof = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
-    for j in range(model.njnt):
-        if int(model.jnt_type[j]) in one_dof:
-            k[model.jnt_dofadr[j]] = model.jnt_stiffness[j]
-    return k
-
-
-def has_internal_elasticity(model: mujoco.MjModel) -> bool:
-    """Whether passive forces come from more than joint springs (a plugin or a flex: ``cable``, ``flex`` links)."""
-    return bool(model.nplugin > 0 or model.nflex > 0)
-
-
-def tangent_jacobian(
-    model: mujoco.MjModel, qpos: np.ndarray, fn: Callable[[np.ndarray], np.ndarray], eps: float = 1e-7
-) -> np.ndarray:
-    """Centred finite-difference ``d fn(q) / dq`` at ``qpos``, one column per degree of freedom.
-
-    Steps are taken in the tangent space (``mj_integratePos``): plain addition for hinges and
-    slides, quaternion integration for ball and free joints (``cable`` links).
-    """
-    jac = np.zeros((model.nv, model.nv))
-    for j in range(model.nv):
-        cols = []
-        for sign in (1.0, -1.0):
-            dq = np.zeros(model.nv)
-            dq[j] = sign * eps
-            q = np.array(qpos, dtype=float)
-            mujoco.mj_integratePos(model, q, dq, 1.0)
-            cols.append(np.array(fn(q), dtype=float))
-        jac[:, j] = (cols[0] - cols[1]) / (2 * eps)
-    return jac
-
-
-def passive_stiffness_matrix(model: mujoco.MjModel, qpos: np.ndarray | None = None, eps: float = 1e-7) -> np.ndarray:
-    """``-d qfrc_passive / dq`` at ``qpos`` (default ``qpos0``), zero velocity, by centred differences.
-
-    Differences are taken in the tangent space (:func:`tangent_jacobian`), so ball and free joints are
-    handled; this captures joint springs, the cable plugin's torques and flex bending and edge
-    springs alike (gravity and constraints are not passive forces).
-    """
-    data = mujoco.MjData(model)
-    q0 = model.qpos0.copy() if qpos is None else np.asarray(qpos, float)
-
-    def passive(q: np.ndarray) -> np.ndarray:
-        data.qpos[:] = q
-        data.qvel[:] = 0.0
-        mujoco.mj_forward(model, data)
-        force: np.ndarray = data.qfrc_passive.copy()
-        return force
-
-    k = -tangent_jacobian(model, q0, passive, eps)
-    sym: np.ndarray = 0.5 * (k + k.T)
-    return sym
-
-
-def passive_damping_matrix(model: mujoco.MjModel, qpos: np.ndarray, eps: float = 1e-6) -> np.ndarray:
-    """``-d qfrc_passive / d qvel`` at ``qpos`` by centred differences (joint dampers, the cable
-    joints' damping and the flex's bending damping alike)."""
-    data = mujoco.MjData(model)
-    c = np.zeros((model.nv, model.nv))
-    for j in range(model.nv):
-        cols = []
-        for sign in (1.0, -1.0):
-            data.qpos[:] = qpos
-            data.qvel[:] = 0.0
-            data.qvel[j] = sign * eps
-            mujoco.mj_forward(model, data)
-            cols.append(data.qfrc_passive.copy())
-        c[:, j] = -(cols[0] - cols[1]) / (2 * eps)
-    return 0.5 * (c + c.T)
-
-
-def highest_frequency_rad_s(model: mujoco.MjModel) -> float:
-    """Highest natural frequency of the passive stiffness (constraints ignored) at ``qpos0`` (rad/s).
-
-    Joint springs give a diagonal stiffness; models with a cable plugin or a flex use
-    :func:`passive_stiffness_matrix`.
-    """
-    data = mujoco.MjData(model)
-    mujoco.mj_forward(model, data)
-    mass = np.zeros((model.nv, model.nv))
-    mujoco.mj_fullM(model, data, mass)
-    if has_internal_elasticity(model):
-        stiff = passive_stiffness_matrix(model)
-        if not np.any(np.abs(stiff) > 0):
-            return 0.0
-    else:
-        k = dof_stiffness(model)
-        if not np.any(k > 0):
-            return 0.0
-        stiff = np.diag(k)
-    w2 = scipy.linalg.eigh(stiff, mass, eigvals_only=True, subset_by_index=[model.nv - 1, model.nv - 1])
-    return float(np.sqrt(max(w2[0], 0.0)))
-
-
-def compile_model(spec: mujoco.MjSpec, *, timestep_s: float | None) -> mujoco.MjModel:
-    """Compile with the timestep rule and the stiff weld time constant ``2 h``.
-
-    Raises
-    ------
-    TimestepError
-        If an explicit ``timestep_s`` makes the stiffest spring unstable (``omega_max h > 2``).
-    """
-    route_mujoco_warnings()
-    hint = (
-        "a size, mass or stiffness of the description is out of range for double precision; check section.*, "
-        "material.*, hardware.*.mass_kg and geometry.*"
-    )
-    try:
-        model = spec.compile()
-    except ValueError as e:
-        raise FpmSimError(f"MuJoCo cannot compile the model ({str(e).splitlines()[0]}): {hint}") from e
-    try:
-        w_max = highest_frequency_rad_s(model)
-    except (np.linalg.LinAlgError, ValueError) as e:
-        raise FpmSimError(f"the model's mass or stiffness matrix is not usable ({e}): {hint}") from e
-    if not math.isfinite(w_max):
-        raise FpmSimError(f"the model's highest natural frequency is not finite: {hint}")
-    if timestep_s is None:
-        h = TIMESTEP_MAX_S if w_max == 0.0 else min(TIMESTEP_MAX_S, TIMESTEP_SAFETY / w_max)
-    else:
-        h = timestep_s
-        if w_max * h >= 2.0:
-            raise TimestepError(
-                f"timestep_s={h:g} s is unstable for this model: its stiffest spring has omega_max = {w_max:.4g} rad/s "
-                f"and omega_max * h = {w_max * h:.2f} >= 2; use timestep_s <= {TIMESTEP_SAFETY / w_max:.3g} s, fewer "
-                f"segments, or leave timestep_s unset (automatic)"
-            )
-    spec.option.timestep = h
-    for eq in spec.equalities:
-        eq.solref = [2.0 * h, 1.0]
-    _limit_flex_damping(spec, model, h)
-    return spec.compile()
-
-
-def _limit_flex_damping(spec: mujoco.MjSpec, model: mujoco.MjModel, h: float) -> None:
-    """Scale the flexes' stiffness-proportional bending damping so that ``mu_max h <= FLEX_DAMPING_LIMIT``.
-
-    ``mu_max`` is the largest eigenvalue of ``M^-1 D`` with ``D`` the flexes' damping matrix at ``qpos0`` (the
-    passive damping less the joints' own, which ``implicitfast`` integrates implicitly). MuJoCo 3.17 applies
-    flex damping explicitly (neither ``implicitfast`` nor ``implicit`` takes it in), so its stiffest damped
-    motion is multiplied by ``1 - mu h`` a step: unstable beyond ``mu h = 2`` (measured: the largest
-    step-map eigenvalue is ``mu h - 1``), sign-flipping beyond 1. On the default manipulator (beta = 5.3e-5 s,
-    16 edges per link, gravity off) ``mu h`` was 10.7: 65 step-map modes at the Nyquist frequency grew by
-    ``|lambda| = 9.8`` a step, and none without the damping. The flex's edges are left undamped for the same
-    reason (:mod:`fpm_sim.model.deformable_links`). The low modes then keep only that fraction of the requested
-    damping: a :class:`FlexDampingWarning` says how much.
-    """
-    if model.nflex == 0 or not np.any(model.flex_damping > 0):
-        return
-    data = mujoco.MjData(model)
-    mujoco.mj_forward(model, data)
-    mass = np.zeros((model.nv, model.nv))
-    mujoco.mj_fullM(model, data, mass)
-    damp = passive_damping_matrix(model, model.qpos0.copy()) - np.diag(model.dof_damping)
-    mu_max = float(scipy.linalg.eigh(damp, mass, eigvals_only=True, subset_by_index=[model.nv - 1, model.nv - 1])[0])
-    if mu_max * h <= FLEX_DAMPING_LIMIT:
-        return
-    scale = FLEX_DAMPING_LIMIT / (mu_max * h)
-    beta = max(f.damping for f in spec.flexes)
-    for f in spec.flexes:
-        f.damping *= scale
-    warnings.warn(
-        FlexDampingWarning(
-            f"flex bending damping lowered from {beta:.3g} s to {beta * scale:.3g} s ({100 * scale:.2g} % of it): "
-            f"MuJoCo applies it explicitly, and at timestep {h:.3g} s the explicit step would flip or grow its "
-            f"stiffest damped motion (mu h = {mu_max * h:.3g} > {FLEX_DAMPING_LIMIT:g}); use link_model 'segments' "
-            "or 'cable' for modal damping ratios",
-            parameter="link_model",
-        ),
-        stacklevel=3,
-    )
-
-
-# ---------------------------------------------------------------------------------------------
-# MuJoCo's warnings and validation helpers
-
-
-class MujocoWarning(FpmSimWarning):
-    """A warning raised inside MuJoCo (e.g. "Nan, Inf or huge value in QACC": the simulation is unstable)."""
-
-
-def _emit_mujoco_warning(message: str) -> None:
-    warnings.warn(f"MuJoCo: {message.strip()}", MujocoWarning, stacklevel=2)
-
-
-def route_mujoco_warnings() -> None:
-    """Send MuJoCo's warnings to Python's ``warnings`` (:class:`MujocoWarning`) instead of ``MUJOCO_LOG.TXT``
-    in the working directory and the console (``mujoco.set_mju_user_warning``).
-
-    Called by :func:`compile_model`, so every fpm-sim model is covered; a handler the caller installed
-    first is kept. Inside :func:`mujoco_messages` the messages are collected instead.
-    """
-    if mujoco.get_mju_user_warning() is None:
-        mujoco.set_mju_user_warning(_emit_mujoco_warning)
-
-
-@contextlib.contextmanager
-def mujoco_messages() -> Iterator[list[str]]:
-    """Collect MuJoCo's warnings raised inside the ``with`` block into the yielded list (never written to a
-    file); the previous handler is restored on exit."""
-    previous = mujoco.get_mju_user_warning()
-    messages: list[str] = []
-    mujoco.set_mju_user_warning(messages.append)
-    try:
-        yield messages
-    finally:
-        mujoco.set_mju_user_warning(previous)
-
-
-def check_finite(name: str, value: Any, *, positive: bool = False) -> np.ndarray:
-    """``value`` as a float array, all finite (and ``> 0`` with ``positive``).
-
-    Raises :class:`FpmSimError` naming ``name`` otherwise."""
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise FpmSimError("must be a number", parameter=name, value=value) from None
-    if not np.all(np.isfinite(arr)):
-        raise FpmSimError("must be finite", parameter=name, value=value)
-    if positive and not np.all(arr > 0):
-        raise FpmSimError("must be positive", parameter=name, value=value)
-    return arr
-
-
-def check_count(name: str, value: Any, *, low: int = 1, high: int | None = None, hint: str = "") -> int:
-    """``value`` as an integer in ``[low, high]``, else :class:`FpmSimError` naming ``name`` and the range."""
-    ok = isinstance(value, (int, np.integer)) and not isinstance(value, bool)
-    if not ok and isinstance(value, float) and math.isfinite(value) and value.is_integer():
-        ok, value = True, int(value)
-    if not ok or value < low or (high is not None and value > high):
-        bound = f"[{low}, {high}]" if high is not None else f">= {low}"
-        raise FpmSimError(f"must be an integer {bound}{hint}", parameter=name, value=value)
-    return int(value)
-
-
-@contextlib.contextmanager
-def open_for_writing(
-    path: str | Path, *, parameter: str = "out", error: type[FpmSimError] = FpmSimError
-) -> Iterator[IO[bytes]]:
-    """Open ``path`` for binary writing (parent folders created), turning a failure (read-only place, a folder
-    in the way, ...) into ``error`` naming the file and ``parameter`` instead of a library's own message."""
-    p = Path(path)
-    try:
-        p.parent.mkdir(parents=True, exist_ok=True)
-        handle = open(p, "wb")  # closed below
-    except OSError as e:
-        raise error(
-            f"cannot write {str(p)!r} ({e.strerror or e})", parameter=parameter, hint="choose a writable path"
-        ) from e
-    with handle:
-        yield handle

@@ -21,6 +21,7 @@ __all__ = [
     "MIN_FLEX_EDGES",
     "LinkBuild",
     "LinkModelError",
+    "LinkSpec",
     "add_box_geom",
     "add_compliance_springs",
     "add_hinge",
@@ -68,6 +69,72 @@ def check_link_model(link_model: str, segments: int | None) -> None:
             parameter="segments",
             value=segments,
         )
+
+
+@dataclass(frozen=True)
+class LinkSpec:
+    """One straight link: where it starts, what it is made of and how it is discretised.
+
+    Built by :func:`fpm_sim.model.links.add_link`, which dispatches on ``link_model`` to the builder of that link
+    model (:data:`fpm_sim.model.links.LINK_BUILDERS`).
+
+    Attributes
+    ----------
+    name
+        Prefix of every body, joint, geom and site of the link.
+    pos_m
+        Link start in the parent body's frame (m).
+    angle_rad
+        Direction of the link about the parent's z axis (rad); the link's x axis points along it.
+    length_m
+        Length from start to end (m).
+    section, material
+        Cross-section and material of the link.
+    link_model
+        ``"segments"``, ``"rigid"``, ``"cable"`` or ``"flex"`` (:class:`fpm_sim.model.options.ModelOptions`).
+    segments
+        Spring locations (``segments``), elastic joints (``cable``) or flex edges (``flex``) per link.
+    axial, rotary_inertia, shear
+        As :class:`fpm_sim.model.options.ModelOptions`: axial springs, the sections' rotary inertia, shear springs
+        (``segments`` only).
+    hub_length_m
+        Rigid length at each end (m; ``segments`` and ``rigid`` only): the springs are spread over the flexible span
+        ``length_m - 2 hub_length_m`` only (pieces ``hub + l/2, l, ..., l, l/2 + hub``); mass stays uniform.
+    damping_beta_s
+        Stiffness-proportional damping ``beta`` (s): each spring of stiffness ``k`` gets damping ``beta k``.
+    start_lumps, end_lumps
+        Lumped hardware at the link's start and end.
+    rgba
+        Colour of the link's geoms.
+    free_start, free_end
+        Nothing holds the link's start (the caller gives the chain models a free joint; ``flex`` then starts on a
+        free vertex and ``build.first`` is that vertex's body) or its end (``flex`` then ends on a free vertex
+        instead of a hub); the chain models ignore both.
+    """
+
+    name: str
+    pos_m: tuple[float, float, float]
+    angle_rad: float
+    length_m: float
+    section: Section
+    material: Material
+    link_model: str = "segments"
+    segments: int = 12
+    axial: bool = True
+    rotary_inertia: bool = False
+    shear: bool = False
+    hub_length_m: float = 0.0
+    damping_beta_s: float = 0.0
+    start_lumps: tuple[LumpedMass, ...] = ()
+    end_lumps: tuple[LumpedMass, ...] = ()
+    rgba: tuple[float, float, float, float] = (0.3, 0.5, 0.8, 1.0)
+    free_start: bool = False
+    free_end: bool = False
+
+    @property
+    def pos(self) -> np.ndarray:
+        """``pos_m`` as an array (m)."""
+        return np.array(self.pos_m, dtype=float)
 
 
 @dataclass

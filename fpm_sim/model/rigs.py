@@ -19,6 +19,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -27,8 +28,17 @@ from fpm_sim.config import Compliance, LumpedMass, Manipulator, Material, RigCon
 from fpm_sim.errors import FpmSimError
 from fpm_sim.model.links import add_link
 from fpm_sim.model.manipulator import dof_kinds_of
-from fpm_sim.model.options import BuiltModel, ModelOptions, add_weld, compile_model, new_spec
-from fpm_sim.model.parts import add_compliance_springs, add_hinge, half_lump, lump_part, set_inertial
+from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.parts import (
+    LinkBuild,
+    LinkSpec,
+    add_compliance_springs,
+    add_hinge,
+    half_lump,
+    lump_part,
+    set_inertial,
+)
+from fpm_sim.model.spec import BuiltModel, add_weld, compile_model, new_spec
 
 __all__ = ["RIGS", "RigError", "RigSetup", "build_rig", "rig_piece"]
 
@@ -80,7 +90,7 @@ def build_rig(
     spec = new_spec(f"fpm_rig_{setup.rig.replace('-', '_')}", gravity=gravity)
     kinds: dict[str, str] = {}
     links: dict[str, list[str]] = {}
-    kw = dict(
+    kw: dict[str, Any] = dict(
         section=piece.section,
         material=piece.material,
         link_model=opts.link_model,
@@ -89,19 +99,21 @@ def build_rig(
         rotary_inertia=opts.rotary_inertia,
         shear=opts.shear,
         damping_beta_s=setup.damping_beta_s,
-        spec=spec,
     )
     hinge = piece.chain_hinge if setup.rig == "chain" else LumpedMass()
     first = add_link(
+        spec,
         spec.worldbody,
-        name="link_0",
-        pos=np.zeros(3),
-        angle_rad=0.0,
-        length_m=free_len,
-        end_lumps=(half_lump(hinge),) if hinge.mass_kg > 0 else (),
-        free_start=setup.rig == "free-free",
-        free_end=setup.rig != "chain",
-        **kw,
+        LinkSpec(
+            name="link_0",
+            pos_m=(0.0, 0.0, 0.0),
+            angle_rad=0.0,
+            length_m=free_len,
+            end_lumps=(half_lump(hinge),) if hinge.mass_kg > 0 else (),
+            free_start=setup.rig == "free-free",
+            free_end=setup.rig != "chain",
+            **kw,
+        ),
     )
     links[first.name] = first.sites
     kinds.update(dict(first.joints))
@@ -111,30 +123,7 @@ def build_rig(
     else:
         _clamp_springs(first.first, "root", comp.base_clamp_nm_per_rad, setup.damping_beta_s, kinds)
     if setup.rig == "chain":
-        turn = math.pi - math.radians(setup.angle_deg)
-        second = add_link(
-            first.last,
-            name="link_1",
-            pos=np.array([first.last_length_m, 0.0, 0.0]),
-            angle_rad=turn,
-            length_m=free_len,
-            start_lumps=(half_lump(hinge),) if hinge.mass_kg > 0 else (),
-            free_end=False,
-            **kw,
-        )
-        add_hinge(second.first, "hinge", [0, 0, 1])
-        kinds["hinge"] = "passive"
-        if math.isfinite(comp.passive_joint_tilt_nm_per_rad):  # the same bearing compliance as the manipulator's
-            k_t = comp.passive_joint_tilt_nm_per_rad
-            for ax, axis in (("x", [1, 0, 0]), ("y", [0, 1, 0])):
-                add_hinge(second.first, f"hinge_tilt{ax}", axis, k_t, setup.damping_beta_s * k_t)
-                kinds[f"hinge_tilt{ax}"] = "tilt"
-        links[second.name] = second.sites
-        kinds.update(dict(second.joints))
-        tip = second.last.add_body(name="tip", pos=[second.last_length_m, 0.0, 0.0])
-        set_inertial(tip, [lump_part(LumpedMass(1e-4, (1e-9, 1e-9, 1e-9)), np.zeros(3))])
-        _clamp_springs(tip, "tip", comp.base_clamp_nm_per_rad, setup.damping_beta_s, kinds)
-        add_weld(spec, "clamp_far", "tip", "world")
+        _add_second_link_and_far_clamp(spec, first, setup, comp, hinge, free_len, kw, kinds, links)
     model = compile_model(spec, timestep_s=opts.timestep_s)
     return BuiltModel(
         model=model,
@@ -151,6 +140,48 @@ def build_rig(
             "nv": int(model.nv),
         },
     )
+
+
+def _add_second_link_and_far_clamp(
+    spec: mujoco.MjSpec,
+    first: LinkBuild,
+    setup: RigSetup,
+    comp: Compliance,
+    hinge: LumpedMass,
+    free_len: float,
+    kw: dict[str, Any],
+    kinds: dict[str, str],
+    links: dict[str, list[str]],
+) -> None:
+    """The chain rig's second link on the hinge at ``first``'s end (turned by ``setup.angle_deg``), its tip
+    clamped to the world."""
+    turn = math.pi - math.radians(setup.angle_deg)
+    second = add_link(
+        spec,
+        first.last,
+        LinkSpec(
+            name="link_1",
+            pos_m=(first.last_length_m, 0.0, 0.0),
+            angle_rad=turn,
+            length_m=free_len,
+            start_lumps=(half_lump(hinge),) if hinge.mass_kg > 0 else (),
+            free_end=False,
+            **kw,
+        ),
+    )
+    add_hinge(second.first, "hinge", [0, 0, 1])
+    kinds["hinge"] = "passive"
+    if math.isfinite(comp.passive_joint_tilt_nm_per_rad):  # the same bearing compliance as the manipulator's
+        k_t = comp.passive_joint_tilt_nm_per_rad
+        for ax, axis in (("x", [1, 0, 0]), ("y", [0, 1, 0])):
+            add_hinge(second.first, f"hinge_tilt{ax}", axis, k_t, setup.damping_beta_s * k_t)
+            kinds[f"hinge_tilt{ax}"] = "tilt"
+    links[second.name] = second.sites
+    kinds.update(dict(second.joints))
+    tip = second.last.add_body(name="tip", pos=[second.last_length_m, 0.0, 0.0])
+    set_inertial(tip, [lump_part(LumpedMass(1e-4, (1e-9, 1e-9, 1e-9)), np.zeros(3))])
+    _clamp_springs(tip, "tip", comp.base_clamp_nm_per_rad, setup.damping_beta_s, kinds)
+    add_weld(spec, "clamp_far", "tip", "world")
 
 
 def rig_piece(

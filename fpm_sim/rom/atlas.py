@@ -66,11 +66,14 @@ import scipy.optimize
 from tqdm import tqdm
 
 from fpm_sim.config import Manipulator
+from fpm_sim.config.checks import check_count
 from fpm_sim.errors import FpmSimError, FpmSimWarning
 from fpm_sim.kinematics import Pose
-from fpm_sim.linear.modal import system_damping_matrix
+from fpm_sim.linear.matrices import system_damping_matrix
 from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import ModelOptions, check_count, open_for_writing
+from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.spec import BuiltModel
+from fpm_sim.outputs import open_for_writing
 from fpm_sim.rom.reduction import ModalSystem, ReducedModel, modal_system
 
 __all__ = [
@@ -672,22 +675,10 @@ def build_atlas(
         Accelerometer position on the distal links (the reduced models' acceleration outputs).
     """
     xs, ys, ps = _axis(x_m, "x_m"), _axis(y_m, "y_m"), _axis(phi_rad, "phi_rad")
-    try:
-        check_count("n_modes", n_modes, low=1, high=200)
-        check_count("n_extra", n_extra, low=0, high=200)
-    except FpmSimError as e:
-        raise AtlasError(e.message, parameter=e.parameter, value=e.value) from None
+    _check_mode_counts(n_modes, n_extra)
     shape = (len(xs), len(ys), len(ps))
     opts = options or ModelOptions(axial=False)  # the shared default resolution (model.options)
-    if root is None:
-        ridx = _grid_index(int(np.argmin(np.abs(a - np.median(a)))) for a in (xs, ys, ps))
-    else:
-        ridx = _grid_index(
-            int(np.argmin(np.abs(a - v))) for a, v in zip((xs, ys, ps), (root.x_m, root.y_m, root.phi_rad))
-        )
-        for a, v, i in zip((xs, ys, ps), (root.x_m, root.y_m, root.phi_rad), ridx):
-            if not math.isclose(float(a[i]), v, abs_tol=1e-9):
-                raise AtlasError(f"the root pose {root.label()} is not a grid node")
+    ridx = _root_index((xs, ys, ps), root)
     order, parent = _bfs_tree(shape, ridx)
     flat_poses = [Pose(float(x), float(y), float(p)) for x in xs for y in ys for p in ps]
     nodes: dict[str, np.ndarray] = {}
@@ -707,38 +698,7 @@ def build_atlas(
         else:
             al = align_modes(aligned[parent[f]], system.phi, n_candidates=n_modes + n_extra)
         aligned[f] = al.basis
-        phi_a = al.basis
-        om = system.omega_rad_s[al.index]
-        q = al.rotation
-        lam = q.T @ np.diag(om**2) @ q
-        c_damp = system_damping_matrix(built.model, system.qpos)
-        xi = phi_a.T @ c_damp @ phi_a
-        gamma = phi_a.T @ system.b_q
-        cq_phi = system.c_q @ phi_a
-        ca_phi = system.c_a @ phi_a
-        # static correction of the kept (tracked) modes: C_q (G - Phi_a Lambda^-1 Phi_a') B_q
-        resid = system.flexibility - phi_a @ np.linalg.solve(lam, phi_a.T)
-        d = np.vstack([system.c_q @ resid @ system.b_q, ca_phi @ gamma])
-        item = {
-            "lam": lam,
-            "xi": xi,
-            "gamma": gamma,
-            "cq_phi": cq_phi,
-            "ca_phi": ca_phi,
-            "d": d,
-            "basis": phi_a,
-            "qpos": system.qpos,
-            "label_freq_hz": om / (2 * np.pi),
-            "label_index": al.index.astype(float),
-            "mac": al.mac,
-            "mac_aligned": al.mac_aligned,
-        }
-        for key, v in item.items():
-            if key not in nodes:
-                nodes[key] = np.zeros(shape + np.shape(v))
-            if nodes[key].shape[3:] != np.shape(v):
-                raise AtlasError("poses gave models of different sizes; use one model option set for the whole grid")
-            nodes[key][np.unravel_index(f, shape)] = v
+        _store(nodes, shape, f, _node_model(built, system, al))
         names = {
             "input_names": list(system.input_names),
             "input_units": list(system.input_units),
@@ -763,6 +723,68 @@ def build_atlas(
         },
         **names,
     )
+
+
+def _check_mode_counts(n_modes: int, n_extra: int) -> None:
+    """``n_modes`` in [1, 200] and ``n_extra`` in [0, 200], else :class:`AtlasError` naming the parameter."""
+    try:
+        check_count("n_modes", n_modes, low=1, high=200)
+        check_count("n_extra", n_extra, low=0, high=200)
+    except FpmSimError as e:
+        raise AtlasError(e.message, parameter=e.parameter, value=e.value) from None
+
+
+def _root_index(axes: tuple[np.ndarray, np.ndarray, np.ndarray], root: Pose | None) -> tuple[int, int, int]:
+    """The grid index of the tracking's root: ``root`` (which must be a grid node), or the grid's middle."""
+    if root is None:
+        return _grid_index(int(np.argmin(np.abs(a - np.median(a)))) for a in axes)
+    values = (root.x_m, root.y_m, root.phi_rad)
+    ridx = _grid_index(int(np.argmin(np.abs(a - v))) for a, v in zip(axes, values))
+    for a, v, i in zip(axes, values, ridx):
+        if not math.isclose(float(a[i]), v, abs_tol=1e-9):
+            raise AtlasError(f"the root pose {root.label()} is not a grid node")
+    return ridx
+
+
+def _node_model(built: BuiltModel, system: ModalSystem, al: Alignment) -> dict[str, np.ndarray]:
+    """The reduced model of one node in its aligned basis ``al``: modal stiffness, damping, input and output
+    matrices, the static correction of the kept modes, and the tracking's labels."""
+    phi_a = al.basis
+    om = system.omega_rad_s[al.index]
+    q = al.rotation
+    lam = q.T @ np.diag(om**2) @ q
+    c_damp = system_damping_matrix(built.model, system.qpos)
+    xi = phi_a.T @ c_damp @ phi_a
+    gamma = phi_a.T @ system.b_q
+    cq_phi = system.c_q @ phi_a
+    ca_phi = system.c_a @ phi_a
+    # static correction of the kept (tracked) modes: C_q (G - Phi_a Lambda^-1 Phi_a') B_q
+    resid = system.flexibility - phi_a @ np.linalg.solve(lam, phi_a.T)
+    d = np.vstack([system.c_q @ resid @ system.b_q, ca_phi @ gamma])
+    return {
+        "lam": lam,
+        "xi": xi,
+        "gamma": gamma,
+        "cq_phi": cq_phi,
+        "ca_phi": ca_phi,
+        "d": d,
+        "basis": phi_a,
+        "qpos": system.qpos,
+        "label_freq_hz": om / (2 * np.pi),
+        "label_index": al.index.astype(float),
+        "mac": al.mac,
+        "mac_aligned": al.mac_aligned,
+    }
+
+
+def _store(nodes: dict[str, np.ndarray], shape: tuple[int, int, int], f: int, item: dict[str, np.ndarray]) -> None:
+    """Put one node's arrays at flat index ``f`` of the grid arrays (made on first use)."""
+    for key, v in item.items():
+        if key not in nodes:
+            nodes[key] = np.zeros(shape + np.shape(v))
+        if nodes[key].shape[3:] != np.shape(v):
+            raise AtlasError("poses gave models of different sizes; use one model option set for the whole grid")
+        nodes[key][np.unravel_index(f, shape)] = v
 
 
 def _node_label(node: tuple[float, float, float] | None) -> str:

@@ -1,7 +1,7 @@
 """Reduced-order models per pose: modal truncation in physical modal coordinates.
 
 The full model is linearised at its static equilibrium under gravity (the same point as
-:mod:`fpm_sim.linear.modal`): ``M`` from ``mj_fullM``, the tangent stiffness ``K`` with the closed loop's
+:mod:`fpm_sim.linear.solvers`): ``M`` from ``mj_fullM``, the tangent stiffness ``K`` with the closed loop's
 prestress, the joint-damper matrix ``C`` and the loop-closure Jacobian ``J``. Motions respect the
 loop closure, ``q = Z p`` with ``Z`` the null space of ``J``; the constrained eigenproblem
 ``Z'KZ x = w^2 Z'MZ x`` gives mass-normalised modes ``Phi = Z X`` (``Phi' M Phi = I``). In the modal
@@ -54,18 +54,13 @@ import scipy.linalg
 from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose
 from fpm_sim.linear.equilibrium import static_equilibrium
-from fpm_sim.linear.modal import (
-    ModeFilter,
-    check_stable,
-    constraint_rank,
-    eigenvalue_tolerances,
-    mass_matrix,
-    reduced_eigenproblem,
-    stiffness_matrix,
-    system_damping_matrix,
-)
+from fpm_sim.linear.matrices import mass_matrix, stiffness_matrix, system_damping_matrix
+from fpm_sim.linear.mode_filter import ModeFilter, check_stable, eigenvalue_tolerances
+from fpm_sim.linear.nullspace import constraint_rank
+from fpm_sim.linear.solvers import reduced_eigenproblem
 from fpm_sim.linear.threads import blas_threads
-from fpm_sim.model.options import BuiltModel, open_for_writing
+from fpm_sim.model.spec import BuiltModel
+from fpm_sim.outputs import open_for_writing
 from fpm_sim.results import to_jsonable
 
 __all__ = [
@@ -229,12 +224,12 @@ def modal_system(
         Position of the accelerometer on each distal link, as a fraction of its length from the
         elbow (nearest segment site).
     filt
-        Rigid-body threshold (``filt.rigid_fraction``, as :mod:`fpm_sim.linear.modal`): a mode within it
+        Rigid-body threshold (``filt.rigid_fraction``, as :mod:`fpm_sim.linear.mode_filter`): a mode within it
         (rigid-body motion, a mechanism) raises :class:`ReductionError`, as no static correction exists
         then; a negative stiffness eigenvalue beyond it raises
-        :class:`~fpm_sim.linear.modal.UnstableModelError`.
+        :class:`~fpm_sim.linear.mode_filter.UnstableModelError`.
 
-    The damping is the model's full viscous damping (:func:`~fpm_sim.linear.modal.system_damping_matrix`):
+    The damping is the model's full viscous damping (:func:`~fpm_sim.linear.matrices.system_damping_matrix`):
     the joint dampers, or the differentiated passive forces of ``cable``/``flex`` links, as ``modes`` uses.
     """
     filt = filt or ModeFilter()

@@ -28,10 +28,17 @@ from numpy.typing import ArrayLike
 from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError
 from fpm_sim.linear.equilibrium import static_equilibrium
-from fpm_sim.model.options import BuiltModel
+from fpm_sim.model.spec import BuiltModel
 from fpm_sim.rom.reduction import END_EFFECTOR_SITE
 from fpm_sim.sim.rollout import end_effector_pose
-from fpm_sim.sim.stepping import DEFAULT_INTEGRATOR, SteppingError, apply_stepping, choose_stepping, reraise_as
+from fpm_sim.sim.stepping import (
+    DEFAULT_INTEGRATOR,
+    Stepping,
+    SteppingError,
+    apply_stepping,
+    choose_stepping,
+    reraise_as,
+)
 
 __all__ = ["BatchedRolloutError", "BatchedRollouts", "batched_rollouts"]
 
@@ -141,19 +148,9 @@ def batched_rollouts(
     ``manip`` is the description ``built`` was made from (recorded in the attributes); ``integrator``,
     ``band_hz``, ``f1_hz``: :func:`fpm_sim.sim.stepping.choose_stepping`.
     """
-    import xarray as xr
     from mujoco import rollout as mj_rollout
 
-    w = np.atleast_2d(np.asarray(wrenches, float))
-    if w.ndim != 2 or w.shape[1] != 3 or w.shape[0] < 1 or not np.all(np.isfinite(w)):
-        raise BatchedRolloutError(
-            "must be finite (n, 3) rows F_x, F_y, M_z", parameter="wrenches", value=f"shape {w.shape}"
-        )
-    if not (isinstance(threads, int) and not isinstance(threads, bool) and threads >= 1):
-        raise BatchedRolloutError("must be an integer >= 1", parameter="threads", value=threads)
-    for name, v in (("duration_s", duration_s), ("output_step_s", output_step_s)):
-        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-            raise BatchedRolloutError("must be a positive finite time", parameter=name, value=v)
+    w = _checked_inputs(wrenches, threads, duration_s, output_step_s)
     q0 = static_equilibrium(built.model, mujoco.MjData(built.model))
     try:
         stepping = choose_stepping(
@@ -208,13 +205,46 @@ def batched_rollouts(
             )
     wall = time.perf_counter() - start
     t = np.arange(n_out + 1) * n_sub * h
+    return _dataset(w, disp, t, stepping, threads=threads, wall_s=wall, n_steps=n_out * n_sub, built=built, manip=manip)
+
+
+def _checked_inputs(wrenches: ArrayLike, threads: int, duration_s: float, output_step_s: float) -> np.ndarray:
+    """The wrenches as finite ``(n, 3)`` rows; ``threads`` an integer >= 1; both times positive and finite (s)."""
+    w = np.atleast_2d(np.asarray(wrenches, float))
+    if w.ndim != 2 or w.shape[1] != 3 or w.shape[0] < 1 or not np.all(np.isfinite(w)):
+        raise BatchedRolloutError(
+            "must be finite (n, 3) rows F_x, F_y, M_z", parameter="wrenches", value=f"shape {w.shape}"
+        )
+    if not (isinstance(threads, int) and not isinstance(threads, bool) and threads >= 1):
+        raise BatchedRolloutError("must be an integer >= 1", parameter="threads", value=threads)
+    for name, v in (("duration_s", duration_s), ("output_step_s", output_step_s)):
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            raise BatchedRolloutError("must be a positive finite time", parameter=name, value=v)
+    return w
+
+
+def _dataset(
+    w: np.ndarray,
+    disp: np.ndarray,
+    t: np.ndarray,
+    stepping: Stepping,
+    *,
+    threads: int,
+    wall_s: float,
+    n_steps: int,
+    built: BuiltModel,
+    manip: Manipulator,
+) -> Any:
+    """The rollouts as an ``xarray.Dataset``: wrenches, end-effector displacements over time, how they were run."""
+    import xarray as xr
+
     return xr.Dataset(
         {
             "wrench": (("rollout", "load"), w, {"units": "N, N, N m"}),
             "ee_disp": (("rollout", "time", "axis"), disp, {"units": "m, m, rad"}),
         },
         coords={
-            "rollout": np.arange(n),
+            "rollout": np.arange(w.shape[0]),
             "time": ("time", t, {"units": "s"}),
             "axis": ["x", "y", "phi"],
             "load": ["fx_n", "fy_n", "mz_nm"],
@@ -222,8 +252,8 @@ def batched_rollouts(
         attrs={
             "stepping": json.dumps(stepping.to_dict()),
             "threads": threads,
-            "wall_s": wall,
-            "n_steps_per_rollout": n_out * n_sub,
+            "wall_s": wall_s,
+            "n_steps_per_rollout": n_steps,
             "description": manip.name,
             "parameters": json.dumps({k: v for k, v in built.parameters.items() if k != "pose"}, default=str),
             "pose": json.dumps(built.parameters.get("pose", {}), default=str),

@@ -128,7 +128,11 @@ def _headless_dm_control() -> tuple[Any, Any, Any]:
 
 @functools.cache
 def _task_class() -> type:
-    """:class:`FlexibleRegulation`, defined on first use (it derives from dm_control's ``Task``)."""
+    """:class:`FlexibleRegulation`, defined on first use (it derives from dm_control's ``Task``).
+
+    Long because: it holds the class body of ``FlexibleRegulation`` (its short methods), defined inside a function
+    so that dm_control is imported only when the environment is first made.
+    """
     _, rl_control, dm_specs = _headless_dm_control()
     task_base: Any = rl_control.Task  # dm_control ships no types: the base class is Any to mypy
 
@@ -279,6 +283,9 @@ def regulation_env(
     integrator, band_hz
         ``"discrete"`` (default) at the step of the band ``band_hz`` (Hz; default 5 x f1), or ``"explicit"``
         (:func:`fpm_sim.sim.stepping.choose_stepping`).
+
+    Long because: the signature and the documentation of its options are half of it; the body (model, physics,
+    task, environment) is about 50 lines.
     """
     manip = with_servo_motors(manip or default_config())
     if thickness_m is not None:

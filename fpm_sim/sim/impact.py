@@ -64,7 +64,7 @@ import numpy as np
 
 from fpm_sim.errors import FpmSimWarning
 from fpm_sim.linear.equilibrium import static_equilibrium
-from fpm_sim.model.options import BuiltModel
+from fpm_sim.model.spec import BuiltModel
 from fpm_sim.response import (
     DEFAULT_MIN_PROMINENCE_DB,
     FrequencyResponse,
@@ -536,36 +536,13 @@ def virtual_impact_test(
     setup.accelerometer.check(built)
     q_eq = static_equilibrium(built.model, mujoco.MjData(built.model)) if system is None else system.qpos
     system = system or modal_system(built, qpos=q_eq)
-    try:
-        stepping = choose_stepping(
-            built,
-            integrator=setup.integrator,
-            band_hz=setup.band_hz,
-            step_s=setup.timestep_s,
-            divides_s=setup.sample_s,
-            max_step_s=setup.pulse_s / 10,
-            f1_hz=float(system.frequencies_hz[0]),
-        )
-    except SteppingError as e:
-        raise reraise_as(FrfError, e) from None
+    stepping = _impact_stepping(built, setup, float(system.frequencies_hz[0]))
     rollout = apply_stepping(built, stepping)
     h = float(rollout.model.opt.timestep)
     n_sub = max(1, round(setup.sample_s / h))
     dt = n_sub * h
     n_samples = round(setup.record_s / dt) + 1
-    rng = np.random.default_rng(setup.seed)
-    amps = setup.peak_force_n * (1.0 + setup.force_spread * rng.uniform(-1.0, 1.0, setup.n_impacts))
-    it = range(setup.n_impacts)
-    if progress:
-        from tqdm import tqdm
-
-        it = tqdm(it, desc="impacts", unit="impact", leave=False)
-    records = []
-    for i in it:
-        rec = _one_impact(rollout, q_eq, setup, float(amps[i]), n_sub, n_samples)
-        if setup.noise_m_s2 > 0:
-            rec.accel_m_s2 = rec.accel_m_s2 + rng.normal(0.0, setup.noise_m_s2, rec.accel_m_s2.size)
-        records.append(rec)
+    records = _impacts(rollout, q_eq, setup, n_sub, n_samples, progress=progress)
     freq, h1, coh = h1_estimate(records, pad_s=setup.pad_s, window_end=setup.window_end)
     frf = FrequencyResponse(
         freq_hz=freq,
@@ -577,21 +554,9 @@ def virtual_impact_test(
         modal_freq_hz=system.frequencies_hz,
         coherence=coh,
     )
-    keep = freq <= setup.f_max_hz
-    peaks = [
-        p
-        for p in frf.peaks(min_prominence_db=setup.min_prominence_db, f_min_hz=setup.f_min_hz)
-        if p.freq_hz <= setup.f_max_hz
-    ]
-    first = peaks[0].freq_hz if peaks else math.nan
-    zeta = half_power_damping(freq[keep], np.abs(h1[keep]), first) if peaks else math.nan
-    tau = exp_window_tau_s(dt * (n_samples - 1), setup.window_end)
-    window_zeta = 1.0 / (tau * 2.0 * math.pi * first) if peaks and math.isfinite(tau) else 0.0
+    first, zeta, tau, window_zeta = _first_peak(frf, setup, dt * (n_samples - 1))
     # the linear model's modal constants at this set-up: why a mode is (not) seen
-    one_hz = np.array([1.0])
-    constants = modal_frf(system, excitation=setup.impact, response=setup.accelerometer, freq_hz=one_hz).residues
-    hammer = modal_frf(system, excitation=setup.impact, response=setup.impact, freq_hz=one_hz).residues
-    sensor = modal_frf(system, excitation=setup.accelerometer, response=setup.accelerometer, freq_hz=one_hz).residues
+    constants, hammer, sensor = _modal_constants(system, setup)
     result = ImpactTestResult(
         frf=frf,
         records=records,
@@ -625,6 +590,70 @@ UFF_WINDOW_TAG = "fpm-sim exp-window"
 """Prefix of the UFF 58 ``id5`` record that carries the exponential window (``fpm-sim exp-window tau_s=..``)."""
 UFF_STEP_TAG = "discrete-step_s"
 """Key of the discrete integrator's step in the UFF 58 ``id5`` record (``discrete-step_s=..``)."""
+
+
+def _first_peak(frf: FrequencyResponse, setup: ImpactSetup, record_s: float) -> tuple[float, float, float, float]:
+    """The first peak of the H1 below ``f_max_hz`` (Hz; NaN if none), its half-power damping ratio, the exponential
+    window's time constant (s) over a record of ``record_s`` and the damping ratio that window adds at the peak."""
+    keep = frf.freq_hz <= setup.f_max_hz
+    peaks = [
+        p
+        for p in frf.peaks(min_prominence_db=setup.min_prominence_db, f_min_hz=setup.f_min_hz)
+        if p.freq_hz <= setup.f_max_hz
+    ]
+    first = peaks[0].freq_hz if peaks else math.nan
+    zeta = half_power_damping(frf.freq_hz[keep], np.abs(frf.h[keep]), first) if peaks else math.nan
+    tau = exp_window_tau_s(record_s, setup.window_end)
+    window_zeta = 1.0 / (tau * 2.0 * math.pi * first) if peaks and math.isfinite(tau) else 0.0
+    return first, zeta, tau, window_zeta
+
+
+def _impact_stepping(built: BuiltModel, setup: ImpactSetup, f1_hz: float) -> Stepping:
+    """The rollouts' integrator and step: from the set-up's band, dividing the sample interval, at least ten steps
+    per hammer pulse (:func:`fpm_sim.sim.stepping.choose_stepping`)."""
+    try:
+        stepping = choose_stepping(
+            built,
+            integrator=setup.integrator,
+            band_hz=setup.band_hz,
+            step_s=setup.timestep_s,
+            divides_s=setup.sample_s,
+            max_step_s=setup.pulse_s / 10,
+            f1_hz=f1_hz,
+        )
+    except SteppingError as e:
+        raise reraise_as(FrfError, e) from None
+    return stepping
+
+
+def _impacts(
+    rollout: BuiltModel, q_eq: np.ndarray, setup: ImpactSetup, n_sub: int, n_samples: int, *, progress: bool
+) -> list[ImpactRecord]:
+    """``setup.n_impacts`` hammer hits of random amplitude (``force_spread``), each recorded with sensor noise."""
+    rng = np.random.default_rng(setup.seed)
+    amps = setup.peak_force_n * (1.0 + setup.force_spread * rng.uniform(-1.0, 1.0, setup.n_impacts))
+    it = range(setup.n_impacts)
+    if progress:
+        from tqdm import tqdm
+
+        it = tqdm(it, desc="impacts", unit="impact", leave=False)
+    records = []
+    for i in it:
+        rec = _one_impact(rollout, q_eq, setup, float(amps[i]), n_sub, n_samples)
+        if setup.noise_m_s2 > 0:
+            rec.accel_m_s2 = rec.accel_m_s2 + rng.normal(0.0, setup.noise_m_s2, rec.accel_m_s2.size)
+        records.append(rec)
+    return records
+
+
+def _modal_constants(system: ModalSystem, setup: ImpactSetup) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The linear model's modal constants at this set-up (why a mode is, or is not, seen): hammer to sensor,
+    hammer driving point, sensor driving point."""
+    one_hz = np.array([1.0])
+    constants = modal_frf(system, excitation=setup.impact, response=setup.accelerometer, freq_hz=one_hz).residues
+    hammer = modal_frf(system, excitation=setup.impact, response=setup.impact, freq_hz=one_hz).residues
+    sensor = modal_frf(system, excitation=setup.accelerometer, response=setup.accelerometer, freq_hz=one_hz).residues
+    return constants, hammer, sensor
 
 
 def write_uff58(

@@ -27,7 +27,7 @@ or huge value in QACC" MuJoCo resets the state to ``qpos0``, which would otherwi
 displacement), when the state is not finite, or when the end effector has moved more than the model's
 size (``model.stat.extent``: a flexible manipulator that far from its equilibrium has left the linear,
 small-deflection regime the model is built for, i.e. its energy has grown without bound). MuJoCo's
-messages are collected (:func:`fpm_sim.model.options.mujoco_messages`), never written to
+messages are collected (:func:`fpm_sim.model.mujoco_log.mujoco_messages`), never written to
 ``MUJOCO_LOG.TXT``.
 """
 
@@ -46,11 +46,15 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from fpm_sim.config import Manipulator
+from fpm_sim.config.checks import check_finite
 from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose, forward_kinematics, inverse_kinematics
 from fpm_sim.linear.equilibrium import static_equilibrium
 from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import BuiltModel, ModelOptions, check_finite, mujoco_messages, open_for_writing
+from fpm_sim.model.mujoco_log import mujoco_messages
+from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.spec import BuiltModel
+from fpm_sim.outputs import open_for_writing
 from fpm_sim.rom.reduction import END_EFFECTOR_SITE, motor_dofs
 from fpm_sim.sim.stepping import (
     DEFAULT_INTEGRATOR,
@@ -358,138 +362,48 @@ def rollout(
         ``"explicit"``: the model's own integrator and step (:func:`fpm_sim.sim.stepping.choose_stepping`).
     f1_hz
         The model's first natural frequency (Hz) if known (the default band needs it; else a modal analysis).
+
+    Long because: the signature and the documentation of its fifteen options are half of it; the body (checks,
+    stepping, recording and the time loop) is named steps of about 45 lines.
     """
-    if not (isinstance(duration_s, (int, float)) and duration_s > 0 and math.isfinite(duration_s)):
-        raise RolloutError("must be a positive finite time", parameter="duration_s", value=duration_s)
-    if not (isinstance(output_step_s, (int, float)) and math.isfinite(output_step_s) and output_step_s > 0):
-        raise RolloutError("must be a positive finite time", parameter="output_step_s", value=output_step_s)
+    _check_times(duration_s, output_step_s)
     q0 = static_equilibrium(built.model, mujoco.MjData(built.model)) if qpos is None else np.asarray(qpos, float)
-    try:
-        stepping = choose_stepping(
-            built, integrator=integrator, band_hz=band_hz, step_s=step_s, divides_s=output_step_s, f1_hz=f1_hz, qpos=q0
-        )
-    except SteppingError as e:
-        raise reraise_as(RolloutError, e) from None
-    model = apply_stepping(built, stepping).model
+    stepping, model, n_sub = _stepping(built, q0, output_step_s, integrator, band_hz, step_s, f1_hz)
     h = float(model.opt.timestep)
-    if not (output_step_s >= h * (1 - 1e-9)):
-        raise RolloutError(f"output_step_s ({output_step_s:g} s) must be at least the model timestep ({h:.3g} s)")
-    n_sub = max(1, round(output_step_s / h))
     dt_out = n_sub * h
     n_out = round(duration_s / dt_out)
+    loads = _Loads(ee_wrench, motor_torque, motor_reference, manip.motors.servo_stiffness_nm_per_rad)
     mdofs = motor_dofs(model)
-    if (motor_torque is not None or motor_reference is not None) and len(mdofs) != 3:
-        raise RolloutError(
-            "motor torques or references need motor hinges: set motors.mode = 'servo' (Motors(mode='servo', "
-            "servo_stiffness_nm_per_rad=...)); locked motors have no joint"
-        )
-    if motor_reference is not None and manip.motors.mode != "servo":
-        raise RolloutError("motor_reference drives a servo: set motors.mode = 'servo'")
-    sid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, END_EFFECTOR_SITE)
-    bid = int(model.site_bodyid[sid])
-    if ee_wrench is not None and not np.allclose(model.body_ipos[bid], model.site_pos[sid], atol=1e-12):
-        raise RolloutError("the platform's centre of mass is not at platform_center; wrench application unsupported")
-    acc_ids = []
-    for s in accel_sites:
-        k = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, s)
-        if k < 0:
-            raise RolloutError(f"unknown site {s!r} in accel_sites (e.g. distal_0_p2, platform_center)")
-        acc_ids.append(k)
+    bid = _check_loads(model, manip, mdofs, loads)
+    acc_ids = _site_ids(model, accel_sites)
     pose = Pose(**built.parameters["pose"])
     asm = inverse_kinematics(manip.geometry, pose)
-    motor0 = np.asarray(asm.motor_angles_rad, float)
-    k_servo = manip.motors.servo_stiffness_nm_per_rad
-
     data = mujoco.MjData(model)
     data.qpos[:] = q0
-    data.qvel[:] = 0.0
     mujoco.mj_forward(model, data)
     ee0 = end_effector_pose(model, data)
-    gravity = model.opt.gravity.copy()
-
-    t = np.arange(n_out + 1) * dt_out
-    ee = np.zeros((n_out + 1, 3))
-    motors = np.zeros((n_out + 1, 3))
-    defl = np.zeros((n_out + 1, 3))
-    wrench = np.zeros((n_out + 1, 3))
-    torque = np.zeros((n_out + 1, 3))
-    acc = {s: np.zeros((n_out + 1, 3)) for s in accel_sites}
-    res6 = np.zeros(6)
-    guess = pose
-
-    def record(k: int) -> None:
-        nonlocal guess
-        ee[k] = end_effector_pose(model, data)
-        ma = motor0 + (np.array([data.qpos[model.jnt_qposadr[model.dof_jntid[d]]] for d in mdofs]) if mdofs else 0.0)
-        motors[k] = ma
-        rigid = forward_kinematics(manip.geometry, ma, guess=guess) if mdofs else pose
-        guess = rigid
-        defl[k] = ee[k] - rigid.as_array()
-        if acc_ids:
-            mujoco.mj_rnePostConstraint(model, data)
-            for s, i in zip(accel_sites, acc_ids):
-                mujoco.mj_objectAcceleration(model, data, mujoco.mjtObj.mjOBJ_SITE, i, res6, 0)
-                acc[s][k] = res6[3:] + gravity  # cacc carries -gravity (accelerometer convention)
-
-    def apply_loads(k: int) -> None:
-        tk = t[k]
-        data.xfrc_applied[bid] = 0.0
-        data.qfrc_applied[:] = 0.0
-        if ee_wrench is not None:
-            w = _load("ee_wrench", ee_wrench(tk), tk)
-            wrench[k] = w
-            data.xfrc_applied[bid, 0:2] = w[0:2]
-            data.xfrc_applied[bid, 5] = w[2]
-        tau = np.zeros(3)
-        if motor_torque is not None:
-            tau += _load("motor_torque", motor_torque(tk), tk)
-        if motor_reference is not None:
-            tau += k_servo * _load("motor_reference", motor_reference(tk), tk)
-        if mdofs:
-            torque[k] = tau
-            data.qfrc_applied[mdofs] = tau
-
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=n_out, desc="rollout", unit="sample", leave=False)
-    start = time.perf_counter()
-    # sample k holds the state at t_k and the loads applied from t_k on (accelerations include them)
-    with mujoco_messages() as messages:
-        for k in range(n_out + 1):
-            apply_loads(k)
-            if acc_ids:
-                mujoco.mj_forward(model, data)
-            else:
-                mujoco.mj_kinematics(model, data)
-            record(k)
-            if k == n_out:
-                break
-            mujoco.mj_step(model, data, nstep=n_sub)
-            why = _divergence(model, data, ee0, messages)
-            if why is not None:
-                if bar is not None:
-                    bar.close()
-                raise RolloutError(
-                    f"the simulation diverged at t = {t[k + 1]:.4g} s: {why}",
-                    parameter="ee_wrench" if ee_wrench is not None else "motor_torque",
-                    hint="reduce the loads (ee_wrench, motor_torque) or the timestep (timestep_s)",
-                )
-            if bar is not None:
-                bar.update(1)
-    wall = time.perf_counter() - start
-    if bar is not None:
-        bar.close()
+    trace = _Trace(
+        model,
+        data,
+        manip,
+        pose,
+        np.asarray(asm.motor_angles_rad, float),
+        mdofs,
+        bid,
+        dict(zip(accel_sites, acc_ids)),
+        np.arange(n_out + 1) * dt_out,
+    )
+    wall = _run(trace, loads, n_sub, ee0, progress=progress)
+    t = trace.t_s
     return RolloutResult(
         t_s=t,
-        ee_pose=ee,
-        ee_disp=ee - ee0,
-        deflection=defl,
-        motor_angles_rad=motors,
-        accel=acc,
-        wrench=wrench,
-        motor_torque=torque,
+        ee_pose=trace.ee,
+        ee_disp=trace.ee - ee0,
+        deflection=trace.defl,
+        motor_angles_rad=trace.motors,
+        accel=trace.acc,
+        wrench=trace.wrench,
+        motor_torque=trace.torque,
         wall_s=wall,
         n_steps=n_out * n_sub,
         stepping=stepping,
@@ -503,3 +417,182 @@ def rollout(
             "motors": dataclasses.asdict(manip.motors),
         },
     )
+
+
+def _stepping(
+    built: BuiltModel,
+    q0: np.ndarray,
+    output_step_s: float,
+    integrator: str,
+    band_hz: float | None,
+    step_s: float | None,
+    f1_hz: float | None,
+) -> tuple[Stepping, mujoco.MjModel, int]:
+    """The integrator and step (:func:`fpm_sim.sim.stepping.choose_stepping`), the model that uses them, and the
+    model steps per output sample."""
+    try:
+        stepping = choose_stepping(
+            built, integrator=integrator, band_hz=band_hz, step_s=step_s, divides_s=output_step_s, f1_hz=f1_hz, qpos=q0
+        )
+    except SteppingError as e:
+        raise reraise_as(RolloutError, e) from None
+    model = apply_stepping(built, stepping).model
+    h = float(model.opt.timestep)
+    if not (output_step_s >= h * (1 - 1e-9)):
+        raise RolloutError(f"output_step_s ({output_step_s:g} s) must be at least the model timestep ({h:.3g} s)")
+    return stepping, model, max(1, round(output_step_s / h))
+
+
+def _check_times(duration_s: float, output_step_s: float) -> None:
+    """Both must be positive finite times (s)."""
+    if not (isinstance(duration_s, (int, float)) and duration_s > 0 and math.isfinite(duration_s)):
+        raise RolloutError("must be a positive finite time", parameter="duration_s", value=duration_s)
+    if not (isinstance(output_step_s, (int, float)) and math.isfinite(output_step_s) and output_step_s > 0):
+        raise RolloutError("must be a positive finite time", parameter="output_step_s", value=output_step_s)
+
+
+@dataclass(frozen=True)
+class _Loads:
+    """A rollout's load profiles (``None``: none) and the servo stiffness a motor reference acts through."""
+
+    ee_wrench: Profile | None
+    motor_torque: Profile | None
+    motor_reference: Profile | None
+    servo_nm_per_rad: float
+
+
+def _check_loads(model: mujoco.MjModel, manip: Manipulator, mdofs: list[int], loads: _Loads) -> int:
+    """Refuse loads the model cannot take; returns the platform body's id (where the wrench acts)."""
+    if (loads.motor_torque is not None or loads.motor_reference is not None) and len(mdofs) != 3:
+        raise RolloutError(
+            "motor torques or references need motor hinges: set motors.mode = 'servo' (Motors(mode='servo', "
+            "servo_stiffness_nm_per_rad=...)); locked motors have no joint"
+        )
+    if loads.motor_reference is not None and manip.motors.mode != "servo":
+        raise RolloutError("motor_reference drives a servo: set motors.mode = 'servo'")
+    sid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, END_EFFECTOR_SITE)
+    bid = int(model.site_bodyid[sid])
+    if loads.ee_wrench is not None and not np.allclose(model.body_ipos[bid], model.site_pos[sid], atol=1e-12):
+        raise RolloutError("the platform's centre of mass is not at platform_center; wrench application unsupported")
+    return bid
+
+
+def _site_ids(model: mujoco.MjModel, sites: Sequence[str]) -> list[int]:
+    """Ids of the sites whose acceleration is recorded."""
+    ids = []
+    for s in sites:
+        k = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, s)
+        if k < 0:
+            raise RolloutError(f"unknown site {s!r} in accel_sites (e.g. distal_0_p2, platform_center)")
+        ids.append(k)
+    return ids
+
+
+class _Trace:
+    """What a rollout records at each output sample ``k`` (state at ``t_k``, loads applied from ``t_k`` on)."""
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        data: mujoco.MjData,
+        manip: Manipulator,
+        pose: Pose,
+        motor0: np.ndarray,
+        mdofs: list[int],
+        bid: int,
+        acc_ids: dict[str, int],
+        t_s: np.ndarray,
+    ) -> None:
+        self.model, self.data, self.manip, self.pose = model, data, manip, pose
+        self.motor0, self.mdofs, self.bid, self.acc_ids, self.t_s = motor0, mdofs, bid, acc_ids, t_s
+        n = t_s.size
+        self.ee = np.zeros((n, 3))
+        self.motors = np.zeros((n, 3))
+        self.defl = np.zeros((n, 3))
+        self.wrench = np.zeros((n, 3))
+        self.torque = np.zeros((n, 3))
+        self.acc = {s: np.zeros((n, 3)) for s in acc_ids}
+        self.gravity = model.opt.gravity.copy()
+        self.guess = pose
+        self._res6 = np.zeros(6)
+
+    def record(self, k: int) -> None:
+        """The platform pose, motor angles, deflection from the rigid pose and site accelerations at sample ``k``."""
+        model, data, mdofs = self.model, self.data, self.mdofs
+        self.ee[k] = end_effector_pose(model, data)
+        ma = self.motor0 + (
+            np.array([data.qpos[model.jnt_qposadr[model.dof_jntid[d]]] for d in mdofs]) if mdofs else 0.0
+        )
+        self.motors[k] = ma
+        rigid = forward_kinematics(self.manip.geometry, ma, guess=self.guess) if mdofs else self.pose
+        self.guess = rigid
+        self.defl[k] = self.ee[k] - rigid.as_array()
+        if self.acc_ids:
+            mujoco.mj_rnePostConstraint(model, data)
+            for s, i in self.acc_ids.items():
+                mujoco.mj_objectAcceleration(model, data, mujoco.mjtObj.mjOBJ_SITE, i, self._res6, 0)
+                self.acc[s][k] = self._res6[3:] + self.gravity  # cacc carries -gravity (accelerometer convention)
+
+    def apply_loads(self, k: int, loads: _Loads) -> None:
+        """Set the wrench on the platform and the motor torques of sample ``k`` (recorded)."""
+        data, tk = self.data, self.t_s[k]
+        data.xfrc_applied[self.bid] = 0.0
+        data.qfrc_applied[:] = 0.0
+        if loads.ee_wrench is not None:
+            w = _load("ee_wrench", loads.ee_wrench(tk), tk)
+            self.wrench[k] = w
+            data.xfrc_applied[self.bid, 0:2] = w[0:2]
+            data.xfrc_applied[self.bid, 5] = w[2]
+        tau = np.zeros(3)
+        if loads.motor_torque is not None:
+            tau += _load("motor_torque", loads.motor_torque(tk), tk)
+        if loads.motor_reference is not None:
+            tau += loads.servo_nm_per_rad * _load("motor_reference", loads.motor_reference(tk), tk)
+        if self.mdofs:
+            self.torque[k] = tau
+            data.qfrc_applied[self.mdofs] = tau
+
+
+def _run(trace: _Trace, loads: _Loads, n_sub: int, ee0: np.ndarray, *, progress: bool) -> float:
+    """Step ``n_sub`` model steps between samples, recording each; returns the wall time (s).
+
+    Raises
+    ------
+    RolloutError
+        The simulation diverged (:func:`_divergence`).
+    """
+    model, data, t = trace.model, trace.data, trace.t_s
+    n_out = t.size - 1
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=n_out, desc="rollout", unit="sample", leave=False)
+    start = time.perf_counter()
+    # sample k holds the state at t_k and the loads applied from t_k on (accelerations include them)
+    with mujoco_messages() as messages:
+        for k in range(n_out + 1):
+            trace.apply_loads(k, loads)
+            if trace.acc_ids:
+                mujoco.mj_forward(model, data)
+            else:
+                mujoco.mj_kinematics(model, data)
+            trace.record(k)
+            if k == n_out:
+                break
+            mujoco.mj_step(model, data, nstep=n_sub)
+            why = _divergence(model, data, ee0, messages)
+            if why is not None:
+                if bar is not None:
+                    bar.close()
+                raise RolloutError(
+                    f"the simulation diverged at t = {t[k + 1]:.4g} s: {why}",
+                    parameter="ee_wrench" if loads.ee_wrench is not None else "motor_torque",
+                    hint="reduce the loads (ee_wrench, motor_torque) or the timestep (timestep_s)",
+                )
+            if bar is not None:
+                bar.update(1)
+    wall = time.perf_counter() - start
+    if bar is not None:
+        bar.close()
+    return wall

@@ -52,7 +52,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from fpm_sim.errors import FpmSimError
-from fpm_sim.model.options import BuiltModel
+from fpm_sim.model.spec import BuiltModel
 
 __all__ = [
     "BAND_F1_MULTIPLE",

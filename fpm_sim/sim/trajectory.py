@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from fpm_sim.config import Manipulator, Motors
+from fpm_sim.config import Geometry, Manipulator, Motors
 from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose, inverse_kinematics
 from fpm_sim.model.options import ModelOptions
@@ -570,26 +570,15 @@ def simulate_move(
         Settling tolerance (m) on the in-plane residual.
     integrator, band_hz
         Time stepping (:func:`fpm_sim.sim.stepping.choose_stepping`); the default band is 5 x f1 at the end pose.
+
+    Long because: the signature and the documentation of its options are a third of it; the rest is the move's
+    steps in order (the end pose's modes and shaper, the motor references, the rollout, the residual vibration).
     """
     from fpm_sim.model.manipulator import build_manipulator
     from fpm_sim.rom.reduction import modal_system
     from fpm_sim.sim.rollout import aligned_options, rollout
 
-    path.check()
-    for name, v in (("settle_s", settle_s), ("settle_tol_m", settle_tol_m), ("output_step_s", output_step_s)):
-        if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0):
-            raise MoveError("must be a positive finite number", parameter=name, value=v)
-    if shaper_kind not in SHAPERS:
-        raise MoveError(
-            "unknown input shaper", parameter="shaper", value=shaper_kind, hint=f"choose one of {', '.join(SHAPERS)}"
-        )
-    if shaper_kind != "none" and path.samples is not None:
-        raise MoveError(
-            "a shaper shapes a profile move; a sampled (CSV) path is commanded as it is",
-            parameter="shaper",
-            value=shaper_kind,
-            hint="drop the shaper ('none') or give a profile move",
-        )
+    _check_move(path, shaper_kind, settle_s=settle_s, settle_tol_m=settle_tol_m, output_step_s=output_step_s)
     manip = with_servo_motors(manip)
     opts = options or ModelOptions(axial=False)
     end = path.end if path.samples is None else Pose(*path.samples[-1, 1:])
@@ -608,12 +597,7 @@ def simulate_move(
     n = round(duration / output_step_s)
     t = np.arange(n + 1) * output_step_s
     cmd = path.poses(t)
-    try:
-        ref = np.array([inverse_kinematics(g, Pose(*c), check_singularity=False).motor_angles_rad for c in cmd])
-    except FpmSimError as e:
-        raise MoveError(f"the commanded path leaves the workspace: {e}") from None
-    ref = theta0 + np.unwrap(ref - theta0, axis=0)
-    dref = np.gradient(ref, output_step_s, axis=0)
+    ref, dref = _motor_references(g, cmd, theta0, output_step_s)
     k, c = manip.motors.servo_stiffness_nm_per_rad, manip.motors.servo_damping_nms_per_rad
 
     def sample(arr: np.ndarray) -> Any:
@@ -663,3 +647,36 @@ def simulate_move(
             "servo_damping_nms_per_rad": c,
         },
     )
+
+
+def _check_move(
+    path: MovePath, shaper_kind: str, *, settle_s: float, settle_tol_m: float, output_step_s: float
+) -> None:
+    """The path, the settling time and tolerance, the output step and the shaper (none on a sampled path)."""
+    path.check()
+    for name, v in (("settle_s", settle_s), ("settle_tol_m", settle_tol_m), ("output_step_s", output_step_s)):
+        if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0):
+            raise MoveError("must be a positive finite number", parameter=name, value=v)
+    if shaper_kind not in SHAPERS:
+        raise MoveError(
+            "unknown input shaper", parameter="shaper", value=shaper_kind, hint=f"choose one of {', '.join(SHAPERS)}"
+        )
+    if shaper_kind != "none" and path.samples is not None:
+        raise MoveError(
+            "a shaper shapes a profile move; a sampled (CSV) path is commanded as it is",
+            parameter="shaper",
+            value=shaper_kind,
+            hint="drop the shaper ('none') or give a profile move",
+        )
+
+
+def _motor_references(
+    g: Geometry, cmd: np.ndarray, theta0: np.ndarray, output_step_s: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Motor angles (rad, continuous from ``theta0``) and rates (rad/s) along the commanded poses ``cmd``."""
+    try:
+        ref = np.array([inverse_kinematics(g, Pose(*c), check_singularity=False).motor_angles_rad for c in cmd])
+    except FpmSimError as e:
+        raise MoveError(f"the commanded path leaves the workspace: {e}") from None
+    ref = theta0 + np.unwrap(ref - theta0, axis=0)
+    return ref, np.gradient(ref, output_step_s, axis=0)

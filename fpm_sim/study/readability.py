@@ -43,7 +43,8 @@ from tqdm import tqdm
 
 from fpm_sim.config import Manipulator
 from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import ModelOptions, dof_stiffness, resolution_footer
+from fpm_sim.model.options import ModelOptions, resolution_footer
+from fpm_sim.model.passive import dof_stiffness
 from fpm_sim.response import FrequencyResponse, FrfError, LinkPoint, modal_frf, pick_peaks
 from fpm_sim.rom.reduction import ModalSystem, modal_system
 from fpm_sim.sim.impact import STUDY_IMPACT_POINT

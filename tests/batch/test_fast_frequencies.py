@@ -87,7 +87,10 @@ def test_plane_split_equals_the_whole_eigenproblem(reference_manip):
     # frequencies must match one reduced_eigenproblem on the whole matrices (round-off: 1e-9 relative at a
     # well-conditioned pose), and the mode-1 character must come out pure (share 0 or 1).
     from fpm_sim.batch.pose_loop import PoseModel, plane_blocks, pose_assembly
-    from fpm_sim.linear.modal import constraint_rank, equality_jacobian, mass_matrix, reduced_eigenproblem
+    from fpm_sim.linear.equilibrium import equality_jacobian
+    from fpm_sim.linear.matrices import mass_matrix
+    from fpm_sim.linear.nullspace import constraint_rank
+    from fpm_sim.linear.solvers import reduced_eigenproblem
 
     opts = fast_options(segments=4)
     for pose in HANDFUL[:3]:

@@ -104,7 +104,8 @@ def test_smooth_terms_match_mujoco_away_from_qpos0_with_gravity_and_slides():
     import mujoco
 
     from fpm_sim.batch import jax_linearisation as jl
-    from fpm_sim.linear.modal import equality_jacobian, mass_matrix
+    from fpm_sim.linear.equilibrium import equality_jacobian
+    from fpm_sim.linear.matrices import mass_matrix
     from fpm_sim.model.manipulator import build_manipulator
 
     built = build_manipulator(default_config(), Pose(0.0, 0.0, 0.0), ModelOptions(segments=2, axial=True))
@@ -130,7 +131,8 @@ def test_smooth_terms_match_mujoco_away_from_qpos0_with_gravity_and_slides():
 
 
 def test_gradients_match_central_differences_of_the_cpu_path():
-    from fpm_sim.batch.jax_backend import parameter_value, pose_frequency_gradients, with_parameter
+    from fpm_sim.batch.jax_backend import pose_frequency_gradients
+    from fpm_sim.config import parameter_value, with_parameter
 
     config = default_config()
     poses = [Pose.from_mm(50.0, -50.0, 0.0), Pose.from_mm(-50.0, 0.0, 0.2)]
@@ -156,7 +158,8 @@ def test_gradients_match_central_differences_of_the_cpu_path():
 
 
 def test_bad_input_is_refused_with_the_parameter_named():
-    from fpm_sim.batch.jax_backend import frequency_gradients, with_parameter
+    from fpm_sim.batch.jax_backend import frequency_gradients
+    from fpm_sim.config import with_parameter
 
     config = default_config()
     with pytest.raises(ValueError, match="gravity"):
@@ -211,7 +214,7 @@ def test_linearise_with_gravity_and_geometric_term_matches_finite_differences_of
     import mujoco
 
     from fpm_sim.batch import jax_linearisation as jl
-    from fpm_sim.linear.modal import equality_jacobian
+    from fpm_sim.linear.equilibrium import equality_jacobian
     from fpm_sim.model.manipulator import build_manipulator
 
     built = build_manipulator(default_config(), Pose(0.0, 0.0, 0.0), ModelOptions(segments=2, axial=False))

@@ -7,7 +7,7 @@ import pytest
 
 from fpm_sim.kinematics import Pose
 from fpm_sim.linear.analysis import compare_methods
-from fpm_sim.linear.modal import TimestepWarning, modes_transition_fd
+from fpm_sim.linear.solvers import TimestepWarning, modes_transition_fd
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.model.rigs import RigSetup, build_rig

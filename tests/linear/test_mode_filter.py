@@ -9,16 +9,12 @@ import pytest
 
 from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import NearSingularityWarning, Pose
-from fpm_sim.linear import modal
-from fpm_sim.linear.modal import (
-    ModeFilter,
-    RedundantConstraintWarning,
-    UnstableModelError,
-    constraint_rank,
-    modes_constrained,
-    modes_transition_fd,
-    reference_frequency_hz,
-)
+from fpm_sim.linear import solvers
+from fpm_sim.linear.equilibrium import equality_jacobian
+from fpm_sim.linear.matrices import forward_at, mass_matrix
+from fpm_sim.linear.mode_filter import ModeFilter, UnstableModelError, reference_frequency_hz
+from fpm_sim.linear.nullspace import RedundantConstraintWarning, constraint_rank
+from fpm_sim.linear.solvers import modes_constrained, modes_transition_fd
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.model.rigs import RigSetup, build_rig
@@ -88,7 +84,7 @@ def test_reference_frequency_scales_with_the_model(steel_bar, default_manip):
     cant = build_rig(RigSetup("cantilever"), steel_bar, ModelOptions(segments=6))
     data = mujoco.MjData(cant.model)
     mujoco.mj_forward(cant.model, data)
-    f_ref = reference_frequency_hz(cant.model, modal.mass_matrix(cant.model, data))
+    f_ref = reference_frequency_hz(cant.model, mass_matrix(cant.model, data))
     f1 = modes_constrained(cant, n_modes=1).frequencies_hz[0]
     # the model's own scale is of the order of its first mode (0.5..5x), so rigid_fraction * f_ref sits
     # far below any physical mode
@@ -97,14 +93,14 @@ def test_reference_frequency_scales_with_the_model(steel_bar, default_manip):
 
 def _shifted(monkeypatch, shift_w2):
     """Make K softer by ``shift_w2 * M`` (every eigenvalue w^2 drops by shift_w2)."""
-    original = modal.stiffness_matrix
+    original = solvers.stiffness_matrix
 
     def softer(model, data, qpos, eps=1e-7):
         k = original(model, data, qpos, eps=eps)
-        modal._forward_at(model, data, qpos)
-        return k - shift_w2 * modal.mass_matrix(model, data)
+        forward_at(model, data, qpos)
+        return k - shift_w2 * mass_matrix(model, data)
 
-    monkeypatch.setattr(modal, "stiffness_matrix", softer)
+    monkeypatch.setattr(solvers, "stiffness_matrix", softer)
 
 
 def test_mild_instability_is_an_error_not_a_zero_mode(monkeypatch, symmetric_manip):
@@ -151,7 +147,7 @@ def test_mode_filter_values_are_checked():
 def _rank_at(built):
     data = mujoco.MjData(built.model)
     mujoco.mj_forward(built.model, data)
-    return constraint_rank(built.model, data), modal.equality_jacobian(built.model, data)
+    return constraint_rank(built.model, data), equality_jacobian(built.model, data)
 
 
 @pytest.mark.parametrize("pose", [Pose(0.0, 0.0, 0.0), NEAR_SINGULAR, Pose(-0.1, 0.0, 0.2)], ids=str)

@@ -10,12 +10,13 @@ import pytest
 from fpm_sim.beam_theory import euler_bernoulli_hz
 from fpm_sim.config import Section
 from fpm_sim.kinematics import Pose
-from fpm_sim.linear.modal import modes_constrained, modes_transition_fd
+from fpm_sim.linear.solvers import modes_constrained, modes_transition_fd
 from fpm_sim.model.deformable_links import DampingWarning, SectionWarning
 from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import FlexDampingWarning, ModelOptions
+from fpm_sim.model.options import ModelOptions
 from fpm_sim.model.parts import DEFAULT_RESOLUTION, LinkModelError
 from fpm_sim.model.rigs import RigSetup, build_rig
+from fpm_sim.model.spec import FlexDampingWarning
 
 
 def _in_plane(built, n=3):
@@ -304,7 +305,7 @@ def _explicit_damping_mu_h(model: mujoco.MjModel) -> float:
     """``mu_max h``: the largest eigenvalue of ``M^-1 D`` (the flex's damping, joints' own removed) times ``h``."""
     import scipy.linalg
 
-    from fpm_sim.model.options import passive_damping_matrix
+    from fpm_sim.model.passive import passive_damping_matrix
 
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)

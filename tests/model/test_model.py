@@ -1,8 +1,9 @@
 import pytest
 
-from fpm_sim.model.options import TIMESTEP_SAFETY, ModelOptions, TimestepError, highest_frequency_rad_s
+from fpm_sim.model.options import ModelOptions, TimestepError
 from fpm_sim.model.parts import LinkModelError
 from fpm_sim.model.rigs import RigSetup, build_rig
+from fpm_sim.model.spec import TIMESTEP_SAFETY, highest_frequency_rad_s
 
 
 def test_automatic_timestep_follows_the_stiffest_spring(steel_bar):

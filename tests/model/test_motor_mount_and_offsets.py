@@ -17,10 +17,13 @@ from fpm_sim.beam_theory import spring_held_torsion_hz, spring_hinged_cantilever
 from fpm_sim.config import Compliance, Manipulator, Material, Section
 from fpm_sim.kinematics import Pose, inverse_kinematics
 from fpm_sim.linear.equilibrium import equality_jacobian
-from fpm_sim.linear.modal import modes_constrained
+from fpm_sim.linear.solvers import modes_constrained
 from fpm_sim.model.links import add_link
 from fpm_sim.model.manipulator import add_motor_mount, build_manipulator, dof_kinds_of
-from fpm_sim.model.options import BuiltModel, ModelOptions, compile_model, dof_stiffness, new_spec
+from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.parts import LinkSpec
+from fpm_sim.model.passive import dof_stiffness
+from fpm_sim.model.spec import BuiltModel, compile_model, new_spec
 
 SECTION = Section(0.02865, 0.0148)  # the default links' section: out-of-plane bending well apart from in-plane
 STEEL = Material(200e9, 0.3, 7850.0)
@@ -42,17 +45,19 @@ def _mounted_cantilever(k_nm_per_rad: float, segments: int, *, rotary_inertia: b
     """One link on a motor mount: the manipulator's own mount code (add_motor_mount) on a link fixed to the world."""
     spec = new_spec("motor_mount", gravity=False)
     link = add_link(
+        spec,
         spec.worldbody,
-        name="link",
-        pos=np.zeros(3),
-        angle_rad=0.0,
-        length_m=LENGTH_M,
-        section=SECTION,
-        material=STEEL,
-        segments=segments,
-        axial=False,
-        rotary_inertia=rotary_inertia,
-        spec=spec,
+        LinkSpec(
+            name="link",
+            pos_m=(0.0, 0.0, 0.0),
+            angle_rad=0.0,
+            length_m=LENGTH_M,
+            section=SECTION,
+            material=STEEL,
+            segments=segments,
+            axial=False,
+            rotary_inertia=rotary_inertia,
+        ),
     )
     kinds = dict(link.joints)
     add_motor_mount(link.first, "motor_0", Compliance(motor_mount_tilt_nm_per_rad=k_nm_per_rad), 0.0, kinds)

@@ -6,7 +6,7 @@ import pytest
 from fpm_sim.beam_theory import euler_bernoulli_hz, rotary_inertia_shift
 from fpm_sim.config import LumpedMass
 from fpm_sim.linear.analysis import compare_methods
-from fpm_sim.linear.modal import TimestepWarning, modes_transition_fd
+from fpm_sim.linear.solvers import TimestepWarning, modes_transition_fd
 from fpm_sim.model.options import DEFAULT_SEGMENTS, ModelOptions
 from fpm_sim.model.rigs import RigError, RigSetup, build_rig
 

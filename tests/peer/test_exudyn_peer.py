@@ -18,7 +18,7 @@ import pytest
 
 from fpm_sim.config import Manipulator
 from fpm_sim.kinematics import Pose, inverse_kinematics
-from fpm_sim.linear.modal import modes_constrained
+from fpm_sim.linear.solvers import modes_constrained
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import ModelOptions
 

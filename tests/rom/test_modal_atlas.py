@@ -6,7 +6,8 @@ import pytest
 
 from fpm_sim.kinematics import Pose
 from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import ModelOptions, dof_stiffness
+from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.passive import dof_stiffness
 from fpm_sim.rom.atlas import (
     ATLAS_ERROR_WARN,
     AtlasAccuracyWarning,

@@ -8,7 +8,7 @@ import pytest
 from fpm_sim.config import Motors
 from fpm_sim.kinematics import Pose
 from fpm_sim.linear.equilibrium import static_equilibrium
-from fpm_sim.linear.modal import modes_transition_fd
+from fpm_sim.linear.solvers import modes_transition_fd
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.rom.reduction import (
@@ -249,7 +249,7 @@ def test_flex_reduced_model_is_damped_as_modes_is(default_manip):
     damping where `modes` gives 0.5-1 %; both now use the model's full viscous damping."""
     import warnings
 
-    from fpm_sim.linear.modal import modes_constrained
+    from fpm_sim.linear.solvers import modes_constrained
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

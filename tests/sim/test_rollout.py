@@ -163,7 +163,7 @@ def test_diverging_or_non_finite_load_is_an_error_not_zeros(flexible, force_n, t
 
 
 def test_mujoco_warnings_never_write_a_log_file(tmp_path, monkeypatch):
-    from fpm_sim.model.options import MujocoWarning, mujoco_messages, route_mujoco_warnings
+    from fpm_sim.model.mujoco_log import MujocoWarning, mujoco_messages, route_mujoco_warnings
 
     monkeypatch.chdir(tmp_path)
     model = mujoco.MjModel.from_xml_string(
