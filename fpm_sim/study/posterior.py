@@ -55,9 +55,9 @@ from fpm_sim.study.tables import measured_table, withheld_cells
 __all__ = [
     "BASE_CONFIG_ATTR",
     "DEFAULT_POSTERIOR_NAME",
-    "CalibrationData",
     "ELBOW_BRANCH_VAR",
     "QUANTILES",
+    "CalibrationData",
     "Posterior",
     "PosteriorError",
     "PredictiveBands",
@@ -720,7 +720,9 @@ class PredictiveBands:
             "elapsed_s": self.elapsed_s,
             "bands_kind": self.kind_line(),
             "discrepancy_rel": None if self.discrepancy_rel is None else np.asarray(self.discrepancy_rel).tolist(),
-            "discrepancy_shift": None if self.discrepancy_shift is None else np.asarray(self.discrepancy_shift).tolist(),
+            "discrepancy_shift": None
+            if self.discrepancy_shift is None
+            else np.asarray(self.discrepancy_shift).tolist(),
         }
 
     @property

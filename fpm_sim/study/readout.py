@@ -130,4 +130,3 @@ def mixture_log_likelihood(
     if not math.isfinite(top):
         return -math.inf
     return top + math.log(float(np.mean(np.exp(per_pose - top))))
-

@@ -362,9 +362,7 @@ def read_priors(source: str | Path, free: Sequence[str], *, text: str | None = N
             f"{where} [likelihood]: mode_read and length_scale_m cannot be combined (a mixture per pose is not "
             "jointly Gaussian); choose one"
         )
-    return Priors(
-        params, sample_branches, branch_reason, disc, disc_fixed, rig_sigma, a, b, where, text, length, read
-    )
+    return Priors(params, sample_branches, branch_reason, disc, disc_fixed, rig_sigma, a, b, where, text, length, read)
 
 
 def _mode_read(tbl: Any, where: str) -> ModeRead | None:
@@ -375,7 +373,9 @@ def _mode_read(tbl: Any, where: str) -> ModeRead | None:
         raise PriorError(f"{where}: expected a table")
     extra = set(tbl) - {"enabled", "modes", "height_db", "width_db", "reason"}
     if extra:
-        raise PriorError(f"{where}: unknown key(s) {sorted(extra)}; it takes enabled, modes, height_db, width_db, reason")
+        raise PriorError(
+            f"{where}: unknown key(s) {sorted(extra)}; it takes enabled, modes, height_db, width_db, reason"
+        )
     reason = _reason(tbl, where)
     if not tbl.get("enabled", True):
         return None

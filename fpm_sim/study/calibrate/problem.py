@@ -38,11 +38,11 @@ from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import assemble_many
 from fpm_sim.study.calibrate.priors import Priors
 from fpm_sim.study.discrepancy import covariance, gaussian_log_likelihood, pose_features
-from fpm_sim.study.readout import mixture_log_likelihood, read_probabilities, sensor_residues
 from fpm_sim.study.identify.data import Observation
 from fpm_sim.study.identify.engine import ELBOW_BRANCHES, predict_observations
 from fpm_sim.study.identify.parameters import ParameterSet, parameter_set
 from fpm_sim.study.inplane_surrogate import inplane_first_frequencies
+from fpm_sim.study.readout import mixture_log_likelihood, read_probabilities, sensor_residues
 from fpm_sim.study.tables import SubsystemTest
 
 __all__ = ["MODELS", "CalibrationError", "CalibrationProblem", "log_sigmoid_soft"]
@@ -248,7 +248,9 @@ class CalibrationProblem:
         """The rig tests' frequencies (Hz) under ``cfg``."""
         from fpm_sim.study.reproduce import subsystem_frequencies
 
-        rigs = [r.ours_hz for r in subsystem_frequencies(cfg, segments=self.subsystem_segments, tests=list(self.rig_tests))]
+        rigs = [
+            r.ours_hz for r in subsystem_frequencies(cfg, segments=self.subsystem_segments, tests=list(self.rig_tests))
+        ]
         return np.asarray(rigs, float)
 
     def noise_sd(self, f_pred: np.ndarray, discrepancy: float) -> np.ndarray:

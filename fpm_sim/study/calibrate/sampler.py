@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from fpm_sim.study.loo import LeaveOneOut, leave_one_out
 from fpm_sim.study.calibrate.problem import CalibrationError, CalibrationProblem
+from fpm_sim.study.loo import LeaveOneOut, leave_one_out
 
 __all__ = ["Calibration", "SamplerOptions", "problem_digest", "run_calibration"]
 
