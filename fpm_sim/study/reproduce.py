@@ -26,16 +26,14 @@ from fpm_sim.batch.pose_loop import PoseFrequencies
 from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError
 from fpm_sim.figures import text_colour, wrap_title
-from fpm_sim.linear.analysis import rig_modes
 from fpm_sim.model.options import ModelOptions, resolution_footer
 from fpm_sim.study.poses import GRID_MM, StudyPose, TableReading, study_poses
+from fpm_sim.study.rigs import SUBSYSTEM_SEGMENTS, SubsystemResult, subsystem_frequencies
 from fpm_sim.study.sweep import WorkspaceSweep
 from fpm_sim.study.tables import (
     STUDY_COMSOL_VS_EXPERIMENT,
     STUDY_THICKNESS_M,
-    SubsystemTest,
     measured_table,
-    subsystem_tests,
     withheld_cells,
 )
 
@@ -67,7 +65,6 @@ COMPARABLE_THICKNESS_REL = 0.25
 31 mm is the study's manipulator; the 10 and 5 mm variants are other machines)."""
 DEFAULT_IDENTIFICATION = "default_identification.json"
 """Packaged summary of the identification that produced the embedded default (its cross-validated errors)."""
-SUBSYSTEM_SEGMENTS = 12
 DEFAULT_OPTIMA_SPREAD_PCT = {
     (100.0, -50.0): 1.5,
     (100.0, 100.0): 2.9,
@@ -80,7 +77,6 @@ DEFAULT_OPTIMA_SPREAD_PCT = {
 predicted f1 of the competing identified descriptions from their median (``studies/optima_predictions.py`` over
 the thirteen identify folders of docs/identification.md, "What the competing optima agree on"). Small: the data
 pin the prediction down whatever the layout; large: the prediction depends on which optimum the search found."""
-"""Spring locations per link for the subsystem rigs (cantilever mode 1 within +0.2 % of Euler-Bernoulli)."""
 
 
 def error_stats(ours: np.ndarray, reference: np.ndarray) -> dict[str, float]:
@@ -109,32 +105,6 @@ def error_stats(ours: np.ndarray, reference: np.ndarray) -> dict[str, float]:
         "mean_signed_pct": float(np.mean(100.0 * (o[ok] - r[ok]) / np.abs(r[ok]))),
         "spearman": rho,
     }
-
-
-@dataclass
-class SubsystemResult:
-    """One subsystem test with our first frequency and its mode's dominant spring kind."""
-
-    test: SubsystemTest
-    ours_hz: float
-    dominant: str
-
-    @property
-    def error_pct(self) -> float:
-        return 100.0 * (self.ours_hz / self.test.experimental_hz - 1.0)
-
-
-def subsystem_frequencies(
-    config: Manipulator, *, segments: int = SUBSYSTEM_SEGMENTS, tests: list[SubsystemTest] | None = None
-) -> list[SubsystemResult]:
-    """Our first frequency of each of the study's subsystem tests (rigs from ``config.rig``)."""
-    opts = ModelOptions(segments=segments, gravity=False)
-    out = []
-    for t in tests or subsystem_tests():
-        res = rig_modes(config, t.rig, angle_deg=t.angle_deg, options=opts, n_modes=1, method="constrained")
-        m = res.modes[0]
-        out.append(SubsystemResult(t, float(m.frequency_hz), m.dominant))
-    return out
 
 
 @dataclass

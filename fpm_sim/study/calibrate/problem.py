@@ -25,7 +25,6 @@ import dataclasses
 import functools
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -35,9 +34,10 @@ from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import assemble_many
 from fpm_sim.study.calibrate.priors import Priors
 from fpm_sim.study.identify.data import Observation
-from fpm_sim.study.identify.engine import ELBOW_BRANCHES, predict_observations
 from fpm_sim.study.identify.parameters import ParameterSet, parameter_set
+from fpm_sim.study.identify.problem import ELBOW_BRANCHES, predict_observations
 from fpm_sim.study.inplane_surrogate import inplane_first_frequencies
+from fpm_sim.study.rigs import subsystem_frequencies
 from fpm_sim.study.tables import SubsystemTest
 
 __all__ = ["MODELS", "CalibrationError", "CalibrationProblem", "log_sigmoid_soft"]
@@ -62,8 +62,8 @@ def log_sigmoid_soft(z: np.ndarray, eps: float) -> np.ndarray:
 class CalibrationProblem:
     """Base description, free groups, priors, data and likelihood settings (see module docstring).
 
-    Picklable (plain data; the parameter set with its setter closures is rebuilt on first use in each
-    process), so a ``spawn`` pool can be given one in its initializer.
+    Picklable (plain data, its parameter set too: :class:`~fpm_sim.study.identify.parameters.ParameterSpec`),
+    so a ``spawn`` pool can be given one in its initializer.
     """
 
     base: Manipulator
@@ -108,14 +108,6 @@ class CalibrationProblem:
                 hint="give rig tests (a CSV file; the rig parameters are seen only by rig tests) "
                 "or remove rig from the free groups",
             )
-
-    # -- pickling: the cached parameter set holds closures; drop it, rebuild on use
-    def __getstate__(self) -> dict[str, Any]:
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
-
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        for k, v in state.items():
-            object.__setattr__(self, k, v)
 
     @functools.cached_property
     def parameters(self) -> ParameterSet:
@@ -211,8 +203,6 @@ class CalibrationProblem:
             return inplane_first_frequencies(cfg, [o.pose for o in self.observations])
         f = predict_observations(cfg, list(self.observations), options=fast_options(segments=self.segments))
         if self.rig_tests:
-            from fpm_sim.study.reproduce import subsystem_frequencies
-
             rigs = [
                 r.ours_hz
                 for r in subsystem_frequencies(cfg, segments=self.subsystem_segments, tests=list(self.rig_tests))

@@ -409,6 +409,20 @@ class ParameterSet:
     def x0(self) -> np.ndarray:
         return np.clip(np.array([p.start for p in self.parameters]), self.lower, self.upper)
 
+    @property
+    def width(self) -> np.ndarray:
+        """The bounds' widths (1 where a parameter's bounds coincide): the unit of the normalised ``z``."""
+        lo, hi = self.lower, self.upper
+        return np.where(hi > lo, hi - lo, 1.0)
+
+    def from_unit(self, z: Sequence[float] | np.ndarray) -> np.ndarray:
+        """Parameters (their units) at normalised ``z`` (clipped to [0, 1]: 0 the lower bound, 1 the upper)."""
+        return self.lower + np.clip(z, 0.0, 1.0) * self.width
+
+    def to_unit(self, x: Sequence[float] | np.ndarray) -> np.ndarray:
+        """Normalised parameters of ``x`` (not clipped)."""
+        return (np.asarray(x, float) - self.lower) / self.width
+
     def apply(self, x: Sequence[float] | np.ndarray, *, base: Manipulator | None = None) -> Manipulator:
         """The description with ``x`` set (validated). Raises :class:`ConfigError` for impossible values."""
         cfg = apply_parameters(base or self.start, self.parameters, x)

@@ -18,7 +18,8 @@ from scipy.stats import spearmanr
 from fpm_sim.config import Manipulator, config_to_toml
 from fpm_sim.outputs import atomic_dir
 from fpm_sim.results import to_jsonable
-from fpm_sim.study.identify.engine import CrossValidation, Identification, variance_scale, workspace_measures
+from fpm_sim.study.identify.engine import CrossValidation, Identification, variance_scale
+from fpm_sim.study.identify.problem import workspace_measures
 
 __all__ = ["identified_config", "provenance_key", "render_report", "write_identification"]
 
@@ -224,9 +225,10 @@ def competing_optima_lines(result: Identification) -> list[str]:
         "| cost | delta | from | " + " | ".join(names) + " |",
         "|---|---|---|" + "---|" * len(names),
     ]
-    for c in sorted(result.candidates, key=lambda c: c["cost"]):
-        vals = " | ".join(f"{v:.4g}" for v in c["values"])
-        lines.append(f"| {c['cost']:.4g} | {(c['cost'] - result.cost) / s2:.2f} | {c['from']} | {vals} |")
+    ps = result.problem.parameters
+    for c in sorted(result.candidates, key=lambda c: c.cost):
+        vals = " | ".join(f"{v:.4g}" for v in ps.from_unit(c.z))
+        lines.append(f"| {c.cost:.4g} | {(c.cost - result.cost) / s2:.2f} | {c.origin} | {vals} |")
     return lines
 
 
