@@ -19,7 +19,7 @@ import numpy as np
 from fpm_sim.batch.frequencies import pose_frequencies
 from fpm_sim.batch.pose_loop import fast_options
 from fpm_sim.config import Manipulator
-from fpm_sim.errors import FpmSimError
+from fpm_sim.errors import FpmSimError, FpmSimWarning
 from fpm_sim.kinematics import NearSingularityWarning, Pose, assemble_many
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.study.identify.data import Observation
@@ -35,6 +35,7 @@ __all__ = [
     "PENALTY_SIGMAS",
     "SURROGATE_BRANCHES",
     "IdentificationError",
+    "IdentificationWarning",
     "IdentifyOptions",
     "Problem",
     "check_problem",
@@ -79,6 +80,11 @@ their results depend on it); ``"de"`` seeds its population from all of :data:`EL
 
 class IdentificationError(FpmSimError):
     """The identification cannot run as asked (no data, no free parameter, a start that cannot assemble)."""
+
+
+class IdentificationWarning(FpmSimWarning):
+    """An identification that runs but whose uncertainties the data cannot check (as many data as free
+    parameters)."""
 
 
 @dataclass(frozen=True)
@@ -164,13 +170,26 @@ def with_branch(problem: Problem, branch: tuple[int, int, int]) -> Problem:
 def check_problem(problem: Problem) -> None:
     """Refuse a problem that cannot be fitted: fewer data than free parameters (the fit would report an optimum
     and uncertainties that the data do not determine), or a measured pose the start description cannot reach
-    (its residual would be NaN). Raises :class:`IdentificationError` naming the file and row."""
+    (its residual would be NaN). Raises :class:`IdentificationError` naming the file and row. Warns
+    (:class:`IdentificationWarning`) where there are exactly as many data as free parameters: the fit can pass
+    through every value, so its standard deviations rest on the stated sigmas alone, unchecked by any residual."""
     n_free, n_data = len(problem.parameters.parameters), len(problem.observations) + len(problem.subsystem_tests)
+    names = ", ".join(problem.parameters.names)
     if n_data < n_free:
         raise IdentificationError(
-            f"{n_data} measured value(s) for {n_free} free parameters ({', '.join(problem.parameters.names)})",
+            f"{n_data} measured value(s) for {n_free} free parameters ({names})",
             parameter="measured",
             hint="measure more poses or modes, or free fewer parameters",
+        )
+    if n_data == n_free:
+        warnings.warn(
+            IdentificationWarning(
+                f"{n_data} measured value(s) for {n_free} free parameters ({names}): no residual degree of freedom, "
+                "so the fit can match every value and its standard deviations rest on the stated sigmas alone, "
+                "unchecked; measure more poses or modes, or free fewer parameters",
+                parameter="measured",
+            ),
+            stacklevel=3,
         )
     obs = problem.observations
     if not obs:
