@@ -125,7 +125,19 @@ def render_report(
     extra: str = "",
 ) -> str:
     """The Markdown report."""
-    p = result.problem
+    lines = _header_lines(result, command=command, data_files=data_files)
+    lines += _statistics_lines(result, cv)
+    lines += _parameter_lines(result)
+    lines += _residual_lines(result, cv)
+    lines += competing_optima_lines(result)
+    if extra:
+        lines += ["", extra]
+    lines += ["", "Figures: `measured_vs_predicted.png`, `residuals_workspace.png`."]
+    return "\n".join(lines) + "\n"
+
+
+def _header_lines(result: Identification, *, command: str, data_files: Sequence[str]) -> list[str]:
+    """The command, the data, the search and the workspace prior."""
     lines = [
         "# fpm-sim identify",
         "",
@@ -149,7 +161,12 @@ def render_report(
             + (f"; below the threshold: {', '.join(ws['below_threshold'])}." if ws["below_threshold"] else "."),
             "",
         ]
-    lines += [
+    return lines
+
+
+def _statistics_lines(result: Identification, cv: CrossValidation | None) -> list[str]:
+    """In-sample and cross-validated errors per data file."""
+    lines = [
         "## Error statistics",
         "",
         "| data | n | in-sample mean abs % | in-sample max % | Spearman | CV mean abs % | CV max % | CV Spearman |",
@@ -169,7 +186,13 @@ def render_report(
             f"Cross-validation: {cv.folds}-fold over poses (every observation at a held-out pose, from every file, "
             f"left out together; each fold refitted from the full-data optimum); {cv.seconds:.0f} s.",
         ]
-    lines += ["", "## Parameters", "", "| parameter | start | value | std | bounds |", "|---|---|---|---|---|"]
+    return lines
+
+
+def _parameter_lines(result: Identification) -> list[str]:
+    """Each parameter's start, value, standard deviation and bounds; the correlations."""
+    p = result.problem
+    lines = ["", "## Parameters", "", "| parameter | start | value | std | bounds |", "|---|---|---|---|---|"]
     for fp, v, s in zip(p.parameters.parameters, result.values, result.std):
         flag = " (at bound)" if fp.name in result.at_bound else ""
         lines.append(f"| {fp.name} | {fp.start:.5g} | {v:.5g}{flag} | {s:.3g} | [{fp.lower:.4g}, {fp.upper:.4g}] |")
@@ -184,8 +207,14 @@ def render_report(
     ]
     for n, row in zip(result.names, result.correlation):
         lines.append(f"{n:<40}" + " ".join(f"{c:+.2f}" for c in row))
-    lines += [
-        "```",
+    lines.append("```")
+    return lines
+
+
+def _residual_lines(result: Identification, cv: CrossValidation | None) -> list[str]:
+    """Every datum's measured, model and cross-validated value; the search history."""
+    p = result.problem
+    lines = [
         "",
         "## Residuals",
         "",
@@ -199,11 +228,7 @@ def render_report(
     lines += ["", "## Search history", "", "| stage | evaluations | cost | seconds | note |", "|---|---|---|---|---|"]
     for h in result.history:
         lines.append(f"| {h.stage} | {h.evaluations} | {h.cost:.4g} | {h.seconds:.0f} | {h.note} |")
-    lines += competing_optima_lines(result)
-    if extra:
-        lines += ["", extra]
-    lines += ["", "Figures: `measured_vs_predicted.png`, `residuals_workspace.png`."]
-    return "\n".join(lines) + "\n"
+    return lines
 
 
 def competing_optima_lines(result: Identification) -> list[str]:
