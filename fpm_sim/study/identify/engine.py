@@ -56,9 +56,9 @@ from fpm_sim.study.identify.problem import (
     unique_poses,
     with_branch,
 )
-from fpm_sim.study.identify.strategies import Candidate
+from fpm_sim.study.identify.strategies import Candidate, Strategy
 from fpm_sim.study.identify.strategies.de import DifferentialEvolution
-from fpm_sim.study.identify.strategies.lsq import least_squares_z, refine_all
+from fpm_sim.study.identify.strategies.lsq import LeastSquares, least_squares_z
 from fpm_sim.study.identify.strategies.multistart import LatinHypercube
 from fpm_sim.study.identify.strategies.surrogate import SurrogateDE
 
@@ -235,20 +235,23 @@ def _global_candidates(
         return [start]
     scored = [start]
     if method in ("multistart", "hybrid"):
-        points = LatinHypercube(opts.n_starts).search(obj, seed=opts.seed, workers=1, progress=progress)
+        lhs: Strategy = LatinHypercube(opts.n_starts)
+        points = lhs.search(obj, seed=opts.seed, workers=1, progress=progress)
         scored += points
         history.log(
             "global latin hypercube", min(c.cost for c in scored), f"{len(points)} points scored with the full model"
         )
     if method == "surrogate-de" or (method == "hybrid" and obj.problem.geometry_free):
-        scored += SurrogateDE(SURROGATE_BRANCHES).search(obj, seed=opts.seed, workers=1, progress=progress)
+        surrogate: Strategy = SurrogateDE(SURROGATE_BRANCHES)
+        scored += surrogate.search(obj, seed=opts.seed, workers=1, progress=progress)
         history.log(
             "global surrogate-de",
             min(c.cost for c in scored),
             "best geometry of each elbow-branch class, scored with the full model",
         )
     if method == "de":
-        found = DifferentialEvolution().search(obj, seed=opts.seed, workers=opts.workers, progress=progress)
+        de: Strategy = DifferentialEvolution()
+        found = de.search(obj, seed=opts.seed, workers=opts.workers, progress=progress)
         history.log(
             "global differential evolution",
             min(c.cost for c in found),
@@ -292,7 +295,7 @@ def identify(problem: Problem, *, options: IdentifyOptions | None = None, progre
     history.log("start", start.cost)
     starts = _global_candidates(obj, opts, start, history, progress=progress)
     ends: list[Candidate] = []
-    for end in refine_all(obj, starts, workers=opts.workers):
+    for end in LeastSquares(tuple(starts)).ends(obj, workers=opts.workers):
         obj.nfev += end.nfev
         ends.append(end)
         history.log("local least squares", end.cost, f"from {end.origin}")

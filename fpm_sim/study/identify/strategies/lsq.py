@@ -10,7 +10,7 @@ evaluation's pose loop); otherwise one after the other, each pose loop in the op
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -21,7 +21,7 @@ from fpm_sim.study.identify.objective import Objective
 from fpm_sim.study.identify.problem import IdentifyOptions, Problem
 from fpm_sim.study.identify.strategies import Candidate, spawn_pool
 
-__all__ = ["LeastSquares", "least_squares_z", "refine", "refine_all"]
+__all__ = ["LeastSquares", "least_squares_z", "refine"]
 
 _WORKER: tuple[Problem, IdentifyOptions] | None = None
 """The problem of this pool worker process (set by :func:`_init_worker`; unused in the parent)."""
@@ -63,28 +63,28 @@ def _worker_refine(start: Candidate) -> Candidate:
     return refine(*_WORKER, start)
 
 
-def refine_all(objective: Objective, starts: Sequence[Candidate], *, workers: int = 1) -> Iterator[Candidate]:
-    """Every start refined (:func:`refine`) on ``objective``'s problem, in ``workers`` processes when there are
-    several starts (module docstring). Yields the ends in the starts' order as they come."""
-    problem, opts = objective.problem, objective.opts
-    if workers <= 1 or len(starts) <= 1:
-        for s in starts:
-            yield refine(problem, opts, s)
-        return
-    member_opts = dataclasses.replace(opts, workers=1)
-    with spawn_pool(min(workers, len(starts)), _init_worker, (problem, member_opts)) as pool:
-        yield from pool.imap(_worker_refine, list(starts), chunksize=1)
-
-
 @dataclass(frozen=True)
 class LeastSquares:
     """The local refinement as a :class:`~fpm_sim.study.identify.strategies.Strategy`: every one of ``starts``
-    refined, in their order."""
+    refined (:func:`refine`), in their order."""
 
     starts: tuple[Candidate, ...]
 
+    def ends(self, objective: Objective, *, workers: int = 1) -> Iterator[Candidate]:
+        """The refined ends on ``objective``'s problem, in ``workers`` processes when there are several starts
+        (module docstring), yielded in the starts' order as they come (``objective.nfev`` not updated)."""
+        problem, opts = objective.problem, objective.opts
+        if workers <= 1 or len(self.starts) <= 1:
+            for s in self.starts:
+                yield refine(problem, opts, s)
+            return
+        member_opts = dataclasses.replace(opts, workers=1)
+        with spawn_pool(min(workers, len(self.starts)), _init_worker, (problem, member_opts)) as pool:
+            yield from pool.imap(_worker_refine, list(self.starts), chunksize=1)
+
     def search(self, objective: Objective, *, seed: int, workers: int, progress: bool) -> list[Candidate]:
-        """The refined ends (``seed`` unused: the refinement is deterministic; ``progress`` unused)."""
-        ends = list(refine_all(objective, self.starts, workers=workers))
+        """The refined ends, their evaluations added to ``objective.nfev`` (``seed`` unused: the refinement is
+        deterministic; ``progress`` unused)."""
+        ends = list(self.ends(objective, workers=workers))
         objective.nfev += sum(e.nfev for e in ends)
         return ends
