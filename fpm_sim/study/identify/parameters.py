@@ -7,7 +7,8 @@ bounds. The mapping is data: a :class:`ParameterSpec` names the description fiel
 :meth:`ParameterSet.apply` turns a vector into a validated :class:`Manipulator`. Specs and sets are plain
 frozen data, so they pickle (a ``spawn`` worker receives them whole).
 
-This module imports neither MuJoCo, SciPy nor JAX: the command line reads :data:`GROUPS` from it.
+This module imports neither MuJoCo, SciPy, JAX nor (until a set is used) NumPy: the command line reads
+:data:`GROUPS` from it while building its parser.
 
 Groups (:data:`GROUPS`):
 
@@ -48,12 +49,13 @@ import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Literal
-
-import numpy as np
+from typing import TYPE_CHECKING, Any, Literal
 
 from fpm_sim.config import ConfigError, LumpedMass, Manipulator
 from fpm_sim.errors import FpmSimError
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = [
     "GEOMETRY_GROUPS",
@@ -162,6 +164,8 @@ def _scaled_lump(lump: LumpedMass, mass: float) -> LumpedMass:
 
 def _chain_mean(per_chain: tuple[float, ...]) -> float:
     """The chains' common value, or their mean where they differ."""
+    import numpy as np
+
     return per_chain[0] if len(set(per_chain)) == 1 else float(np.mean(per_chain))
 
 
@@ -399,28 +403,40 @@ class ParameterSet:
 
     @property
     def lower(self) -> np.ndarray:
+        import numpy as np
+
         return np.array([p.lower for p in self.parameters])
 
     @property
     def upper(self) -> np.ndarray:
+        import numpy as np
+
         return np.array([p.upper for p in self.parameters])
 
     @property
     def x0(self) -> np.ndarray:
+        import numpy as np
+
         return np.clip(np.array([p.start for p in self.parameters]), self.lower, self.upper)
 
     @property
     def width(self) -> np.ndarray:
         """The bounds' widths (1 where a parameter's bounds coincide): the unit of the normalised ``z``."""
+        import numpy as np
+
         lo, hi = self.lower, self.upper
         return np.where(hi > lo, hi - lo, 1.0)
 
     def from_unit(self, z: Sequence[float] | np.ndarray) -> np.ndarray:
         """Parameters (their units) at normalised ``z`` (clipped to [0, 1]: 0 the lower bound, 1 the upper)."""
+        import numpy as np
+
         return self.lower + np.clip(z, 0.0, 1.0) * self.width
 
     def to_unit(self, x: Sequence[float] | np.ndarray) -> np.ndarray:
         """Normalised parameters of ``x`` (not clipped)."""
+        import numpy as np
+
         return (np.asarray(x, float) - self.lower) / self.width
 
     def apply(self, x: Sequence[float] | np.ndarray, *, base: Manipulator | None = None) -> Manipulator:
