@@ -17,22 +17,10 @@ from fpm_sim.cli.common import (
     load_manipulator,
     workers_of,
 )
+from fpm_sim.study.identify.parameters import GROUPS
 
 __all__ = ["add_data_args", "cmd_identify", "parse_measured_arg", "read_data_args", "register"]
 
-GROUPS = (
-    "geometry",
-    "geometry-per-chain",
-    "hubs",
-    "hardware",
-    "section",
-    "section-height",
-    "compliance",
-    "offsets",
-    "rig",
-)
-""":data:`fpm_sim.study.identify.GROUPS`, listed here so that building the parser imports neither MuJoCo nor
-SciPy (a test checks they agree)."""
 GLOBAL_METHODS = ("de", "hybrid", "multistart", "surrogate-de", "none")
 """:data:`fpm_sim.study.identify.GLOBAL_METHODS` (checked by a test)."""
 DEFAULT_SIGMA_PCT = 2.0

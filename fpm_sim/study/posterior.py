@@ -257,67 +257,15 @@ class Posterior:
             missing, more than one chain, parameters unknown to the free groups, or an invalid draw.
         """
         p = Path(path)
-        if p.is_dir():
-            raise PosteriorError("is a folder", parameter="posterior", value=str(p), hint=WRITTEN_BY)
-        if not p.is_file():
-            raise PosteriorError("file not found", parameter="posterior", value=str(p), hint=WRITTEN_BY)
-        import arviz as az
-
-        try:
-            idata = az.from_netcdf(p)
-        except Exception as exc:  # any reader failure (not HDF5/netCDF, damaged) is this file's problem: name it
-            raise PosteriorError(
-                f"not an ArviZ InferenceData netCDF file ({type(exc).__name__}: {exc})", file=p, hint=WRITTEN_BY
-            ) from None
-        if "posterior" not in idata.groups():
-            raise PosteriorError("no 'posterior' group", file=p, hint=WRITTEN_BY)
-        post = idata.posterior
-        missing = [a for a in REQUIRED_ATTRS if a not in post.attrs]
-        if missing:
-            raise PosteriorError(
-                f"the posterior group lacks the attribute(s) {', '.join(missing)}",
-                file=p,
-                hint="it needs the base description, free groups, resolution and command; see docs/identification.md",
-            )
-        if post.sizes.get("chain", 1) != 1:
-            raise PosteriorError(
-                "more than one chain",
-                parameter="chain",
-                value=int(post.sizes["chain"]),
-                file=p,
-                hint="the format holds one chain of equal-weight draws",
-            )
-        try:
-            base = parse_config(tomllib.loads(str(post.attrs[BASE_CONFIG_ATTR])), source=f"posterior: {p.name}")
-        except (tomllib.TOMLDecodeError, ConfigError) as exc:
-            raise PosteriorError(f"not a valid description ({exc})", parameter=BASE_CONFIG_ATTR, file=p) from None
-        groups = tuple(g.strip() for g in str(post.attrs[GROUPS_ATTR]).split(",") if g.strip())
-        try:
-            segments = int(post.attrs[SEGMENTS_ATTR])
-        except (TypeError, ValueError):
-            raise PosteriorError(
-                "must be an integer", parameter=SEGMENTS_ATTR, value=post.attrs[SEGMENTS_ATTR], file=p
-            ) from None
+        post = _posterior_group(p)
+        base, groups, segments = _posterior_attributes(post, p)
 
         def flat(name: str) -> np.ndarray:
             var = post[name]
             extra = [d for d in var.dims if d not in ("chain", "draw")]
             return np.asarray(var.transpose("chain", "draw", *extra).values).reshape((-1, *var.shape[2:]))
 
-        names = [
-            str(n) for n in post.data_vars if str(n) != ELBOW_BRANCH_VAR and not str(n).startswith(LIKELIHOOD_PREFIX)
-        ]
-        try:
-            ps_names = parameter_set(base, list(groups)).names
-        except FpmSimError as exc:
-            raise PosteriorError(
-                f"free groups unusable ({exc})", parameter=GROUPS_ATTR, value=",".join(groups), file=p
-            ) from None
-        names = [n for n in ps_names if n in names] + [n for n in names if n not in ps_names]  # set order first
-        if not names:
-            raise PosteriorError(
-                "the posterior group holds no parameter variables", file=p, hint=f"expected {', '.join(ps_names)}"
-            )
+        names = _parameter_names(post, base, groups, p)
         values = np.column_stack([flat(n).astype(float) for n in names])
         branch = flat(ELBOW_BRANCH_VAR) if ELBOW_BRANCH_VAR in post.data_vars else None
         likelihood = {
@@ -1057,3 +1005,72 @@ def study_bands(
         reading=rd.name,
         loo=posterior.leave_one_out(),
     )
+
+
+def _posterior_group(p: Path) -> Any:
+    """The ``posterior`` group of the ArviZ file ``p`` (an xarray ``Dataset``; Any: xarray is untyped here),
+    refused with :class:`PosteriorError` when missing, unreadable, without one or with more than one chain."""
+    if p.is_dir():
+        raise PosteriorError("is a folder", parameter="posterior", value=str(p), hint=WRITTEN_BY)
+    if not p.is_file():
+        raise PosteriorError("file not found", parameter="posterior", value=str(p), hint=WRITTEN_BY)
+    import arviz as az
+
+    try:
+        idata = az.from_netcdf(p)
+    except Exception as exc:  # any reader failure (not HDF5/netCDF, damaged) is this file's problem: name it
+        raise PosteriorError(
+            f"not an ArviZ InferenceData netCDF file ({type(exc).__name__}: {exc})", file=p, hint=WRITTEN_BY
+        ) from None
+    if "posterior" not in idata.groups():
+        raise PosteriorError("no 'posterior' group", file=p, hint=WRITTEN_BY)
+    post = idata.posterior
+    missing = [a for a in REQUIRED_ATTRS if a not in post.attrs]
+    if missing:
+        raise PosteriorError(
+            f"the posterior group lacks the attribute(s) {', '.join(missing)}",
+            file=p,
+            hint="it needs the base description, free groups, resolution and command; see docs/identification.md",
+        )
+    if post.sizes.get("chain", 1) != 1:
+        raise PosteriorError(
+            "more than one chain",
+            parameter="chain",
+            value=int(post.sizes["chain"]),
+            file=p,
+            hint="the format holds one chain of equal-weight draws",
+        )
+    return post
+
+
+def _posterior_attributes(post: Any, p: Path) -> tuple[Manipulator, tuple[str, ...], int]:
+    """The base description, free groups and model resolution the posterior ``post`` (of file ``p``) states."""
+    try:
+        base = parse_config(tomllib.loads(str(post.attrs[BASE_CONFIG_ATTR])), source=f"posterior: {p.name}")
+    except (tomllib.TOMLDecodeError, ConfigError) as exc:
+        raise PosteriorError(f"not a valid description ({exc})", parameter=BASE_CONFIG_ATTR, file=p) from None
+    groups = tuple(g.strip() for g in str(post.attrs[GROUPS_ATTR]).split(",") if g.strip())
+    try:
+        segments = int(post.attrs[SEGMENTS_ATTR])
+    except (TypeError, ValueError):
+        raise PosteriorError(
+            "must be an integer", parameter=SEGMENTS_ATTR, value=post.attrs[SEGMENTS_ATTR], file=p
+        ) from None
+    return base, groups, segments
+
+
+def _parameter_names(post: Any, base: Manipulator, groups: tuple[str, ...], p: Path) -> list[str]:
+    """The posterior's parameter variables, in the order of the free groups' parameter set first."""
+    names = [str(n) for n in post.data_vars if str(n) != ELBOW_BRANCH_VAR and not str(n).startswith(LIKELIHOOD_PREFIX)]
+    try:
+        ps_names = parameter_set(base, list(groups)).names
+    except FpmSimError as exc:
+        raise PosteriorError(
+            f"free groups unusable ({exc})", parameter=GROUPS_ATTR, value=",".join(groups), file=p
+        ) from None
+    names = [n for n in ps_names if n in names] + [n for n in names if n not in ps_names]  # set order first
+    if not names:
+        raise PosteriorError(
+            "the posterior group holds no parameter variables", file=p, hint=f"expected {', '.join(ps_names)}"
+        )
+    return names

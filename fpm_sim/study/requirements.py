@@ -49,7 +49,7 @@ from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import SINGULAR_TOL, Pose, assemble_many, checked_pose_mm
 from fpm_sim.model.options import ModelOptions, resolution_label
 from fpm_sim.study.identify.data import read_measured_csv
-from fpm_sim.study.identify.engine import predict_observations
+from fpm_sim.study.identify.problem import predict_observations
 from fpm_sim.study.poses import parse_reading, study_poses
 from fpm_sim.study.sweep import dense_grid
 

@@ -34,7 +34,7 @@ import numpy as np
 from fpm_sim.config import Manipulator, default_config
 from fpm_sim.kinematics import Pose
 from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import DEFAULT_SEGMENTS, ModelOptions
+from fpm_sim.model.options import DEFAULT_SEGMENTS, BuiltModel, ModelOptions
 from fpm_sim.results import to_jsonable
 from fpm_sim.rom.reduction import ReducedModel, reduce_model
 from fpm_sim.sim.rollout import RolloutError, aligned_options, constant, rollout
@@ -295,6 +295,9 @@ def study_transient(
     integrator, step_band_hz
         How the full model is stepped: ``"discrete"`` at the step of the band ``step_band_hz`` (Hz; default 5 x
         f1) or ``"explicit"`` (:func:`fpm_sim.sim.stepping.choose_stepping`).
+
+    Long because: its fourteen options take 28 lines of documentation; the steps (build, reduce, one load
+    case per axis, :func:`_load_case`) are 60 lines.
     """
     manip = manip or default_config()
     if thickness_m is not None:
@@ -312,43 +315,19 @@ def study_transient(
     cases = []
     stepping: Stepping | None = None
     for a in axes:
-        k = "xy".index(a)
-        wrench = [0.0, 0.0, 0.0]
-        wrench[k] = force_n
-        try:
-            full = rollout(
-                built,
-                manip,
-                duration_s=duration_s,
-                output_step_s=output_step_s,
-                ee_wrench=constant(*wrench),
-                qpos=rom.qpos,
-                progress=progress,
-                integrator=integrator,
-                band_hz=step_band_hz,
-                f1_hz=float(rom.frequencies_hz[0]),
-            )
-        except RolloutError as e:
-            if e.parameter == "band_hz":  # the stepping's band is this function's step_band_hz
-                e.parameter = "step_band_hz"
-            raise
-        stepping = full.stepping
-        u = np.zeros((len(full.t_s), len(rom.input_names)))
-        u[:, k] = force_n
-        t1 = time.perf_counter()
-        y = rom.simulate(full.t_s, u)
-        wall_rom = time.perf_counter() - t1
-        cases.append(
-            TransientCase(
-                axis=a,
-                force_n=force_n,
-                t_s=full.t_s,
-                disp_full_m=full.ee_disp[:, k],
-                disp_rom_m=y[:, rom.output_index(("disp_x", "disp_y")[k])],
-                wall_full_s=full.wall_s,
-                wall_rom_s=wall_rom,
-            )
+        case, stepping = _load_case(
+            built,
+            manip,
+            rom,
+            a,
+            force_n=force_n,
+            duration_s=duration_s,
+            output_step_s=output_step_s,
+            progress=progress,
+            integrator=integrator,
+            step_band_hz=step_band_hz,
         )
+        cases.append(case)
     params = {
         "pose": dataclasses.asdict(pose),
         "thickness_m": manip.section.thickness_m,
@@ -368,3 +347,56 @@ def study_transient(
         "error_measure": "rms(full - rom) / rms(full) along the loaded axis",
     }
     return TransientResult(cases=cases, rom=rom, wall_rom_build_s=wall_build, parameters=params, stepping=stepping)
+
+
+def _load_case(
+    built: BuiltModel,
+    manip: Manipulator,
+    rom: ReducedModel,
+    axis: str,
+    *,
+    force_n: float,
+    duration_s: float,
+    output_step_s: float,
+    progress: bool,
+    integrator: str,
+    step_band_hz: float | None,
+) -> tuple[TransientCase, Stepping | None]:
+    """One load axis: the full model's rollout under the constant force ``force_n`` (N) along ``axis`` and the
+    reduced model's response to the same force (from the built manipulator ``built`` and its reduced model
+    ``rom``); the full model's stepping."""
+    k = "xy".index(axis)
+    wrench = [0.0, 0.0, 0.0]
+    wrench[k] = force_n
+    try:
+        full = rollout(
+            built,
+            manip,
+            duration_s=duration_s,
+            output_step_s=output_step_s,
+            ee_wrench=constant(*wrench),
+            qpos=rom.qpos,
+            progress=progress,
+            integrator=integrator,
+            band_hz=step_band_hz,
+            f1_hz=float(rom.frequencies_hz[0]),
+        )
+    except RolloutError as e:
+        if e.parameter == "band_hz":  # the stepping's band is study_transient's step_band_hz
+            e.parameter = "step_band_hz"
+        raise
+    u = np.zeros((len(full.t_s), len(rom.input_names)))
+    u[:, k] = force_n
+    t1 = time.perf_counter()
+    y = rom.simulate(full.t_s, u)
+    wall_rom = time.perf_counter() - t1
+    case = TransientCase(
+        axis=axis,
+        force_n=force_n,
+        t_s=full.t_s,
+        disp_full_m=full.ee_disp[:, k],
+        disp_rom_m=y[:, rom.output_index(("disp_x", "disp_y")[k])],
+        wall_full_s=full.wall_s,
+        wall_rom_s=wall_rom,
+    )
+    return case, full.stepping

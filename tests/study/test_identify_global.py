@@ -60,17 +60,17 @@ def test_de_finds_the_branches_and_geometry_a_local_search_misses(strategy):
 
 
 def test_first_population_is_sobol_with_surrogate_seeds_per_branch(monkeypatch):
-    from fpm_sim.study.identify import engine
+    from fpm_sim.study.identify import objective, problem
+    from fpm_sim.study.identify.strategies import de
 
     ref = load_config(REFERENCE_CONFIG)
     ps = parameter_set(ref, ["geometry", "hardware"])
     obs = [Observation(p, 1, 40.0, 0.4, None, "synthetic") for p in POSES]
-    problem = Problem(ps, obs)
-    obj = engine._Objective(problem, IdentifyOptions(segments=SEG))
+    obj = objective.Objective(Problem(ps, obs), IdentifyOptions(segments=SEG))
     free = np.array(obj.man_idx, dtype=int)
     geo = [j for j, i in enumerate(free) if ps.parameters[i].group == "geometry"]
     assert 0 < len(geo) < len(free)
-    branches = list(engine.ELBOW_BRANCHES)
+    branches = list(problem.ELBOW_BRANCHES)
     # a stand-in surrogate: each branch's "optimum" a distinct, recognisable geometry (the order is its ranking)
     ranked = branches[::-1]
     fake = []
@@ -79,10 +79,10 @@ def test_first_population_is_sobol_with_surrogate_seeds_per_branch(monkeypatch):
         z[free[geo]] = 0.01 * (k + 1)
         fake.append((z, f"fake {b}", b))
     calls = []
-    monkeypatch.setattr(engine, "_surrogate_starts", lambda o, opts, br: calls.append(list(br)) or fake)
+    monkeypatch.setattr(de, "surrogate_starts", lambda o, opts, br: calls.append(list(br)) or fake)
 
     d = len(free) + 1
-    plain = engine._de_initial_population(
+    plain = de.initial_population(
         obj, IdentifyOptions(segments=SEG, popsize=5, surrogate_seeds=0), free, branches
     )
     assert calls == []  # no surrogate run when no seed is asked for
@@ -93,7 +93,7 @@ def test_first_population_is_sobol_with_surrogate_seeds_per_branch(monkeypatch):
     assert np.all((plain[:, :-1] >= 0) & (plain[:, :-1] <= 1))
     assert np.all((plain[:, -1] >= 0) & (plain[:, -1] <= len(branches) - 1))
 
-    seeded = engine._de_initial_population(
+    seeded = de.initial_population(
         obj, IdentifyOptions(segments=SEG, popsize=5, surrogate_seeds=2), free, branches
     )
     assert calls == [branches]  # every combination, not the surrogate-de's own six
@@ -113,7 +113,7 @@ def test_refinement_candidates_are_class_leaders_first_then_runners_up():
         segments=SEG, global_method="de", generations=2, popsize=6, n_refine=100, refine_per_class=2, max_nfev=1
     )
     result = identify(problem, options=opts)
-    notes = [c["from"] for c in result.candidates]
+    notes = [c.origin for c in result.candidates]
     leaders = [n for n in notes if ", best of its final population" in n]
     runners_up = [n for n in notes if ", no. 2 of its final population" in n]
     # every candidate is refined (n_refine is larger): the classes' best, then their second best, then the start
@@ -123,7 +123,7 @@ def test_refinement_candidates_are_class_leaders_first_then_runners_up():
     assert {n.split("elbow branches ")[1] for n in runners_up} <= set(branches)
     # one candidate per class unless asked for more
     one = identify(problem, options=dataclasses.replace(opts, refine_per_class=1)).candidates
-    assert [c["from"] for c in one] == [*leaders, "start description"]
+    assert [c.origin for c in one] == [*leaders, "start description"]
 
     # the report lists every end, best first, its cost above the optimum's in units of s^2
     from fpm_sim.study.identify.report import competing_optima_lines

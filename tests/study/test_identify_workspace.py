@@ -19,7 +19,7 @@ from fpm_sim.study.identify import (
     predict_observations,
     workspace_residuals,
 )
-from fpm_sim.study.identify.engine import PENALTY_SIGMAS
+from fpm_sim.study.identify.problem import PENALTY_SIGMAS
 from tests.conftest import REFERENCE_CONFIG
 
 SEG = 2

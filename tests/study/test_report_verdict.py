@@ -8,7 +8,8 @@ import pytest
 
 from fpm_sim.batch.pose_loop import fast_options
 from fpm_sim.model.options import ModelOptions, resolution_footer, resolution_text
-from fpm_sim.study.reproduce import _determination, reproduce_study
+from fpm_sim.study.reproduce import reproduce_study
+from fpm_sim.study.reproduce_report import determination
 from fpm_sim.study.tables import STUDY_COMSOL_VS_EXPERIMENT
 
 SEG = 3  # the report's text does not depend on the resolution; its numbers are read from the result itself
@@ -55,11 +56,11 @@ def test_undetermined_parameters_are_flagged(report):
 
 
 def test_determination_thresholds():
-    assert _determination("identified: x; a.b = 4.428 +- 21.03 kg").startswith("**no")
-    assert _determination("identified: x; a.b = 0.1599 +- 0.09074 m") == "poorly (sd 57 %)"
-    assert _determination("identified: x; a.b = -0.2 +- 0.01 m") == "yes (sd 5 %)"
-    assert _determination("identified: x; a.b = -59.78 +- 31.28 deg") == "poorly (sd 31.28 deg)"
-    assert _determination("study: stated") == "-"
+    assert determination("identified: x; a.b = 4.428 +- 21.03 kg").startswith("**no")
+    assert determination("identified: x; a.b = 0.1599 +- 0.09074 m") == "poorly (sd 57 %)"
+    assert determination("identified: x; a.b = -0.2 +- 0.01 m") == "yes (sd 5 %)"
+    assert determination("identified: x; a.b = -59.78 +- 31.28 deg") == "poorly (sd 31.28 deg)"
+    assert determination("study: stated") == "-"
 
 
 def test_a_description_without_cross_validation_says_so(default_manip):

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from fpm_sim.cli.main import main
-from fpm_sim.study.reproduce import POSES_CSV_COLUMNS, error_stats
+from fpm_sim.study.reproduce import error_stats
+from fpm_sim.study.reproduce_report import POSES_CSV_COLUMNS
 
 
 def test_error_stats_in_the_studys_form():

@@ -27,7 +27,7 @@ from fpm_sim.config import Manipulator, config_to_toml
 from fpm_sim.outputs import atomic_file
 from fpm_sim.study.calibrate.priors import BRANCH_PARAMETER
 from fpm_sim.study.calibrate.sampler import Calibration
-from fpm_sim.study.identify.engine import ELBOW_BRANCHES
+from fpm_sim.study.identify.problem import ELBOW_BRANCHES
 
 __all__ = ["inference_data", "median_config", "thin", "write_config", "write_posterior"]
 

@@ -28,7 +28,6 @@ import dataclasses
 import functools
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -39,10 +38,11 @@ from fpm_sim.kinematics import assemble_many
 from fpm_sim.study.calibrate.priors import Priors
 from fpm_sim.study.discrepancy import covariance, gaussian_log_likelihood, pose_features
 from fpm_sim.study.identify.data import Observation
-from fpm_sim.study.identify.engine import ELBOW_BRANCHES, predict_observations
 from fpm_sim.study.identify.parameters import ParameterSet, parameter_set
+from fpm_sim.study.identify.problem import ELBOW_BRANCHES, predict_observations
 from fpm_sim.study.inplane_surrogate import inplane_first_frequencies
 from fpm_sim.study.readout import mixture_log_likelihood, read_probabilities, sensor_residues
+from fpm_sim.study.rigs import subsystem_frequencies
 from fpm_sim.study.tables import SubsystemTest
 
 __all__ = ["MODELS", "CalibrationError", "CalibrationProblem", "log_sigmoid_soft"]
@@ -67,8 +67,8 @@ def log_sigmoid_soft(z: np.ndarray, eps: float) -> np.ndarray:
 class CalibrationProblem:
     """Base description, free groups, priors, data and likelihood settings (see module docstring).
 
-    Picklable (plain data; the parameter set with its setter closures is rebuilt on first use in each
-    process), so a ``spawn`` pool can be given one in its initializer.
+    Picklable (plain data, its parameter set too: :class:`~fpm_sim.study.identify.parameters.ParameterSpec`),
+    so a ``spawn`` pool can be given one in its initializer.
     """
 
     base: Manipulator
@@ -122,14 +122,6 @@ class CalibrationProblem:
                 hint="give rig tests (a CSV file; the rig parameters are seen only by rig tests) "
                 "or remove rig from the free groups",
             )
-
-    # -- pickling: the cached parameter set holds closures; drop it, rebuild on use
-    def __getstate__(self) -> dict[str, Any]:
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
-
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        for k, v in state.items():
-            object.__setattr__(self, k, v)
 
     @functools.cached_property
     def parameters(self) -> ParameterSet:
@@ -246,8 +238,6 @@ class CalibrationProblem:
 
     def _rig_predictions(self, cfg: Manipulator) -> np.ndarray:
         """The rig tests' frequencies (Hz) under ``cfg``."""
-        from fpm_sim.study.reproduce import subsystem_frequencies
-
         rigs = [
             r.ours_hz for r in subsystem_frequencies(cfg, segments=self.subsystem_segments, tests=list(self.rig_tests))
         ]

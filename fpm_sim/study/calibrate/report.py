@@ -11,7 +11,7 @@ import numpy as np
 from fpm_sim.outputs import atomic_file
 from fpm_sim.study.calibrate.priors import BRANCH_PARAMETER, DISCREPANCY_PARAMETER
 from fpm_sim.study.calibrate.sampler import Calibration
-from fpm_sim.study.identify.engine import ELBOW_BRANCHES
+from fpm_sim.study.identify.problem import ELBOW_BRANCHES
 
 __all__ = ["corner_figure", "render_report", "write_report"]
 

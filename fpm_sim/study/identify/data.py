@@ -155,41 +155,9 @@ def read_measured_csv(
     cols = set(rows[0][1])
     ds = DataSet(source=p.name, sigma_pct=sigma_pct)
     if {"x_mm", "y_mm"} <= cols:
-        fcols = [c for c in cols if c.startswith("f") and c.endswith("_hz")]
-        for c in fcols:
-            if not c[1:-3].isdigit():
-                raise DataError(f"column {c!r} not understood", file=p, hint="frequency columns are f1_hz, f2_hz, ...")
-        fcols.sort(key=lambda c: int(c[1:-3]))
-        if not fcols:
-            raise DataError("no frequency column", file=p, hint="expected f1_hz, f2_hz, ... beside x_mm,y_mm,phi_rad")
+        fcols = _frequency_columns(p, cols)
         for line, r in rows:
-            try:
-                pose = checked_pose_mm(r["x_mm"], r["y_mm"], r.get("phi_rad") or "0", file=p, row=line)
-            except PoseValueError as e:
-                raise DataError(
-                    e.message, parameter=e.parameter, value=e.value, hint=e.hint, file=p, row=line
-                ) from None
-            label = (r.get("mode") or "").strip() or None
-            if label is not None and label not in MODE_LABELS:
-                raise DataError(
-                    "unknown mode kind",
-                    parameter="mode",
-                    value=label,
-                    hint="use in_plane or out_of_plane",
-                    file=p,
-                    row=line,
-                )
-            sig = _float(r.get("sigma_hz"), p, line, "sigma_hz")
-            for c in fcols:
-                f = _float(r[c], p, line, c)
-                if math.isnan(f):
-                    continue
-                if not f > 0:
-                    raise DataError("a frequency must be > 0", parameter=c, value=f, file=p, row=line)
-                s = sig if math.isfinite(sig) else f * sigma_pct / 100.0
-                if not s > 0:
-                    raise DataError("must be > 0", parameter="sigma_hz", value=s, file=p, row=line)
-                ds.observations.append(Observation(pose, int(c[1:-3]), f, s, label, p.name, line=line))
+            ds.observations += _pose_row_observations(p, line, r, fcols, sigma_pct)
         return ds
     if {"row_mm", "col_mm"} <= cols:
         if reading is None:
@@ -202,21 +170,69 @@ def read_measured_csv(
         if fcol is None:
             raise DataError("no frequency column", file=p, hint="expected experimental_hz, comsol_hz or f1_hz")
         for line, r in rows:
-            v = (r[fcol] or "").strip()
-            if not v or v.lower() == "unreadable":
-                continue
-            f = _float(v, p, line, fcol)
-            if not f > 0:
-                raise DataError("a frequency must be > 0", parameter=fcol, value=f, file=p, row=line)
-            rm, cm = _float(r["row_mm"], p, line, "row_mm"), _float(r["col_mm"], p, line, "col_mm")
-            if math.isnan(rm) or math.isnan(cm):
-                raise DataError("row_mm and col_mm must both be given", file=p, row=line)
-            obs = Observation(reading.pose(rm, cm), 1, f, f * sigma_pct / 100.0, None, p.name, rm, cm, line=line)
-            ds.observations.append(obs)
+            obs = _table_row_observation(p, line, r, fcol, reading, sigma_pct)
+            if obs is not None:
+                ds.observations.append(obs)
         return ds
     raise DataError(
         f"columns {sorted(cols)} not understood", file=p, hint="expected x_mm,y_mm,phi_rad,f1_hz,... or row_mm,col_mm"
     )
+
+
+def _frequency_columns(p: Path, cols: set[str]) -> list[str]:
+    """The pose form's ``fK_hz`` columns, by ``K``."""
+    fcols = [c for c in cols if c.startswith("f") and c.endswith("_hz")]
+    for c in fcols:
+        if not c[1:-3].isdigit():
+            raise DataError(f"column {c!r} not understood", file=p, hint="frequency columns are f1_hz, f2_hz, ...")
+    fcols.sort(key=lambda c: int(c[1:-3]))
+    if not fcols:
+        raise DataError("no frequency column", file=p, hint="expected f1_hz, f2_hz, ... beside x_mm,y_mm,phi_rad")
+    return fcols
+
+
+def _pose_row_observations(
+    p: Path, line: int, r: dict[str, str], fcols: list[str], sigma_pct: float
+) -> list[Observation]:
+    """The observations of one pose-form row (its pose checked, blank frequencies skipped)."""
+    try:
+        pose = checked_pose_mm(r["x_mm"], r["y_mm"], r.get("phi_rad") or "0", file=p, row=line)
+    except PoseValueError as e:
+        raise DataError(e.message, parameter=e.parameter, value=e.value, hint=e.hint, file=p, row=line) from None
+    label = (r.get("mode") or "").strip() or None
+    if label is not None and label not in MODE_LABELS:
+        raise DataError(
+            "unknown mode kind", parameter="mode", value=label, hint="use in_plane or out_of_plane", file=p, row=line
+        )
+    sig = _float(r.get("sigma_hz"), p, line, "sigma_hz")
+    out = []
+    for c in fcols:
+        f = _float(r[c], p, line, c)
+        if math.isnan(f):
+            continue
+        if not f > 0:
+            raise DataError("a frequency must be > 0", parameter=c, value=f, file=p, row=line)
+        s = sig if math.isfinite(sig) else f * sigma_pct / 100.0
+        if not s > 0:
+            raise DataError("must be > 0", parameter="sigma_hz", value=s, file=p, row=line)
+        out.append(Observation(pose, int(c[1:-3]), f, s, label, p.name, line=line))
+    return out
+
+
+def _table_row_observation(
+    p: Path, line: int, r: dict[str, str], fcol: str, reading: TableReading, sigma_pct: float
+) -> Observation | None:
+    """The observation of one table-form row (``None``: blank or ``unreadable``)."""
+    v = (r[fcol] or "").strip()
+    if not v or v.lower() == "unreadable":
+        return None
+    f = _float(v, p, line, fcol)
+    if not f > 0:
+        raise DataError("a frequency must be > 0", parameter=fcol, value=f, file=p, row=line)
+    rm, cm = _float(r["row_mm"], p, line, "row_mm"), _float(r["col_mm"], p, line, "col_mm")
+    if math.isnan(rm) or math.isnan(cm):
+        raise DataError("row_mm and col_mm must both be given", file=p, row=line)
+    return Observation(reading.pose(rm, cm), 1, f, f * sigma_pct / 100.0, None, p.name, rm, cm, line=line)
 
 
 def read_subsystems_csv(path: str | Path) -> list[SubsystemTest]:

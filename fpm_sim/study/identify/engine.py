@@ -1,31 +1,29 @@
 """Model updating: a global search, a local least-squares refinement, uncertainty and cross-validation.
 
-Cost: ``sum(r_i^2)`` with ``r_i = (f_model,i - f_measured,i) / sigma_i`` over every observation
-(poses x modes of every ``--measured`` file) and every rig test, each with its own standard deviation.
-Mode matching: an unlabelled ``fK`` is the model's K-th lowest mode at that pose; a labelled one
-(``in_plane`` / ``out_of_plane``) is the K-th lowest of that kind, the kind decided by the mode's
-strain-energy split (in-plane springs vs the rest), so sorted order is not assumed and a swap of an
-in-plane and an out-of-plane mode near a crossing does not swap the match.
+What is fitted and the model's predictions: :mod:`.problem`; the cost ``sum(r_i^2)`` with
+``r_i = (f_model,i - f_measured,i) / sigma_i`` over every observation (poses x modes of every ``--measured``
+file) and every rig test, each with its own standard deviation: :mod:`.objective`; the searches:
+:mod:`.strategies`.
 
 Search (:func:`identify`):
 
 1. global exploration: ``"de"`` (the default: differential evolution of every free parameter on the
    full model at the fitted resolution, the elbow-branch combination an integer variable when the
    geometry is free, mutation ``de_strategy``; the best ``refine_per_class`` final-population members of
-   each branch combination are candidates, class leaders first),
+   each branch combination are candidates, class leaders first; :mod:`.strategies.de`),
    ``"multistart"`` (a Latin hypercube of ``n_starts`` points inside the bounds plus the start, each
-   scored with the full model), ``"surrogate-de"`` (differential evolution of the geometry on the
-   in-plane surrogate, :mod:`fpm_sim.study.inplane_surrogate`, scale-free, for every elbow-branch
-   class, each class's best scored with the full model) or ``"hybrid"`` (the last two candidate lists
-   together). The best ``n_refine`` candidates are refined. All seeded (``seed``): the same seed gives
-   the same result.
-2. local refinement of every candidate (in ``workers`` forked processes when there are several):
-   bounded least squares (:func:`scipy.optimize.least_squares`, trust-region reflective) on the full
-   segment model; the lowest end is the optimum, every end is kept (``Identification.candidates``). The
-   Jacobian is by forward finite differences in parameters normalised to their bounds (step ``1e-3`` of
-   the bound width). The model's
-   geometry enters through MjSpec compilation, which is not differentiable, so the gradients are
-   finite differences, not exact (stated in the report).
+   scored with the full model; :mod:`.strategies.multistart`), ``"surrogate-de"`` (differential evolution
+   of the geometry on the in-plane surrogate, :mod:`fpm_sim.study.inplane_surrogate`, scale-free, for every
+   elbow-branch class, each class's best scored with the full model; :mod:`.strategies.surrogate`) or
+   ``"hybrid"`` (the last two candidate lists together). The best ``n_refine`` candidates are refined. All
+   seeded (``seed``): the same seed gives the same result.
+2. local refinement of every candidate (in ``workers`` spawned processes when there are several;
+   :mod:`.strategies.lsq`): bounded least squares (:func:`scipy.optimize.least_squares`, trust-region
+   reflective) on the full segment model; the lowest end is the optimum, every end is kept
+   (``Identification.candidates``). The Jacobian is by forward finite differences in parameters normalised
+   to their bounds (step ``1e-3`` of the bound width). The model's geometry enters through MjSpec
+   compilation, which is not differentiable, so the gradients are finite differences, not exact (stated in
+   the report).
 3. uncertainty: the Gauss-Newton covariance ``s^2 (J'J)^+`` at the optimum with
    ``s^2 = chi^2 / dof`` (the residuals' own scale: model error included, never below what the
    stated sigmas imply when ``chi^2/dof > 1``; with ``chi^2/dof < 1`` the stated sigmas, ``s^2 = 1``).
@@ -36,237 +34,44 @@ Search (:func:`identify`):
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
-import warnings
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
-from scipy.stats import qmc
 
-from fpm_sim.batch.frequencies import pose_frequencies
-from fpm_sim.batch.pose_loop import fast_options
-from fpm_sim.config import ConfigError, Manipulator
-from fpm_sim.errors import FpmSimError
-from fpm_sim.kinematics import NearSingularityWarning, Pose, assemble_many
-from fpm_sim.model.options import ModelOptions
+from fpm_sim.config import Manipulator
 from fpm_sim.study.identify.data import Observation
-from fpm_sim.study.identify.parameters import GEOMETRY_GROUPS, ParameterSet
-from fpm_sim.study.tables import SubsystemTest
+from fpm_sim.study.identify.objective import Objective
+from fpm_sim.study.identify.problem import (
+    GLOBAL_METHODS,
+    SURROGATE_BRANCHES,
+    IdentificationError,
+    IdentifyOptions,
+    Problem,
+    check_problem,
+    predict_observations,
+    unique_poses,
+    with_branch,
+)
+from fpm_sim.study.identify.strategies import Candidate, Strategy
+from fpm_sim.study.identify.strategies.de import DifferentialEvolution
+from fpm_sim.study.identify.strategies.lsq import LeastSquares, least_squares_z
+from fpm_sim.study.identify.strategies.multistart import LatinHypercube
+from fpm_sim.study.identify.strategies.surrogate import SurrogateDE
 
 __all__ = [
-    "GLOBAL_METHODS",
-    "IN_PLANE_THRESHOLD",
     "CrossValidation",
     "Identification",
-    "IdentifyOptions",
-    "Problem",
     "SearchStep",
     "cross_validate",
+    "fold_assignment",
     "identify",
-    "predict_observations",
     "predict_with_std",
     "variance_scale",
-    "workspace_measures",
-    "workspace_residuals",
 ]
-
-GLOBAL_METHODS = ("de", "hybrid", "multistart", "surrogate-de", "none")
-IN_PLANE_THRESHOLD = 0.5
-"""A mode is ``in_plane`` when more than this fraction of its strain energy is in in-plane springs."""
-PENALTY_SIGMAS = 30.0
-"""Residual (in sigmas) of an observation the model cannot give (unreachable or singular pose, too few
-modes of the asked kind): large, finite, so that the search moves away from it."""
-MODE_MARGIN = 4
-"""Modes computed beyond the highest one asked for, so that labelled matching finds its kind."""
-ELBOW_BRANCHES: tuple[tuple[int, int, int], ...] = (
-    (1, 1, 1),
-    (-1, -1, -1),
-    (1, 1, -1),
-    (1, -1, 1),
-    (-1, 1, 1),
-    (-1, -1, 1),
-    (-1, 1, -1),
-    (1, -1, -1),
-)
-"""Every elbow-branch combination: the discrete variable of ``global_method="de"``."""
-
-
-class IdentificationError(FpmSimError):
-    """The identification cannot run as asked (no data, no free parameter, a start that cannot assemble)."""
-
-
-@dataclass(frozen=True)
-class IdentifyOptions:
-    """Search settings. ``segments``: spring locations per link of the model fitted."""
-
-    segments: int = 4
-    global_method: str = "de"
-    n_starts: int = 24
-    n_refine: int = 4
-    generations: int = 200
-    """``de``: generations of the differential evolution (each ``popsize`` x dimensions evaluations)."""
-    popsize: int = 8
-    """``de``: population size per dimension (scipy's ``popsize``)."""
-    surrogate_seeds: int = 2
-    """``de`` with the geometry free: members of the initial population per elbow-branch combination whose
-    geometry is that branch's in-plane surrogate optimum (:func:`_surrogate_starts`; their other parameters
-    from the Sobol sequence like the rest). ``0``: a Sobol population only."""
-    de_strategy: str = "best1bin"
-    """``de``: scipy's mutation strategy (``"best1bin"``: around the best member, greedy; ``"rand1bin"``: around
-    a random member, keeps more basins alive)."""
-    refine_per_class: int = 1
-    """``de``: final-population members of each elbow-branch class that are candidates for the local
-    refinement (its best ones). The candidates are taken class leaders first (every class's best, then every
-    class's second best, ...), ``n_refine`` of them."""
-    seed: int = 0
-    max_nfev: int = 40
-    workers: int = 1
-    subsystem_segments: int = 8
-    timoshenko: bool = False
-    """Links as Timoshenko beams (shear springs and section rotary inertia, :class:`ModelOptions`)."""
-
-    def model_options(self) -> ModelOptions:
-        if self.timoshenko:
-            return ModelOptions(segments=self.segments, axial=False, gravity=False, shear=True, rotary_inertia=True)
-        return fast_options(segments=self.segments)
-
-
-@dataclass
-class Problem:
-    """What is fitted: the free parameters, the observations, the rig tests."""
-
-    parameters: ParameterSet
-    observations: list[Observation]
-    subsystem_tests: list[SubsystemTest] = field(default_factory=list)
-    subsystem_sigma_pct: float = 1.0
-    workspace: list[Pose] = field(default_factory=list)
-    """Poses the machine is known to work at (it was placed there with its motors locked): a description
-    under which one is unreachable or has a singularity measure below ``min_singularity`` is penalised
-    (:meth:`_Objective.workspace_residuals`). Prior knowledge, not data: no frequency is read there."""
-    min_singularity: float = 0.05
-    """Smallest singularity measure (:mod:`fpm_sim.kinematics`) accepted at a ``workspace`` pose."""
-
-    @property
-    def measured(self) -> np.ndarray:
-        return np.array([o.freq_hz for o in self.observations] + [t.experimental_hz for t in self.subsystem_tests])
-
-    @property
-    def sigma(self) -> np.ndarray:
-        return np.array(
-            [o.sigma_hz for o in self.observations]
-            + [t.experimental_hz * self.subsystem_sigma_pct / 100.0 for t in self.subsystem_tests]
-        )
-
-    @property
-    def labels(self) -> list[str]:
-        return [o.describe() for o in self.observations] + [f"rig {t.label}" for t in self.subsystem_tests]
-
-
-def check_problem(problem: Problem) -> None:
-    """Refuse a problem that cannot be fitted: fewer data than free parameters (the fit would report an optimum
-    and uncertainties that the data do not determine), or a measured pose the start description cannot reach
-    (its residual would be NaN). Raises :class:`IdentificationError` naming the file and row."""
-    n_free, n_data = len(problem.parameters.parameters), len(problem.observations) + len(problem.subsystem_tests)
-    if n_data < n_free:
-        raise IdentificationError(
-            f"{n_data} measured value(s) for {n_free} free parameters ({', '.join(problem.parameters.names)})",
-            parameter="measured",
-            hint="measure more poses or modes, or free fewer parameters",
-        )
-    obs = problem.observations
-    if not obs:
-        return
-    asm = assemble_many(
-        problem.parameters.start.geometry,
-        [o.pose.x_m for o in obs],
-        [o.pose.y_m for o in obs],
-        [o.pose.phi_rad for o in obs],
-    )
-    bad = [o for o, ok in zip(obs, asm.reachable) if not ok]
-    if bad:
-        o = bad[0]
-        where = f"row {o.line}" if o.line is not None else o.describe()
-        raise IdentificationError(
-            f"{o.source}: {where}: the pose (x = {o.pose.x_m * 1e3:g} mm, y = {o.pose.y_m * 1e3:g} mm, phi = "
-            f"{o.pose.phi_rad:g} rad) is unreachable for the start description"
-            + (f" ({len(bad)} such rows)" if len(bad) > 1 else ""),
-            parameter="measured",
-            hint="check the pose columns (x_mm, y_mm in mm, phi_rad in rad) or the start description",
-        )
-
-
-def workspace_measures(problem: Problem, config: Manipulator) -> np.ndarray:
-    """The singularity measure of each ``problem.workspace`` pose under ``config`` (NaN where unreachable)."""
-    ws = problem.workspace
-    return assemble_many(config.geometry, [p.x_m for p in ws], [p.y_m for p in ws], [p.phi_rad for p in ws]).singularity
-
-
-def workspace_residuals(problem: Problem, config: Manipulator) -> np.ndarray:
-    """One residual per ``problem.workspace`` pose: ``PENALTY_SIGMAS * (1 - m / m_min)`` where its singularity
-    measure ``m`` is below ``m_min = problem.min_singularity`` (a hinge: 0 at and above it), ``PENALTY_SIGMAS``
-    where it is unreachable."""
-    if not problem.workspace:
-        return np.zeros(0)
-    m = workspace_measures(problem, config)
-    r = PENALTY_SIGMAS * np.clip(1.0 - m / problem.min_singularity, 0.0, 1.0)
-    return np.where(np.isfinite(r), r, PENALTY_SIGMAS)
-
-
-def _unique_poses(obs: Sequence[Observation]) -> tuple[list[Pose], list[int]]:
-    keys: dict[tuple, int] = {}
-    poses: list[Pose] = []
-    index = []
-    for o in obs:
-        k = (round(o.pose.x_m, 9), round(o.pose.y_m, 9), round(o.pose.phi_rad, 9))
-        if k not in keys:
-            keys[k] = len(poses)
-            poses.append(o.pose)
-        index.append(keys[k])
-    return poses, index
-
-
-def predict_observations(
-    config: Manipulator,
-    observations: Sequence[Observation],
-    *,
-    options: ModelOptions | None = None,
-    workers: int = 1,
-) -> np.ndarray:
-    """The model's frequency (Hz) for each observation (mode matching as in the module docstring);
-    NaN where the model cannot give it."""
-    if not observations:
-        return np.zeros(0)
-    poses, index = _unique_poses(observations)
-    labelled = any(o.label for o in observations)
-    n_modes = max(o.mode for o in observations) + (MODE_MARGIN if labelled else 0)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", NearSingularityWarning)
-        pf = pose_frequencies(config, poses, n_modes=n_modes, options=options or fast_options(), workers=workers)
-    out = np.full(len(observations), np.nan)
-    for j, (o, ip) in enumerate(zip(observations, index)):
-        f = pf.frequencies_hz[ip]
-        if o.label is None:
-            out[j] = f[o.mode - 1]
-            continue
-        frac = pf.in_plane[ip]
-        want = frac > IN_PLANE_THRESHOLD if o.label == "in_plane" else frac <= IN_PLANE_THRESHOLD
-        cand = f[want & np.isfinite(f)]
-        if len(cand) >= o.mode:
-            out[j] = cand[o.mode - 1]
-    return out
-
-
-def _subsystem_predictions(config: Manipulator, tests: Sequence[SubsystemTest], segments: int) -> np.ndarray:
-    if not tests:
-        return np.zeros(0)
-    from fpm_sim.study.reproduce import subsystem_frequencies
-
-    return np.array([r.ours_hz for r in subsystem_frequencies(config, segments=segments, tests=list(tests))])
 
 
 @dataclass
@@ -278,78 +83,6 @@ class SearchStep:
     cost: float
     seconds: float
     note: str = ""
-
-
-class _Objective:
-    """Residual function in normalised parameters ``z in [0, 1]``, counting evaluations."""
-
-    def __init__(self, problem: Problem, opts: IdentifyOptions, obs_mask: np.ndarray | None = None) -> None:
-        self.problem = problem
-        self.opts = opts
-        self.ps = problem.parameters
-        self.lo, self.hi = self.ps.lower, self.ps.upper
-        self.width = np.where(self.hi > self.lo, self.hi - self.lo, 1.0)
-        n_obs = len(problem.observations)
-        self.obs_mask = np.ones(n_obs, bool) if obs_mask is None else obs_mask
-        self.obs = [o for o, k in zip(problem.observations, self.obs_mask) if k]
-        self.measured = np.concatenate([problem.measured[:n_obs][self.obs_mask], problem.measured[n_obs:]])
-        self.sigma = np.concatenate([problem.sigma[:n_obs][self.obs_mask], problem.sigma[n_obs:]])
-        self.sub_idx = self.ps.subset(True)
-        self.man_idx = self.ps.subset(False)
-        self.nfev = 0
-        self._cache: dict[bytes, np.ndarray] = {}
-
-    def x(self, z: np.ndarray) -> np.ndarray:
-        return self.lo + np.clip(z, 0.0, 1.0) * self.width
-
-    def z(self, x: np.ndarray) -> np.ndarray:
-        return (np.asarray(x, float) - self.lo) / self.width
-
-    def predictions(self, x: np.ndarray) -> np.ndarray:
-        """Observations then rig tests. The two blocks are cached apart: a finite-difference step in a rig
-        parameter re-solves only the rigs, one in a manipulator parameter only the poses."""
-        x = np.asarray(x, float)
-        n = len(self.obs) + len(self.problem.subsystem_tests)
-        try:
-            cfg = self.ps.apply(x)
-        except (ConfigError, ValueError):
-            return np.full(n, np.nan)
-        key_m = b"m" + x[self.man_idx].tobytes()
-        key_s = b"s" + x[self.sub_idx].tobytes()
-        if key_m not in self._cache:
-            self.nfev += 1
-            self._cache[key_m] = predict_observations(
-                cfg, self.obs, options=self.opts.model_options(), workers=self.opts.workers
-            )
-        if key_s not in self._cache:
-            self._cache[key_s] = _subsystem_predictions(cfg, self.problem.subsystem_tests, self.opts.subsystem_segments)
-        out = np.concatenate([self._cache[key_m], self._cache[key_s]])
-        if len(self._cache) > 8192:
-            self._cache.clear()
-        return out
-
-    def workspace_residuals(self, x: np.ndarray) -> np.ndarray:
-        """The workspace prior's residuals at parameters ``x`` (:func:`workspace_residuals`)."""
-        if not self.problem.workspace:
-            return np.zeros(0)
-        try:
-            cfg = self.ps.apply(np.asarray(x, float))
-        except (ConfigError, ValueError):
-            return np.full(len(self.problem.workspace), PENALTY_SIGMAS)
-        return workspace_residuals(self.problem, cfg)
-
-    def residuals(self, z: np.ndarray) -> np.ndarray:
-        """Observations, then rig tests, then workspace poses (in sigmas)."""
-        x = self.x(z)
-        f = self.predictions(x)
-        r = (f - self.measured) / self.sigma
-        r = np.where(np.isfinite(r), r, PENALTY_SIGMAS)
-        if not self.problem.workspace:
-            return r
-        return np.concatenate([r, self.workspace_residuals(x)])
-
-    def cost(self, z: np.ndarray) -> float:
-        return float(np.sum(self.residuals(z) ** 2))
 
 
 @dataclass
@@ -370,7 +103,9 @@ class Identification:
     seconds: float
     config: Manipulator
     jacobian: np.ndarray
-    candidates: list[dict[str, Any]] = field(default_factory=list)
+    candidates: list[Candidate] = field(default_factory=list)
+    """Every local refinement's end (:class:`~fpm_sim.study.identify.strategies.Candidate`), in the order of
+    their starts."""
     start_elbow_branch: tuple[int, int, int] | None = None
     """The start description's elbow branches (the global search may pick another class)."""
 
@@ -409,7 +144,10 @@ class Identification:
                 for lab, m, f, s, e in zip(p.labels, self.measured, self.predicted, p.sigma, self.residual_pct)
             ],
             "history": [vars(h) for h in self.history],
-            "candidates": self.candidates,
+            "candidates": [
+                {"from": c.origin, "cost": c.cost, "values": p.parameters.from_unit(c.z).tolist(), "success": c.success}
+                for c in self.candidates
+            ],
             "options": vars(self.options),
             "seconds": self.seconds,
         }
@@ -449,287 +187,32 @@ class Identification:
         return ax.figure
 
 
-def _least_squares_z(fun: Any, z0: np.ndarray, max_nfev: int) -> Any:
-    """Bounded least squares (trust-region reflective) in parameters normalised to their bounds, ``z in [0, 1]``;
-    forward finite differences with a step of ``1e-3`` of the bound width. Every local fit here goes through it."""
-    return least_squares(
-        fun, np.clip(z0, 0.0, 1.0), bounds=(0.0, 1.0), method="trf", diff_step=1e-3, max_nfev=max_nfev, x_scale=1.0
-    )
-
-
 def variance_scale(chi2_per_dof: float) -> float:
     """``s^2 = max(chi^2/dof, 1)`` (1 where there is no degree of freedom, ``chi2_per_dof`` NaN): the factor on
     the Gauss-Newton covariance, and the unit of the report's cost differences between competing optima."""
     return max(chi2_per_dof, 1.0) if math.isfinite(chi2_per_dof) else 1.0
 
 
-def _lhs(n: int, d: int, seed: int) -> np.ndarray:
-    return qmc.LatinHypercube(d=d, seed=seed).random(n)
+class _History:
+    """The search history, printed as it grows when ``progress``."""
 
+    def __init__(self, obj: Objective, *, progress: bool) -> None:
+        self.obj, self.progress = obj, progress
+        self.steps: list[SearchStep] = []
+        self.t_start = time.time()
 
-SURROGATE_BRANCHES: tuple[tuple[int, int, int], ...] = (
-    (1, 1, 1),
-    (-1, -1, -1),
-    (1, 1, -1),
-    (1, -1, -1),
-    (-1, -1, 1),
-    (-1, 1, 1),
-)
-"""The elbow-branch classes ``global_method="surrogate-de"`` and ``"hybrid"`` explore (kept as published:
-their results depend on it); ``"de"`` seeds its population from all of :data:`ELBOW_BRANCHES`."""
-
-
-def _surrogate_starts(
-    obj: _Objective, opts: IdentifyOptions, branches: Sequence[tuple[int, int, int]] = SURROGATE_BRANCHES
-) -> list[tuple[np.ndarray, str, tuple[int, int, int]]]:
-    """Differential evolution of the ``geometry`` group on the in-plane surrogate, per elbow-branch class
-    (best surrogate cost first)."""
-    from scipy.optimize import differential_evolution
-
-    from fpm_sim.study.inplane_surrogate import inplane_first_frequencies
-
-    ps = obj.ps
-    gi = [i for i, p in enumerate(ps.parameters) if p.group in GEOMETRY_GROUPS]
-    if not gi:
-        raise IdentificationError(
-            "surrogate-de needs the geometry group free", parameter="global_method", hint="add geometry to free"
-        )
-    first = [k for k, o in enumerate(obj.obs) if o.mode == 1 and o.label in (None, "in_plane")]
-    poses = [obj.obs[k].pose for k in first]
-    logf = np.log([obj.obs[k].freq_hz for k in first])
-    w = 1.0 / np.array([obj.obs[k].sigma_hz / obj.obs[k].freq_hz for k in first])
-    z0 = obj.z(ps.x0)
-    out = []
-    for branch in branches:
-        base = ps.start.replace(geometry=dataclasses.replace(ps.start.geometry, elbow_branch=branch))
-
-        def cost(zg: np.ndarray, base: Manipulator = base) -> float:
-            z = z0.copy()
-            z[gi] = zg
-            try:
-                cfg = ps.apply(obj.x(z), base=base)
-            except (ConfigError, ValueError):
-                return 1e6
-            f = inplane_first_frequencies(cfg, poses)
-            ok = np.isfinite(f) & (f > 0)
-            if not ok.any():
-                return 1e6
-            d = np.log(np.where(ok, f, 1.0)) - logf
-            d = d - np.average(d[ok], weights=w[ok] ** 2)  # scale-free: the level comes from the masses
-            d = np.where(ok, d * w, PENALTY_SIGMAS)
-            return float(np.sum(d**2) + np.sum(workspace_residuals(obj.problem, cfg) ** 2))
-
-        sol = differential_evolution(
-            cost, [(0.0, 1.0)] * len(gi), seed=opts.seed, maxiter=80, popsize=12, tol=1e-7, polish=False
-        )
-        z = z0.copy()
-        z[gi] = sol.x
-        out.append((z, f"surrogate-de branch {branch}: surrogate cost {sol.fun:.3g}", branch, sol.fun))
-    out.sort(key=lambda t: t[3])
-    return [(z, note, br) for z, note, br, _ in out]
-
-
-_DE_STATE: tuple[list[_Objective], np.ndarray, np.ndarray, bool] | None = None
-"""The objectives of the running differential evolution: module state so that forked worker processes
-inherit them (the parameter setters are closures, which cannot be pickled)."""
-
-
-def _de_decode(v: np.ndarray, z_fixed: np.ndarray, free: np.ndarray, geometry_free: bool) -> tuple[np.ndarray, int]:
-    """A member of the evolution -> normalised parameters (the held ones from ``z_fixed``) and its branch index."""
-    z = z_fixed.copy()
-    z[free] = np.clip(v[: len(free)], 0.0, 1.0)
-    return z, int(np.rint(v[len(free)])) if geometry_free else 0
-
-
-def _de_member_cost(v: np.ndarray) -> float:
-    assert _DE_STATE is not None
-    objs, z_fixed, free, geometry_free = _DE_STATE
-    z, k = _de_decode(v, z_fixed, free, geometry_free)
-    return objs[k].cost(z)
-
-
-def _full_model_de(
-    problem: Problem, obj: _Objective, opts: IdentifyOptions, *, progress: bool = False
-) -> list[tuple[float, np.ndarray, str, tuple[int, int, int] | None]]:
-    """Differential evolution of every free parameter on the full model (the fitted resolution), with the
-    elbow-branch combination as one more, integer, variable when the geometry is free. Returns the final
-    population's best member of each branch combination (cost, z, note, branch), best first.
-
-    The rig parameters (seen only by the rig tests, which see nothing else) are separable: they are fitted
-    to the rig tests alone first and held there, so that the evolution spends no rig solve per member.
-    With ``opts.workers > 1`` each generation's members are scored in that many forked processes (the
-    pose loop inside each then runs serially)."""
-    import multiprocessing
-
-    from scipy.optimize import differential_evolution
-
-    global _DE_STATE
-    ps = problem.parameters
-    geometry_free = any(p.group in GEOMETRY_GROUPS for p in ps.parameters)
-    branches: list[tuple[int, int, int] | None] = list(ELBOW_BRANCHES) if geometry_free else [None]
-    member_opts = dataclasses.replace(opts, workers=1)
-    objs = [_Objective(problem if b is None else _with_branch(problem, b), member_opts) for b in branches]
-    z_fixed = obj.z(ps.x0)
-    free = np.array(obj.man_idx, dtype=int)
-    if obj.sub_idx:
-        sub = np.array(obj.sub_idx, dtype=int)
-        n_obs = len(obj.obs)
-
-        def rig_residuals(zs: np.ndarray) -> np.ndarray:
-            z = z_fixed.copy()
-            z[sub] = zs
-            # the pose block is cached: only the rigs are re-solved (the workspace block does not see them)
-            return obj.residuals(z)[n_obs : n_obs + len(problem.subsystem_tests)]
-
-        z_fixed[sub] = _least_squares_z(rig_residuals, z_fixed[sub], max_nfev=40).x
-    d = len(free)
-    bounds = [(0.0, 1.0)] * d + ([(0.0, len(branches) - 1.0)] if geometry_free else [])
-    init = _de_initial_population(obj, opts, free, branches, progress=progress)
-    t0, generation = time.time(), [0]
-
-    def report(intermediate_result: Any) -> None:
-        generation[0] += 1
-        if progress and (generation[0] % 10 == 0 or generation[0] == opts.generations):
+    def log(self, stage: str, cost: float, note: str = "") -> None:
+        elapsed = time.time() - self.t_start
+        self.steps.append(SearchStep(stage, self.obj.nfev, cost, elapsed, note))
+        if self.progress:
             print(
-                f"[identify] differential evolution: generation {generation[0]}/{opts.generations}, best cost "
-                f"{intermediate_result.fun:.4g} ({time.time() - t0:.0f} s)",
+                f"[identify] {stage}: cost {cost:.4g} ({self.obj.nfev} evaluations, {elapsed:.0f} s) {note}",
                 flush=True,
             )
 
-    integrality = [False] * d + ([True] if geometry_free else [])
-    _DE_STATE = (objs, z_fixed, free, geometry_free)
-    pool = multiprocessing.get_context("fork").Pool(opts.workers) if opts.workers > 1 else None
-    try:
-        sol = differential_evolution(
-            _de_member_cost,
-            bounds,
-            integrality=integrality,
-            seed=opts.seed,
-            maxiter=opts.generations,
-            popsize=opts.popsize,
-            strategy=opts.de_strategy,
-            tol=1e-8,
-            polish=False,
-            init=init,
-            updating="deferred",
-            callback=report,
-            workers=pool.map if pool is not None else 1,
-        )
-    finally:
-        _DE_STATE = None
-        if pool is not None:
-            pool.terminate()
-    obj.nfev += int(sol.nfev)
-    pop = np.atleast_2d(getattr(sol, "population", sol.x[None, :]))
-    energies = np.atleast_1d(getattr(sol, "population_energies", [sol.fun]))
-    out: dict[int, list[tuple[float, np.ndarray, str, tuple[int, int, int] | None]]] = {}
-    note = f"differential evolution ({sol.nit} generations, {sol.nfev} evaluations)"
-    for v, e in sorted(zip(pop, energies), key=lambda t: t[1]):
-        z, k = _de_decode(v, z_fixed, free, geometry_free)
-        members = out.setdefault(k, [])
-        if len(members) < max(1, opts.refine_per_class):
-            rank = "best" if not members else f"no. {len(members) + 1}"
-            where = f" with elbow branches {branches[k]}" if branches[k] is not None else ""
-            members.append((float(e), z, f"{note}, {rank} of its final population{where}", branches[k]))
-    # class leaders first (every class's best, best first), then every class's second best, ...
-    return [
-        c
-        for rank in range(max(1, opts.refine_per_class))
-        for c in sorted((m[rank] for m in out.values() if len(m) > rank), key=lambda t: t[0])
-    ]
 
-
-def _de_initial_population(
-    obj: _Objective,
-    opts: IdentifyOptions,
-    free: np.ndarray,
-    branches: Sequence[tuple[int, int, int] | None],
-    *,
-    progress: bool = False,
-) -> np.ndarray:
-    """The evolution's first population: a scrambled Sobol sequence (scipy's size for ``init="sobol"``: the
-    power of two at or above ``popsize`` x dimensions), its first ``opts.surrogate_seeds`` members per
-    elbow-branch combination given that branch's in-plane surrogate optimum as geometry."""
-    geometry_free = branches != [None]
-    d = len(free) + (1 if geometry_free else 0)
-    n = int(2 ** math.ceil(math.log2(max(5, opts.popsize * d))))
-    pop = qmc.Sobol(d=d, scramble=True, seed=opts.seed).random(n)
-    if geometry_free:
-        pop[:, -1] *= len(branches) - 1.0
-    if opts.surrogate_seeds <= 0 or not geometry_free:
-        return pop
-    t0 = time.time()
-    geo = [j for j, i in enumerate(free) if obj.ps.parameters[i].group in GEOMETRY_GROUPS]
-    row = 0
-    found = _surrogate_starts(obj, opts, [b for b in branches if b is not None])
-    for z, _, branch in found:
-        for _ in range(opts.surrogate_seeds):
-            if row >= n:
-                break
-            pop[row, geo] = z[free[geo]]
-            pop[row, -1] = float(branches.index(branch))
-            row += 1
-    if progress:
-        print(
-            f"[identify] differential evolution: {row} of {n} first members seeded from the in-plane surrogate's "
-            f"optimum of each elbow-branch combination ({time.time() - t0:.0f} s)",
-            flush=True,
-        )
-    return pop
-
-
-def _with_branch(problem: Problem, branch: tuple[int, int, int]) -> Problem:
-    ps = problem.parameters
-    start = ps.start.replace(geometry=dataclasses.replace(ps.start.geometry, elbow_branch=branch))
-    return dataclasses.replace(problem, parameters=ParameterSet(start, ps.parameters))
-
-
-_REFINE_STATE: tuple[Problem, IdentifyOptions] | None = None
-"""The problem of the running local refinements: module state so that forked worker processes inherit it."""
-
-_Refined = tuple[np.ndarray, np.ndarray, np.ndarray, bool, int]
-"""A local refinement's end: normalised parameters, residuals, Jacobian, success, evaluations spent."""
-
-
-def _refine(job: tuple[np.ndarray, tuple[int, int, int] | None]) -> _Refined:
-    """Bounded least squares from ``job = (z, branch)`` on the problem in :data:`_REFINE_STATE` (on the
-    elbow-branch combination ``branch`` when given)."""
-    assert _REFINE_STATE is not None
-    problem, opts = _REFINE_STATE
-    z, branch = job
-    ob = _Objective(problem if branch is None else _with_branch(problem, branch), opts)
-    sol = _least_squares_z(ob.residuals, z, max_nfev=opts.max_nfev)
-    return sol.x, sol.fun, sol.jac, bool(sol.success), ob.nfev
-
-
-def _refine_all(
-    problem: Problem, opts: IdentifyOptions, starts: Sequence[tuple[np.ndarray, str, Any]]
-) -> Iterator[_Refined]:
-    """Every start refined (:func:`_refine`). With ``opts.workers > 1`` and several starts, the starts are
-    refined in that many forked processes, one pose loop each (fewer, longer jobs than splitting each
-    evaluation's pose loop); otherwise one after the other, each pose loop in ``opts.workers`` processes.
-    Yields the ends in the starts' order as they come."""
-    import multiprocessing
-
-    global _REFINE_STATE
-    jobs = [(z, branch) for z, _, branch in starts]
-    parallel = opts.workers > 1 and len(jobs) > 1
-    _REFINE_STATE = (problem, dataclasses.replace(opts, workers=1) if parallel else opts)
-    try:
-        if not parallel:
-            for job in jobs:
-                yield _refine(job)
-            return
-        with multiprocessing.get_context("fork").Pool(min(opts.workers, len(jobs))) as pool:
-            yield from pool.imap(_refine, jobs, chunksize=1)
-    finally:
-        _REFINE_STATE = None
-
-
-def identify(problem: Problem, *, options: IdentifyOptions | None = None, progress: bool = False) -> Identification:
-    """Fit ``problem`` (see module docstring). Returns the optimum with its uncertainty and history."""
-
-    opts = options or IdentifyOptions()
+def _check_request(problem: Problem, opts: IdentifyOptions) -> None:
+    """Refuse an unknown global method, a problem without data or one that cannot be fitted."""
     if opts.global_method not in GLOBAL_METHODS:
         raise IdentificationError(
             "unknown global method",
@@ -740,99 +223,104 @@ def identify(problem: Problem, *, options: IdentifyOptions | None = None, progre
     if not problem.observations and not problem.subsystem_tests:
         raise IdentificationError("no data", parameter="measured", hint="give measured and/or subsystems data")
     check_problem(problem)
-    t_start = time.time()
-    history: list[SearchStep] = []
-    ps = problem.parameters
-    obj = _Objective(problem, opts)
 
-    def log(stage: str, cost: float, note: str = "") -> None:
-        history.append(SearchStep(stage, obj.nfev, cost, time.time() - t_start, note))
-        if progress:
-            print(
-                f"[identify] {stage}: cost {cost:.4g} ({obj.nfev} evaluations, {time.time() - t_start:.0f} s) {note}",
-                flush=True,
-            )
 
-    z_start = obj.z(ps.x0)
-    c0 = obj.cost(z_start)
-    log("start", c0)
-    starts: list[tuple[np.ndarray, str, Any]] = []
-    scored: list[tuple[float, np.ndarray, str, Any]] = [(c0, z_start, "start description", None)]
-    if opts.global_method in ("multistart", "hybrid"):
-        pts = _lhs(opts.n_starts, len(ps.parameters), opts.seed)
-        for k, z in enumerate(pts):
-            scored.append((obj.cost(z), z, f"latin-hypercube point {k}", None))
-        log("global latin hypercube", min(t[0] for t in scored), f"{len(pts)} points scored with the full model")
-    geometry_free = any(p.group in GEOMETRY_GROUPS for p in ps.parameters)
-    if opts.global_method == "surrogate-de" or (opts.global_method == "hybrid" and geometry_free):
-        for z, note, branch in _surrogate_starts(obj, opts):
-            ob = _Objective(_with_branch(problem, branch), opts)
-            scored.append((ob.cost(z), z, note, branch))
-            obj.nfev += ob.nfev
-        log(
+def _global_candidates(
+    obj: Objective, opts: IdentifyOptions, start: Candidate, history: _History, *, progress: bool
+) -> list[Candidate]:
+    """The starts of the local refinement (module docstring, step 1): the global method's candidates, best
+    first (``"de"``: in the evolution's order, then the start description), ``n_refine`` of them."""
+    method = opts.global_method
+    if method == "none":
+        return [start]
+    scored = [start]
+    if method in ("multistart", "hybrid"):
+        lhs: Strategy = LatinHypercube(opts.n_starts)
+        points = lhs.search(obj, seed=opts.seed, workers=1, progress=progress)
+        scored += points
+        history.log(
+            "global latin hypercube", min(c.cost for c in scored), f"{len(points)} points scored with the full model"
+        )
+    if method == "surrogate-de" or (method == "hybrid" and obj.problem.geometry_free):
+        surrogate: Strategy = SurrogateDE(SURROGATE_BRANCHES)
+        scored += surrogate.search(obj, seed=opts.seed, workers=1, progress=progress)
+        history.log(
             "global surrogate-de",
-            min(t[0] for t in scored),
+            min(c.cost for c in scored),
             "best geometry of each elbow-branch class, scored with the full model",
         )
-    if opts.global_method == "de":
-        found = _full_model_de(problem, obj, opts, progress=progress)
-        log(
+    if method == "de":
+        de: Strategy = DifferentialEvolution()
+        found = de.search(obj, seed=opts.seed, workers=opts.workers, progress=progress)
+        history.log(
             "global differential evolution",
-            min(t[0] for t in found),
-            f"full model; {len({t[3] for t in found})} elbow-branch classes in the final population",
+            min(c.cost for c in found),
+            f"full model; {len({c.branch for c in found})} elbow-branch classes in the final population",
         )
-        # the evolution's candidates in their order (class leaders first), then the start description
-        scored = found + scored[:1]
+        scored = [*found, start]  # the evolution's candidates in their order (class leaders first), then the start
     else:
-        scored.sort(key=lambda t: t[0])
-    starts = [(z, note, branch) for _, z, note, branch in scored[: max(1, opts.n_refine)]]
-    if opts.global_method == "none":
-        starts = [(z_start, "start description", None)]
+        scored.sort(key=lambda c: c.cost)
+    return scored[: max(1, opts.n_refine)]
 
-    best = None
-    candidates = []
-    for (_, note, branch), (zs, fun, jac, success, nfev) in zip(starts, _refine_all(problem, opts, starts)):
-        problem_b = problem if branch is None else _with_branch(problem, branch)
-        obj.nfev += nfev
-        c = float(np.sum(fun**2))
-        candidates.append({"from": note, "cost": c, "values": obj.x(zs).tolist(), "success": success})
-        log("local least squares", c, f"from {note}")
-        if best is None or c < best[0]:
-            best = (c, (zs, fun, jac), problem_b)
-    assert best is not None
-    cost, (z_opt, fun, jz), problem_b = best
-    ob = obj if problem_b is problem else _Objective(problem_b, opts)
-    x = ob.x(z_opt)
-    jx = jz / ob.width[None, :]
-    n, k = len(fun) - len(problem.workspace), len(x)  # the workspace residuals are a prior, not data
+
+def _uncertainty(
+    best: Candidate, obj: Objective, n_workspace: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, int]:
+    """At the optimum (module docstring, step 3): the Jacobian in the parameters' units, the standard
+    deviations, the correlation matrix, chi^2 per degree of freedom and the degrees of freedom."""
+    assert best.residuals is not None
+    assert best.jacobian is not None
+    fun = best.residuals
+    jx = best.jacobian / obj.width[None, :]
+    n, k = len(fun) - n_workspace, len(obj.width)  # the workspace residuals are a prior, not data
     dof = max(n - k, 0)
     chi2 = float(np.sum(fun**2))
     chi2_dof = chi2 / dof if dof > 0 else math.nan
-    s2 = variance_scale(chi2_dof)
-    cov = s2 * np.linalg.pinv(jx.T @ jx)
+    cov = variance_scale(chi2_dof) * np.linalg.pinv(jx.T @ jx)
     std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(std, std)
+    return jx, std, corr, chi2_dof, dof
+
+
+def identify(problem: Problem, *, options: IdentifyOptions | None = None, progress: bool = False) -> Identification:
+    """Fit ``problem`` (see module docstring). Returns the optimum with its uncertainty and history."""
+    opts = options or IdentifyOptions()
+    _check_request(problem, opts)
+    obj = Objective(problem, opts)
+    history = _History(obj, progress=progress)
+    ps = problem.parameters
+    z_start = obj.z(ps.x0)
+    start = Candidate(z_start, obj.cost(z_start), "start description")
+    history.log("start", start.cost)
+    starts = _global_candidates(obj, opts, start, history, progress=progress)
+    ends: list[Candidate] = []
+    for end in LeastSquares(tuple(starts)).ends(obj, workers=opts.workers):
+        obj.nfev += end.nfev
+        ends.append(end)
+        history.log("local least squares", end.cost, f"from {end.origin}")
+    best = min(ends, key=lambda c: c.cost)  # the first of equal costs
+    problem_b = problem if best.branch is None else with_branch(problem, best.branch)
+    ob = obj if problem_b is problem else Objective(problem_b, opts)
+    x = ob.x(best.z)
+    jx, std, corr, chi2_dof, dof = _uncertainty(best, ob, len(problem.workspace))
     eps = 1e-6
-    at_bound = [p.name for p, zi in zip(ps.parameters, z_opt) if zi < eps or zi > 1 - eps]
-    cfg = problem_b.parameters.apply(x)
-    predicted = ob.predictions(x)
     return Identification(
         problem=problem_b,
         values=x,
         std=std,
         correlation=corr,
-        predicted=predicted,
-        cost=cost,
+        predicted=ob.predictions(x),
+        cost=best.cost,
         chi2_per_dof=chi2_dof,
         dof=dof,
-        at_bound=at_bound,
-        history=history,
+        at_bound=[p.name for p, zi in zip(ps.parameters, best.z) if zi < eps or zi > 1 - eps],
+        history=history.steps,
         options=opts,
-        seconds=time.time() - t_start,
-        config=cfg,
+        seconds=time.time() - history.t_start,
+        config=problem_b.parameters.apply(x),
         jacobian=jx,
-        candidates=candidates,
+        candidates=ends,
         start_elbow_branch=ps.start.geometry.elbow_branch,
     )
 
@@ -940,16 +428,16 @@ def cross_validate(
     t0 = time.time()
     problem = result.problem
     obs = problem.observations
-    poses, index = _unique_poses(obs)
+    poses, index = unique_poses(obs)
     fold = fold_assignment(len(poses), folds, result.options.seed)
     pred = np.full(len(obs), np.nan)
     opts = result.options
     z_best = None
     for k in range(folds):
         train = np.array([fold[i] != k for i in index])
-        ob = _Objective(problem, opts, obs_mask=train)
+        ob = Objective(problem, opts, obs_mask=train)
         z_best = ob.z(result.values)
-        sol = _least_squares_z(ob.residuals, z_best, max_nfev=max_nfev)
+        sol = least_squares_z(ob.residuals, z_best, max_nfev=max_nfev)
         cfg = problem.parameters.apply(ob.x(sol.x))
         test = [o for o, t in zip(obs, train) if not t]
         f = predict_observations(cfg, test, options=opts.model_options(), workers=opts.workers)

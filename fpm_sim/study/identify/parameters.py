@@ -1,7 +1,14 @@
 """Named parameter groups that ``fpm-sim identify --free`` can free, and how each sets a description.
 
 Every parameter is a scalar in SI units (angles in degrees, stiffnesses as ``log10`` of N m/rad) with
-bounds; :meth:`ParameterSet.apply` turns a vector into a validated :class:`Manipulator`.
+bounds. The mapping is data: a :class:`ParameterSpec` names the description field it edits by a dotted path
+(``"geometry.base_radius_m"``, ``"rig.section.height_m"``) and how the scalar becomes that field's value
+(its ``kind``); :func:`apply_parameters` is the one function that edits a description with them, and
+:meth:`ParameterSet.apply` turns a vector into a validated :class:`Manipulator`. Specs and sets are plain
+frozen data, so they pickle (a ``spawn`` worker receives them whole).
+
+This module imports neither MuJoCo, SciPy, JAX nor (until a set is used) NumPy: the command line reads
+:data:`GROUPS` from it while building its parser.
 
 Groups (:data:`GROUPS`):
 
@@ -41,15 +48,25 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Literal
 
-import numpy as np
-
-from fpm_sim.config import ConfigError, LumpedMass, Manipulator, RigConfig
+from fpm_sim.config import ConfigError, LumpedMass, Manipulator
 from fpm_sim.errors import FpmSimError
 
-__all__ = ["GEOMETRY_GROUPS", "GROUPS", "FreeParameter", "ParameterError", "ParameterSet", "parameter_set"]
+if TYPE_CHECKING:
+    import numpy as np
+
+__all__ = [
+    "GEOMETRY_GROUPS",
+    "GROUPS",
+    "KINDS",
+    "ParameterError",
+    "ParameterSet",
+    "ParameterSpec",
+    "apply_parameters",
+    "parameter_set",
+]
 
 GROUPS = (
     "geometry",
@@ -71,23 +88,69 @@ LOG_STIFF_BOUNDS = (2.0, 7.0)
 OFFSET_BOUNDS_M = (0.0, 0.06)
 """Bounds of the ``offsets`` group's layer heights (m)."""
 
+Kind = Literal["value", "log10", "chain_mean", "chain_item", "angle_deg", "lump_mass"]
+KINDS: tuple[Kind, ...] = ("value", "log10", "chain_mean", "chain_item", "angle_deg", "lump_mass")
+"""How a :class:`ParameterSpec` turns its scalar ``v`` into the value of the field at its ``path``:
+
+``value``
+    ``v`` itself.
+``log10``
+    ``10 ** v``.
+``chain_mean``
+    A per-chain length whose mean is ``v``: ``v`` where the start's chains (``reference``) agree, else each
+    chain's start value shifted by ``v - mean(reference)``.
+``chain_item``
+    Chain ``index`` of a per-chain length set to ``v`` (the other chains as the description has them).
+``angle_deg``
+    A per-chain angle (rad): chains ``chains`` set to ``reference[i] + radians(v)``, the others kept.
+``lump_mass``
+    A :class:`LumpedMass` of mass ``v``, its inertia scaled with the mass (a 15 mm radius of gyration where
+    the description's mass is 0).
+"""
+
 
 class ParameterError(FpmSimError):
     """An unknown or unusable parameter group (``--free``)."""
 
 
 @dataclass(frozen=True)
-class FreeParameter:
-    """One free scalar: dotted name (unit in the name), start value and bounds, and its setter."""
+class ParameterSpec:
+    """One free scalar, as data: its dotted name (unit in the name), the description field it edits, how,
+    its start value and bounds.
+
+    Attributes
+    ----------
+    name
+        The parameter's name in results and priors, e.g. ``geometry.base_rotation_deg``.
+    path
+        Dotted path of the edited field of the :class:`Manipulator`, e.g. ``geometry.base_angles_rad``.
+    kind
+        How the scalar becomes the field's value (:data:`KINDS`).
+    start, lower, upper
+        Start value and bounds, in the parameter's unit.
+    group
+        The ``--free`` group it belongs to.
+    subsystem
+        True for parameters of the test pieces (they change only the rig frequencies).
+    index
+        ``chain_item``: the chain edited.
+    chains
+        ``angle_deg``: the chains turned.
+    reference
+        ``chain_mean``: the start's per-chain values; ``angle_deg``: the start's per-chain angles (rad).
+    """
 
     name: str
+    path: str
+    kind: Kind
     start: float
     lower: float
     upper: float
-    setter: Callable[[Manipulator, float], Manipulator]
     group: str
     subsystem: bool = False
-    """True for parameters of the test pieces (they change only the rig frequencies)."""
+    index: int | None = None
+    chains: tuple[int, ...] = ()
+    reference: tuple[float, ...] = ()
 
 
 def _scaled_lump(lump: LumpedMass, mass: float) -> LumpedMass:
@@ -99,232 +162,222 @@ def _scaled_lump(lump: LumpedMass, mass: float) -> LumpedMass:
     return LumpedMass(mass, (mass * r2, mass * r2, mass * r2))
 
 
-def _set_geometry(cfg: Manipulator, **changes: Any) -> Manipulator:
-    # Any: the field names are chosen at run time; dataclasses.replace checks them.
-    return dataclasses.replace(cfg, geometry=dataclasses.replace(cfg.geometry, **changes))
-
-
-def _chain_mean(per_chain: tuple[float, float, float]) -> float:
+def _chain_mean(per_chain: tuple[float, ...]) -> float:
     """The chains' common value, or their mean where they differ."""
+    import numpy as np
+
     return per_chain[0] if len(set(per_chain)) == 1 else float(np.mean(per_chain))
 
 
-def _mean_setter(field_name: str, per_chain: tuple[float, float, float]) -> Callable[[Manipulator, float], Manipulator]:
-    sym = len(set(per_chain)) == 1
-    mean0 = _chain_mean(per_chain)
-
-    def set_(cfg: Manipulator, v: float) -> Manipulator:
-        value: float | tuple = v if sym else tuple(x + (v - mean0) for x in per_chain)
-        return _set_geometry(cfg, **{field_name: value})
-
-    return set_
-
-
-def _chain_setter(field_name: str, i: int) -> Callable[[Manipulator, float], Manipulator]:
-    def set_(cfg: Manipulator, v: float) -> Manipulator:
-        vals = list(getattr(cfg.geometry, f"{field_name[:-2]}_per_chain"))
-        vals[i] = v
-        return _set_geometry(cfg, **{field_name: tuple(vals)})
-
-    return set_
-
-
-def _angle_setter(
-    field_name: str, start: tuple[float, ...], chains: Sequence[int]
-) -> Callable[[Manipulator, float], Manipulator]:
-    def set_(cfg: Manipulator, v_deg: float) -> Manipulator:
-        cur = list(getattr(cfg.geometry, field_name))
-        for i in chains:
-            cur[i] = start[i] + math.radians(v_deg)
-        return _set_geometry(cfg, **{field_name: tuple(cur)})
-
-    return set_
+def _field_value(spec: ParameterSpec, current: Any, owner: Any, leaf: str, v: float) -> Any:
+    """The new value of field ``leaf`` of ``owner`` (now ``current``) for the scalar ``v`` (:data:`KINDS`).
+    Any: the field's type depends on the path."""
+    if spec.kind == "value":
+        return v
+    if spec.kind == "log10":
+        return 10.0**v
+    if spec.kind == "chain_mean":
+        ref = spec.reference
+        return v if len(set(ref)) == 1 else tuple(x + (v - _chain_mean(ref)) for x in ref)
+    if spec.kind == "chain_item":
+        assert spec.index is not None
+        vals = list(getattr(owner, f"{leaf[:-2]}_per_chain"))
+        vals[spec.index] = v
+        return tuple(vals)
+    if spec.kind == "angle_deg":
+        cur = list(current)
+        for i in spec.chains:
+            cur[i] = spec.reference[i] + math.radians(v)
+        return tuple(cur)
+    if spec.kind == "lump_mass":
+        return _scaled_lump(current, v)
+    raise ValueError(f"unknown parameter kind {spec.kind!r}")
 
 
-def _geometry(cfg: Manipulator) -> list[FreeParameter]:
+def _set_path(obj: Any, path: Sequence[str], spec: ParameterSpec, v: float) -> Any:
+    """``obj`` with the field at ``path`` (relative to it) set from ``v``: ``dataclasses.replace`` at every level
+    (Any: the description's nested dataclasses)."""
+    head, rest = path[0], path[1:]
+    if obj is None:
+        raise ConfigError(f"{spec.name}: the description has no {head!r} to set", parameter=spec.path)
+    current = getattr(obj, head)
+    new = _set_path(current, rest, spec, v) if rest else _field_value(spec, current, obj, head, v)
+    return dataclasses.replace(obj, **{head: new})
+
+
+def apply_parameters(
+    config: Manipulator, specs: Sequence[ParameterSpec], x: Sequence[float] | np.ndarray
+) -> Manipulator:
+    """``config`` with each spec's field set from the matching value of ``x``, in order (not validated: see
+    :meth:`ParameterSet.apply`).
+
+    Parameters
+    ----------
+    config
+        The description edited.
+    specs
+        The free parameters (:class:`ParameterSpec`), each editing the field at its dotted ``path``.
+    x
+        One value per spec, in its unit.
+
+    Returns
+    -------
+    Manipulator
+        The edited description.
+    """
+    for spec, v in zip(specs, x):
+        config = _set_path(config, spec.path.split("."), spec, float(v))
+    return config
+
+
+def _geometry(cfg: Manipulator) -> list[ParameterSpec]:
     g = cfg.geometry
     out = []
     for f in ("base_radius_m", "platform_radius_m", "proximal_length_m", "distal_length_m"):
-        per = getattr(g, f"{f[:-2]}_per_chain")
+        per = tuple(getattr(g, f"{f[:-2]}_per_chain"))
         m = _chain_mean(per)
-        out.append(FreeParameter(f"geometry.{f}", m, 0.6 * m, 1.6 * m, _mean_setter(f, per), "geometry"))
-    out.append(
-        FreeParameter(
-            "geometry.base_rotation_deg",
-            0.0,
-            -60.0,
-            60.0,
-            _angle_setter("base_angles_rad", g.base_angles_rad, range(3)),
-            "geometry",
+        out.append(
+            ParameterSpec(
+                f"geometry.{f}", f"geometry.{f}", "chain_mean", m, 0.6 * m, 1.6 * m, "geometry", reference=per
+            )
         )
-    )
-    out.append(
-        FreeParameter(
-            "geometry.platform_rotation_deg",
-            0.0,
-            -60.0,
-            60.0,
-            _angle_setter("platform_angles_rad", g.platform_angles_rad, range(3)),
-            "geometry",
+    for name, angles in (("base", g.base_angles_rad), ("platform", g.platform_angles_rad)):
+        out.append(
+            ParameterSpec(
+                f"geometry.{name}_rotation_deg",
+                f"geometry.{name}_angles_rad",
+                "angle_deg",
+                0.0,
+                -60.0,
+                60.0,
+                "geometry",
+                chains=(0, 1, 2),
+                reference=tuple(angles),
+            )
         )
-    )
     return out
 
 
-def _geometry_per_chain(cfg: Manipulator) -> list[FreeParameter]:
+def _geometry_per_chain(cfg: Manipulator) -> list[ParameterSpec]:
     g = cfg.geometry
     out = []
+    group = "geometry-per-chain"
     for i in range(3):
         for f in ("base_radius_m", "proximal_length_m", "distal_length_m", "platform_radius_m"):
             v = getattr(g, f"{f[:-2]}_per_chain")[i]
             out.append(
-                FreeParameter(f"geometry.{f}[{i}]", v, 0.8 * v, 1.25 * v, _chain_setter(f, i), "geometry-per-chain")
+                ParameterSpec(f"geometry.{f}[{i}]", f"geometry.{f}", "chain_item", v, 0.8 * v, 1.25 * v, group, index=i)
             )
-        out.append(
-            FreeParameter(
-                f"geometry.base_angle_deg[{i}]",
-                0.0,
-                -15.0,
-                15.0,
-                _angle_setter("base_angles_rad", g.base_angles_rad, [i]),
-                "geometry-per-chain",
+        for name, angles in (("base", g.base_angles_rad), ("platform", g.platform_angles_rad)):
+            out.append(
+                ParameterSpec(
+                    f"geometry.{name}_angle_deg[{i}]",
+                    f"geometry.{name}_angles_rad",
+                    "angle_deg",
+                    0.0,
+                    -15.0,
+                    15.0,
+                    group,
+                    chains=(i,),
+                    reference=tuple(angles),
+                )
             )
-        )
-        out.append(
-            FreeParameter(
-                f"geometry.platform_angle_deg[{i}]",
-                0.0,
-                -15.0,
-                15.0,
-                _angle_setter("platform_angles_rad", g.platform_angles_rad, [i]),
-                "geometry-per-chain",
-            )
-        )
     return out
 
 
-def _hubs(cfg: Manipulator) -> list[FreeParameter]:
+def _hubs(cfg: Manipulator) -> list[ParameterSpec]:
     g = cfg.geometry
     hi = 0.3 * min(g.proximal_length_per_chain + g.distal_length_per_chain)
-
-    def set_(c: Manipulator, v: float) -> Manipulator:
-        return _set_geometry(c, hub_length_m=v)
-
-    return [FreeParameter("geometry.hub_length_m", g.hub_length_m, 0.0, hi, set_, "hubs")]
+    return [ParameterSpec("geometry.hub_length_m", "geometry.hub_length_m", "value", g.hub_length_m, 0.0, hi, "hubs")]
 
 
-def _lump_setter(name: str) -> Callable[[Manipulator, float], Manipulator]:
-    def set_(cfg: Manipulator, v: float) -> Manipulator:
-        hw = cfg.hardware
-        return dataclasses.replace(cfg, hardware=dataclasses.replace(hw, **{name: _scaled_lump(getattr(hw, name), v)}))
-
-    return set_
-
-
-def _hardware(cfg: Manipulator) -> list[FreeParameter]:
+def _hardware(cfg: Manipulator) -> list[ParameterSpec]:
     out = []
     for name in ("platform", "elbow_joint", "platform_joint"):
         m = getattr(cfg.hardware, name).mass_kg
         lo, hi = (0.05 * m, 4.0 * m) if m > 0 else (0.0, 10.0 if name == "platform" else 2.0)
         start = m if m > 0 else 0.5 * hi
-        out.append(FreeParameter(f"hardware.{name}.mass_kg", start, lo, hi, _lump_setter(name), "hardware"))
+        out.append(
+            ParameterSpec(f"hardware.{name}.mass_kg", f"hardware.{name}", "lump_mass", start, lo, hi, "hardware")
+        )
     return out
 
 
-def _section(cfg: Manipulator, fields: tuple[str, ...] = ("height_m", "thickness_m")) -> list[FreeParameter]:
+def _section(cfg: Manipulator, fields: tuple[str, ...] = ("height_m", "thickness_m")) -> list[ParameterSpec]:
     out = []
     for f in fields:
         v = getattr(cfg.section, f)
-
-        def set_(c: Manipulator, x: float, f: str = f) -> Manipulator:
-            return dataclasses.replace(c, section=dataclasses.replace(c.section, **{f: x}))
-
-        out.append(FreeParameter(f"section.{f}", v, 0.5 * v, 2.0 * v, set_, "section"))
+        out.append(ParameterSpec(f"section.{f}", f"section.{f}", "value", v, 0.5 * v, 2.0 * v, "section"))
     return out
 
 
-def _section_height(cfg: Manipulator) -> list[FreeParameter]:
+def _section_height(cfg: Manipulator) -> list[ParameterSpec]:
     return _section(cfg, ("height_m",))
 
 
-def _compliance(cfg: Manipulator) -> list[FreeParameter]:
+def _compliance(cfg: Manipulator) -> list[ParameterSpec]:
     out = []
     for f in ("passive_joint_tilt_nm_per_rad", "motor_clamp_nm_per_rad", "motor_mount_tilt_nm_per_rad"):
         v = getattr(cfg.compliance, f)
         start = min(math.log10(v), LOG_STIFF_BOUNDS[1]) if math.isfinite(v) else LOG_STIFF_BOUNDS[1]
-
-        def set_(c: Manipulator, x: float, f: str = f) -> Manipulator:
-            return dataclasses.replace(c, compliance=dataclasses.replace(c.compliance, **{f: 10.0**x}))
-
-        out.append(FreeParameter(f"compliance.log10_{f}", start, *LOG_STIFF_BOUNDS, set_, "compliance"))
+        out.append(
+            ParameterSpec(f"compliance.log10_{f}", f"compliance.{f}", "log10", start, *LOG_STIFF_BOUNDS, "compliance")
+        )
     return out
 
 
-def _offsets(cfg: Manipulator) -> list[FreeParameter]:
+def _offsets(cfg: Manipulator) -> list[ParameterSpec]:
     g = cfg.geometry
     out = []
     for f in ("distal_offset_m", "platform_offset_m"):
-        per = getattr(g, f"{f[:-2]}_per_chain")
+        per = tuple(getattr(g, f"{f[:-2]}_per_chain"))
         # coplanar (all 0) is a stationary point of every frequency (the mirror z -> -z maps +offsets to -offsets
         # and leaves the frequencies), where a local fit cannot move: start such a description mid-range
         start = _chain_mean(per) if any(per) else 0.5 * (OFFSET_BOUNDS_M[0] + OFFSET_BOUNDS_M[1])
-        out.append(FreeParameter(f"geometry.{f}", start, *OFFSET_BOUNDS_M, _mean_setter(f, per), "offsets"))
+        out.append(
+            ParameterSpec(
+                f"geometry.{f}", f"geometry.{f}", "chain_mean", start, *OFFSET_BOUNDS_M, "offsets", reference=per
+            )
+        )
     return out
 
 
-def _rig(cfg: Manipulator) -> list[FreeParameter]:
+def _rig(cfg: Manipulator) -> list[ParameterSpec]:
     rig = cfg.rig
     if rig is None:
         raise ParameterError(
             "the group 'rig' needs a [rig] table in the start description", parameter="free", hint="add one to config"
         )
-
-    # build(rig, value) -> the new value of the one RigConfig field named by the keyword (Any: its type
-    # depends on that field).
-    def setter(**kw_of_value: Callable[[RigConfig, float], Any]) -> Callable[[Manipulator, float], Manipulator]:
-        ((attr, build),) = kw_of_value.items()
-
-        def set_(c: Manipulator, v: float) -> Manipulator:
-            assert c.rig is not None
-            return dataclasses.replace(c, rig=dataclasses.replace(c.rig, **{attr: build(c.rig, v)}))
-
-        return set_
-
     L = rig.length_m
+    h = rig.section.height_m
     hinge_m = rig.chain_hinge.mass_kg
     return [
-        FreeParameter("rig.length_m", L, 0.5 * L, 2.0 * L, setter(length_m=lambda r, v: v), "rig", True),
-        FreeParameter(
+        ParameterSpec("rig.length_m", "rig.length_m", "value", L, 0.5 * L, 2.0 * L, "rig", True),
+        ParameterSpec(
             "rig.clamped_length_m",
+            "rig.clamped_length_m",
+            "value",
             max(rig.clamped_length_m, 0.05 * L),
             0.0,
             0.4 * L,
-            setter(clamped_length_m=lambda r, v: v),
             "rig",
             True,
         ),
-        FreeParameter(
-            "rig.section.height_m",
-            rig.section.height_m,
-            0.4 * rig.section.height_m,
-            2.5 * rig.section.height_m,
-            setter(section=lambda r, v: dataclasses.replace(r.section, height_m=v)),
-            "rig",
-            True,
-        ),
-        FreeParameter(
+        ParameterSpec("rig.section.height_m", "rig.section.height_m", "value", h, 0.4 * h, 2.5 * h, "rig", True),
+        ParameterSpec(
             "rig.chain_hinge.mass_kg",
+            "rig.chain_hinge",
+            "lump_mass",
             hinge_m if hinge_m > 0 else 0.2,
             0.0,
             2.0,
-            setter(chain_hinge=lambda r, v: _scaled_lump(r.chain_hinge, v)),
             "rig",
             True,
         ),
     ]
 
 
-_BUILDERS = {
+_BUILDERS: dict[str, Callable[[Manipulator], list[ParameterSpec]]] = {
     "geometry": _geometry,
     "geometry-per-chain": _geometry_per_chain,
     "hubs": _hubs,
@@ -339,10 +392,10 @@ _BUILDERS = {
 
 @dataclass
 class ParameterSet:
-    """The free parameters of one identification, over a start description."""
+    """The free parameters of one identification, over a start description (plain data: picklable)."""
 
     start: Manipulator
-    parameters: list[FreeParameter]
+    parameters: list[ParameterSpec] = field(default_factory=list)
 
     @property
     def names(self) -> list[str]:
@@ -350,21 +403,45 @@ class ParameterSet:
 
     @property
     def lower(self) -> np.ndarray:
+        import numpy as np
+
         return np.array([p.lower for p in self.parameters])
 
     @property
     def upper(self) -> np.ndarray:
+        import numpy as np
+
         return np.array([p.upper for p in self.parameters])
 
     @property
     def x0(self) -> np.ndarray:
+        import numpy as np
+
         return np.clip(np.array([p.start for p in self.parameters]), self.lower, self.upper)
+
+    @property
+    def width(self) -> np.ndarray:
+        """The bounds' widths (1 where a parameter's bounds coincide): the unit of the normalised ``z``."""
+        import numpy as np
+
+        lo, hi = self.lower, self.upper
+        return np.where(hi > lo, hi - lo, 1.0)
+
+    def from_unit(self, z: Sequence[float] | np.ndarray) -> np.ndarray:
+        """Parameters (their units) at normalised ``z`` (clipped to [0, 1]: 0 the lower bound, 1 the upper)."""
+        import numpy as np
+
+        return self.lower + np.clip(z, 0.0, 1.0) * self.width
+
+    def to_unit(self, x: Sequence[float] | np.ndarray) -> np.ndarray:
+        """Normalised parameters of ``x`` (not clipped)."""
+        import numpy as np
+
+        return (np.asarray(x, float) - self.lower) / self.width
 
     def apply(self, x: Sequence[float] | np.ndarray, *, base: Manipulator | None = None) -> Manipulator:
         """The description with ``x`` set (validated). Raises :class:`ConfigError` for impossible values."""
-        cfg = base or self.start
-        for p, v in zip(self.parameters, x):
-            cfg = p.setter(cfg, float(v))
+        cfg = apply_parameters(base or self.start, self.parameters, x)
         cfg.replace()  # validate
         return cfg
 
@@ -374,7 +451,7 @@ class ParameterSet:
 
 def parameter_set(start: Manipulator, groups: Sequence[str]) -> ParameterSet:
     """The free parameters of ``groups`` (see module docstring) over ``start``."""
-    params: list[FreeParameter] = []
+    params: list[ParameterSpec] = []
     for g in groups:
         if g not in _BUILDERS:
             raise ParameterError(

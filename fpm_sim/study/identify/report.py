@@ -18,7 +18,8 @@ from scipy.stats import spearmanr
 from fpm_sim.config import Manipulator, config_to_toml
 from fpm_sim.outputs import atomic_dir
 from fpm_sim.results import to_jsonable
-from fpm_sim.study.identify.engine import CrossValidation, Identification, variance_scale, workspace_measures
+from fpm_sim.study.identify.engine import CrossValidation, Identification, variance_scale
+from fpm_sim.study.identify.problem import workspace_measures
 
 __all__ = ["identified_config", "provenance_key", "render_report", "write_identification"]
 
@@ -124,7 +125,19 @@ def render_report(
     extra: str = "",
 ) -> str:
     """The Markdown report."""
-    p = result.problem
+    lines = _header_lines(result, command=command, data_files=data_files)
+    lines += _statistics_lines(result, cv)
+    lines += _parameter_lines(result)
+    lines += _residual_lines(result, cv)
+    lines += competing_optima_lines(result)
+    if extra:
+        lines += ["", extra]
+    lines += ["", "Figures: `measured_vs_predicted.png`, `residuals_workspace.png`."]
+    return "\n".join(lines) + "\n"
+
+
+def _header_lines(result: Identification, *, command: str, data_files: Sequence[str]) -> list[str]:
+    """The command, the data, the search and the workspace prior."""
     lines = [
         "# fpm-sim identify",
         "",
@@ -148,7 +161,12 @@ def render_report(
             + (f"; below the threshold: {', '.join(ws['below_threshold'])}." if ws["below_threshold"] else "."),
             "",
         ]
-    lines += [
+    return lines
+
+
+def _statistics_lines(result: Identification, cv: CrossValidation | None) -> list[str]:
+    """In-sample and cross-validated errors per data file."""
+    lines = [
         "## Error statistics",
         "",
         "| data | n | in-sample mean abs % | in-sample max % | Spearman | CV mean abs % | CV max % | CV Spearman |",
@@ -168,7 +186,13 @@ def render_report(
             f"Cross-validation: {cv.folds}-fold over poses (every observation at a held-out pose, from every file, "
             f"left out together; each fold refitted from the full-data optimum); {cv.seconds:.0f} s.",
         ]
-    lines += ["", "## Parameters", "", "| parameter | start | value | std | bounds |", "|---|---|---|---|---|"]
+    return lines
+
+
+def _parameter_lines(result: Identification) -> list[str]:
+    """Each parameter's start, value, standard deviation and bounds; the correlations."""
+    p = result.problem
+    lines = ["", "## Parameters", "", "| parameter | start | value | std | bounds |", "|---|---|---|---|---|"]
     for fp, v, s in zip(p.parameters.parameters, result.values, result.std):
         flag = " (at bound)" if fp.name in result.at_bound else ""
         lines.append(f"| {fp.name} | {fp.start:.5g} | {v:.5g}{flag} | {s:.3g} | [{fp.lower:.4g}, {fp.upper:.4g}] |")
@@ -183,8 +207,14 @@ def render_report(
     ]
     for n, row in zip(result.names, result.correlation):
         lines.append(f"{n:<40}" + " ".join(f"{c:+.2f}" for c in row))
-    lines += [
-        "```",
+    lines.append("```")
+    return lines
+
+
+def _residual_lines(result: Identification, cv: CrossValidation | None) -> list[str]:
+    """Every datum's measured, model and cross-validated value; the search history."""
+    p = result.problem
+    lines = [
         "",
         "## Residuals",
         "",
@@ -198,11 +228,7 @@ def render_report(
     lines += ["", "## Search history", "", "| stage | evaluations | cost | seconds | note |", "|---|---|---|---|---|"]
     for h in result.history:
         lines.append(f"| {h.stage} | {h.evaluations} | {h.cost:.4g} | {h.seconds:.0f} | {h.note} |")
-    lines += competing_optima_lines(result)
-    if extra:
-        lines += ["", extra]
-    lines += ["", "Figures: `measured_vs_predicted.png`, `residuals_workspace.png`."]
-    return "\n".join(lines) + "\n"
+    return lines
 
 
 def competing_optima_lines(result: Identification) -> list[str]:
@@ -224,9 +250,10 @@ def competing_optima_lines(result: Identification) -> list[str]:
         "| cost | delta | from | " + " | ".join(names) + " |",
         "|---|---|---|" + "---|" * len(names),
     ]
-    for c in sorted(result.candidates, key=lambda c: c["cost"]):
-        vals = " | ".join(f"{v:.4g}" for v in c["values"])
-        lines.append(f"| {c['cost']:.4g} | {(c['cost'] - result.cost) / s2:.2f} | {c['from']} | {vals} |")
+    ps = result.problem.parameters
+    for c in sorted(result.candidates, key=lambda c: c.cost):
+        vals = " | ".join(f"{v:.4g}" for v in ps.from_unit(c.z))
+        lines.append(f"| {c.cost:.4g} | {(c.cost - result.cost) / s2:.2f} | {c.origin} | {vals} |")
     return lines
 
 
