@@ -257,7 +257,8 @@ class Posterior:
             missing, more than one chain, parameters unknown to the free groups, or an invalid draw.
         """
         p = Path(path)
-        post = _posterior_group(p)
+        idata = _inference_data(p)
+        post = idata.posterior
         base, groups, segments = _posterior_attributes(post, p)
 
         def flat(name: str) -> np.ndarray:
@@ -1007,9 +1008,9 @@ def study_bands(
     )
 
 
-def _posterior_group(p: Path) -> Any:
-    """The ``posterior`` group of the ArviZ file ``p`` (an xarray ``Dataset``; Any: xarray is untyped here),
-    refused with :class:`PosteriorError` when missing, unreadable, without one or with more than one chain."""
+def _inference_data(p: Path) -> Any:
+    """The ArviZ file ``p`` (an ``InferenceData``; Any: ArviZ is untyped here), refused with
+    :class:`PosteriorError` when missing, unreadable, without a ``posterior`` group or with more than one chain."""
     if p.is_dir():
         raise PosteriorError("is a folder", parameter="posterior", value=str(p), hint=WRITTEN_BY)
     if not p.is_file():
@@ -1040,7 +1041,7 @@ def _posterior_group(p: Path) -> Any:
             file=p,
             hint="the format holds one chain of equal-weight draws",
         )
-    return post
+    return idata
 
 
 def _posterior_attributes(post: Any, p: Path) -> tuple[Manipulator, tuple[str, ...], int]:

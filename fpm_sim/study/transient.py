@@ -34,7 +34,8 @@ import numpy as np
 from fpm_sim.config import Manipulator, default_config
 from fpm_sim.kinematics import Pose
 from fpm_sim.model.manipulator import build_manipulator
-from fpm_sim.model.options import DEFAULT_SEGMENTS, BuiltModel, ModelOptions
+from fpm_sim.model.options import DEFAULT_SEGMENTS, ModelOptions
+from fpm_sim.model.spec import BuiltModel
 from fpm_sim.results import to_jsonable
 from fpm_sim.rom.reduction import ReducedModel, reduce_model
 from fpm_sim.sim.rollout import RolloutError, aligned_options, constant, rollout
