@@ -253,6 +253,12 @@ def reproduce_pointer(posterior: Posterior, bands: Any, files: list[str]) -> str
     )
     source = posterior.source.name if posterior.source is not None else "a posterior in memory"
     loo = f"; {bands.loo.summary_line()}" if bands.loo is not None else ""
+    if bands.bands.read_quantiles_hz is not None:
+        loo += (
+            "; latent-mode model: the measured values are compared with what the test reads (the first clear peak "
+            "at the sensor, the bands), not with the table's f1 (the machine's lowest mode, which hides from the "
+            "sensor where the posterior says another mode was read)"
+        )
     return (
         f"{source}, {bands.bands.n_draws} of {posterior.n_draws} draws, free groups {','.join(posterior.groups)}; "
         f"the bands of f1 at the measured and withheld poses are in {', '.join(files)}{cover}{loo}"

@@ -30,7 +30,7 @@ import numpy as np
 from fpm_sim.errors import FpmSimError
 from fpm_sim.study.discrepancy import covariance, loo_conditionals
 
-__all__ = ["LOO_QUANTILES", "PARETO_K_LIMIT", "LeaveOneOut", "leave_one_out"]
+__all__ = ["LOO_QUANTILES", "PARETO_K_LIMIT", "LeaveOneOut", "leave_one_out", "loo_from_components"]
 
 LOO_QUANTILES = (0.05, 0.25, 0.5, 0.75, 0.95)
 PARETO_K_LIMIT = 0.7
@@ -218,8 +218,6 @@ def leave_one_out(
     labels
         The data's names.
     """
-    import arviz as az
-
     f = np.asarray(f_hz, float)
     y = np.asarray(measured_hz, float)
     sig = np.asarray(sigma_hz, float)
@@ -245,9 +243,37 @@ def leave_one_out(
         for s in range(n_draws):
             cov = covariance(f[s], sig, features, float(d[s]), float(ls[s]))
             mean[s], sd[s] = loo_conditionals(y - f[s], cov)
+    return loo_from_components((f + mean)[..., None], sd[..., None], np.ones((n_draws, n, 1)), y, labels=labels)
+
+
+def loo_from_components(
+    means_hz: np.ndarray,
+    sds_hz: np.ndarray,
+    weights: np.ndarray,
+    measured_hz: np.ndarray,
+    *,
+    labels: list[str] | None = None,
+) -> LeaveOneOut:
+    """PSIS leave-one-out from each draw's leave-one-out predictive of every datum given as a Gaussian mixture.
+
+    Parameters
+    ----------
+    means_hz, sds_hz, weights
+        ``(n_draws, n, n_components)``: for draw ``s`` and datum ``i``, ``p(y_i | y_-i, theta_s) = sum_c
+        w_sic N(y_i | mean_sic, sd_sic^2)`` (weights summing to 1 over ``c``).
+    measured_hz
+        ``(n,)`` the data.
+    labels
+        The data's names.
+    """
+    import arviz as az
     from scipy.stats import norm
 
-    loglik = norm.logpdf(y[None], f + mean, sd)  # (n_draws, n): log p(y_i | y_-i, theta_s)
+    y = np.asarray(measured_hz, float)
+    mu, sd, wc = (np.asarray(a, float) for a in (means_hz, sds_hz, weights))
+    n = y.size
+    with np.errstate(divide="ignore"):
+        loglik = np.log(np.sum(wc * norm.pdf(y[None, :, None], mu, sd), axis=-1))  # (n_draws, n)
     q = np.zeros((n, len(LOO_QUANTILES)))
     elpd = np.zeros(n)
     kk = np.zeros(n)
@@ -259,8 +285,10 @@ def leave_one_out(
         w = np.exp(lw - np.max(lw))
         w /= w.sum()
         kk[i] = float(k)
-        elpd[i] = float(np.log(np.sum(w * np.exp(loglik[:, i] - loglik[:, i].max()))) + loglik[:, i].max())
-        q[i] = _mixture_quantiles(w, f[:, i] + mean[:, i], sd[:, i], LOO_QUANTILES)
+        top = float(np.max(loglik[:, i]))
+        elpd[i] = float(np.log(np.sum(w * np.exp(loglik[:, i] - top))) + top)
+        ww = (w[:, None] * wc[:, i, :]).ravel()
+        q[i] = _mixture_quantiles(ww / ww.sum(), mu[:, i, :].ravel(), sd[:, i, :].ravel(), LOO_QUANTILES)
     return LeaveOneOut(
         labels=list(labels) if labels is not None else [f"datum {i}" for i in range(n)],
         measured_hz=y,

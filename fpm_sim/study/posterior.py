@@ -48,8 +48,17 @@ from fpm_sim.model.options import ModelOptions, resolution_summary
 from fpm_sim.results import frequencies_dataset
 from fpm_sim.study.discrepancy import LENGTH_SCALE_PARAMETER, conditional, pose_features
 from fpm_sim.study.identify.parameters import ParameterSet, parameter_set
-from fpm_sim.study.loo import LeaveOneOut, leave_one_out
+from fpm_sim.study.loo import LeaveOneOut, leave_one_out, loo_from_components
 from fpm_sim.study.poses import TableReading
+from fpm_sim.study.readout import (
+    MODE_READ_ATTR,
+    ModeRead,
+    components,
+    mode_read_from_text,
+    read_probabilities,
+    sensor_residues,
+    setup_weights,
+)
 from fpm_sim.study.tables import measured_table, withheld_cells
 
 __all__ = [
@@ -121,6 +130,10 @@ class CalibrationData:
     phi_rad: np.ndarray
     labels: list[str]
     f_hz: np.ndarray
+    f_modes_hz: np.ndarray | None = None
+    """``(n_draws, n, modes)`` the lowest modes at each datum (latent-mode model; else ``None``)."""
+    read_probability: np.ndarray | None = None
+    """``(n_draws, setups, n, modes)`` each setup's probability that a datum's first clear peak is each mode."""
 
     @property
     def features(self) -> np.ndarray:
@@ -140,6 +153,12 @@ class CalibrationData:
             return None
         x = np.asarray(obs["x_mm"].values, float)
         keep = np.isfinite(x)  # poses only (rig tests have no pose)
+        modes = probs = None
+        if "f_hz_modes" in ppc and "read_probability" in ppc:
+            fm = ppc["f_hz_modes"].transpose("chain", "draw", "obs", "mode").values
+            modes = np.asarray(fm, float).reshape(-1, *fm.shape[2:])[:, keep]
+            rp = ppc["read_probability"].transpose("chain", "draw", "setup", "obs", "mode").values
+            probs = np.asarray(rp, float).reshape(-1, *rp.shape[2:])[:, :, keep]
         return cls(
             measured_hz=np.asarray(obs["f_hz"].values, float)[keep],
             sigma_hz=np.asarray(obs["sigma_hz"].values, float)[keep],
@@ -148,6 +167,8 @@ class CalibrationData:
             phi_rad=np.asarray(obs["phi_rad"].values, float)[keep],
             labels=[str(v) for v in np.asarray(obs["label"].values)[keep]],
             f_hz=f[:, keep],
+            f_modes_hz=modes,
+            read_probability=probs,
         )
 
 
@@ -177,6 +198,9 @@ class Posterior:
         The file read (``None`` when built in memory).
     data
         The measured poses and every draw's frequency there (:class:`CalibrationData`), when the file has them.
+    mode_read
+        The latent-mode model of the likelihood (:mod:`fpm_sim.study.readout`), or ``None``: each measured value
+        was mode 1.
     """
 
     base: Manipulator
@@ -189,6 +213,7 @@ class Posterior:
     likelihood: dict[str, np.ndarray] = field(default_factory=dict)
     source: Path | None = None
     data: CalibrationData | None = None
+    mode_read: ModeRead | None = None
     _ps: ParameterSet = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -283,6 +308,7 @@ class Posterior:
             likelihood=likelihood,
             source=p,
             data=CalibrationData.from_idata(idata, values.shape[0]),
+            mode_read=_mode_read(post, p),
         )
 
     # ----------------------------------------------------------------------------------------- draws
@@ -364,11 +390,43 @@ class Posterior:
             )
         return shift, sd
 
+    def read_at(self, index: np.ndarray, poses: Sequence[Pose], options: ModelOptions) -> tuple[np.ndarray, np.ndarray]:
+        """What a hammer test like the data's would read at ``poses`` (latent-mode model): ``(freq_hz, weight)``,
+        each ``(len(index), len(poses), modes)``: the lowest modes of each draw and the probability that the
+        first clear peak is each one (the setups weighted by their posterior given the draw and the data)."""
+        read, dat = self.mode_read, self.data
+        if read is None or dat is None or dat.f_modes_hz is None or dat.read_probability is None:
+            raise self._error(
+                "no latent-mode model in this posterior", parameter=MODE_READ_ATTR, hint="calibrate with mode_read"
+            )
+        d = np.asarray(self.likelihood[DISCREPANCY], float)
+        freq = np.full((len(index), len(poses), read.modes), np.nan)
+        weight = np.full_like(freq, np.nan)
+        for row, i in enumerate(index):
+            f, res = sensor_residues(
+                self.config(int(i)), poses, n_modes=read.reference_modes, points=read.points, options=options
+            )
+            probs = read_probabilities(np.transpose(res, (1, 0, 2)), read)  # (setups, poses, modes)
+            w = setup_weights(dat.measured_hz, dat.sigma_hz, dat.f_modes_hz[i], dat.read_probability[i], float(d[i]))
+            freq[row] = f[:, : read.modes]
+            weight[row] = np.einsum("s,spk->pk", w, probs)
+        return freq, weight
+
     def leave_one_out(self) -> LeaveOneOut | None:
         """PSIS leave-one-out predictive of the measured poses (:mod:`fpm_sim.study.loo`); ``None`` when the file
         has no data groups or no discrepancy."""
         if self.data is None or DISCREPANCY not in self.likelihood or self.data.measured_hz.size < 2:
             return None
+        dat = self.data
+        if self.mode_read is not None and dat.f_modes_hz is not None and dat.read_probability is not None:
+            d = np.asarray(self.likelihood[DISCREPANCY], float)
+            parts = [
+                components(dat.measured_hz, dat.sigma_hz, dat.f_modes_hz[i], dat.read_probability[i], float(d[i]),
+                           leave_out=True)
+                for i in range(self.n_draws)
+            ]  # fmt: skip
+            mu, sd, w = (np.stack([c[j] for c in parts]) for j in range(3))
+            return loo_from_components(mu, sd, w, dat.measured_hz, labels=dat.labels)
         return leave_one_out(
             self.data.f_hz,
             self.data.measured_hz,
@@ -430,6 +488,33 @@ def _predictive_quantiles(
     return out
 
 
+def _mixture_quantiles(mu: np.ndarray, sd: np.ndarray, w: np.ndarray, levels: Sequence[float]) -> np.ndarray:
+    """``(len(levels), n_poses)`` quantiles, per pose, of the Gaussian mixture over the components ``(n_draws,
+    n_poses, n_components)`` (means, sds, weights; NaN components left out, weights renormalised per pose), by
+    bisection to round-off; NaN where a pose has no component."""
+    from scipy.special import ndtr
+
+    ok = np.isfinite(mu) & np.isfinite(sd) & np.isfinite(w) & (w > 0)
+    ww = np.where(ok, w, 0.0)
+    tot = ww.sum(axis=(0, 2))
+    ww = ww / np.where(tot > 0, tot, 1.0)[None, :, None]
+    m, s = np.where(ok, mu, 0.0), np.where(ok, sd, 1.0)
+    lo = np.where(ok, m - 12 * s, np.inf).min(axis=(0, 2))
+    hi = np.where(ok, m + 12 * s, -np.inf).max(axis=(0, 2))
+    out = np.full((len(levels), mu.shape[1]), np.nan)
+    has = tot > 0
+    for j, q in enumerate(levels):
+        a, b = np.where(has, lo, 0.0), np.where(has, hi, 0.0)  # poses without a component: left NaN below
+        for _ in range(80):
+            x = 0.5 * (a + b)
+            p = np.sum(ww * ndtr((x[None, :, None] - m) / s), axis=(0, 2))
+            below = p < q
+            a = np.where(below, x, a)
+            b = np.where(below, b, x)
+        out[j, has] = 0.5 * (a + b)[has]
+    return out
+
+
 def _quantiles(f: np.ndarray) -> np.ndarray:
     """:data:`QUANTILES` of ``f`` over its first axis, ignoring NaN (NaN where a column has no value)."""
     out = np.full((len(QUANTILES), *f.shape[1:]), np.nan)
@@ -483,6 +568,26 @@ class PredictiveBands:
     elapsed_s: float = 0.0
     discrepancy_rel: np.ndarray | None = None
     discrepancy_shift: np.ndarray | None = None
+    read_freq_hz: np.ndarray | None = None
+    """``(n_draws, n_poses, modes)`` under the latent-mode model: the modes a hammer test's first clear peak may
+    be (:meth:`Posterior.read_at`); ``None`` otherwise."""
+    read_weight: np.ndarray | None = None
+    """``(n_draws, n_poses, modes)`` the probability that the first clear peak is each of them."""
+    read_noise_rel: float = 0.0
+    """The measurement's relative sd added to a read value's predictive (the data's median)."""
+
+    @property
+    def read_quantiles_hz(self) -> np.ndarray | None:
+        """``(len(QUANTILES), n_poses)`` quantiles of what a hammer test like the data's would read as "the first
+        frequency" (latent-mode model; ``None`` otherwise): the mixture over draws and modes of ``f_k (1 + d z)``
+        plus the measurement noise, weighted by the read probabilities."""
+        if self.read_freq_hz is None or self.read_weight is None or self.discrepancy_rel is None:
+            return None
+        d = np.asarray(self.discrepancy_rel, float)
+        d = d[:, None, None] if d.ndim == 1 else d[:, :, None]
+        sd = self.read_freq_hz * np.sqrt(d**2 + self.read_noise_rel**2)
+        w = np.where(self.computed[:, :, None], self.read_weight, np.nan)
+        return _mixture_quantiles(self.read_freq_hz, sd, w, QUANTILES)
 
     @property
     def n_draws(self) -> int:
@@ -803,6 +908,7 @@ def predict_bands(
     options: ModelOptions | None = None,
     engine: EngineOptions | None = None,
     labels: Sequence[str] | None = None,
+    read: bool = False,
 ) -> PredictiveBands:
     """Lowest ``n_modes`` frequencies of ``n_draws`` posterior draws (:meth:`Posterior.draws`) at ``poses``,
     with their quantiles.
@@ -827,6 +933,9 @@ def predict_bands(
         Where the chunks run (:class:`fpm_sim.batch.engine.EngineOptions`).
     labels
         Optional names of the poses (tables and figures).
+    read
+        Also predict what a hammer test like the data's would read (:attr:`PredictiveBands.read_quantiles_hz`),
+        when the posterior has the latent-mode model (:meth:`Posterior.read_at`; about 0.1 s per draw).
     """
     if n_modes < 1:
         raise FpmSimError("must be >= 1", parameter="n_modes", value=n_modes)
@@ -845,6 +954,11 @@ def predict_bands(
     t0 = time.perf_counter()
     parts = solve_configs(configs, poses, n_modes=n_modes, options=opts, engine=eng)
     disc = posterior.discrepancy_at(index, poses)
+    read_f = read_w = None
+    noise = 0.0
+    if read and posterior.mode_read is not None and posterior.data is not None:
+        read_f, read_w = posterior.read_at(index, poses, opts)
+        noise = float(np.median(posterior.data.sigma_hz / posterior.data.measured_hz))
     return PredictiveBands(
         name=posterior.base.name,
         poses=poses,
@@ -856,6 +970,9 @@ def predict_bands(
         elapsed_s=time.perf_counter() - t0,
         discrepancy_rel=None if disc is None else (disc[1] if posterior.length_scale_m is not None else disc[1][:, 0]),
         discrepancy_shift=None if disc is None or posterior.length_scale_m is None else disc[0],
+        read_freq_hz=read_f,
+        read_weight=read_w,
+        read_noise_rel=noise,
     )
 
 
@@ -879,11 +996,17 @@ class StudyBands:
     (:meth:`Posterior.leave_one_out`; ``None`` when the file lacks the data groups): out-of-sample, unlike the
     in-sample coverage."""
 
+    def f1_quantiles_hz(self) -> np.ndarray:
+        """``(len(QUANTILES), n_poses)`` the bands compared with the measured values: what the study's test would
+        read (:attr:`PredictiveBands.read_quantiles_hz`) under the latent-mode model, else f1's."""
+        read = self.bands.read_quantiles_hz
+        return read if read is not None else self.bands.quantiles_hz[:, :, 0]
+
     def coverage(self) -> dict[str, float]:
         """At the measured poses: the share of measured f1 inside the 90 % and the 50 % bands, and the mean
         absolute error of the median (%)."""
         m = ~self.withheld & np.isfinite(self.measured_hz)
-        q = self.bands.quantiles_hz[:, m, 0]
+        q = self.f1_quantiles_hz()[:, m]
         f = self.measured_hz[m]
         n = int(m.sum())
         if n == 0:
@@ -898,11 +1021,16 @@ class StudyBands:
 
     def table(self) -> str:
         """Measured poses (median, bands, measured, inside which band) and withheld poses (median, bands)."""
-        q = self.bands.quantiles_hz[:, :, 0]
+        q = self.f1_quantiles_hz()
         comp = self.bands.computed_fraction
         n = self.bands.n_draws
+        what = (
+            "the first clear peak a hammer test reads (latent-mode model: mode 1, 2 or 3 by its peak at the sensor)"
+            if self.bands.read_quantiles_hz is not None
+            else "f1"
+        )
         lines = [
-            f"f1 over {n} posterior draws, reading {self.reading}",
+            f"{what} over {n} posterior draws, reading {self.reading}",
             f"{'cell':>10}  {'median Hz':>9}  {'25-75 % Hz':>15}  {'5-95 % Hz':>15}  {'measured Hz':>11}  "
             f"{'in':>4}  draws",
         ]
@@ -938,9 +1066,12 @@ class StudyBands:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: coverage, and per pose the bands, the measured value (``None``: withheld) and the flag."""
         rows = self.bands.rows()
-        for r, f, w in zip(rows, self.measured_hz, self.withheld):
+        read = self.bands.read_quantiles_hz
+        for i, (r, f, w) in enumerate(zip(rows, self.measured_hz, self.withheld)):
             r["measured_hz"] = float(f) if math.isfinite(f) else None
             r["withheld"] = bool(w)
+            if read is not None:  # what a hammer test would read (the latent-mode model)
+                r.update({f"read_q{round(100 * q):02d}_hz": float(read[k, i]) for k, q in enumerate(QUANTILES)})
         return {
             "reading": self.reading,
             "n_draws": self.bands.n_draws,
@@ -964,9 +1095,16 @@ class StudyBands:
         return [*paths, out / f"{stem}.png"]
 
     def plot(self, ax: Any = None) -> Any:
-        """The bands of f1 at the measured poses (with the measured values) and the withheld ones (shaded)."""
+        """The bands of f1 at the measured poses (with the measured values) and the withheld ones (shaded); under
+        the latent-mode model the bands of what a hammer test reads, with the machine's f1 median beside them."""
         fig = self.bands.plot(ax, measured_hz=self.measured_hz)
         a = fig.axes[0] if ax is None else ax
+        read = self.bands.read_quantiles_hz
+        if read is not None:
+            x = np.arange(read.shape[1]) + 0.25
+            a.vlines(x, read[0], read[4], color="tab:green", alpha=0.35, lw=4, label="read: 90 % band")
+            a.vlines(x, read[1], read[3], color="tab:green", alpha=0.9, lw=4, label="read: 50 % band")
+            a.plot(x, read[2], "_", color="darkgreen", ms=9, label="read: median (first clear peak)")
         w = np.flatnonzero(self.withheld)
         if w.size:
             a.axvspan(w.min() - 0.5, w.max() + 0.5, color="0.9", zorder=0, label="withheld: predictions only")
@@ -998,6 +1136,7 @@ def study_bands(
         options=options,
         engine=engine,
         labels=[f"{r:g},{c:g}" for r, c, _ in cells],
+        read=True,
     )
     return StudyBands(
         bands=bands,
@@ -1006,6 +1145,16 @@ def study_bands(
         reading=rd.name,
         loo=posterior.leave_one_out(),
     )
+
+
+def _mode_read(post: Any, p: Path) -> ModeRead | None:
+    """The latent-mode model the file's posterior was computed with, or ``None``."""
+    if MODE_READ_ATTR not in post.attrs:
+        return None
+    try:
+        return mode_read_from_text(str(post.attrs[MODE_READ_ATTR]))
+    except (ValueError, KeyError, TypeError) as exc:
+        raise PosteriorError(f"not the latent-mode settings ({exc})", parameter=MODE_READ_ATTR, file=p) from None
 
 
 def _inference_data(p: Path) -> Any:

@@ -39,11 +39,27 @@ from fpm_sim.linear.threads import blas_threads
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.response import LinkPoint, MaterialPoint, material_point
 
-__all__ = ["SENSOR_POINTS", "ModeRead", "mixture_log_likelihood", "read_probabilities", "sensor_residues"]
+__all__ = [
+    "MODE_READ_ATTR",
+    "SENSOR_POINTS",
+    "ModeRead",
+    "components",
+    "mixture_log_likelihood",
+    "mode_read_from_text",
+    "mode_read_text",
+    "read_probabilities",
+    "responsibilities",
+    "sensor_residues",
+    "setup_weights",
+]
 
 SENSOR_POINTS = tuple(LinkPoint(f"distal_{i}", 0.5, axis) for i in range(3) for axis in ("normal", "z"))
 """Candidate accelerometer (and hammer) points: the middle of each distal link, along its in-plane normal or
 out of the plane. Assumed: the study says "on the second links" and nothing of the axis or the chain."""
+
+
+MODE_READ_ATTR = "fpm_sim_mode_read"
+"""The ``posterior.nc`` attribute that holds the latent-mode model's settings (:func:`mode_read_text`)."""
 
 
 @dataclass(frozen=True)
@@ -56,6 +72,35 @@ class ModeRead:
     width_db: float = 3.0
     points: tuple[LinkPoint, ...] = SENSOR_POINTS
     reason: str = ""
+
+
+def mode_read_text(read: ModeRead) -> str:
+    """The settings as JSON (the file attribute :data:`MODE_READ_ATTR`)."""
+    import json
+
+    return json.dumps(
+        {
+            "modes": read.modes,
+            "reference_modes": read.reference_modes,
+            "height_db": read.height_db,
+            "width_db": read.width_db,
+            "points": [[pt.link, pt.fraction, pt.axis] for pt in read.points],
+        }
+    )
+
+
+def mode_read_from_text(text: str) -> ModeRead:
+    """Inverse of :func:`mode_read_text` (raises ``ValueError``/``KeyError``/``TypeError`` on a bad text)."""
+    import json
+
+    d = json.loads(text)
+    return ModeRead(
+        modes=int(d["modes"]),
+        reference_modes=int(d["reference_modes"]),
+        height_db=float(d["height_db"]),
+        width_db=float(d["width_db"]),
+        points=tuple(LinkPoint(str(a), float(b), str(c)) for a, b, c in d["points"]),
+    )
 
 
 def sensor_residues(
@@ -130,3 +175,66 @@ def mixture_log_likelihood(
     if not math.isfinite(top):
         return -math.inf
     return top + math.log(float(np.mean(np.exp(per_pose - top))))
+
+
+def _log_pose_terms(
+    y_hz: np.ndarray, sigma_hz: np.ndarray, freq_hz: np.ndarray, probs: np.ndarray, d: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(log P_sik + log N(y_i | f_ik, s_ik))`` ``(setups, n, modes)`` and ``s_ik`` ``(n, modes)``."""
+    f = np.asarray(freq_hz, float)
+    s = np.sqrt(np.asarray(sigma_hz, float)[:, None] ** 2 + (d * f) ** 2)
+    logn = -0.5 * ((np.asarray(y_hz, float)[:, None] - f) / s) ** 2 - np.log(math.sqrt(2 * math.pi) * s)
+    with np.errstate(divide="ignore"):
+        return np.log(probs) + logn[None], s
+
+
+def _logsumexp(a: np.ndarray, axis: int) -> np.ndarray:
+    m = np.max(a, axis=axis, keepdims=True)
+    m = np.where(np.isfinite(m), m, 0.0)
+    with np.errstate(divide="ignore"):
+        out: np.ndarray = np.squeeze(m, axis) + np.log(np.sum(np.exp(a - m), axis=axis))
+    return out
+
+
+def setup_weights(
+    y_hz: np.ndarray, sigma_hz: np.ndarray, freq_hz: np.ndarray, probs: np.ndarray, d: float
+) -> np.ndarray:
+    """``(setups,)`` the posterior probability of each setup given the data and one draw's machine."""
+    lp, _ = _log_pose_terms(y_hz, sigma_hz, freq_hz, probs, d)
+    tot = _logsumexp(lp, axis=-1).sum(axis=-1)
+    top = np.max(tot)
+    w = np.exp(tot - top) if math.isfinite(top) else np.ones_like(tot)
+    out: np.ndarray = w / w.sum()
+    return out
+
+
+def responsibilities(
+    y_hz: np.ndarray, sigma_hz: np.ndarray, freq_hz: np.ndarray, probs: np.ndarray, d: float
+) -> np.ndarray:
+    """``(n, modes)`` the probability that datum ``i`` was mode ``k``, given the data and one draw's machine."""
+    lp, _ = _log_pose_terms(y_hz, sigma_hz, freq_hz, probs, d)
+    w = setup_weights(y_hz, sigma_hz, freq_hz, probs, d)
+    per = np.exp(lp - _logsumexp(lp, axis=-1)[..., None])  # (setups, n, modes): given the setup
+    out: np.ndarray = np.einsum("s,snk->nk", w, np.nan_to_num(per))
+    return out
+
+
+def components(
+    y_hz: np.ndarray, sigma_hz: np.ndarray, freq_hz: np.ndarray, probs: np.ndarray, d: float, *, leave_out: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One draw's predictive of every datum as a Gaussian mixture: ``(means, sds, weights)``, each ``(n,
+    setups * modes)``: mode ``k``'s frequency and sd under setup ``s``, weighted ``P(s | data) P_sik``, or with
+    ``leave_out`` ``P(s | the other data) P_sik`` (the leave-one-out predictive of datum ``i``)."""
+    lp, s = _log_pose_terms(y_hz, sigma_hz, freq_hz, probs, d)
+    per = _logsumexp(lp, axis=-1)  # (setups, n)
+    n = per.shape[1]
+    if leave_out:
+        rest = np.stack([np.delete(per, i, axis=1).sum(axis=1) for i in range(n)], axis=1)  # (setups, n)
+    else:
+        rest = np.broadcast_to(per.sum(axis=1)[:, None], per.shape)
+    w = np.exp(rest - _logsumexp(rest, axis=0)[None])  # (setups, n): P(s | ...)
+    weights = (np.nan_to_num(w)[:, :, None] * probs).transpose(1, 0, 2).reshape(n, -1)
+    k = probs.shape[0]
+    means = np.broadcast_to(np.asarray(freq_hz, float)[None], probs.shape).transpose(1, 0, 2).reshape(n, -1)
+    sds = np.broadcast_to(s[None], (k, *s.shape)).transpose(1, 0, 2).reshape(n, -1)
+    return means, sds, weights / weights.sum(axis=1, keepdims=True)

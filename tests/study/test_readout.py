@@ -69,3 +69,30 @@ def test_mixture_likelihood_is_the_average_over_setups_of_the_per_pose_mixtures(
     assert mixture_log_likelihood(y, sig, f, one, d) == pytest.approx(
         float(np.sum(stats.norm.logpdf(y, f[:, 0], s[:, 0]))), rel=1e-12
     )
+
+
+def test_components_weigh_setups_by_the_data_and_leave_each_datum_out():
+    """components(): written out for two setups, three poses, two modes."""
+    from fpm_sim.study.readout import components, responsibilities, setup_weights
+
+    rng = np.random.default_rng(5)
+    y = np.array([50.0, 40.0, 60.0])
+    sig = 0.02 * y
+    f = rng.uniform(35, 70, (3, 2))
+    probs = rng.dirichlet(np.ones(2), size=(2, 3))
+    d = 0.1
+    s = np.sqrt(sig[:, None] ** 2 + (d * f) ** 2)
+    dens = stats.norm.pdf(y[:, None], f, s)  # (n, modes)
+    per = np.einsum("snk,nk->sn", probs, dens)  # (setups, n)
+    w_all = per.prod(axis=1) / per.prod(axis=1).sum()
+    np.testing.assert_allclose(setup_weights(y, sig, f, probs, d), w_all, rtol=1e-10)
+    mu, sd, w = components(y, sig, f, probs, d, leave_out=True)
+    for i in range(3):
+        rest = np.delete(per, i, axis=1).prod(axis=1)
+        expect = (rest / rest.sum())[:, None] * probs[:, i, :]  # (setups, modes)
+        np.testing.assert_allclose(w[i], expect.ravel(), rtol=1e-10)
+        np.testing.assert_allclose(mu[i], np.tile(f[i], 2))
+        np.testing.assert_allclose(sd[i], np.tile(s[i], 2))
+    resp = responsibilities(y, sig, f, probs, d)
+    expect = np.einsum("s,snk->nk", w_all, probs * dens[None] / per[:, :, None])
+    np.testing.assert_allclose(resp, expect, rtol=1e-10)

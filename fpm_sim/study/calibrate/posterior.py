@@ -11,7 +11,10 @@ predictions) and ``config.toml`` (the posterior median with its provenance).
   ``n_calls``, ``ess_kish``;
 - ``observed_data``: ``f_hz`` (dim ``obs``; coordinates ``x_mm``, ``y_mm``, ``phi_rad``, ``label``);
 - ``posterior_predictive``: ``f_hz`` (the model's frequencies at each draw) and ``f_hz_measurement`` (plus
-  one draw of the likelihood's noise), dims ``chain, draw, obs``.
+  one draw of the likelihood's noise), dims ``chain, draw, obs``; under the latent-mode model also
+  ``f_hz_modes`` (``chain, draw, obs, mode``: the lowest modes) and ``read_probability`` (``chain, draw,
+  setup, obs, mode``: each setup's probability that the first clear peak is that mode), and the posterior's
+  attribute ``fpm_sim_mode_read`` (the model's settings, :func:`fpm_sim.study.readout.mode_read_text`).
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ from fpm_sim.outputs import atomic_file
 from fpm_sim.study.calibrate.priors import BRANCH_PARAMETER
 from fpm_sim.study.calibrate.sampler import Calibration
 from fpm_sim.study.identify.problem import ELBOW_BRANCHES
+from fpm_sim.study.readout import MODE_READ_ATTR, mode_read_text
 
 __all__ = ["inference_data", "median_config", "thin", "write_config", "write_posterior"]
 
@@ -96,10 +100,22 @@ def inference_data(cal: Calibration, *, command: str, idx: np.ndarray | None = N
     ppc = xr.Dataset(
         {
             "f_hz": xr.DataArray(cal.f_pred[sel][None], dims=("chain", "draw", "obs")),
-            "f_hz_measurement": xr.DataArray(cal.f_noisy[sel][None], dims=("chain", "draw", "obs")),
+            "f_hz_measurement": xr.DataArray(cal.predictive_sample[sel][None], dims=("chain", "draw", "obs")),
         },
         coords={"chain": [0], "draw": np.arange(n), **oc},
     )
+    if cal.readouts is not None:  # the latent-mode model: what predictions at new poses need (module docstring)
+        read = p.priors.mode_read
+        assert read is not None
+        n_obs = len(p.observations)
+        fm = np.full((n, p.n_data, read.modes), np.nan)
+        pr = np.full((n, len(read.points), p.n_data, read.modes), np.nan)
+        for row, k in enumerate(sel):
+            fm[row, :n_obs], pr[row, :, :n_obs] = cal.readouts[int(k)][:2]
+        ppc["f_hz_modes"] = xr.DataArray(fm[None], dims=("chain", "draw", "obs", "mode"))
+        ppc["read_probability"] = xr.DataArray(pr[None], dims=("chain", "draw", "setup", "obs", "mode"))
+        ppc = ppc.assign_coords(mode=np.arange(1, read.modes + 1), setup=[pt.label() for pt in read.points])
+        posterior.attrs[MODE_READ_ATTR] = mode_read_text(read)
     return az.InferenceData(posterior=posterior, sample_stats=stats, observed_data=observed, posterior_predictive=ppc)
 
 

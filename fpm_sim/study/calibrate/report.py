@@ -12,6 +12,7 @@ from fpm_sim.outputs import atomic_file
 from fpm_sim.study.calibrate.priors import BRANCH_PARAMETER, DISCREPANCY_PARAMETER
 from fpm_sim.study.calibrate.sampler import Calibration
 from fpm_sim.study.identify.problem import ELBOW_BRANCHES
+from fpm_sim.study.readout import setup_weights
 
 __all__ = ["corner_figure", "render_report", "write_report"]
 
@@ -136,9 +137,37 @@ def render_report(cal: Calibration, *, command: str, data_note: str) -> str:
     ]
     for lab, y, m, a, b, c, d, ok in zip(p.labels, p.measured, med, lo50, hi50, lo90, hi90, c90):
         lines.append(f"| {lab} | {y:.4g} | {m:.4g} | {a:.4g}-{b:.4g} | {c:.4g}-{d:.4g} | {'yes' if ok else 'NO'} |")
+    lines += _read_lines(cal)
     lines += _loo_lines(cal)
     lines += ["", "Figures: `corner.png` (pairwise draws), `predicted_vs_measured.png`, `leave_one_out.png`.", ""]
     return "\n".join(lines)
+
+
+def _read_lines(cal: Calibration) -> list[str]:
+    """The latent-mode section: per measured pose, which mode the posterior thinks the first clear peak was, and
+    which accelerometer setup."""
+    resp = cal.read_responsibility()
+    read = cal.problem.priors.mode_read
+    if resp is None or read is None or cal.readouts is None:
+        return []
+    p = cal.problem
+    n = len(p.observations)
+    setups = np.mean([setup_weights(p.measured[:n], p.sigma[:n], f, pr, d) for f, pr, d in cal.readouts], axis=0)
+    best = int(np.argmax(setups))
+    lines = [
+        "",
+        "## Which mode was read (latent-mode model)",
+        "",
+        "Accelerometer setup (link and axis; the study does not state them), posterior: "
+        + ", ".join(f"{pt.label()} {100 * w:.0f} %" for pt, w in sorted(zip(read.points, setups), key=lambda t: -t[1]))
+        + f". Most probable: {read.points[best].label()}.",
+        "",
+        "| datum | measured (Hz) | " + " | ".join(f"P(mode {k + 1})" for k in range(read.modes)) + " |",
+        "|---|---|" + "---|" * read.modes,
+    ]
+    for lab, y, r in zip(p.labels[:n], p.measured[:n], resp):
+        lines.append(f"| {lab} | {y:.4g} | " + " | ".join(f"{v:.2f}" for v in r) + " |")
+    return lines
 
 
 def _loo_lines(cal: Calibration) -> list[str]:

@@ -8,6 +8,7 @@ module-level :func:`_worker_log_likelihood` / :func:`_worker_prior_transform`; n
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import math
 import multiprocessing
@@ -20,7 +21,8 @@ from typing import Any
 import numpy as np
 
 from fpm_sim.study.calibrate.problem import CalibrationError, CalibrationProblem
-from fpm_sim.study.loo import LeaveOneOut, leave_one_out
+from fpm_sim.study.loo import LeaveOneOut, leave_one_out, loo_from_components
+from fpm_sim.study.readout import components, responsibilities
 
 __all__ = ["Calibration", "SamplerOptions", "problem_digest", "run_calibration"]
 
@@ -131,6 +133,57 @@ class Calibration:
     def names(self) -> list[str]:
         return self.problem.names
 
+    @functools.cached_property
+    def readouts(self) -> list[tuple[np.ndarray, np.ndarray, float]] | None:
+        """Under the latent-mode model (:mod:`fpm_sim.study.readout`): per draw the lowest modes' frequencies at
+        the observations ``(n, modes)``, the read probabilities ``(setups, n, modes)`` and the discrepancy;
+        ``None`` otherwise."""
+        p = self.problem
+        if p.priors.mode_read is None:
+            return None
+        out = []
+        for t in self.draws:
+            freq, probs = p.read_modes(p.config(t))
+            out.append((freq, probs, p.split(t)[1]))
+        return out
+
+    def _components(self, *, leave_out: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(n_draws, n_obs, C)`` means, sds and weights of each draw's predictive of every observation
+        (latent-mode model only; :func:`fpm_sim.study.readout.components`)."""
+        p = self.problem
+        n = len(p.observations)
+        assert self.readouts is not None
+        parts = [components(p.measured[:n], p.sigma[:n], f, pr, d, leave_out=leave_out) for f, pr, d in self.readouts]
+        return tuple(np.stack([c[j] for c in parts]) for j in range(3))  # type: ignore[return-value]
+
+    @functools.cached_property
+    def predictive_sample(self) -> np.ndarray:
+        """``(n_draws, n_data)`` one draw of a new measurement per posterior draw: :attr:`f_noisy`, or under the
+        latent-mode model a draw of the mixture (setup given the data, mode by its read probability, then the
+        discrepancy and noise), seeded."""
+        if self.readouts is None:
+            return self.f_noisy
+        mu, sd, w = self._components(leave_out=False)
+        rng = np.random.default_rng(0)
+        cum = np.cumsum(w, axis=-1)
+        pick = (rng.random(cum.shape[:-1])[..., None] > cum).sum(axis=-1).clip(max=w.shape[-1] - 1)
+        m = np.take_along_axis(mu, pick[..., None], -1)[..., 0]
+        v = np.take_along_axis(sd, pick[..., None], -1)[..., 0]
+        out = self.f_noisy.copy()
+        out[:, : mu.shape[1]] = m + v * rng.standard_normal(m.shape)
+        return out
+
+    def read_responsibility(self) -> np.ndarray | None:
+        """``(n_obs, modes)`` posterior probability that each measured value was mode ``k`` (latent-mode model;
+        ``None`` otherwise): the draws' :func:`fpm_sim.study.readout.responsibilities`, averaged."""
+        if self.readouts is None:
+            return None
+        p = self.problem
+        n = len(p.observations)
+        r = [responsibilities(p.measured[:n], p.sigma[:n], f, pr, d) for f, pr, d in self.readouts]
+        out: np.ndarray = np.mean(r, axis=0)
+        return out
+
     def column(self, name: str) -> np.ndarray:
         return self.draws[:, self.names.index(name)]
 
@@ -141,7 +194,7 @@ class Calibration:
 
     def bands(self, level: float, *, noisy: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """Central ``level`` predictive band (lower, upper) of every datum."""
-        f = self.f_noisy if noisy else self.f_pred
+        f = self.predictive_sample if noisy else self.f_pred
         a = 0.5 * (1.0 - level)
         lo: np.ndarray = np.quantile(f, a, axis=0)
         hi: np.ndarray = np.quantile(f, 1.0 - a, axis=0)
@@ -158,6 +211,9 @@ class Calibration:
         """PSIS leave-one-out predictive of every measured pose (:mod:`fpm_sim.study.loo`; rig tests aside)."""
         p = self.problem
         n = len(p.observations)
+        if self.readouts is not None:
+            mu, sd, w = self._components(leave_out=True)
+            return loo_from_components(mu, sd, w, p.measured[:n], labels=p.labels[:n])
         d = np.array([p.split(t)[1] for t in self.draws])
         ls = None if p.priors.length_scale is None else np.array([p.length_scale_m(t) for t in self.draws])
         return leave_one_out(
@@ -251,7 +307,7 @@ class Calibration:
         fig = ax.figure if ax is not None else plt.figure(figsize=(6.5, 5.5))
         ax = ax if ax is not None else fig.add_subplot(111)
         y = self.problem.measured
-        med = np.median(self.f_noisy, axis=0)
+        med = np.median(self.predictive_sample, axis=0)
         lo50, hi50 = self.bands(0.5)
         lo90, hi90 = self.bands(0.9)
         # data with the same measured value side by side (0.6 Hz apart), not on top of each other
