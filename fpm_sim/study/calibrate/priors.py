@@ -278,17 +278,7 @@ def read_priors(source: str | Path, free: Sequence[str], *, text: str | None = N
         unknown distribution, section or key, or a missing ``reason``; each names the key.
     """
     where = str(source)
-    if text is None:
-        try:
-            text = Path(source).read_text()
-        except FileNotFoundError as exc:
-            raise PriorError(
-                "priors file not found", parameter="priors", value=str(source), hint="give a priors TOML file"
-            ) from exc
-        except IsADirectoryError as exc:
-            raise PriorError(
-                "is a folder", parameter="priors", value=str(source), hint="give a priors TOML file"
-            ) from exc
+    text = _priors_text(source) if text is None else text
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -299,7 +289,44 @@ def read_priors(source: str | Path, free: Sequence[str], *, text: str | None = N
             f"{where}: unknown section(s) {sorted(unknown)}; use [parameters.*], [likelihood], [statements.*]"
         )
     ptab = doc.get("parameters", {})
-    names = list(free)
+    params = _parameter_priors(ptab, list(free), where)
+    sample_branches, branch_reason = _branches(ptab, where)
+    lik = doc.get("likelihood", {})
+    unknown = set(lik) - {"discrepancy_rel", "rig_sigma_pct", "length_scale_m", "mode_read"}
+    if unknown:
+        raise PriorError(
+            f"{where} [likelihood]: unknown key(s) {sorted(unknown)}; it takes discrepancy_rel, length_scale_m, "
+            "mode_read, rig_sigma_pct"
+        )
+    disc, disc_fixed = _discrepancy(lik, where)
+    rig_sigma = float(lik.get("rig_sigma_pct", 1.0))
+    if not rig_sigma > 0:
+        raise PriorError(f"{where} [likelihood].rig_sigma_pct: must be > 0, got {rig_sigma:g}")
+    a, b = _statements(doc.get("statements", {}), where)
+    length = _length_scale(lik, disc, disc_fixed, where)
+    read = _mode_read(lik.get("mode_read"), f"{where} [likelihood.mode_read]")
+    if read is not None and length is not None:
+        raise PriorError(
+            f"{where} [likelihood]: mode_read and length_scale_m cannot be combined (a mixture per pose is not "
+            "jointly Gaussian); choose one"
+        )
+    return Priors(params, sample_branches, branch_reason, disc, disc_fixed, rig_sigma, a, b, where, text, length, read)
+
+
+def _priors_text(source: str | Path) -> str:
+    """The file's text; a missing file or a folder is refused naming it."""
+    try:
+        return Path(source).read_text()
+    except FileNotFoundError as exc:
+        raise PriorError(
+            "priors file not found", parameter="priors", value=str(source), hint="give a priors TOML file"
+        ) from exc
+    except IsADirectoryError as exc:
+        raise PriorError("is a folder", parameter="priors", value=str(source), hint="give a priors TOML file") from exc
+
+
+def _parameter_priors(ptab: Mapping[str, Any], names: list[str], where: str) -> tuple[Prior, ...]:
+    """One prior per free parameter, in their order; a stray or a missing one is refused."""
     stray = [k for k in ptab if k not in names and k != BRANCH_PARAMETER]
     if stray:
         raise PriorError(
@@ -311,35 +338,34 @@ def read_priors(source: str | Path, free: Sequence[str], *, text: str | None = N
         raise PriorError(
             f'{where}: no prior for the free parameter(s) {", ".join(missing)}; add [parameters."{missing[0]}"]'
         )
-    params = tuple(_prior(n, ptab[n], f'{where} [parameters."{n}"]') for n in names)
-    sample_branches, branch_reason = False, "fixed: the base description's elbow branches"
-    if BRANCH_PARAMETER in ptab:
-        t = ptab[BRANCH_PARAMETER]
-        w = f'{where} [parameters."{BRANCH_PARAMETER}"]'
-        d = t.get("dist") if isinstance(t, Mapping) else None
-        if d not in ("branches", "fixed"):
-            raise PriorError(f'{w}.dist: {d!r}; use "branches" (uniform over the 8 combinations) or "fixed"')
-        sample_branches, branch_reason = d == "branches", _reason(t, w)
-    lik = doc.get("likelihood", {})
-    unknown = set(lik) - {"discrepancy_rel", "rig_sigma_pct", "length_scale_m", "mode_read"}
-    if unknown:
-        raise PriorError(
-            f"{where} [likelihood]: unknown key(s) {sorted(unknown)}; it takes discrepancy_rel, length_scale_m, "
-            "mode_read, rig_sigma_pct"
-        )
-    disc: Prior | None = None
-    disc_fixed = 0.0
+    return tuple(_prior(n, ptab[n], f'{where} [parameters."{n}"]') for n in names)
+
+
+def _branches(ptab: Mapping[str, Any], where: str) -> tuple[bool, str]:
+    """Whether the elbow branches are sampled, and why."""
+    if BRANCH_PARAMETER not in ptab:
+        return False, "fixed: the base description's elbow branches"
+    t = ptab[BRANCH_PARAMETER]
+    w = f'{where} [parameters."{BRANCH_PARAMETER}"]'
+    d = t.get("dist") if isinstance(t, Mapping) else None
+    if d not in ("branches", "fixed"):
+        raise PriorError(f'{w}.dist: {d!r}; use "branches" (uniform over the 8 combinations) or "fixed"')
+    return d == "branches", _reason(t, w)
+
+
+def _discrepancy(lik: Mapping[str, Any], where: str) -> tuple[Prior | None, float]:
+    """The discrepancy's prior, or its fixed value (default 0: no discrepancy term)."""
     d_tbl = lik.get("discrepancy_rel", {"value": 0.0, "reason": "no discrepancy term"})
     if isinstance(d_tbl, Mapping) and "value" in d_tbl:
-        disc_fixed = _number(d_tbl, "value", f"{where} [likelihood.discrepancy_rel]")
-        if disc_fixed < 0:
-            raise PriorError(f"{where} [likelihood.discrepancy_rel].value: must be >= 0, got {disc_fixed:g}")
-    else:
-        disc = _prior(DISCREPANCY_PARAMETER, d_tbl, f"{where} [likelihood.discrepancy_rel]")
-    rig_sigma = float(lik.get("rig_sigma_pct", 1.0))
-    if not rig_sigma > 0:
-        raise PriorError(f"{where} [likelihood].rig_sigma_pct: must be > 0, got {rig_sigma:g}")
-    st = doc.get("statements", {})
+        fixed = _number(d_tbl, "value", f"{where} [likelihood.discrepancy_rel]")
+        if fixed < 0:
+            raise PriorError(f"{where} [likelihood.discrepancy_rel].value: must be >= 0, got {fixed:g}")
+        return None, fixed
+    return _prior(DISCREPANCY_PARAMETER, d_tbl, f"{where} [likelihood.discrepancy_rel]"), 0.0
+
+
+def _statements(st: Mapping[str, Any], where: str) -> tuple[SingularAtPhi0 | None, MeasuredPosesClear | None]:
+    """The study's statements (a) and (b), each ``None`` when absent."""
     unknown = set(st) - {"singular_at_phi0", "measured_poses_clear"}
     if unknown:
         raise PriorError(
@@ -355,14 +381,7 @@ def read_priors(source: str | Path, free: Sequence[str], *, text: str | None = N
         if "measured_poses_clear" in st
         else None
     )
-    length = _length_scale(lik, disc, disc_fixed, where)
-    read = _mode_read(lik.get("mode_read"), f"{where} [likelihood.mode_read]")
-    if read is not None and length is not None:
-        raise PriorError(
-            f"{where} [likelihood]: mode_read and length_scale_m cannot be combined (a mixture per pose is not "
-            "jointly Gaussian); choose one"
-        )
-    return Priors(params, sample_branches, branch_reason, disc, disc_fixed, rig_sigma, a, b, where, text, length, read)
+    return a, b
 
 
 def _mode_read(tbl: Any, where: str) -> ModeRead | None:

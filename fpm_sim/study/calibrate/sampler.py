@@ -339,6 +339,74 @@ def _pool(problem: CalibrationProblem, workers: int) -> Any:
     return ctx.Pool(workers, initializer=_init_worker, initargs=(problem,))
 
 
+def _run_sampler(
+    problem: CalibrationProblem,
+    opts: SamplerOptions,
+    pool: Any,
+    *,
+    checkpoint: Path | None,
+    resume: bool,
+    progress: bool,
+) -> Any:
+    """dynesty's static sampler run to ``opts.dlogz``: a fresh one, or restored from ``checkpoint`` (checked
+    against the problem's fingerprint in the ``.digest`` file beside it)."""
+    import dynesty
+
+    digest = problem_digest(problem)
+    kw: dict[str, Any] = {}
+    if checkpoint is not None:
+        kw.update(checkpoint_file=str(checkpoint), checkpoint_every=opts.checkpoint_every_s)
+    digest_file = Path(str(checkpoint) + ".digest")
+    if resume:
+        if checkpoint is None or not Path(checkpoint).exists():
+            raise CalibrationError(
+                "no checkpoint file to resume from",
+                parameter="resume",
+                value=None if checkpoint is None else str(checkpoint),
+                hint="start a fresh run (resume off) first",
+            )
+        if not digest_file.exists() or digest_file.read_text().strip() != digest:
+            raise CalibrationError(
+                "the checkpoint belongs to another problem (data, priors, free groups, base description or "
+                "segments differ)",
+                parameter="resume",
+                file=checkpoint,
+                hint="start a fresh run (resume off) into an empty or overwritten output folder",
+            )
+        sampler = dynesty.NestedSampler.restore(str(checkpoint), pool=pool)
+        # a run interrupted mid-way continues (resume=True); one that ended on max_calls has its final live
+        # points added to the results, which dynesty takes out again and continues from with resume=False
+        finished = bool(getattr(sampler, "added_live", False))
+        sampler.run_nested(dlogz=opts.dlogz, maxcall=opts.max_calls, print_progress=progress, resume=not finished, **kw)
+        return sampler
+    if checkpoint is not None:
+        digest_file.write_text(digest)
+    sampler = dynesty.NestedSampler(
+        _worker_log_likelihood,
+        _worker_prior_transform,
+        problem.ndim,
+        nlive=opts.live_points,
+        sample=opts.sample,
+        walks=opts.walks,
+        rstate=np.random.default_rng(opts.seed),
+        pool=pool,
+        queue_size=opts.workers if pool is not None else None,
+    )
+    sampler.run_nested(dlogz=opts.dlogz, maxcall=opts.max_calls, print_progress=progress, **kw)
+    return sampler
+
+
+def _equal_weight_indices(logwt: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    """Indices of ``n`` equal-weight draws (at most as many as the run has samples) from the weighted samples."""
+    from dynesty.utils import resample_equal
+
+    w = np.exp(logwt - np.max(logwt))
+    w /= w.sum()
+    idx_all = resample_equal(np.arange(len(w)), w, rstate=rng)
+    out: np.ndarray = rng.choice(idx_all, size=min(n, len(idx_all)), replace=False)
+    return out
+
+
 def run_calibration(
     problem: CalibrationProblem,
     options: SamplerOptions | None = None,
@@ -354,66 +422,17 @@ def run_calibration(
     ``.digest`` file beside it records the problem's fingerprint); ``resume``: continue from it (refused when
     the problem differs).
     """
-    import dynesty
-
     opts = options or SamplerOptions()
     opts.check()
     _init_worker(problem)  # this process too: dynesty may call the functions here
-    digest = problem_digest(problem)
     t0 = time.time()
     pool = _pool(problem, opts.workers) if opts.workers > 1 else None
     try:
-        kw: dict[str, Any] = {}
-        if checkpoint is not None:
-            kw.update(checkpoint_file=str(checkpoint), checkpoint_every=opts.checkpoint_every_s)
-        digest_file = Path(str(checkpoint) + ".digest")
-        if resume:
-            if checkpoint is None or not Path(checkpoint).exists():
-                raise CalibrationError(
-                    "no checkpoint file to resume from",
-                    parameter="resume",
-                    value=None if checkpoint is None else str(checkpoint),
-                    hint="start a fresh run (resume off) first",
-                )
-            if not digest_file.exists() or digest_file.read_text().strip() != digest:
-                raise CalibrationError(
-                    "the checkpoint belongs to another problem (data, priors, free groups, base description or "
-                    "segments differ)",
-                    parameter="resume",
-                    file=checkpoint,
-                    hint="start a fresh run (resume off) into an empty or overwritten output folder",
-                )
-            sampler = dynesty.NestedSampler.restore(str(checkpoint), pool=pool)
-            # a run interrupted mid-way continues (resume=True); one that ended on max_calls has its final live
-            # points added to the results, which dynesty takes out again and continues from with resume=False
-            finished = bool(getattr(sampler, "added_live", False))
-            sampler.run_nested(
-                dlogz=opts.dlogz, maxcall=opts.max_calls, print_progress=progress, resume=not finished, **kw
-            )
-        else:
-            if checkpoint is not None:
-                digest_file.write_text(digest)
-            sampler = dynesty.NestedSampler(
-                _worker_log_likelihood,
-                _worker_prior_transform,
-                problem.ndim,
-                nlive=opts.live_points,
-                sample=opts.sample,
-                walks=opts.walks,
-                rstate=np.random.default_rng(opts.seed),
-                pool=pool,
-                queue_size=opts.workers if pool is not None else None,
-            )
-            sampler.run_nested(dlogz=opts.dlogz, maxcall=opts.max_calls, print_progress=progress, **kw)
+        sampler = _run_sampler(problem, opts, pool, checkpoint=checkpoint, resume=resume, progress=progress)
         res = sampler.results
         logwt = np.asarray(res["logwt"])
-        w = np.exp(logwt - np.max(logwt))
-        w /= w.sum()
         rng = np.random.default_rng(opts.seed + 1)
-        from dynesty.utils import resample_equal
-
-        idx_all = resample_equal(np.arange(len(w)), w, rstate=rng)
-        idx = rng.choice(idx_all, size=min(opts.draws, len(idx_all)), replace=False)
+        idx = _equal_weight_indices(logwt, opts.draws, rng)
         draws = np.asarray(res["samples"])[idx]
         logl = np.asarray(res["logl"])[idx]
         uniq, inverse = np.unique(idx, return_inverse=True)
