@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from fpm_sim.errors import FpmSimError
+from fpm_sim.figures import bands_against_measured
 from fpm_sim.study.discrepancy import covariance, loo_conditionals
 
 __all__ = ["LOO_QUANTILES", "PARETO_K_LIMIT", "LeaveOneOut", "leave_one_out", "loo_from_components"]
@@ -153,23 +154,15 @@ class LeaveOneOut:
 
         fig = ax.figure if ax is not None else plt.figure(figsize=(6.5, 5.5))
         ax = ax if ax is not None else fig.add_subplot(111)
-        y = self.measured_hz
-        xs = y.astype(float).copy()
-        for v in np.unique(y):  # equal measured values side by side
-            k = np.flatnonzero(y == v)
-            xs[k] = v + 0.6 * (np.arange(len(k)) - 0.5 * (len(k) - 1))
-        q = self.quantiles_hz
-        ax.vlines(xs, q[:, 0], q[:, 4], color="tab:green", alpha=0.35, lw=4, label="90 % leave-one-out band")
-        ax.vlines(xs, q[:, 1], q[:, 3], color="tab:green", alpha=0.9, lw=4, label="50 % leave-one-out band")
-        ax.plot(xs, q[:, 2], "k_", ms=9, label="leave-one-out median")
-        lim = [0.9 * float(min(y.min(), q[:, 0].min())), 1.1 * float(max(y.max(), q[:, 4].max()))]
-        ax.plot(lim, lim, color="0.5", lw=0.8, ls="--", label="predicted = measured")
-        ax.set_xlim(lim)
-        ax.set_ylim(lim)
-        ax.set_xlabel("measured frequency (Hz)")
-        ax.set_ylabel("predicted without that datum (Hz)")
-        ax.set_title(f"leave-one-out predictions (PSIS; {self.inside(0.9).sum()}/{self.n} inside 90 %)")
-        ax.legend(loc="upper left", fontsize=8)
+        bands_against_measured(
+            ax,
+            self.measured_hz,
+            self.quantiles_hz.T,
+            what="leave-one-out",
+            colour="tab:green",
+            ylabel="predicted without that datum (Hz)",
+            title=f"leave-one-out predictions (PSIS; {self.inside(0.9).sum()}/{self.n} inside 90 %)",
+        )
         return fig
 
 

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from fpm_sim.figures import bands_against_measured
 from fpm_sim.study.calibrate.problem import CalibrationError, CalibrationProblem
 from fpm_sim.study.loo import LeaveOneOut, leave_one_out, loo_from_components
 from fpm_sim.study.readout import components, responsibilities
@@ -306,26 +307,18 @@ class Calibration:
 
         fig = ax.figure if ax is not None else plt.figure(figsize=(6.5, 5.5))
         ax = ax if ax is not None else fig.add_subplot(111)
-        y = self.problem.measured
-        med = np.median(self.predictive_sample, axis=0)
         lo50, hi50 = self.bands(0.5)
         lo90, hi90 = self.bands(0.9)
-        # data with the same measured value side by side (0.6 Hz apart), not on top of each other
-        xs = y.astype(float).copy()
-        for v in np.unique(y):
-            k = np.flatnonzero(y == v)
-            xs[k] = v + 0.6 * (np.arange(len(k)) - 0.5 * (len(k) - 1))
-        ax.vlines(xs, lo90, hi90, color="tab:blue", alpha=0.35, lw=4, label="90 % predictive band")
-        ax.vlines(xs, lo50, hi50, color="tab:blue", alpha=0.9, lw=4, label="50 % predictive band")
-        ax.plot(xs, med, "k_", ms=9, label="predictive median")
-        lim = [0.9 * float(np.nanmin([y.min(), lo90.min()])), 1.1 * float(np.nanmax([y.max(), hi90.max()]))]
-        ax.plot(lim, lim, color="0.5", lw=0.8, ls="--", label="predicted = measured")
-        ax.set_xlim(lim)
-        ax.set_ylim(lim)
-        ax.set_xlabel("measured frequency (Hz)")
-        ax.set_ylabel("predicted frequency (Hz)")
-        ax.set_title(f"posterior predictive at the data ({len(self.draws)} draws)")
-        ax.legend(loc="upper left", fontsize=8)
+        med = np.median(self.predictive_sample, axis=0)
+        bands_against_measured(
+            ax,
+            self.problem.measured,
+            [lo90, lo50, med, hi50, hi90],
+            what="predictive",
+            colour="tab:blue",
+            ylabel="predicted frequency (Hz)",
+            title=f"posterior predictive at the data ({len(self.draws)} draws)",
+        )
         return fig
 
 
