@@ -112,7 +112,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Samples the posterior of the free parameter groups of a description given measured natural "
         "frequencies (and rig tests), priors from a TOML file (one distribution per free parameter, each with its "
         "reason; the study's statements as soft likelihood terms) and a Gaussian likelihood with a relative "
-        "model-discrepancy term, by nested sampling (dynesty). Writes OUT/posterior.nc (ArviZ), OUT/report.md, "
+        "model-discrepancy term (independent, or a Gaussian process over the pose with [likelihood.length_scale_m]; "
+        "with [likelihood.mode_read] the mode behind each measured first frequency is latent), by nested sampling "
+        "(dynesty). Writes OUT/posterior.nc (ArviZ), OUT/report.md (diagnostics, evidence, leave-one-out checks), "
         "OUT/config.toml (the posterior median) and figures; checkpoints to OUT/checkpoint.dynesty (--resume).",
     )
     add_data_args(p)
