@@ -184,7 +184,19 @@ BUILDERS = {
     "ModalEstimate": _ema,
     "CheckReport": lambda: _check_report(),
     "Calibration": lambda: _calibration(),
+    "LeaveOneOut": lambda: _leave_one_out(),
 }
+
+
+def _leave_one_out():
+    """PSIS leave-one-out of the shipped posterior (its data groups hold what it needs: no model is built)."""
+    from fpm_sim.study.posterior import Posterior, default_posterior_path
+
+    path = default_posterior_path()
+    assert path is not None
+    loo = Posterior.from_netcdf(path).leave_one_out()
+    assert loo is not None
+    return loo
 
 
 @_quiet
