@@ -214,7 +214,8 @@ def responsibilities(
     """``(n, modes)`` the probability that datum ``i`` was mode ``k``, given the data and one draw's machine."""
     lp, _ = _log_pose_terms(y_hz, sigma_hz, freq_hz, probs, d)
     w = setup_weights(y_hz, sigma_hz, freq_hz, probs, d)
-    per = np.exp(lp - _logsumexp(lp, axis=-1)[..., None])  # (setups, n, modes): given the setup
+    with np.errstate(invalid="ignore"):  # a setup that cannot read a datum: -inf - -inf, zeroed below
+        per = np.exp(lp - _logsumexp(lp, axis=-1)[..., None])  # (setups, n, modes): given the setup
     out: np.ndarray = np.einsum("s,snk->nk", w, np.nan_to_num(per))
     return out
 
@@ -232,7 +233,8 @@ def components(
         rest = np.stack([np.delete(per, i, axis=1).sum(axis=1) for i in range(n)], axis=1)  # (setups, n)
     else:
         rest = np.broadcast_to(per.sum(axis=1)[:, None], per.shape)
-    w = np.exp(rest - _logsumexp(rest, axis=0)[None])  # (setups, n): P(s | ...)
+    with np.errstate(invalid="ignore"):  # every setup impossible for the other data: NaN, zeroed below
+        w = np.exp(rest - _logsumexp(rest, axis=0)[None])  # (setups, n): P(s | ...)
     weights = (np.nan_to_num(w)[:, :, None] * probs).transpose(1, 0, 2).reshape(n, -1)
     k = probs.shape[0]
     means = np.broadcast_to(np.asarray(freq_hz, float)[None], probs.shape).transpose(1, 0, 2).reshape(n, -1)
