@@ -361,6 +361,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="fpm-sim",
         description="Natural frequencies, modes and reduced models of flexible planar 3RRR manipulators (MuJoCo).",
+        allow_abbrev=False,  # stated here too; every sub-command's parser is a _Parser, which defaults to it
     )
     parser.add_argument("--version", action="version", version=f"fpm-sim {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
