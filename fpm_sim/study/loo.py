@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -31,7 +32,14 @@ from fpm_sim.errors import FpmSimError
 from fpm_sim.figures import bands_against_measured
 from fpm_sim.study.discrepancy import covariance, loo_conditionals
 
-__all__ = ["LOO_QUANTILES", "PARETO_K_LIMIT", "LeaveOneOut", "leave_one_out", "loo_from_components"]
+__all__ = [
+    "LOO_QUANTILES",
+    "PARETO_K_LIMIT",
+    "LeaveOneOut",
+    "leave_one_out",
+    "loo_from_components",
+    "mixture_quantiles",
+]
 
 LOO_QUANTILES = (0.05, 0.25, 0.5, 0.75, 0.95)
 PARETO_K_LIMIT = 0.7
@@ -166,23 +174,31 @@ class LeaveOneOut:
         return fig
 
 
-def _mixture_quantiles(w: np.ndarray, mu: np.ndarray, sd: np.ndarray, levels: tuple[float, ...]) -> np.ndarray:
-    """Quantiles of ``sum_s w_s N(mu_s, sd_s^2)`` (weights summing to 1), by bisection to round-off."""
+def mixture_quantiles(mu: np.ndarray, sd: np.ndarray, w: np.ndarray, levels: Sequence[float]) -> np.ndarray:
+    """``(len(levels), n_poses)`` quantiles, per pose, of the Gaussian mixture over the components ``(n_draws,
+    n_poses, n_components)`` (means, sds, weights; NaN components left out, weights renormalised per pose), by
+    bisection to round-off; NaN where a pose has no component."""
     from scipy.special import ndtr
 
-    lo = float(np.min(mu - 12 * sd))
-    hi = float(np.max(mu + 12 * sd))
-    out = []
-    for q in levels:
-        a, b = lo, hi
+    ok = np.isfinite(mu) & np.isfinite(sd) & np.isfinite(w) & (w > 0)
+    ww = np.where(ok, w, 0.0)
+    tot = ww.sum(axis=(0, 2))
+    ww = ww / np.where(tot > 0, tot, 1.0)[None, :, None]
+    m, s = np.where(ok, mu, 0.0), np.where(ok, sd, 1.0)
+    lo = np.where(ok, m - 12 * s, np.inf).min(axis=(0, 2))
+    hi = np.where(ok, m + 12 * s, -np.inf).max(axis=(0, 2))
+    out = np.full((len(levels), mu.shape[1]), np.nan)
+    has = tot > 0
+    for j, q in enumerate(levels):
+        a, b = np.where(has, lo, 0.0), np.where(has, hi, 0.0)  # poses without a component: left NaN below
         for _ in range(80):
             x = 0.5 * (a + b)
-            if float(np.sum(w * ndtr((x - mu) / sd))) < q:
-                a = x
-            else:
-                b = x
-        out.append(0.5 * (a + b))
-    return np.array(out)
+            p = np.sum(ww * ndtr((x[None, :, None] - m) / s), axis=(0, 2))
+            below = p < q
+            a = np.where(below, x, a)
+            b = np.where(below, b, x)
+        out[j, has] = 0.5 * (a + b)[has]
+    return out
 
 
 def leave_one_out(
@@ -267,7 +283,7 @@ def loo_from_components(
     n = y.size
     with np.errstate(divide="ignore"):
         loglik = np.log(np.sum(wc * norm.pdf(y[None, :, None], mu, sd), axis=-1))  # (n_draws, n)
-    q = np.zeros((n, len(LOO_QUANTILES)))
+    psis = np.zeros_like(loglik)  # (n_draws, n): each datum's normalised importance weights
     elpd = np.zeros(n)
     kk = np.zeros(n)
     for i in range(n):
@@ -280,12 +296,12 @@ def loo_from_components(
         kk[i] = float(k)
         top = float(np.max(loglik[:, i]))
         elpd[i] = float(np.log(np.sum(w * np.exp(loglik[:, i] - top))) + top)
-        ww = (w[:, None] * wc[:, i, :]).ravel()
-        q[i] = _mixture_quantiles(ww / ww.sum(), mu[:, i, :].ravel(), sd[:, i, :].ravel(), LOO_QUANTILES)
+        psis[:, i] = w
+    q = mixture_quantiles(mu, sd, psis[:, :, None] * wc, LOO_QUANTILES)  # (5, n)
     return LeaveOneOut(
         labels=list(labels) if labels is not None else [f"datum {i}" for i in range(n)],
         measured_hz=y,
-        quantiles_hz=q,
+        quantiles_hz=q.T,
         pointwise_elpd=elpd,
         pareto_k=kk,
     )

@@ -48,12 +48,12 @@ from fpm_sim.model.options import ModelOptions, resolution_summary
 from fpm_sim.results import frequencies_dataset
 from fpm_sim.study.discrepancy import LENGTH_SCALE_PARAMETER, conditional, pose_features
 from fpm_sim.study.identify.parameters import ParameterSet, parameter_set
-from fpm_sim.study.loo import LeaveOneOut, leave_one_out, loo_from_components
+from fpm_sim.study.loo import LeaveOneOut, leave_one_out, loo_from_components, mixture_quantiles
 from fpm_sim.study.poses import TableReading
 from fpm_sim.study.readout import (
     MODE_READ_ATTR,
     ModeRead,
-    components,
+    draws_components,
     mode_read_from_text,
     read_probabilities,
     sensor_residues,
@@ -420,12 +420,9 @@ class Posterior:
         dat = self.data
         if self.mode_read is not None and dat.f_modes_hz is not None and dat.read_probability is not None:
             d = np.asarray(self.likelihood[DISCREPANCY], float)
-            parts = [
-                components(dat.measured_hz, dat.sigma_hz, dat.f_modes_hz[i], dat.read_probability[i], float(d[i]),
-                           leave_out=True)
-                for i in range(self.n_draws)
-            ]  # fmt: skip
-            mu, sd, w = (np.stack([c[j] for c in parts]) for j in range(3))
+            mu, sd, w = draws_components(
+                dat.measured_hz, dat.sigma_hz, dat.f_modes_hz, dat.read_probability, d, leave_out=True
+            )
             return loo_from_components(mu, sd, w, dat.measured_hz, labels=dat.labels)
         return leave_one_out(
             self.data.f_hz,
@@ -485,33 +482,6 @@ def _predictive_quantiles(
             lo = np.where(below, x, lo)
             hi = np.where(below, hi, x)
     out: np.ndarray = np.where(n > 0, 0.5 * (lo + hi), np.nan)
-    return out
-
-
-def _mixture_quantiles(mu: np.ndarray, sd: np.ndarray, w: np.ndarray, levels: Sequence[float]) -> np.ndarray:
-    """``(len(levels), n_poses)`` quantiles, per pose, of the Gaussian mixture over the components ``(n_draws,
-    n_poses, n_components)`` (means, sds, weights; NaN components left out, weights renormalised per pose), by
-    bisection to round-off; NaN where a pose has no component."""
-    from scipy.special import ndtr
-
-    ok = np.isfinite(mu) & np.isfinite(sd) & np.isfinite(w) & (w > 0)
-    ww = np.where(ok, w, 0.0)
-    tot = ww.sum(axis=(0, 2))
-    ww = ww / np.where(tot > 0, tot, 1.0)[None, :, None]
-    m, s = np.where(ok, mu, 0.0), np.where(ok, sd, 1.0)
-    lo = np.where(ok, m - 12 * s, np.inf).min(axis=(0, 2))
-    hi = np.where(ok, m + 12 * s, -np.inf).max(axis=(0, 2))
-    out = np.full((len(levels), mu.shape[1]), np.nan)
-    has = tot > 0
-    for j, q in enumerate(levels):
-        a, b = np.where(has, lo, 0.0), np.where(has, hi, 0.0)  # poses without a component: left NaN below
-        for _ in range(80):
-            x = 0.5 * (a + b)
-            p = np.sum(ww * ndtr((x[None, :, None] - m) / s), axis=(0, 2))
-            below = p < q
-            a = np.where(below, x, a)
-            b = np.where(below, b, x)
-        out[j, has] = 0.5 * (a + b)[has]
     return out
 
 
@@ -587,7 +557,7 @@ class PredictiveBands:
         d = d[:, None, None] if d.ndim == 1 else d[:, :, None]
         sd = self.read_freq_hz * np.sqrt(d**2 + self.read_noise_rel**2)
         w = np.where(self.computed[:, :, None], self.read_weight, np.nan)
-        return _mixture_quantiles(self.read_freq_hz, sd, w, QUANTILES)
+        return mixture_quantiles(self.read_freq_hz, sd, w, QUANTILES)
 
     @property
     def n_draws(self) -> int:

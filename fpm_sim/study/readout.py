@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+from scipy.special import logsumexp
 
 from fpm_sim.batch.pose_loop import fast_options, pose_model
 from fpm_sim.config import Manipulator
@@ -44,6 +45,7 @@ __all__ = [
     "SENSOR_POINTS",
     "ModeRead",
     "components",
+    "draws_components",
     "mixture_log_likelihood",
     "mode_read_from_text",
     "mode_read_text",
@@ -164,17 +166,8 @@ def mixture_log_likelihood(
 
     ``y_hz``, ``sigma_hz``: ``(n,)``; ``freq_hz``: ``(n, modes)``; ``probs``: ``(n_setups, n, modes)``.
     """
-    f = np.asarray(freq_hz, float)
-    s2 = np.asarray(sigma_hz, float)[:, None] ** 2 + (d * f) ** 2
-    logn = -0.5 * (np.asarray(y_hz, float)[:, None] - f) ** 2 / s2 - 0.5 * np.log(2 * math.pi * s2)  # (n, modes)
-    with np.errstate(divide="ignore"):
-        lp = np.log(probs) + logn[None]  # (setups, n, modes)
-    m = lp.max(axis=-1, keepdims=True)
-    per_pose = (m[..., 0] + np.log(np.exp(lp - m).sum(axis=-1))).sum(axis=-1)  # (setups,)
-    top = float(per_pose.max())
-    if not math.isfinite(top):
-        return -math.inf
-    return top + math.log(float(np.mean(np.exp(per_pose - top))))
+    per_setup = _setup_log_likelihoods(_log_pose_terms(y_hz, sigma_hz, freq_hz, probs, d)[0])
+    return float(logsumexp(per_setup) - math.log(per_setup.size))
 
 
 def _log_pose_terms(
@@ -188,24 +181,26 @@ def _log_pose_terms(
         return np.log(probs) + logn[None], s
 
 
-def _logsumexp(a: np.ndarray, axis: int) -> np.ndarray:
-    m = np.max(a, axis=axis, keepdims=True)
-    m = np.where(np.isfinite(m), m, 0.0)
-    with np.errstate(divide="ignore"):
-        out: np.ndarray = np.squeeze(m, axis) + np.log(np.sum(np.exp(a - m), axis=axis))
+def _setup_log_likelihoods(lp: np.ndarray) -> np.ndarray:
+    """``(setups,)`` ``log prod_i sum_k`` of the pose terms ``lp`` (:func:`_log_pose_terms`)."""
+    out: np.ndarray = logsumexp(lp, axis=-1).sum(axis=-1)
+    return out
+
+
+def _normalised(log_w: np.ndarray, axis: int = 0) -> np.ndarray:
+    """``exp(log_w)`` normalised along ``axis``; where every weight is zero, zeros (not NaN)."""
+    with np.errstate(invalid="ignore"):  # -inf - -inf where every entry is impossible: zeroed
+        out: np.ndarray = np.nan_to_num(np.exp(log_w - logsumexp(log_w, axis=axis, keepdims=True)))
     return out
 
 
 def setup_weights(
     y_hz: np.ndarray, sigma_hz: np.ndarray, freq_hz: np.ndarray, probs: np.ndarray, d: float
 ) -> np.ndarray:
-    """``(setups,)`` the posterior probability of each setup given the data and one draw's machine."""
-    lp, _ = _log_pose_terms(y_hz, sigma_hz, freq_hz, probs, d)
-    tot = _logsumexp(lp, axis=-1).sum(axis=-1)
-    top = np.max(tot)
-    w = np.exp(tot - top) if math.isfinite(top) else np.ones_like(tot)
-    out: np.ndarray = w / w.sum()
-    return out
+    """``(setups,)`` the posterior probability of each setup given the data and one draw's machine (uniform
+    when the data rule every setup out)."""
+    tot = _setup_log_likelihoods(_log_pose_terms(y_hz, sigma_hz, freq_hz, probs, d)[0])
+    return _normalised(tot) if np.isfinite(tot).any() else np.full(tot.shape, 1.0 / tot.size)
 
 
 def responsibilities(
@@ -213,10 +208,9 @@ def responsibilities(
 ) -> np.ndarray:
     """``(n, modes)`` the probability that datum ``i`` was mode ``k``, given the data and one draw's machine."""
     lp, _ = _log_pose_terms(y_hz, sigma_hz, freq_hz, probs, d)
-    w = setup_weights(y_hz, sigma_hz, freq_hz, probs, d)
-    with np.errstate(invalid="ignore"):  # a setup that cannot read a datum: -inf - -inf, zeroed below
-        per = np.exp(lp - _logsumexp(lp, axis=-1)[..., None])  # (setups, n, modes): given the setup
-    out: np.ndarray = np.einsum("s,snk->nk", w, np.nan_to_num(per))
+    tot = _setup_log_likelihoods(lp)
+    w = _normalised(tot) if np.isfinite(tot).any() else np.full(tot.shape, 1.0 / tot.size)
+    out: np.ndarray = np.einsum("s,snk->nk", w, _normalised(lp, axis=-1))  # per setup: P(mode | datum, setup)
     return out
 
 
@@ -227,16 +221,32 @@ def components(
     setups * modes)``: mode ``k``'s frequency and sd under setup ``s``, weighted ``P(s | data) P_sik``, or with
     ``leave_out`` ``P(s | the other data) P_sik`` (the leave-one-out predictive of datum ``i``)."""
     lp, s = _log_pose_terms(y_hz, sigma_hz, freq_hz, probs, d)
-    per = _logsumexp(lp, axis=-1)  # (setups, n)
+    per = logsumexp(lp, axis=-1)  # (setups, n)
     n = per.shape[1]
     if leave_out:
         rest = np.stack([np.delete(per, i, axis=1).sum(axis=1) for i in range(n)], axis=1)  # (setups, n)
     else:
         rest = np.broadcast_to(per.sum(axis=1)[:, None], per.shape)
-    with np.errstate(invalid="ignore"):  # every setup impossible for the other data: NaN, zeroed below
-        w = np.exp(rest - _logsumexp(rest, axis=0)[None])  # (setups, n): P(s | ...)
-    weights = (np.nan_to_num(w)[:, :, None] * probs).transpose(1, 0, 2).reshape(n, -1)
+    w = _normalised(rest)  # (setups, n): P(s | ...)
+    weights = (w[:, :, None] * probs).transpose(1, 0, 2).reshape(n, -1)
     k = probs.shape[0]
     means = np.broadcast_to(np.asarray(freq_hz, float)[None], probs.shape).transpose(1, 0, 2).reshape(n, -1)
     sds = np.broadcast_to(s[None], (k, *s.shape)).transpose(1, 0, 2).reshape(n, -1)
     return means, sds, weights / weights.sum(axis=1, keepdims=True)
+
+
+def draws_components(
+    y_hz: np.ndarray,
+    sigma_hz: np.ndarray,
+    freq_hz: np.ndarray,
+    probs: np.ndarray,
+    d: np.ndarray,
+    *,
+    leave_out: bool,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`components` of every draw, stacked: ``(n_draws, n, setups * modes)`` means, sds and weights, from
+    each draw's ``freq_hz`` ``(n_draws, n, modes)``, ``probs`` ``(n_draws, setups, n, modes)`` and ``d``
+    ``(n_draws,)``."""
+    parts = [components(y_hz, sigma_hz, f, pr, float(dd), leave_out=leave_out) for f, pr, dd in zip(freq_hz, probs, d)]
+    means, sds, weights = (np.stack([c[j] for c in parts]) for j in range(3))
+    return means, sds, weights

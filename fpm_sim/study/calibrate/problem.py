@@ -63,6 +63,12 @@ def log_sigmoid_soft(z: np.ndarray, eps: float) -> np.ndarray:
     return out
 
 
+def _independent_log_likelihood(residual: np.ndarray, sd: np.ndarray) -> float:
+    """``sum_i log N(residual_i | 0, sd_i^2)``."""
+    r = residual / sd
+    return float(-0.5 * np.sum(r**2) - np.sum(np.log(sd)) - 0.5 * r.size * math.log(2 * math.pi))
+
+
 @dataclass(frozen=True)
 class CalibrationProblem:
     """Base description, free groups, priors, data and likelihood settings (see module docstring).
@@ -343,19 +349,15 @@ class CalibrationProblem:
             f_rig = self._rig_predictions(cfg)
             if not np.all(np.isfinite(f_rig)):
                 return -math.inf
-            s = self._sigma[n:]
-            r = (f_rig - self._measured[n:]) / s
-            ll += float(-0.5 * np.sum(r**2) - np.sum(np.log(s)) - 0.5 * len(r) * math.log(2 * math.pi))
+            ll += _independent_log_likelihood(f_rig - self._measured[n:], self._sigma[n:])
         return ll + self.statements_log_likelihood(cfg)
 
     def data_log_likelihood(self, f: np.ndarray, d: float, length_scale_m: float | None) -> float:
         """The data's ``log L`` at model frequencies ``f`` (module docstring), without the statements."""
         s = self.noise_sd(f, d)
-        r = (f - self._measured) / s
+        residual = f - self._measured
         n = len(self.observations)
         if length_scale_m is None or n == 0:
-            return float(-0.5 * np.sum(r**2) - np.sum(np.log(s)) - 0.5 * len(r) * math.log(2 * math.pi))
+            return _independent_log_likelihood(residual, s)
         cov = covariance(f[:n], self._sigma[:n], self.features, d, length_scale_m)
-        rigs = r[n:]
-        ll_rig = float(-0.5 * np.sum(rigs**2) - np.sum(np.log(s[n:])) - 0.5 * len(rigs) * math.log(2 * math.pi))
-        return gaussian_log_likelihood(f[:n] - self._measured[:n], cov) + ll_rig
+        return gaussian_log_likelihood(residual[:n], cov) + _independent_log_likelihood(residual[n:], s[n:])

@@ -23,7 +23,7 @@ import numpy as np
 from fpm_sim.figures import bands_against_measured
 from fpm_sim.study.calibrate.problem import CalibrationError, CalibrationProblem
 from fpm_sim.study.loo import LeaveOneOut, leave_one_out, loo_from_components
-from fpm_sim.study.readout import components, responsibilities
+from fpm_sim.study.readout import draws_components, responsibilities
 
 __all__ = ["Calibration", "SamplerOptions", "problem_digest", "run_calibration"]
 
@@ -154,8 +154,8 @@ class Calibration:
         p = self.problem
         n = len(p.observations)
         assert self.readouts is not None
-        parts = [components(p.measured[:n], p.sigma[:n], f, pr, d, leave_out=leave_out) for f, pr, d in self.readouts]
-        return tuple(np.stack([c[j] for c in parts]) for j in range(3))  # type: ignore[return-value]
+        freq, probs, d = (np.array([r[j] for r in self.readouts]) for j in range(3))
+        return draws_components(p.measured[:n], p.sigma[:n], freq, probs, d, leave_out=leave_out)
 
     @functools.cached_property
     def predictive_sample(self) -> np.ndarray:
