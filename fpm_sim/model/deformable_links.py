@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import mujoco
@@ -280,13 +281,25 @@ def _add_flex_host(
     host = parent.add_body(name=f"{link.name}_b0", pos=list(link.pos), quat=quat_z(link.angle_rad))
     # the rod between the start point and the first free vertex's cell: vertex v1 (at +l/2)
     # carries rho A l, as every interior vertex; hardware lumps sit at the start point
+    _finish_end_body(host, cell, link.start_lumps, f"{link.name}_p0", build)
+
+
+def _finish_end_body(
+    body: mujoco.MjsBody,
+    cell: tuple[float, np.ndarray, np.ndarray],
+    lumps: Sequence[LumpedMass],
+    site: str,
+    build: LinkBuild,
+) -> None:
+    """An end body of a flex link: its rod cell, the hardware lumps at the end, a small hub inertia, and the
+    end's site; recorded in ``build``."""
     parts = [cell]
-    parts += [lump_part(lump, np.zeros(3)) for lump in link.start_lumps if lump.mass_kg > 0]
+    parts += [lump_part(lump, np.zeros(3)) for lump in lumps if lump.mass_kg > 0]
     parts.append((0.0, np.zeros(3), np.eye(3) * _HUB_INERTIA_KG_M2))
-    _set_parts(host, parts)
-    host.add_site(name=f"{link.name}_p0", pos=[0.0, 0.0, 0.0], size=[0.002, 0, 0])
-    build.sites.append(f"{link.name}_p0")
-    build.bodies.append(host)
+    _set_parts(body, parts)
+    body.add_site(name=site, pos=[0.0, 0.0, 0.0], size=[0.002, 0, 0])
+    build.sites.append(site)
+    build.bodies.append(body)
 
 
 def _add_flex_vertex(
@@ -332,13 +345,7 @@ def _add_flex_hub(
         jn = f"{name}_hub_r{ax_name}"
         hub.add_joint(name=jn, type=mujoco.mjtJoint.mjJNT_HINGE, axis=list(axis))
         build.joints.append((jn, "flex_in" if ax_name == "z" else "flex_out"))
-    parts = [cell]
-    parts += [lump_part(lump, np.zeros(3)) for lump in link.end_lumps if lump.mass_kg > 0]
-    parts.append((0.0, np.zeros(3), np.eye(3) * _HUB_INERTIA_KG_M2))
-    _set_parts(hub, parts)
-    hub.add_site(name=f"{name}_p{n}", pos=[0.0, 0.0, 0.0], size=[0.002, 0, 0])
-    build.sites.append(f"{name}_p{n}")
-    build.bodies.append(hub)
+    _finish_end_body(hub, cell, link.end_lumps, f"{name}_p{n}", build)
 
 
 def _add_flex(spec: mujoco.MjSpec, link: LinkSpec, l_v: float, verts: _FlexVertices) -> None:
