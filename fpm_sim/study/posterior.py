@@ -360,19 +360,20 @@ class Posterior:
         v = self.likelihood.get(LENGTH_SCALE_PARAMETER)
         return None if v is None else np.asarray(v, float)
 
-    def discrepancy_at(self, index: np.ndarray, poses: Sequence[Pose]) -> tuple[np.ndarray, np.ndarray] | None:
-        """The model discrepancy at ``poses`` for draws ``index``: ``(shift, sd)``, each ``(len(index),
-        len(poses))`` relative (a frequency is ``f (1 + shift + sd z)``), or ``None`` without a discrepancy.
+    def discrepancy_at(self, index: np.ndarray, poses: Sequence[Pose]) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """The model discrepancy at ``poses`` for draws ``index``, relative (a frequency is ``f (1 + shift + sd
+        z)``): ``(shift, sd)`` as :class:`PredictiveBands` holds them.
 
-        Independent discrepancy: shift 0, sd ``d``. Gaussian process: the conditional given the draw's residuals
-        at the measured poses (:func:`fpm_sim.study.discrepancy.conditional`)."""
+        No discrepancy: ``(None, None)``. Independent: ``(None, d)``, ``d`` per draw ``(len(index),)``. Gaussian
+        process: each ``(len(index), len(poses))``, the conditional given the draw's residuals at the measured
+        poses (:func:`fpm_sim.study.discrepancy.conditional`)."""
         if DISCREPANCY not in self.likelihood:
-            return None
+            return None, None
         d = np.asarray(self.likelihood[DISCREPANCY], float)[index]
         shape = (len(index), len(poses))
         ls = self.length_scale_m
         if ls is None:
-            return np.zeros(shape), np.broadcast_to(d[:, None], shape).copy()
+            return None, d
         if self.data is None:
             raise self._error(
                 "a Gaussian-process discrepancy needs the data it was conditioned on",
@@ -923,7 +924,7 @@ def predict_bands(
     eng = dataclasses.replace(eng, desc="draws x poses" if eng.desc == "poses" else eng.desc)
     t0 = time.perf_counter()
     parts = solve_configs(configs, poses, n_modes=n_modes, options=opts, engine=eng)
-    disc = posterior.discrepancy_at(index, poses)
+    shift, sd = posterior.discrepancy_at(index, poses)
     read_f = read_w = None
     noise = 0.0
     if read and posterior.mode_read is not None and posterior.data is not None:
@@ -938,8 +939,8 @@ def predict_bands(
         options=opts,
         labels=list(labels) if labels is not None else None,
         elapsed_s=time.perf_counter() - t0,
-        discrepancy_rel=None if disc is None else (disc[1] if posterior.length_scale_m is not None else disc[1][:, 0]),
-        discrepancy_shift=None if disc is None or posterior.length_scale_m is None else disc[0],
+        discrepancy_rel=sd,
+        discrepancy_shift=shift,
         read_freq_hz=read_f,
         read_weight=read_w,
         read_noise_rel=noise,
