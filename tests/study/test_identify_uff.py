@@ -17,14 +17,16 @@ from fpm_sim.study.identify.ema import EmaError, estimate_modes, read_frfs, writ
 from tests.helpers.truths import reference_config  # the tests' reference geometry, shared with the impact road
 
 SEGMENTS = 3
-# What LSCF with sdypy-EMA's stabilisation chart promises on a noise-free rational FRF. The reported pole is the
-# one nearest each peak among those stable between consecutive polynomial orders (fn_tol 1e-3, xi_tol 5e-2), so
-# which order supplies it depends on floating-point detail: 1e-8 relative here (numpy 2.4 / scipy 1.17 /
-# sdypy-EMA 0.31.0), 2.5e-5 on a newcomer's machine with the same sdypy-EMA (130.0032 Hz for 130 Hz). 1e-4 is
-# 4x the worst seen and 10x inside the chart's own fn_tol. A pole's error spreads to its real part, so the
-# damping ratio's relative error is about the frequency's divided by zeta (0.01 here): 2.5e-3, hence 5e-3.
-EMA_FREQ_RTOL = 1e-4
-EMA_DAMPING_RTOL = 5e-3
+# What LSCF with sdypy-EMA's stabilisation chart promises on a noise-free rational FRF. Every model order at or
+# above the true one reproduces the poles up to round-off amplified by the least-squares normal equations; a few
+# high orders are ill-conditioned and off by 1e-5 in frequency and 1 % in damping (issue 32: one such order was
+# picked under OPENBLAS_CORETYPE=Haswell). estimate_modes reports the median of the chart's stable column (about
+# 35 orders), which is off only if half the orders are: measured 2e-10 in frequency and 3e-8 in damping on three
+# BLAS kernels and under 1e-12 jitter. A damping ratio's relative error is the pole's error over zeta |s|, so it
+# is 10^2-10^3 times the frequency's at zeta ~ 0.01. The tolerances leave a 10^3-10^4 margin for other kernels
+# and still fail on any single spoiled order (1e-5 in frequency, 1e-2 in damping).
+EMA_FREQ_RTOL = 1e-7
+EMA_DAMPING_RTOL = 1e-4
 POSES_MM = [(0.0, 0.0, 0.2), (50.0, -50.0, 0.0), (-50.0, 50.0, 0.0), (100.0, 0.0, 0.2)]
 
 
@@ -40,15 +42,19 @@ def test_uff58_round_trip_is_exact_and_carries_the_pose(tmp_path):
     np.testing.assert_allclose(back.h, h, rtol=1e-10)
 
 
-def test_ema_recovers_known_poles():
+@pytest.mark.parametrize("jitter_seed", [None, 1, 2, 3])
+def test_ema_recovers_known_poles(jitter_seed):
     f = np.arange(0.0, 400.0, 0.25)
     w = 2 * np.pi * f
     fn, zeta = np.array([40.0, 65.0, 130.0]), np.array([0.01, 0.015, 0.01])
     h = sum(-(w**2) / ((2 * np.pi * a) ** 2 - w**2 + 2j * z * 2 * np.pi * a * w) for a, z in zip(fn, zeta))
+    if jitter_seed is not None:
+        # another machine's round-off, imitated: which order the chart's argmin picks must not matter
+        h = h * (1 + 1e-12 * np.random.default_rng(jitter_seed).standard_normal(h.shape))
     from fpm_sim.study.identify.ema import MeasuredFrf
 
     est = estimate_modes(MeasuredFrf(f, h, "synthetic", (0, 0, 0)), f_lower_hz=5, f_upper_hz=300, n_modes=3)
-    # noise-free rational FRF: LSCF exact up to which stable order is picked (EMA_FREQ_RTOL says why)
+    # noise-free rational FRF: the stable column's median is exact to round-off (EMA_FREQ_RTOL says why)
     np.testing.assert_allclose(est.freq_hz, fn, rtol=EMA_FREQ_RTOL)
     np.testing.assert_allclose(est.damping, zeta, rtol=EMA_DAMPING_RTOL)
 

@@ -244,8 +244,7 @@ def estimate_modes(
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
         model.get_poles(method="lscf", show_progress=False)
         model.select_closest_poles(approx, f_window=max(2.0, 0.05 * min(approx)), fn_temp=fn_tol, xi_temp=xi_tol)
-    fn = np.asarray(model.nat_freq, float)
-    xi = np.asarray(model.nat_xi, float)
+    fn, xi = _stable_column_medians(model.all_poles, np.asarray(model.nat_freq, float), fn_tol=fn_tol)
     tau = frf.window_tau_s if window_tau_s is None else window_tau_s
     tau = None if tau == np.inf else tau  # an infinite time constant: no window
     if tau is not None:
@@ -260,6 +259,33 @@ def estimate_modes(
             raise reraise_as(EmaError, e) from None
     order = np.argsort(fn)
     return ModalEstimate(frf.source, frf.pose_mm_rad, fn[order], xi[order], window_tau_s=tau, discrete_step_s=step)
+
+
+def _stable_column_medians(
+    poles_by_order: Sequence[np.ndarray], picked_fn_hz: np.ndarray, *, fn_tol: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each picked pole's column of the stabilisation chart, read as one value: the median over model orders.
+
+    sdypy-EMA reports the single stable pole nearest the column's centre, so *which order* supplies it is an
+    argmin that round-off can flip; an ill-conditioned high order's pole is often off by 1 % in damping while
+    its frequency is within ``fn_tol``. An analyst reads the column, not one of its points: here every physical
+    pole (positive damping) of every order within ``fn_tol`` (relative) of the picked frequency, and its
+    frequency (Hz) and damping ratio are the medians over them, which one spoiled order cannot move.
+    """
+    fn_all, xi_all = [], []
+    for s in poles_by_order:
+        s = np.ravel(np.asarray(s, complex))
+        s = s[np.imag(s) > 0]  # one of each conjugate pair
+        w = np.abs(s)
+        fn_all.append(w / (2 * np.pi))
+        xi_all.append(-np.real(s) / np.where(w > 0, w, 1.0))
+    fn_cat, xi_cat = np.concatenate(fn_all), np.concatenate(xi_all)
+    fn_out, xi_out = np.empty_like(picked_fn_hz), np.empty_like(picked_fn_hz)
+    for k, f0 in enumerate(picked_fn_hz):
+        column = (np.abs(fn_cat / f0 - 1.0) < fn_tol) & (xi_cat > 0)
+        # the picked pole is a stable one within fn_tol of itself, so the column is never empty
+        fn_out[k], xi_out[k] = np.median(fn_cat[column]), np.median(xi_cat[column])
+    return fn_out, xi_out
 
 
 def remove_window_decay(
