@@ -25,6 +25,8 @@ else keyword-only; the model options are one ``options=fs.ModelOptions(...)``::
     fs.calibrate(cfg, priors="p.toml", measured=["f.csv"])  # Bayesian updating: a posterior
     fs.reproduce(cfg)                         # the study's tests and 25 poses
     fs.export_mjcf(cfg, pose)                 # the generated MJCF
+    delta = fs.load_description("examples/architectures/delta.toml")  # any architecture (docs/architectures.md)
+    fs.modes(delta, fs.TaskPose.from_mm(x_mm=50, z_mm=-320))          # in its own task coordinates
     fs.check_requirements(fs.load_requirements("fpm-requirements.toml"), cfg)  # docs/testing.md
     fs.predict_bands("posterior.nc", pose)    # median and 5-95 % bands over a posterior's draws
 
@@ -42,6 +44,8 @@ _API = {
     "load_config": "fpm_sim.config",
     "default_config": "fpm_sim.config",
     "Pose": "fpm_sim.kinematics",
+    "load_description": "fpm_sim.architecture",
+    "TaskPose": "fpm_sim.architecture",
     "ModelOptions": "fpm_sim.model.options",
     "LinkPoint": "fpm_sim.response",
     "FpmSimError": "fpm_sim.errors",

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Literal, overload
 
 if TYPE_CHECKING:
+    from fpm_sim.architecture import Description, TaskPose
     from fpm_sim.config import Manipulator, RigConfig
     from fpm_sim.designs.study import DesignResult
     from fpm_sim.kinematics import Pose
@@ -89,9 +90,23 @@ def _options(options: ModelOptions | None, *, stacklevel: int = 3) -> ModelOptio
     return options
 
 
-def _built(config: Manipulator | None, pose: Pose | None, options: ModelOptions | None) -> BuiltModel:
+def _built(
+    config: Manipulator | Description | None, pose: Pose | TaskPose | None, options: ModelOptions | None
+) -> BuiltModel:
+    from fpm_sim.architecture import Description, TaskPose
+
+    if isinstance(config, Description):  # a described architecture (fpm_sim.architecture)
+        from fpm_sim.model.general import build_general
+
+        if pose is not None and not isinstance(pose, TaskPose):
+            raise TypeError("a described architecture takes a fs.TaskPose (x_m, y_m, z_m, phi_rad)")
+        home = config.check_poses[0] if config.check_poses else {}
+        task_pose = pose if pose is not None else TaskPose(*(home.get(c, 0.0) for c in ("x", "y", "z", "phi")))
+        return build_general(config, task_pose, _options(options, stacklevel=4))
     from fpm_sim.model.manipulator import build_manipulator
 
+    if isinstance(pose, TaskPose):
+        raise TypeError("the 3RRR takes a fs.Pose (x_m, y_m, phi_rad)")
     return build_manipulator(_config(config), _pose(pose), _options(options, stacklevel=4))
 
 
@@ -110,8 +125,8 @@ def _aligned(
 
 @overload
 def modes(
-    config: Manipulator | None = None,
-    pose: Pose | None = None,
+    config: Manipulator | Description | None = None,
+    pose: Pose | TaskPose | None = None,
     *,
     options: ModelOptions | None = None,
     n_modes: int | None = 10,
@@ -121,8 +136,8 @@ def modes(
 
 @overload
 def modes(
-    config: Manipulator | None = None,
-    pose: Pose | None = None,
+    config: Manipulator | Description | None = None,
+    pose: Pose | TaskPose | None = None,
     *,
     options: ModelOptions | None = None,
     n_modes: int | None = 10,
@@ -131,8 +146,8 @@ def modes(
 
 
 def modes(
-    config: Manipulator | None = None,
-    pose: Pose | None = None,
+    config: Manipulator | Description | None = None,
+    pose: Pose | TaskPose | None = None,
     *,
     options: ModelOptions | None = None,
     n_modes: int | None = 10,
@@ -143,9 +158,13 @@ def modes(
     Parameters
     ----------
     config
-        Manipulator description; ``None``: the embedded study prototype.
+        Manipulator description: the 3RRR's (:class:`fpm_sim.config.Manipulator`; ``None``: the embedded study
+        prototype) or any described architecture (:class:`fpm_sim.architecture.Description`,
+        ``fs.load_description``).
     pose
-        End-effector pose (m, m, rad); ``None``: ``(0, 0, 0)``.
+        End-effector pose: a :class:`fpm_sim.kinematics.Pose` (m, m, rad; ``None``: ``(0, 0, 0)``) for the 3RRR,
+        a :class:`fpm_sim.architecture.TaskPose` in the architecture's task coordinates for a described one
+        (``None``: its first check pose).
     options
         Model options; ``None``: ``ModelOptions()`` (standard resolution, gravity, axial springs).
     n_modes
@@ -1010,8 +1029,8 @@ def reproduce(
 
 
 def export_mjcf(
-    config: Manipulator | None = None,
-    pose: Pose | None = None,
+    config: Manipulator | Description | None = None,
+    pose: Pose | TaskPose | None = None,
     *,
     rig: str | None = None,
     angle_deg: float = 180.0,
@@ -1033,8 +1052,11 @@ def export_mjcf(
     """
     if rig is None:
         return _built(config, pose, options).to_xml()
+    from fpm_sim.architecture import Description
     from fpm_sim.model.rigs import RigSetup, build_rig, rig_piece
 
+    if isinstance(config, Description):
+        raise TypeError("the rigs are the study's test pieces: export a described architecture with rig=None")
     cfg = _config(config)
     built = build_rig(
         RigSetup(rig, angle_deg=angle_deg), piece or rig_piece(cfg), _options(options), compliance=cfg.compliance

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -25,6 +26,7 @@ from fpm_sim.errors import FpmSimError
 from fpm_sim.outputs import prove_creatable
 
 if TYPE_CHECKING:
+    from fpm_sim.architecture import Description, TaskPose
     from fpm_sim.config import Manipulator
     from fpm_sim.kinematics import Pose
     from fpm_sim.model.options import ModelOptions
@@ -50,11 +52,13 @@ __all__ = [
     "engine_options",
     "error_line",
     "finish_store",
+    "load_machine",
     "load_manipulator",
     "mm",
     "model_options",
     "pose_of",
     "read_input_file",
+    "task_pose_of",
     "with_resolution",
     "workers_of",
 ]
@@ -279,11 +283,12 @@ def add_model_args(p: argparse.ArgumentParser, *, axial: bool = True) -> None:
 
 
 def add_pose_args(p: argparse.ArgumentParser) -> None:
-    """``--x-mm``, ``--y-mm``, ``--phi-rad``."""
-    g = p.add_argument_group("pose")
-    g.add_argument("--x-mm", type=float, default=0.0, help="end-effector x (mm)")
-    g.add_argument("--y-mm", type=float, default=0.0, help="end-effector y (mm)")
-    g.add_argument("--phi-rad", type=float, default=0.0, help="end-effector rotation (rad, within -pi..pi)")
+    """``--x-mm``, ``--y-mm``, ``--z-mm``, ``--phi-rad``: the task coordinates (those the architecture has)."""
+    g = p.add_argument_group("pose (the architecture's task coordinates; default: its first check pose, or 0)")
+    g.add_argument("--x-mm", type=float, default=None, help="end-effector x (mm)")
+    g.add_argument("--y-mm", type=float, default=None, help="end-effector y (mm)")
+    g.add_argument("--z-mm", type=float, default=None, help="end-effector z (mm; spatial architectures: the Delta)")
+    g.add_argument("--phi-rad", type=float, default=None, help="end-effector rotation (rad, within -pi..pi)")
 
 
 def add_output_args(p: argparse.ArgumentParser) -> None:
@@ -319,6 +324,10 @@ def load_manipulator(args: argparse.Namespace) -> Manipulator:
         raise CliError(f"--config {path} is a folder, not a file; give a TOML description (see 'fpm-sim config')")
     if not path.exists():
         raise CliError(f"--config {path}: file not found; check the path (fpm-sim config prints a template)")
+    from fpm_sim.architecture import is_description_file
+
+    if is_description_file(path):
+        raise CliError(_not_yet(str(getattr(args, "command", None) or "this command"), path))
     return load_config(path)
 
 
@@ -342,10 +351,59 @@ def model_options(args: argparse.Namespace, **overrides: Any) -> ModelOptions:
 
 
 def pose_of(args: argparse.Namespace) -> Pose:
-    """The pose of ``--x-mm``, ``--y-mm``, ``--phi-rad``; a rotation beyond pi is refused, not wrapped."""
+    """The 3RRR's pose of ``--x-mm``, ``--y-mm``, ``--phi-rad`` (each 0 when not given); a rotation beyond pi is
+    refused, not wrapped; ``--z-mm`` is refused (the 3RRR's task coordinates are x, y, phi)."""
     from fpm_sim.kinematics import checked_pose_mm
 
-    return checked_pose_mm(args.x_mm, args.y_mm, args.phi_rad)
+    if getattr(args, "z_mm", None) is not None:
+        raise CliError("--z-mm: the 3RRR's task coordinates are x, y and phi; drop --z-mm")
+    return checked_pose_mm(*(0.0 if v is None else v for v in (args.x_mm, args.y_mm, args.phi_rad)))
+
+
+GENERAL_COMMANDS = ("modes", "export-mjcf", "sweep")
+"""The commands that run on a described architecture (``[[chains]]``) so far; the others say so."""
+
+
+def load_machine(args: argparse.Namespace, command: str) -> Manipulator | Description:
+    """The 3RRR description of ``--config``, or a described architecture (``[[chains]]``, :mod:`fpm_sim.architecture`)
+    for the commands of :data:`GENERAL_COMMANDS`."""
+    from fpm_sim.architecture import is_description_file, load_description
+
+    path = getattr(args, "config", None)
+    if path and Path(path).is_file() and is_description_file(path):
+        if command not in GENERAL_COMMANDS:
+            raise CliError(_not_yet(command, Path(path)))
+        return load_description(path)
+    return load_manipulator(args)
+
+
+def _not_yet(command: str, path: Path) -> str:
+    return (
+        f"--config {path} describes an architecture of its own ([[chains]]); '{command}' runs on the study's 3RRR "
+        f"form only so far. On a described architecture run: {', '.join(GENERAL_COMMANDS)}"
+    )
+
+
+def task_pose_of(args: argparse.Namespace, desc: Description) -> TaskPose:
+    """The task pose of the pose options for a described architecture: an option the architecture has no task
+    coordinate for is refused by name; a coordinate not given takes the description's first check pose (or 0)."""
+    from fpm_sim.architecture import TaskPose
+
+    given = {"x": args.x_mm, "y": args.y_mm, "z": getattr(args, "z_mm", None), "phi": args.phi_rad}
+    flags = {"x": "--x-mm", "y": "--y-mm", "z": "--z-mm", "phi": "--phi-rad"}
+    for c, v in given.items():
+        if v is not None and c not in desc.task:
+            raise CliError(
+                f"{flags[c]}: {desc.name} has no task coordinate {c} (its task coordinates are "
+                f"{', '.join(desc.task)}); drop {flags[c]}"
+            )
+        if v is not None and not math.isfinite(v):
+            raise CliError(f"{flags[c]}: must be a finite number, got {v}")
+    if given["phi"] is not None and abs(given["phi"]) > math.pi:
+        raise CliError(f"--phi-rad {given['phi']:g} is outside -pi..pi; give it in radians within -pi..pi")
+    home = desc.check_poses[0] if desc.check_poses else {}
+    si = {c: (given[c] * (1.0 if c == "phi" else 1e-3) if given[c] is not None else home.get(c, 0.0)) for c in given}
+    return TaskPose(x_m=si["x"], y_m=si["y"], z_m=si["z"], phi_rad=si["phi"])
 
 
 def with_resolution(payload: dict[str, Any], options: ModelOptions) -> dict[str, Any]:

@@ -40,10 +40,12 @@ try:  # Ctrl-C while the modules load (a second or so): one line and 130, as at 
         count_arg,
         emit,
         error_line,
+        load_machine,
         load_manipulator,
         mm,
         model_options,
         pose_of,
+        task_pose_of,
         with_resolution,
     )
     from fpm_sim.errors import FpmSimError, FpmSimWarning
@@ -150,7 +152,6 @@ def _shapes_and_plot(args: argparse.Namespace, result: ModalResult | ModalCompar
 
 def cmd_modes(args: argparse.Namespace) -> int:
     from fpm_sim.linear.analysis import analyse
-    from fpm_sim.model.manipulator import build_manipulator
     from fpm_sim.model.options import warn_if_coarse
 
     check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
@@ -166,19 +167,18 @@ def cmd_modes(args: argparse.Namespace) -> int:
             text += f"\nbands plotted to {args.plot}"
         emit(args, payload, text)
         return 0
-    manip = load_manipulator(args)
-    pose = pose_of(args)
+    machine = load_machine(args, "modes")
     opts = model_options(args)
     warn_if_coarse(opts)
-    built = build_manipulator(manip, pose, opts)
+    built, pose_label = _build_machine(args, machine, opts)
     result = analyse(built, args.method, args.n_modes)
     payload, table = result.to_dict(args.n_modes), result.table(args.n_modes)
-    payload["config"] = manip.name
-    payload["manipulator"] = manip.to_dict()
+    payload["config"] = machine.name
+    payload["manipulator"] = machine.to_dict()
     with_resolution(payload, opts)
     note = _shapes_and_plot(args, result, payload)
     text = (
-        _header(built, f"{manip.name}\n  pose {pose.label()}")
+        _header(built, f"{machine.name}\n  pose {pose_label}")
         + "\n"
         + table  # ends with the resolution line
         + _n_modes_note(result, args.n_modes)
@@ -186,6 +186,22 @@ def cmd_modes(args: argparse.Namespace) -> int:
     )
     emit(args, payload, text)
     return 0
+
+
+def _build_machine(args: argparse.Namespace, machine: Any, opts: Any) -> tuple[BuiltModel, str]:
+    """The model of the 3RRR (at ``pose_of``) or of a described architecture (at ``task_pose_of``), and the pose's
+    label."""
+    from fpm_sim.architecture import Description
+
+    if isinstance(machine, Description):
+        from fpm_sim.model.general import build_general
+
+        task_pose = task_pose_of(args, machine)
+        return build_general(machine, task_pose, opts), task_pose.label(machine.task)
+    from fpm_sim.model.manipulator import build_manipulator
+
+    pose = pose_of(args)
+    return build_manipulator(machine, pose, opts), pose.label()
 
 
 def _rig_setup(args: argparse.Namespace) -> Any:
@@ -281,16 +297,20 @@ def cmd_config(args: argparse.Namespace) -> int:
 
 
 def cmd_export_mjcf(args: argparse.Namespace) -> int:
-    from fpm_sim.model.manipulator import build_manipulator
+    from fpm_sim.config import Manipulator
     from fpm_sim.model.rigs import build_rig
     from fpm_sim.outputs import atomic_file
 
     check_output_file(args.out, "--out", (".xml",), overwrite=args.overwrite)
-    manip = load_manipulator(args)
+    machine = load_machine(args, "export-mjcf")
     opts = model_options(args)
     if args.what == "manipulator":
-        built = build_manipulator(manip, pose_of(args), opts)
+        built, _ = _build_machine(args, machine, opts)
+    elif not isinstance(machine, Manipulator):
+        raise CliError(f"export-mjcf {args.what}: the rigs are the study's own test pieces; on a described "
+                       "architecture export the manipulator")
     else:
+        manip = machine
         args.rig = args.what
         built = build_rig(_rig_setup(args), _rig_piece(args, manip), opts, compliance=manip.compliance)
     xml = built.to_xml()

@@ -492,6 +492,12 @@ def load_config(path: str | Path) -> Manipulator:
         data = tomllib.loads(p.read_text())
     except FileNotFoundError as exc:
         raise ConfigError(f"config file not found: {p}") from exc
+    except IsADirectoryError as exc:
+        raise ConfigError(f"{p} is a folder, not a TOML file", hint="give the description's .toml file") from exc
+    except UnicodeDecodeError as exc:
+        raise ConfigError(
+            f"{p} is not a TOML file (not UTF-8 text: byte {exc.start})", hint="give the description's .toml file"
+        ) from exc
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{p}: invalid TOML: {exc}") from exc
     try:

@@ -136,7 +136,7 @@ def eigenvalue_tolerances(
     evaluation): above it the noise (measured 1e-4 rad^2/s^2) is below 1e-6 of ``w^2`` and cannot change a
     classification."""
     w_ref = 2 * np.pi * reference_frequency_hz(model, mass)
-    if stiff_change is None or np.min(w2) > (0.1 * w_ref) ** 2:
+    if stiff_change is None or w2.size == 0 or np.min(w2) > (0.1 * w_ref) ** 2:  # (none: a rigid structure)
         fd = np.zeros(shapes.shape[1])
     else:
         fd = np.abs(np.einsum("ik,ij,jk->k", shapes, stiff_change(), shapes))

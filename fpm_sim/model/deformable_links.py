@@ -219,6 +219,8 @@ def add_flex_link(spec: mujoco.MjSpec, parent: mujoco.MjsBody, link: LinkSpec) -
         If ``damping_beta_s > 0``: bending is damped only along the current curvature.
     """
     _check_engine("flex")
+    if not isinstance(link.section, Section):
+        raise LinkModelError("a flex link takes a rectangular section", parameter="section", value=link.section)
     _warn_if_not_square(link.section)
     n = link.segments
     l_v = flex_spacing_m(link.length_m, n, free_start=link.free_start, free_end=link.free_end)

@@ -35,8 +35,9 @@ from collections.abc import Callable
 import mujoco
 import numpy as np
 
+from fpm_sim.architecture.description import AnySection
 from fpm_sim.beam_theory import shear_coefficient_rectangle
-from fpm_sim.config import Material, Section
+from fpm_sim.config import Material
 from fpm_sim.model.deformable_links import add_cable_link, add_flex_link
 from fpm_sim.model.parts import (
     LinkBuild,
@@ -46,7 +47,6 @@ from fpm_sim.model.parts import (
     box_part,
     check_link_model,
     lump_part,
-    quat_z,
     set_inertial,
 )
 
@@ -111,7 +111,7 @@ def add_link(spec: mujoco.MjSpec, parent: mujoco.MjsBody, link: LinkSpec) -> Lin
     return LINK_BUILDERS[link.link_model](spec, parent, link)
 
 
-def _segment_stiffness(section: Section, material: Material) -> dict[str, float]:
+def _segment_stiffness(section: AnySection, material: Material) -> dict[str, float]:
     """Stiffness times length of each spring kind (N m^2 for rotations, N for slides; divide by the spacing)."""
     shear_ga = shear_coefficient_rectangle(material.poisson) * material.shear_pa * section.area_m2
     return {
@@ -134,13 +134,14 @@ def add_segment_link(spec: mujoco.MjSpec, parent: mujoco.MjsBody, link: LinkSpec
         l_seg = (length_m - 2.0 * hub_m) / link.segments
         lengths = [hub_m + l_seg / 2.0] + [l_seg] * (link.segments - 1) + [l_seg / 2.0 + hub_m]
     k = _segment_stiffness(sec, mat)
-    kinds = ["bend_in", "bend_out", "twist"] + (["axial"] if link.axial else [])
+    # a link without spin inertia (free to spin between two ball joints) carries no torque along itself: no twist
+    kinds = ["bend_in", "bend_out"] + (["twist"] if link.spin_inertia else []) + (["axial"] if link.axial else [])
     kinds += ["shear_in", "shear_out"] if link.shear else []
     build = LinkBuild(name=name, bodies=[], piece_lengths_m=lengths)
     body = parent
     for j, piece in enumerate(lengths):
         if j == 0:
-            body = body.add_body(name=f"{name}_b0", pos=list(link.pos), quat=quat_z(link.angle_rad))
+            body = body.add_body(name=f"{name}_b0", pos=list(link.pos), quat=link.start_quat)
         else:
             body = body.add_body(name=f"{name}_b{j}", pos=[lengths[j - 1], 0.0, 0.0])
             l_spring = (length_m - 2.0 * hub_m) / link.segments
@@ -148,7 +149,7 @@ def add_segment_link(spec: mujoco.MjSpec, parent: mujoco.MjsBody, link: LinkSpec
                 jn = f"{name}_s{j}_{kind}"
                 _add_spring(body, jn, kind, k[kind] / l_spring, link.damping_beta_s)
                 build.joints.append((jn, kind))
-        parts = [box_part(piece, sec, mat, 0.0, rotary_inertia=link.rotary_inertia)]
+        parts = [box_part(piece, sec, mat, 0.0, rotary_inertia=link.rotary_inertia, spin_inertia=link.spin_inertia)]
         if j == 0:
             parts += [lump_part(lump, np.zeros(3)) for lump in link.start_lumps if lump.mass_kg > 0]
         if j == len(lengths) - 1:

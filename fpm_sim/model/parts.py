@@ -11,6 +11,7 @@ from typing import cast
 import mujoco
 import numpy as np
 
+from fpm_sim.architecture.description import AnySection
 from fpm_sim.config import LumpedMass, Material, Section
 from fpm_sim.errors import FpmSimError
 
@@ -116,7 +117,7 @@ class LinkSpec:
     pos_m: tuple[float, float, float]
     angle_rad: float
     length_m: float
-    section: Section
+    section: AnySection
     material: Material
     link_model: str = "segments"
     segments: int = 12
@@ -130,6 +131,18 @@ class LinkSpec:
     rgba: tuple[float, float, float, float] = (0.3, 0.5, 0.8, 1.0)
     free_start: bool = False
     free_end: bool = False
+    spin_inertia: bool = True
+    """False: the pieces' inertia about the link's own axis is dropped (to 1e-6 of the others: MuJoCo needs it
+    positive): a link whose spin is free between two ball joints carries none of it into the other modes, and no
+    torque along itself, so it gets no twist springs either (``segments`` and ``rigid`` only)."""
+    quat: tuple[float, float, float, float] | None = None
+    """Orientation of the link frame in the parent's (w, x, y, z), for links out of the base plane (``segments``
+    and ``rigid`` only); None: ``angle_rad`` about z."""
+
+    @property
+    def start_quat(self) -> list[float]:
+        """The link frame's orientation in the parent frame (w, x, y, z)."""
+        return list(self.quat) if self.quat is not None else quat_z(self.angle_rad)
 
     @property
     def pos(self) -> np.ndarray:
@@ -194,7 +207,13 @@ def lump_part(lump: LumpedMass, pos: np.ndarray) -> tuple[float, np.ndarray, np.
 
 
 def box_part(
-    length: float, section: Section, material: Material, x0: float, *, rotary_inertia: bool = False
+    length: float,
+    section: AnySection,
+    material: Material,
+    x0: float,
+    *,
+    rotary_inertia: bool = False,
+    spin_inertia: bool = True,
 ) -> tuple[float, np.ndarray, np.ndarray]:
     """A box piece along x from ``x0`` to ``x0 + length``.
 
@@ -202,13 +221,20 @@ def box_part(
     ``t^2/12`` and ``h^2/12`` terms), keeping the ``l^2/12`` term of the piece's distributed mass:
     the chain then converges to an Euler-Bernoulli beam instead of a Rayleigh beam.
     """
-    t, h = section.thickness_m, section.height_m
-    m = material.density_kg_m3 * length * t * h
     r = 1.0 if rotary_inertia else 0.0
-    iyy, izz = m * (length**2 + r * h**2) / 12.0, m * (length**2 + r * t**2) / 12.0
+    if isinstance(section, Section):
+        t, h = section.thickness_m, section.height_m
+        m = material.density_kg_m3 * length * t * h
+        iyy, izz = m * (length**2 + r * h**2) / 12.0, m * (length**2 + r * t**2) / 12.0
+        polar = m * (t**2 + h**2) / 12.0
+    else:  # any other section (tube, general): the same terms from its constants (radii of gyration I / A)
+        m = material.density_kg_m3 * length * section.area_m2
+        gz, gy = section.gyration_sq_m2  # about the link's z (in-plane bending) and y axes
+        iyy, izz = m * (length**2 / 12.0 + r * gy), m * (length**2 / 12.0 + r * gz)
+        polar = m * (gy + gz)
     # Without rotary inertia the twist inertia is capped at iyy + izz (MuJoCo's triangle inequality),
     # 1e-5 below it so that the inequality survives the rounding of the written MJCF.
-    ixx = min(m * (t**2 + h**2) / 12.0, (iyy + izz) * (1.0 - 1e-5))
+    ixx = min(polar, (iyy + izz) * (1.0 - 1e-5)) if spin_inertia else 1e-6 * (iyy + izz)
     i = np.diag([ixx, iyy, izz])
     return (m, np.array([x0 + length / 2.0, 0.0, 0.0]), i)
 
@@ -217,7 +243,7 @@ def add_box_geom(
     body: mujoco.MjsBody,
     name: str,
     length: float,
-    section: Section,
+    section: AnySection,
     x0: float,
     rgba: tuple[float, float, float, float],
 ) -> None:

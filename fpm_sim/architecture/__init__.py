@@ -1,0 +1,43 @@
+"""Any flexible manipulator: its description (chains of joints and links, end effector, task coordinates), read
+from TOML, and its kinematics (inverse, forward, closure, mobility, singularity). Below ``model``, which builds the
+MuJoCo model from a description assembled at a pose."""
+
+from fpm_sim.architecture.description import (
+    ChainDesc,
+    Description,
+    EndEffectorDesc,
+    GeneralSection,
+    JointDesc,
+    LinkDesc,
+    PlacedLump,
+    TubeSection,
+)
+from fpm_sim.architecture.kinematics import (
+    MobilityError,
+    TaskAssembly,
+    TaskPose,
+    UnreachableTaskPoseError,
+    check_mobility,
+    solve_task_pose,
+)
+from fpm_sim.architecture.reader import is_description_file, load_description, parse_description
+
+__all__ = [
+    "ChainDesc",
+    "Description",
+    "EndEffectorDesc",
+    "GeneralSection",
+    "JointDesc",
+    "LinkDesc",
+    "MobilityError",
+    "PlacedLump",
+    "TaskAssembly",
+    "TaskPose",
+    "TubeSection",
+    "UnreachableTaskPoseError",
+    "check_mobility",
+    "is_description_file",
+    "load_description",
+    "parse_description",
+    "solve_task_pose",
+]

@@ -1,0 +1,536 @@
+"""Kinematics of any described manipulator: inverse and forward kinematics, closure, mobility, singularity.
+
+**Unknowns.** Every moving joint's coordinates (chain by chain, path order; a revolute or prismatic joint has one,
+a universal two, a spherical three: a rotation vector) and the end effector's coordinates that the task leaves
+free (planar: of ``x, y, phi``; spatial: of ``x, y, z`` and a rotation vector).
+
+**Closure.** A chain ending on the end effector through joint ``J`` at attachment point ``a`` must bring its end
+frame ``(p, R)`` onto it: ``p = p_E + R_E a`` (three rows), and by ``J``'s type a revolute's axis ``R n = R_E n``
+(the cross product: two independent rows), a fixed joint's frame ``R = R_E`` (nine rows, three independent), a
+spherical nothing more. Rotation rows are scaled by the characteristic length (:func:`characteristic_length_m`).
+
+**Inverse kinematics** solves the closures for the unknowns at the task coordinates by Gauss-Newton with
+minimum-norm steps (a rod between two spherical joints keeps its spin at zero), from the working mode's start
+(each branch interval's middle), then from seeded random starts; the first solution whose coordinates lie in every
+working-mode interval is taken. A pose no start reaches is refused (:class:`UnreachableTaskPoseError`).
+
+**Mobility and singularity** come from the closure's Jacobian in consistent units (rotation columns times the
+characteristic length ``ell``): with the actuated joints locked, the free end effector and the passive joints must
+not move (type 2: ``[J_passive, J_ee]`` full column rank, less the idle spins of links between two spherical
+joints); with the task coordinates held, the joints must not move (type 1: ``[J_joints, J_ee_free]``). Each
+measure is the smallest kept singular value over the largest; 0 at a singularity.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from fpm_sim.architecture.description import ChainDesc, Description, JointDesc, LinkDesc
+from fpm_sim.errors import FpmSimError
+
+__all__ = [
+    "CLOSURE_TOL_M",
+    "ChainFrames",
+    "MobilityError",
+    "TaskAssembly",
+    "TaskPose",
+    "UnreachableTaskPoseError",
+    "check_mobility",
+    "solve_task_pose",
+]
+
+CLOSURE_TOL_M = 1e-11
+"""Inverse kinematics converges when every closure residual is below this (m; rotations times ``ell``)."""
+RANK_RTOL = 1e-7
+"""A singular value below ``RANK_RTOL`` times the largest counts as zero in the mobility count. Round-off puts
+such values at ~1e-14 relative, and a structure's softest direction at 1e-3 or more (a pose that close to a
+singularity is refused anyway), so the decision has seven orders of margin on either side."""
+MAX_RANDOM_STARTS = 48
+
+
+class UnreachableTaskPoseError(FpmSimError):
+    """No assembly in the working mode reaches the task pose."""
+
+
+class MobilityError(FpmSimError):
+    """With the actuators locked the described machine is not a structure: it has degrees of freedom left."""
+
+
+@dataclass(frozen=True)
+class TaskPose:
+    """Task coordinates of the end effector: metres and radians; those the architecture lacks stay 0."""
+
+    x_m: float = 0.0
+    y_m: float = 0.0
+    z_m: float = 0.0
+    phi_rad: float = 0.0
+
+    @classmethod
+    def from_mm(cls, x_mm: float = 0.0, y_mm: float = 0.0, z_mm: float = 0.0, phi_rad: float = 0.0) -> TaskPose:
+        return cls(x_mm * 1e-3, y_mm * 1e-3, z_mm * 1e-3, phi_rad)
+
+    def value(self, coordinate: str) -> float:
+        return float({"x": self.x_m, "y": self.y_m, "z": self.z_m, "phi": self.phi_rad}[coordinate])
+
+    def label(self, task: tuple[str, ...] = ("x", "y", "z", "phi")) -> str:
+        """``(x=.. mm, y=.. mm)``: the task coordinates ``task`` only."""
+        parts = [f"{c}={self.value(c):.3f} rad" if c == "phi" else f"{c}={self.value(c) * 1e3:.1f} mm" for c in task]
+        return "(" + ", ".join(parts) + ")"
+
+
+@dataclass(frozen=True)
+class ChainFrames:
+    """One chain at an assembly: the frame (position m, rotation 3x3) before each path entry, and its end frame."""
+
+    name: str
+    positions_m: np.ndarray  # (len(path) + 1, 3)
+    rotations: np.ndarray  # (len(path) + 1, 3, 3)
+    coordinates: dict[str, np.ndarray]  # joint name -> its coordinates (rad, m, or a rotation vector)
+
+
+@dataclass(frozen=True)
+class TaskAssembly:
+    """The machine assembled at a task pose: every chain's frames, the end effector's frame, and measures."""
+
+    pose: TaskPose
+    chains: dict[str, ChainFrames]
+    ee_position_m: np.ndarray
+    ee_rotation: np.ndarray
+    closure_residual_m: float
+    singularity_type1: float
+    singularity_type2: float
+
+    @property
+    def singularity(self) -> float:
+        return min(self.singularity_type1, self.singularity_type2)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# frames
+
+
+def rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rotation matrix about the unit ``axis`` by ``angle`` (rad)."""
+    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    out: np.ndarray = np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
+    return out
+
+
+def rotvec_matrix(v: np.ndarray) -> np.ndarray:
+    """Rotation matrix of a rotation vector (rad)."""
+    angle = float(np.linalg.norm(v))
+    if angle < 1e-15:
+        return np.eye(3)
+    return rotation(v / angle, angle)
+
+
+def joint_motion(j: JointDesc, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The joint's displacement ``(translation, rotation)`` in the frame before it, at coordinates ``q``."""
+    if j.type == "revolute":
+        return np.zeros(3), rotation(np.array(j.axis), float(q[0]))
+    if j.type == "prismatic":
+        return np.array(j.axis) * float(q[0]), np.eye(3)
+    if j.type == "universal":
+        r1 = rotation(np.array(j.axis), float(q[0]))
+        return np.zeros(3), r1 @ rotation(np.array(j.axis2), float(q[1]))
+    if j.type == "spherical":
+        return np.zeros(3), rotvec_matrix(q)
+    return np.zeros(3), np.eye(3)
+
+
+def chain_frames(chain: ChainDesc, q: dict[str, np.ndarray], base_p: np.ndarray, base_r: np.ndarray) -> ChainFrames:
+    """Walk a chain's path from its base frame at the joint coordinates ``q`` (name -> coordinates)."""
+    p = base_p + base_r @ np.array(chain.base_position_m)
+    r = base_r @ np.array(chain.base_rotation)
+    ps, rs = [p], [r]
+    end = chain.end_joint
+    for e in chain.path:
+        if isinstance(e, LinkDesc):
+            p = p + r[:, 0] * e.length_m
+        elif e is not end:
+            dp, dr = joint_motion(e, q[e.name])
+            p, r = p + r @ dp, r @ dr
+        ps.append(p)
+        rs.append(r)
+    return ChainFrames(chain.name, np.array(ps), np.array(rs), dict(q))
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# the unknowns
+
+
+@dataclass(frozen=True)
+class _Layout:
+    """Where each joint's and end-effector coordinate sits in the unknown vector."""
+
+    joints: list[tuple[str, JointDesc, slice]]  # (chain name, joint, slice)
+    ee_free: list[str]  # end-effector coordinates that are unknowns
+    ee_slice: slice
+    size: int
+
+
+def _ee_coordinates(desc: Description) -> list[str]:
+    return ["x", "y", "phi"] if desc.planar else ["x", "y", "z", "rx", "ry", "rz"]
+
+
+def _layout(desc: Description, *, ee_free: list[str] | None = None) -> _Layout:
+    joints, k = [], 0
+    for c in desc.chains:
+        for j in c.moving_joints:
+            joints.append((c.name, j, slice(k, k + j.dof)))
+            k += j.dof
+    free = [c for c in _ee_coordinates(desc) if c not in desc.task] if ee_free is None else ee_free
+    return _Layout(joints, free, slice(k, k + len(free)), k + len(free))
+
+
+def _ee_frame(desc: Description, pose: TaskPose, free: list[str], zf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    vals = {c: (pose.value(c) if c in ("x", "y", "z", "phi") else 0.0) for c in _ee_coordinates(desc)}
+    vals.update(dict(zip(free, zf)))
+    p = np.array([vals["x"], vals["y"], 0.0 if desc.planar else vals["z"]])
+    if desc.planar:
+        return p, rotation(np.array([0.0, 0.0, 1.0]), vals["phi"])
+    return p, rotvec_matrix(np.array([vals["rx"], vals["ry"], vals["rz"]]))
+
+
+def _frames(desc: Description, lay: _Layout, z: np.ndarray) -> dict[str, ChainFrames]:
+    q: dict[str, dict[str, np.ndarray]] = {c.name: {} for c in desc.chains}
+    for cname, j, s in lay.joints:
+        q[cname][j.name] = z[s]
+    out: dict[str, ChainFrames] = {}
+    for c in desc.chains:
+        if c.parent is None:
+            bp, br = np.zeros(3), np.eye(3)
+        else:
+            bp, br = out[c.parent].positions_m[-1], out[c.parent].rotations[-1]
+        out[c.name] = chain_frames(c, q[c.name], bp, br)
+    return out
+
+
+def _residual_blocks(
+    desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray, ell: float
+) -> list[tuple[str, np.ndarray]]:
+    """Each closed chain's closure residual (module docstring), by chain name."""
+    frames = _frames(desc, lay, z)
+    pe, re = _ee_frame(desc, pose, lay.ee_free, z[lay.ee_slice])
+    out: list[tuple[str, np.ndarray]] = []
+    for c in desc.chains:
+        end = c.end_joint
+        if end is None:
+            continue
+        f = frames[c.name]
+        p, r = f.positions_m[-1], f.rotations[-1]
+        rows = [p - (pe + re @ np.array(desc.end_effector.attachments_m[str(end.at)]))]
+        if end.type == "revolute":
+            rows.append(ell * np.cross(r @ np.array(end.axis), re @ np.array(end.axis)))
+        elif end.type == "fixed":  # the relative rotation's vector (its norm is the angle, to first order)
+            d = re.T @ r
+            rows.append(ell * 0.5 * np.array([d[2, 1] - d[1, 2], d[0, 2] - d[2, 0], d[1, 0] - d[0, 1]]))
+        out.append((c.name, np.concatenate(rows)))
+    return out
+
+
+def _residual(desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray, ell: float) -> np.ndarray:
+    blocks = _residual_blocks(desc, lay, pose, z, ell)
+    return np.concatenate([b for _, b in blocks]) if blocks else np.zeros(0)
+
+
+def characteristic_length_m(desc: Description) -> float:
+    """The length that puts rotations and translations in one unit (m): :func:`singularity_char_length_m`."""
+    return singularity_char_length_m(desc)
+
+
+def _jacobian(desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray, ell: float) -> np.ndarray:
+    """Central differences of the residual (rows) over the unknowns (columns; rotations as they are)."""
+    r0 = _residual(desc, lay, pose, z, ell)
+    jac = np.empty((r0.size, z.size))
+    h = 1e-7
+    for k in range(z.size):
+        dz = np.zeros(z.size)
+        dz[k] = h
+        jac[:, k] = (_residual(desc, lay, pose, z + dz, ell) - _residual(desc, lay, pose, z - dz, ell)) / (2 * h)
+    return jac
+
+
+def _in_branch(j: JointDesc, q: np.ndarray) -> bool:
+    if j.branch is None:
+        return True
+    lo, hi = j.branch
+    v = float(q[0])
+    if j.type == "revolute":
+        v = lo + (v - lo) % (2 * math.pi)
+    return lo <= v <= hi
+
+
+def _wrapped(lay: _Layout, z: np.ndarray) -> np.ndarray:
+    """Revolute coordinates into (-pi, pi]; a branch interval keeps its own window."""
+    z = z.copy()
+    for _, j, s in lay.joints:
+        if j.type in ("revolute", "universal"):
+            v = z[s]
+            z[s] = np.where(v > math.pi, v - 2 * math.pi * np.floor((v + math.pi) / (2 * math.pi)), v)
+            z[s] = z[s] - 2 * math.pi * np.floor((z[s] + math.pi) / (2 * math.pi))
+    return z
+
+
+def _newton(desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray, ell: float) -> tuple[np.ndarray, float]:
+    """Gauss-Newton with minimum-norm steps (lstsq), each step capped at 0.5 (rad or m)."""
+    res = float("inf")
+    for _ in range(60):
+        r = _residual(desc, lay, pose, z, ell)
+        res = float(np.max(np.abs(r))) if r.size else 0.0
+        if res < CLOSURE_TOL_M or not np.isfinite(res):
+            break
+        step = np.linalg.lstsq(_jacobian(desc, lay, pose, z, ell), r, rcond=None)[0]
+        norm = float(np.max(np.abs(step)))
+        z = z - step * (0.5 / norm if norm > 0.5 else 1.0)
+    return z, res
+
+
+def _starts(desc: Description, lay: _Layout, span_m: float) -> list[np.ndarray]:
+    """The working mode's start (branch midpoints, zeros elsewhere), then seeded random starts."""
+    first = np.zeros(lay.size)
+    for _, j, s in lay.joints:
+        if j.branch is not None:
+            first[s.start] = 0.5 * (j.branch[0] + j.branch[1])
+    starts = [first]
+    rng = np.random.default_rng(0)
+    for _ in range(MAX_RANDOM_STARTS):
+        z = np.zeros(lay.size)
+        for _, j, s in lay.joints:
+            if j.branch is not None:
+                z[s.start] = rng.uniform(*j.branch)
+            elif j.type in ("revolute", "universal"):
+                z[s] = rng.uniform(-math.pi, math.pi, s.stop - s.start)
+            elif j.type == "prismatic":
+                z[s] = rng.uniform(-span_m, span_m)
+            else:
+                z[s] = rng.normal(0.0, 0.5, 3)
+        z[lay.ee_slice] = [
+            rng.uniform(-math.pi, math.pi) if c in ("phi", "rx", "ry", "rz") else 0.0 for c in lay.ee_free
+        ]
+        starts.append(z)
+    return starts
+
+
+def solve_task_pose(desc: Description, pose: TaskPose, *, start: np.ndarray | None = None) -> TaskAssembly:
+    """Assemble ``desc`` at ``pose`` in its working mode (module docstring).
+
+    ``start``: the unknowns of a neighbouring pose (``TaskAssembly`` of a sweep) to try first.
+
+    Raises
+    ------
+    UnreachableTaskPoseError
+        No start converges to an assembly inside every working-mode interval.
+    """
+    _check_reach(desc, pose)
+    lay = _layout(desc)
+    ell = characteristic_length_m(desc)
+    span = sum(lk.length_m for c in desc.chains for lk in c.links)
+    starts = ([start] if start is not None else []) + _starts(desc, lay, span)
+    for z0 in starts:
+        z, res = _newton(desc, lay, pose, np.array(z0, float), ell)
+        if res < CLOSURE_TOL_M and all(_in_branch(j, z[s]) for _, j, s in lay.joints):
+            return _assembly(desc, lay, pose, _wrapped(lay, z), ell)
+    raise UnreachableTaskPoseError(
+        f"no assembly of {desc.name!r} in its working mode reaches {pose.label(desc.task)}",
+        parameter="pose",
+        hint="choose a pose inside the workspace, or check the chains' lengths and working modes (branch_deg)",
+    )
+
+
+def _check_reach(desc: Description, pose: TaskPose) -> None:
+    """A chain from the ground of revolute, universal and spherical joints reaches at most its links' total length
+    from its base: refuse a pose beyond it, naming the chain (before any Newton step)."""
+    for i, c in enumerate(desc.chains):
+        end = c.end_joint
+        if end is None or c.parent is not None or any(j.type == "prismatic" for j in c.joints):
+            continue
+        reach = sum(lk.length_m for lk in c.links)
+        a = np.array(desc.end_effector.attachments_m[str(end.at)])
+        if desc.planar:
+            pe, re = _ee_frame(desc, pose, [c for c in ("x", "y", "phi") if c not in desc.task], np.zeros(3))
+            target = pe + (re @ a if "phi" in desc.task else np.zeros(3))
+            slack = 0.0 if "phi" in desc.task else float(np.linalg.norm(a))
+        else:
+            target, slack = np.array([pose.x_m, pose.y_m, pose.z_m]), float(np.linalg.norm(a))
+        dist = float(np.linalg.norm(target - np.array(c.base_position_m))) - slack
+        if dist > reach * (1 + 1e-12):
+            raise UnreachableTaskPoseError(
+                f"chain {c.name!r} cannot reach its attachment point {end.at!r} at {pose.label(desc.task)}: "
+                f"{dist * 1e3:.1f} mm away, its links span at most {reach * 1e3:.1f} mm",
+                parameter=f"chains[{i}]",
+                hint="choose a pose inside the workspace, or check the chain's base and link lengths",
+            )
+
+
+def _assembly(desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray, ell: float) -> TaskAssembly:
+    frames = _frames(desc, lay, z)
+    pe, re = _ee_frame(desc, pose, lay.ee_free, z[lay.ee_slice])
+    r = _residual(desc, lay, pose, z, ell)
+    t1, t2 = singularity_measures(desc, lay, pose, z, ell)
+    return TaskAssembly(pose, frames, pe, re, float(np.max(np.abs(r))) if r.size else 0.0, t1, t2)
+
+
+def idle_motions(desc: Description) -> int:
+    """Motions that move no mass centre off its line: the spin of each link between two spherical joints."""
+    count = 0
+    for c in desc.chains:
+        for k, e in enumerate(c.path):
+            if isinstance(e, LinkDesc) and 0 < k < len(c.path) - 1:
+                before, after = c.path[k - 1], c.path[k + 1]
+                if all(isinstance(x, JointDesc) and x.type == "spherical" for x in (before, after)):
+                    count += 1
+    return count
+
+
+def _scaled_columns(lay: _Layout, jac: np.ndarray, ell: float, desc: Description) -> np.ndarray:
+    """Rotation columns over ``ell``: every column in metres of residual per metre of motion."""
+    out = jac.copy()
+    for _, j, s in lay.joints:
+        if j.type != "prismatic":
+            out[:, s] /= ell
+    for k, c in enumerate(lay.ee_free):
+        if c in ("phi", "rx", "ry", "rz"):
+            out[:, lay.ee_slice.start + k] /= ell
+    return out
+
+
+def singularity_char_length_m(desc: Description) -> float:
+    """The length that weighs the end effector's rotations against its translations in the type-2 measure (m): the
+    largest attachment radius or a quarter of the closing links' mean length, whichever is larger (the 3RRR's
+    ``max(r_p, L2 / 4)``)."""
+    radius = max(float(np.linalg.norm(a[:2] if desc.planar else a)) for a in desc.end_effector.attachments_m.values())
+    last = [c.links[-1].length_m for c in desc.chains if c.end_joint is not None and c.links]
+    return max(radius, float(np.mean(last)) / 4.0 if last else 0.0)
+
+
+def _without(b: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """``m`` with the column space of ``b`` projected out (rank of ``b`` at :data:`RANK_RTOL`)."""
+    if b.size == 0:
+        return m
+    u, sv, _ = np.linalg.svd(b, full_matrices=False)
+    keep = sv > RANK_RTOL * sv[0] if sv.size and sv[0] > 0 else np.zeros(0, bool)
+    basis = u[:, keep]
+    out: np.ndarray = m - basis @ (basis.T @ m)
+    return out
+
+
+def _root(desc: Description, name: str) -> str:
+    chain = desc.chain(name)
+    return name if chain.parent is None else _root(desc, chain.parent)
+
+
+def _drive_length(chain: ChainDesc, frames: ChainFrames, k: int) -> float:
+    """How far the next joint (or the chain's end) moves per unit of the actuated joint at path index ``k`` (m per
+    rad or m per m): the lever of a revolute actuator, 1 for a prismatic one."""
+    j = chain.path[k]
+    assert isinstance(j, JointDesc)
+    if j.type == "prismatic":
+        return 1.0
+    nxt = next((i for i in range(k + 1, len(chain.path)) if isinstance(chain.path[i], JointDesc)), len(chain.path))
+    axis = frames.rotations[k] @ np.array(j.axis)
+    lever = float(np.linalg.norm(np.cross(axis, frames.positions_m[nxt] - frames.positions_m[k])))
+    return lever if lever > 0 else 1.0
+
+
+def singularity_measures(
+    desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray, ell: float
+) -> tuple[float, float]:
+    """Type 1 and type 2 singularity measures (0 at a singularity; the 3RRR's serial and parallel measures).
+
+    Type 2: with the actuators locked, the closures' Jacobian over the end effector's coordinates (rotations over
+    :func:`singularity_char_length_m`) with every passive joint's effect projected out; its smallest singular value
+    over its largest. Type 1: for each group of chains hanging from one base chain, the Jacobian over its actuated
+    joints (each over its lever, :func:`_drive_length`) with the passive joints' and the free end-effector
+    coordinates' effects projected out; ``sqrt(det(C' C))``, the smallest over the groups (``|sin|`` of a 3RRR's
+    elbow angle).
+    """
+    full = _layout(desc, ee_free=_ee_coordinates(desc))
+    zf = np.concatenate([z[: lay.ee_slice.start], _full_ee(desc, lay, pose, z)])
+    jac = _jacobian(desc, full, pose, zf, ell)
+    if jac.size == 0:
+        return 1.0, 1.0
+    ell_c = singularity_char_length_m(desc)
+    ee_cols = list(range(full.ee_slice.start, full.ee_slice.stop))
+    jx = jac[:, ee_cols] / np.array([ell_c if c in ("phi", "rx", "ry", "rz") else 1.0 for c in full.ee_free])
+    passive = [k for _, j, s in full.joints if not j.actuated for k in range(s.start, s.stop)]
+    sv = np.linalg.svd(_without(jac[:, passive], jx), compute_uv=False)
+    type2 = float(sv[len(ee_cols) - 1] / sv[0]) if sv.size >= len(ee_cols) and sv[0] > 0 else 0.0
+    return _type1(desc, full, pose, zf, jac, lay), type2
+
+
+def _type1(desc: Description, full: _Layout, pose: TaskPose, zf: np.ndarray, jac: np.ndarray, lay: _Layout) -> float:
+    """Type 1 (module docstring): ``C`` = the actuated joints' columns (each over its lever) with the passive joints'
+    and the free end-effector coordinates' columns projected out; per group of chains hanging from one base chain,
+    ``sqrt(det(C_g' C_g))``; the smallest."""
+    frames = _frames(desc, full, zf)
+    free = [full.ee_slice.start + k for k, c in enumerate(full.ee_free) if c in lay.ee_free]
+    passive = [k for _, j, s in full.joints if not j.actuated for k in range(s.start, s.stop)]
+    acts = [(cn, j, s) for cn, j, s in full.joints if j.actuated]
+    if not acts:
+        return 1.0
+    cols, levers, groups = [], [], []
+    for cn, j, s in acts:
+        chain = desc.chain(cn)
+        cols += list(range(s.start, s.stop))
+        levers += [_drive_length(chain, frames[cn], chain.path.index(j))] * (s.stop - s.start)
+        groups += [_root(desc, cn)] * (s.stop - s.start)
+    c = _without(jac[:, passive + free], jac[:, cols] / np.array(levers))
+    worst = 1.0
+    for g in dict.fromkeys(groups):
+        cg = c[:, [k for k, gg in enumerate(groups) if gg == g]]
+        worst = min(worst, float(math.sqrt(max(np.linalg.det(cg.T @ cg), 0.0))))
+    return worst
+
+
+def _full_ee(desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray) -> np.ndarray:
+    """All end-effector coordinates (task ones from the pose, free ones from ``z``)."""
+    vals = dict(zip(lay.ee_free, z[lay.ee_slice]))
+    return np.array([vals.get(c, pose.value(c) if c in ("x", "y", "z", "phi") else 0.0) for c in _ee_coordinates(desc)])
+
+
+def check_mobility(desc: Description, assembly: TaskAssembly) -> None:
+    """Refuse a machine that moves with its actuators locked (:class:`MobilityError`), naming how many degrees of
+    freedom it keeps. Counted from the closure Jacobian's rank at the assembly (:data:`RANK_RTOL`)."""
+    full = _layout(desc, ee_free=_ee_coordinates(desc))
+    z = _unknowns_of(desc, full, assembly)
+    ell = characteristic_length_m(desc)
+    jac = _scaled_columns(full, _jacobian(desc, full, assembly.pose, z, ell), ell, desc)
+    passive = [k for _, j, s in full.joints if not j.actuated for k in range(s.start, s.stop)]
+    cols = jac[:, passive + list(range(full.ee_slice.start, full.ee_slice.stop))]
+    s = np.linalg.svd(cols, compute_uv=False) if cols.size else np.zeros(0)
+    rank = int(np.sum(s > RANK_RTOL * s[0])) if s.size and s[0] > 0 else 0
+    left = cols.shape[1] - rank - idle_motions(desc)
+    if left > 0:
+        raise MobilityError(
+            f"with its actuators locked, {desc.name!r} keeps {left} degree(s) of freedom at {assembly.pose.label()}: "
+            "it is a mechanism, not a structure, and has no modes there",
+            parameter="chains",
+            hint="mark more joints actuated = true, or check the joint types (a locked machine needs as many "
+            "actuators as degrees of freedom)",
+        )
+
+
+def _unknowns_of(desc: Description, full: _Layout, asm: TaskAssembly) -> np.ndarray:
+    z = np.zeros(full.size)
+    for cname, j, s in full.joints:
+        z[s] = asm.chains[cname].coordinates[j.name]
+    ee = {"x": asm.ee_position_m[0], "y": asm.ee_position_m[1]}
+    if desc.planar:
+        ee["phi"] = math.atan2(asm.ee_rotation[1, 0], asm.ee_rotation[0, 0])
+    else:
+        ee["z"] = asm.ee_position_m[2]
+        ee.update(zip(("rx", "ry", "rz"), _rotvec(asm.ee_rotation)))
+    z[full.ee_slice] = [ee[c] for c in full.ee_free]
+    return z
+
+
+def _rotvec(r: np.ndarray) -> np.ndarray:
+    angle = math.acos(max(-1.0, min(1.0, (np.trace(r) - 1.0) / 2.0)))
+    if angle < 1e-12:
+        return np.zeros(3)
+    w = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]]) / (2 * math.sin(angle))
+    return w * angle
