@@ -14,6 +14,7 @@ from fpm_sim.rom.reduction import modal_system
 from fpm_sim.sim.impact import write_uff58
 from fpm_sim.study.identify import IdentifyOptions, Problem, identify, parameter_set, read_measured_csv
 from fpm_sim.study.identify.ema import EmaError, estimate_modes, read_frfs, write_modes_csv
+from tests.helpers.jitter import JITTER_SEEDS, jitter
 from tests.helpers.truths import reference_config  # the tests' reference geometry, shared with the impact road
 
 SEGMENTS = 3
@@ -42,7 +43,7 @@ def test_uff58_round_trip_is_exact_and_carries_the_pose(tmp_path):
     np.testing.assert_allclose(back.h, h, rtol=1e-10)
 
 
-@pytest.mark.parametrize("jitter_seed", [None, 1, 2, 3])
+@pytest.mark.parametrize("jitter_seed", [None, *JITTER_SEEDS])
 def test_ema_recovers_known_poles(jitter_seed):
     f = np.arange(0.0, 400.0, 0.25)
     w = 2 * np.pi * f
@@ -50,7 +51,7 @@ def test_ema_recovers_known_poles(jitter_seed):
     h = sum(-(w**2) / ((2 * np.pi * a) ** 2 - w**2 + 2j * z * 2 * np.pi * a * w) for a, z in zip(fn, zeta))
     if jitter_seed is not None:
         # another machine's round-off, imitated: which order the chart's argmin picks must not matter
-        h = h * (1 + 1e-12 * np.random.default_rng(jitter_seed).standard_normal(h.shape))
+        h = jitter(h, jitter_seed)
     from fpm_sim.study.identify.ema import MeasuredFrf
 
     est = estimate_modes(MeasuredFrf(f, h, "synthetic", (0, 0, 0)), f_lower_hz=5, f_upper_hz=300, n_modes=3)
@@ -136,9 +137,11 @@ def _accelerance(f_hz: np.ndarray, fn_hz: np.ndarray, decay_1_s: np.ndarray) -> 
     return h
 
 
-def test_ema_removes_the_exponential_windows_decay():
+@pytest.mark.parametrize("jitter_seed", [None, *JITTER_SEEDS])
+def test_ema_removes_the_exponential_windows_decay(jitter_seed):
     """A window exp(-t / tau) adds 1 / tau to every pole's decay: an FRF whose poles decay at sigma + 1/tau,
-    analysed with that tau, gives back the structure's own frequencies and damping."""
+    analysed with that tau, gives back the structure's own frequencies and damping; also on the FRF jittered at
+    1e-12 (another machine's round-off: the same stable-column read as test_ema_recovers_known_poles)."""
     from fpm_sim.study.identify.ema import MeasuredFrf
 
     f = np.arange(0.0, 400.0, 0.25)
@@ -150,6 +153,8 @@ def test_ema_removes_the_exponential_windows_decay():
     s_win = sigma + 1 / tau_s
     fn_win = np.hypot(s_win, wd) / (2 * np.pi)
     h = _accelerance(f, fn_win, s_win)
+    if jitter_seed is not None:
+        h = jitter(h, jitter_seed)
     raw = estimate_modes(MeasuredFrf(f, h, "windowed", (0, 0, 0)), f_lower_hz=5, f_upper_hz=300, n_modes=3)
     # uncorrected, the damping is 2.6..4.5x the structure's at these frequencies and the frequency is high
     assert np.all(raw.damping > 1.5 * zeta)
@@ -157,7 +162,9 @@ def test_ema_removes_the_exponential_windows_decay():
     frf = MeasuredFrf(f, h, "windowed", (0, 0, 0), window_tau_s=tau_s)
     est = estimate_modes(frf, f_lower_hz=5, f_upper_hz=300, n_modes=3)
     assert est.window_tau_s == tau_s
-    # noise-free rational FRF: LSCF exact up to which stable order is picked (EMA_FREQ_RTOL says why)
+    # noise-free rational FRF: the stable column's median is exact to round-off (EMA_FREQ_RTOL says why). Removing
+    # the window subtracts 1/tau from a decay 2.6-4.5 times the structure's, which multiplies the damping's relative
+    # error by as much: measured 2e-9 in frequency and 2e-7 in damping over 12 jitter seeds, inside both tolerances
     np.testing.assert_allclose(est.freq_hz, fn, rtol=EMA_FREQ_RTOL)
     np.testing.assert_allclose(est.damping, zeta, rtol=EMA_DAMPING_RTOL)
     # the argument overrides the file's value; inf means no window
