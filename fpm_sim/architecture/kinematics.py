@@ -23,6 +23,7 @@ measure is the smallest kept singular value over the largest; 0 at a singularity
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -242,7 +243,111 @@ def characteristic_length_m(desc: Description) -> float:
     return singularity_char_length_m(desc)
 
 
+def _skew(w: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+
+
+def _right_jacobian(v: np.ndarray) -> np.ndarray:
+    """SO(3)'s right Jacobian: ``exp(v + d) = exp(v) exp(J_r(v) d)`` to first order."""
+    t = float(np.linalg.norm(v))
+    k = _skew(v)
+    if t < 1e-8:
+        out: np.ndarray = np.eye(3) - 0.5 * k
+        return out
+    out = np.eye(3) - (1 - math.cos(t)) / t**2 * k + (t - math.sin(t)) / t**3 * (k @ k)
+    return out
+
+
+def _joint_twists(j: JointDesc, q: np.ndarray, r_before: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """World angular and linear velocity (about the joint's centre) per unit rate of each of the joint's
+    coordinates."""
+    zero = np.zeros(3)
+    if j.type == "revolute":
+        return [(r_before @ np.array(j.axis), zero)]
+    if j.type == "prismatic":
+        return [(zero, r_before @ np.array(j.axis))]
+    if j.type == "universal":
+        a1 = r_before @ np.array(j.axis)
+        a2 = r_before @ rotation(np.array(j.axis), float(q[0])) @ np.array(j.axis2)
+        return [(a1, zero), (a2, zero)]
+    cols = r_before @ rotvec_matrix(q) @ _right_jacobian(q)
+    return [(cols[:, i], zero) for i in range(3)]
+
+
+def _row_blocks_rate(
+    desc: Description,
+    frames: dict[str, ChainFrames],
+    pe: np.ndarray,
+    re: np.ndarray,
+    moved: set[str],
+    w: np.ndarray,
+    v: np.ndarray,
+    centre: np.ndarray,
+    ee_moves: bool,
+    ell: float,
+) -> np.ndarray:
+    """Rate of every closure row when the chains in ``moved`` (downstream of a joint) turn at ``w`` about ``centre``
+    and translate at ``v`` (or, ``ee_moves``, when the end effector does)."""
+    out = []
+    for c in desc.chains:
+        end = c.end_joint
+        if end is None:
+            continue
+        f = frames[c.name]
+        p, r = f.positions_m[-1], f.rotations[-1]
+        a_w = re @ np.array(desc.end_effector.attachments_m[str(end.at)])
+        w_c = w if (c.name in moved and not ee_moves) else np.zeros(3)
+        w_e = w if ee_moves else np.zeros(3)
+        dp = np.cross(w_c, p - centre) + (v if c.name in moved and not ee_moves else 0.0)
+        dpe = (v + np.cross(w_e, a_w)) if ee_moves else np.zeros(3)
+        rows = [dp - dpe]
+        if end.type == "revolute":
+            n_c, n_e = r @ np.array(end.axis), re @ np.array(end.axis)
+            rows.append(ell * (np.cross(np.cross(w_c, n_c), n_e) + np.cross(n_c, np.cross(w_e, n_e))))
+        elif end.type == "fixed":
+            dd = re.T @ (_skew(w_c) @ r) - re.T @ _skew(w_e) @ r
+            rows.append(ell * 0.5 * np.array([dd[2, 1] - dd[1, 2], dd[0, 2] - dd[2, 0], dd[1, 0] - dd[0, 1]]))
+        out.append(np.concatenate(rows))
+    return np.concatenate(out) if out else np.zeros(0)
+
+
+def _descendants(desc: Description, name: str) -> set[str]:
+    out = {name}
+    for c in desc.chains:
+        if c.parent in out:
+            out.add(c.name)
+    return out
+
+
 def _jacobian(desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray, ell: float) -> np.ndarray:
+    """The closure residual's Jacobian over the unknowns, from the joints' twists (the geometric Jacobian; tested
+    against central differences)."""
+    frames = _frames(desc, lay, z)
+    pe, re = _ee_frame(desc, pose, lay.ee_free, z[lay.ee_slice])
+    cols: list[np.ndarray] = []
+    for cname, j, s in lay.joints:
+        chain = desc.chain(cname)
+        k = chain.path.index(j)
+        f = frames[cname]
+        moved = _descendants(desc, cname)
+        for w, v in _joint_twists(j, z[s], f.rotations[k]):
+            cols.append(_row_blocks_rate(desc, frames, pe, re, moved, w, v, f.positions_m[k], False, ell))
+    zf = z[lay.ee_slice]
+    for c in lay.ee_free:
+        w, v = np.zeros(3), np.zeros(3)
+        if c in ("x", "y", "z"):
+            v["xyz".index(c)] = 1.0
+        elif c == "phi":
+            w[2] = 1.0
+        else:
+            rv = np.array([dict(zip(lay.ee_free, zf)).get(k, 0.0) for k in ("rx", "ry", "rz")])
+            w = re @ _right_jacobian(rv)[:, "xyz".index(c[1])]
+        cols.append(_row_blocks_rate(desc, frames, pe, re, set(), w, v, pe, True, ell))
+    n_rows = sum(b.size for _, b in _residual_blocks(desc, lay, pose, z, ell)) if not cols else cols[0].size
+    return np.stack(cols, axis=1) if cols else np.zeros((n_rows, 0))
+
+
+def _jacobian_fd(desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray, ell: float) -> np.ndarray:
     """Central differences of the residual (rows) over the unknowns (columns; rotations as they are)."""
     r0 = _residual(desc, lay, pose, z, ell)
     jac = np.empty((r0.size, z.size))
@@ -328,12 +433,30 @@ def solve_task_pose(desc: Description, pose: TaskPose, *, start: np.ndarray | No
     _check_reach(desc, pose)
     lay = _layout(desc)
     ell = characteristic_length_m(desc)
+    roots = [c.name for c in desc.chains if c.parent is None]
+    if lay.ee_free or len(roots) == 1:
+        return _assembly(desc, lay, pose, _solve(desc, lay, pose, start, ell), ell)
+    # the end effector's pose is all given: each base chain (with the chains on it) closes on its own
+    z = np.zeros(lay.size)
+    where = {(cn, j.name): s for cn, j, s in lay.joints}
+    for root in roots:
+        part = dataclasses.replace(desc, chains=tuple(c for c in desc.chains if _root(desc, c.name) == root))
+        part_lay = _layout(part)
+        idx = [k for cn, j, _ in part_lay.joints for k in range(where[cn, j.name].start, where[cn, j.name].stop)]
+        zs = _solve(part, part_lay, pose, None if start is None else np.asarray(start)[idx], ell)
+        z[idx] = zs
+    return _assembly(desc, lay, pose, z, ell)
+
+
+def _solve(desc: Description, lay: _Layout, pose: TaskPose, start: np.ndarray | None, ell: float) -> np.ndarray:
+    """Newton from ``start``, the working mode's start and the random ones: the first solution in every working-mode
+    interval, wrapped."""
     span = sum(lk.length_m for c in desc.chains for lk in c.links)
     starts = ([start] if start is not None else []) + _starts(desc, lay, span)
     for z0 in starts:
         z, res = _newton(desc, lay, pose, np.array(z0, float), ell)
         if res < CLOSURE_TOL_M and all(_in_branch(j, z[s]) for _, j, s in lay.joints):
-            return _assembly(desc, lay, pose, _wrapped(lay, z), ell)
+            return _wrapped(lay, z)
     raise UnreachableTaskPoseError(
         f"no assembly of {desc.name!r} in its working mode reaches {pose.label(desc.task)}",
         parameter="pose",
@@ -506,7 +629,8 @@ def check_mobility(desc: Description, assembly: TaskAssembly) -> None:
     left = cols.shape[1] - rank - idle_motions(desc)
     if left > 0:
         raise MobilityError(
-            f"with its actuators locked, {desc.name!r} keeps {left} degree(s) of freedom at {assembly.pose.label()}: "
+            f"with its actuators locked, {desc.name!r} keeps {left} degree(s) of freedom at "
+            f"{assembly.pose.label(desc.task)}: "
             "it is a mechanism, not a structure, and has no modes there",
             parameter="chains",
             hint="mark more joints actuated = true, or check the joint types (a locked machine needs as many "
