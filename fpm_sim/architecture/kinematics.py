@@ -49,7 +49,7 @@ RANK_RTOL = 1e-7
 """A singular value below ``RANK_RTOL`` times the largest counts as zero in the mobility count. Round-off puts
 such values at ~1e-14 relative, and a structure's softest direction at 1e-3 or more (a pose that close to a
 singularity is refused anyway), so the decision has seven orders of margin on either side."""
-MAX_RANDOM_STARTS = 48
+MAX_RANDOM_STARTS = 24
 
 
 class UnreachableTaskPoseError(FpmSimError):
@@ -381,12 +381,15 @@ def _wrapped(lay: _Layout, z: np.ndarray) -> np.ndarray:
 
 
 def _newton(desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray, ell: float) -> tuple[np.ndarray, float]:
-    """Gauss-Newton with minimum-norm steps (lstsq), each step capped at 0.5 (rad or m)."""
+    """Gauss-Newton with minimum-norm steps (lstsq), each step capped at 0.5 (rad or m); given up when ten steps
+    have not halved the residual (a start that leads nowhere: the next one is tried)."""
     res = float("inf")
+    history: list[float] = []
     for _ in range(60):
         r = _residual(desc, lay, pose, z, ell)
         res = float(np.max(np.abs(r))) if r.size else 0.0
-        if res < CLOSURE_TOL_M or not np.isfinite(res):
+        history.append(res)
+        if res < CLOSURE_TOL_M or not np.isfinite(res) or (len(history) > 10 and res > 0.5 * history[-11]):
             break
         step = np.linalg.lstsq(_jacobian(desc, lay, pose, z, ell), r, rcond=None)[0]
         norm = float(np.max(np.abs(step)))
@@ -418,6 +421,30 @@ def _starts(desc: Description, lay: _Layout, span_m: float) -> list[np.ndarray]:
         ]
         starts.append(z)
     return starts
+
+
+def _aimed(desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray) -> np.ndarray:
+    """``z`` with every chain of one spherical joint and one link (a rod) pointed at its attachment point: a
+    Delta's rods then start nearly closed."""
+    z = z.copy()
+    frames = _frames(desc, lay, z)
+    pe, re = _ee_frame(desc, pose, lay.ee_free, z[lay.ee_slice])
+    for cname, j, s in lay.joints:
+        chain = desc.chain(cname)
+        moving, end = chain.moving_joints, chain.end_joint
+        if j.type != "spherical" or moving != (j,) or end is None or len(chain.links) != 1:
+            continue
+        k = chain.path.index(j)
+        p0, r0 = frames[cname].positions_m[k], frames[cname].rotations[k]
+        d = r0.T @ (pe + re @ np.array(desc.end_effector.attachments_m[str(end.at)]) - p0)
+        norm = float(np.linalg.norm(d))
+        if norm == 0.0:
+            continue
+        d /= norm
+        axis = np.cross([1.0, 0.0, 0.0], d)
+        sin, cos = float(np.linalg.norm(axis)), float(d[0])
+        z[s] = axis / sin * math.atan2(sin, cos) if sin > 1e-12 else np.zeros(3)
+    return z
 
 
 def solve_task_pose(desc: Description, pose: TaskPose, *, start: np.ndarray | None = None) -> TaskAssembly:
@@ -454,7 +481,7 @@ def _solve(desc: Description, lay: _Layout, pose: TaskPose, start: np.ndarray | 
     span = sum(lk.length_m for c in desc.chains for lk in c.links)
     starts = ([start] if start is not None else []) + _starts(desc, lay, span)
     for z0 in starts:
-        z, res = _newton(desc, lay, pose, np.array(z0, float), ell)
+        z, res = _newton(desc, lay, pose, _aimed(desc, lay, pose, np.array(z0, float)), ell)
         if res < CLOSURE_TOL_M and all(_in_branch(j, z[s]) for _, j, s in lay.joints):
             return _wrapped(lay, z)
     raise UnreachableTaskPoseError(
@@ -464,25 +491,39 @@ def _solve(desc: Description, lay: _Layout, pose: TaskPose, start: np.ndarray | 
     )
 
 
-def _check_reach(desc: Description, pose: TaskPose) -> None:
-    """A chain from the ground of revolute, universal and spherical joints reaches at most its links' total length
-    from its base: refuse a pose beyond it, naming the chain (before any Newton step)."""
+def closure_reach(desc: Description) -> list[tuple[int, ChainDesc, np.ndarray, float]]:
+    """For each closed chain of revolute, universal and spherical joints: ``(index, chain, root base (m), reach (m))``
+    where reach bounds the distance from its root chain's base to its attachment point: every link and every base
+    offset along the chain and its ancestors (chains with prismatic joints are left out)."""
+    out = []
     for i, c in enumerate(desc.chains):
         end = c.end_joint
-        if end is None or c.parent is not None or any(j.type == "prismatic" for j in c.joints):
+        line = [c]
+        while line[-1].parent is not None:
+            line.append(desc.chain(str(line[-1].parent)))
+        if end is None or any(j.type == "prismatic" for ch in line for j in ch.joints):
             continue
-        reach = sum(lk.length_m for lk in c.links)
-        a = np.array(desc.end_effector.attachments_m[str(end.at)])
+        reach = sum(lk.length_m for ch in line for lk in ch.links)
+        reach += sum(float(np.linalg.norm(ch.base_position_m)) for ch in line[:-1])
+        out.append((i, c, np.array(line[-1].base_position_m), reach))
+    return out
+
+
+def _check_reach(desc: Description, pose: TaskPose) -> None:
+    """Refuse a pose beyond a chain's reach (:func:`closure_reach`), naming the chain, before any Newton step."""
+    for i, chain, base, reach in closure_reach(desc):
+        at = str(chain.end_joint.at) if chain.end_joint is not None else ""
+        a = np.array(desc.end_effector.attachments_m[at])
         if desc.planar:
             pe, re = _ee_frame(desc, pose, [c for c in ("x", "y", "phi") if c not in desc.task], np.zeros(3))
             target = pe + (re @ a if "phi" in desc.task else np.zeros(3))
             slack = 0.0 if "phi" in desc.task else float(np.linalg.norm(a))
         else:
             target, slack = np.array([pose.x_m, pose.y_m, pose.z_m]), float(np.linalg.norm(a))
-        dist = float(np.linalg.norm(target - np.array(c.base_position_m))) - slack
+        dist = float(np.linalg.norm(target - base)) - slack
         if dist > reach * (1 + 1e-12):
             raise UnreachableTaskPoseError(
-                f"chain {c.name!r} cannot reach its attachment point {end.at!r} at {pose.label(desc.task)}: "
+                f"chain {chain.name!r} cannot reach its attachment point {at!r} at {pose.label(desc.task)}: "
                 f"{dist * 1e3:.1f} mm away, its links span at most {reach * 1e3:.1f} mm",
                 parameter=f"chains[{i}]",
                 hint="choose a pose inside the workspace, or check the chain's base and link lengths",

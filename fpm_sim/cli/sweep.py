@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from fpm_sim.cli.bands import add_posterior_args, sweep_bands
 from fpm_sim.cli.common import (
+    CliError,
     add_config_args,
     add_engine_args,
     add_output_args,
@@ -14,20 +16,78 @@ from fpm_sim.cli.common import (
     emit,
     engine_options,
     finish_store,
+    load_machine,
     resolution_line,
     with_resolution,
 )
 from fpm_sim.cli.reproduce import add_study_args, default_out, study_manipulator, study_options
 
+if TYPE_CHECKING:
+    from fpm_sim.architecture import Description
+
 __all__ = ["cmd_sweep", "register"]
+
+_STUDY_ONLY = {"reading": "x+", "thickness_mm": None, "backend": "cpu", "posterior": None}
+"""Options of the study's own sweep (their defaults): on a described architecture they are refused by name."""
+
+
+def _sweep_described(args: argparse.Namespace, desc: Description) -> int:
+    """``fpm-sim sweep --config machine.toml``: the general pose loop (:mod:`fpm_sim.batch.task_sweep`)."""
+    from fpm_sim.batch.task_sweep import read_task_poses_csv, sweep_task, task_grid
+    from fpm_sim.model.options import warn_if_coarse
+    from fpm_sim.outputs import atomic_dir
+
+    for key, default in _STUDY_ONLY.items():
+        if getattr(args, key, default) != default:
+            flag = "--" + key.replace("_", "-")
+            raise CliError(f"{flag}: an option of the study's 3RRR sweep; a described architecture has no {flag}")
+    if args.grid == "paper":
+        raise CliError("--grid paper: the study's 25 poses are the 3RRR's; use --grid dense or --poses on this machine")
+    opts = study_options(args)
+    held = _held_coordinates(args, desc)
+    if args.poses is not None:
+        poses, grid = read_task_poses_csv(args.poses, desc), "poses"
+    else:
+        poses, _, _ = task_grid(desc, step_mm=args.step_mm, held=held)
+        grid = "dense"
+    out = args.out or Path("out") / f"sweep_{grid}_{Path(args.config).stem}"
+    check_output_dir(out, "--out", overwrite=args.overwrite)
+    warn_if_coarse(opts)
+    sw = sweep_task(desc, poses, options=opts, workers=args.workers, grid=grid, step_mm=args.step_mm)
+    with atomic_dir(out, overwrite=args.overwrite) as tmp:
+        names = [p.name for p in sw.write(tmp)]
+    finish_store(out)
+    paths = [Path(out) / n for n in names]
+    text = sw.table() + "\n" + resolution_line(sw.options or opts) + "\n  wrote " + ", ".join(str(p) for p in paths)
+    payload = {**sw.to_dict(), "files": [str(p) for p in paths]}
+    emit(args, with_resolution(payload, sw.options or opts), text)
+    return 0
+
+
+def _held_coordinates(args: argparse.Namespace, desc: Description) -> dict[str, float]:
+    """The task coordinates a dense grid holds: z (spatial; ``--z-mm``, default the first check pose's) and phi
+    (``--phi-rad``, where the architecture sets it)."""
+    if args.phi_rad and "phi" not in desc.task:
+        raise CliError(f"--phi-rad: {desc.name} has no task coordinate phi; drop --phi-rad")
+    if args.z_mm is not None and "z" not in desc.task:
+        raise CliError(f"--z-mm: {desc.name} has no task coordinate z; drop --z-mm")
+    home = desc.check_poses[0] if desc.check_poses else {}
+    z = args.z_mm * 1e-3 if args.z_mm is not None else home.get("z", 0.0)
+    return {"z": z, "phi": args.phi_rad}
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
+    from fpm_sim.config import Manipulator
     from fpm_sim.model.options import warn_if_coarse
     from fpm_sim.outputs import atomic_dir
     from fpm_sim.study.poses import parse_reading
     from fpm_sim.study.sweep import sweep_workspace
 
+    machine = load_machine(args, "sweep")
+    if not isinstance(machine, Manipulator):
+        return _sweep_described(args, machine)
+    if args.z_mm is not None:
+        raise CliError("--z-mm: the 3RRR's task coordinates are x, y and phi; drop --z-mm")
     if args.posterior is not None:  # predictions with bands (fpm_sim.cli.bands)
         return sweep_bands(args)
     reading = parse_reading(args.reading)
@@ -100,6 +160,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--grid", choices=("paper", "dense"), default="dense", help="dense grid or the study's poses")
     p.add_argument("--step-mm", type=float, default=10.0, help="dense grid spacing (mm, default 10)")
     p.add_argument("--phi-rad", type=float, default=0.0, help="platform rotation for the dense grid (rad)")
+    p.add_argument(
+        "--z-mm",
+        type=float,
+        default=None,
+        help="height of the dense grid's horizontal slice (mm; spatial architectures; default: the first check pose's)",
+    )
     add_config_args(p)
     p.add_argument("--poses", type=Path, help="CSV of poses (columns x_mm,y_mm,phi_rad) instead of --grid")
     add_study_args(p)

@@ -1,0 +1,69 @@
+"""The figure of a :class:`fpm_sim.batch.task_sweep.TaskSweep`: f1 over x and y, with the singularity loci."""
+
+from __future__ import annotations
+
+import warnings
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from fpm_sim.figures import wrap_title
+
+if TYPE_CHECKING:
+    from fpm_sim.batch.task_sweep import TaskSweep
+
+__all__ = ["plot_task_sweep"]
+
+
+def _field(sweep: TaskSweep, values: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+    z = np.full((len(ys), len(xs)), np.nan)
+    for p, v in zip(sweep.poses, values):
+        z[np.searchsorted(ys, round(p.y_m * 1e3, 9)), np.searchsorted(xs, round(p.x_m * 1e3, 9))] = v
+    return z
+
+
+def plot_task_sweep(sweep: TaskSweep, ax: Any = None) -> Any:
+    """Heatmap of f1 (a grid) or coloured points (a pose list), singular and near-singular poses marked, the two
+    singularity loci (type 1 and type 2 measure at 0.02) drawn on a grid; the ``Figure``."""
+    import matplotlib.pyplot as plt
+
+    xs = np.array(sorted({round(p.x_m * 1e3, 9) for p in sweep.poses}))
+    ys = np.array(sorted({round(p.y_m * 1e3, 9) for p in sweep.poses}))
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(7, 6), constrained_layout=True)
+    else:
+        fig = ax.figure
+    f1 = sweep.freq_hz[:, 0]
+    if sweep.grid == "dense" and sweep.step_mm:
+        step = sweep.step_mm
+        extent = (xs[0] - step / 2, xs[-1] + step / 2, ys[0] - step / 2, ys[-1] + step / 2)
+        im = ax.imshow(_field(sweep, f1, xs, ys), origin="lower", extent=extent, cmap="viridis")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            for values, colour, style in ((sweep.type2, "red", "solid"), (sweep.type1, "black", "dashed")):
+                field = _field(sweep, values, xs, ys)
+                if np.isfinite(field).sum() > 4 and np.nanmin(field) < 0.02 < np.nanmax(field):
+                    ax.contour(xs, ys, field, levels=[0.02], colors=colour, linewidths=1.2, linestyles=style)
+        ax.plot([], [], color="red", label="type-2 (parallel) singularity: measure 0.02")
+        ax.plot([], [], color="black", ls="--", label="type-1 (serial) singularity: measure 0.02")
+    else:
+        im = ax.scatter([p.x_m * 1e3 for p in sweep.poses], [p.y_m * 1e3 for p in sweep.poses], c=f1, s=120)
+    fig.colorbar(im, ax=ax, label="first natural frequency (Hz)")
+    marks = {"singular": ("s", "red"), "near_singular": ("o", "orange")}
+    for status, (marker, colour) in marks.items():
+        pts = [(p.x_m * 1e3, p.y_m * 1e3) for p, s in zip(sweep.poses, sweep.status) if s == status]
+        if pts:
+            ax.scatter(*zip(*pts), marker=marker, s=10, color=colour, label=status.replace("_", " "), zorder=3)
+    ax.set_xlabel("x (mm)")
+    ax.set_ylabel("y (mm)")
+    ax.set_aspect("equal")
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.1), ncols=2)
+    held = [
+        f"{c} = {sweep.poses[0].value(c) * 1e3:g} mm" if c == "z" else f"phi = {sweep.poses[0].phi_rad:g} rad"
+        for c in sweep.task
+        if c in ("z", "phi")
+    ]
+    title = f"{sweep.name}: first natural frequency" + (f" at {', '.join(held)}" if held else "")
+    ax.set_title(wrap_title(title, fig, 9, fraction=0.7), fontsize=9)
+    return fig
