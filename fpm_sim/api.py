@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Literal, overload
 
 if TYPE_CHECKING:
     from fpm_sim.architecture import Description, TaskPose
+    from fpm_sim.batch.task_sweep import TaskSweep
     from fpm_sim.config import Manipulator, RigConfig
     from fpm_sim.designs.study import DesignResult
     from fpm_sim.kinematics import Pose
@@ -228,18 +229,19 @@ def rig_modes(
 
 
 def sweep(
-    config: Manipulator | None = None,
+    config: Manipulator | Description | None = None,
     *,
     grid: str = "dense",
-    poses: Sequence[Pose] | None = None,
+    poses: Sequence[Pose] | Sequence[TaskPose] | None = None,
     step_mm: float = 10.0,
     phi_rad: float = 0.0,
+    z_mm: float | None = None,
     reading: str = "x+",
     options: ModelOptions | None = None,
     backend: str = "cpu",
     workers: int = 1,
     progress: bool = False,
-) -> WorkspaceSweep:
+) -> WorkspaceSweep | TaskSweep:
     """First three natural frequencies (Hz) over the workspace, the study's 25 poses or given poses.
 
     The ``fpm-sim sweep`` command.
@@ -247,12 +249,17 @@ def sweep(
     Parameters
     ----------
     config
-        Manipulator description; ``None``: the embedded one.
+        Manipulator description; ``None``: the embedded one. A described architecture
+        (:class:`fpm_sim.architecture.Description`) is swept by its own pose loop
+        (:func:`fpm_sim.batch.task_sweep.sweep_task`; ``grid`` ``"dense"`` or ``"poses"``, the result a
+        :class:`fpm_sim.batch.task_sweep.TaskSweep`).
     grid
         ``"dense"`` (a square grid of ``step_mm`` at rotation ``phi_rad``), ``"paper"`` (the study's poses) or
         ``"poses"`` (``poses``).
     poses
-        The poses of ``grid="poses"``.
+        The poses of ``grid="poses"`` (:class:`fpm_sim.architecture.TaskPose` for a described architecture).
+    z_mm
+        Height of a spatial architecture's dense grid (mm; ``None``: its first check pose's).
     step_mm
         Dense grid spacing (mm).
     phi_rad
@@ -267,6 +274,22 @@ def sweep(
     progress
         Show a progress bar.
     """
+    from fpm_sim.architecture import Description, TaskPose
+
+    if isinstance(config, Description):
+        from fpm_sim.batch.task_sweep import sweep_task, task_grid
+
+        if grid == "dense":
+            home = config.check_poses[0] if config.check_poses else {}
+            held = {"z": z_mm * 1e-3 if z_mm is not None else home.get("z", 0.0), "phi": phi_rad}
+            task_poses, _, _ = task_grid(config, step_mm=step_mm, held=held)
+        else:
+            task_poses = [p for p in poses or [] if isinstance(p, TaskPose)]
+            if len(task_poses) != len(poses or []) or not task_poses:
+                raise TypeError("a described architecture's poses are fs.TaskPose values (grid='poses')")
+        return sweep_task(
+            config, task_poses, options=_options(options), workers=workers, grid=grid, step_mm=step_mm
+        )
     from fpm_sim.study.poses import parse_reading
     from fpm_sim.study.sweep import sweep_workspace
 

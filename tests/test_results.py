@@ -5,6 +5,7 @@ import functools
 import json
 import math
 import warnings
+from pathlib import Path
 
 import matplotlib
 import numpy as np
@@ -18,6 +19,7 @@ from matplotlib.figure import Figure
 import fpm_sim as fs
 from fpm_sim.results import Result, frequencies_dataset, to_jsonable
 
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "architectures"
 SEG = 3  # a tiny model: every instance here is built in well under a second or a few
 TINY = fs.ModelOptions(segments=SEG)
 LOOP = fs.ModelOptions(segments=SEG, axial=False, gravity=False)  # the pose loop's options at the tiny resolution
@@ -166,6 +168,13 @@ BUILDERS = {
     "MoveResult": lambda: _move(),
     "Stepping": lambda: _move().stepping,
     "WorkspaceSweep": _sweep,
+    "TaskSweep": lambda: _quiet_call(
+        fs.sweep,
+        fs.load_description(EXAMPLES / "five_bar.toml"),
+        grid="poses",
+        poses=[fs.TaskPose(0.0, 0.25), fs.TaskPose(0.04, 0.18), fs.TaskPose(0.0, 0.6)],
+        options=fs.ModelOptions(segments=SEG),
+    ),
     "PoseFrequencies": lambda: _sweep().frequencies,
     "StudyReproduction": _reproduction,
     "DesignResult": lambda: _quiet_call(
@@ -389,3 +398,9 @@ def test_numpy_values_tuples_and_non_finite_floats_become_standard_json():
     out = to_jsonable(value)
     assert out == {"1": [1.5, 3], "a": [[1.0, "inf"], ["nan", -2.0]], "b": [0.25, "text", None]}
     assert json.loads(json.dumps(out, allow_nan=False)) == out  # standard JSON: no NaN/Infinity tokens
+
+
+def test_a_task_sweep_shares_the_dataset_shape():
+    sw = BUILDERS["TaskSweep"]()
+    assert sw.status == ["ok", "ok", "unreachable"]
+    check_frequency_dataset(sw.to_xarray(), sw.freq_hz, sw.poses, sw.status)

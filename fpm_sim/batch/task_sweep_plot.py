@@ -38,14 +38,22 @@ def plot_task_sweep(sweep: TaskSweep, ax: Any = None) -> Any:
         step = sweep.step_mm
         extent = (xs[0] - step / 2, xs[-1] + step / 2, ys[0] - step / 2, ys[-1] + step / 2)
         im = ax.imshow(_field(sweep, f1, xs, ys), origin="lower", extent=extent, cmap="viridis")
+        loci = (
+            (sweep.type2, "red", "solid", "type-2 (parallel) singularity: measure 0.02"),
+            (sweep.type1, "black", "dashed", "type-1 (serial) singularity: measure 0.02"),
+        )
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            for values, colour, style in ((sweep.type2, "red", "solid"), (sweep.type1, "black", "dashed")):
+            for values, colour, style, label in loci:
                 field = _field(sweep, values, xs, ys)
                 if np.isfinite(field).sum() > 4 and np.nanmin(field) < 0.02 < np.nanmax(field):
                     ax.contour(xs, ys, field, levels=[0.02], colors=colour, linewidths=1.2, linestyles=style)
-        ax.plot([], [], color="red", label="type-2 (parallel) singularity: measure 0.02")
-        ax.plot([], [], color="black", ls="--", label="type-1 (serial) singularity: measure 0.02")
+                    ax.plot([], [], color=colour, ls=style, label=label)
+        reached = [(p.x_m * 1e3, p.y_m * 1e3) for p, s in zip(sweep.poses, sweep.status) if s != "unreachable"]
+        if reached:  # the workspace, not the box searched for it
+            rx, ry = np.array(reached).T
+            ax.set_xlim(rx.min() - step, rx.max() + step)
+            ax.set_ylim(ry.min() - step, ry.max() + step)
     else:
         im = ax.scatter([p.x_m * 1e3 for p in sweep.poses], [p.y_m * 1e3 for p in sweep.poses], c=f1, s=120)
     fig.colorbar(im, ax=ax, label="first natural frequency (Hz)")
@@ -59,8 +67,11 @@ def plot_task_sweep(sweep: TaskSweep, ax: Any = None) -> Any:
     ax.set_aspect("equal")
     if ax.get_legend_handles_labels()[0]:
         ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.1), ncols=2)
+    nb = "\u00a0"  # a held coordinate is not broken across lines
     held = [
-        f"{c} = {sweep.poses[0].value(c) * 1e3:g} mm" if c == "z" else f"phi = {sweep.poses[0].phi_rad:g} rad"
+        f"z{nb}={nb}{sweep.poses[0].z_m * 1e3:g}{nb}mm"
+        if c == "z"
+        else f"phi{nb}={nb}{sweep.poses[0].phi_rad:g}{nb}rad"
         for c in sweep.task
         if c in ("z", "phi")
     ]

@@ -37,6 +37,11 @@ def _sweep_described(args: argparse.Namespace, desc: Description) -> int:
     from fpm_sim.model.options import warn_if_coarse
     from fpm_sim.outputs import atomic_dir
 
+    if args.backend != "cpu":
+        raise CliError(
+            f"--backend {args.backend}: the batched backends (MuJoCo's formulas in JAX, MJX) run the 3RRR only so far; "
+            "a described architecture's pose loop is --backend cpu (docs/architectures.md)"
+        )
     for key, default in _STUDY_ONLY.items():
         if getattr(args, key, default) != default:
             flag = "--" + key.replace("_", "-")
