@@ -290,13 +290,16 @@ def sweep(
         return sweep_task(
             config, task_poses, options=_options(options), workers=workers, grid=grid, step_mm=step_mm
         )
+    from fpm_sim.kinematics import Pose
     from fpm_sim.study.poses import parse_reading
     from fpm_sim.study.sweep import sweep_workspace
 
+    if poses is not None and not all(isinstance(p, Pose) for p in poses):
+        raise TypeError("the 3RRR's poses are fs.Pose values (x_m, y_m, phi_rad)")
     return sweep_workspace(
         _config(config),
         grid=grid,
-        poses=poses,
+        poses=[p for p in poses if isinstance(p, Pose)] if poses is not None else None,
         step_mm=step_mm,
         phi_rad=phi_rad,
         reading=parse_reading(reading),
