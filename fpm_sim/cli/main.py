@@ -151,10 +151,14 @@ def _shapes_and_plot(args: argparse.Namespace, result: ModalResult | ModalCompar
 
 
 def cmd_modes(args: argparse.Namespace) -> int:
+    from fpm_sim.config import Manipulator
     from fpm_sim.linear.analysis import analyse
     from fpm_sim.model.options import warn_if_coarse
 
     check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
+    machine = load_machine(args, "modes")
+    if args.posterior is not None and not isinstance(machine, Manipulator):
+        raise CliError("--posterior: the posterior's draws are the study's 3RRR's; a described architecture has none")
     if args.posterior is not None:  # predictions with bands (fpm_sim.cli.bands)
         from fpm_sim.cli.bands import modes_bands
 
@@ -167,7 +171,6 @@ def cmd_modes(args: argparse.Namespace) -> int:
             text += f"\nbands plotted to {args.plot}"
         emit(args, payload, text)
         return 0
-    machine = load_machine(args, "modes")
     opts = model_options(args)
     warn_if_coarse(opts)
     built, pose_label = _build_machine(args, machine, opts)
