@@ -50,6 +50,7 @@ def main() -> None:
         table += modes_table(name)
         desc = fs.load_description(EXAMPLES / f"{name}.toml")
         sw = fs.sweep(desc, step_mm=STEPS_MM[name], options=fs.ModelOptions(fidelity="fast"), workers=args.workers)
+        sw.write_csv(args.out / "results" / f"architecture_{name}_sweep.csv")
         fig = sw.plot()
         fig.savefig(args.out / "figures" / f"architecture_{name}_f1.png", dpi=100)
         print(name, sw.table(), flush=True)

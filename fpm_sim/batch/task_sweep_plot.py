@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fpm_sim.figures import wrap_title
+from fpm_sim.kinematics import NEAR_SINGULAR_WARN
 
 if TYPE_CHECKING:
     from fpm_sim.batch.task_sweep import TaskSweep
@@ -23,8 +24,9 @@ def _field(sweep: TaskSweep, values: np.ndarray, xs: np.ndarray, ys: np.ndarray)
 
 
 def plot_task_sweep(sweep: TaskSweep, ax: Any = None) -> Any:
-    """Heatmap of f1 (a grid) or coloured points (a pose list), singular and near-singular poses marked, the two
-    singularity loci (type 1 and type 2 measure at 0.02) drawn on a grid; the ``Figure``."""
+    """Heatmap of f1 (a grid) or coloured points (a pose list), singular and near-singular poses marked, and on a
+    grid the two singularity measures' contours at :data:`fpm_sim.kinematics.NEAR_SINGULAR_WARN`, the boundary of
+    the near-singular regions around the loci; the ``Figure``."""
     import matplotlib.pyplot as plt
 
     xs = np.array(sorted({round(p.x_m * 1e3, 9) for p in sweep.poses}))
@@ -38,16 +40,17 @@ def plot_task_sweep(sweep: TaskSweep, ax: Any = None) -> Any:
         step = sweep.step_mm
         extent = (xs[0] - step / 2, xs[-1] + step / 2, ys[0] - step / 2, ys[-1] + step / 2)
         im = ax.imshow(_field(sweep, f1, xs, ys), origin="lower", extent=extent, cmap="viridis")
+        level = NEAR_SINGULAR_WARN  # the near-singular region's boundary
         loci = (
-            (sweep.type2, "red", "solid", "type-2 (parallel) singularity: measure 0.02"),
-            (sweep.type1, "black", "dashed", "type-1 (serial) singularity: measure 0.02"),
+            (sweep.type2, "red", "solid", f"type-2 (parallel) singularity measure {level:g}"),
+            (sweep.type1, "black", "dashed", f"type-1 (serial) singularity measure {level:g}"),
         )
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             for values, colour, style, label in loci:
                 field = _field(sweep, values, xs, ys)
-                if np.isfinite(field).sum() > 4 and np.nanmin(field) < 0.02 < np.nanmax(field):
-                    ax.contour(xs, ys, field, levels=[0.02], colors=colour, linewidths=1.2, linestyles=style)
+                if np.isfinite(field).sum() > 4 and np.nanmin(field) < level < np.nanmax(field):
+                    ax.contour(xs, ys, field, levels=[level], colors=colour, linewidths=1.8, linestyles=style, zorder=4)
                     ax.plot([], [], color=colour, ls=style, label=label)
         reached = [(p.x_m * 1e3, p.y_m * 1e3) for p, s in zip(sweep.poses, sweep.status) if s != "unreachable"]
         if reached:  # the workspace, not the box searched for it
@@ -57,11 +60,13 @@ def plot_task_sweep(sweep: TaskSweep, ax: Any = None) -> Any:
     else:
         im = ax.scatter([p.x_m * 1e3 for p in sweep.poses], [p.y_m * 1e3 for p in sweep.poses], c=f1, s=120)
     fig.colorbar(im, ax=ax, label="first natural frequency (Hz)")
-    marks = {"singular": ("s", "red"), "near_singular": ("o", "orange")}
+    marks = {"singular": ("x", "red"), "near_singular": ("o", "orange")}
     for status, (marker, colour) in marks.items():
         pts = [(p.x_m * 1e3, p.y_m * 1e3) for p, s in zip(sweep.poses, sweep.status) if s == status]
         if pts:
-            ax.scatter(*zip(*pts), marker=marker, s=10, color=colour, label=status.replace("_", " "), zorder=3)
+            label = status.replace("_", " ") + (" (not computed)" if status == "singular" else "")
+            look: dict[str, str] = {"facecolors": "none", "edgecolors": colour} if marker == "o" else {"color": colour}
+            ax.scatter(*zip(*pts), marker=marker, s=9, linewidths=0.8, label=label, zorder=3, **look)
     ax.set_xlabel("x (mm)")
     ax.set_ylabel("y (mm)")
     ax.set_aspect("equal")
