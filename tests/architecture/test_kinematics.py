@@ -154,3 +154,16 @@ def test_the_geometric_jacobian_is_the_residual_s_derivative(name):
         pose = TaskPose(0.01, 0.2, -0.3, 0.1)
         exact, fd = kin._jacobian(desc, lay, pose, z, ell), kin._jacobian_fd(desc, lay, pose, z, ell)
         assert np.max(np.abs(exact - fd)) < 1e-7 * np.max(np.abs(fd))
+
+
+def test_the_shipped_3rrr_description_is_the_embedded_default_in_the_general_form():
+    """examples/architectures/three_rrr.toml is what three_rrr_toml writes from the embedded default (regenerate it
+    with that function when the default changes), and it reads back to description_of_3rrr's description with every
+    value's provenance."""
+    from fpm_sim.architecture.three_rrr import three_rrr_toml
+
+    cfg = default_config()
+    assert (EXAMPLES / "three_rrr.toml").read_text() == three_rrr_toml(cfg)
+    desc = load_description(EXAMPLES / "three_rrr.toml")
+    assert desc == description_of_3rrr(cfg)
+    assert not [k for k, v in desc.provenance.items() if v.startswith("user")]
