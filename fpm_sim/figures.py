@@ -8,7 +8,7 @@ import math
 import textwrap
 from typing import Any
 
-__all__ = ["bands_against_measured", "text_colour", "wrap_title"]
+__all__ = ["bands_against_measured", "text_colour", "wrap_title", "write_table_and_figure"]
 
 CHAR_WIDTH_EM = 0.6
 """Mean width of a character of matplotlib's default sans-serif font, in ems (font sizes): DejaVu Sans averages
@@ -64,3 +64,20 @@ def bands_against_measured(
     ax.set_ylabel(ylabel)
     ax.set_title(title)
     ax.legend(loc="upper left", fontsize=8)
+
+
+def write_table_and_figure(result: Any, out_dir: Any, stem: str, *, dpi: int = 110) -> list[Any]:
+    """Write ``result``'s table (``result.write_csv(path)``) and figure (``result.plot()``) as ``<stem>.csv`` and
+    ``<stem>.png`` into ``out_dir`` (created); returns the two paths."""
+    from pathlib import Path
+
+    import matplotlib.pyplot as plt
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    csv_path, png_path = out / f"{stem}.csv", out / f"{stem}.png"
+    result.write_csv(csv_path)
+    fig = result.plot()
+    fig.savefig(png_path, dpi=dpi)
+    plt.close(fig)
+    return [csv_path, png_path]

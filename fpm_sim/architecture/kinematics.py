@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -210,6 +211,19 @@ def _frames(desc: Description, lay: _Layout, z: np.ndarray) -> dict[str, ChainFr
     return out
 
 
+def _closed_ends(
+    desc: Description, frames: dict[str, ChainFrames], re: np.ndarray
+) -> Iterator[tuple[ChainDesc, JointDesc, np.ndarray, np.ndarray, np.ndarray]]:
+    """Each closed chain, its end joint, its end frame (position m, rotation) and its attachment point relative to
+    the end effector's origin in world axes (m)."""
+    for c in desc.chains:
+        end = c.end_joint
+        if end is not None:
+            f = frames[c.name]
+            a_w = re @ np.array(desc.end_effector.attachments_m[str(end.at)])
+            yield c, end, f.positions_m[-1], f.rotations[-1], a_w
+
+
 def _residual_blocks(
     desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray, ell: float
 ) -> list[tuple[str, np.ndarray]]:
@@ -217,13 +231,8 @@ def _residual_blocks(
     frames = _frames(desc, lay, z)
     pe, re = _ee_frame(desc, pose, lay.ee_free, z[lay.ee_slice])
     out: list[tuple[str, np.ndarray]] = []
-    for c in desc.chains:
-        end = c.end_joint
-        if end is None:
-            continue
-        f = frames[c.name]
-        p, r = f.positions_m[-1], f.rotations[-1]
-        rows = [p - (pe + re @ np.array(desc.end_effector.attachments_m[str(end.at)]))]
+    for c, end, p, r, a_w in _closed_ends(desc, frames, re):
+        rows = [p - (pe + a_w)]
         if end.type == "revolute":
             rows.append(ell * np.cross(r @ np.array(end.axis), re @ np.array(end.axis)))
         elif end.type == "fixed":  # the relative rotation's vector (its norm is the angle, to first order)
@@ -289,13 +298,7 @@ def _row_blocks_rate(
     """Rate of every closure row when the chains in ``moved`` (downstream of a joint) turn at ``w`` about ``centre``
     and translate at ``v`` (or, ``ee_moves``, when the end effector does)."""
     out = []
-    for c in desc.chains:
-        end = c.end_joint
-        if end is None:
-            continue
-        f = frames[c.name]
-        p, r = f.positions_m[-1], f.rotations[-1]
-        a_w = re @ np.array(desc.end_effector.attachments_m[str(end.at)])
+    for c, end, p, r, a_w in _closed_ends(desc, frames, re):
         w_c = w if (c.name in moved and not ee_moves) else np.zeros(3)
         w_e = w if ee_moves else np.zeros(3)
         dp = np.cross(w_c, p - centre) + (v if c.name in moved and not ee_moves else 0.0)

@@ -27,6 +27,7 @@ import numpy as np
 from fpm_sim.architecture import Description, TaskPose
 from fpm_sim.architecture.kinematics import UnreachableTaskPoseError, closure_reach, solve_task_pose
 from fpm_sim.errors import FpmSimError
+from fpm_sim.figures import write_table_and_figure
 from fpm_sim.kinematics import NEAR_SINGULAR_WARN, SINGULAR_TOL
 from fpm_sim.model.options import ModelOptions
 
@@ -211,16 +212,9 @@ class TaskSweep:
         return plot_task_sweep(self, ax)
 
     def write(self, out_dir: str | Path) -> list[Path]:
-        import matplotlib.pyplot as plt
-
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
-        csv_path, png_path = out / f"sweep_{self.grid}.csv", out / f"sweep_{self.grid}.png"
-        self.write_csv(csv_path)
-        fig = self.plot()
-        fig.savefig(png_path, dpi=110)
-        plt.close(fig)
-        return [csv_path, png_path]
+        """``sweep_<grid>.csv`` and ``sweep_<grid>.png`` in ``out_dir``."""
+        paths: list[Path] = write_table_and_figure(self, out_dir, f"sweep_{self.grid}")
+        return paths
 
 
 def sweep_task(

@@ -27,7 +27,7 @@ from fpm_sim.batch.frequencies import pose_frequencies
 from fpm_sim.batch.pose_loop import PoseFrequencies, fast_options
 from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError
-from fpm_sim.figures import text_colour, wrap_title
+from fpm_sim.figures import text_colour, wrap_title, write_table_and_figure
 from fpm_sim.kinematics import Pose, assemble_many
 from fpm_sim.model.options import ModelOptions, resolution_footer
 from fpm_sim.study.poses import TableReading, study_poses
@@ -229,16 +229,9 @@ class WorkspaceSweep:
         return fig
 
     def write(self, out_dir: str | Path) -> list[Path]:
-        import matplotlib.pyplot as plt
-
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
-        csv_path, png_path = out / f"sweep_{self.grid}.csv", out / f"sweep_{self.grid}.png"
-        self.write_csv(csv_path)
-        fig = self.plot()
-        fig.savefig(png_path, dpi=110)
-        plt.close(fig)
-        return [csv_path, png_path]
+        """``sweep_<grid>.csv`` and ``sweep_<grid>.png`` in ``out_dir``."""
+        paths: list[Path] = write_table_and_figure(self, out_dir, f"sweep_{self.grid}")
+        return paths
 
 
 def sweep_workspace(
