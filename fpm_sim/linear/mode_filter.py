@@ -118,8 +118,13 @@ def reference_frequency_hz(model: mujoco.MjModel, mass: np.ndarray) -> float:
 def noise_w2(model: mujoco.MjModel, mass: np.ndarray, filt: ModeFilter, fd_noise: float = 0.0) -> float:
     """``w2_tol`` (rad^2/s^2): eigenvalues within ``+-w2_tol`` of zero carry no strain energy to within the
     computation's noise (module docstring); ``fd_noise = |x'(K(e) - K(2e))x|`` for an ``M``-normalised shape."""
-    w_ref = 2 * np.pi * reference_frequency_hz(model, mass)
-    return max((filt.rigid_fraction * w_ref) ** 2, FD_NOISE_MARGIN * fd_noise)
+    return float(_w2_tol(2 * np.pi * reference_frequency_hz(model, mass), filt, np.asarray(fd_noise)))
+
+
+def _w2_tol(w_ref: float, filt: ModeFilter, fd_noise: np.ndarray) -> np.ndarray:
+    """:func:`noise_w2` for the reference ``w_ref`` (rad/s), per finite-difference noise in ``fd_noise``."""
+    out: np.ndarray = np.maximum((filt.rigid_fraction * w_ref) ** 2, FD_NOISE_MARGIN * fd_noise)
+    return out
 
 
 def eigenvalue_tolerances(
@@ -140,7 +145,7 @@ def eigenvalue_tolerances(
         fd = np.zeros(shapes.shape[1])
     else:
         fd = np.abs(np.einsum("ik,ij,jk->k", shapes, stiff_change(), shapes))
-    return np.array([noise_w2(model, mass, filt, float(v)) for v in fd])
+    return _w2_tol(w_ref, filt, fd)  # the reference computed once for every mode
 
 
 def check_stable(w2: np.ndarray, tol: np.ndarray, *, what: str = "the equilibrium") -> None:
