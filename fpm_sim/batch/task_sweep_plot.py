@@ -1,29 +1,28 @@
-"""The figure of a :class:`fpm_sim.batch.task_sweep.TaskSweep`: f1 over x and y, with the singularity loci."""
+"""The figure of a :class:`fpm_sim.batch.task_sweep.TaskSweep`: f1 over x and y, with the singularity loci.
+
+It takes the sweep as ``Any``: importing its class here would close an import cycle (task_sweep calls this lazily)."""
 
 from __future__ import annotations
 
 import warnings
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from fpm_sim.figures import wrap_title
 from fpm_sim.kinematics import NEAR_SINGULAR_WARN
 
-if TYPE_CHECKING:
-    from fpm_sim.batch.task_sweep import TaskSweep
-
 __all__ = ["plot_task_sweep"]
 
 
-def _field(sweep: TaskSweep, values: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+def _field(sweep: Any, values: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
     z = np.full((len(ys), len(xs)), np.nan)
     for p, v in zip(sweep.poses, values):
         z[np.searchsorted(ys, round(p.y_m * 1e3, 9)), np.searchsorted(xs, round(p.x_m * 1e3, 9))] = v
     return z
 
 
-def plot_task_sweep(sweep: TaskSweep, ax: Any = None) -> Any:
+def plot_task_sweep(sweep: Any, ax: Any = None) -> Any:
     """Heatmap of f1 (a grid) or coloured points (a pose list), singular and near-singular poses marked, and on a
     grid the two singularity measures' contours at :data:`fpm_sim.kinematics.NEAR_SINGULAR_WARN`, the boundary of
     the near-singular regions around the loci; the ``Figure``."""
