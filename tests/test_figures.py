@@ -4,6 +4,7 @@ numbers), axis labels on every data axes, and the plotted data equal to the tabl
 
 import csv
 import math
+from pathlib import Path
 
 import matplotlib
 import numpy as np
@@ -255,6 +256,29 @@ def test_modes_plot_has_a_legend_and_the_equilibrium_shape():
         assert labels[0] == "equilibrium"
         assert labels[1].startswith("mode shape")
     plt.close(fig)
+
+
+def test_mode_animation_frames_keep_their_texts_inside():
+    """A frame of ``modes --animate``: 3D for the out-of-plane mode 1, 2D for the in-plane mode 2 at (0, 0, 0)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    import fpm_sim as fs
+    from fpm_sim.linear.animation import frame_figure
+
+    with pytest.warns(ResolutionWarning):
+        res = fs.modes(None, None, options=fs.ModelOptions(segments=SEG), n_modes=2)
+    for mode, name in ((1, "3d"), (2, "rectilinear")):
+        fig = frame_figure(res, mode=mode)
+        FigureCanvasAgg(fig)  # a figure of no window: the checker measures texts through an Agg canvas
+        check_figure(fig)
+        assert [a.name for a in fig.axes] == [name]
+        assert fig.get_suptitle().startswith(f"mode {mode}: ")
+        assert "Hz" in fig.get_suptitle()
+    five_bar = fs.load_description(Path(__file__).resolve().parents[1] / "examples" / "architectures" / "five_bar.toml")
+    res = fs.modes(five_bar, None, options=fs.ModelOptions(segments=SEG, gravity=False), n_modes=1)
+    fig = frame_figure(res, mode=1)  # a wide planar machine, out of plane: 3D
+    FigureCanvasAgg(fig)
+    check_figure(fig)
 
 
 def test_readability_panels_do_not_overlap(default_manip):

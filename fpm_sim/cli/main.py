@@ -132,7 +132,8 @@ def _n_modes_note(result: ModalResult | ModalComparison, n_modes: int) -> str:
 
 
 def _shapes_and_plot(args: argparse.Namespace, result: ModalResult | ModalComparison, payload: dict[str, Any]) -> str:
-    """Add Cartesian mode shapes to the payload (``--shapes``) and save a figure (``--plot``)."""
+    """Add Cartesian mode shapes to the payload (``--shapes``), write the animated GIF of one mode (``--animate``,
+    ``--mode``) and save a figure (``--plot``)."""
     import numpy as np
 
     primary = _primary(result)
@@ -144,9 +145,12 @@ def _shapes_and_plot(args: argparse.Namespace, result: ModalResult | ModalCompar
             peak = max(float(np.max(np.linalg.norm(d, axis=1))) for d in disp.values()) or 1.0
             mode_payload["points_displacement"] = {k: (v / peak).tolist() for k, v in disp.items()}
         payload["points_position_m"] = {k: v.tolist() for k, v in primary.point_positions().items()}
+    if args.animate:  # first: a --mode beyond the modes found writes nothing
+        primary.animate(args.animate, mode=args.mode or 1)  # matplotlib's Agg renderer and Pillow writer
+        note += f"\nmode {args.mode or 1} animated to {args.animate}"
     if args.plot:
         save_figure(args.plot, lambda: primary.plot(n_modes=min(args.n_modes, 6)))
-        note = f"\nmode shapes plotted to {args.plot}"
+        note += f"\nmode shapes plotted to {args.plot}"
     return note
 
 
@@ -156,14 +160,18 @@ def cmd_modes(args: argparse.Namespace) -> int:
     from fpm_sim.model.options import warn_if_coarse
 
     check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
+    check_output_file(args.animate, "--animate", (".gif",))
+    if args.mode is not None and args.animate is None:
+        raise CliError("--mode picks the mode that --animate draws; add --animate FILE.gif")
     machine = load_machine(args, "modes")
     if args.posterior is not None and not isinstance(machine, Manipulator):
         raise CliError("--posterior: the posterior's draws are the study's 3RRR's; a described architecture has none")
     if args.posterior is not None:  # predictions with bands (fpm_sim.cli.bands)
         from fpm_sim.cli.bands import modes_bands
 
-        if args.shapes:
-            raise CliError("--shapes draws one description's mode shapes; drop it with --posterior (bands only)")
+        if args.shapes or args.animate:
+            option = "--shapes" if args.shapes else "--animate"
+            raise CliError(f"{option} draws one description's mode shapes; drop it with --posterior (bands only)")
 
         bands, payload, text = modes_bands(args)
         if args.plot:
@@ -174,7 +182,8 @@ def cmd_modes(args: argparse.Namespace) -> int:
     opts = model_options(args)
     warn_if_coarse(opts)
     built, pose_label = _build_machine(args, machine, opts)
-    result = analyse(built, args.method, args.n_modes)
+    # --mode K beyond --n-modes: every physical mode (a K beyond them is then refused by name, as --mode)
+    result = analyse(built, args.method, args.n_modes if (args.mode or 1) <= args.n_modes else None)
     payload, table = result.to_dict(args.n_modes), result.table(args.n_modes)
     payload["config"] = machine.name
     payload["manipulator"] = machine.to_dict()
@@ -401,6 +410,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="with --json: Cartesian mode shapes of points along each link",
     )
     p.add_argument("--plot", type=Path, help="save the first mode shapes (3D view) to this image (.png, .pdf, .svg)")
+    p.add_argument(
+        "--animate",
+        type=Path,
+        metavar="GIF",
+        help="write an animated GIF of one mode shape (--mode) to this file (.gif): one period, looping",
+    )
+    p.add_argument(
+        "--mode", type=count_arg("--mode"), metavar="K", help="the mode --animate draws, 1-based (default 1)"
+    )
     add_posterior_args(p)
     add_output_args(p)
     p.set_defaults(func=cmd_modes)

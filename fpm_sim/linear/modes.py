@@ -1,9 +1,11 @@
 """The result of a modal analysis: the modes of one model by one method, their strain-energy character,
-tables, JSON and 3D plots of the mode shapes (the methods that compute them: :mod:`fpm_sim.linear.solvers`)."""
+tables, JSON, 3D plots and animated GIFs (:mod:`fpm_sim.linear.animation`) of the mode shapes (the methods
+that compute them: :mod:`fpm_sim.linear.solvers`)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import mujoco
@@ -156,6 +158,46 @@ class ModalResult:
             self._plot_mode(fig.add_subplot(1, len(indices), k + 1, projection="3d"), i, scale_m)
         fig.tight_layout()
         return fig
+
+    def animate(
+        self,
+        path: str | Path,
+        *,
+        mode: int = 1,
+        frames: int = 24,
+        fps: int = 12,
+        scale_m: float | None = None,
+    ) -> Path:
+        """Write an animated GIF of one mode shape: the deformed links over the undeformed ones for one period,
+        in 3D where the mode leaves the machine's plane, with its frequency in the title
+        (:func:`fpm_sim.linear.animation.animate_mode`). Headless: matplotlib's Agg renderer and Pillow writer.
+
+        Parameters
+        ----------
+        path
+            The ``.gif`` file to write (atomically).
+        mode
+            The mode to draw, 1-based (1 .. the number of modes found).
+        frames
+            Frames per period (2..240); the GIF loops.
+        fps
+            Frames per second of the GIF (1..50).
+        scale_m
+            Drawn length of the largest point displacement (m); ``None``: 15 % of the model's size.
+
+        Returns
+        -------
+        Path
+            The file written.
+
+        Raises
+        ------
+        fpm_sim.linear.animation.AnimationError
+            ``mode`` beyond the modes found (``parameter="mode"``), bad ``frames``, ``fps`` or ``scale_m``.
+        """
+        from fpm_sim.linear.animation import animate_mode
+
+        return animate_mode(self, path, mode=mode, frames=frames, fps=fps, scale_m=scale_m)
 
     def _plot_mode(self, ax: Any, index: int, scale_m: float) -> None:
         pos = self.point_positions()
