@@ -112,11 +112,16 @@ class _State:
         return fallback
 
     def description(self, path: Path | None) -> Manipulator:
+        """The 3RRR's description, or a described architecture's (``[[chains]]``: fpm_sim.architecture)."""
         key = str(path) if path else ""
         if key not in self._descriptions:
+            from fpm_sim.architecture import is_description_file, load_description
             from fpm_sim.config import default_config, load_config
 
-            self._descriptions[key] = load_config(path) if path else default_config()
+            if path and is_description_file(path):
+                self._descriptions[key] = load_description(path)  # type: ignore[assignment]
+            else:
+                self._descriptions[key] = load_config(path) if path else default_config()
         return self._descriptions[key]
 
 
@@ -170,7 +175,7 @@ class FpmSweep:
 
         seg = segments if segments is not None else self.segments
         pts = self._poses(poses, grid)
-        return self.cache.frequencies(self.config, pts, payload_kg, options_for(seg), n_modes)
+        return self.cache.frequencies(self.config, pts, payload_kg, options_for(seg), n_modes)  # type: ignore[return-value]
 
     def mode(
         self,

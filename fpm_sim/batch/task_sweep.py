@@ -151,6 +151,11 @@ class TaskSweep:
     step_mm: float | None = None
     options: ModelOptions | None = None
 
+    @property
+    def frequencies_hz(self) -> np.ndarray:
+        """``(n_poses, n_modes)`` frequencies (Hz; NaN where not computed), as the 3RRR's pose loop names them."""
+        return self.freq_hz
+
     def rows(self) -> list[dict[str, Any]]:
         """One row per pose: its task coordinates (mm, rad), status, singularity measures, f1..fn (Hz)."""
         out = []

@@ -16,7 +16,7 @@ __all__ = ["cmd_check", "register"]
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    from fpm_sim.cli.common import load_manipulator
+    from fpm_sim.cli.common import load_machine
     from fpm_sim.study.requirements import check_requirements, load_requirements
 
     check_output_file(args.junit_xml, "--junit-xml", (".xml",))
@@ -26,8 +26,8 @@ def cmd_check(args: argparse.Namespace) -> int:
     reqs = load_requirements(args.file)
     if args.config is None and reqs.config is not None:
         args.config = reqs.config
-    manip = load_manipulator(args)
-    report = check_requirements(reqs, manip, segments=args.segments)
+    machine = load_machine(args, "check")
+    report = check_requirements(reqs, machine, segments=args.segments)
     notes = []
     if args.junit_xml:
         report.write_junit(args.junit_xml)

@@ -361,7 +361,7 @@ def pose_of(args: argparse.Namespace) -> Pose:
     return checked_pose_mm(*(0.0 if v is None else v for v in (args.x_mm, args.y_mm, args.phi_rad)))
 
 
-GENERAL_COMMANDS = ("modes", "export-mjcf", "sweep")
+GENERAL_COMMANDS = ("modes", "export-mjcf", "sweep", "check")
 """The commands that run on a described architecture (``[[chains]]``) so far; the others say so."""
 
 

@@ -42,8 +42,10 @@ from typing import Any
 
 import numpy as np
 
+from fpm_sim.architecture import Description, TaskPose
 from fpm_sim.batch.frequencies import pose_frequencies
 from fpm_sim.batch.pose_loop import PoseFrequencies, fast_options, pose_assembly, read_poses_csv
+from fpm_sim.batch.task_sweep import TaskSweep, read_task_poses_csv, sweep_task, task_grid
 from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import SINGULAR_TOL, Pose, assemble_many, checked_pose_mm
@@ -85,15 +87,20 @@ _KIND_KEYS = {
     "band_exclusion": _COMMON_KEYS | {"band_hz", "n_modes"},
     "match_measurements": {"name", "kind", "payload_kg", "segments", "measured_csv", "tolerance_pct"},
 }
-_POSE_KEYS = {"grid", "step_mm", "phi_rad", "reading", "file", "list", "min_singularity"}
+_POSE_KEYS = {"grid", "step_mm", "phi_rad", "reading", "file", "list", "min_singularity", "cylinder"}
+_CYLINDER_KEYS = {"radius_mm", "z_mm", "step_mm"}
+USABLE = ("ok", "near_singular")
+"""The pose loop's statuses a requirement evaluates (a workspace grid's other points lie outside the workspace)."""
 
 
 class RequirementError(FpmSimError):
     """A requirements file or a requirement that cannot be evaluated; the message names the requirement and key."""
 
 
-def pose_text(pose: Pose) -> str:
-    """``(x=50.0 mm, y=-20.0 mm, phi=0.000 rad)``."""
+def pose_text(pose: Pose | TaskPose) -> str:
+    """``(x=50.0 mm, y=-20.0 mm, phi=0.000 rad)``; a task pose with its non-zero z and phi."""
+    if isinstance(pose, TaskPose):
+        return pose.label(("x", "y") + (("z",) if pose.z_m else ()) + (("phi",) if pose.phi_rad else ()))
     return pose.label()
 
 
@@ -125,8 +132,15 @@ class PoseSpec:
     min_singularity: float = 0.0
     """Grid points whose singularity measure (0 singular .. 1) is below this are left out (the usable
     workspace); 0 keeps every reachable, non-singular point."""
+    radius_mm: float = 0.0
+    z_mm: tuple[float, float] = (0.0, 0.0)
+    """``kind = "cylinder"`` (a described spatial architecture): points within ``radius_mm`` of the z axis on a
+    ``step_mm`` grid in x, y and z, from ``z_mm[0]`` to ``z_mm[1]``."""
 
     def describe(self) -> str:
+        if self.kind == "cylinder":
+            lo, hi = self.z_mm
+            return f"cylinder of radius {self.radius_mm:g} mm, z {lo:g}..{hi:g} mm, {self.step_mm:g} mm grid"
         if self.kind == "workspace":
             far = f", singularity measure >= {self.min_singularity:g}" if self.min_singularity else ""
             return f"reachable workspace, {self.step_mm:g} mm grid, phi {self.phi_rad:g} rad{far}"
@@ -136,8 +150,13 @@ class PoseSpec:
             return f"poses of {self.file}"
         return f"{len(self.points)} listed poses"
 
-    def resolve(self, config: Manipulator, where: str) -> list[Pose]:
-        """The poses; an explicitly named pose that is unreachable or singular raises, naming ``where``."""
+    def resolve(self, config: Manipulator | Description, where: str) -> list[Pose] | list[TaskPose]:
+        """The poses; an explicitly named pose that is unreachable or singular raises, naming ``where``. For a
+        described architecture, task poses (a grid's unreachable points are left to the evaluation to drop)."""
+        if isinstance(config, Description):
+            return self._task_poses(config, where)
+        if self.kind == "cylinder":
+            raise RequirementError(f"{where}.poses: a cylinder is a spatial machine's pose set; the 3RRR is planar")
         if self.kind == "workspace":
             grid = dense_grid(config, step_mm=self.step_mm, phi_rad=self.phi_rad)
             many = assemble_many(
@@ -152,6 +171,8 @@ class PoseSpec:
             if self.kind == "file":
                 poses = read_poses_csv(self.file or "", parameter=f"{where}.poses.file")
             else:
+                if any(len(p) != 3 for p in self.points):
+                    raise RequirementError(f"{where}.poses.list: the 3RRR's poses are [x_mm, y_mm, phi_rad]")
                 poses = [checked_pose_mm(x, y, phi, file=where) for x, y, phi in self.points]
             for p in poses:
                 status = pose_assembly(config, p)[2]
@@ -163,6 +184,32 @@ class PoseSpec:
         if not poses:
             raise RequirementError(f"{where}.poses: the pose set ({self.describe()}) is empty; give at least one pose")
         return poses
+
+    def _task_poses(self, desc: Description, where: str) -> list[TaskPose]:
+        """The pose set of a described architecture, in its task coordinates (module docstring)."""
+        home = desc.check_poses[0] if desc.check_poses else {}
+        if self.kind == "paper":
+            raise RequirementError(f"{where}.poses: the study's 25 poses are the 3RRR's; {desc.name!r} has its own")
+        if self.kind == "workspace":
+            return task_grid(desc, step_mm=self.step_mm, held={"z": home.get("z", 0.0), "phi": self.phi_rad})[0]
+        if self.kind == "cylinder":
+            lo, hi = sorted(self.z_mm)
+            heights = np.arange(lo, hi + 1e-9, self.step_mm)
+            poses = []
+            for z in heights:
+                grid = task_grid(desc, step_mm=self.step_mm, held={"z": z * 1e-3})[0]
+                poses += [p for p in grid if math.hypot(p.x_m, p.y_m) <= self.radius_mm * 1e-3 + 1e-12]
+            return poses
+        if self.kind == "file":
+            return read_task_poses_csv(self.file or "", desc, parameter=f"{where}.poses.file")
+        coords = list(desc.task)
+        out = []
+        for i, p in enumerate(self.points):
+            if len(p) != len(coords):
+                raise RequirementError(f"{where}.poses.list[{i}]: {desc.name!r} takes [{', '.join(coords)}] (mm, rad)")
+            v = dict(zip(coords, p))
+            out.append(TaskPose.from_mm(v.get("x", 0.0), v.get("y", 0.0), v.get("z", 0.0), v.get("phi", 0.0)))
+        return out
 
 
 def _number(value: Any, where: str) -> float:
@@ -182,17 +229,22 @@ def parse_pose_spec(value: Any, where: str, base: Path) -> PoseSpec:
     unknown = set(value) - _POSE_KEYS
     if unknown:
         raise RequirementError(f"{where}: unknown key(s) {', '.join(sorted(unknown))}; allowed: {sorted(_POSE_KEYS)}")
-    forms = [k for k in ("grid", "file", "list") if k in value]
+    forms = [k for k in ("grid", "file", "list", "cylinder") if k in value]
     if len(forms) != 1:
-        raise RequirementError(f"{where} needs exactly one of grid, file or list, got {forms or 'none'}")
+        raise RequirementError(f"{where} needs exactly one of grid, file, list or cylinder, got {forms or 'none'}")
+    if "cylinder" in value:
+        return _cylinder(value["cylinder"], f"{where}.cylinder")
     if "file" in value:
         if not isinstance(value["file"], str):
             raise RequirementError(f"{where}.file must be a path (string), got {value['file']!r}")
         return PoseSpec(kind="file", file=str(base / value["file"]))
     if "list" in value:
         pts = value["list"]
-        if not isinstance(pts, list) or not all(isinstance(p, list) and len(p) == 3 for p in pts):
-            raise RequirementError(f"{where}.list must be a list of [x_mm, y_mm, phi_rad] triples, got {pts!r}")
+        if not isinstance(pts, list) or not all(isinstance(p, list) and 2 <= len(p) <= 3 for p in pts):
+            raise RequirementError(
+                f"{where}.list must be a list of poses in the task coordinates ([x_mm, y_mm, phi_rad] for the 3RRR, "
+                f"[x_mm, y_mm, z_mm] for a Delta), got {pts!r}"
+            )
         points = tuple(tuple(_number(c, f"{where}.list[{i}]") for c in p) for i, p in enumerate(pts))
         return PoseSpec(kind="list", points=points)  # type: ignore[arg-type]
     grid = value["grid"]
@@ -211,6 +263,20 @@ def parse_pose_spec(value: Any, where: str, base: Path) -> PoseSpec:
         parse_reading(str(reading))
         return PoseSpec(kind="paper", reading=str(reading))
     raise RequirementError(f'{where}.grid must be "dense" or "paper", got {grid!r}')
+
+
+def _cylinder(value: Any, where: str) -> PoseSpec:
+    """``{ radius_mm = .., z_mm = [low, high], step_mm = .. }``."""
+    if not isinstance(value, dict) or set(value) != _CYLINDER_KEYS:
+        raise RequirementError(f"{where} must be {{ radius_mm = .., z_mm = [low, high], step_mm = .. }}, got {value!r}")
+    z = value["z_mm"]
+    if not isinstance(z, list) or len(z) != 2:
+        raise RequirementError(f"{where}.z_mm must be [low, high] (mm), got {z!r}")
+    radius, step = _number(value["radius_mm"], f"{where}.radius_mm"), _number(value["step_mm"], f"{where}.step_mm")
+    if radius <= 0 or step <= 0:
+        raise RequirementError(f"{where}: radius_mm and step_mm must be > 0, got {radius:g} and {step:g}")
+    lo, hi = (_number(v, f"{where}.z_mm") for v in z)
+    return PoseSpec(kind="cylinder", radius_mm=radius, z_mm=(lo, hi), step_mm=step)
 
 
 # --------------------------------------------------------------------------------------------- requirements
@@ -387,8 +453,12 @@ def load_requirements(path: str | Path) -> RequirementsFile:
 # --------------------------------------------------------------------------------------------- the shared sweeps
 
 
-def _pose_key(poses: Sequence[Pose]) -> tuple[tuple[float, float, float], ...]:
-    return tuple((round(p.x_m, 9), round(p.y_m, 9), round(p.phi_rad, 9)) for p in poses)
+def _pose_key(poses: Sequence[Pose] | Sequence[TaskPose]) -> tuple[tuple[float, ...], ...]:
+    return tuple(
+        (round(p.x_m, 9), round(p.y_m, 9), round(p.phi_rad, 9))
+        + ((round(p.z_m, 9),) if isinstance(p, TaskPose) else ())
+        for p in poses
+    )
 
 
 class SweepCache:
@@ -399,18 +469,34 @@ class SweepCache:
     """
 
     def __init__(self) -> None:
-        self._store: dict[tuple[Any, ...], PoseFrequencies] = {}
+        self._store: dict[tuple[Any, ...], Any] = {}
         self.computed = 0
 
     def frequencies(
-        self, config: Manipulator, poses: Sequence[Pose], payload_kg: float | None, options: ModelOptions, n_modes: int
-    ) -> PoseFrequencies:
-        """The lowest ``n_modes`` frequencies at ``poses`` with ``payload_kg`` (None: the description's)."""
-        key = (config, _pose_key(poses), payload_kg, options)
+        self,
+        config: Manipulator | Description,
+        poses: Sequence[Pose] | Sequence[TaskPose],
+        payload_kg: float | None,
+        options: ModelOptions,
+        n_modes: int,
+    ) -> PoseFrequencies | TaskSweep:
+        """The lowest ``n_modes`` frequencies at ``poses`` with ``payload_kg`` (None: the description's); a
+        described architecture's come from its own pose loop (:func:`fpm_sim.batch.task_sweep.sweep_task`)."""
+        # a Description holds tables (unhashable): the session's one object stands for it
+        who = ("described", id(config)) if isinstance(config, Description) else config
+        key = (who, _pose_key(poses), payload_kg, options)
         hit = self._store.get(key)
+        if isinstance(config, Description):
+            if hit is None or hit.frequencies_hz.shape[1] < n_modes:
+                task_poses = [p for p in poses if isinstance(p, TaskPose)]
+                hit = sweep_task(config, task_poses, options=options, n_modes=n_modes)
+                self._store[key] = hit
+                self.computed += 1
+            return hit
         if hit is None or hit.frequencies_hz.shape[1] < n_modes:
             cfg = config if payload_kg is None else with_payload(config, payload_kg)
-            hit = pose_frequencies(cfg, list(poses), n_modes=n_modes, options=options, desc="requirements")
+            pts = [p for p in poses if isinstance(p, Pose)]
+            hit = pose_frequencies(cfg, pts, n_modes=n_modes, options=options, desc="requirements")
             self._store[key] = hit
             self.computed += 1
         return hit
@@ -428,7 +514,7 @@ class RequirementOutcome:
     passed: bool
     margin_hz: float
     margin_pct: float
-    worst_pose: Pose | None
+    worst_pose: Pose | TaskPose | None
     worst_mode: int
     worst_value_hz: float
     worst_payload_kg: float | None
@@ -447,7 +533,10 @@ class RequirementOutcome:
             "passed": self.passed,
             "margin_hz": self.margin_hz,
             "margin_pct": self.margin_pct,
-            "worst_pose": None if p is None else {"x_mm": p.x_m * 1e3, "y_mm": p.y_m * 1e3, "phi_rad": p.phi_rad},
+            "worst_pose": None
+            if p is None
+            else {"x_mm": p.x_m * 1e3, "y_mm": p.y_m * 1e3, "phi_rad": p.phi_rad}
+            | ({"z_mm": p.z_m * 1e3} if isinstance(p, TaskPose) else {}),
             "worst_mode": self.worst_mode,
             "worst_value_hz": self.worst_value_hz,
             "worst_payload_kg": self.worst_payload_kg,
@@ -465,7 +554,7 @@ def _payload_text(m: float | None) -> str:
 
 def _grid_outcome(
     req: Requirement,
-    poses: Sequence[Pose],
+    poses: Sequence[Pose] | Sequence[TaskPose],
     margins: np.ndarray,
     refs: np.ndarray,
     values: np.ndarray,
@@ -507,6 +596,14 @@ def _needed_payloads(req: Requirement) -> list[float | None]:
     return pays[-1:] if req.kind == "min_frequency" else pays
 
 
+def _check_payload(req: Requirement, config: Manipulator | Description) -> None:
+    if req.payload_kg and isinstance(config, Description):
+        raise RequirementError(
+            f"requirement {req.name!r}: payload_kg varies the 3RRR's hardware.payload; a described architecture "
+            "carries its payload as an end-effector lump (remove payload_kg)"
+        )
+
+
 def _check_probability(req: Requirement) -> None:
     if req.probability is not None:
         raise RequirementError(
@@ -517,11 +614,11 @@ def _check_probability(req: Requirement) -> None:
 
 def evaluate(
     req: Requirement,
-    config: Manipulator,
+    config: Manipulator | Description,
     *,
     cache: SweepCache | None = None,
     default_segments: int | None = None,
-    poses: Sequence[Pose] | None = None,
+    poses: Sequence[Pose] | Sequence[TaskPose] | None = None,
 ) -> RequirementOutcome:
     """Evaluate one requirement on ``config`` (``poses`` overrides the requirement's pose set, already resolved)."""
     t0 = time.perf_counter()
@@ -532,10 +629,11 @@ def evaluate(
         out = _evaluate_measurements(req, config, opts)
     else:
         _check_probability(req)
-        pts = list(poses) if poses is not None else req.poses.resolve(config, where)
+        _check_payload(req, config)
+        pts: list[Any] = list(poses) if poses is not None else list(req.poses.resolve(config, where))
         n = req.modes_needed()
         pays = _needed_payloads(req)
-        sweeps = [cache.frequencies(config, pts, m, opts, n).frequencies_hz[:, :n] for m in pays]
+        pts, sweeps = _usable(req, config, pts, [cache.frequencies(config, pts, m, opts, n) for m in pays], n)
         light, heavy = sweeps[0], sweeps[-1]
         pay_light, pay_heavy = (math.nan if m is None else m for m in (pays[0], pays[-1]))
         if req.kind == "min_frequency":
@@ -580,8 +678,32 @@ def evaluate(
     return out
 
 
-def _evaluate_measurements(req: Requirement, config: Manipulator, opts: ModelOptions) -> RequirementOutcome:
+def _usable(
+    req: Requirement, config: Manipulator | Description, pts: list[Any], sweeps: list[Any], n: int
+) -> tuple[list[Any], list[np.ndarray]]:
+    """The poses a requirement evaluates and their lowest ``n`` frequencies per payload. A described architecture's
+    grid keeps its reachable, non-singular points (:data:`USABLE`); a pose it names explicitly must be one."""
+    if not isinstance(config, Description):
+        return pts, [s.frequencies_hz[:, :n] for s in sweeps]
+    status = sweeps[0].status
+    keep = [i for i, s in enumerate(status) if s in USABLE]
+    bad = [i for i, s in enumerate(status) if s not in USABLE]
+    if bad and req.poses.kind in ("list", "file"):
+        raise RequirementError(
+            f"requirement {req.name!r}.poses: pose {pose_text(pts[bad[0]])} is {status[bad[0]]} for {config.name!r}; "
+            "remove it or move it inside the reachable workspace (fpm-sim sweep shows it)"
+        )
+    if not keep:
+        raise RequirementError(f"requirement {req.name!r}.poses: no reachable pose in {req.poses.describe()}")
+    return [pts[i] for i in keep], [s.frequencies_hz[keep, :n] for s in sweeps]
+
+
+def _evaluate_measurements(
+    req: Requirement, config: Manipulator | Description, opts: ModelOptions
+) -> RequirementOutcome:
     where = f"requirement {req.name!r}"
+    if isinstance(config, Description):
+        raise RequirementError(f"{where}: match_measurements reads the 3RRR's measured poses; not for {config.name!r}")
     ds = read_measured_csv(req.measured_csv or "")
     obs = ds.observations
     if not obs:
@@ -668,15 +790,17 @@ class CheckReport:
     def table(self) -> str:
         """Requirement, worst pose (mm, rad), mode, margin (Hz, %), pass/fail."""
         w = max(len("requirement"), *(len(o.name) for o in self.outcomes))
+        spatial = any(isinstance(o.worst_pose, TaskPose) and o.worst_pose.z_m for o in self.outcomes)
+        head = "worst pose (x mm, y mm, z mm)" if spatial else "worst pose (x mm, y mm, phi rad)"
         lines = [
             f"{self.source} on {self.config_name}: {sum(o.passed for o in self.outcomes)} of {len(self.outcomes)} "
             f"requirements pass ({self.sweeps} sweeps)",
-            f"{'requirement':<{w}}  {'worst pose (x mm, y mm, phi rad)':<34}  {'mode':>4}  {'margin Hz':>10}  "
-            f"{'margin %':>9}  result",
+            f"{'requirement':<{w}}  {head:<34}  {'mode':>4}  {'margin Hz':>10}  {'margin %':>9}  result",
         ]
         for o in self.outcomes:
             p = o.worst_pose
-            pose = "-" if p is None else f"({p.x_m * 1e3:.1f}, {p.y_m * 1e3:.1f}, {p.phi_rad:.3f})"
+            last = f"{p.z_m * 1e3:.1f}" if spatial and isinstance(p, TaskPose) else f"{p.phi_rad:.3f}" if p else ""
+            pose = "-" if p is None else f"({p.x_m * 1e3:.1f}, {p.y_m * 1e3:.1f}, {last})"
             lines.append(
                 f"{o.name:<{w}}  {pose:<34}  {o.worst_mode:>4}  {o.margin_hz:>10.3f}  {o.margin_pct:>9.2f}  "
                 f"{'pass' if o.passed else 'FAIL'}"
@@ -746,21 +870,26 @@ def effective_requirements(reqs: RequirementsFile, segments: int | None = None) 
 
 
 def prepare_sweeps(
-    requirements: Sequence[Requirement], config: Manipulator, cache: SweepCache, *, keep_errors: bool = False
-) -> list[list[Pose] | FpmSimError | None]:
+    requirements: Sequence[Requirement],
+    config: Manipulator | Description,
+    cache: SweepCache,
+    *,
+    keep_errors: bool = False,
+) -> list[list[Pose] | list[TaskPose] | FpmSimError | None]:
     """Resolve every requirement's poses, then run each shared sweep once, for the most modes it is asked for.
 
     Returns per requirement its poses (None for ``match_measurements``); a requirement whose poses cannot be
     resolved raises, or with ``keep_errors`` gets its :class:`FpmSimError` in its place (the others still run).
     """
-    resolved: list[list[Pose] | FpmSimError | None] = []
-    by_spec: dict[PoseSpec, list[Pose]] = {}  # requirements naming the same pose set resolve it once
+    resolved: list[list[Pose] | list[TaskPose] | FpmSimError | None] = []
+    by_spec: dict[PoseSpec, list[Pose] | list[TaskPose]] = {}  # requirements naming the same pose set resolve it once
     for r in requirements:
         if r.kind == "match_measurements":
             resolved.append(None)
             continue
         try:
             _check_probability(r)
+            _check_payload(r, config)
             if r.poses not in by_spec:
                 by_spec[r.poses] = r.poses.resolve(config, f"requirement {r.name!r}")
             resolved.append(by_spec[r.poses])
@@ -768,7 +897,7 @@ def prepare_sweeps(
             if not keep_errors:
                 raise
             resolved.append(exc)
-    need: dict[tuple[Any, ...], tuple[list[Pose], float | None, ModelOptions, int]] = {}
+    need: dict[tuple[Any, ...], tuple[list[Pose] | list[TaskPose], float | None, ModelOptions, int]] = {}
     for r, pts in zip(requirements, resolved):
         if not isinstance(pts, list):
             continue
@@ -783,7 +912,11 @@ def prepare_sweeps(
 
 
 def check_requirements(
-    reqs: RequirementsFile, config: Manipulator, *, cache: SweepCache | None = None, segments: int | None = None
+    reqs: RequirementsFile,
+    config: Manipulator | Description,
+    *,
+    cache: SweepCache | None = None,
+    segments: int | None = None,
 ) -> CheckReport:
     """Evaluate every requirement of ``reqs`` on ``config`` (``segments`` overrides the file's resolution).
 
