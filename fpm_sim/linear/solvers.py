@@ -284,9 +284,10 @@ def reduced_eigenproblem(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The constrained generalised eigenproblem ``Z'KZ x = w^2 Z'MZ x`` on the admissible motions ``Z``.
 
-    ``basis`` is ``Z``: :attr:`ConstraintRank.basis` from :func:`~fpm_sim.linear.nullspace.constraint_rank` (the one
-    rank decision), or the identity for an unconstrained model. ``n_modes``: only the lowest ``n_modes``
-    eigenpairs (LAPACK's subset driver; the pose loop's floor); default all.
+    ``basis`` is ``Z``: :attr:`~fpm_sim.linear.nullspace.ConstraintRank.basis` from
+    :func:`~fpm_sim.linear.nullspace.constraint_rank` (the one rank decision), or the identity for an
+    unconstrained model. ``n_modes``: only the lowest ``n_modes`` eigenpairs (LAPACK's subset driver; the pose
+    loop's floor); default all.
 
     Returns ``(z, kr, mr, w2, x)``: the null-space basis, the symmetrised reduced stiffness and mass,
     the eigenvalues ``w^2`` (ascending) and the ``mr``-normalised eigenvectors.

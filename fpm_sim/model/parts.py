@@ -152,7 +152,7 @@ class LinkSpec:
 
 @dataclass
 class LinkBuild:
-    """Handles of one link in the spec, filled by :func:`add_link`."""
+    """Handles of one link in the spec, filled by :func:`~fpm_sim.model.links.add_link`."""
 
     name: str
     bodies: list[mujoco.MjsBody]

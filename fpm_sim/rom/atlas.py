@@ -23,7 +23,7 @@ arbitrary signs, and with an arbitrary basis inside (near-)repeated frequencies 
    the basis-invariant static-correction feedthrough ``D`` (as :func:`fpm_sim.rom.reduction.reduce_model`).
 4. **Interpolates** these matrices entrywise between grid poses (multilinear or cubic, on a
    rectilinear grid in ``x``, ``y``, ``phi``) and diagonalises the interpolated ``Lambda``
-   (``Lambda = U diag(omega^2) U'``) to return an ordinary modal :class:`~fpm_sim.reduction.ReducedModel`
+   (``Lambda = U diag(omega^2) U'``) to return an ordinary modal :class:`~fpm_sim.rom.reduction.ReducedModel`
    (states = amplitudes of the interpolated mass-normalised modes, sorted by frequency). Interpolating
    the matrices, not the eigenvalues, is what keeps repeated and crossing modes well posed: matrix
    entries vary smoothly where eigenvalues have kinks.

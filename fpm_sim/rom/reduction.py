@@ -676,7 +676,7 @@ def reduce_model(
     Parameters
     ----------
     built
-        The full model (a :class:`~fpm_sim.model.BuiltModel`) or its already solved
+        The full model (a :class:`~fpm_sim.model.spec.BuiltModel`) or its already solved
         :class:`ModalSystem` (to reduce one linearisation several ways).
     n_modes, band_hz, error_bound
         Exactly one: keep the lowest ``n_modes`` modes; all modes up to ``band_hz`` (Hz); or the fewest

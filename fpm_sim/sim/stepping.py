@@ -82,7 +82,8 @@ MAX_NUMERICAL_DAMPING = 0.02
 """Largest numerical damping ratio allowed at the band's top (module docstring): a fifth of it, 0.4 %, at f1 with
 the default band, below the 0.5-2 % of a bolted steel structure."""
 MAX_STEP_S = 1e-4
-"""Largest step (s) the rule picks, whatever the band (the explicit rule's cap, :data:`TIMESTEP_MAX_S`)."""
+"""Largest step (s) the rule picks, whatever the band (the explicit rule's cap,
+:data:`~fpm_sim.model.spec.TIMESTEP_MAX_S`)."""
 
 
 class SteppingError(FpmSimError):

@@ -19,7 +19,7 @@ corrects a prediction between measured poses, and why its bands narrow there and
 
 Pure NumPy; every function works on one draw's arrays. Used by the likelihood
 (:mod:`fpm_sim.study.calibrate.problem`), the predictive bands (:mod:`fpm_sim.study.posterior`) and the
-leave-one-out checks (:mod:`fpm_sim.study.calibrate.loo`).
+leave-one-out checks (:mod:`fpm_sim.study.loo`).
 """
 
 from __future__ import annotations

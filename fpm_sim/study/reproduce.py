@@ -5,7 +5,7 @@ Compute here (:func:`reproduce_study` returns a :class:`StudyReproduction`), wri
 :meth:`~fpm_sim.study.reproduce_report.ReproductionReport.write` writes ``poses.csv``, ``report.md`` and the
 PNG figures).
 
-The pose loop is :func:`fpm_sim.batch.pose_loop.pose_frequencies` (replaceable backend); the subsystem rigs
+The pose loop is :func:`fpm_sim.batch.frequencies.pose_frequencies` (replaceable backend); the subsystem rigs
 are :func:`fpm_sim.study.rigs.subsystem_frequencies`.
 """
 
@@ -155,7 +155,7 @@ class StudyReproduction(ReproductionReport):
         return error_stats(self.f1_hz, self.comsol_hz)
 
     def rows(self) -> list[dict[str, Any]]:
-        """One dict per pose with the :data:`POSES_CSV_COLUMNS`."""
+        """One dict per pose with the :data:`~fpm_sim.study.reproduce_report.POSES_CSV_COLUMNS`."""
         out = []
         f = self.frequencies.frequencies_hz
         for i, p in enumerate(self.poses):
