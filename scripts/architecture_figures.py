@@ -17,7 +17,7 @@ from fpm_sim.linear.solvers import modes_constrained
 from fpm_sim.model.general import build_general
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "architectures"
-STEPS_MM = {"five_bar": 15.0, "delta": 25.0, "three_prr": 8.0, "serial_arm": 40.0}
+STEPS_MM = {"five_bar": 20.0, "delta": 30.0, "three_prr": 10.0, "serial_arm": 50.0}
 
 
 def modes_table(name: str, n_modes: int = 6) -> list[str]:

@@ -52,6 +52,7 @@ __all__ = [
     "engine_options",
     "error_line",
     "finish_store",
+    "is_described",
     "load_machine",
     "load_manipulator",
     "mm",
@@ -363,6 +364,14 @@ def pose_of(args: argparse.Namespace) -> Pose:
 
 GENERAL_COMMANDS = ("modes", "export-mjcf", "sweep", "check")
 """The commands that run on a described architecture (``[[chains]]``) so far; the others say so."""
+
+
+def is_described(args: argparse.Namespace) -> bool:
+    """Whether ``--config`` names a described architecture's file (``[[chains]]``)."""
+    from fpm_sim.architecture import is_description_file
+
+    path = getattr(args, "config", None)
+    return path is not None and Path(path).is_file() and is_description_file(path)
 
 
 def load_machine(args: argparse.Namespace, command: str) -> Manipulator | Description:

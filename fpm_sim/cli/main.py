@@ -40,6 +40,7 @@ try:  # Ctrl-C while the modules load (a second or so): one line and 130, as at 
         count_arg,
         emit,
         error_line,
+        is_described,
         load_machine,
         load_manipulator,
         mm,
@@ -155,7 +156,6 @@ def _shapes_and_plot(args: argparse.Namespace, result: ModalResult | ModalCompar
 
 
 def cmd_modes(args: argparse.Namespace) -> int:
-    from fpm_sim.config import Manipulator
     from fpm_sim.linear.analysis import analyse
     from fpm_sim.model.options import warn_if_coarse
 
@@ -163,8 +163,7 @@ def cmd_modes(args: argparse.Namespace) -> int:
     check_output_file(args.animate, "--animate", (".gif",))
     if args.mode is not None and args.animate is None:
         raise CliError("--mode picks the mode that --animate draws; add --animate FILE.gif")
-    machine = load_machine(args, "modes")
-    if args.posterior is not None and not isinstance(machine, Manipulator):
+    if args.posterior is not None and is_described(args):
         raise CliError("--posterior: the posterior's draws are the study's 3RRR's; a described architecture has none")
     if args.posterior is not None:  # predictions with bands (fpm_sim.cli.bands)
         from fpm_sim.cli.bands import modes_bands
@@ -179,6 +178,7 @@ def cmd_modes(args: argparse.Namespace) -> int:
             text += f"\nbands plotted to {args.plot}"
         emit(args, payload, text)
         return 0
+    machine = load_machine(args, "modes")
     opts = model_options(args)
     warn_if_coarse(opts)
     built, pose_label = _build_machine(args, machine, opts)

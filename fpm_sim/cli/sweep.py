@@ -16,7 +16,7 @@ from fpm_sim.cli.common import (
     emit,
     engine_options,
     finish_store,
-    load_machine,
+    is_described,
     resolution_line,
     with_resolution,
 )
@@ -82,15 +82,15 @@ def _held_coordinates(args: argparse.Namespace, desc: Description) -> dict[str, 
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
-    from fpm_sim.config import Manipulator
     from fpm_sim.model.options import warn_if_coarse
     from fpm_sim.outputs import atomic_dir
     from fpm_sim.study.poses import parse_reading
     from fpm_sim.study.sweep import sweep_workspace
 
-    machine = load_machine(args, "sweep")
-    if not isinstance(machine, Manipulator):
-        return _sweep_described(args, machine)
+    if is_described(args):
+        from fpm_sim.architecture import load_description
+
+        return _sweep_described(args, load_description(args.config))
     if args.z_mm is not None:
         raise CliError("--z-mm: the 3RRR's task coordinates are x, y and phi; drop --z-mm")
     if args.posterior is not None:  # predictions with bands (fpm_sim.cli.bands)
