@@ -20,9 +20,10 @@ The message is built from these: ``"<file>: row <row>: <parameter>: <message>, g
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
-__all__ = ["FpmSimError", "FpmSimWarning"]
+__all__ = ["FpmSimError", "FpmSimWarning", "read_text_input"]
 
 _UNSET: Any = type("_Unset", (), {"__repr__": lambda self: "<unset>"})()
 
@@ -121,3 +122,34 @@ def _rebuild_warning(cls: type[FpmSimWarning], message: str, parameter: str | No
     w = cls.__new__(cls)
     FpmSimWarning.__init__(w, message, parameter=parameter)
     return w
+
+
+def read_text_input(
+    path: str | Path,
+    *,
+    error: type[FpmSimError] = FpmSimError,
+    parameter: str | None = None,
+    kind: str = "a text file",
+    hint: str | None = None,
+    newline: str | None = None,
+) -> str:
+    """Read an input file's text (UTF-8, a byte-order mark dropped): for every reader of a text format (TOML, CSV).
+
+    A binary file (not UTF-8, or holding NUL bytes) is refused with ``error`` naming ``parameter`` (the option the
+    file came from, on the command line) and saying what the file is not (``kind``: ``"a TOML file"``) and how to
+    fix it (``hint``), instead of a ``UnicodeDecodeError`` from deep inside a parser. A missing file or a folder
+    raises the ``OSError`` of :func:`open`: each reader words those its own way. ``newline`` as for :func:`open`
+    (``""`` for the :mod:`csv` module).
+    """
+    p = Path(path)
+    try:
+        with open(p, encoding="utf-8-sig", newline=newline) as fh:
+            text = fh.read()
+    except UnicodeDecodeError as exc:
+        raise error(
+            f"{p} is not {kind}: binary, not UTF-8 text (byte {exc.start})", parameter=parameter, hint=hint
+        ) from None
+    nul = text.find("\x00")
+    if nul >= 0:
+        raise error(f"{p} is not {kind}: binary (a NUL byte at character {nul})", parameter=parameter, hint=hint)
+    return text

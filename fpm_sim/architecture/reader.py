@@ -56,6 +56,7 @@ from fpm_sim.architecture.description import (
 )
 from fpm_sim.config import LumpedMass, Material, Section
 from fpm_sim.config.schema import ConfigError
+from fpm_sim.errors import read_text_input
 
 __all__ = ["is_description_file", "load_description", "parse_description"]
 
@@ -425,14 +426,15 @@ def _check_structure(desc: Description) -> None:
 def load_description(path: str | Path) -> Description:
     """Load a description file (see the module docstring); :class:`fpm_sim.config.ConfigError` names the path."""
     p = Path(path)
+    hint = "give the description's .toml file"
     try:
-        data = tomllib.loads(p.read_text())
+        data = tomllib.loads(read_text_input(p, error=ConfigError, parameter="config", kind="a TOML file", hint=hint))
     except FileNotFoundError as exc:
-        raise ConfigError(f"description file not found: {p}") from exc
-    except (UnicodeDecodeError, IsADirectoryError) as exc:
-        raise ConfigError(f"{p} is not a TOML file", hint="give the description's .toml file") from exc
+        raise ConfigError(f"description file not found: {p}", parameter="config", hint=hint) from exc
+    except IsADirectoryError as exc:
+        raise ConfigError(f"{p} is a folder, not a TOML file", parameter="config", hint=hint) from exc
     except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{p}: invalid TOML: {exc}") from exc
+        raise ConfigError(f"{p}: invalid TOML: {exc}", parameter="config") from exc
     try:
         desc = parse_description(data, source=f"user: {p.name}")
     except ConfigError as exc:

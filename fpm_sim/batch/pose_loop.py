@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import io
 import math
 import warnings
 from collections.abc import Sequence
@@ -42,7 +43,7 @@ from numpy.typing import ArrayLike
 
 from fpm_sim.batch.engine import EngineOptions, chunk_size, run_chunks, split
 from fpm_sim.config import Manipulator
-from fpm_sim.errors import FpmSimError, FpmSimWarning
+from fpm_sim.errors import FpmSimError, FpmSimWarning, read_text_input
 from fpm_sim.kinematics import (
     NEAR_SINGULAR_WARN,
     SINGULAR_TOL,
@@ -632,22 +633,23 @@ def read_poses_csv(path: str | Path, *, parameter: str = "poses") -> list[Pose]:
     p = Path(path)
     if not p.is_file():
         raise PosesFileError(f"{p}: no such file", parameter=parameter)
-    with open(p, newline="", encoding="utf-8-sig") as fh:
-        reader = csv.DictReader(fh)
-        missing = {"x_mm", "y_mm", "phi_rad"} - {h.strip() for h in reader.fieldnames or []}
-        if missing:
-            raise PosesFileError(
-                f"{p}: missing column(s) {', '.join(sorted(missing))}",
-                parameter=parameter,
-                hint="the header must hold x_mm,y_mm,phi_rad",
-            )
-        poses: list[Pose] = []
-        for r in reader:
-            r = {(k or "").strip(): v for k, v in r.items()}
-            try:
-                poses.append(checked_pose_mm(r["x_mm"], r["y_mm"], r["phi_rad"], row=reader.line_num))
-            except PoseValueError as e:
-                raise PosesFileError(f"{p}: {e}", parameter=parameter) from None
+    hint = "give a CSV file of poses with the header x_mm,y_mm,phi_rad"
+    text = read_text_input(p, error=PosesFileError, parameter=parameter, kind="a CSV file", hint=hint, newline="")
+    reader = csv.DictReader(io.StringIO(text, newline=""))
+    missing = {"x_mm", "y_mm", "phi_rad"} - {h.strip() for h in reader.fieldnames or []}
+    if missing:
+        raise PosesFileError(
+            f"{p}: missing column(s) {', '.join(sorted(missing))}",
+            parameter=parameter,
+            hint="the header must hold x_mm,y_mm,phi_rad",
+        )
+    poses: list[Pose] = []
+    for r in reader:
+        r = {(k or "").strip(): v for k, v in r.items()}
+        try:
+            poses.append(checked_pose_mm(r["x_mm"], r["y_mm"], r["phi_rad"], row=reader.line_num))
+        except PoseValueError as e:
+            raise PosesFileError(f"{p}: {e}", parameter=parameter) from None
     if not poses:
         raise PosesFileError(f"{p}: no rows after the header", parameter=parameter)
     return poses

@@ -19,7 +19,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from fpm_sim.errors import FpmSimError
+from fpm_sim.errors import FpmSimError, read_text_input
 
 __all__ = [
     "DEFAULT_CONFIG_NAME",
@@ -488,18 +488,16 @@ def load_config(path: str | Path) -> Manipulator:
         With the dotted name of the offending field.
     """
     p = Path(path)
+    hint = "give the description's .toml file"
     try:
-        data = tomllib.loads(p.read_text())
+        text = read_text_input(p, error=ConfigError, parameter="config", kind="a TOML file", hint=hint)
+        data = tomllib.loads(text)
     except FileNotFoundError as exc:
-        raise ConfigError(f"config file not found: {p}") from exc
+        raise ConfigError(f"config file not found: {p}", parameter="config", hint=hint) from exc
     except IsADirectoryError as exc:
-        raise ConfigError(f"{p} is a folder, not a TOML file", hint="give the description's .toml file") from exc
-    except UnicodeDecodeError as exc:
-        raise ConfigError(
-            f"{p} is not a TOML file (not UTF-8 text: byte {exc.start})", hint="give the description's .toml file"
-        ) from exc
+        raise ConfigError(f"{p} is a folder, not a TOML file", parameter="config", hint=hint) from exc
     except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{p}: invalid TOML: {exc}") from exc
+        raise ConfigError(f"{p}: invalid TOML: {exc}", parameter="config") from exc
     try:
         return parse_config(data, source=f"user: {p.name}")
     except ConfigError as exc:

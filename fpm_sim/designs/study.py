@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import io
 import itertools
 import math
 import time
@@ -31,7 +32,7 @@ from fpm_sim.batch.pose_loop import (
     solve_configs,
 )
 from fpm_sim.config import Manipulator, parameter_value, with_parameter
-from fpm_sim.errors import FpmSimError, FpmSimWarning
+from fpm_sim.errors import FpmSimError, FpmSimWarning, read_text_input
 from fpm_sim.figures import wrap_title
 from fpm_sim.kinematics import Pose
 from fpm_sim.model.options import ModelOptions, resolution_footer
@@ -131,10 +132,11 @@ def read_designs_csv(path: str | Path, config: Manipulator) -> list[dict[str, fl
     p = Path(path)
     if not p.is_file():
         raise DesignError(f"{p}: no such file", parameter="designs")
-    with open(p, newline="", encoding="utf-8-sig") as fh:
-        reader = csv.reader(fh)
-        header = [h.strip() for h in next(reader, [])]
-        rows = [r for r in reader if any(c.strip() for c in r)]
+    hint = "give a CSV file of designs: a header of dotted fields, then one design per row"
+    text = read_text_input(p, error=DesignError, parameter="designs", kind="a CSV file", hint=hint, newline="")
+    reader = csv.reader(io.StringIO(text, newline=""))
+    header = [h.strip() for h in next(reader, [])]
+    rows = [r for r in reader if any(c.strip() for c in r)]
     if not header or not rows:
         raise DesignError(
             f"{p}: no rows", parameter="designs", hint="write a header of dotted fields, then one design per row"

@@ -128,7 +128,8 @@ def static_equilibrium(
     # Scale the constraint block to the stiffness (spring constants reach 1e9 N/m, J is O(1)):
     # unscaled, the KKT matrix had a condition number of 1e14 and the loop residual stalled.
     s = max(float(np.max(np.abs(np.diag(stiffness)))), 1.0)
-    for _ in range(max_iter):
+    steps = 0
+    for steps in range(1, max_iter + 1):  # noqa: B007 (the count is reported after the loop)
         kkt = np.block([[stiffness, -s * jac.T], [s * jac, np.zeros((nc, nc))]])
         rhs = np.concatenate([f + jac.T @ lam, -s * r])
         sol = np.linalg.lstsq(kkt, rhs, rcond=1e-13)[0]
@@ -140,8 +141,10 @@ def static_equilibrium(
         small_step = float(np.max(np.abs(sol[: model.nv]))) < step_tol
         if closure <= pos_tol_m and (imbalance <= rtol * scale or small_step):
             return q
+        if not (np.isfinite(imbalance) and np.isfinite(closure)):
+            break  # the iteration diverged: a further step would ask LAPACK for the SVD of non-finite numbers
     raise EquilibriumError(
-        f"no static equilibrium after {max_iter} Newton steps (force imbalance {imbalance:.3e} of {scale:.3e}, "
+        f"no static equilibrium after {steps} Newton steps (force imbalance {imbalance:.3e} of {scale:.3e}, "
         f"loop-closure residual {closure:.3e} m); the structure may buckle under gravity or be a mechanism "
         "(check compliances and motors.mode)"
     )

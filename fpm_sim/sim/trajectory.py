@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import io
 import math
 import time
 from dataclasses import dataclass, field
@@ -41,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from fpm_sim.config import Geometry, Manipulator, Motors
-from fpm_sim.errors import FpmSimError
+from fpm_sim.errors import FpmSimError, read_text_input
 from fpm_sim.kinematics import Pose, inverse_kinematics
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.sim.stepping import DEFAULT_INTEGRATOR, Stepping
@@ -200,8 +201,11 @@ def read_path_csv(path: str | Path) -> np.ndarray:
     if not p.is_file():
         raise MoveError("path CSV not found", parameter="path_csv", value=str(p), hint="give an existing file")
     header = "t_s,x_mm,y_mm,phi_rad"
-    with p.open(newline="") as f:  # (row number in the file, cells); comment and blank lines are skipped
-        rows = [(i, r) for i, r in enumerate(csv.reader(f), 1) if r and not r[0].lstrip().startswith("#")]
+    text = read_text_input(
+        p, error=MoveError, parameter="path_csv", kind="a CSV file", hint=f"give a path CSV ({header})", newline=""
+    )
+    lines = csv.reader(io.StringIO(text, newline=""))  # (row number in the file, cells); comments, blanks skipped
+    rows = [(i, r) for i, r in enumerate(lines, 1) if r and not r[0].lstrip().startswith("#")]
     if not rows or [c.strip() for c in rows[0][1]] != header.split(","):
         raise MoveError(
             "the first row must be the header",

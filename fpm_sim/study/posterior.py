@@ -1139,9 +1139,11 @@ def _inference_data(p: Path) -> Any:
 
     try:
         idata = az.from_netcdf(p)
-    except Exception as exc:  # any reader failure (not HDF5/netCDF, damaged) is this file's problem: name it
+    except Exception as exc:  # any reader failure (not HDF5/netCDF, damaged): the file given is not one; name it
         raise PosteriorError(
-            f"not an ArviZ InferenceData netCDF file ({type(exc).__name__}: {exc})", file=p, hint=WRITTEN_BY
+            f"{p}: not an ArviZ InferenceData netCDF file ({type(exc).__name__}: {exc})",
+            parameter="posterior",
+            hint=WRITTEN_BY,
         ) from None
     if "posterior" not in idata.groups():
         raise PosteriorError("no 'posterior' group", file=p, hint=WRITTEN_BY)

@@ -47,7 +47,7 @@ from fpm_sim.batch.frequencies import pose_frequencies
 from fpm_sim.batch.pose_loop import PoseFrequencies, fast_options, pose_assembly, read_poses_csv
 from fpm_sim.batch.task_sweep import TaskSweep, read_task_poses_csv, sweep_task, task_grid
 from fpm_sim.config import Manipulator
-from fpm_sim.errors import FpmSimError
+from fpm_sim.errors import FpmSimError, read_text_input
 from fpm_sim.kinematics import SINGULAR_TOL, Pose, assemble_many, checked_pose_mm
 from fpm_sim.model.options import ModelOptions, resolution_label
 from fpm_sim.study.identify.data import read_measured_csv
@@ -442,10 +442,12 @@ def load_requirements(path: str | Path) -> RequirementsFile:
     if p.is_dir():
         raise RequirementError(f"{p} is a folder; give a requirements TOML file (fpm-requirements.toml)")
     try:
-        data = tomllib.loads(p.read_text())
+        hint = "give fpm-requirements.toml (docs/testing.md)"
+        text = read_text_input(p, error=RequirementError, kind="a requirements TOML file", hint=hint)
+        data = tomllib.loads(text)
     except FileNotFoundError:
         raise RequirementError(f"{p}: file not found; give a requirements TOML file") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+    except tomllib.TOMLDecodeError as exc:
         raise RequirementError(f"{p} is not valid TOML ({exc}); fix the syntax") from None
     return parse_requirements(data, p)
 

@@ -52,6 +52,9 @@ CASES: list[tuple[str, list[str], str]] = [
     ("modes-config-not-toml", ["modes", "--config", "{tmp}/bad.toml"], "config|bad.toml"),
     ("modes-config-negative-thickness", ["modes", "--config", "{tmp}/neg.toml"], "thickness"),
     ("modes-x-text", ["modes", "--x-mm", "abc"], "x-mm"),
+    # flex links near the singularity: the equilibrium iteration diverged into NaN (was LAPACK's SVD traceback)
+    ("modes-flex-near-singular", ["modes", "--x-mm", "-100", "--y-mm", "50", "--link-model", "flex", "--fidelity",
+                                  "fast", "--n-modes", "2"], "equilibrium"),
     # subsystem rigs
     ("rig-length-negative", ["rig", "cantilever", "--length-mm", "-1000", *S3], "length"),
     ("rig-thickness-zero", ["rig", "cantilever", "--thickness-mm", "0", *S3], "thickness"),
@@ -213,6 +216,41 @@ EDGE_CASES: list[tuple[str, list[str], str]] = [
      "unrecognized arguments: --thickness-m"),
     ("reproduce-thickness-zero", ["reproduce", "--thickness-mm", "0", "--out", "{tmp}/r"],
      "--thickness-mm: must be a positive finite number, got 0 mm"),
+    # binary garbage given for every kind of input file (issue 32): one line naming the option, what the file is not
+    ("garbage-config", ["modes", "--config", "{tmp}/g.toml", *S3],
+     r"^error: --config: .*g\.toml is not a TOML file: binary"),
+    ("garbage-config-sweep", ["sweep", "--config", "{tmp}/g.toml", "--out", "{tmp}/s"],
+     r"^error: --config: .*g\.toml is not a TOML file: binary"),
+    ("garbage-sweep-poses", ["sweep", "--poses", "{tmp}/g.csv", "--out", "{tmp}/s"],
+     r"^error: --poses: .*g\.csv is not a CSV file: binary"),
+    ("garbage-sweep-poses-nul", ["sweep", "--poses", "{tmp}/nul.csv", "--out", "{tmp}/s"],
+     r"^error: --poses: .*nul\.csv is not a CSV file: binary \(a NUL byte"),
+    ("garbage-design-poses", ["design", *VARY, "--poses", "{tmp}/g.csv", "--out", "{tmp}/d"],
+     r"^error: --poses: .*g\.csv is not a CSV file: binary"),
+    ("garbage-design-designs", ["design", "--designs", "{tmp}/g.csv", "--out", "{tmp}/d"],
+     r"^error: --designs: .*g\.csv is not a CSV file: binary"),
+    ("garbage-identify-measured", ["identify", "--measured", "{tmp}/g.csv", *M],
+     r"^error: --measured: .*g\.csv is not a CSV file: binary"),
+    ("garbage-identify-measured-nul", ["identify", "--measured", "{tmp}/nul.csv", *M],
+     r"^error: --measured: .*nul\.csv is not a CSV file: binary \(a NUL byte"),
+    ("garbage-identify-subsystems", ["identify", "--measured", "{tmp}/ok.csv", "--subsystems", "{tmp}/g.csv", *M],
+     r"^error: --subsystems: .*g\.csv is not a CSV file: binary"),
+    ("garbage-identify-workspace", ["identify", "--measured", "{tmp}/ok.csv", "--workspace", "{tmp}/g.csv", *M],
+     r"^error: --workspace: .*g\.csv is not a CSV file: binary"),
+    ("garbage-calibrate-measured", ["calibrate", "--priors", "{tmp}/g.toml", "--measured", "{tmp}/g.csv", "--out",
+     "{tmp}/c"], r"^error: --measured: .*g\.csv is not a CSV file: binary"),
+    ("garbage-calibrate-priors", ["calibrate", "--priors", "{tmp}/g.toml", "--measured", "{tmp}/ok.csv", "--out",
+     "{tmp}/c", "--free", "section"], r"^error: --priors: .*g\.toml is not a TOML file: binary"),
+    ("garbage-requirements", ["check", "{tmp}/g.toml"], r"^error: .*g\.toml is not a requirements TOML file: binary"),
+    ("garbage-modes-posterior", ["modes", "--posterior", "{tmp}/g.nc"],
+     r"^error: --posterior: .*g\.nc: not an ArviZ InferenceData netCDF file"),
+    ("garbage-reproduce-posterior", ["reproduce", "--posterior", "{tmp}/g.nc", "--out", "{tmp}/r"],
+     r"^error: --posterior: .*g\.nc: not an ArviZ InferenceData netCDF file"),
+    ("garbage-ema-uff", ["ema", "{tmp}/g.uff", *EMA], r"^error: files: .*g\.uff is not a Universal File: no data set"),
+    ("garbage-ema-csv", ["ema", "{tmp}/g.csv", *EMA], r"^error: files: .*g\.csv is not a CSV file: binary"),
+    ("garbage-move-path-csv", ["move", "--path-csv", "{tmp}/g.csv", *S3],
+     r"^error: --path-csv: .*g\.csv is not a CSV file: binary"),
+    ("garbage-atlas", ["atlas", "query", "{tmp}/g.npz"], r"^error: .*g\.npz' is not a readable atlas file"),
 ]  # fmt: skip
 
 XFAIL: dict[str, str] = {}
@@ -318,6 +356,10 @@ def _edge_files(tmp: Path) -> None:
     (tmp / "other_run").mkdir()
     (tmp / "other_run" / "design.csv").write_text("another study's results\n")
     (tmp / "taken.uff").mkdir()
+    garbage = bytes((97 * k + 13) % 256 for k in range(2048))  # binary: not UTF-8 from its third byte
+    for name in ("g.toml", "g.csv", "g.nc", "g.uff", "g.npz"):
+        (tmp / name).write_bytes(garbage)
+    (tmp / "nul.csv").write_bytes(b"x_mm,y_mm,phi_rad,f1_hz\n\x00\x00,0,0,50\n")  # UTF-8, but NUL bytes
 
 
 def _tree(root: Path) -> dict[str, bytes | None]:

@@ -202,7 +202,9 @@ def test_bad_posterior_files_say_what_is_wrong(tmp_path):
     junk.write_text("not a netcdf file")
     with pytest.raises(PosteriorError, match=r"junk\.nc: not an ArviZ") as unreadable:
         Posterior.from_netcdf(junk)
-    assert unreadable.value.file == str(junk)  # a file's content is wrong: the error names the file
+    # not a posterior at all: the error names the parameter (the command line's --posterior) and the file
+    assert unreadable.value.parameter == "posterior"
+    assert str(junk) in str(unreadable.value)
     with pytest.raises(PosteriorError, match=r"fpm_sim_segments: must be an integer, got 'four'") as seg:
         Posterior.from_netcdf(write_posterior(tmp_path / "s.nc", attrs={"fpm_sim_segments": "four"}))
     assert (seg.value.parameter, seg.value.file) == ("fpm_sim_segments", str(tmp_path / "s.nc"))

@@ -60,7 +60,7 @@ from typing import Any
 import numpy as np
 from scipy.special import ndtr, ndtri
 
-from fpm_sim.errors import FpmSimError
+from fpm_sim.errors import FpmSimError, read_text_input
 from fpm_sim.study.discrepancy import LENGTH_SCALE_PARAMETER
 from fpm_sim.study.readout import ModeRead
 
@@ -314,9 +314,11 @@ def read_priors(source: str | Path, free: Sequence[str], *, text: str | None = N
 
 
 def _priors_text(source: str | Path) -> str:
-    """The file's text; a missing file or a folder is refused naming it."""
+    """The file's text; a missing file, a folder or a binary file is refused naming it."""
     try:
-        return Path(source).read_text()
+        return read_text_input(
+            source, error=PriorError, parameter="priors", kind="a TOML file", hint="give a priors TOML file"
+        )
     except FileNotFoundError as exc:
         raise PriorError(
             "priors file not found", parameter="priors", value=str(source), hint="give a priors TOML file"

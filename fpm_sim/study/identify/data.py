@@ -21,7 +21,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from fpm_sim.errors import FpmSimError
+from fpm_sim.errors import FpmSimError, read_text_input
 from fpm_sim.kinematics import Pose, PoseValueError, checked_pose_mm
 from fpm_sim.study.poses import TableReading
 from fpm_sim.study.tables import SubsystemTest, parse_subsystem_rows
@@ -87,13 +87,11 @@ def read_csv_rows(path: Path, parameter: str = "measured") -> list[tuple[int, di
     """``(line number, row)`` of every data row (``#`` comments and blank lines skipped); UTF-8 with or without
     a byte-order mark, any line ending; header names stripped."""
     try:
-        text = path.read_text(encoding="utf-8-sig")
+        text = read_text_input(path, error=DataError, parameter=parameter, kind="a CSV file", hint="give a CSV file")
     except FileNotFoundError as exc:
         raise DataError(f"file not found: {path}", parameter=parameter) from exc
     except IsADirectoryError as exc:
         raise DataError(f"{path} is a folder", parameter=parameter, hint="give a CSV file") from exc
-    except UnicodeDecodeError as exc:
-        raise DataError(f"{path} is not UTF-8 text ({exc.reason})", parameter=parameter) from exc
     lines = [
         (n, ln) for n, ln in enumerate(text.splitlines(), start=1) if ln.strip() and not ln.lstrip().startswith("#")
     ]

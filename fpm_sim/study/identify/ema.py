@@ -174,16 +174,22 @@ def read_frfs(path: str | Path) -> list[MeasuredFrf]:
         return [MeasuredFrf(values[:, 0], values[:, 1] + 1j * values[:, 2], p.name, None)]
     import pyuff
 
+    hint = "give Universal Files of type-58 (function) records (.uff/.unv) or FRF CSVs"
     try:
         uff = pyuff.UFF(str(p))
         types = list(uff.get_set_types())
     except Exception as exc:  # pyuff raises bare Exceptions on malformed files
-        raise EmaError(f"{p}: not a readable Universal File ({exc})") from exc
+        raise EmaError(f"{p}: not a readable Universal File ({exc})", parameter="files", hint=hint) from None
+    if not types:  # binary garbage, or any text without a '    -1' delimited data set
+        raise EmaError(f"{p} is not a Universal File: no data set in it", parameter="files", hint=hint)
     out = []
     for i, t in enumerate(types):
         if int(t) != 58:
             continue
-        d = uff.read_sets(i)
+        try:
+            d = uff.read_sets(i)
+        except Exception as exc:  # pyuff's bare Exception on a damaged record
+            raise EmaError(f"{p}: record {i} (type 58) cannot be read ({exc})", parameter="files", hint=hint) from None
         m = _POSE_RE.search(str(d.get("id4", "")))
         pose = (float(m.group(1)), float(m.group(2)), float(m.group(3))) if m else None
         w = _WINDOW_RE.search(str(d.get("id5", "")))
@@ -198,7 +204,8 @@ def read_frfs(path: str | Path) -> list[MeasuredFrf]:
         _check_frequencies(frf.freq_hz, p, None, record=i)
         out.append(frf)
     if not out:
-        raise EmaError(f"{p}: no type-58 (function) record")
+        kinds = ", ".join(sorted({str(int(t)) for t in types}))
+        raise EmaError(f"{p}: no type-58 (function) record (its data sets are of type {kinds})", parameter="files")
     return out
 
 
