@@ -46,14 +46,14 @@ def cmd_design(args: argparse.Namespace) -> int:
     from fpm_sim.model.options import warn_if_coarse
     from fpm_sim.outputs import atomic_dir
 
+    out = args.out
+    # first, before the inputs are read (a posterior: seconds). --resume continues OUT.partial/ (the folder itself
+    # appears only at the end): a finished run in --out, of this study or another, is replaced only with --overwrite
+    check_output_dir(out, "--out", overwrite=args.overwrite)
     posterior = load_posterior(args)  # --posterior: designs over its draws (fpm_sim.cli.bands)
     config = posterior.median_config() if posterior is not None else load_manipulator(args)
     if bool(args.vary) == bool(args.designs):
         raise CliError("give --vary FIELD=SPEC (one or more) or --designs FILE.csv, not both and not neither")
-    out = args.out
-    # --resume continues OUT.partial/ (the folder itself appears only at the end): a finished run in --out, of this
-    # study or another, is replaced only with --overwrite
-    check_output_dir(out, "--out", overwrite=args.overwrite)
     vary = parse_vary(args.vary, config) if args.vary else None
     designs = read_designs_csv(args.designs, config) if args.designs else None
     poses, grid = _poses(args, config)

@@ -92,9 +92,15 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     from fpm_sim.study.reproduce import reproduce_study
 
     reading = parse_reading(args.reading)
+    if args.out is not None:  # first: before the inputs are read (a posterior: seconds) and anything is computed
+        check_output_dir(args.out, "--out", overwrite=args.overwrite)
+    manip = None if args.posterior is not None else study_manipulator(args)
+    if args.out is None and manip is not None:  # the default folder names the description's thickness
+        check_output_dir(default_out("reproduce", manip, args.reading), "--out", overwrite=args.overwrite)
     posterior, note = reproduce_posterior(args)  # --posterior, or the shipped default's (fpm_sim.cli.bands)
-    explicit = args.posterior is not None and posterior is not None
-    manip = posterior.median_config() if explicit and posterior is not None else study_manipulator(args)
+    if manip is None:
+        assert posterior is not None  # --posterior given: its median is the description
+        manip = posterior.median_config()
     opts = study_options(args)
     out = args.out or default_out("reproduce", manip, args.reading)
     check_output_dir(out, "--out", overwrite=args.overwrite)

@@ -87,6 +87,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from fpm_sim.study.poses import parse_reading
     from fpm_sim.study.sweep import sweep_workspace
 
+    if args.out is not None:  # before the inputs are read (a posterior: seconds) and anything is computed
+        check_output_dir(args.out, "--out", overwrite=args.overwrite)
     if is_described(args):
         from fpm_sim.architecture import load_description
 
