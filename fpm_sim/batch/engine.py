@@ -27,11 +27,15 @@ from __future__ import annotations
 import hashlib
 import logging
 import math
+import multiprocessing
 import os
 import pickle
 import shutil
+import signal
 import sys
-from collections.abc import Callable, Sequence
+import threading
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -47,6 +51,7 @@ __all__ = [
     "chunk_size",
     "chunk_store",
     "run_chunks",
+    "spawn_pool",
     "split",
 ]
 
@@ -122,6 +127,34 @@ class EngineOptions:
     @property
     def remote(self) -> bool:
         return self.scheduler is not None and "://" in self.scheduler
+
+
+@contextmanager
+def _sigint_ignored() -> Iterator[None]:
+    """SIGINT ignored in this block (main thread only: elsewhere a no-op); the previous handler restored after."""
+    previous = signal.getsignal(signal.SIGINT)
+    if threading.current_thread() is not threading.main_thread() or previous is None:
+        yield
+        return
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def spawn_pool(workers: int, initializer: Callable[..., None] | None = None, initargs: tuple[Any, ...] = ()) -> Any:
+    """A ``spawn`` :class:`multiprocessing.pool.Pool` of ``workers`` processes, each given ``initargs`` once through
+    ``initializer`` (picklable data only), whose workers ignore Ctrl-C.
+
+    A terminal's Ctrl-C goes to the whole process group: workers that took it would each print their own
+    ``KeyboardInterrupt`` traceback (also after the command's one "interrupted" line). These inherit SIGINT ignored
+    (set while they start; Python keeps an ignored SIGINT ignored), so only this process is interrupted; its caller
+    stops them with ``pool.terminate()`` (as leaving a ``with pool:`` block does), never ``close()`` and ``join()``,
+    which would wait for their queued work. A Ctrl-C in the milliseconds the workers take to start is lost.
+    """
+    with _sigint_ignored():
+        return multiprocessing.get_context("spawn").Pool(workers, initializer=initializer, initargs=initargs)
 
 
 def chunk_store(out: str | Path) -> Path:

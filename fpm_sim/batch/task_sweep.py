@@ -16,9 +16,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
-from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +24,7 @@ import numpy as np
 
 from fpm_sim.architecture import Description, TaskPose
 from fpm_sim.architecture.kinematics import UnreachableTaskPoseError, closure_reach, solve_task_pose
+from fpm_sim.batch.engine import spawn_pool
 from fpm_sim.errors import FpmSimError
 from fpm_sim.figures import write_table_and_figure
 from fpm_sim.kinematics import NEAR_SINGULAR_WARN, SINGULAR_TOL
@@ -237,8 +236,8 @@ def sweep_task(
     opts = replace(options or ModelOptions(), gravity=False, axial=False)
     if workers > 1 and len(poses) > workers:
         chunks = [poses[i::workers] for i in range(workers)]
-        with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
-            parts = list(pool.map(_chunk, [(desc, c, opts, n_modes) for c in chunks]))
+        with spawn_pool(workers) as pool:  # its workers ignore Ctrl-C: this process alone stops, and stops them
+            parts = pool.map(_chunk, [(desc, c, opts, n_modes) for c in chunks])
         results: list[tuple[Any, ...]] = [None] * len(poses)  # type: ignore[list-item]
         for i, part in enumerate(parts):
             results[i::workers] = part

@@ -71,3 +71,17 @@ def test_unreachable_scheduler_is_a_clear_error(reference_manip):
     engine = EngineOptions(scheduler="tcp://127.0.0.1:9", chunk=1, connect_timeout_s=2.0)
     with pytest.raises(EngineError, match="scheduler"):
         pose_frequencies(reference_manip, POSES[:2], n_modes=1, options=fast_options(segments=2), engine=engine)
+
+
+def test_spawn_pool_workers_ignore_ctrl_c_and_this_process_keeps_its_handler():
+    """A terminal's Ctrl-C reaches the whole process group: the pool's workers ignore it (no traceback of theirs),
+    this process keeps its handler (it is interrupted and stops them)."""
+    import signal
+
+    from fpm_sim.batch.engine import spawn_pool
+
+    before = signal.getsignal(signal.SIGINT)
+    with spawn_pool(1) as pool:
+        in_worker = pool.apply(signal.getsignal, (signal.SIGINT,))
+    assert in_worker == signal.SIG_IGN
+    assert signal.getsignal(signal.SIGINT) is before

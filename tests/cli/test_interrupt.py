@@ -10,6 +10,7 @@ are being written.
 from __future__ import annotations
 
 import csv
+import os
 import re
 import signal
 import subprocess
@@ -110,3 +111,30 @@ def test_existing_folder_of_another_run_is_refused(tmp_path, capsys):
     assert "--overwrite" in err
     assert "--out" in err
     assert (out / "report.md").read_text() == "another run\n"
+
+
+def test_ctrl_c_during_identify_is_one_line_and_130(tmp_path):
+    """Ctrl-C as a terminal sends it (to the whole process group) while differential evolution runs on a pool of
+    worker processes: exit 130, the one "interrupted" line, no worker's traceback, no output folder (issue 32)."""
+    from importlib.resources import files
+
+    measured = files("fpm_sim.data").joinpath("measured_table4_train.csv")
+    out = tmp_path / "id"
+    argv = [sys.executable, "-m", "fpm_sim.cli.main", "identify", "--measured", f"{measured},reading=x+", "--free",
+            "section", "--segments", "2", "--workers", "2", "--out", str(out)]  # fmt: skip
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        for line in proc.stdout:  # the workers are busy once a generation is reported
+            if "differential evolution: generation" in line:
+                break
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err, err
+    assert [ln for ln in err.strip().splitlines() if not ln.startswith("warning:")] == [
+        "interrupted (Ctrl-C); unfinished outputs were not written"
+    ], err
+    assert not out.exists()

@@ -11,7 +11,6 @@ import dataclasses
 import functools
 import hashlib
 import math
-import multiprocessing
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -20,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from fpm_sim.batch.engine import spawn_pool
 from fpm_sim.figures import bands_against_measured
 from fpm_sim.study.calibrate.problem import CalibrationError, CalibrationProblem
 from fpm_sim.study.loo import LeaveOneOut, leave_one_out, loo_from_components
@@ -328,8 +328,8 @@ def _ess_kish(logwt: np.ndarray) -> float:
 
 
 def _pool(problem: CalibrationProblem, workers: int) -> Any:
-    ctx = multiprocessing.get_context("spawn")
-    return ctx.Pool(workers, initializer=_init_worker, initargs=(problem,))
+    """A spawn pool whose workers hold ``problem`` and ignore Ctrl-C (:func:`fpm_sim.batch.engine.spawn_pool`)."""
+    return spawn_pool(workers, _init_worker, (problem,))
 
 
 def _run_sampler(
@@ -438,10 +438,13 @@ def run_calibration(
         ess = _ess_kish(logwt)
         # the run stops on dlogz unless max_calls came first
         converged = opts.max_calls is None or n_calls < opts.max_calls
-    finally:
+    except BaseException:  # Ctrl-C or an error: the workers (which ignore Ctrl-C) stop now, their queued work unrun
         if pool is not None:
-            pool.close()
-            pool.join()
+            pool.terminate()
+        raise
+    if pool is not None:
+        pool.close()
+        pool.join()
     f_noisy = np.stack([problem.simulate_measurement(f, t, rng) for f, t in zip(f_pred, draws)])
     start_ll = problem.start_log_likelihood()
     if print_func is not None:

@@ -13,13 +13,13 @@ in its initializer (:func:`spawn_pool`); nothing relies on ``fork``. The nested 
 
 from __future__ import annotations
 
-import multiprocessing
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
 
+from fpm_sim.batch.engine import spawn_pool as engine_spawn_pool
 from fpm_sim.study.identify.objective import Objective
 
 __all__ = ["Candidate", "Strategy", "spawn_pool"]
@@ -78,5 +78,6 @@ class Strategy(Protocol):
 
 def spawn_pool(workers: int, initializer: Callable[..., None], initargs: tuple[Any, ...]) -> Any:
     """A ``spawn`` process pool of ``workers`` whose workers each get ``initargs`` once, through
-    ``initializer`` (picklable data only: spawn-safe)."""
-    return multiprocessing.get_context("spawn").Pool(workers, initializer=initializer, initargs=initargs)
+    ``initializer`` (picklable data only: spawn-safe), and ignore Ctrl-C (:func:`fpm_sim.batch.engine.spawn_pool`:
+    stop it with ``terminate()``)."""
+    return engine_spawn_pool(workers, initializer, initargs)
