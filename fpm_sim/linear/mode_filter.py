@@ -72,6 +72,9 @@ bar's modes measure ``|zeta| ~ 3e-13`` of round-off."""
 class UnstableModelError(FpmSimError):
     """The linearised model grows: a negative stiffness eigenvalue or negative damping beyond round-off."""
 
+    worst_w2: float | None = None
+    """The most negative stiffness eigenvalue (rad^2/s^2), when that is the cause (:func:`check_stable`)."""
+
 
 @dataclass(frozen=True)
 class ModeFilter:
@@ -153,12 +156,14 @@ def check_stable(w2: np.ndarray, tol: np.ndarray, *, what: str = "the equilibriu
     bad = w2 < -tol
     if np.any(bad):
         worst = float(np.min(w2[bad]))
-        raise UnstableModelError(
+        error = UnstableModelError(
             f"{what} is unstable: {int(np.sum(bad))} negative stiffness eigenvalue(s), the most negative "
             f"{worst:.4g} rad^2/s^2 (growth time {1.0 / math.sqrt(-worst):.3g} s), beyond the round-off bound "
             f"{float(np.max(tol[bad])):.2g}; the structure buckles under gravity or the compliances are too soft "
             "(check section, material, hardware masses and compliance)"
         )
+        error.worst_w2 = worst
+        raise error
 
 
 def classify(w2: float, w2_tol: float, zeta: float, ratio: float, filt: ModeFilter) -> str | None:

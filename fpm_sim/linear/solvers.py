@@ -23,6 +23,8 @@ Timestep: the step map (semi-implicit Euler on the springs) raises an undamped m
 """
 from __future__ import annotations
 
+import copy
+import dataclasses
 import math
 import warnings
 from collections.abc import Callable
@@ -53,8 +55,13 @@ from fpm_sim.model.spec import BuiltModel
 
 __all__ = [
     "OMEGA_H_WARN",
+    "STEP_HALVINGS",
+    "BucklingError",
+    "CoarseTimestepError",
+    "StepMapError",
     "TimestepWarning",
     "check_n_modes",
+    "growth_error",
     "modes_constrained",
     "modes_transition_fd",
     "reduced_eigenproblem",
@@ -131,30 +138,19 @@ def modes_transition_fd(
     ------
     UnstableModelError
         A mode grows (negative damping ratio beyond round-off, or a real eigenvalue growing faster
-        than the rigid-body threshold): the equilibrium is unstable or the timestep too coarse.
+        than the rigid-body threshold): :func:`growth_error` says which of the equilibrium
+        (:class:`BucklingError`), the step (:class:`CoarseTimestepError`) or the finite-difference
+        linearisation itself (:class:`StepMapError`) it is.
     """
     filt = filt or ModeFilter()
     model = built.model
     check_n_modes(n_modes, model.nv)
     if not (math.isfinite(eps) and eps > 0):
         raise FpmSimError(f"eps must be a positive step, got {eps!r}")
-    data = mujoco.MjData(model)
-    q_eq = static_equilibrium(model, data) if qpos is None else np.asarray(qpos, float)
-    forward_at(model, data, q_eq)
-    rank = constraint_rank(model, data, warn=False)
-    jac = scaled_jacobian(model, data, rank.length_m)
-    jnorm = float(np.linalg.norm(jac, 2)) if jac.size else 0.0
-    mass = mass_matrix(model, data)
-    w_tol = float(np.sqrt(noise_w2(model, mass, filt)))
-    nx = 2 * model.nv + model.na
-    a = np.zeros((nx, nx))
-    mujoco.mjd_transitionFD(model, data, eps, True, a, None, None, None)
-    if not np.all(np.isfinite(a)):
-        raise UnstableModelError(
-            "the linearised step map has non-finite entries (the simulation diverges at the equilibrium); "
-            "check the description (thickness, Young's modulus, masses) or pass a smaller timestep_s"
-        )
-    modes, dropped = _step_map_modes(built, a, jac, jnorm, w_tol, filt)
+    q_eq = static_equilibrium(model, mujoco.MjData(model)) if qpos is None else np.asarray(qpos, float)
+    modes, dropped, growing = _step_map_modes(built, *_linearise(model, q_eq, eps, filt), filt)
+    if growing:
+        raise growth_error(built, q_eq, growing, eps=eps, filt=filt)
     h = model.opt.timestep
     result = _finish(ModalResult("transition_fd", built, q_eq, modes, dropped), n_modes, stacklevel=3)
     if result.modes:
@@ -170,18 +166,32 @@ def modes_transition_fd(
     return result
 
 
+def _linearise(
+    model: mujoco.MjModel, q_eq: np.ndarray, eps: float, filt: ModeFilter
+) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """At ``q_eq``: the step map ``a`` of ``mjd_transitionFD``, the equality Jacobian in consistent units, its norm
+    and the rigid-body threshold ``w_tol`` (rad/s)."""
+    data = mujoco.MjData(model)
+    forward_at(model, data, q_eq)
+    rank = constraint_rank(model, data, warn=False)
+    jac = scaled_jacobian(model, data, rank.length_m)
+    jnorm = float(np.linalg.norm(jac, 2)) if jac.size else 0.0
+    w_tol = float(np.sqrt(noise_w2(model, mass_matrix(model, data), filt)))
+    nx = 2 * model.nv + model.na
+    a = np.zeros((nx, nx))
+    mujoco.mjd_transitionFD(model, data, eps, True, a, None, None, None)
+    return a, jac, jnorm, w_tol
+
+
 def _step_map_modes(
     built: BuiltModel, a: np.ndarray, jac: np.ndarray, jnorm: float, w_tol: float, filt: ModeFilter
-) -> tuple[list[Mode], dict[str, int]]:
-    """The physical modes of the step map ``a`` (one of each conjugate pair, by ascending ``|s|``) and the count
-    of each dropped kind.
-
-    Raises
-    ------
-    UnstableModelError
-        A mode grows: a real eigenvalue above ``w_tol`` or a damping ratio below ``-NEGATIVE_DAMPING_TOL``.
-    """
+) -> tuple[list[Mode], dict[str, int], list[str]]:
+    """The physical modes of the step map ``a`` (one of each conjugate pair, by ascending ``|s|``), the count
+    of each dropped kind, and what grows (a real eigenvalue above ``w_tol``, a damping ratio below
+    ``-NEGATIVE_DAMPING_TOL``, non-finite entries), in words: empty when nothing does."""
     model = built.model
+    if not np.all(np.isfinite(a)):
+        return [], {}, ["non-finite entries: the simulation diverges at the equilibrium"]
     lam, vec = np.linalg.eig(a)
     h = model.opt.timestep
     with np.errstate(divide="ignore", invalid="ignore"):  # lambda = 0: an infinitely damped state, s = -inf
@@ -214,13 +224,115 @@ def _step_map_modes(
             continue
         shape = real_shape(shape_c)
         modes.append(Mode(f_hz, zeta, shape, strain_energy_character(shape, k_dof, built.dof_kinds), ratio))
-    if growing:
-        raise UnstableModelError(
-            f"{len(growing)} mode(s) of the linearised step map grow ({'; '.join(growing[:3])}): the equilibrium "
-            f"is unstable or timestep_s={h:.3g} s is too coarse for the stiffest springs; check the description "
-            "(section thickness, Young's modulus, masses) or pass a smaller timestep_s"
+    return modes, dropped, growing
+
+
+class BucklingError(UnstableModelError):
+    """The equilibrium itself is unstable: its stiffness has a negative eigenvalue, found by the constrained
+    eigen-solve (no time step), so no ``timestep_s`` helps; under gravity's prestress when the same model without
+    gravity is stable (the message then gives its f1)."""
+
+
+class CoarseTimestepError(UnstableModelError):
+    """The equilibrium is stable (the constrained eigen-solve, no time step) but the step map grows at this
+    ``timestep_s``; the hint names a step whose step map was checked not to grow."""
+
+
+class StepMapError(UnstableModelError):
+    """The equilibrium is stable, but the step map grows at every step tried: the finite-difference linearisation
+    (``transition_fd``) is unreliable for this model; the constrained eigen-solve is the one to use."""
+
+
+STEP_HALVINGS = 4
+"""Steps tried by :func:`growth_error` below the one that grew: ``h/2`` ... ``h/2**STEP_HALVINGS``."""
+
+
+def growth_error(
+    built: BuiltModel, q_eq: np.ndarray, growing: list[str], *, eps: float = 1e-6, filt: ModeFilter | None = None
+) -> UnstableModelError:
+    """The error for a step map that grows at the equilibrium ``q_eq``, saying which cause it is (never "or").
+
+    The constrained eigen-solve at the same equilibrium decides, with no time step involved: a negative stiffness
+    eigenvalue is the structure's own instability (:class:`BucklingError`: under gravity's prestress, with the
+    pose's singularity measure and f1 without gravity, when the model is stable without gravity). Otherwise the
+    step is the cause: the steps ``h/2``, ``h/4``, ... (:data:`STEP_HALVINGS` of them) are tried, each with the
+    weld time constant ``2 h`` that compilation ties to the step, and the first whose step map does not grow is
+    named (:class:`CoarseTimestepError`); when none works the linearisation itself is (:class:`StepMapError`).
+    """
+    filt = filt or ModeFilter()
+    grows = f"{len(growing)} mode(s) of the linearised step map grow ({'; '.join(growing[:3])})"
+    with warnings.catch_warnings():  # the diagnosis would repeat the first solve's warnings
+        warnings.simplefilter("ignore")
+        try:
+            exact = modes_constrained(built, n_modes=1, qpos=q_eq, filt=filt)
+        except UnstableModelError as exc:
+            return _buckling_error(built, grows, exc.worst_w2, filt)
+        return _step_error(built, q_eq, grows, exact, eps, filt)
+
+
+def _buckling_error(built: BuiltModel, grows: str, worst_w2: float | None, filt: ModeFilter) -> BucklingError:
+    negative = "a negative eigenvalue" + (f" ({worst_w2:.3g} rad^2/s^2)" if worst_w2 is not None else "")
+    measure = built.parameters.get("singularity_measure")
+    at = f" (singularity measure {measure:.3g})" if isinstance(measure, (int, float)) else ""
+    gravity = bool(np.any(built.model.opt.gravity != 0.0))
+    f1_free = _f1_without_gravity(built, filt) if gravity else None
+    if f1_free is not None:
+        return BucklingError(
+            f"the structure buckles under gravity's prestress at this pose{at}: at its static equilibrium the "
+            f"gravity-prestressed stiffness has {negative} (constrained eigen-solve, no time step), while without "
+            f"gravity it is stable with f1 = {f1_free:.3g} Hz; {grows}, and no timestep_s helps",
+            hint="move the pose away from the singularity, lighten the platform and payload (hardware.*.mass_kg) "
+            "or stiffen the links (section.*); gravity off gives the unloaded modes",
         )
-    return modes, dropped
+    return BucklingError(
+        f"the structure is unstable at this pose{at}{' even without gravity' if gravity else ''}: at its "
+        f"equilibrium the stiffness has {negative} (constrained eigen-solve, no time step); {grows}, and no "
+        "timestep_s helps",
+        hint="check the description: section.*, material.*, compliance.* and hardware.*.mass_kg",
+    )
+
+
+def _f1_without_gravity(built: BuiltModel, filt: ModeFilter) -> float | None:
+    """f1 (Hz) of the same model with gravity off (the constrained eigen-solve), ``None`` if it is unstable too."""
+    model = copy.copy(built.model)
+    model.opt.gravity[:] = 0.0
+    try:
+        free = modes_constrained(dataclasses.replace(built, model=model), n_modes=1, filt=filt)
+    except UnstableModelError:
+        return None
+    return free.modes[0].frequency_hz if free.modes else math.nan
+
+
+def _step_error(
+    built: BuiltModel, q_eq: np.ndarray, grows: str, exact: ModalResult, eps: float, filt: ModeFilter
+) -> UnstableModelError:
+    h = float(built.model.opt.timestep)
+    f1 = exact.modes[0].frequency_hz if exact.modes else math.nan
+    stable = f"the equilibrium is stable (constrained eigen-solve, no time step: f1 = {f1:.4g} Hz)"
+    h_try = h
+    for k in range(1, STEP_HALVINGS + 1):
+        h_try = float(f"{h / 2**k:.2g}")
+        if not _grows_at(built, q_eq, h_try, eps, filt):
+            return CoarseTimestepError(
+                f"{h:.3g} s is too coarse for this model at this pose: {grows}, while {stable}",
+                parameter="timestep_s",
+                hint=f"timestep_s={h_try:.2g} s works (its step map checked: no mode grows)",
+            )
+    return StepMapError(
+        f"the finite-difference linearisation is unreliable for this model: {grows} at timestep_s={h:.3g} s and at "
+        f"every step down to {h_try:.2g} s, while {stable}",
+        parameter="method",
+        hint="use method 'constrained' (the exact eigen-solve, no time step)",
+    )
+
+
+def _grows_at(built: BuiltModel, q_eq: np.ndarray, h: float, eps: float, filt: ModeFilter) -> bool:
+    """Whether the step map at ``q_eq`` grows at the step ``h`` (weld time constant ``2 h``, as compiled)."""
+    model = copy.copy(built.model)
+    model.opt.timestep = h
+    model.eq_solref[:, 0] = 2.0 * h
+    at_h = dataclasses.replace(built, model=model)
+    return bool(_step_map_modes(at_h, *_linearise(model, q_eq, eps, filt), filt)[2])
 
 
 def modes_constrained(
