@@ -29,6 +29,7 @@ VARY = ["--vary", "section.thickness_m=0.01,0.02"]
 # (command, the arguments the parser requires, output option, suffix of the output's name: "" a folder)
 OUTPUTS: list[tuple[str, list[str], str, str]] = [
     ("modes", [], "--plot", ".png"),
+    ("modes", [], "--animate", ".gif"),
     ("export-mjcf", ["manipulator"], "--out", ".xml"),
     ("reproduce", [], "--out", ""),
     ("sweep", [], "--out", ""),
