@@ -18,6 +18,21 @@ from fpm_sim.model.general import build_general
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "architectures"
 STEPS_MM = {"five_bar": 20.0, "delta": 30.0, "three_prr": 10.0, "serial_arm": 50.0}
+BOX_MM = {"three_prr": 150.0}
+"""A box (+- mm) for machines whose chains the reach box cannot bound (a prismatic joint on an unbounded rail)."""
+
+
+def sweep(name: str, workers: int):
+    desc = fs.load_description(EXAMPLES / f"{name}.toml")
+    opts = fs.ModelOptions(fidelity="fast")
+    if name not in BOX_MM:
+        return fs.sweep(desc, step_mm=STEPS_MM[name], options=opts, workers=workers)
+    from fpm_sim.batch.task_sweep import sweep_task
+
+    half, step = BOX_MM[name], STEPS_MM[name]
+    ticks = [k * step for k in range(-int(half / step), int(half / step) + 1)]
+    poses = [fs.TaskPose.from_mm(x, y) for y in ticks for x in ticks]
+    return sweep_task(desc, poses, options=opts, workers=workers, grid="dense", step_mm=step)
 
 
 def modes_table(name: str, n_modes: int = 6) -> list[str]:
@@ -41,21 +56,19 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--out", type=Path, default=Path("docs"))
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--only", default=None, help="one machine (default: all four)")
+    ap.add_argument("--sweeps", default=",".join(STEPS_MM), help="the machines whose maps to draw (comma-separated)")
     args = ap.parse_args()
-    names = [args.only] if args.only else list(STEPS_MM)
     table = ["# First modes of the example architectures at their check poses", "",
              "Written by `python scripts/architecture_figures.py`; see docs/architectures.md.", ""]
-    for name in names:
+    for name in STEPS_MM:
         table += modes_table(name)
-        desc = fs.load_description(EXAMPLES / f"{name}.toml")
-        sw = fs.sweep(desc, step_mm=STEPS_MM[name], options=fs.ModelOptions(fidelity="fast"), workers=args.workers)
+    (args.out / "results" / "architectures_modes.md").write_text("\n".join(table))
+    for name in [n for n in args.sweeps.split(",") if n]:
+        sw = sweep(name, args.workers)
         sw.write_csv(args.out / "results" / f"architecture_{name}_sweep.csv")
         fig = sw.plot()
         fig.savefig(args.out / "figures" / f"architecture_{name}_f1.png", dpi=100)
         print(name, sw.table(), flush=True)
-    if not args.only:
-        (args.out / "results" / "architectures_modes.md").write_text("\n".join(table))
 
 
 if __name__ == "__main__":
