@@ -553,7 +553,7 @@ def idle_motions(desc: Description) -> int:
     return count
 
 
-def _scaled_columns(lay: _Layout, jac: np.ndarray, ell: float, desc: Description) -> np.ndarray:
+def _scaled_columns(lay: _Layout, jac: np.ndarray, ell: float) -> np.ndarray:
     """Rotation columns over ``ell``: every column in metres of residual per metre of motion."""
     out = jac.copy()
     for _, j, s in lay.joints:
@@ -665,7 +665,7 @@ def check_mobility(desc: Description, assembly: TaskAssembly) -> None:
     full = _layout(desc, ee_free=_ee_coordinates(desc))
     z = _unknowns_of(desc, full, assembly)
     ell = characteristic_length_m(desc)
-    jac = _scaled_columns(full, _jacobian(desc, full, assembly.pose, z, ell), ell, desc)
+    jac = _scaled_columns(full, _jacobian(desc, full, assembly.pose, z, ell), ell)
     passive = [k for _, j, s in full.joints if not j.actuated for k in range(s.start, s.stop)]
     cols = jac[:, passive + list(range(full.ee_slice.start, full.ee_slice.stop))]
     s = np.linalg.svd(cols, compute_uv=False) if cols.size else np.zeros(0)

@@ -55,8 +55,7 @@ from fpm_sim.architecture.description import (
     raise_at,
 )
 from fpm_sim.config import LumpedMass, Material, Section
-from fpm_sim.config.schema import ConfigError
-from fpm_sim.errors import read_text_input
+from fpm_sim.config.schema import ConfigError, read_toml_file
 
 __all__ = ["is_description_file", "load_description", "parse_description"]
 
@@ -426,15 +425,7 @@ def _check_structure(desc: Description) -> None:
 def load_description(path: str | Path) -> Description:
     """Load a description file (see the module docstring); :class:`fpm_sim.config.ConfigError` names the path."""
     p = Path(path)
-    hint = "give the description's .toml file"
-    try:
-        data = tomllib.loads(read_text_input(p, error=ConfigError, parameter="config", kind="a TOML file", hint=hint))
-    except FileNotFoundError as exc:
-        raise ConfigError(f"description file not found: {p}", parameter="config", hint=hint) from exc
-    except IsADirectoryError as exc:
-        raise ConfigError(f"{p} is a folder, not a TOML file", parameter="config", hint=hint) from exc
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{p}: invalid TOML: {exc}", parameter="config") from exc
+    data = read_toml_file(p, what="description")
     try:
         desc = parse_description(data, source=f"user: {p.name}")
     except ConfigError as exc:

@@ -488,21 +488,28 @@ def load_config(path: str | Path) -> Manipulator:
         With the dotted name of the offending field.
     """
     p = Path(path)
-    hint = "give the description's .toml file"
-    try:
-        text = read_text_input(p, error=ConfigError, parameter="config", kind="a TOML file", hint=hint)
-        data = tomllib.loads(text)
-    except FileNotFoundError as exc:
-        raise ConfigError(f"config file not found: {p}", parameter="config", hint=hint) from exc
-    except IsADirectoryError as exc:
-        raise ConfigError(f"{p} is a folder, not a TOML file", parameter="config", hint=hint) from exc
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{p}: invalid TOML: {exc}", parameter="config") from exc
+    data = read_toml_file(p, what="config")
     try:
         return parse_config(data, source=f"user: {p.name}")
     except ConfigError as exc:
         exc.file = exc.file or str(p)  # the value came from this file, not from an option
         raise
+
+
+def read_toml_file(path: Path, *, what: str) -> dict[str, Any]:
+    """The parsed TOML of a description file (the 3RRR's or a described architecture's): one
+    :class:`ConfigError` naming ``config`` for a missing file, a folder, text that is not UTF-8 and invalid TOML;
+    ``what`` names the file in the missing-file message (``config``, ``description``)."""
+    hint = "give the description's .toml file"
+    try:
+        text = read_text_input(path, error=ConfigError, parameter="config", kind="a TOML file", hint=hint)
+        return tomllib.loads(text)
+    except FileNotFoundError as exc:
+        raise ConfigError(f"{what} file not found: {path}", parameter="config", hint=hint) from exc
+    except IsADirectoryError as exc:
+        raise ConfigError(f"{path} is a folder, not a TOML file", parameter="config", hint=hint) from exc
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: invalid TOML: {exc}", parameter="config") from exc
 
 
 def default_config() -> Manipulator:
