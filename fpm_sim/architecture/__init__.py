@@ -19,6 +19,7 @@ from fpm_sim.architecture.kinematics import (
     UnreachableTaskPoseError,
     check_mobility,
     solve_task_pose,
+    task_unknowns,
 )
 from fpm_sim.architecture.reader import is_description_file, load_description, parse_description
 
@@ -40,4 +41,5 @@ __all__ = [
     "load_description",
     "parse_description",
     "solve_task_pose",
+    "task_unknowns",
 ]

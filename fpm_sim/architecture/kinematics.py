@@ -24,8 +24,9 @@ measure is the smallest kept singular value over the largest; 0 at a singularity
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,6 +43,7 @@ __all__ = [
     "UnreachableTaskPoseError",
     "check_mobility",
     "solve_task_pose",
+    "task_unknowns",
 ]
 
 CLOSURE_TOL_M = 1e-11
@@ -234,7 +236,7 @@ def _residual_blocks(
     for c, end, p, r, a_w in _closed_ends(desc, frames, re):
         rows = [p - (pe + a_w)]
         if end.type == "revolute":
-            rows.append(ell * np.cross(r @ np.array(end.axis), re @ np.array(end.axis)))
+            rows.append(ell * _cross(r @ np.array(end.axis), re @ np.array(end.axis)))
         elif end.type == "fixed":  # the relative rotation's vector (its norm is the angle, to first order)
             d = re.T @ r
             rows.append(ell * 0.5 * np.array([d[2, 1] - d[1, 2], d[0, 2] - d[2, 0], d[1, 0] - d[0, 1]]))
@@ -250,6 +252,12 @@ def _residual(desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray, el
 def characteristic_length_m(desc: Description) -> float:
     """The length that puts rotations and translations in one unit (m): :func:`singularity_char_length_m`."""
     return singularity_char_length_m(desc)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a x b`` of two 3-vectors (``np.cross``'s axis handling costs ten times the product at this size; the inverse
+    kinematics takes thousands per pose)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
 def _skew(w: np.ndarray) -> np.ndarray:
@@ -283,35 +291,57 @@ def _joint_twists(j: JointDesc, q: np.ndarray, r_before: np.ndarray) -> list[tup
     return [(cols[:, i], zero) for i in range(3)]
 
 
-def _row_blocks_rate(
+def _rows_rate(
     desc: Description,
     frames: dict[str, ChainFrames],
-    pe: np.ndarray,
     re: np.ndarray,
-    moved: set[str],
-    w: np.ndarray,
-    v: np.ndarray,
-    centre: np.ndarray,
-    ee_moves: bool,
+    cols: _Columns,
     ell: float,
 ) -> np.ndarray:
-    """Rate of every closure row when the chains in ``moved`` (downstream of a joint) turn at ``w`` about ``centre``
-    and translate at ``v`` (or, ``ee_moves``, when the end effector does)."""
+    """Rate of every closure row (rows) for each column's motion (columns): a joint's twist ``w``, ``v`` about its
+    ``centre`` moving the chains downstream of it (``moved``), or the end effector's (``ee``). All columns at once: a
+    few array operations per closed chain."""
     out = []
     for c, end, p, r, a_w in _closed_ends(desc, frames, re):
-        w_c = w if (c.name in moved and not ee_moves) else np.zeros(3)
-        w_e = w if ee_moves else np.zeros(3)
-        dp = np.cross(w_c, p - centre) + (v if c.name in moved and not ee_moves else 0.0)
-        dpe = (v + np.cross(w_e, a_w)) if ee_moves else np.zeros(3)
+        own = cols.moved[c.name][:, None]  # the chain's end moves with the column's joint
+        w_c, w_e = cols.w * own, cols.w * cols.ee[:, None]
+        dp = np.cross(w_c, p - cols.centre) + cols.v * own
+        dpe = (cols.v + np.cross(w_e, a_w)) * cols.ee[:, None]
         rows = [dp - dpe]
         if end.type == "revolute":
             n_c, n_e = r @ np.array(end.axis), re @ np.array(end.axis)
             rows.append(ell * (np.cross(np.cross(w_c, n_c), n_e) + np.cross(n_c, np.cross(w_e, n_e))))
         elif end.type == "fixed":
-            dd = re.T @ (_skew(w_c) @ r) - re.T @ _skew(w_e) @ r
-            rows.append(ell * 0.5 * np.array([dd[2, 1] - dd[1, 2], dd[0, 2] - dd[2, 0], dd[1, 0] - dd[0, 1]]))
-        out.append(np.concatenate(rows))
-    return np.concatenate(out) if out else np.zeros(0)
+            u = w_c - w_e
+            zero = np.zeros(len(u))
+            skew = np.stack(
+                [
+                    np.stack([zero, -u[:, 2], u[:, 1]], axis=1),
+                    np.stack([u[:, 2], zero, -u[:, 0]], axis=1),
+                    np.stack([-u[:, 1], u[:, 0], zero], axis=1),
+                ],
+                axis=1,
+            )
+            dd = np.einsum("ji,njk,kl->nil", re, skew, r)
+            rows.append(
+                ell
+                * 0.5
+                * np.stack([dd[:, 2, 1] - dd[:, 1, 2], dd[:, 0, 2] - dd[:, 2, 0], dd[:, 1, 0] - dd[:, 0, 1]], axis=1)
+            )
+        out.append(np.concatenate(rows, axis=1).T)
+    return np.concatenate(out, axis=0) if out else np.zeros((0, len(cols.w)))
+
+
+@dataclass
+class _Columns:
+    """The unknowns' motions, one row each: angular and linear velocity (world), the point the rotation is about,
+    whether it moves the end effector (``ee``) or, per chain, that chain's end (``moved``)."""
+
+    w: np.ndarray
+    v: np.ndarray
+    centre: np.ndarray
+    ee: np.ndarray
+    moved: dict[str, np.ndarray]
 
 
 def _descendants(desc: Description, name: str) -> set[str]:
@@ -327,27 +357,36 @@ def _jacobian(desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray, el
     against central differences)."""
     frames = _frames(desc, lay, z)
     pe, re = _ee_frame(desc, pose, lay.ee_free, z[lay.ee_slice])
-    cols: list[np.ndarray] = []
+    rows: list[tuple[np.ndarray, np.ndarray, np.ndarray, set[str], bool]] = []  # w, v, centre, moved, ee
     for cname, j, s in lay.joints:
-        chain = desc.chain(cname)
-        k = chain.path.index(j)
+        k = desc.chain(cname).path.index(j)
         f = frames[cname]
         moved = _descendants(desc, cname)
-        for w, v in _joint_twists(j, z[s], f.rotations[k]):
-            cols.append(_row_blocks_rate(desc, frames, pe, re, moved, w, v, f.positions_m[k], False, ell))
+        rows += [(wj, vj, f.positions_m[k], moved, False) for wj, vj in _joint_twists(j, z[s], f.rotations[k])]
     zf = z[lay.ee_slice]
     for c in lay.ee_free:
-        w, v = np.zeros(3), np.zeros(3)
+        we, ve = np.zeros(3), np.zeros(3)
         if c in ("x", "y", "z"):
-            v["xyz".index(c)] = 1.0
+            ve["xyz".index(c)] = 1.0
         elif c == "phi":
-            w[2] = 1.0
+            we[2] = 1.0
         else:
             rv = np.array([dict(zip(lay.ee_free, zf)).get(k, 0.0) for k in ("rx", "ry", "rz")])
-            w = re @ _right_jacobian(rv)[:, "xyz".index(c[1])]
-        cols.append(_row_blocks_rate(desc, frames, pe, re, set(), w, v, pe, True, ell))
-    n_rows = sum(b.size for _, b in _residual_blocks(desc, lay, pose, z, ell)) if not cols else cols[0].size
-    return np.stack(cols, axis=1) if cols else np.zeros((n_rows, 0))
+            we = re @ _right_jacobian(rv)[:, "xyz".index(c[1])]
+        rows.append((we, ve, pe, set(), True))
+    if not rows:
+        n_rows = sum(b.size for _, b in _residual_blocks(desc, lay, pose, z, ell))
+        return np.zeros((n_rows, 0))
+    w, v, centre, moves, ee = zip(*rows)
+    ee_a = np.array(ee)
+    cols = _Columns(
+        np.array(w),
+        np.array(v),
+        np.array(centre),
+        ee_a.astype(float),
+        {c.name: np.array([c.name in m for m in moves]) & ~ee_a for c in desc.chains},
+    )
+    return _rows_rate(desc, frames, re, cols, ell)
 
 
 def _jacobian_fd(desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray, ell: float) -> np.ndarray:
@@ -360,6 +399,10 @@ def _jacobian_fd(desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray,
         dz[k] = h
         jac[:, k] = (_residual(desc, lay, pose, z + dz, ell) - _residual(desc, lay, pose, z - dz, ell)) / (2 * h)
     return jac
+
+
+def _lazy(make: Callable[[], list[np.ndarray]]) -> Iterator[np.ndarray]:
+    yield from make()
 
 
 def _in_branch(j: JointDesc, q: np.ndarray) -> bool:
@@ -384,17 +427,30 @@ def _wrapped(lay: _Layout, z: np.ndarray) -> np.ndarray:
 
 
 def _newton(desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray, ell: float) -> tuple[np.ndarray, float]:
-    """Gauss-Newton with minimum-norm steps (lstsq), each step capped at 0.5 (rad or m); given up when ten steps
-    have not halved the residual (a start that leads nowhere: the next one is tried)."""
+    """Gauss-Newton with minimum-norm steps (the Jacobian's pseudo-inverse, lstsq's cut-off), each step capped at
+    0.5 (rad or m); given up when ten steps have not halved the residual (a start that leads nowhere: the next one is
+    tried). The pseudo-inverse is kept while each step cuts the residual at least fourfold (chord steps: from a
+    neighbouring pose's solution, a sweep's usual start, one Jacobian serves the whole solve); the solution is the
+    same, the residual is what is tested. Once converged, one more chord step (a residual's cost) takes the solution
+    from the tolerance to round-off, as a full Newton step would."""
     res = float("inf")
     history: list[float] = []
+    inverse: np.ndarray | None = None
     for _ in range(60):
         r = _residual(desc, lay, pose, z, ell)
         res = float(np.max(np.abs(r))) if r.size else 0.0
         history.append(res)
+        if res < CLOSURE_TOL_M and inverse is not None:
+            z_fine = z - inverse @ r
+            r_fine = _residual(desc, lay, pose, z_fine, ell)
+            res_fine = float(np.max(np.abs(r_fine)))
+            return (z_fine, res_fine) if res_fine < res else (z, res)
         if res < CLOSURE_TOL_M or not np.isfinite(res) or (len(history) > 10 and res > 0.5 * history[-11]):
             break
-        step = np.linalg.lstsq(_jacobian(desc, lay, pose, z, ell), r, rcond=None)[0]
+        if inverse is None or res > 0.25 * history[-2]:
+            jac = _jacobian(desc, lay, pose, z, ell)
+            inverse = np.linalg.pinv(jac, rcond=np.finfo(float).eps * max(jac.shape))
+        step = inverse @ r
         norm = float(np.max(np.abs(step)))
         z = z - step * (0.5 / norm if norm > 0.5 else 1.0)
     return z, res
@@ -444,7 +500,7 @@ def _aimed(desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray) -> np
         if norm == 0.0:
             continue
         d /= norm
-        axis = np.cross([1.0, 0.0, 0.0], d)
+        axis = _cross(np.array([1.0, 0.0, 0.0]), d)
         sin, cos = float(np.linalg.norm(axis)), float(d[0])
         z[s] = axis / sin * math.atan2(sin, cos) if sin > 1e-12 else np.zeros(3)
     return z
@@ -482,8 +538,8 @@ def _solve(desc: Description, lay: _Layout, pose: TaskPose, start: np.ndarray | 
     """Newton from ``start``, the working mode's start and the random ones: the first solution in every working-mode
     interval, wrapped."""
     span = sum(lk.length_m for c in desc.chains for lk in c.links)
-    starts = ([start] if start is not None else []) + _starts(desc, lay, span)
-    for z0 in starts:
+    starts = itertools.chain([start] if start is not None else [], _lazy(lambda: _starts(desc, lay, span)))
+    for z0 in starts:  # a neighbour's solution first; the working mode's and random starts only when it fails
         z, res = _newton(desc, lay, pose, _aimed(desc, lay, pose, np.array(z0, float)), ell)
         if res < CLOSURE_TOL_M and all(_in_branch(j, z[s]) for _, j, s in lay.joints):
             return _wrapped(lay, z)
@@ -599,7 +655,7 @@ def _drive_length(chain: ChainDesc, frames: ChainFrames, k: int) -> float:
         return 1.0
     nxt = next((i for i in range(k + 1, len(chain.path)) if isinstance(chain.path[i], JointDesc)), len(chain.path))
     axis = frames.rotations[k] @ np.array(j.axis)
-    lever = float(np.linalg.norm(np.cross(axis, frames.positions_m[nxt] - frames.positions_m[k])))
+    lever = float(np.linalg.norm(_cross(axis, frames.positions_m[nxt] - frames.positions_m[k])))
     return lever if lever > 0 else 1.0
 
 
@@ -680,6 +736,12 @@ def check_mobility(desc: Description, assembly: TaskAssembly) -> None:
             hint="mark more joints actuated = true, or check the joint types (a locked machine needs as many "
             "actuators as degrees of freedom)",
         )
+
+
+def task_unknowns(desc: Description, assembly: TaskAssembly) -> np.ndarray:
+    """The unknowns of :func:`solve_task_pose` at ``assembly``: its ``start`` for a neighbouring pose (a sweep's
+    continuation)."""
+    return _unknowns_of(desc, _layout(desc), assembly)
 
 
 def _unknowns_of(desc: Description, full: _Layout, asm: TaskAssembly) -> np.ndarray:

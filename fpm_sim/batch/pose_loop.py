@@ -80,6 +80,7 @@ __all__ = [
     "pose_assembly",
     "pose_model",
     "read_poses_csv",
+    "reset_equality_frames",
     "solve_configs",
     "solve_poses",
 ]
@@ -249,6 +250,25 @@ def _pose_angles(asm: Assembly) -> list[tuple[str, float]]:
     return out
 
 
+def reset_equality_frames(m: mujoco.MjModel, d: mujoco.MjData, equalities: Sequence[int] | np.ndarray) -> None:
+    """After a re-pose of ``m``'s bodies: the kinematics at ``qpos0`` into ``d``, and the equalities' frames that
+    the compiler takes from the bodies at ``qpos0``, recomputed with ``mj_setConst``'s operations: a weld's relative
+    pose of body 2 in body 1 (``eq_data[3:10]``; its anchor on body 2 at the origin, as ``spec.add_weld`` builds it),
+    a connect's anchor in body 2's frame (``eq_data[3:6]``) from its anchor in body 1's (``eq_data[0:3]``)."""
+    d.qpos[:] = m.qpos0
+    mujoco.mj_kinematics(m, d)
+    inv = np.zeros(4)
+    for e in equalities:
+        b1, b2 = m.eq_obj1id[e], m.eq_obj2id[e]
+        if m.eq_type[e] == mujoco.mjtEq.mjEQ_WELD:
+            mujoco.mju_mulMatTVec3(m.eq_data[e, 3:6], d.xmat[b1], d.xpos[b2] - d.xpos[b1])
+            mujoco.mju_negQuat(inv, d.xquat[b1])
+            mujoco.mju_mulQuat(m.eq_data[e, 6:10], inv, d.xquat[b2])
+        elif m.eq_type[e] == mujoco.mjtEq.mjEQ_CONNECT:
+            world = d.xpos[b1] + d.xmat[b1].reshape(3, 3) @ m.eq_data[e, 0:3]
+            mujoco.mju_mulMatTVec3(m.eq_data[e, 3:6], d.xmat[b2], world - d.xpos[b2])
+
+
 class PoseModel:
     """One compiled manipulator model, re-posed in place for every pose (no recompile per pose).
 
@@ -289,14 +309,7 @@ class PoseModel:
         m, d = self.model, self.data
         for body, (_, ang) in zip(self._body_ids, _pose_angles(asm)):
             m.body_quat[body] = (math.cos(ang / 2.0), 0.0, 0.0, math.sin(ang / 2.0))
-        d.qpos[:] = m.qpos0
-        mujoco.mj_kinematics(m, d)
-        inv = np.zeros(4)
-        for e in self._welds:  # relpose of body 2 in body 1 with mj_setConst's operations (eq_data[3:10])
-            b1, b2 = m.eq_obj1id[e], m.eq_obj2id[e]
-            mujoco.mju_mulMatTVec3(m.eq_data[e, 3:6], d.xmat[b1], d.xpos[b2] - d.xpos[b1])
-            mujoco.mju_negQuat(inv, d.xquat[b1])
-            mujoco.mju_mulQuat(m.eq_data[e, 6:10], inv, d.xquat[b2])
+        reset_equality_frames(m, d, self._welds)
 
     def solve(self, asm: Assembly, n_modes: int) -> tuple[np.ndarray, np.ndarray, bool]:
         """``(frequencies_hz, in_plane, deficient)`` of the lowest ``n_modes`` modes at ``asm`` (see

@@ -1,11 +1,12 @@
 """First natural frequencies of a described architecture over its workspace (``fpm-sim sweep --config machine.toml``).
 
 The pose loop of any :class:`fpm_sim.architecture.Description`: at each task pose the general inverse kinematics
-(warm-started from the previous pose of the chunk), the singularity measures, the general MuJoCo model
-(:func:`fpm_sim.model.general.build_general`) and the constrained eigen-solve. Its policy is the 3RRR pose loop's:
-gravity off, inextensible links (no axial springs), the resolution of the options. A pose is ``unreachable`` when
-no assembly in the working mode exists, ``singular`` below :data:`fpm_sim.kinematics.SINGULAR_TOL` (its modes are
-not computed) and ``near_singular`` below :data:`fpm_sim.kinematics.NEAR_SINGULAR_WARN`.
+(warm-started from the previous pose of the chunk), the singularity measures, and the constrained eigen-solve on one
+compiled model re-posed at every pose (:class:`fpm_sim.batch.task_pose_model.TaskPoseModel`, the 3RRR loop's way).
+Its policy is the 3RRR pose loop's: gravity off, inextensible links (no axial springs), the resolution of the
+options. A pose is ``unreachable`` when no assembly in the working mode exists, ``singular`` below
+:data:`fpm_sim.kinematics.SINGULAR_TOL` (its modes are not computed) or when the constraint rank decision loses a
+loop direction, and ``near_singular`` below :data:`fpm_sim.kinematics.NEAR_SINGULAR_WARN`.
 
 Grids are in the architecture's own task coordinates: ``x`` and ``y`` every ``step_mm`` over the box the chains
 can reach, the other task coordinates held (``z_mm`` for a spatial machine: a horizontal slice; ``phi_rad`` for a
@@ -14,6 +15,7 @@ planar one that sets it).
 
 from __future__ import annotations
 
+import itertools
 import math
 import warnings
 from dataclasses import dataclass, replace
@@ -23,11 +25,13 @@ from typing import Any
 import numpy as np
 
 from fpm_sim.architecture import Description, TaskPose
-from fpm_sim.architecture.kinematics import UnreachableTaskPoseError, closure_reach, solve_task_pose
+from fpm_sim.architecture.kinematics import UnreachableTaskPoseError, closure_reach, solve_task_pose, task_unknowns
 from fpm_sim.batch.engine import spawn_pool
+from fpm_sim.batch.task_pose_model import TaskPoseModel
 from fpm_sim.errors import FpmSimError
 from fpm_sim.figures import write_table_and_figure
 from fpm_sim.kinematics import NEAR_SINGULAR_WARN, SINGULAR_TOL
+from fpm_sim.linear.threads import blas_threads
 from fpm_sim.model.options import ModelOptions
 
 __all__ = ["TaskSweep", "read_task_poses_csv", "sweep_task", "task_grid"]
@@ -108,31 +112,47 @@ def read_task_poses_csv(path: str | Path, desc: Description, *, parameter: str =
     return poses
 
 
-def _one(desc: Description, pose: TaskPose, opts: ModelOptions, n_modes: int, start: Any) -> tuple[Any, ...]:
+def _one(
+    desc: Description, pose: TaskPose, opts: ModelOptions, n_modes: int, start: np.ndarray | None, cache: _Loop
+) -> tuple[Any, ...]:
     """(status, frequencies, type 1, type 2, unknowns for the next pose's start) at one pose."""
-    from fpm_sim.linear.solvers import modes_constrained
-    from fpm_sim.model.general import build_general
-
     nan = np.full(n_modes, np.nan)
     try:
         asm = solve_task_pose(desc, pose, start=start)
     except UnreachableTaskPoseError:
         return "unreachable", nan, math.nan, math.nan, None
     t1, t2 = asm.singularity_type1, asm.singularity_type2
+    z = task_unknowns(desc, asm)
     if min(t1, t2) < SINGULAR_TOL:
-        return "singular", nan, t1, t2, None
+        return "singular", nan, t1, t2, z
+    if cache.model is None:  # compiled once, at the chunk's first pose with modes (mobility checked there)
+        cache.model = TaskPoseModel(desc, opts, asm)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        f = modes_constrained(build_general(desc, pose, opts, assembly=asm), n_modes=n_modes).frequencies_hz
-    out = nan.copy()
-    out[: len(f)] = f[:n_modes]
+        f, deficient = cache.model.solve(asm, n_modes)
+    if deficient:  # the constraint rank decision (consistent units) lost a loop direction
+        return "singular", nan, t1, t2, z
     status = "near_singular" if min(t1, t2) < NEAR_SINGULAR_WARN else "ok"
-    return status, out, t1, t2, None
+    return status, f, t1, t2, z
+
+
+@dataclass
+class _Loop:
+    """A chunk's re-posed model (compiled at its first pose with modes)."""
+
+    model: TaskPoseModel | None = None
 
 
 def _chunk(args: tuple[Description, list[TaskPose], ModelOptions, int]) -> list[tuple[Any, ...]]:
+    """The chunk's poses in order, each one's inverse kinematics started from the last assembled pose's."""
     desc, poses, opts, n_modes = args
-    return [_one(desc, p, opts, n_modes, None) for p in poses]
+    cache, start, out = _Loop(), None, []
+    with blas_threads():  # one BLAS thread around the dense solves (fpm_sim.linear.threads)
+        for p in poses:
+            row = _one(desc, p, opts, n_modes, start, cache)
+            start = row[4] if row[4] is not None else start
+            out.append(row)
+    return out
 
 
 @dataclass
@@ -235,12 +255,12 @@ def sweep_task(
     """The first ``n_modes`` frequencies (Hz) at every pose (module docstring), on ``workers`` processes."""
     opts = replace(options or ModelOptions(), gravity=False, axial=False)
     if workers > 1 and len(poses) > workers:
-        chunks = [poses[i::workers] for i in range(workers)]
+        # contiguous runs of the grid: each pose's inverse kinematics starts from its neighbour's
+        bounds = np.linspace(0, len(poses), workers + 1).astype(int)
+        chunks = [poses[a:b] for a, b in itertools.pairwise(bounds)]
         with spawn_pool(workers) as pool:  # its workers ignore Ctrl-C: this process alone stops, and stops them
             parts = pool.map(_chunk, [(desc, c, opts, n_modes) for c in chunks])
-        results: list[tuple[Any, ...]] = [None] * len(poses)  # type: ignore[list-item]
-        for i, part in enumerate(parts):
-            results[i::workers] = part
+        results = [row for part in parts for row in part]
     else:
         results = _chunk((desc, poses, opts, n_modes))
     return TaskSweep(

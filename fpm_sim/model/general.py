@@ -21,7 +21,9 @@ Built with :class:`mujoco.MjSpec` like the 3RRR's own builder, with every body p
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
+from types import SimpleNamespace
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -35,7 +37,7 @@ from fpm_sim.model.options import ModelOptions
 from fpm_sim.model.parts import LinkSpec, lump_part, set_inertial
 from fpm_sim.model.spec import WELD_SOLIMP, BuiltModel, add_weld, compile_model, new_spec
 
-__all__ = ["GeneralModelError", "build_general"]
+__all__ = ["GeneralModelError", "PoseFrames", "Reposer", "build_general", "build_reposable"]
 
 MIN_BODY_MASS_KG = 1e-4
 """Mass given to a body that would carry none (a pin between a hinge and a weld): MuJoCo needs mass on every
@@ -84,10 +86,70 @@ class _Pending:
     joints: list[tuple[str, JointDesc, np.ndarray, np.ndarray]]  # (name, joint, centre, frame before the joint)
 
 
+@dataclass
+class PoseFrames:
+    """What the pose sets in a described machine's model, by name (:func:`general_frames`): each body's placement in
+    its parent (``pos``, ``quat``), each joint's centre and axis in its body, each equality's ``data``. Everything else
+    (masses, inertias in the bodies' own frames, springs, the bodies inside a link) is the same at every pose."""
+
+    bodies: dict[str, tuple[list[float], list[float]]] = field(default_factory=dict)
+    joints: dict[str, tuple[list[float], list[float]]] = field(default_factory=dict)
+    equalities: dict[str, Any] = field(default_factory=dict)
+
+
+class _Recorder:
+    """A stand-in for the spec and its bodies in the frames pass (:func:`general_frames`): it records the placements
+    that :class:`PoseFrames` holds and adds nothing else."""
+
+    def __init__(self, frames: PoseFrames, name: str = "world") -> None:
+        self.frames, self.name = frames, name
+
+    @property
+    def worldbody(self) -> _Recorder:
+        return self
+
+    def add_body(self, *, name: str, pos: list[float], quat: list[float]) -> _Recorder:
+        self.frames.bodies[name] = (list(pos), list(quat))
+        return _Recorder(self.frames, name)
+
+    def add_joint(self, *, name: str, axis: list[float], pos: list[float], **_: Any) -> None:
+        self.frames.joints[name] = (list(pos), list(axis))
+
+    def add_site(self, **_: Any) -> None:
+        pass
+
+    def add_geom(self, **_: Any) -> None:
+        pass
+
+    def add_equality(self, *, name: str, **_: Any) -> SimpleNamespace:
+        eq = SimpleNamespace(name1="", name2="", data=np.zeros(11), solimp=[])
+        self.frames.equalities[name] = eq
+        return eq
+
+
+@dataclass
+class _LinkShape:
+    """What the frames pass keeps of a link built once: its first body's name and where the link ends on its last."""
+
+    first: str
+    last_length_m: float
+
+
 class _Builder:
-    def __init__(self, desc: Description, asm: TaskAssembly, opts: ModelOptions) -> None:
+    def __init__(
+        self, desc: Description, asm: TaskAssembly, opts: ModelOptions, shapes: dict[str, _LinkShape] | None = None
+    ) -> None:
+        """``shapes``: the links of a model already built (its :attr:`shapes`): a frames pass into a
+        :class:`_Recorder` instead of a spec."""
         self.desc, self.asm, self.opts = desc, asm, opts
-        self.spec = new_spec(f"fpm_{desc.name.split(' ')[0]}", gravity=opts.gravity)
+        self.frames_only = shapes is not None
+        self.shapes: dict[str, _LinkShape] = shapes if shapes is not None else {}
+        self.recorded = PoseFrames()
+        self.spec: Any = (
+            _Recorder(self.recorded)
+            if self.frames_only
+            else new_spec(f"fpm_{desc.name.split(' ')[0]}", gravity=opts.gravity)
+        )
         world = _Body(self.spec.worldbody, np.zeros(3), np.eye(3), [])
         self.ground = world
         self.kinds: dict[str, str] = {}
@@ -150,15 +212,22 @@ class _Builder:
             start_lumps=tuple(x for x in start_lumps if x.mass_kg > 0),
             spin_inertia=not _between_spherical(chain, k),
         )
-        build = add_link(self.spec, parent.body, spec)
-        first = _Body(build.first, p0, r0, [])
+        if self.frames_only:  # the link's inside is the same at every pose: only its first body is placed
+            shape = self.shapes[name]
+            first_body = parent.body.add_body(name=shape.first, pos=list(spec.pos), quat=spec.start_quat)
+            last_body = _Recorder(self.recorded, f"{name} (last piece)")  # what hangs on it is placed, not it
+        else:
+            build = add_link(self.spec, parent.body, spec)
+            shape = self.shapes[name] = _LinkShape(build.first.name, build.last_length_m)
+            first_body, last_body = build.first, build.last
+            self.kinds.update(dict(build.joints))
+            self.links[name] = build.sites
+        first = _Body(first_body, p0, r0, [])
         # a link between two spherical joints spins freely about its axis: a zero-frequency motion, not a mode;
         # its start joint loses that spin (module docstring)
         self.attach_joints(first, pending, spin_free=not _between_spherical(chain, k))
-        self.kinds.update(dict(build.joints))
-        self.links[name] = build.sites
-        offset = lk.length_m - build.last_length_m
-        return _Body(build.last, p0 + r0[:, 0] * offset, r0, [])
+        offset = lk.length_m - shape.last_length_m
+        return _Body(last_body, p0 + r0[:, 0] * offset, r0, [])
 
     def chain(self, chain: ChainDesc) -> None:
         body = self.ground if chain.parent is None else self.chain_end[chain.parent]
@@ -277,14 +346,17 @@ def build_general(
             value=opts.link_model,
             hint="use 'segments' (or 'rigid') for a described architecture",
         )
+    return _build(desc, pose, opts, assembly)[0]
+
+
+def _build(
+    desc: Description, pose: TaskPose, opts: ModelOptions, assembly: TaskAssembly | None
+) -> tuple[BuiltModel, dict[str, _LinkShape]]:
     asm = assembly if assembly is not None else solve_task_pose(desc, pose)
     check_mobility(desc, asm)
-    b = _Builder(desc, asm, opts)
-    for chain in desc.chains:
-        b.chain(chain)
-    b.finish()
+    b = _built_spec(desc, asm, opts)
     model = compile_model(b.spec, timestep_s=opts.timestep_s)
-    return BuiltModel(
+    built = BuiltModel(
         model=model,
         spec=b.spec,
         name="manipulator",
@@ -304,6 +376,42 @@ def build_general(
             "singularity_type2": asm.singularity_type2,
         },
     )
+    return built, b.shapes
+
+
+def _built_spec(
+    desc: Description, asm: TaskAssembly, opts: ModelOptions, shapes: dict[str, _LinkShape] | None = None
+) -> _Builder:
+    b = _Builder(desc, asm, opts, shapes)
+    for chain in desc.chains:
+        b.chain(chain)
+    if not b.frames_only:
+        b.finish()
+    return b
+
+
+@dataclass
+class Reposer:
+    """The frames pass of a model :func:`build_reposable` built: :meth:`frames` gives what another pose sets in it."""
+
+    desc: Description
+    options: ModelOptions
+    shapes: dict[str, _LinkShape]
+
+    def frames(self, assembly: TaskAssembly) -> PoseFrames:
+        """What the pose sets at ``assembly`` (:class:`PoseFrames`): the builder's own placements (one builder,
+        nothing re-derived), without building a spec. No checks: ``assembly`` is a neighbour of the pose the model
+        was built at."""
+        return _built_spec(self.desc, assembly, self.options, self.shapes).recorded
+
+
+def build_reposable(
+    desc: Description, pose: TaskPose, options: ModelOptions, *, assembly: TaskAssembly | None = None
+) -> tuple[BuiltModel, Reposer]:
+    """:func:`build_general`, and the :class:`Reposer` that places the same model at other poses (what
+    :class:`fpm_sim.batch.task_pose_model.TaskPoseModel` copies into the compiled model)."""
+    built, shapes = _build(desc, pose, options, assembly)
+    return built, Reposer(desc, options, shapes)
 
 
 def _between_spherical(chain: ChainDesc, k: int) -> bool:
