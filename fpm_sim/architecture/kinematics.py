@@ -117,10 +117,18 @@ class TaskAssembly:
 
 
 def rotation(axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rotation matrix about the unit ``axis`` by ``angle`` (rad)."""
-    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
-    out: np.ndarray = np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
-    return out
+    """Rotation matrix about the unit ``axis`` by ``angle`` (rad): Rodrigues' ``c I + s [a]x + (1 - c) a a'``,
+    written out (the inverse kinematics builds thousands per pose)."""
+    x, y, z = float(axis[0]), float(axis[1]), float(axis[2])
+    c, s = math.cos(angle), math.sin(angle)
+    t = 1.0 - c
+    return np.array(
+        [
+            [c + t * x * x, t * x * y - s * z, t * x * z + s * y],
+            [t * x * y + s * z, c + t * y * y, t * y * z - s * x],
+            [t * x * z - s * y, t * y * z + s * x, c + t * z * z],
+        ]
+    )
 
 
 def rotvec_matrix(v: np.ndarray) -> np.ndarray:
@@ -255,9 +263,15 @@ def characteristic_length_m(desc: Description) -> float:
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``a x b`` of two 3-vectors (``np.cross``'s axis handling costs ten times the product at this size; the inverse
-    kinematics takes thousands per pose)."""
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+    """``a x b`` of 3-vectors, or row by row of ``(n, 3)`` arrays (``np.cross``'s axis handling costs ten times the
+    product at these sizes; the inverse kinematics takes thousands per pose)."""
+    a1, a2, a3 = a[..., 0], a[..., 1], a[..., 2]
+    b1, b2, b3 = b[..., 0], b[..., 1], b[..., 2]
+    out = np.empty(np.broadcast_shapes(np.shape(a), np.shape(b)))
+    out[..., 0] = a2 * b3 - a3 * b2
+    out[..., 1] = a3 * b1 - a1 * b3
+    out[..., 2] = a1 * b2 - a2 * b1
+    return out
 
 
 def _skew(w: np.ndarray) -> np.ndarray:
@@ -305,12 +319,12 @@ def _rows_rate(
     for c, end, p, r, a_w in _closed_ends(desc, frames, re):
         own = cols.moved[c.name][:, None]  # the chain's end moves with the column's joint
         w_c, w_e = cols.w * own, cols.w * cols.ee[:, None]
-        dp = np.cross(w_c, p - cols.centre) + cols.v * own
-        dpe = (cols.v + np.cross(w_e, a_w)) * cols.ee[:, None]
+        dp = _cross(w_c, p - cols.centre) + cols.v * own
+        dpe = (cols.v + _cross(w_e, a_w)) * cols.ee[:, None]
         rows = [dp - dpe]
         if end.type == "revolute":
             n_c, n_e = r @ np.array(end.axis), re @ np.array(end.axis)
-            rows.append(ell * (np.cross(np.cross(w_c, n_c), n_e) + np.cross(n_c, np.cross(w_e, n_e))))
+            rows.append(ell * (_cross(_cross(w_c, n_c), n_e) + _cross(n_c, _cross(w_e, n_e))))
         elif end.type == "fixed":
             u = w_c - w_e
             zero = np.zeros(len(u))
