@@ -66,6 +66,7 @@ __all__ = [
     "frequency_gradients",
     "jax_pose_frequencies",
     "pose_frequency_gradients",
+    "solve_jax_models",
     "x64",
 ]
 
@@ -342,11 +343,22 @@ def jax_pose_frequencies(
     """
     del workers
     return batched_pose_frequencies(
-        config, poses, backend="jax", solve=_solve_jax, n_modes=n_modes, options=options, progress=progress, desc=desc
+        config,
+        poses,
+        backend="jax",
+        solve=solve_jax_models,
+        n_modes=n_modes,
+        options=options,
+        progress=progress,
+        desc=desc,
     )
 
 
-def _solve_jax(built: list[BuiltModel], n_modes: int, timings: BackendTimings, t0: float) -> tuple[np.ndarray, ...]:
+def solve_jax_models(
+    built: list[BuiltModel], n_modes: int, timings: BackendTimings, t0: float
+) -> tuple[np.ndarray, ...]:
+    """The ``jax`` backend's :data:`BatchSolver`: every model of ``built`` (one structure) linearised and solved in
+    one compiled, ``vmap``-ped call (any described machine's models too, :mod:`fpm_sim.batch.task_sweep`)."""
     import jax.numpy as jnp
 
     from fpm_sim.batch import jax_linearisation as jl

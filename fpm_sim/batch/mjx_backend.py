@@ -60,6 +60,7 @@ __all__ = [
     "mjx_pose_frequencies",
     "serial_dofs",
     "smooth_force",
+    "solve_mjx_models",
     "stack_models",
 ]
 
@@ -258,11 +259,22 @@ def mjx_pose_frequencies(
     """
     del workers
     return batched_pose_frequencies(
-        config, poses, backend="mjx", solve=_solve_mjx, n_modes=n_modes, options=options, progress=progress, desc=desc
+        config,
+        poses,
+        backend="mjx",
+        solve=solve_mjx_models,
+        n_modes=n_modes,
+        options=options,
+        progress=progress,
+        desc=desc,
     )
 
 
-def _solve_mjx(built: list[BuiltModel], n_modes: int, timings: BackendTimings, t0: float) -> tuple[np.ndarray, ...]:
+def solve_mjx_models(
+    built: list[BuiltModel], n_modes: int, timings: BackendTimings, t0: float
+) -> tuple[np.ndarray, ...]:
+    """The ``mjx`` backend's :data:`fpm_sim.batch.jax_backend.BatchSolver`: every model of ``built`` (one structure,
+    checked by :func:`check_mjx_model`) through MJX's pipeline in one compiled, ``vmap``-ped call."""
     import jax
 
     for b in built:

@@ -22,6 +22,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+import mujoco
 import numpy as np
 
 from fpm_sim.architecture import Description, TaskPose
@@ -112,19 +113,27 @@ def read_task_poses_csv(path: str | Path, desc: Description, *, parameter: str =
     return poses
 
 
-def _one(
-    desc: Description, pose: TaskPose, opts: ModelOptions, n_modes: int, start: np.ndarray | None, cache: _Loop
-) -> tuple[Any, ...]:
-    """(status, frequencies, type 1, type 2, unknowns for the next pose's start) at one pose."""
+def _kinematics_row(desc: Description, pose: TaskPose, n_modes: int, start: np.ndarray | None) -> tuple[Any, ...]:
+    """(status, NaN frequencies, type 1, type 2, unknowns for the next pose's start, assembly or None) at one pose."""
     nan = np.full(n_modes, np.nan)
     try:
         asm = solve_task_pose(desc, pose, start=start)
     except UnreachableTaskPoseError:
-        return "unreachable", nan, math.nan, math.nan, None
+        return "unreachable", nan, math.nan, math.nan, None, None
     t1, t2 = asm.singularity_type1, asm.singularity_type2
     z = task_unknowns(desc, asm)
     if min(t1, t2) < SINGULAR_TOL:
-        return "singular", nan, t1, t2, z
+        return "singular", nan, t1, t2, z, None
+    return ("near_singular" if min(t1, t2) < NEAR_SINGULAR_WARN else "ok"), nan, t1, t2, z, asm
+
+
+def _one(
+    desc: Description, pose: TaskPose, opts: ModelOptions, n_modes: int, start: np.ndarray | None, cache: _Loop
+) -> tuple[Any, ...]:
+    """(status, frequencies, type 1, type 2, unknowns for the next pose's start) at one pose."""
+    status, nan, t1, t2, z, asm = _kinematics_row(desc, pose, n_modes, start)
+    if asm is None:
+        return status, nan, t1, t2, z
     if cache.model is None:  # compiled once, at the chunk's first pose with modes (mobility checked there)
         cache.model = TaskPoseModel(desc, opts, asm)
     with warnings.catch_warnings():
@@ -132,7 +141,6 @@ def _one(
         f, deficient = cache.model.solve(asm, n_modes)
     if deficient:  # the constraint rank decision (consistent units) lost a loop direction
         return "singular", nan, t1, t2, z
-    status = "near_singular" if min(t1, t2) < NEAR_SINGULAR_WARN else "ok"
     return status, f, t1, t2, z
 
 
@@ -251,10 +259,17 @@ def sweep_task(
     grid: str = "poses",
     step_mm: float | None = None,
     progress: bool = False,
+    backend: str = "cpu",
 ) -> TaskSweep:
-    """The first ``n_modes`` frequencies (Hz) at every pose (module docstring), on ``workers`` processes."""
+    """The first ``n_modes`` frequencies (Hz) at every pose (module docstring), on ``workers`` processes.
+
+    ``backend``: ``"cpu"`` (this loop), or ``"jax"`` / ``"mjx"``: the kinematics and the re-posed models here, the
+    eigen-solves of all poses in one batched call of that backend (:func:`batched_task_modes`; ``workers``
+    unused)."""
     opts = replace(options or ModelOptions(), gravity=False, axial=False)
-    if workers > 1 and len(poses) > workers:
+    if backend != "cpu":
+        results = batched_task_modes(desc, poses, opts, n_modes, backend=backend)
+    elif workers > 1 and len(poses) > workers:
         # contiguous runs of the grid: each pose's inverse kinematics starts from its neighbour's
         bounds = np.linspace(0, len(poses), workers + 1).astype(int)
         chunks = [poses[a:b] for a, b in itertools.pairwise(bounds)]
@@ -275,3 +290,81 @@ def sweep_task(
         step_mm=step_mm,
         options=opts,
     )
+
+
+BATCHED_BACKENDS = ("jax", "mjx")
+"""Backends that solve a described machine's poses in one batched call (JAX and MJX, imported when called)."""
+
+
+def batched_task_modes(
+    desc: Description, poses: list[TaskPose], opts: ModelOptions, n_modes: int, *, backend: str
+) -> list[tuple[Any, ...]]:
+    """The sweep's rows (as :func:`_chunk`'s) with the eigen-solves of ``backend`` (:data:`BATCHED_BACKENDS`): the
+    kinematics (warm-started) and one re-posed model per pose here, copied per pose, then every pose's constrained
+    eigenproblem in one call of the backend's solver. The rank decision is the cpu loop's (consistent units).
+
+    Raises
+    ------
+    FpmSimError
+        What the backend cannot linearise (the ``jax`` formulas: hinge and slide joints closed by welds; MJX: no
+        long serial chain), named by the backend's own check.
+    """
+    import copy
+
+    from fpm_sim.batch.jax_backend import BackendTimings, check_options, x64
+    from fpm_sim.linear.nullspace import constraint_rank
+    from fpm_sim.model.spec import BuiltModel
+
+    if backend not in BATCHED_BACKENDS:
+        raise FpmSimError(f"unknown backend {backend!r}", parameter="backend", value=backend, hint="cpu, jax or mjx")
+    check_options(opts, backend)
+    _check_batched(desc, backend)
+    rows: list[tuple[Any, ...]] = []
+    built: list[tuple[int, Any]] = []
+    start, loop = None, _Loop()
+    for p in poses:
+        row = _kinematics_row(desc, p, n_modes, start)
+        start = row[4] if row[4] is not None else start
+        if row[0] in ("ok", "near_singular"):
+            loop.model = loop.model or TaskPoseModel(desc, opts, row[5])
+            loop.model.set_pose(row[5])
+            built.append((len(rows), replace(loop.model.built, model=copy.copy(loop.model.model))))
+        rows.append(row[:5])
+    if not built:
+        return rows
+    if backend == "jax":
+        from fpm_sim.batch.jax_backend import solve_jax_models as solve
+    else:
+        from fpm_sim.batch.mjx_backend import solve_mjx_models as solve
+    models: list[BuiltModel] = [b for _, b in built]
+    with x64():
+        w2 = solve(models, n_modes, BackendTimings(poses=len(models)), 0.0)[0]
+    for r, (i, b) in enumerate(built):
+        data = mujoco.MjData(b.model)
+        mujoco.mj_forward(b.model, data)
+        if constraint_rank(b.model, data, warn=False).deficient:
+            rows[i] = ("singular", rows[i][1], *rows[i][2:])
+            continue
+        f = np.full(n_modes, np.nan)
+        f[: w2.shape[1]] = np.sqrt(np.maximum(w2[r], 0.0)) / (2 * np.pi)
+        rows[i] = (rows[i][0], f, *rows[i][2:])
+    return rows
+
+
+def _check_batched(desc: Description, backend: str) -> None:
+    """Refuse what the ``jax`` backend's formulas do not hold yet, naming the joint: a chain closed on the end
+    effector by a spherical joint is a ``connect`` equality, and those formulas close loops by welds only (MJX's
+    pipeline takes both)."""
+    if backend != "jax":
+        return
+    closed = [(i, c) for i, c in enumerate(desc.chains) if c.end_joint is not None]
+    for i, c in closed[1:]:  # the first closed chain carries the end effector; the others close loops on it
+        end = c.end_joint
+        if end is not None and end.type == "spherical":
+            raise FpmSimError(
+                f"chains[{i}].path[{len(c.path) - 1}].type = 'spherical': the jax backend closes loops by welds "
+                "only, and a spherical end joint is a point (connect) constraint",
+                parameter="backend",
+                value=backend,
+                hint="use --backend mjx (MJX's own pipeline takes it) or cpu",
+            )

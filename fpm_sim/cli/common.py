@@ -295,9 +295,7 @@ def add_pose_args(p: argparse.ArgumentParser) -> None:
 
 def add_output_args(p: argparse.ArgumentParser) -> None:
     """``--json``."""
-    p.add_argument(
-        "--json", action=argparse.BooleanOptionalAction, default=False, help="print JSON instead of a table"
-    )
+    p.add_argument("--json", action=argparse.BooleanOptionalAction, default=False, help="print JSON instead of a table")
 
 
 def add_overwrite_arg(p: argparse.ArgumentParser) -> None:

@@ -27,7 +27,7 @@ if TYPE_CHECKING:
 
 __all__ = ["cmd_sweep", "register"]
 
-_STUDY_ONLY = {"reading": "x+", "thickness_mm": None, "backend": "cpu", "posterior": None}
+_STUDY_ONLY = {"reading": "x+", "thickness_mm": None, "posterior": None}
 """Options of the study's own sweep (their defaults): on a described architecture they are refused by name."""
 
 
@@ -37,11 +37,6 @@ def _sweep_described(args: argparse.Namespace, desc: Description) -> int:
     from fpm_sim.model.options import warn_if_coarse
     from fpm_sim.outputs import atomic_dir
 
-    if args.backend != "cpu":
-        raise CliError(
-            f"--backend {args.backend}: the batched backends (MuJoCo's formulas in JAX, MJX) run the 3RRR only so far; "
-            "a described architecture's pose loop is --backend cpu (docs/architectures.md)"
-        )
     for key, default in _STUDY_ONLY.items():
         if getattr(args, key, default) != default:
             flag = "--" + key.replace("_", "-")
@@ -58,7 +53,9 @@ def _sweep_described(args: argparse.Namespace, desc: Description) -> int:
     out = args.out or Path("out") / f"sweep_{grid}_{Path(args.config).stem}"
     check_output_dir(out, "--out", overwrite=args.overwrite)
     warn_if_coarse(opts)
-    sw = sweep_task(desc, poses, options=opts, workers=args.workers, grid=grid, step_mm=args.step_mm)
+    sw = sweep_task(
+        desc, poses, options=opts, workers=args.workers, grid=grid, step_mm=args.step_mm, backend=args.backend
+    )
     with atomic_dir(out, overwrite=args.overwrite) as tmp:
         names = [p.name for p in sw.write(tmp)]
     finish_store(out)

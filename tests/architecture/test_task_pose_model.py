@@ -69,3 +69,34 @@ def test_the_sweep_loop_equals_one_model_compiled_per_pose():
         for pose, freq in zip(poses, sweep.freq_hz):
             ref = modes_constrained(build_general(desc, pose, OPTIONS), n_modes=4).frequencies_hz
             np.testing.assert_allclose(freq, ref, rtol=1e-7)  # as in the test above
+
+
+def _check_poses(desc) -> list[fs.TaskPose]:
+    return [_pose(desc, k) for k in range(3)]
+
+
+def test_the_jax_backend_solves_a_described_machine_as_the_cpu_loop_does():
+    desc = fs.load_description(EXAMPLES / "five_bar.toml")
+    options = fs.ModelOptions(segments=2)
+    cpu = sweep_task(desc, _check_poses(desc), options=options, n_modes=4)
+    jax = sweep_task(desc, _check_poses(desc), options=options, n_modes=4, backend="jax")
+    assert jax.status == cpu.status
+    # the same discrete eigenproblem, MuJoCo's formulas in JAX against MuJoCo's own: equal to round-off, far
+    # below 1e-9 (measured 3e-12)
+    np.testing.assert_allclose(jax.freq_hz, cpu.freq_hz, rtol=1e-9)
+
+
+@pytest.mark.slow  # MJX's compile of the Delta's tree: about a minute on a 2-core CPU
+def test_the_mjx_backend_solves_the_delta_as_the_cpu_loop_does():
+    desc = fs.load_description(EXAMPLES / "delta.toml")
+    options = fs.ModelOptions(segments=2)
+    cpu = sweep_task(desc, _check_poses(desc), options=options, n_modes=4)
+    mjx = sweep_task(desc, _check_poses(desc), options=options, n_modes=4, backend="mjx")
+    assert mjx.status == cpu.status
+    np.testing.assert_allclose(mjx.freq_hz, cpu.freq_hz, rtol=1e-9)  # as above (measured 6e-13)
+
+
+def test_the_jax_backend_refuses_a_spherical_loop_closure_by_its_path():
+    desc = fs.load_description(EXAMPLES / "delta.toml")
+    with pytest.raises(fs.FpmSimError, match=r"chains\[\d+\]\.path\[\d+\]\.type = 'spherical'.*mjx"):
+        sweep_task(desc, _check_poses(desc), backend="jax")
