@@ -354,8 +354,8 @@ def design(
 
 
 def reduce(
-    config: Manipulator | None = None,
-    pose: Pose | None = None,
+    config: Manipulator | Description | None = None,
+    pose: Pose | TaskPose | None = None,
     *,
     n_modes: int | None = None,
     band_hz: float | None = None,
@@ -369,14 +369,15 @@ def reduce(
     Parameters
     ----------
     config, pose
-        As :func:`modes`.
+        As :func:`modes` (the 3RRR or a described architecture).
     n_modes, band_hz, error_bound
         Modes kept: a count, every mode up to ``band_hz`` (Hz), or the fewest with a relative static
         truncation error <= ``error_bound`` (exactly one of them; none: 6 modes).
     static_correction
         Feedthrough for the truncated modes.
     accel_fraction
-        Accelerometer outputs at this fraction (0..1 from the elbow) of each distal link.
+        Accelerometer outputs at this fraction (0..1 from the link's start: the elbow) of each accelerometer link:
+        the 3RRR's distal links, a described machine's last flexible link of each chain.
     options
         Model options (as :func:`modes`).
     """
@@ -395,8 +396,8 @@ def reduce(
 
 
 def frf(
-    config: Manipulator | None = None,
-    pose: Pose | None = None,
+    config: Manipulator | Description | None = None,
+    pose: Pose | TaskPose | None = None,
     *,
     excitation: LinkPoint | None = None,
     response: LinkPoint | None = None,
@@ -415,9 +416,11 @@ def frf(
     Parameters
     ----------
     config, pose
-        As :func:`modes`.
+        As :func:`modes` (the 3RRR or a described architecture).
     excitation
-        Force input point and direction (``fs.LinkPoint``); default mid-span of ``distal_0`` along z.
+        Force input point and direction (``fs.LinkPoint``); default the model's test point
+        (:func:`fpm_sim.response.default_point`): mid-span of ``distal_0`` along z on the 3RRR, mid-span of the
+        first chain's last flexible link along the link frame's z on a described machine.
     response
         Response point and axis; default the excitation (a driving-point FRF).
     quantity
@@ -431,7 +434,7 @@ def frf(
     options
         Model options (as :func:`modes`; the links must be flexible).
     """
-    from fpm_sim.response import FrfError, LinkPoint, frf_grid, modal_frf
+    from fpm_sim.response import FrfError, default_point, frf_grid, modal_frf
     from fpm_sim.rom.reduction import modal_system
 
     if options is not None and options.link_model == "rigid":
@@ -442,7 +445,7 @@ def frf(
             hint="use 'segments'",
         )
     built = _built(config, pose, options)
-    exc = excitation or LinkPoint("distal_0", 0.5, "z")
+    exc = excitation or default_point(built)
     resp = response or exc
     exc.check(built, "input")
     resp.check(built, "output")
@@ -654,8 +657,8 @@ def move(
 
 
 def impact(
-    config: Manipulator | None = None,
-    pose: Pose | None = None,
+    config: Manipulator | Description | None = None,
+    pose: Pose | TaskPose | None = None,
     *,
     setup: ImpactSetup | None = None,
     options: ModelOptions | None = None,
@@ -668,10 +671,11 @@ def impact(
     Parameters
     ----------
     config, pose
-        As :func:`modes`.
+        As :func:`modes` (the 3RRR or a described architecture).
     setup
         Hammer, accelerometer, pulse, record, noise, ... (:class:`fpm_sim.sim.impact.ImpactSetup`; ``None``:
-        the study's set-up).
+        the study's set-up with hammer and accelerometer at the model's test point: the study's on the 3RRR,
+        mid-span of the first chain's last flexible link along the link frame's z on a described machine).
     options
         Model options (as :func:`modes`; the links must be flexible).
     progress
@@ -798,11 +802,12 @@ def readability(
 
 
 def atlas(
-    config: Manipulator | None = None,
+    config: Manipulator | Description | None = None,
     *,
     x_m: Sequence[float],
     y_m: Sequence[float],
     phi_rad: Sequence[float] = (0.0,),
+    z_m: float | None = None,
     n_modes: int = 6,
     n_extra: int = 4,
     options: ModelOptions | None = None,
@@ -817,9 +822,12 @@ def atlas(
     Parameters
     ----------
     config
-        Manipulator description; ``None``: the embedded one.
+        Manipulator description; ``None``: the embedded one; or a described architecture
+        (:class:`fpm_sim.architecture.Description`: the grid in its task coordinates, queried at a ``fs.TaskPose``).
     x_m, y_m, phi_rad
-        The grid (m, m, rad).
+        The grid (m, m, rad); ``phi_rad`` only on a machine that sets phi.
+    z_m
+        A spatial architecture's height (m; default its first check pose's): the atlas is a horizontal slice.
     n_modes, n_extra
         Tracked (kept) modes and extra candidates for the tracking.
     options
@@ -827,13 +835,15 @@ def atlas(
     progress
         Show a progress bar.
     """
+    from fpm_sim.architecture import Description
     from fpm_sim.rom.atlas import build_atlas
 
     return build_atlas(
-        _config(config),
+        config if isinstance(config, Description) else _config(config),
         x_m=x_m,
         y_m=y_m,
         phi_rad=phi_rad,
+        z_m=z_m,
         options=_options(options),
         n_modes=n_modes,
         n_extra=n_extra,

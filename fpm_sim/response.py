@@ -16,7 +16,8 @@ stiffness-proportional damping, however it was set: assumed or identified); a us
 for all modes, or one per mode) replaces them, e.g. a ratio identified from a measured FRF by
 :func:`half_power_damping`.
 
-Points (:class:`LinkPoint`) are given by link name (``proximal_i``, ``distal_i``, or ``platform``),
+Points (:class:`LinkPoint`) are given by link name (the 3RRR's ``proximal_i``, ``distal_i``; a described
+machine's ``<chain>_<link>``, :attr:`BuiltModel.links`; or ``platform``, the end effector's reference point),
 a fraction of the link's length from its start (the motor for a proximal link, the elbow for a
 distal link) and an axis: ``normal`` (in the base plane, normal to the link: the bending direction),
 ``along`` (the link axis), ``z`` (out of the plane), or the world axes ``x`` / ``y``. The point is a
@@ -53,6 +54,7 @@ __all__ = [
     "LinkPoint",
     "MaterialPoint",
     "Peak",
+    "default_point",
     "frf_grid",
     "half_power_damping",
     "locate",
@@ -80,7 +82,8 @@ class LinkPoint:
     Parameters
     ----------
     link
-        ``proximal_i``, ``distal_i`` (``i`` in 0..2) or ``platform`` (its centre).
+        ``proximal_i``, ``distal_i`` (``i`` in 0..2) on the 3RRR, ``<chain>_<link>`` on a described machine, or
+        ``platform`` (the end effector's reference point).
     fraction
         Position along the link as a fraction of its length from its start (0..1); ignored for the
         platform.
@@ -115,6 +118,20 @@ class LinkPoint:
             raise FrfError("the platform has no link axis: use axis x, y or z")
 
 
+def default_point(built: BuiltModel) -> LinkPoint:
+    """The model's default excitation and accelerometer point (:attr:`BuiltModel.test_point`): on the 3RRR the
+    study's, mid-span of ``distal_0`` along z; on a described machine mid-span of the first chain's last flexible
+    link along the link frame's z (:mod:`fpm_sim.model.general`)."""
+    if built.test_point is None:
+        raise FrfError(
+            f"the {built.name} model has no default test point (no flexible link to excite)",
+            parameter="excitation",
+            hint="give the point (a LinkPoint on a flexible link)",
+        )
+    link, fraction, axis = built.test_point
+    return LinkPoint(link, fraction, axis)
+
+
 @dataclass(frozen=True)
 class MaterialPoint:
     """Where a :class:`LinkPoint` sits in a compiled model: its body, the body-frame position (m) and
@@ -145,7 +162,7 @@ def material_point(built: BuiltModel, point: LinkPoint) -> MaterialPoint:
     point.check(built)
     model = built.model
     if point.link == "platform":
-        sid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, "platform_center")
+        sid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, built.end_effector_site or "platform_center")
         return MaterialPoint(int(model.site_bodyid[sid]), model.site_pos[sid].copy(), point.axis, True)
     sites = built.links[point.link]
     ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, s) for s in sites]

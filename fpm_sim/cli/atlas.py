@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
+from typing import Any
 
 from fpm_sim.cli.common import (
+    CliError,
     add_config_args,
     add_output_args,
     add_pose_args,
@@ -13,7 +16,7 @@ from fpm_sim.cli.common import (
     check_output_file,
     count_arg,
     emit,
-    load_manipulator,
+    load_machine,
     model_options,
     pose_of,
     read_input_file,
@@ -25,6 +28,27 @@ from fpm_sim.cli.main import PLOT_SUFFIXES, save_figure
 __all__ = ["register"]
 
 PAPER_GRID_MM = [-100.0, -50.0, 0.0, 50.0, 100.0]  # study.poses.GRID_MM (a test checks), kept light for --help
+DESCRIBED_HALF_WIDTH_MM = 20.0
+"""A described architecture's default grid: its first check pose and +-20 mm in x and y (3 x 3 poses, the fewest
+with an interpolation error estimate)."""
+
+
+def _grid(args: argparse.Namespace, machine: Any) -> tuple[list[float], list[float], list[float]]:
+    """The grid (m, m, rad) of the options, or the default: the study's 5 x 5 paper grid at phi 0 for the 3RRR,
+    the first check pose and +-20 mm for a described architecture (its phi where it sets one)."""
+    from fpm_sim.architecture import Description
+
+    if isinstance(machine, Description):
+        home = machine.check_poses[0] if machine.check_poses else {}
+        h = DESCRIBED_HALF_WIDTH_MM
+        xs = [home.get("x", 0.0) * 1e3 + d for d in (-h, 0.0, h)]
+        ys = [home.get("y", 0.0) * 1e3 + d for d in (-h, 0.0, h)]
+        phis = [home.get("phi", 0.0)]
+    else:
+        xs, ys, phis = PAPER_GRID_MM, PAPER_GRID_MM, [0.0]
+    x_mm = args.x_mm if args.x_mm is not None else xs
+    y_mm = args.y_mm if args.y_mm is not None else ys
+    return [v * 1e-3 for v in x_mm], [v * 1e-3 for v in y_mm], args.phi_rad if args.phi_rad is not None else phis
 
 
 def cmd_atlas_build(args: argparse.Namespace) -> int:
@@ -38,12 +62,14 @@ def cmd_atlas_build(args: argparse.Namespace) -> int:
     check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
     opts = model_options(args)
     warn_if_coarse(opts)
-    manip = load_manipulator(args)
+    machine = load_machine(args, "atlas")
+    x_m, y_m, phi_rad = _grid(args, machine)
     atlas = build_atlas(
-        manip,
-        x_m=[v * 1e-3 for v in args.x_mm],
-        y_m=[v * 1e-3 for v in args.y_mm],
-        phi_rad=args.phi_rad,
+        machine,
+        x_m=x_m,
+        y_m=y_m,
+        phi_rad=phi_rad,
+        z_m=None if args.z_mm is None else args.z_mm * 1e-3,
         options=opts,
         n_modes=args.modes,
         n_extra=args.extra,
@@ -76,15 +102,14 @@ def cmd_atlas_build(args: argparse.Namespace) -> int:
 def cmd_atlas_query(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from fpm_sim.model.manipulator import build_manipulator
     from fpm_sim.model.options import ModelOptions
     from fpm_sim.outputs import atomic_file
-    from fpm_sim.rom.atlas import AtlasError, load_atlas, mac_matrix
+    from fpm_sim.rom.atlas import AtlasError, load_atlas, mac_matrix, model_at
     from fpm_sim.rom.reduction import modal_system
 
     check_output_file(args.out, "--out", (".mat", ".npz"))
-    pose = pose_of(args)
     atlas = read_input_file(args.atlas, "atlas", load_atlas, "an atlas written by 'fpm-sim atlas build --out FILE.npz'")
+    pose, pose_label = _query_pose(args, atlas)
     rom = atlas.query(pose, method=args.method)
     if args.out:
         with atomic_file(args.out) as tmp:
@@ -95,15 +120,15 @@ def cmd_atlas_query(args: argparse.Namespace) -> int:
     )
     payload = with_resolution(rom.to_dict(), opts)
     payload["atlas"] = str(args.atlas)
-    lines = [f"interpolated reduced model at {pose.label()} from {args.atlas} ({args.method}):"]
+    lines = [f"interpolated reduced model at {pose_label} from {args.atlas} ({args.method}):"]
     if args.direct:
-        manip = load_manipulator(args)
+        manip = load_machine(args, "atlas")
         if manip.name != atlas.parameters.get("config"):
             raise AtlasError(
                 f"the atlas was built for config {atlas.parameters.get('config')!r}, not {manip.name!r}; "
                 "pass its --config"
             )
-        system = modal_system(build_manipulator(manip, pose, opts))
+        system = modal_system(model_at(manip, pose, opts))
         # each interpolated mode against the direct mode of the most similar shape (MAC), which need not
         # be the same sorted position: the atlas keeps the tracked modes, not always the lowest ones
         mac = mac_matrix(rom.mode_shapes, system.phi)
@@ -141,21 +166,72 @@ def cmd_atlas_query(args: argparse.Namespace) -> int:
     return 0
 
 
+def _query_pose(args: argparse.Namespace, atlas: Any) -> tuple[Any, str]:
+    """The query's pose: the 3RRR's (:func:`pose_of`), or a described architecture's task pose in the atlas's task
+    coordinates (an option for another coordinate refused by name; one not given takes the atlas's root node, z
+    its height), and its label."""
+    from fpm_sim.architecture import TaskPose
+
+    machine = atlas.parameters.get("architecture")
+    if machine is None:
+        pose = pose_of(args)
+        return pose, pose.label()
+    task = machine["task"]
+    given = {"x": args.x_mm, "y": args.y_mm, "z": args.z_mm, "phi": args.phi_rad}
+    for c, v in given.items():
+        flag = "--phi-rad" if c == "phi" else f"--{c}-mm"
+        if v is not None and c not in task:
+            raise CliError(
+                f"{flag}: the atlas's machine ({atlas.parameters.get('config')}) has no task coordinate {c} (its task "
+                f"coordinates are {', '.join(task)}); drop {flag}"
+            )
+        if v is not None and not math.isfinite(v):
+            raise CliError(f"{flag}: must be a finite number, got {v}")
+    root = [float(a[i]) for a, i in zip((atlas.x_m, atlas.y_m, atlas.phi_rad), atlas.root)]
+    scale = {"x": 1e-3, "y": 1e-3, "phi": 1.0}
+    x, y, phi = (r if given[c] is None else given[c] * scale[c] for c, r in zip(("x", "y", "phi"), root))
+    z = float(machine["z_m"]) if given["z"] is None else given["z"] * 1e-3
+    task_pose = TaskPose(x, y, z, phi)
+    return task_pose, task_pose.label(tuple(task))
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "atlas",
         help="modal atlas: reduced models on a pose grid tracked by MAC, interpolated at poses in between",
         description=(
             "build: modal systems on an x/y/phi grid (default the study's 5 x 5 grid, phi 0), modes tracked from the "
-            "central pose by MAC and aligned by Procrustes rotations, saved to .npz. query: the interpolated reduced "
-            "model at a pose (optionally compared with a direct computation, --direct; exported with --out)."
+            "central pose by MAC and aligned by Procrustes rotations, saved to .npz; on a described architecture "
+            "(--config with [[chains]]) the grid is in its task coordinates (x, y; phi where it sets it; a spatial "
+            "one at one --z-mm). query: the interpolated reduced model at a pose (optionally compared with a direct "
+            "computation, --direct, which needs the atlas's --config; exported with --out); a described "
+            "architecture's coordinates not given take the atlas's central pose."
         ),
     )
     sp = p.add_subparsers(dest="atlas_command", required=True)
     b = sp.add_parser("build", help="build and save an atlas")
-    b.add_argument("--x-mm", type=float, nargs="+", default=PAPER_GRID_MM, help="grid x values (mm)")
-    b.add_argument("--y-mm", type=float, nargs="+", default=PAPER_GRID_MM, help="grid y values (mm)")
-    b.add_argument("--phi-rad", type=float, nargs="+", default=[0.0], help="grid rotations (rad, default 0)")
+    b.add_argument(
+        "--x-mm",
+        type=float,
+        nargs="+",
+        default=None,
+        help="grid x values (mm; default the study's -100..100 step 50 on the 3RRR, the first check pose +-20 mm on "
+        "a described architecture)",
+    )
+    b.add_argument("--y-mm", type=float, nargs="+", default=None, help="grid y values (mm; default as --x-mm)")
+    b.add_argument(
+        "--phi-rad",
+        type=float,
+        nargs="+",
+        default=None,
+        help="grid rotations (rad, default 0; a described architecture that sets phi: its first check pose's)",
+    )
+    b.add_argument(
+        "--z-mm",
+        type=float,
+        default=None,
+        help="a spatial architecture's height (mm; default its first check pose's): the atlas is a horizontal slice",
+    )
     b.add_argument("--modes", type=count_arg("--modes"), default=6, help="tracked modes (default 6)")
     b.add_argument(
         "--extra", type=count_arg("--extra", low=0), default=4, help="extra candidate modes per pose (default 4)"

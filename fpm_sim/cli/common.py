@@ -45,6 +45,7 @@ __all__ = [
     "add_overwrite_arg",
     "add_pose_args",
     "add_resolution_args",
+    "build_machine",
     "check_output_dir",
     "check_output_file",
     "count_arg",
@@ -87,6 +88,7 @@ OPTION_NAMES: dict[str, tuple[str, float]] = {
     "section.height_m": ("--height-mm", 1e3),
     "x_m": ("--x-mm", 1e3),
     "y_m": ("--y-mm", 1e3),
+    "z_m": ("--z-mm", 1e3),
     "phi_rad": ("--phi-rad", 1.0),
     "pose.phi_rad": ("--phi-rad", 1.0),
     "link_model": ("--link-model", 1.0),
@@ -360,7 +362,7 @@ def pose_of(args: argparse.Namespace) -> Pose:
     return checked_pose_mm(*(0.0 if v is None else v for v in (args.x_mm, args.y_mm, args.phi_rad)))
 
 
-GENERAL_COMMANDS = ("modes", "export-mjcf", "sweep", "check")
+GENERAL_COMMANDS = ("modes", "export-mjcf", "sweep", "check", "reduce", "frf", "impact", "atlas")
 """The commands that run on a described architecture (``[[chains]]``) so far; the others say so."""
 
 
@@ -412,6 +414,22 @@ def task_pose_of(args: argparse.Namespace, desc: Description) -> TaskPose:
     home = desc.check_poses[0] if desc.check_poses else {}
     si = {c: (given[c] * (1.0 if c == "phi" else 1e-3) if given[c] is not None else home.get(c, 0.0)) for c in given}
     return TaskPose(x_m=si["x"], y_m=si["y"], z_m=si["z"], phi_rad=si["phi"])
+
+
+def build_machine(args: argparse.Namespace, machine: Manipulator | Description, opts: ModelOptions) -> tuple[Any, str]:
+    """The :class:`~fpm_sim.model.spec.BuiltModel` of the 3RRR (at :func:`pose_of`) or of a described architecture
+    (at :func:`task_pose_of`), and the pose's label."""
+    from fpm_sim.architecture import Description
+
+    if isinstance(machine, Description):
+        from fpm_sim.model.general import build_general
+
+        task_pose = task_pose_of(args, machine)
+        return build_general(machine, task_pose, opts), task_pose.label(machine.task)
+    from fpm_sim.model.manipulator import build_manipulator
+
+    pose = pose_of(args)
+    return build_manipulator(machine, pose, opts), pose.label()
 
 
 def with_resolution(payload: dict[str, Any], options: ModelOptions) -> dict[str, Any]:

@@ -12,12 +12,12 @@ from fpm_sim.cli.common import (
     add_model_args,
     add_output_args,
     add_pose_args,
+    build_machine,
     check_output_file,
     count_arg,
     emit,
-    load_manipulator,
+    load_machine,
     model_options,
-    pose_of,
     resolution_line,
     with_resolution,
 )
@@ -40,25 +40,28 @@ class LinkPointDefault:
 
 
 def add_point_args(p: argparse.ArgumentParser, prefix: str, what: str, default: Any) -> None:
+    """``--PREFIX-link``, ``--PREFIX-fraction``, ``--PREFIX-axis``; each not given is ``None`` and takes
+    :func:`point_of`'s fallback (``default``: the 3RRR's, named in the help; ``None``: another point's)."""
     g = p.add_argument_group(what)
     d = default or LinkPointDefault()
     same = default is None
     g.add_argument(
         f"--{prefix}-link",
-        default=None if same else d.link,
-        help="proximal_i, distal_i or platform" + (" (default: as the excitation)" if same else f" (default {d.link})"),
+        default=None,
+        help="the 3RRR's proximal_i, distal_i; a described architecture's <chain>_<link>; or platform (the end "
+        "effector)" + (" (default: as the excitation)" if same else f" (default {d.link} on the 3RRR)"),
     )
     g.add_argument(
         f"--{prefix}-fraction",
         type=float,
-        default=None if same else d.fraction,
+        default=None,
         help="position along the link from its start, 0..1" + ("" if same else f" (default {d.fraction:g})"),
     )
     g.add_argument(
         f"--{prefix}-axis",
         choices=AXES,
-        default=None if same else d.axis,
-        help="normal (in-plane, normal to the link), along, z (out of plane), x, y"
+        default=None,
+        help="normal (in-plane, normal to the link), along, z (out of plane: the link frame's z), x, y"
         + ("" if same else f" (default {d.axis})"),
     )
 
@@ -79,10 +82,9 @@ def point_of(args: argparse.Namespace, prefix: str, fallback: Any = None) -> Any
 
 
 def cmd_frf(args: argparse.Namespace) -> int:
-    from fpm_sim.model.manipulator import build_manipulator
     from fpm_sim.model.options import warn_if_coarse
     from fpm_sim.outputs import atomic_file
-    from fpm_sim.response import LinkPoint, frf_grid, modal_frf
+    from fpm_sim.response import default_point, frf_grid, modal_frf
     from fpm_sim.rom.reduction import modal_system
 
     frf_grid(args.f_min_hz, args.f_max_hz, args.df_hz, [])  # checks the band before any computation
@@ -92,11 +94,11 @@ def cmd_frf(args: argparse.Namespace) -> int:
         raise CliError(
             "an FRF needs flexible links: with rigid links and locked motors nothing moves; use --link-model segments"
         )
-    manip = load_manipulator(args)
+    machine = load_machine(args, "frf")
     opts = model_options(args)
     warn_if_coarse(opts)
-    built = build_manipulator(manip, pose_of(args), opts)
-    exc = point_of(args, "input", LinkPoint("distal_0", 0.5, "z"))
+    built, pose_label = build_machine(args, machine, opts)
+    exc = point_of(args, "input", default_point(built))
     resp = point_of(args, "output", exc)
     exc.check(built, "input")
     resp.check(built, "output")
@@ -122,7 +124,7 @@ def cmd_frf(args: argparse.Namespace) -> int:
     payload["csv"] = str(args.csv) if args.csv else None
     payload["plot"] = str(args.plot) if args.plot else None
     lines = [
-        f"pose {pose_of(args).label()}, damping "
+        f"pose {pose_label}, damping "
         + ("model" if args.damping_ratio is None else f"{args.damping_ratio:g} (all modes)"),
         frf.table(),
     ]
@@ -142,7 +144,13 @@ def register(sub: argparse._SubParsersAction) -> None:
             "--damping-ratio for every mode (e.g. a value identified from a measured FRF)."
         ),
     )
-    add_point_args(p, "input", "force input (default distal_0 mid-span, z)", LinkPointDefault("distal_0", 0.5, "z"))
+    add_point_args(
+        p,
+        "input",
+        "force input (default: the machine's test point: on the 3RRR distal_0 mid-span, z; on a described "
+        "architecture mid-span of the first chain's last flexible link, z)",
+        LinkPointDefault("distal_0", 0.5, "z"),
+    )
     add_point_args(p, "output", "response (default: the input point and axis, a driving-point FRF)", None)
     p.add_argument(
         "--quantity", choices=tuple(QUANTITIES), default="accelerance", help="FRF kind (default accelerance)"

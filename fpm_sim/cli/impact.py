@@ -12,11 +12,11 @@ from fpm_sim.cli.common import (
     add_output_args,
     add_pose_args,
     add_resolution_args,
+    build_machine,
     check_output_file,
     emit,
-    load_manipulator,
+    load_machine,
     model_options,
-    pose_of,
     resolution_line,
     with_resolution,
 )
@@ -35,10 +35,10 @@ PEAK_FORCE_N = 20.0
 
 
 def cmd_impact(args: argparse.Namespace) -> int:
-    from fpm_sim.model.manipulator import build_manipulator
     from fpm_sim.model.options import resolve_segments, warn_if_coarse
     from fpm_sim.outputs import atomic_file
-    from fpm_sim.sim.impact import STUDY_IMPACT_POINT, ImpactSetup, virtual_impact_test
+    from fpm_sim.response import default_point
+    from fpm_sim.sim.impact import ImpactSetup, virtual_impact_test
 
     check_output_file(args.csv, "--csv", (".csv",))
     check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
@@ -60,9 +60,14 @@ def cmd_impact(args: argparse.Namespace) -> int:
     if segments < 2:
         raise CliError(f"--segments must be >= 2 for flexible links, got {segments}")
     warn_if_coarse(opts)
-    manip = load_manipulator(args)
-    built = build_manipulator(manip, pose_of(args), opts)
-    hit = point_of(args, "impact", STUDY_IMPACT_POINT)
+    machine = load_machine(args, "impact")
+    if args.uff and "z" in getattr(machine, "task", ()):
+        raise CliError(
+            f"--uff: the UFF record carries a pose in x, y and phi; {machine.name} sets z too; drop --uff (--csv "
+            "writes the FRF)"
+        )
+    built, pose_label = build_machine(args, machine, opts)
+    hit = point_of(args, "impact", default_point(built))
     acc = point_of(args, "accel", hit)
     setup = ImpactSetup(
         impact=hit,
@@ -85,12 +90,12 @@ def cmd_impact(args: argparse.Namespace) -> int:
     if args.uff:
         from fpm_sim.sim.impact import write_uff58
 
-        pose = pose_of(args)
+        pose = built.parameters["pose"]
         with atomic_file(args.uff) as tmp:
             write_uff58(
                 res.frf,
                 tmp,
-                pose_mm_rad=(pose.x_m * 1e3, pose.y_m * 1e3, pose.phi_rad),
+                pose_mm_rad=(pose["x_m"] * 1e3, pose["y_m"] * 1e3, pose["phi_rad"]),
                 window_tau_s=res.window_tau_s,
                 discrete_step_s=res.discrete_step_s,
             )
@@ -100,7 +105,7 @@ def cmd_impact(args: argparse.Namespace) -> int:
     payload["csv"] = str(args.csv) if args.csv else None
     payload["plot"] = str(args.plot) if args.plot else None
     text = (
-        f"pose {pose_of(args).label()}, {opts.segments} segments, axial {opts.axial}, nv {built.model.nv}, "
+        f"pose {pose_label}, {opts.segments} segments, axial {opts.axial}, nv {built.model.nv}, "
         f"timestep {res.parameters['rollout_timestep_s']:.3g} s ({res.parameters['rollout_integrator']})\n"
         + res.table()
         + "\n"
@@ -120,7 +125,8 @@ def register(sub: argparse._SubParsersAction) -> None:
             "model from its static equilibrium; accelerometer signal with optional noise; H1 FRF averaged over the "
             "impacts (exponential window, zero padding); the first frequency by peak picking, compared with the "
             "modal f1 of the same model. Default point (assumed for the study): mid-span of chain 0's distal link, "
-            "axis z (out of plane), hammer along the accelerometer axis."
+            "axis z (out of plane), hammer along the accelerometer axis; on a described architecture mid-span of "
+            "the first chain's last flexible link, along the link frame's z."
         ),
     )
     add_point_args(p, "impact", "hammer", STUDY_POINT)

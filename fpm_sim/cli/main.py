@@ -36,6 +36,7 @@ try:  # Ctrl-C while the modules load (a second or so): one line and 130, as at 
         add_output_args,
         add_overwrite_arg,
         add_pose_args,
+        build_machine,
         check_output_file,
         count_arg,
         emit,
@@ -45,8 +46,6 @@ try:  # Ctrl-C while the modules load (a second or so): one line and 130, as at 
         load_manipulator,
         mm,
         model_options,
-        pose_of,
-        task_pose_of,
         with_resolution,
     )
     from fpm_sim.errors import FpmSimError, FpmSimWarning
@@ -180,7 +179,7 @@ def cmd_modes(args: argparse.Namespace) -> int:
     machine = load_machine(args, "modes")
     opts = model_options(args)
     warn_if_coarse(opts)
-    built, pose_label = _build_machine(args, machine, opts)
+    built, pose_label = build_machine(args, machine, opts)
     # --mode K beyond --n-modes: every physical mode (a K beyond them is then refused by name, as --mode)
     result = analyse(built, args.method, args.n_modes if (args.mode or 1) <= args.n_modes else None)
     payload, table = result.to_dict(args.n_modes), result.table(args.n_modes)
@@ -197,22 +196,6 @@ def cmd_modes(args: argparse.Namespace) -> int:
     )
     emit(args, payload, text)
     return 0
-
-
-def _build_machine(args: argparse.Namespace, machine: Any, opts: Any) -> tuple[BuiltModel, str]:
-    """The model of the 3RRR (at ``pose_of``) or of a described architecture (at ``task_pose_of``), and the pose's
-    label."""
-    from fpm_sim.architecture import Description
-
-    if isinstance(machine, Description):
-        from fpm_sim.model.general import build_general
-
-        task_pose = task_pose_of(args, machine)
-        return build_general(machine, task_pose, opts), task_pose.label(machine.task)
-    from fpm_sim.model.manipulator import build_manipulator
-
-    pose = pose_of(args)
-    return build_manipulator(machine, pose, opts), pose.label()
 
 
 def _rig_setup(args: argparse.Namespace) -> Any:
@@ -316,7 +299,7 @@ def cmd_export_mjcf(args: argparse.Namespace) -> int:
     machine = load_machine(args, "export-mjcf")
     opts = model_options(args)
     if args.what == "manipulator":
-        built, _ = _build_machine(args, machine, opts)
+        built, _ = build_machine(args, machine, opts)
     elif not isinstance(machine, Manipulator):
         raise CliError(
             f"export-mjcf {args.what}: the rigs are the study's own test pieces; on a described "

@@ -11,12 +11,13 @@ from fpm_sim.cli.common import (
     add_model_args,
     add_output_args,
     add_pose_args,
+    build_machine,
     check_output_file,
     count_arg,
     emit,
-    load_manipulator,
+    is_described,
+    load_machine,
     model_options,
-    pose_of,
     with_resolution,
 )
 from fpm_sim.cli.rollout import add_motor_args, apply_motor_args
@@ -25,18 +26,21 @@ __all__ = ["register"]
 
 
 def cmd_reduce(args: argparse.Namespace) -> int:
-    from fpm_sim.model.manipulator import build_manipulator
     from fpm_sim.model.options import warn_if_coarse
     from fpm_sim.outputs import atomic_file
     from fpm_sim.rom.reduction import reduce_model
 
     check_output_file(args.out, "--out", (".mat", ".npz"))
     if args.accel_fraction is not None and not 0.0 <= args.accel_fraction <= 1.0:
-        raise CliError(f"--accel-fraction must be in 0..1 (from the elbow), got {args.accel_fraction}")
+        raise CliError(f"--accel-fraction must be in 0..1 (from the link's start), got {args.accel_fraction}")
+    if args.motors == "servo" and is_described(args):
+        raise CliError(
+            "--motors servo: a described architecture's actuated joints are locked (no motor model yet); drop --motors"
+        )
     opts = model_options(args)
     warn_if_coarse(opts)
-    manip = apply_motor_args(load_manipulator(args), args)
-    built = build_manipulator(manip, pose_of(args), opts)
+    machine = load_machine(args, "reduce")
+    built, pose_label = build_machine(args, apply_motor_args(machine, args), opts)
     rom = reduce_model(
         built,
         n_modes=args.modes,
@@ -61,7 +65,7 @@ def cmd_reduce(args: argparse.Namespace) -> int:
         payload["python_control"] = None
         control_note = "\npython-control not installed (pip install 'fpm-sim[control]' for a StateSpace)"
     text = (
-        f"reduced model at pose {rom.pose.label()}: {rom.n_modes} modes of "
+        f"reduced model at pose {pose_label}: {rom.n_modes} modes of "
         f"{rom.parameters['reduction']['n_modes_full']}, "
         f"static correction {rom.static_correction}, uncorrected static truncation error "
         f"{rom.parameters['reduction']['static_truncation_error']:.2e}\n"
@@ -82,8 +86,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         description=(
             "Modal truncation in physical modal coordinates at the static equilibrium: A, B, C, D with inputs "
             "force_x, force_y (N), moment_z (N m) at the end effector and motor_torque_i (N m, servo motors only); "
-            "outputs disp_x, disp_y (m), rot_z (rad) and acc_distal_i (m/s^2). Choose modes by --modes, "
-            "--band-hz or --error-bound."
+            "outputs disp_x, disp_y (m), rot_z (rad) and acc_<link> (m/s^2) on each accelerometer link (the 3RRR's "
+            "distal links; a described architecture's last flexible link of each chain; a spatial one has all six "
+            "wrench and displacement components). Choose modes by --modes, --band-hz or --error-bound."
         ),
     )
     g = p.add_mutually_exclusive_group(required=True)
@@ -98,7 +103,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="feedthrough for the truncated modes (default on)",
     )
     p.add_argument(
-        "--accel-fraction", type=float, default=0.5, help="accelerometer position on each distal link (0..1 from elbow)"
+        "--accel-fraction",
+        type=float,
+        default=0.5,
+        help="accelerometer position on each accelerometer link (0..1 from its start: the 3RRR's elbow)",
     )
     add_motor_args(p)
     add_pose_args(p)

@@ -17,6 +17,17 @@ Built with :class:`mujoco.MjSpec` like the 3RRR's own builder, with every body p
   axis: a zero-frequency motion, not a mode. Its first ball joint is built as two hinges across the rod, which
   removes the spin, and the rod's inertia about its own axis is dropped (``LinkSpec.spin_inertia``): with its spin
   free it takes no part in any other mode, so the other modes are those of the ball-jointed rod (tested).
+
+What the analyses instrument by default (:class:`fpm_sim.model.spec.BuiltModel`'s ``accelerometer_links``,
+``test_point``, ``end_effector_site``), the same rule for every machine (:func:`instrumentation`):
+
+- an accelerometer on the **last flexible link of each chain** (the 3RRR's distal links), at ``accel_fraction``
+  of its length from its start (reduced models' outputs ``acc_<chain>_<link>``);
+- the default excitation (FRF input, impact hammer and accelerometer) at **mid-span of the first of those links**
+  (the first chain that has a flexible link), along the link frame's **z** axis: the section's ``height_m``
+  direction, out of the plane for a planar machine (as the study's hammer on the 3RRR), the direction the
+  description's joint axes and section orientation state for a spatial one;
+- the end effector's reference point is its frame's origin (site ``end_effector_site``).
 """
 
 from __future__ import annotations
@@ -37,7 +48,7 @@ from fpm_sim.model.options import ModelOptions
 from fpm_sim.model.parts import LinkSpec, lump_part, set_inertial
 from fpm_sim.model.spec import WELD_SOLIMP, BuiltModel, add_weld, compile_model, new_spec
 
-__all__ = ["GeneralModelError", "PoseFrames", "Reposer", "build_general", "build_reposable"]
+__all__ = ["GeneralModelError", "PoseFrames", "Reposer", "build_general", "build_reposable", "instrumentation"]
 
 MIN_BODY_MASS_KG = 1e-4
 """Mass given to a body that would carry none (a pin between a hinge and a weld): MuJoCo needs mass on every
@@ -375,6 +386,7 @@ def _build(
             "singularity_type1": asm.singularity_type1,
             "singularity_type2": asm.singularity_type2,
         },
+        **instrumentation(desc),
     )
     return built, b.shapes
 
@@ -412,6 +424,23 @@ def build_reposable(
     :class:`fpm_sim.batch.task_pose_model.TaskPoseModel` copies into the compiled model)."""
     built, shapes = _build(desc, pose, options, assembly)
     return built, Reposer(desc, options, shapes)
+
+
+def instrumentation(desc: Description) -> dict[str, Any]:
+    """The default accelerometer links, test point, end-effector site and plane of ``desc``'s models (the rule of the
+    module docstring): a link carries an accelerometer when it is its chain's last flexible link; the test point is
+    mid-span of the first of them along the link frame's z."""
+    accel = tuple(
+        f"{c.name}_{[lk for lk in c.links if lk.flexible][-1].name}"
+        for c in desc.chains
+        if any(lk.flexible for lk in c.links)
+    )
+    return {
+        "end_effector_site": "end_effector_site",
+        "accelerometer_links": accel,
+        "test_point": (accel[0], 0.5, "z") if accel else None,
+        "planar": desc.planar,
+    }
 
 
 def _between_spherical(chain: ChainDesc, k: int) -> bool:

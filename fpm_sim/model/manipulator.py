@@ -118,6 +118,10 @@ def build_manipulator(
             "motor_angles_rad": asm.motor_angles_rad.tolist(),
             "singularity_measure": asm.singularity.value,
         },
+        end_effector_site="platform_center",
+        accelerometer_links=tuple(f"distal_{i}" for i in range(3)),
+        test_point=("distal_0", 0.5, "z"),  # the study's impact point (fpm_sim.sim.impact.STUDY_IMPACT_POINT)
+        planar=True,
     )
 
 

@@ -86,6 +86,21 @@ class BuiltModel:
         ``tilt``, ``motor``, ``clamp`` or ``free``.
     parameters
         What was used to build it (JSON-ready).
+    end_effector_site
+        The end effector's reference site: where the reduced models' wrench inputs act and their displacement
+        outputs are read, and the point ``platform`` of :class:`fpm_sim.response.LinkPoint` (``""``: none).
+    accelerometer_links
+        The links that carry the reduced models' default accelerometers (one each, output ``acc_<link>``).
+    test_point
+        The default excitation (FRF input, impact hammer and accelerometer): ``(link, fraction of its length from
+        its start, axis)`` as :class:`fpm_sim.response.LinkPoint` takes them; ``None``: none.
+    planar
+        Whether the machine moves in its base plane (x, y): the end effector's wrench is then
+        ``force_x, force_y, moment_z`` and an accelerometer reads the in-plane normal of its link; else the
+        full six components and the link frame's y axis.
+
+    The 3RRR's builder sets the study's choices (``platform_center``, ``distal_0..2``, mid-span of ``distal_0``
+    along z); :func:`fpm_sim.model.general.build_general` states the rule for any described machine.
     """
 
     model: mujoco.MjModel
@@ -94,6 +109,10 @@ class BuiltModel:
     links: dict[str, list[str]]
     dof_kinds: list[str]
     parameters: dict[str, Any] = field(default_factory=dict)
+    end_effector_site: str = ""
+    accelerometer_links: tuple[str, ...] = ()
+    test_point: tuple[str, float, str] | None = None
+    planar: bool = True
 
     @property
     def floating(self) -> bool:

@@ -22,7 +22,9 @@ arbitrary signs, and with an arbitrary basis inside (near-)repeated frequencies 
    modal input matrix ``Gamma = Phi_a' B_q`` and output matrices ``C_q Phi_a``, ``C_a Phi_a``, and
    the basis-invariant static-correction feedthrough ``D`` (as :func:`fpm_sim.rom.reduction.reduce_model`).
 4. **Interpolates** these matrices entrywise between grid poses (multilinear or cubic, on a
-   rectilinear grid in ``x``, ``y``, ``phi``) and diagonalises the interpolated ``Lambda``
+   rectilinear grid in ``x``, ``y``, ``phi``; a described architecture's grid is in its task coordinates: ``x``,
+   ``y`` and ``phi`` where it sets it, a spatial machine's at one height ``z``, a horizontal slice) and
+   diagonalises the interpolated ``Lambda``
    (``Lambda = U diag(omega^2) U'``) to return an ordinary modal :class:`~fpm_sim.rom.reduction.ReducedModel`
    (states = amplitudes of the interpolated mass-normalised modes, sorted by frequency). Interpolating
    the matrices, not the eigenvalues, is what keeps repeated and crossing modes well posed: matrix
@@ -65,11 +67,13 @@ import scipy.interpolate
 import scipy.optimize
 from tqdm import tqdm
 
+from fpm_sim.architecture import Description, TaskPose
 from fpm_sim.config import Manipulator
 from fpm_sim.config.checks import check_count
 from fpm_sim.errors import FpmSimError, FpmSimWarning
 from fpm_sim.kinematics import Pose
 from fpm_sim.linear.matrices import system_damping_matrix
+from fpm_sim.model.general import build_general
 from fpm_sim.model.manipulator import build_manipulator
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.model.spec import BuiltModel
@@ -268,10 +272,31 @@ class ModalAtlas:
     def grid_shape(self) -> tuple[int, int, int]:
         return (len(self.x_m), len(self.y_m), len(self.phi_rad))
 
-    def poses(self) -> list[Pose]:
-        return [Pose(float(x), float(y), float(p)) for x in self.x_m for y in self.y_m for p in self.phi_rad]
+    def poses(self) -> list[Pose | TaskPose]:
+        """The grid's poses, x slowest: the 3RRR's :class:`Pose`, or a described architecture's :class:`TaskPose`
+        (at the atlas's height ``z``)."""
+        grid = [(float(x), float(y), float(p)) for x in self.x_m for y in self.y_m for p in self.phi_rad]
+        held = self.parameters.get("architecture")
+        return [_pose(held, x, y, p) for x, y, p in grid]
 
-    def _below(self, key: str, threshold: float) -> list[tuple[Pose, int, float]]:
+    def check_pose(self, pose: Pose | TaskPose) -> None:
+        """Refuse a pose of another kind than the atlas's grid, or off its height (:class:`AtlasError`)."""
+        held: dict[str, Any] | None = self.parameters.get("architecture")
+        if held is None and not isinstance(pose, Pose):
+            raise AtlasError(f"the atlas of {self.parameters.get('config')!r} is queried at a fs.Pose (the 3RRR's)")
+        if held is None:
+            return
+        if not isinstance(pose, TaskPose):
+            raise AtlasError(f"the atlas of {self.parameters.get('config')!r} is queried at a fs.TaskPose")
+        if not math.isclose(pose.z_m, float(held["z_m"]), abs_tol=1e-9):
+            raise AtlasError(
+                f"the atlas is a slice at z = {float(held['z_m']) * 1e3:g} mm",
+                parameter="z_m",
+                value=pose.z_m,
+                hint="query that height, or build an atlas at this one",
+            )
+
+    def _below(self, key: str, threshold: float) -> list[tuple[Pose | TaskPose, int, float]]:
         out = []
         for flat, pose in enumerate(self.poses()):
             idx = np.unravel_index(flat, self.grid_shape)
@@ -279,11 +304,11 @@ class ModalAtlas:
             out += [(pose, j, float(mac[j])) for j in range(self.n_modes) if mac[j] < threshold]
         return out
 
-    def label_changes(self, threshold: float = MAC_WARN) -> list[tuple[Pose, int, float]]:
+    def label_changes(self, threshold: float = MAC_WARN) -> list[tuple[Pose | TaskPose, int, float]]:
         """Labels whose matched shape has a MAC below ``threshold`` with the parent pose's: (pose, label, MAC)."""
         return self._below("mac", threshold)
 
-    def weak_links(self, threshold: float = BASIS_MAC_WARN) -> list[tuple[Pose, int, float]]:
+    def weak_links(self, threshold: float = BASIS_MAC_WARN) -> list[tuple[Pose | TaskPose, int, float]]:
         """Aligned basis vectors with a MAC below ``threshold`` with the parent pose's: (pose, label, MAC)."""
         return self._below("mac_aligned", threshold)
 
@@ -292,7 +317,7 @@ class ModalAtlas:
         live = [i for i, a in enumerate(axes) if len(a) > 1]
         return [axes[i] for i in live], live
 
-    def _interp(self, key: str, pose: Pose, method: str) -> np.ndarray:
+    def _interp(self, key: str, pose: Pose | TaskPose, method: str) -> np.ndarray:
         values = self.nodes[key]
         axes, live = self._axes()
         point = np.array([pose.x_m, pose.y_m, pose.phi_rad])
@@ -341,19 +366,19 @@ class ModalAtlas:
                 err[tuple(index)] = np.fmax(err[tuple(index)], e)
         return err
 
-    def error_estimate(self, pose: Pose) -> float:
+    def error_estimate(self, pose: Pose | TaskPose) -> float:
         """Estimated worst relative frequency error of a query at ``pose`` (module docstring): a quarter of the
         largest leave-one-out error over the modes and the nodes of its grid cell and their neighbours; NaN
         without an estimate."""
         return self._estimate(pose)[0]
 
-    def error_estimate_node(self, pose: Pose) -> tuple[float, float, float] | None:
+    def error_estimate_node(self, pose: Pose | TaskPose) -> tuple[float, float, float] | None:
         """The grid node ``(x_m, y_m, phi_rad)`` whose leave-one-out error sets :meth:`error_estimate` at
         ``pose`` (None without an estimate): a node whose interpolation stencil reaches a near-singular pose
         makes the estimate large even where the query itself interpolates well."""
         return self._estimate(pose)[1]
 
-    def _estimate(self, pose: Pose) -> tuple[float, tuple[float, float, float] | None]:
+    def _estimate(self, pose: Pose | TaskPose) -> tuple[float, tuple[float, float, float] | None]:
         err = self.loo_errors()
         window = []
         for values, v in zip((self.x_m, self.y_m, self.phi_rad), (pose.x_m, pose.y_m, pose.phi_rad)):
@@ -374,7 +399,7 @@ class ModalAtlas:
             raise AtlasError(f"method must be 'auto', 'linear' or 'cubic', got {method!r}")
         return method
 
-    def query(self, pose: Pose, *, method: str = "auto") -> ReducedModel:
+    def query(self, pose: Pose | TaskPose, *, method: str = "auto") -> ReducedModel:
         """The reduced model at ``pose``, interpolated (module docstring, step 4).
 
         Parameters
@@ -387,6 +412,7 @@ class ModalAtlas:
             ``tests/test_modal_atlas.py``.
         """
         method = self._method(method)
+        self.check_pose(pose)
         get = {
             k: self._interp(k, pose, method) for k in ("lam", "xi", "gamma", "cq_phi", "ca_phi", "d", "basis", "qpos")
         }
@@ -450,7 +476,7 @@ class ModalAtlas:
             parameters=params,
         )
 
-    def label_frequencies(self, pose: Pose, *, method: str = "auto") -> np.ndarray:
+    def label_frequencies(self, pose: Pose | TaskPose, *, method: str = "auto") -> np.ndarray:
         """Tracked frequency (Hz) of each reference mode label at ``pose``, interpolated per label.
 
         Coarser than :meth:`query` wherever a label changes character between grid poses
@@ -647,15 +673,16 @@ def _axis(values: Sequence[float], name: str) -> np.ndarray:
 
 
 def build_atlas(
-    manip: Manipulator,
+    manip: Manipulator | Description,
     *,
     x_m: Sequence[float],
     y_m: Sequence[float],
     phi_rad: Sequence[float] = (0.0,),
+    z_m: float | None = None,
     options: ModelOptions | None = None,
     n_modes: int = 6,
     n_extra: int = 4,
-    root: Pose | None = None,
+    root: Pose | TaskPose | None = None,
     accel_fraction: float = 0.5,
     progress: bool = False,
 ) -> ModalAtlas:
@@ -663,6 +690,12 @@ def build_atlas(
 
     Parameters
     ----------
+    manip
+        The 3RRR (:class:`~fpm_sim.config.Manipulator`) or a described architecture
+        (:class:`~fpm_sim.architecture.Description`: its grid in its task coordinates; ``phi_rad`` only where it
+        sets phi).
+    z_m
+        A spatial architecture's height (m; default its first check pose's): the atlas is a horizontal slice.
     options
         Model options shared by every pose (default: the shared default resolution, inextensible links).
     n_modes
@@ -672,31 +705,25 @@ def build_atlas(
     root
         Reference pose (a grid node; default the node nearest the grid centre).
     accel_fraction
-        Accelerometer position on the distal links (the reduced models' acceleration outputs).
+        Accelerometer position on the accelerometer links (the 3RRR's distal links; the reduced models' acceleration
+        outputs).
     """
     xs, ys, ps = _axis(x_m, "x_m"), _axis(y_m, "y_m"), _axis(phi_rad, "phi_rad")
     _check_mode_counts(n_modes, n_extra)
+    held = _held(manip, ps, z_m)
     shape = (len(xs), len(ys), len(ps))
     opts = options or ModelOptions(axial=False)  # the shared default resolution (model.options)
     ridx = _root_index((xs, ys, ps), root)
     order, parent = _bfs_tree(shape, ridx)
-    flat_poses = [Pose(float(x), float(y), float(p)) for x in xs for y in ys for p in ps]
+    flat_poses = [_pose(held, float(x), float(y), float(p)) for x in xs for y in ys for p in ps]
     nodes: dict[str, np.ndarray] = {}
     aligned: dict[int, np.ndarray] = {}
     names: dict[str, list[str]] = {}
     it = tqdm(order, desc="atlas poses", unit="pose", leave=False) if progress else order
     for f in it:
-        built = build_manipulator(manip, flat_poses[f], opts)
+        built = model_at(manip, flat_poses[f], opts)
         system = modal_system(built, accel_fraction=accel_fraction)
-        k_all = len(system.omega_rad_s)
-        if n_modes + n_extra > k_all:
-            raise AtlasError(f"n_modes + n_extra = {n_modes + n_extra} exceeds the {k_all} modes of the model")
-        if parent[f] < 0:
-            al = Alignment(
-                np.arange(n_modes), np.ones(n_modes), np.eye(n_modes), system.phi[:, :n_modes].copy(), np.ones(n_modes)
-            )
-        else:
-            al = align_modes(aligned[parent[f]], system.phi, n_candidates=n_modes + n_extra)
+        al = _align(system, aligned[parent[f]] if parent[f] >= 0 else None, n_modes, n_extra)
         aligned[f] = al.basis
         _store(nodes, shape, f, _node_model(built, system, al))
         names = {
@@ -720,9 +747,66 @@ def build_atlas(
             "accel_fraction": accel_fraction,
             "nv": int(nodes["basis"].shape[3]),
             "mujoco": mujoco.__version__,
+            **({} if held is None else {"architecture": held}),
         },
         **names,
     )
+
+
+def _align(system: ModalSystem, parent_basis: np.ndarray | None, n_modes: int, n_extra: int) -> Alignment:
+    """The node's modes matched to its parent's aligned basis (the root, ``parent_basis`` None: its own lowest)."""
+    k_all = len(system.omega_rad_s)
+    if n_modes + n_extra > k_all:
+        raise AtlasError(f"n_modes + n_extra = {n_modes + n_extra} exceeds the {k_all} modes of the model")
+    if parent_basis is None:
+        return Alignment(
+            np.arange(n_modes), np.ones(n_modes), np.eye(n_modes), system.phi[:, :n_modes].copy(), np.ones(n_modes)
+        )
+    return align_modes(parent_basis, system.phi, n_candidates=n_modes + n_extra)
+
+
+def model_at(manip: Manipulator | Description, pose: Pose | TaskPose, options: ModelOptions) -> BuiltModel:
+    """The model of the 3RRR (:func:`~fpm_sim.model.manipulator.build_manipulator`) or of a described architecture
+    (:func:`~fpm_sim.model.general.build_general`) at ``pose``."""
+    if isinstance(manip, Description):
+        if not isinstance(pose, TaskPose):
+            raise AtlasError(f"{manip.name} takes a fs.TaskPose")
+        return build_general(manip, pose, options)
+    if not isinstance(pose, Pose):
+        raise AtlasError("the 3RRR takes a fs.Pose (x_m, y_m, phi_rad)")
+    return build_manipulator(manip, pose, options)
+
+
+def _held(manip: Manipulator | Description, phi: np.ndarray, z_m: float | None) -> dict[str, Any] | None:
+    """What a described architecture's grid holds (its task coordinates and height ``z_m``, m); ``None`` for the
+    3RRR. A grid coordinate the architecture lacks is refused by name."""
+    if not isinstance(manip, Description):
+        if z_m is not None:
+            raise AtlasError("the 3RRR's task coordinates are x, y and phi", parameter="z_m", value=z_m, hint="drop it")
+        return None
+    if "phi" not in manip.task and (len(phi) != 1 or phi[0] != 0.0):
+        raise AtlasError(
+            f"{manip.name} has no task coordinate phi (its task coordinates are {', '.join(manip.task)})",
+            parameter="phi_rad",
+            value=phi.tolist(),
+            hint="drop it",
+        )
+    if "z" not in manip.task and z_m is not None:
+        raise AtlasError(
+            f"{manip.name} has no task coordinate z (its task coordinates are {', '.join(manip.task)})",
+            parameter="z_m",
+            value=z_m,
+            hint="drop it",
+        )
+    home = manip.check_poses[0] if manip.check_poses else {}
+    z = float(z_m) if z_m is not None else float(home.get("z", 0.0))
+    if not math.isfinite(z):
+        raise AtlasError("must be a finite height", parameter="z_m", value=z_m)
+    return {"task": list(manip.task), "z_m": z}
+
+
+def _pose(held: dict[str, Any] | None, x: float, y: float, phi: float) -> Pose | TaskPose:
+    return Pose(x, y, phi) if held is None else TaskPose(x, y, float(held["z_m"]), phi)
 
 
 def _check_mode_counts(n_modes: int, n_extra: int) -> None:
@@ -734,7 +818,7 @@ def _check_mode_counts(n_modes: int, n_extra: int) -> None:
         raise AtlasError(e.message, parameter=e.parameter, value=e.value) from None
 
 
-def _root_index(axes: tuple[np.ndarray, np.ndarray, np.ndarray], root: Pose | None) -> tuple[int, int, int]:
+def _root_index(axes: tuple[np.ndarray, np.ndarray, np.ndarray], root: Pose | TaskPose | None) -> tuple[int, int, int]:
     """The grid index of the tracking's root: ``root`` (which must be a grid node), or the grid's middle."""
     if root is None:
         return _grid_index(int(np.argmin(np.abs(a - np.median(a)))) for a in axes)

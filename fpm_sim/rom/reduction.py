@@ -15,18 +15,22 @@ and the state-space model has ``x = [eta; eta']``::
 
 Inputs (columns of ``B_q``, generalised forces of unit inputs):
 
-- ``force_x``, ``force_y`` (N), ``moment_z`` (N m): a wrench on the end effector at
-  ``platform_center``, world axes (``B_q = J_site'``);
+- ``force_x``, ``force_y`` (N), ``moment_z`` (N m): a wrench on the end effector at its reference site
+  (:attr:`BuiltModel.end_effector_site`: the 3RRR's ``platform_center``), world axes (``B_q = J_site'``); a
+  spatial machine (``BuiltModel.planar`` false) has all six, ``force_x/y/z`` and ``moment_x/y/z``;
 - ``motor_torque_i`` (N m): a torque on motor hinge ``motor_i``; present only when the motors have a
   hinge (``motors.mode = "servo"`` or a finite ``compliance.motor_clamp_nm_per_rad``). Locked motors
   have no joint, so no torque input.
 
 Outputs (rows of ``C_q`` or ``C_a``, linearised at the equilibrium):
 
-- ``disp_x``, ``disp_y`` (m), ``rot_z`` (rad): end-effector displacement from the equilibrium;
-- ``acc_distal_i`` (m/s^2): acceleration at a point of distal link ``i`` (``accel_fraction`` of its
-  length from the elbow), in the base plane, normal to the link (the bending direction a uniaxial
-  accelerometer on the link measures).
+- ``disp_x``, ``disp_y`` (m), ``rot_z`` (rad): end-effector displacement from the equilibrium (a spatial
+  machine: ``disp_x/y/z``, ``rot_x/y/z``);
+- ``acc_<link>`` (m/s^2): acceleration at a point of each accelerometer link
+  (:attr:`BuiltModel.accelerometer_links`: the 3RRR's distal links, ``acc_distal_i``; a described machine's last
+  flexible link of each chain), ``accel_fraction`` of its length from its start (the elbow), along the link
+  frame's y axis (the bending direction a uniaxial accelerometer on the link measures), projected on the base
+  plane for a planar machine.
 
 Static correction (``static_correction=True``): the truncated modes' quasi-static contribution to
 the displacement outputs enters as the feedthrough ``D = C_q (G - Phi_k Omega_k^-2 Phi_k') B_q``,
@@ -51,6 +55,7 @@ import mujoco
 import numpy as np
 import scipy.linalg
 
+from fpm_sim.architecture import TaskPose
 from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import Pose
 from fpm_sim.linear.equilibrium import static_equilibrium
@@ -80,6 +85,25 @@ __all__ = [
 END_EFFECTOR_SITE = "platform_center"
 WRENCH_INPUTS = (("force_x", "N"), ("force_y", "N"), ("moment_z", "N m"))
 DISP_OUTPUTS = (("disp_x", "m"), ("disp_y", "m"), ("rot_z", "rad"))
+SPATIAL_WRENCH_INPUTS = (
+    ("force_x", "N"),
+    ("force_y", "N"),
+    ("force_z", "N"),
+    ("moment_x", "N m"),
+    ("moment_y", "N m"),
+    ("moment_z", "N m"),
+)
+SPATIAL_DISP_OUTPUTS = (
+    ("disp_x", "m"),
+    ("disp_y", "m"),
+    ("disp_z", "m"),
+    ("rot_x", "rad"),
+    ("rot_y", "rad"),
+    ("rot_z", "rad"),
+)
+_PLANAR_ROWS = ((0, 0), (0, 1), (1, 2))
+"""The wrench rows of a planar machine: (0 translation / 1 rotation Jacobian, world axis)."""
+_SPATIAL_ROWS = ((0, 0), (0, 1), (0, 2), (1, 0), (1, 1), (1, 2))
 
 
 class ReductionError(FpmSimError):
@@ -109,7 +133,8 @@ class ModalSystem:
     flexibility
         Constrained static flexibility ``G = Z (Z'KZ)^-1 Z'``, ``(nv, nv)``.
     b_q, c_q, c_a
-        Generalised forces of unit inputs ``(nv, n_in)``; displacement outputs ``(3, nv)``;
+        Generalised forces of unit inputs ``(nv, n_in)``; displacement outputs ``(3, nv)`` (``(6, nv)`` for a
+        spatial machine);
         acceleration outputs ``(n_acc, nv)`` (rows of the accelerometer directions times the site
         Jacobians).
     input_names, input_units, output_names, output_units
@@ -160,14 +185,17 @@ def motor_dofs(model: mujoco.MjModel) -> list[int]:
 
 
 def accel_site_names(built: BuiltModel, fraction: float) -> list[str]:
-    """Site on each distal link nearest ``fraction`` of its length from the elbow."""
+    """Site on each accelerometer link (:attr:`BuiltModel.accelerometer_links`: the 3RRR's distal links) nearest
+    ``fraction`` of its length from its start (the elbow)."""
     if not (0.0 <= fraction <= 1.0):
         raise ReductionError(f"accel_fraction must lie in [0, 1], got {fraction!r}")
+    if not built.accelerometer_links:
+        raise ReductionError("acceleration outputs need a manipulator model (links that carry accelerometers)")
     out = []
-    for i in range(3):
-        sites = built.links.get(f"distal_{i}")
+    for link in built.accelerometer_links:
+        sites = built.links.get(link)
         if not sites:
-            raise ReductionError("acceleration outputs need the manipulator model (distal links)")
+            raise ReductionError(f"the model has no accelerometer link {link!r}")
         model = built.model
         data = mujoco.MjData(model)
         mujoco.mj_forward(model, data)
@@ -183,11 +211,12 @@ def _io_maps(
     model = built.model
     nv = model.nv
     jacp, jacr = np.zeros((3, nv)), np.zeros((3, nv))
-    mujoco.mj_jacSite(model, data, jacp, jacr, _site_id(model, END_EFFECTOR_SITE))
-    wrench_rows = np.vstack([jacp[0], jacp[1], jacr[2]])
+    mujoco.mj_jacSite(model, data, jacp, jacr, _site_id(model, built.end_effector_site or END_EFFECTOR_SITE))
+    inputs, _, rows = _wrench(built)
+    wrench_rows = np.vstack([(jacp, jacr)[j][axis] for j, axis in rows])
     cols = [wrench_rows.T]
-    names = [n for n, _ in WRENCH_INPUTS]
-    units = [u for _, u in WRENCH_INPUTS]
+    names = [n for n, _ in inputs]
+    units = [u for _, u in inputs]
     for i, dof in enumerate(motor_dofs(model)):
         e = np.zeros((nv, 1))
         e[dof] = 1.0
@@ -201,10 +230,20 @@ def _io_maps(
         sid = _site_id(model, s)
         mujoco.mj_jacSite(model, data, jacp, None, sid)
         normal = data.site_xmat[sid].reshape(3, 3)[:, 1].copy()  # link frame y: in-plane normal
-        normal[2] = 0.0
+        if built.planar:
+            normal[2] = 0.0
         normal /= np.linalg.norm(normal)
         c_a[k] = normal @ jacp
     return b_q, names, units, c_q, c_a
+
+
+def _wrench(
+    built: BuiltModel,
+) -> tuple[tuple[tuple[str, str], ...], tuple[tuple[str, str], ...], tuple[tuple[int, int], ...]]:
+    """The wrench inputs, displacement outputs and Jacobian rows of ``built`` (planar: three; spatial: six)."""
+    if built.planar:
+        return WRENCH_INPUTS, DISP_OUTPUTS, _PLANAR_ROWS
+    return SPATIAL_WRENCH_INPUTS, SPATIAL_DISP_OUTPUTS, _SPATIAL_ROWS
 
 
 def modal_system(
@@ -221,8 +260,8 @@ def modal_system(
     qpos
         Linearisation point; default the static equilibrium under gravity.
     accel_fraction
-        Position of the accelerometer on each distal link, as a fraction of its length from the
-        elbow (nearest segment site).
+        Position of the accelerometer on each accelerometer link (:attr:`BuiltModel.accelerometer_links`), as a
+        fraction of its length from its start (the elbow; nearest segment site).
     filt
         Rigid-body threshold (``filt.rigid_fraction``, as :mod:`fpm_sim.linear.mode_filter`): a mode within it
         (rigid-body motion, a mechanism) raises :class:`ReductionError`, as no static correction exists
@@ -264,8 +303,9 @@ def modal_system(
     flex = z @ scipy.linalg.solve(kr, z.T, assume_a="sym")
     accel_sites = accel_site_names(built, accel_fraction)
     b_q, in_names, in_units, c_q, c_a = _io_maps(built, data, accel_sites)
-    out_names = [n for n, _ in DISP_OUTPUTS] + [f"acc_distal_{i}" for i in range(len(accel_sites))]
-    out_units = [u for _, u in DISP_OUTPUTS] + ["m/s^2"] * len(accel_sites)
+    _, outputs, _ = _wrench(built)
+    out_names = [n for n, _ in outputs] + [f"acc_{link}" for link in built.accelerometer_links]
+    out_units = [u for _, u in outputs] + ["m/s^2"] * len(accel_sites)
     return ModalSystem(
         built=built,
         qpos=q_eq,
@@ -292,9 +332,10 @@ def static_truncation_error(system: ModalSystem, n_modes: int) -> float:
     ``1 / 0.1 m`` and the rotation row by ``0.1 m`` (a wrench of 1 N at a 0.1 m arm).
     """
     arm = 0.1
-    scale_in = np.array([1.0, 1.0, 1.0 / arm])
-    scale_out = np.array([1.0, 1.0, arm])
-    b = system.b_q[:, :3] * scale_in
+    n_w = system.c_q.shape[0]  # the wrench's components (3 planar, 6 spatial), the first inputs
+    scale_in = np.array([1.0 / arm if u == "N m" else 1.0 for u in system.input_units[:n_w]])
+    scale_out = np.array([arm if u == "rad" else 1.0 for u in system.output_units[:n_w]])
+    b = system.b_q[:, :n_w] * scale_in
     c = system.c_q * scale_out[:, None]
     full = c @ system.flexibility @ b
     pk = system.phi[:, :n_modes]
@@ -379,7 +420,8 @@ class ReducedModel:
     input_names, input_units, output_names, output_units, state_names
         Signal names and units.
     pose
-        End-effector pose of the linearisation (m, m, rad).
+        End-effector pose of the linearisation: the 3RRR's :class:`~fpm_sim.kinematics.Pose` (m, m, rad) or a
+        described machine's :class:`~fpm_sim.architecture.TaskPose` (m, m, m, rad).
     frequencies_hz, damping_ratios
         Undamped natural frequency and damping ratio ``Xi_ii / (2 omega_i)`` of each kept mode.
     modal_masses
@@ -403,7 +445,7 @@ class ReducedModel:
     input_units: list[str]
     output_names: list[str]
     output_units: list[str]
-    pose: Pose
+    pose: Pose | TaskPose
     frequencies_hz: np.ndarray
     damping_ratios: np.ndarray
     modal_masses: np.ndarray
@@ -541,8 +583,8 @@ class ReducedModel:
             "output_names": np.array(self.output_names, dtype=object),
             "output_units": np.array(self.output_units, dtype=object),
             "state_names": np.array(self.state_names, dtype=object),
-            "pose": self.pose.as_array(),
-            "pose_units": np.array(["m", "m", "rad"], dtype=object),
+            "pose": np.array(list(dataclasses.asdict(self.pose).values()), dtype=float),
+            "pose_units": np.array(["m"] * (len(dataclasses.asdict(self.pose)) - 1) + ["rad"], dtype=object),
             "frequencies_hz": self.frequencies_hz,
             "damping_ratios": self.damping_ratios,
             "modal_masses": self.modal_masses,
@@ -617,7 +659,7 @@ def load_reduced_model(path: str | Path) -> ReducedModel:
         input_units=_strings(raw["input_units"]),
         output_names=_strings(raw["output_names"]),
         output_units=_strings(raw["output_units"]),
-        pose=Pose(float(pose[0]), float(pose[1]), float(pose[2])),
+        pose=TaskPose(*map(float, pose)) if pose.size == 4 else Pose(float(pose[0]), float(pose[1]), float(pose[2])),
         frequencies_hz=vec("frequencies_hz"),
         damping_ratios=vec("damping_ratios"),
         modal_masses=vec("modal_masses"),
@@ -684,7 +726,7 @@ def reduce_model(
     static_correction
         Add the truncated modes' static flexibility as feedthrough on the displacement outputs.
     accel_fraction
-        Accelerometer position on each distal link (fraction of its length from the elbow).
+        Accelerometer position on each accelerometer link (fraction of its length from its start: the elbow).
     qpos
         Linearisation point (default: static equilibrium under gravity).
     """
@@ -697,8 +739,9 @@ def reduce_model(
     n_in = system.b_q.shape[1]
     a = np.block([[np.zeros((k, k)), np.eye(k)], [-np.diag(w**2), -xi]])
     b = np.vstack([np.zeros((k, n_in)), gamma])
-    c_disp = np.hstack([system.c_q @ pk, np.zeros((3, k))])
-    d_disp = np.zeros((3, n_in))
+    n_disp = system.c_q.shape[0]
+    c_disp = np.hstack([system.c_q @ pk, np.zeros((n_disp, k))])
+    d_disp = np.zeros((n_disp, n_in))
     if static_correction:
         residual = system.flexibility - (pk / w**2) @ pk.T
         d_disp = system.c_q @ residual @ system.b_q
@@ -711,18 +754,17 @@ def reduce_model(
     mujoco.mj_forward(model, data)
     modal_masses = np.einsum("ik,ij,jk->k", pk, mass_matrix(model, data), pk)
     pose_d = system.built.parameters.get("pose", {"x_m": 0.0, "y_m": 0.0, "phi_rad": 0.0})
-    params = dict(system.built.parameters)
-    params.update(
-        {
-            "reduction": {
-                "n_modes": k,
-                "n_modes_full": len(system.omega_rad_s),
-                "static_correction": static_correction,
-                "static_truncation_error": static_truncation_error(system, k),
-                "accel_sites": system.accel_sites,
-            }
-        }
-    )
+    pose = TaskPose(**pose_d) if "z_m" in pose_d else Pose(**pose_d)  # a described machine's task pose
+    params = {
+        **system.built.parameters,
+        "reduction": {
+            "n_modes": k,
+            "n_modes_full": len(system.omega_rad_s),
+            "static_correction": static_correction,
+            "static_truncation_error": static_truncation_error(system, k),
+            "accel_sites": system.accel_sites,
+        },
+    }
     return ReducedModel(
         a=a,
         b=b,
@@ -732,7 +774,7 @@ def reduce_model(
         input_units=list(system.input_units),
         output_names=list(system.output_names),
         output_units=list(system.output_units),
-        pose=Pose(**pose_d),
+        pose=pose,
         frequencies_hz=w / (2 * np.pi),
         damping_ratios=np.diag(xi) / (2 * w),
         modal_masses=modal_masses,

@@ -70,6 +70,7 @@ from fpm_sim.response import (
     FrequencyResponse,
     FrfError,
     LinkPoint,
+    default_point,
     half_power_damping,
     material_point,
     modal_frf,
@@ -524,13 +525,14 @@ def virtual_impact_test(
         The full model; a copy runs on the ``discrete`` integrator unless ``setup.integrator`` is ``"explicit"``
         (``built`` is not changed). ``sample_s`` is rounded to a whole number of steps.
     setup
-        Test settings (default :class:`ImpactSetup`).
+        Test settings (default: :class:`ImpactSetup` with the hammer and the accelerometer at the model's test
+        point, :func:`fpm_sim.response.default_point`: the study's :data:`STUDY_IMPACT_POINT` on the 3RRR).
     system
         The modal system of ``built`` if already computed (else computed here).
     progress
         Show a tqdm progress bar over the impacts.
     """
-    setup = setup or ImpactSetup()
+    setup = setup or ImpactSetup(impact=default_point(built), accelerometer=default_point(built))
     setup.check()
     setup.impact.check(built)
     setup.accelerometer.check(built)

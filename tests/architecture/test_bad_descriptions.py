@@ -91,8 +91,8 @@ def test_an_option_the_architecture_lacks_is_refused_by_name(capsys):
 
 
 def test_a_command_not_yet_general_says_so_in_one_line(capsys):
-    code = main(["reduce", "--config", str(EXAMPLES / "five_bar.toml"), "--modes", "4"])
+    code = main(["move", "--config", str(EXAMPLES / "five_bar.toml")])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2
     assert len(err) == 1
-    assert "'reduce' runs on the study's 3RRR form only so far" in err[0]
+    assert "'move' runs on the study's 3RRR form only so far" in err[0]

@@ -69,7 +69,6 @@ def test_a_delta_sweep_reads_its_poses_file_in_x_y_z(tmp_path, capsys):
     ("extra", "flag"),
     [
         (["--reading", "y-"], "--reading"),
-        (["--backend", "jax"], "--backend"),
         (["--thickness-mm", "5"], "--thickness-mm"),
         (["--grid", "paper"], "--grid paper"),
         (["--phi-rad", "0.1"], "--phi-rad"),
@@ -82,3 +81,14 @@ def test_the_study_s_options_are_refused_by_name(extra, flag, tmp_path, capsys):
     assert len(err) == 1
     assert err[0].startswith(f"error: {flag}")
     assert not (tmp_path / "o").exists()
+
+
+def test_the_jax_backend_on_the_delta_is_refused_by_the_joint_it_cannot_close(tmp_path, capsys):
+    out = tmp_path / "o"
+    code = main(["sweep", "--config", str(EXAMPLES / "delta.toml"), "--backend", "jax", "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert len(err) == 1
+    assert err[0].startswith("error: --backend: chains[")
+    assert "spherical" in err[0]
+    assert not out.exists()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import dataclasses
 from typing import Any
 
 import numpy as np
@@ -33,4 +34,4 @@ def with_step(built: BuiltModel, h: float) -> BuiltModel:
     model = copy.copy(built.model)
     model.opt.timestep = h
     model.eq_solref[:, 0] = 2.0 * h
-    return BuiltModel(model, built.spec, built.name, built.links, built.dof_kinds, built.parameters)
+    return dataclasses.replace(built, model=model)
