@@ -40,6 +40,8 @@ __all__ = [
     "TaskAssembly",
     "TaskPose",
     "UnreachableTaskPoseError",
+    "actuated_coordinates",
+    "assembly_unknowns",
     "check_mobility",
     "solve_task_pose",
 ]
@@ -680,6 +682,20 @@ def check_mobility(desc: Description, assembly: TaskAssembly) -> None:
             hint="mark more joints actuated = true, or check the joint types (a locked machine needs as many "
             "actuators as degrees of freedom)",
         )
+
+
+def assembly_unknowns(desc: Description, asm: TaskAssembly) -> np.ndarray:
+    """The unknowns of ``asm`` as :func:`solve_task_pose`'s ``start`` takes them: a warm start for a neighbouring
+    pose (a path followed in small steps stays in the working mode it starts in)."""
+    return _unknowns_of(desc, _layout(desc), asm)
+
+
+def actuated_coordinates(desc: Description, asm: TaskAssembly) -> np.ndarray:
+    """The actuated joints' coordinates at ``asm`` (rad or m), in the description's order (one per joint: revolute
+    or prismatic)."""
+    return np.array(
+        [float(asm.chains[c.name].coordinates[j.name][0]) for c in desc.chains for j in c.joints if j.actuated]
+    )
 
 
 def _unknowns_of(desc: Description, full: _Layout, asm: TaskAssembly) -> np.ndarray:

@@ -295,9 +295,7 @@ def add_pose_args(p: argparse.ArgumentParser) -> None:
 
 def add_output_args(p: argparse.ArgumentParser) -> None:
     """``--json``."""
-    p.add_argument(
-        "--json", action=argparse.BooleanOptionalAction, default=False, help="print JSON instead of a table"
-    )
+    p.add_argument("--json", action=argparse.BooleanOptionalAction, default=False, help="print JSON instead of a table")
 
 
 def add_overwrite_arg(p: argparse.ArgumentParser) -> None:
@@ -362,7 +360,7 @@ def pose_of(args: argparse.Namespace) -> Pose:
     return checked_pose_mm(*(0.0 if v is None else v for v in (args.x_mm, args.y_mm, args.phi_rad)))
 
 
-GENERAL_COMMANDS = ("modes", "export-mjcf", "sweep", "check")
+GENERAL_COMMANDS = ("modes", "export-mjcf", "sweep", "check", "rollout", "move")
 """The commands that run on a described architecture (``[[chains]]``) so far; the others say so."""
 
 

@@ -149,6 +149,14 @@ def _site_id(model: mujoco.MjModel, name: str) -> int:
     return sid
 
 
+def _ee_site_id(model: mujoco.MjModel) -> int:
+    """The 3RRR's ``platform_center``, else a described architecture's ``end_effector_site``
+    (:mod:`fpm_sim.model.general`)."""
+    if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, END_EFFECTOR_SITE) < 0:
+        return _site_id(model, "end_effector_site")
+    return _site_id(model, END_EFFECTOR_SITE)
+
+
 def motor_dofs(model: mujoco.MjModel) -> list[int]:
     """DOF addresses of the motor hinges ``motor_0..2`` (empty when the motors are locked)."""
     out = []
@@ -183,7 +191,7 @@ def _io_maps(
     model = built.model
     nv = model.nv
     jacp, jacr = np.zeros((3, nv)), np.zeros((3, nv))
-    mujoco.mj_jacSite(model, data, jacp, jacr, _site_id(model, END_EFFECTOR_SITE))
+    mujoco.mj_jacSite(model, data, jacp, jacr, _ee_site_id(model))
     wrench_rows = np.vstack([jacp[0], jacp[1], jacr[2]])
     cols = [wrench_rows.T]
     names = [n for n, _ in WRENCH_INPUTS]
@@ -262,7 +270,8 @@ def modal_system(
     phi = z @ x
     xi = phi.T @ damp @ phi
     flex = z @ scipy.linalg.solve(kr, z.T, assume_a="sym")
-    accel_sites = accel_site_names(built, accel_fraction)
+    # the accelerometers sit on the 3RRR's distal links; a described architecture's model has none of them
+    accel_sites = accel_site_names(built, accel_fraction) if "distal_0" in built.links else []
     b_q, in_names, in_units, c_q, c_a = _io_maps(built, data, accel_sites)
     out_names = [n for n, _ in DISP_OUTPUTS] + [f"acc_distal_{i}" for i in range(len(accel_sites))]
     out_units = [u for _, u in DISP_OUTPUTS] + ["m/s^2"] * len(accel_sites)
