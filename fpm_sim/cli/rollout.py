@@ -200,6 +200,8 @@ def cmd_rollout(args: argparse.Namespace) -> int:
         raise CliError(
             f"--motor-torque-nm needs {n_motors} values, one per actuated joint ({names}), got {len(torques)}"
         )
+    if isinstance(machine, RolloutMachine) and any(torques) and args.motors != "servo":
+        raise CliError("--motor-torque-nm drives servos: add --motors servo (locked actuated joints have no joint)")
     ee = _profile(args.load_profile, wrench, args.load_start_s, args.load_freq_hz) if any(wrench) else None
     torque = _profile(args.load_profile, torques, args.load_start_s, args.load_freq_hz) if any(torques) else None
     fraction = 0.5 if args.accel_fraction is None else args.accel_fraction

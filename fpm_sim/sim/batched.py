@@ -173,12 +173,7 @@ def batched_rollouts(
     h = float(model.opt.timestep)
     n_sub = max(1, round(output_step_s / h))
     n_out = round(duration_s / (n_sub * h))
-    sid = end_effector_site_id(model)
-    bid = int(model.site_bodyid[sid])
-    if not np.allclose(model.body_ipos[bid], model.site_pos[sid], atol=1e-12):
-        raise BatchedRolloutError(
-            "the end effector's centre of mass is not at its site; wrench application unsupported"
-        )
+    control = _control(model, w, coords)
     data = mujoco.MjData(model)
     data.qpos[:] = q0
     mujoco.mj_forward(model, data)
@@ -189,10 +184,6 @@ def batched_rollouts(
     mujoco.mj_getState(model, data, s0, spec)
     n = w.shape[0]
     state = np.tile(s0, (n, 1))
-    control = np.zeros((n, 1, 6 * model.nbody))
-    slots = {"x": 0, "y": 1, "z": 2, "phi": 5}
-    for k, c in enumerate(coords):
-        control[:, 0, 6 * bid + slots[c]] = w[:, k]
     datas = [mujoco.MjData(model) for _ in range(threads)]
     disp = np.zeros((n, n_out + 1, len(coords)))
     out = np.empty((n, n_sub, nstate))
@@ -222,6 +213,22 @@ def batched_rollouts(
     wall = time.perf_counter() - start
     t = np.arange(n_out + 1) * n_sub * h
     return _dataset(w, disp, t, stepping, threads=threads, wall_s=wall, n_steps=n_out * n_sub, built=built, manip=manip)
+
+
+def _control(model: mujoco.MjModel, w: np.ndarray, coords: tuple[str, ...]) -> np.ndarray:
+    """The ``xfrc_applied`` control of each rollout: its load on the end effector's body (centre of mass at its
+    site, checked), a force along each translational coordinate and a moment about z for ``phi``."""
+    sid = end_effector_site_id(model)
+    bid = int(model.site_bodyid[sid])
+    if not np.allclose(model.body_ipos[bid], model.site_pos[sid], atol=1e-12):
+        raise BatchedRolloutError(
+            "the end effector's centre of mass is not at its site; wrench application unsupported"
+        )
+    control = np.zeros((w.shape[0], 1, 6 * model.nbody))
+    slots = {"x": 0, "y": 1, "z": 2, "phi": 5}
+    for k, c in enumerate(coords):
+        control[:, 0, 6 * bid + slots[c]] = w[:, k]
+    return control
 
 
 def _checked_inputs(

@@ -133,7 +133,7 @@ def machine_of(built: BuiltModel, desc: Description, asm: TaskAssembly) -> Rollo
         motor0=motor0,
         servo_stiffness=np.array([desc.servos.gains(t)[0] for t in types]) if servo else None,
         rigid_pose=rigid,
-        no_motor_hint="give the actuated joints servos (fpm-sim: --motors servo; fs.rollout(..., motors='servo'); "
+        no_motor_hint="give the actuated joints servos (motors='servo': fs.rollout(..., motors='servo'), "
         "build_general(..., motors='servo')); locked ones have no joint",
         parameters={"motors": "servo" if servo else "locked", "actuated_joints": list(names)},
     )
