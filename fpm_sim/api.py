@@ -346,7 +346,9 @@ def sweep(
             task_poses = [p for p in poses or [] if isinstance(p, TaskPose)]
             if len(task_poses) != len(poses or []) or not task_poses:
                 raise TypeError("a described architecture's poses are fs.TaskPose values (grid='poses')")
-        return sweep_task(config, task_poses, options=_options(options), workers=workers, grid=grid, step_mm=step_mm)
+        return sweep_task(
+            config, task_poses, options=_options(options), workers=workers, grid=grid, step_mm=step_mm
+        )
     from fpm_sim.kinematics import Pose
     from fpm_sim.study.poses import parse_reading
     from fpm_sim.study.sweep import sweep_workspace
@@ -1217,7 +1219,6 @@ if TYPE_CHECKING:
     from pathlib import Path
 
     from fpm_sim.study.posterior import Posterior, PredictiveBands
-
 
 def predict_bands(
     posterior: Posterior | str | Path,

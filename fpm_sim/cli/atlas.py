@@ -84,7 +84,9 @@ def cmd_atlas_query(args: argparse.Namespace) -> int:
 
     check_output_file(args.out, "--out", (".mat", ".npz"))
     pose = pose_of(args)
-    atlas = read_input_file(args.atlas, "atlas", load_atlas, "an atlas written by 'fpm-sim atlas build --out FILE.npz'")
+    atlas = read_input_file(
+        args.atlas, "atlas", load_atlas, "an atlas written by 'fpm-sim atlas build --out FILE.npz'"
+    )
     rom = atlas.query(pose, method=args.method)
     if args.out:
         with atomic_file(args.out) as tmp:

@@ -76,7 +76,8 @@ def cmd_design(args: argparse.Namespace) -> int:
     finish_store(out)
     text = (
         f"{config.name}\n  {len(result.designs)} designs x {len(poses)} poses ({grid} grid), "
-        f"{result.elapsed_s:.1f} s\n\n{result.table()}\n\n  wrote " + ", ".join(str(p) for p in paths)
+        f"{result.elapsed_s:.1f} s\n\n{result.table()}\n\n  wrote "
+        + ", ".join(str(p) for p in paths)
     )
     payload = {"summary": result.summary(), "files": [str(p) for p in paths], "elapsed_s": result.elapsed_s}
     emit(args, with_resolution(payload, opts), text)

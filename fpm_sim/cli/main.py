@@ -109,8 +109,9 @@ def save_figure(path: Path, draw: Callable[[], Any]) -> None:
 def _header(built: BuiltModel, title: str) -> str:
     p = built.parameters
     o = p["options"]
-    return f"{title}\n  nv = {p['nv']}, timestep = {p['timestep_s']:.3g} s, link model = {o['link_model']}" + (
-        f" ({o['segments']} segments)" if o["link_model"] != "rigid" else ""
+    return (
+        f"{title}\n  nv = {p['nv']}, timestep = {p['timestep_s']:.3g} s, link model = {o['link_model']}"
+        + (f" ({o['segments']} segments)" if o["link_model"] != "rigid" else "")
     )
 
 
@@ -318,10 +319,8 @@ def cmd_export_mjcf(args: argparse.Namespace) -> int:
     if args.what == "manipulator":
         built, _ = _build_machine(args, machine, opts)
     elif not isinstance(machine, Manipulator):
-        raise CliError(
-            f"export-mjcf {args.what}: the rigs are the study's own test pieces; on a described "
-            "architecture export the manipulator"
-        )
+        raise CliError(f"export-mjcf {args.what}: the rigs are the study's own test pieces; on a described "
+                       "architecture export the manipulator")
     else:
         manip = machine
         args.rig = args.what

@@ -15,7 +15,6 @@ __all__ = [
     "check_finite",
 ]
 
-
 def check_finite(name: str, value: Any, *, positive: bool = False) -> np.ndarray:
     """``value`` as a float array, all finite (and ``> 0`` with ``positive``).
 

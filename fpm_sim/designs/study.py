@@ -148,7 +148,9 @@ def read_designs_csv(path: str | Path, config: Manipulator) -> list[dict[str, fl
     designs: list[dict[str, float]] = []
     for line, r in enumerate(rows, start=2):
         if len(r) != len(header):
-            raise DesignError(f"{p}: row {line} has {len(r)} cells for {len(header)} columns", parameter="designs")
+            raise DesignError(
+                f"{p}: row {line} has {len(r)} cells for {len(header)} columns", parameter="designs"
+            )
         try:
             values = [float(v) for v in r]
         except ValueError:
@@ -497,10 +499,8 @@ class DesignResult:
             a.set_ylabel("y (mm)", fontsize=7)
         if sc is not None:
             fig.colorbar(sc, ax=axes, label="f1 (Hz)", shrink=0.8)
-        shown = (
-            f"designs 1-{n} of {len(self.designs)} (the rest in design.csv)"
-            if n < len(self.designs)
-            else (f"all {n} designs")
+        shown = f"designs 1-{n} of {len(self.designs)} (the rest in design.csv)" if n < len(self.designs) else (
+            f"all {n} designs"
         )
         fig.suptitle(f"f1 over the poses, {shown}; small grey marks: no f1 (out of reach or failed)", fontsize=9)
         return fig

@@ -17,7 +17,6 @@ __all__ = [
     "route_mujoco_warnings",
 ]
 
-
 class MujocoWarning(FpmSimWarning):
     """A warning raised inside MuJoCo (e.g. "Nan, Inf or huge value in QACC": the simulation is unstable)."""
 
