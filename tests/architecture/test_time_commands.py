@@ -237,3 +237,21 @@ def test_an_option_the_five_bar_lacks_is_refused_in_one_line(capsys, command, op
     assert len(err) == 1
     assert err[0].startswith("error: ")
     assert says in err[0]
+
+
+def test_the_servo_gains_come_from_the_file_with_their_source_or_the_stated_default():
+    from fpm_sim.architecture.description import SERVO_SOURCE
+    from fpm_sim.config.schema import ConfigError
+
+    raw = tomllib.loads(FIVE_BAR.read_text())
+    raw["servos"] = {"stiffness_nm_per_rad": {"value": 800.0, "source": "datasheet"}}
+    desc = parse_description(raw)
+    assert desc.servos.gains("revolute") == (800.0, 1.0)
+    built = _quiet(build_general, desc, TaskPose(0.0, 0.25), ModelOptions(segments=2), motors="servo")
+    gains = built.parameters["servos"]
+    assert gains["stiffness_nm_per_rad"] == {"value": 800.0, "source": "datasheet"}
+    assert gains["damping_nms_per_rad"]["source"] == SERVO_SOURCE
+    assert "servos" not in _quiet(build_general, desc, TaskPose(0.0, 0.25), ModelOptions(segments=2)).parameters
+    raw["servos"] = {"stiffness_nm_per_rad": 0.0}
+    with pytest.raises(ConfigError, match=r"servos\.stiffness_nm_per_rad"):
+        parse_description(raw)
