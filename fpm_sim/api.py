@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal, overload
+from typing import TYPE_CHECKING, Any, Literal, overload
 
 if TYPE_CHECKING:
     from fpm_sim.architecture import Description, TaskPose
@@ -36,7 +36,7 @@ if TYPE_CHECKING:
     from fpm_sim.rom.reduction import ReducedModel
     from fpm_sim.sim.batched import BatchedRollouts
     from fpm_sim.sim.impact import ImpactSetup, ImpactTestResult
-    from fpm_sim.sim.rollout import RolloutResult
+    from fpm_sim.sim.rollout import RolloutMachine, RolloutResult
     from fpm_sim.sim.trajectory import MoveResult
     from fpm_sim.study.calibrate import Calibration, SamplerOptions
     from fpm_sim.study.identify import Identification, IdentifyOptions, Observation
@@ -111,17 +111,76 @@ def _built(
     return build_manipulator(_config(config), _pose(pose), _options(options, stacklevel=4))
 
 
-def _aligned(
-    config: Manipulator | None, pose: Pose | None, options: ModelOptions | None, output_step_s: float
-) -> tuple[Manipulator, BuiltModel]:
-    """Return the description and its model for a rollout (the timestep rounded down to divide the output step)."""
-    from fpm_sim.model.manipulator import build_manipulator
-    from fpm_sim.model.options import ModelOptions
-    from fpm_sim.sim.rollout import aligned_options
+def _task_pose(desc: Description, pose: Pose | TaskPose | None) -> TaskPose:
+    """``pose`` (a :class:`TaskPose`), or the description's first check pose."""
+    from fpm_sim.architecture import TaskPose
 
-    manip, p = _config(config), _pose(pose)
+    if pose is not None and not isinstance(pose, TaskPose):
+        raise TypeError("a described architecture takes a fs.TaskPose (x_m, y_m, z_m, phi_rad)")
+    home = desc.check_poses[0] if desc.check_poses else {}
+    return pose if pose is not None else TaskPose(*(home.get(c, 0.0) for c in ("x", "y", "z", "phi")))
+
+
+def _aligned(
+    config: Manipulator | Description | None,
+    pose: Pose | TaskPose | None,
+    options: ModelOptions | None,
+    output_step_s: float,
+    motors: str = "locked",
+) -> tuple[Manipulator | RolloutMachine, BuiltModel]:
+    """Return the description and its model for a rollout (the timestep rounded down to divide the output step).
+
+    A described architecture's description is its :class:`RolloutMachine`, its actuated joints ``motors``.
+    """
+    from fpm_sim.architecture import Description, TaskPose, solve_task_pose
+    from fpm_sim.model.options import ModelOptions
+    from fpm_sim.sim.rollout import RolloutError, aligned_options, aligned_step
+
     opts = _options(options, stacklevel=4) or ModelOptions()
-    return manip, build_manipulator(manip, p, aligned_options(manip, p, opts, output_step_s))
+    if isinstance(config, Description):
+        from fpm_sim.model.general import build_general
+        from fpm_sim.sim.task import machine_of
+
+        p = _task_pose(config, pose)
+        asm = solve_task_pose(config, p)
+        h = opts.timestep_s or build_general(config, p, opts, assembly=asm, motors=motors).timestep_s
+        built = build_general(config, p, aligned_step(opts, h, output_step_s), assembly=asm, motors=motors)
+        return machine_of(built, config, asm), built
+    from fpm_sim.model.manipulator import build_manipulator
+
+    if motors != "locked":
+        raise RolloutError(
+            "sets a described architecture's actuated joints",
+            parameter="motors",
+            value=motors,
+            hint="for the 3RRR set config.motors (Motors(mode='servo', ...))",
+        )
+    if isinstance(pose, TaskPose):
+        raise TypeError("the 3RRR takes a fs.Pose (x_m, y_m, phi_rad)")
+    manip, p3 = _config(config), _pose(pose)
+    return manip, build_manipulator(manip, p3, aligned_options(manip, p3, opts, output_step_s))
+
+
+def _task_load(
+    machine: Manipulator | RolloutMachine, values: dict[str, float], *, what: str = "end-effector load"
+) -> list[float]:
+    """Return the end-effector load along the machine's coordinates from the named components.
+
+    ``force_x_n``, ...: a non-zero one the machine has no coordinate for is refused by name.
+    """
+    from fpm_sim.sim.rollout import RolloutError, RolloutMachine
+
+    coords = machine.coordinates if isinstance(machine, RolloutMachine) else ("x", "y", "phi")
+    names = {"x": "force_x_n", "y": "force_y_n", "z": "force_z_n", "phi": "moment_z_nm"}
+    for c, n in names.items():
+        if values.get(n, 0.0) != 0.0 and c not in coords:
+            raise RolloutError(
+                f"the machine has no task coordinate {c} (its coordinates: {', '.join(coords)}), so no {what} along it",
+                parameter=n,
+                value=values[n],
+                hint=f"drop {n}",
+            )
+    return [float(values.get(names[c], 0.0)) for c in coords]
 
 
 @overload
@@ -462,15 +521,17 @@ def frf(
 
 
 def rollout(
-    config: Manipulator | None = None,
-    pose: Pose | None = None,
+    config: Manipulator | Description | None = None,
+    pose: Pose | TaskPose | None = None,
     *,
     duration_s: float = 0.2,
     output_step_s: float = 1e-4,
     force_x_n: float = 0.0,
     force_y_n: float = 0.0,
+    force_z_n: float = 0.0,
     moment_z_nm: float = 0.0,
-    motor_torque_nm: Sequence[float] = (0.0, 0.0, 0.0),
+    motor_torque_nm: Sequence[float] | None = None,
+    motors: str = "locked",
     accel_fraction: float | None = 0.5,
     options: ModelOptions | None = None,
     progress: bool = False,
@@ -486,17 +547,24 @@ def rollout(
     Parameters
     ----------
     config, pose
-        As :func:`modes`.
+        As :func:`modes` (a described architecture: its task coordinates are recorded, :mod:`fpm_sim.sim.task`).
     duration_s
         Simulated time (s).
     output_step_s
         Sample period of the recorded signals (s).
-    force_x_n, force_y_n, moment_z_nm
-        Constant end-effector force (N) and moment (N m).
+    force_x_n, force_y_n, force_z_n, moment_z_nm
+        Constant end-effector force (N) and moment about z (N m); a described architecture takes a force along
+        each of its translational task coordinates and a moment where it has ``phi`` (others refused by name;
+        the 3RRR has no ``force_z_n``).
     motor_torque_nm
-        Constant motor torques (N m; needs servo motors in ``config``).
+        Constant motor torques (N m, N on a prismatic joint), one per motor (the 3RRR: three, needs servo motors in
+        ``config``; a described architecture: one per actuated joint, needs ``motors="servo"``); ``None``: none.
+    motors
+        A described architecture's actuated joints: ``"locked"`` (default) or ``"servo"`` (its ``[servos]`` gains,
+        :class:`fpm_sim.architecture.description.ServoGains`); the 3RRR's come from ``config.motors``.
     accel_fraction
-        Record accelerations at this fraction (0..1) of each distal link; ``None``: none.
+        Record accelerations at this fraction (0..1) of each distal link (the 3RRR); ``None``: none (a described
+        architecture records none).
     options
         Model options (as :func:`modes`).
     progress
@@ -507,19 +575,23 @@ def rollout(
         (:func:`fpm_sim.sim.stepping.choose_stepping`).
     """
     from fpm_sim.rom.reduction import accel_site_names
-    from fpm_sim.sim.rollout import constant
+    from fpm_sim.sim.rollout import RolloutMachine, constant
     from fpm_sim.sim.rollout import rollout as _rollout
 
-    manip, built = _aligned(config, pose, options, output_step_s)
-    wrench = (force_x_n, force_y_n, moment_z_nm)
+    machine, built = _aligned(config, pose, options, output_step_s, motors)
+    wrench = _task_load(
+        machine, dict(force_x_n=force_x_n, force_y_n=force_y_n, force_z_n=force_z_n, moment_z_nm=moment_z_nm)
+    )
+    torque = _motor_torques(machine, motor_torque_nm)
+    general = isinstance(machine, RolloutMachine)
     return _rollout(
         built,
-        manip,
+        machine,
         duration_s=duration_s,
         output_step_s=output_step_s,
         ee_wrench=constant(*wrench) if any(wrench) else None,
-        motor_torque=constant(*motor_torque_nm) if any(motor_torque_nm) else None,
-        accel_sites=accel_site_names(built, accel_fraction) if accel_fraction is not None else [],
+        motor_torque=constant(*torque) if any(torque) else None,
+        accel_sites=accel_site_names(built, accel_fraction) if accel_fraction is not None and not general else [],
         progress=progress,
         integrator=integrator,
         band_hz=band_hz,
@@ -527,9 +599,27 @@ def rollout(
     )
 
 
+def _motor_torques(machine: Manipulator | RolloutMachine, torques: Sequence[float] | None) -> list[float]:
+    """One torque per motor (the 3RRR's three, a described architecture's actuated joints); the count checked."""
+    from fpm_sim.sim.rollout import RolloutError, RolloutMachine
+
+    names = machine.motor_names if isinstance(machine, RolloutMachine) else ("0", "1", "2")
+    if torques is None:
+        return [0.0] * len(names)
+    values = [float(v) for v in torques]
+    if len(values) != len(names):
+        raise RolloutError(
+            f"needs {len(names)} values, one per actuated joint ({', '.join(names)}), got {len(values)}",
+            parameter="motor_torque_nm",
+            value=values,
+            hint=f"give {len(names)} torques",
+        )
+    return values
+
+
 def batched_rollouts(
-    config: Manipulator | None = None,
-    pose: Pose | None = None,
+    config: Manipulator | Description | None = None,
+    pose: Pose | TaskPose | None = None,
     *,
     wrenches: Sequence[Sequence[float]],
     duration_s: float = 0.2,
@@ -541,15 +631,17 @@ def batched_rollouts(
 ) -> BatchedRollouts:
     """Many constant end-effector loads on one model, stepped in ``mujoco.rollout``'s threads.
 
-    Each row of ``wrenches`` (``F_x, F_y`` in N, ``M_z`` in N m) is one rollout from the static equilibrium under
-    gravity, as :func:`rollout` with that constant load (:mod:`fpm_sim.sim.batched`); no command of its own.
+    Each row of ``wrenches`` (``F_x, F_y`` in N, ``M_z`` in N m; a described architecture: a force per
+    translational task coordinate and a moment about z for ``phi``, in its task order) is one rollout from the
+    static equilibrium under gravity, as :func:`rollout` with that constant load (:mod:`fpm_sim.sim.batched`); no
+    command of its own.
 
     Parameters
     ----------
     config, pose
         As :func:`modes`.
     wrenches
-        ``(n, 3)`` constant end-effector loads, one rollout each.
+        ``(n, 3)`` constant end-effector loads (a described architecture: ``(n, len(task))``), one rollout each.
     duration_s, output_step_s
         Simulated time (s) and sample period (s).
     threads
@@ -568,10 +660,10 @@ def batched_rollouts(
     from fpm_sim.sim.batched import BatchedRollouts
     from fpm_sim.sim.batched import batched_rollouts as _batched
 
-    manip, built = _aligned(config, pose, options, output_step_s)
+    machine, built = _aligned(config, pose, options, output_step_s)
     ds = _batched(
         built,
-        manip,
+        machine,
         wrenches,
         duration_s=duration_s,
         output_step_s=output_step_s,
@@ -583,10 +675,10 @@ def batched_rollouts(
 
 
 def move(
-    config: Manipulator | None = None,
-    pose: Pose | None = None,
+    config: Manipulator | Description | None = None,
+    pose: Pose | TaskPose | None = None,
     *,
-    end: Pose | None = None,
+    end: Pose | TaskPose | None = None,
     move_s: float = 0.3,
     profile: str = "minimum-jerk",
     path_csv: str | Path | None = None,
@@ -603,18 +695,22 @@ def move(
 
     The full flexible model follows the commanded path; reported: tracking error, link deflection, residual
     vibration after the move (peak, settling time, dominant frequency against the modal f1 at the end pose),
-    motor torques (:mod:`fpm_sim.sim.trajectory`). Locked motors get the stated default servos.
+    motor torques (:mod:`fpm_sim.sim.trajectory`). Locked motors get the stated default servos; a described
+    architecture's actuated joints its ``[servos]`` gains (their stated defaults: :mod:`fpm_sim.sim.task`).
 
     Parameters
     ----------
     config
         As :func:`modes`.
     pose, end
-        Start and end pose (m, m, rad); ``None``: ``(0, 0, 0)`` and ``(30 mm, 0, 0)``.
+        Start and end pose (m, m, rad); ``None``: ``(0, 0, 0)`` and ``(30 mm, 0, 0)``. A described architecture:
+        :class:`fpm_sim.architecture.TaskPose` s; ``None``: its first check pose, and that pose 30 mm further along
+        x.
     move_s, profile
         Move time (s) and motion profile (``"trapezoidal"``, ``"s-curve"``, ``"minimum-jerk"``).
     path_csv
-        A commanded path ``t_s, x_mm, y_mm, phi_rad`` instead of a profile move (then no ``pose``/``end``).
+        A commanded path ``t_s, x_mm, y_mm, phi_rad`` (a described architecture: ``t_s`` and its task columns,
+        ``x_mm, y_mm[, z_mm][, phi_rad]``) instead of a profile move (then no ``pose``/``end``).
     shaper
         Input shaper for the end pose's dominant in-plane mode: ``"none"``, ``"zv"`` or ``"zvd"``.
     settle_s, settle_tol_m
@@ -628,23 +724,18 @@ def move(
     progress
         Show a progress bar.
     """
+    from fpm_sim.architecture import Description, TaskPose
     from fpm_sim.kinematics import Pose
     from fpm_sim.sim import trajectory as tj
 
-    if path_csv is not None:
-        if pose is not None or end is not None:
-            raise tj.MoveError(
-                "a sampled path sets its own start and end poses",
-                parameter="path_csv",
-                value=str(path_csv),
-                hint="give either a path CSV or the start and end poses",
-            )
-        path = tj.MovePath.from_csv(path_csv)
-    else:
-        path = tj.MovePath(_pose(pose), Pose.from_mm(30.0, 0.0, 0.0) if end is None else end, move_s, kind=profile)
-    return tj.simulate_move(
-        _config(config),
-        path,
+    if path_csv is not None and (pose is not None or end is not None):
+        raise tj.MoveError(
+            "a sampled path sets its own start and end poses",
+            parameter="path_csv",
+            value=str(path_csv),
+            hint="give either a path CSV or the start and end poses",
+        )
+    kw: dict[str, Any] = dict(
         settle_s=settle_s,
         options=_options(options),
         output_step_s=output_step_s,
@@ -654,6 +745,38 @@ def move(
         band_hz=band_hz,
         progress=progress,
     )
+    if isinstance(config, Description):
+        return _task_move(config, pose, end, move_s, profile, path_csv, kw)
+    if isinstance(pose, TaskPose) or isinstance(end, TaskPose):
+        raise TypeError("the 3RRR takes fs.Pose s (x_m, y_m, phi_rad)")
+    if path_csv is not None:
+        path = tj.MovePath.from_csv(path_csv)
+    else:
+        path = tj.MovePath(_pose(pose), Pose.from_mm(30.0, 0.0, 0.0) if end is None else end, move_s, kind=profile)
+    return tj.simulate_move(_config(config), path, **kw)
+
+
+def _task_move(
+    desc: Description,
+    pose: Pose | TaskPose | None,
+    end: Pose | TaskPose | None,
+    move_s: float,
+    profile: str,
+    path_csv: str | Path | None,
+    kw: dict[str, Any],
+) -> MoveResult:
+    """:func:`move` on a described architecture (:func:`fpm_sim.sim.task.simulate_task_move`)."""
+    import dataclasses
+
+    from fpm_sim.sim.task import TaskPath, pose_vector, simulate_task_move
+
+    if path_csv is not None:
+        path = TaskPath.from_csv(path_csv, desc.task)
+    else:
+        start = _task_pose(desc, pose)
+        stop = _task_pose(desc, end) if end is not None else dataclasses.replace(start, x_m=start.x_m + 0.03)
+        path = TaskPath(desc.task, pose_vector(start, desc.task), pose_vector(stop, desc.task), move_s, kind=profile)
+    return simulate_task_move(desc, path, **kw)
 
 
 def impact(

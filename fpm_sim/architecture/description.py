@@ -44,6 +44,7 @@ __all__ = [
     "JointDesc",
     "LinkDesc",
     "PlacedLump",
+    "ServoGains",
     "TubeSection",
 ]
 
@@ -211,6 +212,39 @@ class EndEffectorDesc:
     lumps: tuple[PlacedLump, ...] = ()
 
 
+SERVO_SOURCE = (
+    "assumed default: the 3RRR's stated servo (fpm_sim.sim.trajectory.DEFAULT_SERVO_*: 500 N m/rad, 1 N m s/rad); "
+    "a prismatic axis through a 10 mm-lead ball screw of it (x (2 pi / 0.01 m)^2)"
+)
+"""The provenance of :class:`ServoGains`' defaults (a description's ``[servos]`` table replaces them)."""
+_SCREW = (2.0 * math.pi / 0.01) ** 2  # (rad/m)^2: a rotary servo seen through a 10 mm-lead ball screw
+
+
+@dataclass(frozen=True)
+class ServoGains:
+    """The position servo of every actuated joint when the machine moves (rollouts with motor torques, moves):
+    a spring-damper about the assembled coordinate, its set point moved by the command. Revolute: N m/rad and
+    N m s/rad; prismatic: N/m and N s/m. Defaults: :data:`SERVO_SOURCE` (assumed; no machine's gains are known)."""
+
+    stiffness_nm_per_rad: float = 500.0
+    damping_nms_per_rad: float = 1.0
+    stiffness_n_per_m: float = 500.0 * _SCREW
+    damping_ns_per_m: float = 1.0 * _SCREW
+
+    def gains(self, joint_type: str) -> tuple[float, float]:
+        """``(stiffness, damping)`` of an actuated joint of ``joint_type`` (revolute or prismatic)."""
+        if joint_type == "prismatic":
+            return self.stiffness_n_per_m, self.damping_ns_per_m
+        return self.stiffness_nm_per_rad, self.damping_nms_per_rad
+
+    def to_dict(self, provenance: dict[str, str]) -> dict[str, Any]:
+        """The gains and each one's source (the file's ``servos.<name>`` provenance, else :data:`SERVO_SOURCE`)."""
+        return {
+            k: {"value": float(getattr(self, k)), "source": provenance.get(f"servos.{k}", SERVO_SOURCE)}
+            for k in ("stiffness_nm_per_rad", "damping_nms_per_rad", "stiffness_n_per_m", "damping_ns_per_m")
+        }
+
+
 @dataclass(frozen=True)
 class Description:
     """A whole manipulator (module docstring). ``provenance`` maps each value's path in the file to its source."""
@@ -223,6 +257,8 @@ class Description:
     damping_beta_s: float = 0.0
     check_poses: tuple[dict[str, float], ...] = ()
     """Poses the description is checked at (task coordinate -> value, m and rad); the first is the default pose."""
+    servos: ServoGains = field(default_factory=ServoGains)
+    """The actuated joints' servos when they move (``[servos]`` in the file; :class:`ServoGains`)."""
     provenance: dict[str, str] = field(default_factory=dict, compare=False)
     source_file: str | None = field(default=None, compare=False)
 

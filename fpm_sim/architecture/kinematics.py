@@ -41,6 +41,7 @@ __all__ = [
     "TaskAssembly",
     "TaskPose",
     "UnreachableTaskPoseError",
+    "actuated_coordinates",
     "check_mobility",
     "solve_task_pose",
     "task_unknowns",
@@ -756,6 +757,14 @@ def task_unknowns(desc: Description, assembly: TaskAssembly) -> np.ndarray:
     """The unknowns of :func:`solve_task_pose` at ``assembly``: its ``start`` for a neighbouring pose (a sweep's
     continuation)."""
     return _unknowns_of(desc, _layout(desc), assembly)
+
+
+def actuated_coordinates(desc: Description, asm: TaskAssembly) -> np.ndarray:
+    """The actuated joints' coordinates at ``asm`` (rad or m), in the description's order (one per joint: revolute
+    or prismatic)."""
+    return np.array(
+        [float(asm.chains[c.name].coordinates[j.name][0]) for c in desc.chains for j in c.joints if j.actuated]
+    )
 
 
 def _unknowns_of(desc: Description, full: _Layout, asm: TaskAssembly) -> np.ndarray:

@@ -51,6 +51,7 @@ from fpm_sim.architecture.description import (
     JointDesc,
     LinkDesc,
     PlacedLump,
+    ServoGains,
     TubeSection,
     raise_at,
 )
@@ -71,6 +72,7 @@ _TOP = {
     "chains",
     "damping",
     "check_poses",
+    "servos",
 }
 _TASK_KEYS = {"x": "x_mm", "y": "y_mm", "z": "z_mm", "phi": "phi_rad"}
 
@@ -338,10 +340,28 @@ def parse_description(data: dict[str, Any], *, source: str = "user") -> Descript
         end_effector=ee,
         damping_beta_s=r.number(damping, "damping", "stiffness_proportional_s", 0.0),
         check_poses=_check_poses(data.get("check_poses", []), task),
+        servos=_servos(r, data.get("servos", {})),
         provenance=r.provenance,
     )
     _check_structure(desc)
     return desc
+
+
+def _servos(r: _Values, t: Any) -> ServoGains:
+    """``[servos]``: the actuated joints' servo gains, each optional (its default: :data:`SERVO_SOURCE`)."""
+    keys = ("stiffness_nm_per_rad", "damping_nms_per_rad", "stiffness_n_per_m", "damping_ns_per_m")
+    table = _keys(t, "servos", set(keys))
+    d = ServoGains()
+    values = {}
+    for k in keys:
+        if k in table:
+            v = r.number(table, "servos", k)
+            if v < 0 or (k.startswith("stiffness") and v == 0):
+                raise_at(f"servos.{k}", "must be > 0 (a stiffness) or >= 0 (a damping)", v)
+            values[k] = v
+        else:
+            values[k] = getattr(d, k)  # its provenance: SERVO_SOURCE (ServoGains.to_dict)
+    return ServoGains(**values)
 
 
 def _task(task: Any, *, planar: bool) -> tuple[str, ...]:

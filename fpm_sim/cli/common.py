@@ -362,7 +362,7 @@ def pose_of(args: argparse.Namespace) -> Pose:
     return checked_pose_mm(*(0.0 if v is None else v for v in (args.x_mm, args.y_mm, args.phi_rad)))
 
 
-GENERAL_COMMANDS = ("modes", "export-mjcf", "sweep", "check", "reduce", "frf", "impact", "atlas")
+GENERAL_COMMANDS = ("modes", "export-mjcf", "sweep", "check", "reduce", "frf", "impact", "atlas", "rollout", "move")
 """The commands that run on a described architecture (``[[chains]]``) so far; the others say so."""
 
 
@@ -387,7 +387,17 @@ def load_machine(args: argparse.Namespace, command: str) -> Manipulator | Descri
     return load_manipulator(args)
 
 
+STUDY_COMMANDS = ("reproduce", "rig", "readability", "transient")
+"""The study's own commands: its poses, test rigs, readings and transient, which are the 3RRR's by definition."""
+
+
 def _not_yet(command: str, path: Path) -> str:
+    if command in STUDY_COMMANDS:
+        return (
+            f"--config {path} describes an architecture of its own ([[chains]]); '{command}' is the study's own "
+            "command (its 3RRR's poses, rigs and readings: docs/study.md) and has no meaning on another "
+            f"machine. On a described architecture run: {', '.join(GENERAL_COMMANDS)}"
+        )
     return (
         f"--config {path} describes an architecture of its own ([[chains]]); '{command}' runs on the study's 3RRR "
         f"form only so far. On a described architecture run: {', '.join(GENERAL_COMMANDS)}"

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import math
 from pathlib import Path
+from typing import Any
 
 from fpm_sim.cli.common import (
     CliError,
@@ -15,10 +16,11 @@ from fpm_sim.cli.common import (
     add_resolution_args,
     check_output_file,
     emit,
-    load_manipulator,
+    load_machine,
     model_options,
     pose_of,
     resolution_line,
+    task_pose_of,
     with_resolution,
 )
 from fpm_sim.cli.main import PLOT_SUFFIXES, save_figure
@@ -34,34 +36,76 @@ DEFAULT_SETTLE_TOL_MM = 0.02
 """:data:`fpm_sim.sim.trajectory.DEFAULT_SETTLE_TOL_M` in mm (checked by a test)."""
 
 
-def cmd_move(args: argparse.Namespace) -> int:
-    from fpm_sim.kinematics import Pose
-    from fpm_sim.model.options import warn_if_coarse
-    from fpm_sim.outputs import atomic_file
-    from fpm_sim.sim.trajectory import MovePath, simulate_move
+_TO_FLAGS = {"x": "to_x_mm", "y": "to_y_mm", "z": "to_z_mm", "phi": "to_phi_rad"}
 
-    check_output_file(args.out, "--out", (".csv", ".npz"))
-    check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
+
+def _check_numbers(args: argparse.Namespace) -> None:
     for flag in ("move_s", "settle_s", "settle_tol_mm", "output_step_s"):
         v = getattr(args, flag)
         if not (math.isfinite(v) and v > 0):
             raise CliError(f"--{flag.replace('_', '-')} must be a positive number, got {v!r}")
-    for flag in ("to_x_mm", "to_y_mm", "to_phi_rad"):
-        if not math.isfinite(getattr(args, flag)):
-            raise CliError(f"--{flag.replace('_', '-')} must be a finite number, got {getattr(args, flag)!r}")
-    if abs(args.to_phi_rad) > math.pi:
+    for flag in _TO_FLAGS.values():
+        v = getattr(args, flag)
+        if v is not None and not math.isfinite(v):
+            raise CliError(f"--{flag.replace('_', '-')} must be a finite number, got {v!r}")
+    if args.to_phi_rad is not None and abs(args.to_phi_rad) > math.pi:
         raise CliError(f"--to-phi-rad {args.to_phi_rad:g} is outside -pi..pi; give it in radians within -pi..pi")
-    stepping = stepping_kwargs(args)
-    start = pose_of(args)
-    end = Pose.from_mm(args.to_x_mm, args.to_y_mm, args.to_phi_rad)
+
+
+def _path(args: argparse.Namespace, machine: Any) -> Any:
+    """The commanded path: the 3RRR's :class:`MovePath`, or a described architecture's ``TaskPath`` (its task
+    coordinates; an end coordinate not given is the start's, x 30 mm further when none is given)."""
+    from fpm_sim.architecture import Description
+    from fpm_sim.kinematics import Pose
+    from fpm_sim.sim.task import TaskPath, pose_vector
+    from fpm_sim.sim.trajectory import MovePath
+
+    if not isinstance(machine, Description):
+        if args.to_z_mm is not None:
+            raise CliError("--to-z-mm: the 3RRR's task coordinates are x, y and phi; drop --to-z-mm")
+        if args.path_csv is not None:
+            return MovePath.from_csv(args.path_csv)
+        to = [v if v is not None else d for v, d in zip((args.to_x_mm, args.to_y_mm, args.to_phi_rad), (30.0, 0, 0))]
+        return MovePath(pose_of(args), Pose.from_mm(*to), args.move_s, kind=args.profile)
+    task = machine.task
+    for c, flag in _TO_FLAGS.items():
+        if getattr(args, flag) is not None and c not in task:
+            f = "--" + flag.replace("_", "-")
+            raise CliError(
+                f"{f}: {machine.name} has no task coordinate {c} (its task coordinates are {', '.join(task)}); drop {f}"
+            )
+    start = task_pose_of(args, machine)
     if args.path_csv is not None:
-        path = MovePath.from_csv(args.path_csv)
-    else:
-        path = MovePath(start, end, args.move_s, kind=args.profile)
+        return TaskPath.from_csv(args.path_csv, task)
+    given = {c: getattr(args, _TO_FLAGS[c]) for c in task}
+    x0 = pose_vector(start, task)
+    end = x0.copy()
+    if all(v is None for v in given.values()):
+        end[0] += 0.030
+    for k, c in enumerate(task):
+        if given[c] is not None:
+            end[k] = given[c] if c == "phi" else given[c] * 1e-3
+    return TaskPath(task, x0, end, args.move_s, kind=args.profile)
+
+
+def cmd_move(args: argparse.Namespace) -> int:
+    from fpm_sim.architecture import Description
+    from fpm_sim.model.options import warn_if_coarse
+    from fpm_sim.outputs import atomic_file
+    from fpm_sim.sim.task import simulate_task_move
+    from fpm_sim.sim.trajectory import simulate_move
+
+    check_output_file(args.out, "--out", (".csv", ".npz"))
+    check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
+    _check_numbers(args)
+    stepping = stepping_kwargs(args)
+    machine = load_machine(args, "move")
+    path = _path(args, machine)
     opts = model_options(args)
     warn_if_coarse(opts)
-    res = simulate_move(
-        load_manipulator(args),
+    simulate: Any = simulate_task_move if isinstance(machine, Description) else simulate_move
+    res = simulate(
+        machine,
         path,
         settle_s=args.settle_s,
         options=opts,
@@ -99,12 +143,25 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     add_pose_args(p)
     g = p.add_argument_group("move")
-    g.add_argument("--to-x-mm", type=float, default=30.0, help="end pose x (mm, default 30)")
-    g.add_argument("--to-y-mm", type=float, default=0.0, help="end pose y (mm, default 0)")
-    g.add_argument("--to-phi-rad", type=float, default=0.0, help="end pose rotation (rad, default 0)")
+    g.add_argument(
+        "--to-x-mm",
+        type=float,
+        default=None,
+        help="end pose x (mm; default 30; a described architecture: the start's x + 30 mm when no --to-* is given)",
+    )
+    g.add_argument(
+        "--to-y-mm", type=float, default=None, help="end pose y (mm; default 0, a described one: the start's)"
+    )
+    g.add_argument("--to-z-mm", type=float, default=None, help="end pose z (mm; spatial machines; default the start's)")
+    g.add_argument("--to-phi-rad", type=float, default=None, help="end pose rotation (rad; default 0 / the start's)")
     g.add_argument("--move-s", type=float, default=0.3, help="move time (s, default 0.3)")
     g.add_argument("--profile", choices=PROFILES, default="minimum-jerk", help="motion profile (default minimum-jerk)")
-    g.add_argument("--path-csv", type=Path, help="a commanded path t_s,x_mm,y_mm,phi_rad instead of a profile move")
+    g.add_argument(
+        "--path-csv",
+        type=Path,
+        help="a commanded path t_s,x_mm,y_mm,phi_rad instead of a profile move (a described architecture: t_s and "
+        "its task columns x_mm,y_mm[,z_mm][,phi_rad])",
+    )
     g.add_argument(
         "--shaper", choices=SHAPERS, default="none", help="input shaper for the end pose's in-plane mode (default none)"
     )

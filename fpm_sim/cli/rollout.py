@@ -14,11 +14,12 @@ from fpm_sim.cli.common import (
     add_pose_args,
     check_output_file,
     emit,
-    load_manipulator,
+    load_machine,
     mm,
     model_options,
     pose_of,
     resolution_line,
+    task_pose_of,
     with_resolution,
 )
 from fpm_sim.cli.main import PLOT_SUFFIXES, save_figure
@@ -73,9 +74,16 @@ def equilibrium_hint(exc: Exception, args: argparse.Namespace) -> str:
 
 def add_motor_args(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("motors")
-    g.add_argument("--motors", choices=("config", "servo"), default="config", help="motors as configured, or servo")
+    g.add_argument(
+        "--motors",
+        choices=("config", "servo"),
+        default="config",
+        help="motors as configured, or servo (a described architecture: locked, or servos of its [servos] gains)",
+    )
     g.add_argument("--servo-stiffness-nm-per-rad", type=float, help="servo stiffness (with --motors servo)")
-    g.add_argument("--servo-damping-nms-per-rad", type=float, default=0.0, help="servo damping (with --motors servo)")
+    g.add_argument(
+        "--servo-damping-nms-per-rad", type=float, default=None, help="servo damping (with --motors servo; default 0)"
+    )
 
 
 def apply_motor_args(manip: Any, args: argparse.Namespace) -> Any:
@@ -90,7 +98,7 @@ def apply_motor_args(manip: Any, args: argparse.Namespace) -> Any:
         motors=Motors(
             mode="servo",
             servo_stiffness_nm_per_rad=args.servo_stiffness_nm_per_rad,
-            servo_damping_nms_per_rad=args.servo_damping_nms_per_rad,
+            servo_damping_nms_per_rad=args.servo_damping_nms_per_rad or 0.0,
         )
     )
 
@@ -107,21 +115,74 @@ def _profile(kind: str, values: list[float], t0_s: float, freq_hz: float) -> Any
     raise CliError(f"--load-profile must be constant, step or sine, got {kind!r}")
 
 
+_LOAD_FLAGS = {"x": "--force-x-n", "y": "--force-y-n", "z": "--force-z-n", "phi": "--moment-z-nm"}
+
+
+def _general_machine(args: argparse.Namespace, desc: Any, opts: Any) -> tuple[Any, Any, list[float]]:
+    """A described architecture's model (servos with ``--motors servo``), its rollout machine and its end-effector
+    load along its task coordinates; the options it lacks refused by name."""
+    from fpm_sim.architecture import solve_task_pose
+    from fpm_sim.model.general import build_general
+    from fpm_sim.sim.rollout import aligned_step
+    from fpm_sim.sim.task import machine_of
+
+    for flag, v in (
+        ("--thickness-mm", args.thickness_mm),
+        ("--servo-stiffness-nm-per-rad", args.servo_stiffness_nm_per_rad),
+        ("--servo-damping-nms-per-rad", args.servo_damping_nms_per_rad),
+        ("--accel-fraction", args.accel_fraction),
+    ):
+        if v is not None:
+            raise CliError(
+                f"{flag} is for the study's 3RRR; a described architecture sets its section in the file and its "
+                f"servo gains in [servos], and records no accelerations; drop {flag}"
+            )
+    given = {"x": args.force_x_n, "y": args.force_y_n, "z": args.force_z_n, "phi": args.moment_z_nm}
+    for c, v in given.items():
+        if v != 0.0 and c not in desc.task:
+            raise CliError(
+                f"{_LOAD_FLAGS[c]}: {desc.name} has no task coordinate {c} (its task coordinates are "
+                f"{', '.join(desc.task)}), so no load along it; drop {_LOAD_FLAGS[c]}"
+            )
+    pose = task_pose_of(args, desc)
+    motors = "servo" if args.motors == "servo" else "locked"
+    asm = solve_task_pose(desc, pose)
+    h = opts.timestep_s or build_general(desc, pose, opts, assembly=asm, motors=motors).timestep_s
+    built = build_general(desc, pose, aligned_step(opts, h, args.output_step_s), assembly=asm, motors=motors)
+    return built, machine_of(built, desc, asm), [given[c] for c in desc.task]
+
+
+def _machine(args: argparse.Namespace, opts: Any) -> tuple[Any, Any, list[float], int]:
+    """The model, the machine (the 3RRR's description or a described architecture's rollout machine), the
+    end-effector load and the number of motors."""
+    from fpm_sim.architecture import Description
+    from fpm_sim.model.manipulator import build_manipulator
+    from fpm_sim.sim.rollout import aligned_options
+
+    machine = load_machine(args, "rollout")
+    if isinstance(machine, Description):
+        built, mc, wrench = _general_machine(args, machine, opts)
+        return built, mc, wrench, len(mc.motor_names)
+    if args.thickness_mm is not None:
+        machine = machine.with_section(thickness_m=mm(args.thickness_mm))
+    machine = apply_motor_args(machine, args)
+    if args.force_z_n != 0.0:
+        raise CliError("--force-z-n: the 3RRR's task coordinates are x, y and phi; drop --force-z-n")
+    pose = pose_of(args)
+    # timestep rounded down so that the output step is a whole number of steps
+    built = build_manipulator(machine, pose, aligned_options(machine, pose, opts, args.output_step_s))
+    return built, machine, [args.force_x_n, args.force_y_n, args.moment_z_nm], 3
+
+
 def cmd_rollout(args: argparse.Namespace) -> int:
     from fpm_sim.linear.equilibrium import EquilibriumError
-    from fpm_sim.model.manipulator import build_manipulator
     from fpm_sim.model.options import warn_if_coarse
     from fpm_sim.outputs import atomic_file
     from fpm_sim.rom.reduction import accel_site_names
-    from fpm_sim.sim.rollout import aligned_options, rollout
+    from fpm_sim.sim.rollout import RolloutMachine, rollout
 
     check_output_file(args.out, "--out", (".csv", ".npz"))
     check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
-    manip = load_manipulator(args)
-    if args.thickness_mm is not None:
-        manip = manip.with_section(thickness_m=mm(args.thickness_mm))
-    manip = apply_motor_args(manip, args)
-    pose = pose_of(args)
     if not args.output_step_s > 0:
         raise CliError(f"--output-step-s must be positive, got {args.output_step_s!r}")
     stepping = stepping_kwargs(args)
@@ -132,20 +193,23 @@ def cmd_rollout(args: argparse.Namespace) -> int:
         stepping["step_s"] = args.timestep_s  # the discrete step; the model keeps its automatic one (weld stiffness)
     opts = model_options(args, timestep_s=None) if discrete else model_options(args)
     warn_if_coarse(opts)
-    # timestep rounded down so that the output step is a whole number of steps
-    built = build_manipulator(manip, pose, aligned_options(manip, pose, opts, args.output_step_s))
-    wrench = [args.force_x_n, args.force_y_n, args.moment_z_nm]
+    built, machine, wrench, n_motors = _machine(args, opts)
+    torques = args.motor_torque_nm if args.motor_torque_nm is not None else [0.0] * n_motors
+    if len(torques) != n_motors:
+        names = ", ".join(machine.motor_names) if isinstance(machine, RolloutMachine) else "motor_0..2"
+        raise CliError(
+            f"--motor-torque-nm needs {n_motors} values, one per actuated joint ({names}), got {len(torques)}"
+        )
+    if isinstance(machine, RolloutMachine) and any(torques) and args.motors != "servo":
+        raise CliError("--motor-torque-nm drives servos: add --motors servo (locked actuated joints have no joint)")
     ee = _profile(args.load_profile, wrench, args.load_start_s, args.load_freq_hz) if any(wrench) else None
-    torque = (
-        _profile(args.load_profile, args.motor_torque_nm, args.load_start_s, args.load_freq_hz)
-        if any(args.motor_torque_nm)
-        else None
-    )
-    sites = accel_site_names(built, args.accel_fraction) if args.accel_fraction is not None else []
+    torque = _profile(args.load_profile, torques, args.load_start_s, args.load_freq_hz) if any(torques) else None
+    fraction = 0.5 if args.accel_fraction is None else args.accel_fraction
+    sites = accel_site_names(built, fraction) if not isinstance(machine, RolloutMachine) else []
     try:
         res = rollout(
             built,
-            manip,
+            machine,
             duration_s=args.duration_s,
             output_step_s=args.output_step_s,
             ee_wrench=ee,
@@ -191,15 +255,28 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--output-step-s", type=float, default=1e-4, help="output step (s, default 1e-4)")
     p.add_argument("--force-x-n", type=float, default=0.0, help="end-effector force along x (N)")
     p.add_argument("--force-y-n", type=float, default=0.0, help="end-effector force along y (N)")
-    p.add_argument("--moment-z-nm", type=float, default=0.0, help="end-effector moment about z (N m)")
-    p.add_argument("--motor-torque-nm", type=float, nargs=3, default=[0.0, 0.0, 0.0], help="motor torques (N m)")
+    p.add_argument("--force-z-n", type=float, default=0.0, help="end-effector force along z (N; spatial machines)")
+    p.add_argument(
+        "--moment-z-nm", type=float, default=0.0, help="end-effector moment about z (N m; machines with phi)"
+    )
+    p.add_argument(
+        "--motor-torque-nm",
+        type=float,
+        nargs="+",
+        default=None,
+        help="motor torques (N m; N on a prismatic joint), one per motor: the 3RRR's three, a described "
+        "architecture's actuated joints in the file's order (needs --motors servo)",
+    )
     p.add_argument("--load-profile", choices=("constant", "step", "sine"), default="constant", help="load time profile")
     p.add_argument("--load-start-s", type=float, default=0.0, help="step time (s) for --load-profile step")
     p.add_argument("--load-freq-hz", type=float, default=10.0, help="frequency (Hz) for --load-profile sine")
     add_motor_args(p)
     p.add_argument("--thickness-mm", type=float, help="link in-plane thickness override (mm)")
     p.add_argument(
-        "--accel-fraction", type=float, default=0.5, help="record accelerations on each distal link at this fraction"
+        "--accel-fraction",
+        type=float,
+        default=None,
+        help="record accelerations on each distal link at this fraction (the 3RRR; default 0.5)",
     )
     p.add_argument("--out", type=Path, help="time histories, .csv or .npz")
     p.add_argument("--plot", type=Path, help="plot file (.png, .pdf, .svg)")

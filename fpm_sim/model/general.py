@@ -6,7 +6,10 @@ Built with :class:`mujoco.MjSpec` like the 3RRR's own builder, with every body p
 - each chain is a branch of the body tree from the ground (or from its parent chain's end body); every link is
   built by :func:`fpm_sim.model.links.add_link` (``segments``, or one rigid body for ``flexible = false``) in its
   own frame (x along the link, y along the section's ``thickness_m``, z along its ``height_m``);
-- actuated joints are locked (no joint: the next body is rigid on the one before); passive joints are MuJoCo
+- actuated joints are locked (``motors="locked"``, the default: no joint, the next body is rigid on the one before;
+  what modal analysis uses) or position servos (``motors="servo"``: a hinge or slide with the description's servo
+  stiffness and damping about the assembled coordinate, kind ``motor``, :class:`ServoGains`; what rollouts with
+  motor torques and moves drive); passive joints are MuJoCo
   joints on the next body (revolute: hinge, prismatic: slide, universal: two hinges, spherical: ball), at the
   joint's centre;
 - a joint's lump sits on the body before it (the previous link's end); a link's ``end_lump`` on its end;
@@ -48,7 +51,19 @@ from fpm_sim.model.options import ModelOptions
 from fpm_sim.model.parts import LinkSpec, lump_part, set_inertial
 from fpm_sim.model.spec import WELD_SOLIMP, BuiltModel, add_weld, compile_model, new_spec
 
-__all__ = ["GeneralModelError", "PoseFrames", "Reposer", "build_general", "build_reposable", "instrumentation"]
+__all__ = [
+    "MOTOR_MODES",
+    "GeneralModelError",
+    "PoseFrames",
+    "Reposer",
+    "actuated_joint_names",
+    "build_general",
+    "build_reposable",
+    "instrumentation",
+]
+
+MOTOR_MODES = ("locked", "servo")
+"""How :func:`build_general` builds the actuated joints (module docstring)."""
 
 MIN_BODY_MASS_KG = 1e-4
 """Mass given to a body that would carry none (a pin between a hinge and a weld): MuJoCo needs mass on every
@@ -148,11 +163,17 @@ class _LinkShape:
 
 class _Builder:
     def __init__(
-        self, desc: Description, asm: TaskAssembly, opts: ModelOptions, shapes: dict[str, _LinkShape] | None = None
+        self,
+        desc: Description,
+        asm: TaskAssembly,
+        opts: ModelOptions,
+        shapes: dict[str, _LinkShape] | None = None,
+        *,
+        servo: bool = False,
     ) -> None:
         """``shapes``: the links of a model already built (its :attr:`shapes`): a frames pass into a
-        :class:`_Recorder` instead of a spec."""
-        self.desc, self.asm, self.opts = desc, asm, opts
+        :class:`_Recorder` instead of a spec. ``servo``: the actuated joints as servo-driven joints."""
+        self.desc, self.asm, self.opts, self.servo = desc, asm, opts, servo
         self.frames_only = shapes is not None
         self.shapes: dict[str, _LinkShape] = shapes if shapes is not None else {}
         self.recorded = PoseFrames()
@@ -192,8 +213,12 @@ class _Builder:
                 axes, names = [frame @ np.array(j.axis)], [name]
             for jn, ax in zip(names, axes):
                 jt = _JOINT_TYPES[j.type] if len(axes) == 1 else _JOINT_TYPES["revolute"]
-                body.body.add_joint(name=jn, type=jt, axis=(body.r.T @ ax).tolist(), pos=pos)
+                mj = body.body.add_joint(name=jn, type=jt, axis=(body.r.T @ ax).tolist(), pos=pos)
                 self.kinds[jn] = "passive"
+                if j.actuated:  # a servo: a spring-damper about the assembled coordinate (module docstring)
+                    k, c = self.desc.servos.gains(j.type)
+                    mj.stiffness, mj.damping = [k, 0.0, 0.0], [c, 0.0, 0.0]
+                    self.kinds[jn] = "motor"
                 body.jointed = True
         pending.joints.clear()
 
@@ -257,7 +282,13 @@ class _Builder:
                         parameter=f"chains.{chain.name}.{e.name}.lump",
                         hint="put the lump on the link before it (end_lump) or on a joint that follows a link",
                     )
-                if not e.actuated and e.type != "fixed":
+                if e.actuated and self.servo and e.type not in ("revolute", "prismatic"):
+                    raise GeneralModelError(
+                        f"actuated {e.type} joint {chain.name}.{e.name}: servos drive revolute or prismatic joints",
+                        parameter=f"chains.{chain.name}.{e.name}.type",
+                        hint="build it with motors='locked' (modal analysis), or actuate a revolute or prismatic joint",
+                    )
+                if (not e.actuated or self.servo) and e.type != "fixed":
                     pending.joints.append((f"{chain.name}_{e.name}", e, frames.positions_m[k], frames.rotations[k]))
         if pending.joints:
             raise GeneralModelError(
@@ -337,8 +368,12 @@ def build_general(
     options: ModelOptions | None = None,
     *,
     assembly: TaskAssembly | None = None,
+    motors: str = "locked",
 ) -> BuiltModel:
     """Generate and compile the flexible manipulator ``desc`` assembled at the task pose ``pose``.
+
+    ``motors``: ``"locked"`` (no joint at the actuated joints) or ``"servo"`` (position servos there; module
+    docstring). The mobility check is made with them locked either way.
 
     Raises
     ------
@@ -350,6 +385,10 @@ def build_general(
         A link model other than ``segments`` or ``rigid``, or shear springs on a non-rectangular section.
     """
     opts = options or ModelOptions()
+    if motors not in MOTOR_MODES:
+        raise GeneralModelError(
+            "unknown motor model", parameter="motors", value=motors, hint=f"choose one of {', '.join(MOTOR_MODES)}"
+        )
     if opts.link_model not in ("segments", "rigid"):
         raise GeneralModelError(
             f"link model {opts.link_model!r} is built for the 3RRR only so far",
@@ -357,15 +396,15 @@ def build_general(
             value=opts.link_model,
             hint="use 'segments' (or 'rigid') for a described architecture",
         )
-    return _build(desc, pose, opts, assembly)[0]
+    return _build(desc, pose, opts, assembly, motors)[0]
 
 
 def _build(
-    desc: Description, pose: TaskPose, opts: ModelOptions, assembly: TaskAssembly | None
+    desc: Description, pose: TaskPose, opts: ModelOptions, assembly: TaskAssembly | None, motors: str = "locked"
 ) -> tuple[BuiltModel, dict[str, _LinkShape]]:
     asm = assembly if assembly is not None else solve_task_pose(desc, pose)
     check_mobility(desc, asm)
-    b = _built_spec(desc, asm, opts)
+    b = _built_spec(desc, asm, opts, servo=motors == "servo")
     model = compile_model(b.spec, timestep_s=opts.timestep_s)
     built = BuiltModel(
         model=model,
@@ -385,6 +424,7 @@ def _build(
             },
             "singularity_type1": asm.singularity_type1,
             "singularity_type2": asm.singularity_type2,
+            **({"motors": "servo", "servos": desc.servos.to_dict(desc.provenance)} if motors == "servo" else {}),
         },
         **instrumentation(desc),
     )
@@ -392,9 +432,14 @@ def _build(
 
 
 def _built_spec(
-    desc: Description, asm: TaskAssembly, opts: ModelOptions, shapes: dict[str, _LinkShape] | None = None
+    desc: Description,
+    asm: TaskAssembly,
+    opts: ModelOptions,
+    shapes: dict[str, _LinkShape] | None = None,
+    *,
+    servo: bool = False,
 ) -> _Builder:
-    b = _Builder(desc, asm, opts, shapes)
+    b = _Builder(desc, asm, opts, shapes, servo=servo)
     for chain in desc.chains:
         b.chain(chain)
     if not b.frames_only:
@@ -441,6 +486,12 @@ def instrumentation(desc: Description) -> dict[str, Any]:
         "test_point": (accel[0], 0.5, "z") if accel else None,
         "planar": desc.planar,
     }
+
+
+def actuated_joint_names(desc: Description) -> list[tuple[str, str]]:
+    """``(chain, joint)`` of every actuated joint, in the description's order (the servo joints' names are
+    ``{chain}_{joint}``)."""
+    return [(c.name, j.name) for c in desc.chains for j in c.joints if j.actuated]
 
 
 def _between_spherical(chain: ChainDesc, k: int) -> bool:

@@ -29,8 +29,7 @@ from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError
 from fpm_sim.linear.equilibrium import static_equilibrium
 from fpm_sim.model.spec import BuiltModel
-from fpm_sim.rom.reduction import END_EFFECTOR_SITE
-from fpm_sim.sim.rollout import end_effector_pose
+from fpm_sim.sim.rollout import RolloutMachine, end_effector_coordinates, end_effector_site_id
 from fpm_sim.sim.stepping import (
     DEFAULT_INTEGRATOR,
     Stepping,
@@ -41,6 +40,10 @@ from fpm_sim.sim.stepping import (
 )
 
 __all__ = ["BatchedRolloutError", "BatchedRollouts", "batched_rollouts"]
+
+
+_UNIT = {"x": "m", "y": "m", "z": "m", "phi": "rad"}
+_LOAD = {"x": "fx_n", "y": "fy_n", "z": "fz_n", "phi": "mz_nm"}
 
 
 class BatchedRolloutError(FpmSimError):
@@ -68,12 +71,12 @@ class BatchedRollouts:
 
         ds = self.dataset
         disp = np.asarray(ds["ee_disp"].values)
-        axes = ("x_m", "y_m", "phi_rad")
+        axes = [f"{c}_{'rad' if c == 'phi' else 'm'}" for c in ds["axis"].values]
         parameters = json.loads(ds.attrs["parameters"])
         return {
             "rollouts": [
                 {
-                    "wrench": dict(zip(("fx_n", "fy_n", "mz_nm"), map(float, w))),
+                    "wrench": dict(zip([str(x) for x in ds["load"].values], map(float, w))),
                     "final_disp": dict(zip(axes, map(float, d[-1]))),
                     "peak_abs_disp": dict(zip(axes, map(float, np.abs(d).max(axis=0)))),
                 }
@@ -93,19 +96,24 @@ class BatchedRollouts:
     def table(self) -> str:
         """One row per rollout: wrench (N, N, N m), final and peak in-plane displacement (um), final rotation."""
         d = self.to_dict()
+        heads = {"fx_n": "F_x (N)", "fy_n": "F_y (N)", "fz_n": "F_z (N)", "mz_nm": "M_z (N m)"}
+        loads = [str(x) for x in self.dataset["load"].values]
+        axes = [str(x) for x in self.dataset["axis"].values]
         lines = [
             f"{len(d['rollouts'])} rollouts of {d['duration_s']:.4g} s in {d['threads']} thread(s), "
             f"wall {d['wall_s']:.2f} s",
-            f"{'F_x (N)':>9} {'F_y (N)':>9} {'M_z (N m)':>10} {'final x (um)':>13} {'final y (um)':>13} "
-            f"{'peak |xy| (um)':>15} {'final phi (urad)':>17}",
+            " ".join(f"{heads[x]:>10}" for x in loads)
+            + "".join(f" {'final ' + c + (' (urad)' if c == 'phi' else ' (um)'):>17}" for c in axes)
+            + f" {'peak |xy| (um)':>15}",
         ]
         disp = np.asarray(self.dataset["ee_disp"].values)
         for r, dd in zip(d["rollouts"], disp):
-            w, f = r["wrench"], r["final_disp"]
+            w, f = r["wrench"], list(r["final_disp"].values())
             peak = float(np.linalg.norm(dd[:, :2], axis=1).max())
             lines.append(
-                f"{w['fx_n']:9.3g} {w['fy_n']:9.3g} {w['mz_nm']:10.3g} {f['x_m'] * 1e6:13.4g} {f['y_m'] * 1e6:13.4g} "
-                f"{peak * 1e6:15.4g} {f['phi_rad'] * 1e6:17.4g}"
+                " ".join(f"{w[x]:10.3g}" for x in loads)
+                + "".join(f" {v * 1e6:17.4g}" for v in f)
+                + f" {peak * 1e6:15.4g}"
             )
         st = d["stepping"]
         lines.append(f"integrator {st['integrator']}, step {st['step_s']:.3g} s, band {st['band_hz']:.4g} Hz")
@@ -120,7 +128,7 @@ class BatchedRollouts:
         ds = self.dataset
         t_ms = np.asarray(ds["time"].values) * 1e3
         for w, d in zip(np.asarray(ds["wrench"].values), np.asarray(ds["ee_disp"].values)):
-            label = f"F = ({w[0]:g}, {w[1]:g}) N, M = {w[2]:g} N m"
+            label = ", ".join(f"{n} {v:g}" for n, v in zip(ds["load"].values, w))
             ax.plot(t_ms, np.linalg.norm(d[:, :2], axis=1) * 1e6, lw=1, label=label)
         ax.set_xlabel("t (ms)")
         ax.set_ylabel("|end-effector displacement| (um)")
@@ -132,7 +140,7 @@ class BatchedRollouts:
 
 def batched_rollouts(
     built: BuiltModel,
-    manip: Manipulator,
+    manip: Manipulator | RolloutMachine,
     wrenches: ArrayLike,
     *,
     duration_s: float,
@@ -145,12 +153,15 @@ def batched_rollouts(
     """Constant end-effector wrenches ``(n, 3)`` (``F_x, F_y`` in N, ``M_z`` in N m), one rollout each, in
     ``threads`` threads (module docstring); returns an :class:`xarray.Dataset`.
 
-    ``manip`` is the description ``built`` was made from (recorded in the attributes); ``integrator``,
-    ``band_hz``, ``f1_hz``: :func:`fpm_sim.sim.stepping.choose_stepping`.
+    ``manip`` is the description ``built`` was made from (recorded in the attributes), or a described
+    architecture's :class:`fpm_sim.sim.rollout.RolloutMachine` (then each row is a load along its coordinates: a
+    force (N) per translational one, a moment about z (N m) for ``phi``); ``integrator``, ``band_hz``, ``f1_hz``:
+    :func:`fpm_sim.sim.stepping.choose_stepping`.
     """
     from mujoco import rollout as mj_rollout
 
-    w = _checked_inputs(wrenches, threads, duration_s, output_step_s)
+    coords = manip.coordinates if isinstance(manip, RolloutMachine) else ("x", "y", "phi")
+    w = _checked_inputs(wrenches, threads, duration_s, output_step_s, coords)
     q0 = static_equilibrium(built.model, mujoco.MjData(built.model))
     try:
         stepping = choose_stepping(
@@ -162,23 +173,19 @@ def batched_rollouts(
     h = float(model.opt.timestep)
     n_sub = max(1, round(output_step_s / h))
     n_out = round(duration_s / (n_sub * h))
-    sid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, END_EFFECTOR_SITE)
-    bid = int(model.site_bodyid[sid])
+    control = _control(model, w, coords)
     data = mujoco.MjData(model)
     data.qpos[:] = q0
     mujoco.mj_forward(model, data)
-    ee0 = end_effector_pose(model, data)
+    ee0 = end_effector_coordinates(model, data, coords)
     spec = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
     nstate = mujoco.mj_stateSize(model, spec)
     s0 = np.empty(nstate)
     mujoco.mj_getState(model, data, s0, spec)
     n = w.shape[0]
     state = np.tile(s0, (n, 1))
-    control = np.zeros((n, 1, 6 * model.nbody))
-    control[:, 0, 6 * bid : 6 * bid + 2] = w[:, :2]
-    control[:, 0, 6 * bid + 5] = w[:, 2]
     datas = [mujoco.MjData(model) for _ in range(threads)]
-    disp = np.zeros((n, n_out + 1, 3))
+    disp = np.zeros((n, n_out + 1, len(coords)))
     out = np.empty((n, n_sub, nstate))
     probe = mujoco.MjData(model)
     start = time.perf_counter()
@@ -197,7 +204,7 @@ def batched_rollouts(
         for i in range(n):
             mujoco.mj_setState(model, probe, state[i], spec)
             mujoco.mj_kinematics(model, probe)
-            disp[i, k] = end_effector_pose(model, probe) - ee0
+            disp[i, k] = end_effector_coordinates(model, probe, coords) - ee0
         if not np.all(np.isfinite(state)) or np.abs(disp[:, k, :2]).max() > model.stat.extent:
             raise BatchedRolloutError(
                 f"a rollout diverged by t = {k * n_sub * h:.4g} s",
@@ -208,12 +215,32 @@ def batched_rollouts(
     return _dataset(w, disp, t, stepping, threads=threads, wall_s=wall, n_steps=n_out * n_sub, built=built, manip=manip)
 
 
-def _checked_inputs(wrenches: ArrayLike, threads: int, duration_s: float, output_step_s: float) -> np.ndarray:
-    """The wrenches as finite ``(n, 3)`` rows; ``threads`` an integer >= 1; both times positive and finite (s)."""
-    w = np.atleast_2d(np.asarray(wrenches, float))
-    if w.ndim != 2 or w.shape[1] != 3 or w.shape[0] < 1 or not np.all(np.isfinite(w)):
+def _control(model: mujoco.MjModel, w: np.ndarray, coords: tuple[str, ...]) -> np.ndarray:
+    """The ``xfrc_applied`` control of each rollout: its load on the end effector's body (centre of mass at its
+    site, checked), a force along each translational coordinate and a moment about z for ``phi``."""
+    sid = end_effector_site_id(model)
+    bid = int(model.site_bodyid[sid])
+    if not np.allclose(model.body_ipos[bid], model.site_pos[sid], atol=1e-12):
         raise BatchedRolloutError(
-            "must be finite (n, 3) rows F_x, F_y, M_z", parameter="wrenches", value=f"shape {w.shape}"
+            "the end effector's centre of mass is not at its site; wrench application unsupported"
+        )
+    control = np.zeros((w.shape[0], 1, 6 * model.nbody))
+    slots = {"x": 0, "y": 1, "z": 2, "phi": 5}
+    for k, c in enumerate(coords):
+        control[:, 0, 6 * bid + slots[c]] = w[:, k]
+    return control
+
+
+def _checked_inputs(
+    wrenches: ArrayLike, threads: int, duration_s: float, output_step_s: float, coords: tuple[str, ...]
+) -> np.ndarray:
+    """The wrenches as finite ``(n, len(coords))`` rows; ``threads`` an integer >= 1; both times positive and
+    finite (s)."""
+    w = np.atleast_2d(np.asarray(wrenches, float))
+    if w.ndim != 2 or w.shape[1] != len(coords) or w.shape[0] < 1 or not np.all(np.isfinite(w)):
+        names = ", ".join({"x": "F_x", "y": "F_y", "z": "F_z", "phi": "M_z"}[c] for c in coords)
+        raise BatchedRolloutError(
+            f"must be finite (n, {len(coords)}) rows {names}", parameter="wrenches", value=f"shape {w.shape}"
         )
     if not (isinstance(threads, int) and not isinstance(threads, bool) and threads >= 1):
         raise BatchedRolloutError("must be an integer >= 1", parameter="threads", value=threads)
@@ -233,28 +260,29 @@ def _dataset(
     wall_s: float,
     n_steps: int,
     built: BuiltModel,
-    manip: Manipulator,
+    manip: Manipulator | RolloutMachine,
 ) -> Any:
     """The rollouts as an ``xarray.Dataset``: wrenches, end-effector displacements over time, how they were run."""
     import xarray as xr
 
+    coords = manip.coordinates if isinstance(manip, RolloutMachine) else ("x", "y", "phi")
     return xr.Dataset(
         {
-            "wrench": (("rollout", "load"), w, {"units": "N, N, N m"}),
-            "ee_disp": (("rollout", "time", "axis"), disp, {"units": "m, m, rad"}),
+            "wrench": (("rollout", "load"), w, {"units": ", ".join("N m" if c == "phi" else "N" for c in coords)}),
+            "ee_disp": (("rollout", "time", "axis"), disp, {"units": ", ".join(_UNIT[c] for c in coords)}),
         },
         coords={
             "rollout": np.arange(w.shape[0]),
             "time": ("time", t, {"units": "s"}),
-            "axis": ["x", "y", "phi"],
-            "load": ["fx_n", "fy_n", "mz_nm"],
+            "axis": list(coords),
+            "load": [_LOAD[c] for c in coords],
         },
         attrs={
             "stepping": json.dumps(stepping.to_dict()),
             "threads": threads,
             "wall_s": wall_s,
             "n_steps_per_rollout": n_steps,
-            "description": manip.name,
+            "description": manip.name if isinstance(manip, Manipulator) else str(built.parameters.get("config")),
             "parameters": json.dumps({k: v for k, v in built.parameters.items() if k != "pose"}, default=str),
             "pose": json.dumps(built.parameters.get("pose", {}), default=str),
         },

@@ -66,11 +66,18 @@ from fpm_sim.sim.stepping import (
 )
 
 __all__ = [
+    "EE_SITES",
     "RolloutError",
+    "RolloutMachine",
     "RolloutResult",
     "aligned_options",
+    "aligned_step",
+    "check_times",
     "constant",
+    "end_effector_coordinates",
     "end_effector_pose",
+    "end_effector_site_id",
+    "machine_of_3rrr",
     "rollout",
     "save_columns",
     "sine",
@@ -79,6 +86,10 @@ __all__ = [
 
 Profile = Callable[[float], ArrayLike]
 """A load as a function of time (s): three numbers, a sequence or an array (see the module docstring)."""
+EE_SITES = (END_EFFECTOR_SITE, "end_effector_site")
+"""The end-effector site of the 3RRR's model and of a described architecture's (:mod:`fpm_sim.model.general`)."""
+_UNITS = {"x": "m", "y": "m", "z": "m", "phi": "rad"}
+_LOAD_NAMES = {"x": "fx_n", "y": "fy_n", "z": "fz_n", "phi": "mz_nm"}
 
 
 class RolloutError(FpmSimError):
@@ -92,15 +103,16 @@ _BAD_STATE = (
 )
 
 
-def _divergence(model: mujoco.MjModel, data: mujoco.MjData, ee0: np.ndarray, messages: list[str]) -> str | None:
-    """Why the run has diverged (module docstring), or ``None``."""
+def _divergence(model: mujoco.MjModel, data: mujoco.MjData, p0: np.ndarray, messages: list[str]) -> str | None:
+    """Why the run has diverged (module docstring; ``p0``: the end-effector site's position at the start), or
+    ``None``."""
     bad = [int(w) for w in _BAD_STATE if data.warning[int(w)].number > 0]
     if bad or messages:
         what = messages[0].strip() if messages else "bad state warning"
         return f"MuJoCo reported an unstable simulation ({what})"
     if not (np.all(np.isfinite(data.qpos)) and np.all(np.isfinite(data.qvel))):
         return "the state is no longer finite"
-    moved = float(np.linalg.norm(end_effector_pose(model, data)[:2] - ee0[:2]))
+    moved = float(np.linalg.norm(data.site_xpos[end_effector_site_id(model)] - p0))
     if moved > model.stat.extent:
         return f"the end effector moved {moved:.3g} m, more than the model's size ({model.stat.extent:.3g} m)"
     return None
@@ -144,17 +156,19 @@ class RolloutResult:
     t_s
         Sample times (s), from 0.
     ee_pose
-        ``(n, 3)``: end-effector ``x, y`` (m) and rotation ``phi`` (rad), absolute.
+        ``(n, c)``: the end effector's :attr:`coordinates` (m, rad), absolute; the 3RRR's ``x, y, phi``.
     ee_disp
-        ``(n, 3)``: ``ee_pose`` minus its value at the equilibrium (``t = 0``).
+        ``(n, c)``: ``ee_pose`` minus its value at the equilibrium (``t = 0``).
     deflection
-        ``(n, 3)``: ``ee_pose`` minus the rigid-link forward kinematics of the motor angles.
+        ``(n, c)``: ``ee_pose`` minus the rigid-link forward kinematics of the motor angles.
     motor_angles_rad
-        ``(n, 3)`` motor angles (constant when locked).
+        ``(n, m)`` motor (actuated joint) coordinates, rad (m for a prismatic one); constant when locked.
     accel
         Site name -> ``(n, 3)`` world-frame linear acceleration (m/s^2), gravity excluded.
     wrench, motor_torque
-        ``(n, 3)`` loads applied over each sample's interval.
+        ``(n, c)`` end-effector loads (a force along each translational coordinate, N; a moment about z for
+        ``phi``, N m) and ``(n, m)`` motor torques (N m; N on a prismatic joint), applied over each sample's
+        interval.
     wall_s
         Wall-clock time of the stepping loop (s).
     parameters
@@ -174,22 +188,26 @@ class RolloutResult:
     parameters: dict[str, Any] = field(default_factory=dict)
     stepping: Stepping | None = None
     """The integrator, its step and its error bounds in the band (:mod:`fpm_sim.sim.stepping`)."""
+    coordinates: tuple[str, ...] = ("x", "y", "phi")
+    """The end effector's recorded coordinates: the 3RRR's ``x, y, phi``, a described architecture's task ones."""
+    motor_names: tuple[str, ...] = ("0", "1", "2")
+    """The motors' names in the columns (``motor_<name>_rad``): the 3RRR's ``0..2``, else ``<chain>_<joint>``."""
+
+    def _names(self) -> list[str]:
+        return [f"{c}_{_UNITS[c]}" for c in self.coordinates]
 
     def columns(self) -> dict[str, np.ndarray]:
         """Flat name -> column view (units in the names)."""
         cols: dict[str, np.ndarray] = {"t_s": self.t_s}
-        for k, n in enumerate(("x_m", "y_m", "phi_rad")):
-            cols[f"ee_{n}"] = self.ee_pose[:, k]
-        for k, n in enumerate(("x_m", "y_m", "phi_rad")):
-            cols[f"disp_{n}"] = self.ee_disp[:, k]
-        for k, n in enumerate(("x_m", "y_m", "phi_rad")):
-            cols[f"deflection_{n}"] = self.deflection[:, k]
-        for i in range(3):
-            cols[f"motor_{i}_rad"] = self.motor_angles_rad[:, i]
-        for k, n in enumerate(("fx_n", "fy_n", "mz_nm")):
-            cols[f"load_{n}"] = self.wrench[:, k]
-        for i in range(3):
-            cols[f"motor_torque_{i}_nm"] = self.motor_torque[:, i]
+        for prefix, arr in (("ee", self.ee_pose), ("disp", self.ee_disp), ("deflection", self.deflection)):
+            for k, n in enumerate(self._names()):
+                cols[f"{prefix}_{n}"] = arr[:, k]
+        for i, m in enumerate(self.motor_names):
+            cols[f"motor_{m}_rad"] = self.motor_angles_rad[:, i]
+        for k, c in enumerate(self.coordinates):
+            cols[f"load_{_LOAD_NAMES[c]}"] = self.wrench[:, k]
+        for i, m in enumerate(self.motor_names):
+            cols[f"motor_torque_{m}_nm"] = self.motor_torque[:, i]
         for site, a in self.accel.items():
             for k, ax in enumerate("xyz"):
                 cols[f"acc_{site}_{ax}_m_s2"] = a[:, k]
@@ -211,8 +229,8 @@ class RolloutResult:
             "n_steps": self.n_steps,
             "wall_s": self.wall_s,
             "stepping": self.stepping.to_dict() if self.stepping is not None else None,
-            "final_disp": {"x_m": d[-1, 0], "y_m": d[-1, 1], "phi_rad": d[-1, 2]},
-            "peak_abs_disp": {k: float(np.max(np.abs(d[:, i]))) for i, k in enumerate(("x_m", "y_m", "phi_rad"))},
+            "final_disp": {k: float(d[-1, i]) for i, k in enumerate(self._names())},
+            "peak_abs_disp": {k: float(np.max(np.abs(d[:, i]))) for i, k in enumerate(self._names())},
             "peak_abs_accel_m_s2": {s: float(np.max(np.linalg.norm(a, axis=1))) for s, a in self.accel.items()},
         }
 
@@ -227,7 +245,8 @@ class RolloutResult:
             *([self.stepping.line()] if self.stepping is not None else []),
             f"{'signal':<22} {'final':>12} {'peak |.|':>12}",
         ]
-        for i, (k, unit) in enumerate((("disp x", "mm"), ("disp y", "mm"), ("disp phi", "mrad"))):
+        for i, c in enumerate(self.coordinates):
+            k, unit = f"disp {c}", ("mrad" if c == "phi" else "mm")
             peak = np.max(np.abs(d[:, i]))
             lines.append(f"{k + ' (' + unit + ')':<22} {d[-1, i] * 1e3:>12.5f} {peak * 1e3:>12.5f}")
         for s, a in self.accel.items():
@@ -250,19 +269,22 @@ class RolloutResult:
         if axes is None:
             _, axes = plt.subplots(n_ax, 1, figsize=(8, 2.6 * n_ax), sharex=True)
         ax = axes[0]
-        ax.plot(self.t_s, self.ee_disp[:, 0] * 1e3, label="x")
-        ax.plot(self.t_s, self.ee_disp[:, 1] * 1e3, label="y")
+        for k, c in enumerate(self.coordinates):
+            if c != "phi":
+                ax.plot(self.t_s, self.ee_disp[:, k] * 1e3, label=c)
         ax.set_ylabel("EE displacement (mm)")
-        ax2 = ax.twinx()
-        ax2.plot(self.t_s, self.ee_disp[:, 2] * 1e3, color="0.5", lw=0.8, label="phi")
-        ax2.set_ylabel("phi (mrad)")
+        if "phi" in self.coordinates:
+            ax2 = ax.twinx()
+            ax2.plot(self.t_s, self.ee_disp[:, self.coordinates.index("phi")] * 1e3, color="0.5", lw=0.8, label="phi")
+            ax2.set_ylabel("phi (mrad)")
         ax.legend(loc="upper left", fontsize=8)
         if len(axes) == 1:
             ax.set_xlabel("t (s)")
             return ax.figure
         ax = axes[1]
-        ax.plot(self.t_s, self.deflection[:, 0] * 1e3, label="x")
-        ax.plot(self.t_s, self.deflection[:, 1] * 1e3, label="y")
+        for k, c in enumerate(self.coordinates):
+            if c != "phi":
+                ax.plot(self.t_s, self.deflection[:, k] * 1e3, label=c)
         ax.set_ylabel("deflection (mm)")
         ax.legend(loc="upper left", fontsize=8)
         if self.accel:
@@ -297,14 +319,19 @@ def aligned_options(manip: Manipulator, pose: Pose, options: ModelOptions, outpu
     """``options`` with the automatic timestep rounded down so that ``output_step_s`` is a whole number of
     steps (an explicit ``options.timestep_s`` is rounded the same way)."""
     h_auto = options.timestep_s or build_manipulator(manip, pose, options).timestep_s
-    n = int(np.ceil(output_step_s / h_auto * (1 - 1e-12)))
+    return aligned_step(options, h_auto, output_step_s)
+
+
+def aligned_step(options: ModelOptions, step_s: float, output_step_s: float) -> ModelOptions:
+    """``options`` with the timestep ``step_s`` rounded down so that ``output_step_s`` is a whole number of steps."""
+    n = int(np.ceil(output_step_s / step_s * (1 - 1e-12)))
     return dataclasses.replace(options, timestep_s=output_step_s / n)
 
 
-def _load(name: str, value: ArrayLike, t_s: float) -> np.ndarray:
+def _load(name: str, value: ArrayLike, t_s: float, n: int = 3) -> np.ndarray:
     v = np.asarray(value, float)
-    if v.shape != (3,) or not np.all(np.isfinite(v)):
-        raise RolloutError(f"must give 3 finite values at t = {t_s:g} s", parameter=name, value=value)
+    if v.shape != (n,) or not np.all(np.isfinite(v)):
+        raise RolloutError(f"must give {n} finite values at t = {t_s:g} s", parameter=name, value=value)
     return v
 
 
@@ -313,17 +340,84 @@ def _platform_phi(data: mujoco.MjData, body_id: int) -> float:
     return math.atan2(r[1, 0], r[0, 0])
 
 
-def end_effector_pose(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
-    """``(x, y, phi)`` of ``platform_center`` after a forward pass."""
-    sid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, END_EFFECTOR_SITE)
-    bid = int(model.site_bodyid[sid])
+def end_effector_site_id(model: mujoco.MjModel) -> int:
+    """The end-effector site's id (:data:`EE_SITES`: the 3RRR's ``platform_center`` or ``end_effector_site``)."""
+    for name in EE_SITES:
+        sid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, name)
+        if sid >= 0:
+            return int(sid)
+    raise RolloutError(f"the model has no end-effector site ({' or '.join(EE_SITES)})")
+
+
+def end_effector_coordinates(model: mujoco.MjModel, data: mujoco.MjData, coordinates: Sequence[str]) -> np.ndarray:
+    """The end effector's ``coordinates`` (of ``x, y, z`` in m, ``phi`` about z in rad) after a forward pass."""
+    sid = end_effector_site_id(model)
     p = data.site_xpos[sid]
-    return np.array([p[0], p[1], _platform_phi(data, bid)])
+    values = {"x": p[0], "y": p[1], "z": p[2]}
+    if "phi" in coordinates:
+        values["phi"] = _platform_phi(data, int(model.site_bodyid[sid]))
+    return np.array([values[c] for c in coordinates])
+
+
+def end_effector_pose(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
+    """``(x, y, phi)`` of the end-effector site (``platform_center``) after a forward pass."""
+    return end_effector_coordinates(model, data, ("x", "y", "phi"))
+
+
+@dataclass
+class RolloutMachine:
+    """What a rollout reads of the machine besides its MuJoCo model: :func:`machine_of_3rrr` for the 3RRR,
+    :func:`fpm_sim.sim.task.machine_of` for a described architecture."""
+
+    coordinates: tuple[str, ...]
+    """The end effector's recorded coordinates, and the components of its load (a force along each translational
+    one, a moment about z for ``phi``)."""
+    motor_names: tuple[str, ...]
+    """Every motor (actuated joint), driven or locked: one motor torque value each."""
+    motor_dofs: list[int]
+    """Their degrees of freedom in the model (empty: locked, no joint)."""
+    motor0: np.ndarray
+    """Their coordinates at the assembly (``qpos0``), absolute (rad or m)."""
+    servo_stiffness: np.ndarray | None
+    """Each motor's servo stiffness (a reference acts through it); ``None``: no servo."""
+    rigid_pose: Callable[[np.ndarray], np.ndarray]
+    """Motor coordinates (absolute) -> the rigid-link end-effector coordinates (the deflection's reference)."""
+    no_motor_hint: str
+    """How to give the motors joints (the error when torques or references meet locked motors)."""
+    parameters: dict[str, Any] = field(default_factory=dict)
+
+
+def machine_of_3rrr(built: BuiltModel, manip: Manipulator) -> RolloutMachine:
+    """The 3RRR ``manip`` built as ``built``: ``x, y, phi``, motors ``motor_0..2`` (rigid forward kinematics from
+    the last pose: :func:`fpm_sim.kinematics.forward_kinematics`)."""
+    pose = Pose(**built.parameters["pose"])
+    motor0 = np.asarray(inverse_kinematics(manip.geometry, pose).motor_angles_rad, float)
+    mdofs = motor_dofs(built.model)
+    guess = [pose]
+
+    def rigid(ma: np.ndarray) -> np.ndarray:
+        if not mdofs:
+            return pose.as_array()
+        guess[0] = forward_kinematics(manip.geometry, ma, guess=guess[0])
+        return guess[0].as_array()
+
+    servo = manip.motors.mode == "servo"
+    return RolloutMachine(
+        coordinates=("x", "y", "phi"),
+        motor_names=("0", "1", "2"),
+        motor_dofs=mdofs,
+        motor0=motor0,
+        servo_stiffness=np.full(3, manip.motors.servo_stiffness_nm_per_rad) if servo else None,
+        rigid_pose=rigid,
+        no_motor_hint="set motors.mode = 'servo' (Motors(mode='servo', servo_stiffness_nm_per_rad=...)); locked "
+        "motors have no joint",
+        parameters={"motors": dataclasses.asdict(manip.motors)},
+    )
 
 
 def rollout(
     built: BuiltModel,
-    manip: Manipulator,
+    manip: Manipulator | RolloutMachine,
     *,
     duration_s: float,
     output_step_s: float = 1e-4,
@@ -344,13 +438,15 @@ def rollout(
     ----------
     built, manip
         The model (from :func:`fpm_sim.model.manipulator.build_manipulator`) and the description it
-        was built from (for the rigid forward kinematics and the servo stiffness).
+        was built from (for the rigid forward kinematics and the servo stiffness); or any machine's model and its
+        :class:`RolloutMachine` (:func:`fpm_sim.sim.task.machine_of`).
     duration_s
         Simulated time (s).
     output_step_s
         Output (and load hold) interval; rounded to a whole number of model timesteps.
     ee_wrench, motor_torque, motor_reference
-        Load profiles ``t -> 3 values`` (see module docstring); ``None``: none.
+        Load profiles ``t -> values`` (see module docstring; one per end-effector coordinate, one per motor);
+        ``None``: none.
     accel_sites
         Sites whose acceleration is recorded.
     qpos
@@ -364,36 +460,25 @@ def rollout(
         The model's first natural frequency (Hz) if known (the default band needs it; else a modal analysis).
 
     Long because: the signature and the documentation of its fifteen options are half of it; the body (checks,
-    stepping, recording and the time loop) is named steps of about 45 lines.
+    stepping, recording and the time loop) is named steps of about 35 lines.
     """
-    _check_times(duration_s, output_step_s)
+    check_times(duration_s, output_step_s)
+    machine = manip if isinstance(manip, RolloutMachine) else machine_of_3rrr(built, manip)
     q0 = static_equilibrium(built.model, mujoco.MjData(built.model)) if qpos is None else np.asarray(qpos, float)
     stepping, model, n_sub = _stepping(built, q0, output_step_s, integrator, band_hz, step_s, f1_hz)
     h = float(model.opt.timestep)
     dt_out = n_sub * h
     n_out = round(duration_s / dt_out)
-    loads = _Loads(ee_wrench, motor_torque, motor_reference, manip.motors.servo_stiffness_nm_per_rad)
-    mdofs = motor_dofs(model)
-    bid = _check_loads(model, manip, mdofs, loads)
+    loads = _Loads(ee_wrench, motor_torque, motor_reference, machine.servo_stiffness)
+    bid = _check_loads(model, machine, loads)
     acc_ids = _site_ids(model, accel_sites)
-    pose = Pose(**built.parameters["pose"])
-    asm = inverse_kinematics(manip.geometry, pose)
     data = mujoco.MjData(model)
     data.qpos[:] = q0
     mujoco.mj_forward(model, data)
-    ee0 = end_effector_pose(model, data)
-    trace = _Trace(
-        model,
-        data,
-        manip,
-        pose,
-        np.asarray(asm.motor_angles_rad, float),
-        mdofs,
-        bid,
-        dict(zip(accel_sites, acc_ids)),
-        np.arange(n_out + 1) * dt_out,
-    )
-    wall = _run(trace, loads, n_sub, ee0, progress=progress)
+    p0 = data.site_xpos[end_effector_site_id(model)].copy()
+    ee0 = end_effector_coordinates(model, data, machine.coordinates)
+    trace = _Trace(model, data, machine, bid, dict(zip(accel_sites, acc_ids)), np.arange(n_out + 1) * dt_out)
+    wall = _run(trace, loads, n_sub, p0, progress=progress)
     t = trace.t_s
     return RolloutResult(
         t_s=t,
@@ -407,6 +492,8 @@ def rollout(
         wall_s=wall,
         n_steps=n_out * n_sub,
         stepping=stepping,
+        coordinates=machine.coordinates,
+        motor_names=machine.motor_names,
         parameters={
             **built.parameters,
             "timestep_s": h,
@@ -414,7 +501,7 @@ def rollout(
             "duration_s": float(t[-1]),
             "output_step_s": dt_out,
             "steps_per_output": n_sub,
-            "motors": dataclasses.asdict(manip.motors),
+            **machine.parameters,
         },
     )
 
@@ -443,7 +530,7 @@ def _stepping(
     return stepping, model, max(1, round(output_step_s / h))
 
 
-def _check_times(duration_s: float, output_step_s: float) -> None:
+def check_times(duration_s: float, output_step_s: float) -> None:
     """Both must be positive finite times (s)."""
     if not (isinstance(duration_s, (int, float)) and duration_s > 0 and math.isfinite(duration_s)):
         raise RolloutError("must be a positive finite time", parameter="duration_s", value=duration_s)
@@ -458,22 +545,24 @@ class _Loads:
     ee_wrench: Profile | None
     motor_torque: Profile | None
     motor_reference: Profile | None
-    servo_nm_per_rad: float
+    servo_stiffness: np.ndarray | None
 
 
-def _check_loads(model: mujoco.MjModel, manip: Manipulator, mdofs: list[int], loads: _Loads) -> int:
-    """Refuse loads the model cannot take; returns the platform body's id (where the wrench acts)."""
-    if (loads.motor_torque is not None or loads.motor_reference is not None) and len(mdofs) != 3:
-        raise RolloutError(
-            "motor torques or references need motor hinges: set motors.mode = 'servo' (Motors(mode='servo', "
-            "servo_stiffness_nm_per_rad=...)); locked motors have no joint"
-        )
-    if loads.motor_reference is not None and manip.motors.mode != "servo":
-        raise RolloutError("motor_reference drives a servo: set motors.mode = 'servo'")
-    sid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, END_EFFECTOR_SITE)
+def _check_loads(model: mujoco.MjModel, machine: RolloutMachine, loads: _Loads) -> int:
+    """Refuse loads the model cannot take; returns the end effector's body id (where the wrench acts)."""
+    n = len(machine.motor_names)
+    if (loads.motor_torque is not None or loads.motor_reference is not None) and len(machine.motor_dofs) != n:
+        raise RolloutError("motor torques or references need motor joints: " + machine.no_motor_hint)
+    if loads.motor_reference is not None and machine.servo_stiffness is None:
+        raise RolloutError("motor_reference drives a servo: " + machine.no_motor_hint)
+    sid = end_effector_site_id(model)
     bid = int(model.site_bodyid[sid])
     if loads.ee_wrench is not None and not np.allclose(model.body_ipos[bid], model.site_pos[sid], atol=1e-12):
-        raise RolloutError("the platform's centre of mass is not at platform_center; wrench application unsupported")
+        raise RolloutError(
+            "the end effector's centre of mass is not at its site; wrench application unsupported",
+            parameter="ee_wrench",
+            hint="place the end effector's lumps at its origin",
+        )
     return bid
 
 
@@ -488,6 +577,10 @@ def _site_ids(model: mujoco.MjModel, sites: Sequence[str]) -> list[int]:
     return ids
 
 
+_WRENCH_SLOT = {"x": 0, "y": 1, "z": 2, "phi": 5}
+"""Where each end-effector coordinate's load goes in ``xfrc_applied`` (force x, y, z; torque about z)."""
+
+
 class _Trace:
     """What a rollout records at each output sample ``k`` (state at ``t_k``, loads applied from ``t_k`` on)."""
 
@@ -495,38 +588,33 @@ class _Trace:
         self,
         model: mujoco.MjModel,
         data: mujoco.MjData,
-        manip: Manipulator,
-        pose: Pose,
-        motor0: np.ndarray,
-        mdofs: list[int],
+        machine: RolloutMachine,
         bid: int,
         acc_ids: dict[str, int],
         t_s: np.ndarray,
     ) -> None:
-        self.model, self.data, self.manip, self.pose = model, data, manip, pose
-        self.motor0, self.mdofs, self.bid, self.acc_ids, self.t_s = motor0, mdofs, bid, acc_ids, t_s
-        n = t_s.size
-        self.ee = np.zeros((n, 3))
-        self.motors = np.zeros((n, 3))
-        self.defl = np.zeros((n, 3))
-        self.wrench = np.zeros((n, 3))
-        self.torque = np.zeros((n, 3))
+        self.model, self.data, self.machine = model, data, machine
+        self.bid, self.acc_ids, self.t_s = bid, acc_ids, t_s
+        n, c, m = t_s.size, len(machine.coordinates), len(machine.motor_names)
+        self.ee = np.zeros((n, c))
+        self.motors = np.zeros((n, m))
+        self.defl = np.zeros((n, c))
+        self.wrench = np.zeros((n, c))
+        self.torque = np.zeros((n, m))
         self.acc = {s: np.zeros((n, 3)) for s in acc_ids}
         self.gravity = model.opt.gravity.copy()
-        self.guess = pose
+        self.slots = [_WRENCH_SLOT[x] for x in machine.coordinates]
+        self.qadr = [int(model.jnt_qposadr[model.dof_jntid[d]]) for d in machine.motor_dofs]
         self._res6 = np.zeros(6)
 
     def record(self, k: int) -> None:
-        """The platform pose, motor angles, deflection from the rigid pose and site accelerations at sample ``k``."""
-        model, data, mdofs = self.model, self.data, self.mdofs
-        self.ee[k] = end_effector_pose(model, data)
-        ma = self.motor0 + (
-            np.array([data.qpos[model.jnt_qposadr[model.dof_jntid[d]]] for d in mdofs]) if mdofs else 0.0
-        )
+        """The end-effector pose, motor angles, deflection from the rigid pose and site accelerations at sample
+        ``k``."""
+        model, data, mc = self.model, self.data, self.machine
+        self.ee[k] = end_effector_coordinates(model, data, mc.coordinates)
+        ma = mc.motor0 + (np.array([data.qpos[a] for a in self.qadr]) if self.qadr else 0.0)
         self.motors[k] = ma
-        rigid = forward_kinematics(self.manip.geometry, ma, guess=self.guess) if mdofs else self.pose
-        self.guess = rigid
-        self.defl[k] = self.ee[k] - rigid.as_array()
+        self.defl[k] = self.ee[k] - mc.rigid_pose(ma)
         if self.acc_ids:
             mujoco.mj_rnePostConstraint(model, data)
             for s, i in self.acc_ids.items():
@@ -534,26 +622,26 @@ class _Trace:
                 self.acc[s][k] = self._res6[3:] + self.gravity  # cacc carries -gravity (accelerometer convention)
 
     def apply_loads(self, k: int, loads: _Loads) -> None:
-        """Set the wrench on the platform and the motor torques of sample ``k`` (recorded)."""
-        data, tk = self.data, self.t_s[k]
+        """Set the wrench on the end effector and the motor torques of sample ``k`` (recorded)."""
+        data, tk, mc = self.data, self.t_s[k], self.machine
         data.xfrc_applied[self.bid] = 0.0
         data.qfrc_applied[:] = 0.0
         if loads.ee_wrench is not None:
-            w = _load("ee_wrench", loads.ee_wrench(tk), tk)
+            w = _load("ee_wrench", loads.ee_wrench(tk), tk, len(mc.coordinates))
             self.wrench[k] = w
-            data.xfrc_applied[self.bid, 0:2] = w[0:2]
-            data.xfrc_applied[self.bid, 5] = w[2]
-        tau = np.zeros(3)
+            data.xfrc_applied[self.bid, self.slots] = w
+        m = len(mc.motor_names)
+        tau = np.zeros(m)
         if loads.motor_torque is not None:
-            tau += _load("motor_torque", loads.motor_torque(tk), tk)
-        if loads.motor_reference is not None:
-            tau += loads.servo_nm_per_rad * _load("motor_reference", loads.motor_reference(tk), tk)
-        if self.mdofs:
+            tau += _load("motor_torque", loads.motor_torque(tk), tk, m)
+        if loads.motor_reference is not None and loads.servo_stiffness is not None:
+            tau += loads.servo_stiffness * _load("motor_reference", loads.motor_reference(tk), tk, m)
+        if mc.motor_dofs:
             self.torque[k] = tau
-            data.qfrc_applied[self.mdofs] = tau
+            data.qfrc_applied[mc.motor_dofs] = tau
 
 
-def _run(trace: _Trace, loads: _Loads, n_sub: int, ee0: np.ndarray, *, progress: bool) -> float:
+def _run(trace: _Trace, loads: _Loads, n_sub: int, p0: np.ndarray, *, progress: bool) -> float:
     """Step ``n_sub`` model steps between samples, recording each; returns the wall time (s).
 
     Raises
@@ -581,7 +669,7 @@ def _run(trace: _Trace, loads: _Loads, n_sub: int, ee0: np.ndarray, *, progress:
             if k == n_out:
                 break
             mujoco.mj_step(model, data, nstep=n_sub)
-            why = _divergence(model, data, ee0, messages)
+            why = _divergence(model, data, p0, messages)
             if why is not None:
                 if bar is not None:
                     bar.close()

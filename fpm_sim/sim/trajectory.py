@@ -57,6 +57,7 @@ __all__ = [
     "MovePath",
     "MoveResult",
     "ResidualVibration",
+    "check_move",
     "dominant_frequency_hz",
     "profile",
     "read_path_csv",
@@ -195,12 +196,14 @@ class MovePath:
         return a0[None, :] + np.asarray(s)[:, None] * (a1 - a0)[None, :]
 
 
-def read_path_csv(path: str | Path) -> np.ndarray:
-    """Rows ``t_s, x_mm, y_mm, phi_rad`` of a path CSV (header row) as ``(n, 4)`` in SI (m, rad)."""
+def read_path_csv(path: str | Path, coordinates: tuple[str, ...] = ("x", "y", "phi")) -> np.ndarray:
+    """Rows ``t_s, x_mm, y_mm, phi_rad`` of a path CSV (header row) as ``(n, 4)`` in SI (m, rad); a described
+    architecture's ``coordinates`` make the columns ``t_s`` and its task columns (``x_mm, y_mm[, z_mm][, phi_rad]``)."""
     p = Path(path)
     if not p.is_file():
         raise MoveError("path CSV not found", parameter="path_csv", value=str(p), hint="give an existing file")
-    header = "t_s,x_mm,y_mm,phi_rad"
+    header = ",".join(["t_s"] + [c + ("_rad" if c == "phi" else "_mm") for c in coordinates])
+    width = len(coordinates) + 1
     text = read_text_input(
         p, error=MoveError, parameter="path_csv", kind="a CSV file", hint=f"give a path CSV ({header})", newline=""
     )
@@ -217,9 +220,9 @@ def read_path_csv(path: str | Path) -> np.ndarray:
         )
     values: list[list[float]] = []
     for i, r in rows[1:]:
-        if len(r) != 4:
+        if len(r) != width:
             raise MoveError(
-                "needs 4 values per row", parameter="path_csv", value=",".join(r), hint=header, file=p, row=i
+                f"needs {width} values per row", parameter="path_csv", value=",".join(r), hint=header, file=p, row=i
             )
         try:
             v = [float(c) for c in r]
@@ -241,10 +244,15 @@ def read_path_csv(path: str | Path) -> np.ndarray:
         values.append(v)
     if len(values) < 2:
         raise MoveError(
-            "needs at least two rows of 4 values after the header", parameter="path_csv", value=len(values), file=p
+            f"needs at least two rows of {width} values after the header",
+            parameter="path_csv",
+            value=len(values),
+            file=p,
         )
     data = np.array(values, float)
-    data[:, 1:3] *= 1e-3
+    for k, c in enumerate(coordinates, 1):
+        if c != "phi":
+            data[:, k] *= 1e-3
     return data
 
 
@@ -414,6 +422,15 @@ class MoveResult:
     stepping: Stepping | None
     wall_s: float
     parameters: dict[str, Any] = field(default_factory=dict)
+    coordinates: tuple[str, ...] = ("x", "y", "phi")
+    """The end effector's coordinates in the columns (a described architecture's task coordinates)."""
+    motor_names: tuple[str, ...] = ("0", "1", "2")
+    """The motors' names in the columns (``motor_<name>_rad``)."""
+
+    @property
+    def translational(self) -> list[int]:
+        """The columns of the end effector's position (all but ``phi``): what the residual vibration measures."""
+        return [k for k, c in enumerate(self.coordinates) if c != "phi"]
 
     @property
     def tracking_error(self) -> np.ndarray:
@@ -423,7 +440,7 @@ class MoveResult:
     def columns(self) -> dict[str, np.ndarray]:
         """Flat name -> column (units in the names)."""
         cols: dict[str, np.ndarray] = {"t_s": self.t_s}
-        names = ("x_m", "y_m", "phi_rad")
+        names = [c + ("_rad" if c == "phi" else "_m") for c in self.coordinates]
         for prefix, arr in (
             ("command", self.command),
             ("ee", self.ee_pose),
@@ -432,10 +449,10 @@ class MoveResult:
         ):
             for k, n in enumerate(names):
                 cols[f"{prefix}_{n}"] = arr[:, k]
-        for i in range(3):
-            cols[f"motor_{i}_ref_rad"] = self.motor_ref_rad[:, i]
-            cols[f"motor_{i}_rad"] = self.motor_angles_rad[:, i]
-            cols[f"motor_{i}_torque_nm"] = self.motor_torque_nm[:, i]
+        for i, m in enumerate(self.motor_names):
+            cols[f"motor_{m}_ref_rad"] = self.motor_ref_rad[:, i]
+            cols[f"motor_{m}_rad"] = self.motor_angles_rad[:, i]
+            cols[f"motor_{m}_torque_nm"] = self.motor_torque_nm[:, i]
         return cols
 
     def save(self, path: str | Path) -> Path:
@@ -450,8 +467,8 @@ class MoveResult:
         from fpm_sim.model.options import resolution_of_parameters
 
         moving = self.t_s <= self.move_end_s
-        err = np.linalg.norm(self.tracking_error[:, :2], axis=1)
-        defl = np.linalg.norm(self.deflection[:, :2], axis=1)
+        err = np.linalg.norm(self.tracking_error[:, self.translational], axis=1)
+        defl = np.linalg.norm(self.deflection[:, self.translational], axis=1)
         return {
             "move_end_s": self.move_end_s,
             "duration_s": float(self.t_s[-1]),
@@ -513,8 +530,9 @@ class MoveResult:
         a.axis("equal")
         a.legend(fontsize=8)
         a = axes[1]
-        a.plot(self.t_s * 1e3, np.linalg.norm(self.tracking_error[:, :2], axis=1) * 1e3, label="|pose - command|")
-        a.plot(self.t_s * 1e3, np.linalg.norm(self.deflection[:, :2], axis=1) * 1e3, label="|deflection|")
+        tr = self.translational
+        a.plot(self.t_s * 1e3, np.linalg.norm(self.tracking_error[:, tr], axis=1) * 1e3, label="|pose - command|")
+        a.plot(self.t_s * 1e3, np.linalg.norm(self.deflection[:, tr], axis=1) * 1e3, label="|deflection|")
         a.axvline(self.move_end_s * 1e3, color="0.5", ls=":", lw=1)
         a.set_xlabel("t (ms)")
         a.set_ylabel("mm")
@@ -528,7 +546,7 @@ class MoveResult:
     def _plot_residual(self, a: Any) -> None:
         r = self.residual
         after = self.t_s >= self.move_end_s
-        res = np.linalg.norm(self.tracking_error[:, :2] - r.final_offset_m, axis=1)
+        res = np.linalg.norm(self.tracking_error[:, self.translational] - r.final_offset_m, axis=1)
         a.plot(self.t_s[after] * 1e3, res[after] * 1e3, lw=1, label=f"shaper {self.shaper}")
         a.axhline(r.tol_m * 1e3, color="r", ls="--", lw=0.8, label=f"tolerance {r.tol_m * 1e3:g} mm")
         a.set_xlabel("t (ms)")
@@ -582,7 +600,7 @@ def simulate_move(
     from fpm_sim.rom.reduction import modal_system
     from fpm_sim.sim.rollout import aligned_options, rollout
 
-    _check_move(path, shaper_kind, settle_s=settle_s, settle_tol_m=settle_tol_m, output_step_s=output_step_s)
+    check_move(path, shaper_kind, settle_s=settle_s, settle_tol_m=settle_tol_m, output_step_s=output_step_s)
     manip = with_servo_motors(manip)
     opts = options or ModelOptions(axial=False)
     end = path.end if path.samples is None else Pose(*path.samples[-1, 1:])
@@ -653,10 +671,9 @@ def simulate_move(
     )
 
 
-def _check_move(
-    path: MovePath, shaper_kind: str, *, settle_s: float, settle_tol_m: float, output_step_s: float
-) -> None:
-    """The path, the settling time and tolerance, the output step and the shaper (none on a sampled path)."""
+def check_move(path: Any, shaper_kind: str, *, settle_s: float, settle_tol_m: float, output_step_s: float) -> None:
+    """The path (a :class:`MovePath` or a described architecture's ``TaskPath``), the settling time and tolerance,
+    the output step and the shaper (none on a sampled path)."""
     path.check()
     for name, v in (("settle_s", settle_s), ("settle_tol_m", settle_tol_m), ("output_step_s", output_step_s)):
         if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0):

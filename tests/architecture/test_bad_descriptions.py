@@ -90,9 +90,20 @@ def test_an_option_the_architecture_lacks_is_refused_by_name(capsys):
     assert err.startswith("error: --phi-rad: Delta (example specification) has no task coordinate phi")
 
 
-def test_a_command_not_yet_general_says_so_in_one_line(capsys):
-    code = main(["move", "--config", str(EXAMPLES / "five_bar.toml")])
+def test_a_command_not_yet_general_says_so_in_one_line(capsys, tmp_path):
+    priors = Path(__file__).resolve().parents[2] / "fpm_sim" / "data" / "study_priors.toml"
+    args = ["--priors", str(priors), "--out", str(tmp_path / "o")]
+    code = main(["calibrate", "--config", str(EXAMPLES / "five_bar.toml"), *args])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2
     assert len(err) == 1
-    assert "'move' runs on the study's 3RRR form only so far" in err[0]
+    assert "'calibrate' runs on the study's 3RRR form only so far" in err[0]
+
+
+@pytest.mark.parametrize("command", [["reproduce"], ["readability"], ["transient"], ["rig", "chain"]])
+def test_the_study_s_own_commands_say_they_are_the_study_s(command, capsys):
+    code = main([*command, "--config", str(EXAMPLES / "five_bar.toml")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert len(err) == 1
+    assert f"'{command[0]}' is the study's own command" in err[0]

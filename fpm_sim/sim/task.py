@@ -1,0 +1,328 @@
+"""Rollouts and moves of any described architecture (:mod:`fpm_sim.architecture`), in its task coordinates.
+
+The same time stepping as the 3RRR's (:func:`fpm_sim.sim.rollout.rollout`, :func:`fpm_sim.sim.trajectory`), read
+through a :class:`fpm_sim.sim.rollout.RolloutMachine` (:func:`machine_of`):
+
+- the end effector's recorded coordinates are the architecture's task coordinates (``x, y[, z][, phi]``), its
+  load a force along each translational one (N) and a moment about z (N m) for ``phi``;
+- the motors are the actuated joints, in the description's order, named ``<chain>_<joint>``; they have joints
+  only in a model built with ``motors="servo"`` (:func:`fpm_sim.model.general.build_general`): position servos of
+  the description's gains (:class:`fpm_sim.architecture.description.ServoGains`);
+- the deflection is the pose minus the rigid-link pose of the motor coordinates, to first order about the
+  assembly: ``pose + J (theta - theta_0)`` with ``J`` the rigid kinematics' task-per-motor Jacobian, by central
+  differences of the inverse kinematics (:func:`rigid_jacobian`). With locked motors it is exact (``theta =
+  theta_0``); with servos its error is of order ``|J'| |theta - theta_0|^2``, second order in the small motions a
+  rollout makes.
+
+A move (:func:`simulate_task_move`) commands a path in task coordinates (:class:`TaskPath`); the joint targets are
+the general inverse kinematics (:func:`fpm_sim.architecture.solve_task_pose`) on a grid of :data:`IK_POINTS` times
+along it, each warm-started from the previous one so the path stays in the working mode it starts in, and a cubic
+spline between them (the path is smooth; a sampled path is interpolated linearly between its own rows, as the
+command). The servos track them as the 3RRR's do (:mod:`fpm_sim.sim.trajectory`); the residual vibration of the
+end effector's position after the move is compared with the modal f1 at the end pose (servos on) and its dominant
+mode (the largest share of the end effector's translational static compliance), which input shapers are designed
+for. The move's deflection uses ``J`` at the end pose about the joint targets: ``cmd + J (theta - theta_ref)``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from fpm_sim.architecture.description import Description
+from fpm_sim.architecture.kinematics import (
+    TaskAssembly,
+    TaskPose,
+    actuated_coordinates,
+    solve_task_pose,
+    task_unknowns,
+)
+from fpm_sim.errors import FpmSimError
+from fpm_sim.model.general import actuated_joint_names, build_general
+from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.spec import BuiltModel
+from fpm_sim.sim.rollout import RolloutMachine, aligned_step, rollout
+from fpm_sim.sim.stepping import DEFAULT_INTEGRATOR
+from fpm_sim.sim.trajectory import (
+    DEFAULT_SETTLE_TOL_M,
+    MoveError,
+    MoveResult,
+    check_move,
+    profile,
+    read_path_csv,
+    residual_vibration,
+    shaper,
+)
+
+__all__ = [
+    "IK_POINTS",
+    "TaskPath",
+    "machine_of",
+    "pose_vector",
+    "rigid_jacobian",
+    "simulate_task_move",
+    "task_pose",
+]
+
+IK_POINTS = 201
+"""Inverse-kinematics solves along a profile move (a cubic spline between them). A minimum-jerk 30 mm move's joint
+targets are smooth on 1/200 of the move: the spline's error is below 1e-9 rad (its fourth derivative times h^4)."""
+FD_STEP = 1e-6
+"""Central-difference step (m, rad) of :func:`rigid_jacobian`: the inverse kinematics converges to 1e-11 m, so the
+derivative's round-off is ~1e-5 relative and its truncation ~1e-12."""
+
+
+def pose_vector(pose: TaskPose, task: tuple[str, ...]) -> np.ndarray:
+    """The task coordinates ``task`` of ``pose`` (m, rad)."""
+    return np.array([pose.value(c) for c in task])
+
+
+def task_pose(values: np.ndarray, task: tuple[str, ...]) -> TaskPose:
+    """The :class:`TaskPose` of task-coordinate values (the others 0)."""
+    v = dict(zip(task, map(float, values)))
+    return TaskPose(v.get("x", 0.0), v.get("y", 0.0), v.get("z", 0.0), v.get("phi", 0.0))
+
+
+def rigid_jacobian(desc: Description, asm: TaskAssembly) -> np.ndarray:
+    """``d pose / d theta`` (task coordinates per actuated coordinate) of the rigid kinematics at ``asm``: the
+    inverse of the inverse kinematics' central differences (a pseudo-inverse when the counts differ)."""
+    x0 = pose_vector(asm.pose, desc.task)
+    start = task_unknowns(desc, asm)
+    cols = []
+    for k in range(len(desc.task)):
+        dx = np.zeros_like(x0)
+        dx[k] = FD_STEP
+        hi = actuated_coordinates(desc, solve_task_pose(desc, task_pose(x0 + dx, desc.task), start=start))
+        lo = actuated_coordinates(desc, solve_task_pose(desc, task_pose(x0 - dx, desc.task), start=start))
+        cols.append((hi - lo) / (2 * FD_STEP))
+    out: np.ndarray = np.linalg.pinv(np.column_stack(cols))
+    return out
+
+
+def machine_of(built: BuiltModel, desc: Description, asm: TaskAssembly) -> RolloutMachine:
+    """The :class:`RolloutMachine` of ``desc`` built as ``built`` (by :func:`build_general`) at ``asm``."""
+    model = built.model
+    names = tuple(f"{c}_{j}" for c, j in actuated_joint_names(desc))
+    ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n) for n in names]
+    dofs = [int(model.jnt_dofadr[i]) for i in ids] if all(i >= 0 for i in ids) else []
+    motor0 = actuated_coordinates(desc, asm)
+    x0 = pose_vector(asm.pose, desc.task)
+    jac: list[np.ndarray] = []
+
+    def rigid(ma: np.ndarray) -> np.ndarray:
+        if not dofs:
+            return x0
+        if not jac:
+            jac.append(rigid_jacobian(desc, asm))
+        out: np.ndarray = x0 + jac[0] @ (ma - motor0)
+        return out
+
+    types = [j.type for c in desc.chains for j in c.joints if j.actuated]
+    servo = dofs and built.parameters.get("motors") == "servo"
+    return RolloutMachine(
+        coordinates=desc.task,
+        motor_names=names,
+        motor_dofs=dofs,
+        motor0=motor0,
+        servo_stiffness=np.array([desc.servos.gains(t)[0] for t in types]) if servo else None,
+        rigid_pose=rigid,
+        no_motor_hint="give the actuated joints servos (motors='servo': fs.rollout(..., motors='servo'), "
+        "build_general(..., motors='servo')); locked ones have no joint",
+        parameters={"motors": "servo" if servo else "locked", "actuated_joints": list(names)},
+    )
+
+
+@dataclass(frozen=True)
+class TaskPath:
+    """A commanded end-effector path in task coordinates ``task``: a profile move from ``start`` to ``end``
+    (arrays of the task coordinates, m and rad) in ``move_s`` with the profile ``kind``, or ``samples`` (rows
+    ``t_s`` and the task coordinates; linear between rows, the last held). ``impulses`` shape the profile."""
+
+    task: tuple[str, ...]
+    start: np.ndarray
+    end: np.ndarray
+    move_s: float
+    kind: str = "minimum-jerk"
+    samples: np.ndarray | None = None
+    impulses: tuple[np.ndarray, np.ndarray] = field(default_factory=lambda: (np.array([1.0]), np.array([0.0])))
+
+    @classmethod
+    def from_csv(cls, path: str | Path, task: tuple[str, ...]) -> TaskPath:
+        """The sampled path of a CSV ``t_s`` and the task columns (``x_mm, y_mm[, z_mm][, phi_rad]``)."""
+        s = read_path_csv(path, task)
+        return cls(task, s[0, 1:], s[-1, 1:], float(s[-1, 0]), samples=s)
+
+    def check(self) -> None:
+        if self.samples is None:
+            profile(self.kind, 0.0)
+            if not (math.isfinite(self.move_s) and self.move_s > 0):
+                raise MoveError(
+                    "the move time must be a positive finite time (s)", parameter="move_s", value=self.move_s
+                )
+
+    @property
+    def duration_s(self) -> float:
+        """When the command stops changing (s)."""
+        if self.samples is not None:
+            return float(self.samples[-1, 0])
+        return self.move_s + float(self.impulses[1][-1])
+
+    def poses(self, t_s: np.ndarray) -> np.ndarray:
+        """``(n, len(task))`` commanded task coordinates at ``t_s``."""
+        t = np.asarray(t_s, float)
+        if self.samples is not None:
+            return np.column_stack(
+                [np.interp(t, self.samples[:, 0], self.samples[:, k]) for k in range(1, 1 + len(self.task))]
+            )
+        amps, times = self.impulses
+        s = sum(a * profile(self.kind, (t - t0) / self.move_s) for a, t0 in zip(amps, times))
+        return self.start[None, :] + np.asarray(s)[:, None] * (self.end - self.start)[None, :]
+
+
+def _joint_targets(
+    desc: Description, path: TaskPath, start: TaskAssembly, t_s: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The actuated coordinates along the commanded path at ``t_s`` and their rates (module docstring)."""
+    from scipy.interpolate import CubicSpline
+
+    if path.samples is not None:
+        grid = path.samples[:, 0]
+    else:
+        grid = np.linspace(0.0, path.duration_s, IK_POINTS)
+    cmd = path.poses(grid)
+    guess, theta = task_unknowns(desc, start), []
+    for k, x in enumerate(cmd):
+        try:
+            asm = solve_task_pose(desc, task_pose(x, desc.task), start=guess)
+        except FpmSimError as e:
+            raise MoveError(
+                f"the commanded path leaves the workspace at t = {grid[k]:.4g} s: {e}",
+                parameter="path",
+                hint="choose start and end poses whose straight path stays inside the workspace",
+            ) from None
+        guess = task_unknowns(desc, asm)
+        theta.append(actuated_coordinates(desc, asm))
+    th = np.array(theta)
+    th = th[0] + np.unwrap(th - th[0], axis=0)
+    if path.samples is not None:
+        ref = np.column_stack([np.interp(t_s, grid, th[:, i]) for i in range(th.shape[1])])
+    else:
+        ref = CubicSpline(grid, th, axis=0)(np.minimum(t_s, grid[-1]))
+    step = float(t_s[1] - t_s[0]) if len(t_s) > 1 else 1.0
+    return ref, np.gradient(ref, step, axis=0)
+
+
+def _end_modes(desc: Description, end: TaskPose, opts: ModelOptions) -> tuple[float, float, float]:
+    """Modal f1 at the end pose (servos on), the frequency and damping ratio of its dominant mode (the largest share
+    of the end effector's translational static compliance: ``|C phi_r|^2 / omega_r^2``)."""
+    from fpm_sim.rom.reduction import modal_system
+    from fpm_sim.sim.rollout import end_effector_site_id
+
+    system = modal_system(build_general(desc, end, opts, motors="servo"))
+    model = system.built.model
+    data = mujoco.MjData(model)
+    data.qpos[:] = system.qpos
+    mujoco.mj_forward(model, data)
+    jacp = np.zeros((3, model.nv))
+    mujoco.mj_jacSite(model, data, jacp, None, end_effector_site_id(model))
+    rows = jacp[[k for k, c in enumerate("xyz") if c in desc.task]]
+    share = np.sum((rows @ system.phi) ** 2, axis=0) / system.omega_rad_s**2
+    r = int(np.argmax(share))
+    w = float(system.omega_rad_s[r])
+    return float(system.frequencies_hz[0]), w / (2 * math.pi), float(system.xi[r, r] / (2 * w))
+
+
+def simulate_task_move(
+    desc: Description,
+    path: TaskPath,
+    *,
+    settle_s: float = 0.3,
+    options: ModelOptions | None = None,
+    output_step_s: float = 1e-4,
+    shaper_kind: str = "none",
+    settle_tol_m: float = DEFAULT_SETTLE_TOL_M,
+    integrator: str = DEFAULT_INTEGRATOR,
+    band_hz: float | None = None,
+    progress: bool = False,
+) -> MoveResult:
+    """Simulate the move ``path`` of ``desc`` on its full flexible model with servos (module docstring); the
+    options as :func:`fpm_sim.sim.trajectory.simulate_move`.
+
+    Long because: the move's steps in order (the end pose's modes and shaper, the joint targets, the rollout, the
+    torques and the residual vibration) and the result's fields.
+    """
+    check_move(path, shaper_kind, settle_s=settle_s, settle_tol_m=settle_tol_m, output_step_s=output_step_s)
+    opts = options or ModelOptions(axial=False)
+    start, end = task_pose(path.start, desc.task), task_pose(path.end, desc.task)
+    f1_end, f_dom, z_dom = _end_modes(desc, end, opts)
+    impulses = shaper(shaper_kind, f_dom, z_dom)
+    if path.samples is None:
+        path = dataclasses.replace(path, impulses=impulses)
+    asm0 = solve_task_pose(desc, start)
+    h_auto = opts.timestep_s or build_general(desc, start, opts, assembly=asm0, motors="servo").timestep_s
+    built = build_general(desc, start, aligned_step(opts, h_auto, output_step_s), assembly=asm0, motors="servo")
+    machine = machine_of(built, desc, asm0)
+    n = round((path.duration_s + settle_s) / output_step_s)
+    t = np.arange(n + 1) * output_step_s
+    cmd = path.poses(t)
+    ref, dref = _joint_targets(desc, path, asm0, t)
+    types = [j.type for c in desc.chains for j in c.joints if j.actuated]
+    k, c = (np.array([desc.servos.gains(ty)[i] for ty in types]) for i in (0, 1))
+
+    def sample(arr: np.ndarray) -> Any:
+        return lambda tt: arr[min(round(tt / output_step_s), n)]
+
+    wall0 = time.perf_counter()
+    res = rollout(
+        built,
+        machine,
+        duration_s=float(t[-1]),
+        output_step_s=output_step_s,
+        motor_reference=sample(ref - machine.motor0),
+        motor_torque=sample(c * dref),
+        integrator=integrator,
+        band_hz=band_hz,
+        f1_hz=f1_end,
+        progress=progress,
+    )
+    wall = time.perf_counter() - wall0
+    m = len(res.t_s)
+    theta = res.motor_angles_rad
+    torque = k * (ref[:m] - theta) + c * (dref[:m] - np.gradient(theta, output_step_s, axis=0))
+    jac_end = rigid_jacobian(desc, solve_task_pose(desc, end))
+    deflection = res.ee_pose - (cmd[:m] + (theta - ref[:m]) @ jac_end.T)
+    tr = [i for i, x in enumerate(desc.task) if x != "phi"]
+    err = res.ee_pose - cmd[:m]
+    residual = residual_vibration(res.t_s, err[:, tr], path.duration_s, settle_tol_m, (f1_end, f_dom, z_dom))
+    return MoveResult(
+        t_s=res.t_s,
+        command=cmd[:m],
+        ee_pose=res.ee_pose,
+        deflection=deflection,
+        motor_ref_rad=ref[:m],
+        motor_angles_rad=theta,
+        motor_torque_nm=torque,
+        residual=residual,
+        move_end_s=path.duration_s,
+        shaper=shaper_kind,
+        impulses=impulses,
+        stepping=res.stepping,
+        wall_s=wall,
+        coordinates=desc.task,
+        motor_names=machine.motor_names,
+        parameters={
+            **res.parameters,
+            "start": dataclasses.asdict(start),
+            "end": dataclasses.asdict(end),
+            "profile": path.kind if path.samples is None else "csv",
+            "move_s": path.move_s,
+            "settle_s": settle_s,
+        },
+    )
