@@ -32,6 +32,7 @@ The file's form (``examples/architectures/*.toml`` are complete examples; ``docs
 
 from __future__ import annotations
 
+import copy
 import math
 import tomllib
 from pathlib import Path
@@ -339,6 +340,8 @@ def parse_description(data: dict[str, Any], *, source: str = "user") -> Descript
         damping_beta_s=r.number(damping, "damping", "stiffness_proportional_s", 0.0),
         check_poses=_check_poses(data.get("check_poses", []), task),
         provenance=r.provenance,
+        data=copy.deepcopy(data),
+        source=source,
     )
     _check_structure(desc)
     return desc

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -30,7 +31,7 @@ from fpm_sim.figures import write_table_and_figure
 from fpm_sim.kinematics import NEAR_SINGULAR_WARN, SINGULAR_TOL
 from fpm_sim.model.options import ModelOptions
 
-__all__ = ["TaskSweep", "read_task_poses_csv", "sweep_task", "task_grid"]
+__all__ = ["TaskSweep", "read_task_poses_csv", "sweep_task", "sweep_task_many", "task_grid"]
 
 MAX_GRID_POINTS = 40_000
 
@@ -233,25 +234,44 @@ def sweep_task(
     progress: bool = False,
 ) -> TaskSweep:
     """The first ``n_modes`` frequencies (Hz) at every pose (module docstring), on ``workers`` processes."""
+    (sw,) = sweep_task_many([desc], poses, options=options, n_modes=n_modes, workers=workers)
+    return replace(sw, grid=grid, step_mm=step_mm)
+
+
+def sweep_task_many(
+    descs: Sequence[Description],
+    poses: list[TaskPose],
+    *,
+    options: ModelOptions | None = None,
+    n_modes: int = 3,
+    workers: int = 1,
+) -> list[TaskSweep]:
+    """:func:`sweep_task` of several descriptions (a design study's designs) over the same poses, their chunks on one
+    pool of ``workers`` processes."""
     opts = replace(options or ModelOptions(), gravity=False, axial=False)
-    if workers > 1 and len(poses) > workers:
-        chunks = [poses[i::workers] for i in range(workers)]
+    n = workers if workers > 1 and len(poses) > workers else 1
+    jobs = [(d, poses[i::n], opts, n_modes) for d in descs for i in range(n)]
+    if workers > 1 and len(jobs) > 1:
         with spawn_pool(workers) as pool:  # its workers ignore Ctrl-C: this process alone stops, and stops them
-            parts = pool.map(_chunk, [(desc, c, opts, n_modes) for c in chunks])
-        results: list[tuple[Any, ...]] = [None] * len(poses)  # type: ignore[list-item]
-        for i, part in enumerate(parts):
-            results[i::workers] = part
+            parts = pool.map(_chunk, jobs)
     else:
-        results = _chunk((desc, poses, opts, n_modes))
-    return TaskSweep(
-        name=desc.name,
-        task=desc.task,
-        poses=list(poses),
-        freq_hz=np.array([r[1] for r in results]).reshape(len(poses), n_modes),
-        status=[r[0] for r in results],
-        type1=np.array([r[2] for r in results], float),
-        type2=np.array([r[3] for r in results], float),
-        grid=grid,
-        step_mm=step_mm,
-        options=opts,
-    )
+        parts = [_chunk(job) for job in jobs]
+    out = []
+    for d, desc in enumerate(descs):
+        results: list[tuple[Any, ...]] = [None] * len(poses)  # type: ignore[list-item]
+        for i in range(n):
+            results[i::n] = parts[d * n + i]
+        out.append(
+            TaskSweep(
+                name=desc.name,
+                task=desc.task,
+                poses=list(poses),
+                freq_hz=np.array([r[1] for r in results]).reshape(len(poses), n_modes),
+                status=[r[0] for r in results],
+                type1=np.array([r[2] for r in results], float),
+                type2=np.array([r[3] for r in results], float),
+                grid="poses",
+                options=opts,
+            )
+        )
+    return out
