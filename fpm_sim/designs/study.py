@@ -134,6 +134,9 @@ def parse_vary(items: Sequence[str], config: Machine) -> dict[str, list[float]]:
         if name in out:
             raise DesignError(f"{name} given twice", parameter="vary", hint="give all its values in one SPEC")
         out[name] = parse_spec(spec, name=name, parameter="vary")
+        if isinstance(config, Description):  # each value read into the file now (cheap), before any warning or work
+            for v in out[name]:
+                apply_design(config, {name: v})
     return out
 
 
@@ -178,6 +181,8 @@ def read_designs_csv(path: str | Path, config: Machine) -> list[dict[str, float]
         if not all(math.isfinite(v) for v in values):
             raise DesignError(f"{p}: row {line}: cells must be finite", parameter="designs", value=r)
         designs.append(dict(zip(header, values)))
+        if isinstance(config, Description):  # each row read into the file now (cheap), before any work
+            apply_design(config, designs[-1])
     return designs
 
 
@@ -661,6 +666,24 @@ def _solve(
     )
 
 
+def _designs_of(
+    config: Machine, vary: Mapping[str, Sequence[float]] | None, designs: Sequence[Mapping[str, float]] | None
+) -> tuple[list[dict[str, float]], dict[str, list[float]], bool]:
+    """``(designs, levels, factorial)``: the full factorial of ``vary`` (fields checked on ``config``), or the rows
+    of ``designs`` with each field's distinct values as its levels."""
+    if vary is not None:
+        levels = {k: [float(v) for v in vals] for k, vals in vary.items()}
+        for name, vals in levels.items():
+            _check_field(config, name)
+            if not vals:
+                raise DesignError(f"{name}: no values", parameter="vary")
+        return factorial(levels), levels, True
+    design_list = [{k: float(v) for k, v in d.items()} for d in designs or []]
+    if not design_list:
+        raise DesignError("no designs", parameter="designs")
+    return design_list, {k: sorted({d[k] for d in design_list}) for k in design_list[0]}, False
+
+
 def design_study(
     config: Machine,
     *,
@@ -706,20 +729,7 @@ def design_study(
         Unknown field, invalid value, both or neither of ``vary``/``designs``, no poses.
     """
     pose_list: list[Any] = check_request(vary, designs, n_modes=n_modes, f_min_hz=f_min_hz, poses=list(poses))
-    if vary is not None:
-        levels = {k: [float(v) for v in vals] for k, vals in vary.items()}
-        for name, vals in levels.items():
-            _check_field(config, name)
-            if not vals:
-                raise DesignError(f"{name}: no values", parameter="vary")
-        design_list = factorial(levels)
-        is_factorial = True
-    else:
-        design_list = [{k: float(v) for k, v in d.items()} for d in designs or []]
-        if not design_list:
-            raise DesignError("no designs", parameter="designs")
-        levels = {k: sorted({d[k] for d in design_list}) for k in design_list[0]}
-        is_factorial = False
+    design_list, levels, is_factorial = _designs_of(config, vary, designs)
     fields = list(levels)
     base: Any = config  # either form; apply_design keeps it
     configs = [apply_design(base, d) for d in design_list]
