@@ -29,6 +29,7 @@ from fpm_sim.architecture.kinematics import (
     solve_task_pose,
 )
 from fpm_sim.architecture.reader import is_description_file, load_description, parse_description
+from fpm_sim.architecture.writer import description_toml
 
 __all__ = [
     "ChainDesc",
@@ -45,6 +46,7 @@ __all__ = [
     "TubeSection",
     "UnreachableTaskPoseError",
     "check_mobility",
+    "description_toml",
     "description_value",
     "is_description_file",
     "load_description",

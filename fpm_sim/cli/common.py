@@ -362,7 +362,7 @@ def pose_of(args: argparse.Namespace) -> Pose:
     return checked_pose_mm(*(0.0 if v is None else v for v in (args.x_mm, args.y_mm, args.phi_rad)))
 
 
-GENERAL_COMMANDS = ("modes", "export-mjcf", "sweep", "check", "design")
+GENERAL_COMMANDS = ("modes", "export-mjcf", "sweep", "check", "design", "identify")
 """The commands that run on a described architecture (``[[chains]]``) so far; the others say so."""
 
 
