@@ -346,9 +346,7 @@ def sweep(
             task_poses = [p for p in poses or [] if isinstance(p, TaskPose)]
             if len(task_poses) != len(poses or []) or not task_poses:
                 raise TypeError("a described architecture's poses are fs.TaskPose values (grid='poses')")
-        return sweep_task(
-            config, task_poses, options=_options(options), workers=workers, grid=grid, step_mm=step_mm
-        )
+        return sweep_task(config, task_poses, options=_options(options), workers=workers, grid=grid, step_mm=step_mm)
     from fpm_sim.kinematics import Pose
     from fpm_sim.study.poses import parse_reading
     from fpm_sim.study.sweep import sweep_workspace
@@ -370,24 +368,28 @@ def sweep(
 
 
 def design(
-    config: Manipulator | None = None,
+    config: Manipulator | Description | None = None,
     *,
-    poses: Sequence[Pose],
+    poses: Sequence[Pose] | Sequence[TaskPose] | None = None,
     vary: dict[str, Sequence[float]] | None = None,
     designs: Sequence[dict[str, float]] | None = None,
     n_modes: int = 3,
     f_min_hz: float | None = None,
     options: ModelOptions | None = None,
+    workers: int = 1,
 ) -> DesignResult:
     """Lowest ``n_modes`` frequencies for every design x pose (``fpm-sim design``).
 
     Parameters
     ----------
     config
-        The base description; ``None``: the embedded one.
+        The base description; ``None``: the embedded one. A described architecture
+        (:class:`fpm_sim.architecture.Description`, read from its file) varies dotted paths into its file
+        (``sections.bar.height_m``, ``chains.left.proximal.length_m``: docs/architectures.md).
     poses
         The poses, the same for every design (e.g. ``fs.sweep``'s grids, or
-        :func:`fpm_sim.study.sweep.dense_grid`).
+        :func:`fpm_sim.study.sweep.dense_grid`); a described architecture's are
+        :class:`fpm_sim.architecture.TaskPose` values, ``None``: its check poses. The 3RRR needs them.
     vary
         ``{dotted field: values}`` (SI units, as the field names say): the full factorial.
     designs
@@ -398,17 +400,30 @@ def design(
         Threshold of the summary's workspace share (Hz).
     options
         Pose-loop model options; ``None``: as :func:`sweep`.
+    workers
+        Processes of a described architecture's pose loop (the 3RRR's runs on the Dask engine's default).
     """
-    from fpm_sim.designs import design_study
+    from fpm_sim.architecture import Description, TaskPose
+    from fpm_sim.batch.engine import EngineOptions
+    from fpm_sim.designs import DesignError, design_study
 
+    if isinstance(config, Description):
+        home = [TaskPose(*(p.get(c, 0.0) for c in ("x", "y", "z", "phi"))) for p in config.check_poses]
+        chosen: Sequence[Pose] | Sequence[TaskPose] = home if poses is None else poses
+        engine = EngineOptions(workers=workers)
+    elif poses is None:
+        raise DesignError("the 3RRR's design study needs poses", parameter="poses", hint="e.g. dense_grid(config)")
+    else:
+        chosen, engine = poses, None
     return design_study(
-        _config(config),
-        poses=poses,
+        _config(config) if not isinstance(config, Description) else config,
+        poses=chosen,
         vary=vary,
         designs=designs,
         n_modes=n_modes,
         f_min_hz=f_min_hz,
         options=_options(options),
+        engine=engine,
     )
 
 
@@ -1229,6 +1244,7 @@ if TYPE_CHECKING:
     from pathlib import Path
 
     from fpm_sim.study.posterior import Posterior, PredictiveBands
+
 
 def predict_bands(
     posterior: Posterior | str | Path,

@@ -387,9 +387,7 @@ class FrequencyResponse:
             lines.append(f"{i:>4}  {p.freq_hz:>10.3f}  {p.magnitude:>10.4g}  {p.prominence_db:>15.1f}")
         return "\n".join(lines)
 
-    def plot(
-        self, ax: Any = None, *, axes: Any = None, label: str | None = None, modal_lines: bool = True
-    ) -> Any:
+    def plot(self, ax: Any = None, *, axes: Any = None, label: str | None = None, modal_lines: bool = True) -> Any:
         """Magnitude (dB) and phase against frequency; returns the ``Figure``.
 
         ``ax``: one axes (the magnitude alone) or two (magnitude, phase); ``axes``: two axes; default a new

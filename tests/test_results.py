@@ -100,6 +100,15 @@ def _quiet_call(fn, *args, **kwargs):
         return fn(*args, **kwargs)
 
 
+def _described_identification():
+    from fpm_sim.study.identify.described import TaskMeasurements, identify_description
+
+    data = TaskMeasurements("twin", [fs.TaskPose(0.0, 0.25)], np.array([[30.0]]), np.array([[0.6]]))
+    desc = fs.load_description(EXAMPLES / "five_bar.toml")
+    free = {"sections.bar.height_m": (0.003, 0.012)}
+    return _quiet_call(identify_description, desc, data, free, options=LOOP, max_nfev=3)
+
+
 def _readability():
     from fpm_sim.study.poses import study_poses
 
@@ -177,6 +186,7 @@ BUILDERS = {
     ),
     "PoseFrequencies": lambda: _sweep().frequencies,
     "StudyReproduction": _reproduction,
+    "DescribedIdentification": _described_identification,
     "DesignResult": lambda: _quiet_call(
         fs.design, poses=POSES, vary={"hardware.payload.mass_kg": [0.0, 0.5]}, options=LOOP
     ),

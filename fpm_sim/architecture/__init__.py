@@ -12,6 +12,14 @@ from fpm_sim.architecture.description import (
     PlacedLump,
     TubeSection,
 )
+from fpm_sim.architecture.edit import (
+    ParameterPathError,
+    description_value,
+    machine_parameter,
+    settable_paths,
+    with_description_value,
+    with_machine_parameter,
+)
 from fpm_sim.architecture.kinematics import (
     MobilityError,
     TaskAssembly,
@@ -22,6 +30,7 @@ from fpm_sim.architecture.kinematics import (
     task_unknowns,
 )
 from fpm_sim.architecture.reader import is_description_file, load_description, parse_description
+from fpm_sim.architecture.writer import description_toml
 
 __all__ = [
     "ChainDesc",
@@ -31,15 +40,22 @@ __all__ = [
     "JointDesc",
     "LinkDesc",
     "MobilityError",
+    "ParameterPathError",
     "PlacedLump",
     "TaskAssembly",
     "TaskPose",
     "TubeSection",
     "UnreachableTaskPoseError",
     "check_mobility",
+    "description_toml",
+    "description_value",
     "is_description_file",
     "load_description",
+    "machine_parameter",
     "parse_description",
+    "settable_paths",
     "solve_task_pose",
     "task_unknowns",
+    "with_description_value",
+    "with_machine_parameter",
 ]

@@ -261,6 +261,11 @@ class Description:
     """The actuated joints' servos when they move (``[servos]`` in the file; :class:`ServoGains`)."""
     provenance: dict[str, str] = field(default_factory=dict, compare=False)
     source_file: str | None = field(default=None, compare=False)
+    data: dict[str, Any] | None = field(default=None, compare=False, repr=False)
+    """The parsed TOML mapping it was read from (``None``: built in code): what a dotted-path edit
+    (:mod:`fpm_sim.architecture.edit`) changes and reads again, so that an edited value is validated as the file's."""
+    source: str = field(default="user", compare=False, repr=False)
+    """The provenance of the file's bare numbers when it has no ``default_source`` (``user: <file>``)."""
 
     def chain(self, name: str) -> ChainDesc:
         for c in self.chains:

@@ -32,6 +32,7 @@ The file's form (``examples/architectures/*.toml`` are complete examples; ``docs
 
 from __future__ import annotations
 
+import copy
 import math
 import tomllib
 from pathlib import Path
@@ -342,6 +343,8 @@ def parse_description(data: dict[str, Any], *, source: str = "user") -> Descript
         check_poses=_check_poses(data.get("check_poses", []), task),
         servos=_servos(r, data.get("servos", {})),
         provenance=r.provenance,
+        data=copy.deepcopy(data),
+        source=source,
     )
     _check_structure(desc)
     return desc

@@ -18,6 +18,7 @@ from __future__ import annotations
 import itertools
 import math
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -35,7 +36,7 @@ from fpm_sim.kinematics import NEAR_SINGULAR_WARN, SINGULAR_TOL
 from fpm_sim.linear.threads import blas_threads
 from fpm_sim.model.options import ModelOptions
 
-__all__ = ["TaskSweep", "read_task_poses_csv", "sweep_task", "task_grid"]
+__all__ = ["TaskSweep", "read_task_poses_csv", "sweep_task", "sweep_task_many", "task_grid"]
 
 MAX_GRID_POINTS = 40_000
 
@@ -269,15 +270,47 @@ def sweep_task(
     opts = replace(options or ModelOptions(), gravity=False, axial=False)
     if backend != "cpu":
         results = batched_task_modes(desc, poses, opts, n_modes, backend=backend)
-    elif workers > 1 and len(poses) > workers:
-        # contiguous runs of the grid: each pose's inverse kinematics starts from its neighbour's
-        bounds = np.linspace(0, len(poses), workers + 1).astype(int)
-        chunks = [poses[a:b] for a, b in itertools.pairwise(bounds)]
+        return _task_sweep(desc, poses, results, opts, n_modes, grid=grid, step_mm=step_mm)
+    (sw,) = sweep_task_many([desc], poses, options=opts, n_modes=n_modes, workers=workers)
+    return replace(sw, grid=grid, step_mm=step_mm)
+
+
+def sweep_task_many(
+    descs: Sequence[Description],
+    poses: list[TaskPose],
+    *,
+    options: ModelOptions | None = None,
+    n_modes: int = 3,
+    workers: int = 1,
+) -> list[TaskSweep]:
+    """:func:`sweep_task` of several descriptions (a design study's designs) over the same poses, their chunks on one
+    pool of ``workers`` processes. A chunk is a contiguous run of the poses: each pose's inverse kinematics starts
+    from its neighbour's."""
+    opts = replace(options or ModelOptions(), gravity=False, axial=False)
+    n = workers if workers > 1 and len(poses) > workers else 1
+    bounds = np.linspace(0, len(poses), n + 1).astype(int)
+    jobs = [(d, poses[lo:hi], opts, n_modes) for d in descs for lo, hi in itertools.pairwise(bounds)]
+    if workers > 1 and len(jobs) > 1:
         with spawn_pool(workers) as pool:  # its workers ignore Ctrl-C: this process alone stops, and stops them
-            parts = pool.map(_chunk, [(desc, c, opts, n_modes) for c in chunks])
-        results = [row for part in parts for row in part]
+            parts = pool.map(_chunk, jobs)
     else:
-        results = _chunk((desc, poses, opts, n_modes))
+        parts = [_chunk(job) for job in jobs]
+    return [
+        _task_sweep(desc, poses, [row for part in parts[d * n : (d + 1) * n] for row in part], opts, n_modes)
+        for d, desc in enumerate(descs)
+    ]
+
+
+def _task_sweep(
+    desc: Description,
+    poses: list[TaskPose],
+    results: list[tuple[Any, ...]],
+    opts: ModelOptions,
+    n_modes: int,
+    *,
+    grid: str = "poses",
+    step_mm: float | None = None,
+) -> TaskSweep:
     return TaskSweep(
         name=desc.name,
         task=desc.task,

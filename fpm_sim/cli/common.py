@@ -362,7 +362,20 @@ def pose_of(args: argparse.Namespace) -> Pose:
     return checked_pose_mm(*(0.0 if v is None else v for v in (args.x_mm, args.y_mm, args.phi_rad)))
 
 
-GENERAL_COMMANDS = ("modes", "export-mjcf", "sweep", "check", "reduce", "frf", "impact", "atlas", "rollout", "move")
+GENERAL_COMMANDS = (
+    "modes",
+    "export-mjcf",
+    "sweep",
+    "check",
+    "design",
+    "identify",
+    "reduce",
+    "frf",
+    "impact",
+    "atlas",
+    "rollout",
+    "move",
+)
 """The commands that run on a described architecture (``[[chains]]``) so far; the others say so."""
 
 
@@ -440,6 +453,18 @@ def build_machine(args: argparse.Namespace, machine: Manipulator | Description, 
 
     pose = pose_of(args)
     return build_manipulator(machine, pose, opts), pose.label()
+
+
+def held_task_coordinates(args: argparse.Namespace, desc: Description) -> dict[str, float]:
+    """The task coordinates a dense grid holds: z (spatial; ``--z-mm``, default the first check pose's) and phi
+    (``--phi-rad``, where the architecture sets it)."""
+    if args.phi_rad and "phi" not in desc.task:
+        raise CliError(f"--phi-rad: {desc.name} has no task coordinate phi; drop --phi-rad")
+    if args.z_mm is not None and "z" not in desc.task:
+        raise CliError(f"--z-mm: {desc.name} has no task coordinate z; drop --z-mm")
+    home = desc.check_poses[0] if desc.check_poses else {}
+    z = args.z_mm * 1e-3 if args.z_mm is not None else home.get("z", 0.0)
+    return {"z": z, "phi": args.phi_rad}
 
 
 def with_resolution(payload: dict[str, Any], options: ModelOptions) -> dict[str, Any]:

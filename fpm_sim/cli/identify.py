@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 from typing import Any
 
@@ -14,6 +15,7 @@ from fpm_sim.cli.common import (
     add_overwrite_arg,
     check_output_dir,
     emit,
+    is_described,
     load_manipulator,
     workers_of,
 )
@@ -82,6 +84,68 @@ def read_data_args(args: argparse.Namespace) -> tuple[list[str], list[Any], list
     return groups, datasets, tests
 
 
+_STUDY_ONLY = {
+    "subsystems": None,
+    "workspace": None,
+    "reading": None,
+    "folds": 0,
+    "global_method": "de",
+    "timoshenko": False,
+    "workers": None,
+}
+"""Options of the 3RRR's identification (their defaults): on a described architecture they are refused by name."""
+
+
+def _identify_described(args: argparse.Namespace) -> int:
+    """``fpm-sim identify --config machine.toml --free PATH[=lo:hi],...``: bounded least squares of dotted paths into
+    its file (:mod:`fpm_sim.study.identify.described`); writes the fitted file, identify.json and a figure."""
+    import matplotlib.pyplot as plt
+
+    from fpm_sim.architecture import description_toml, load_description
+    from fpm_sim.model.options import ModelOptions
+    from fpm_sim.outputs import atomic_dir
+    from fpm_sim.results import to_jsonable
+    from fpm_sim.study.identify.described import identify_description, parse_free_paths, read_task_measured_csv
+
+    for key, default in _STUDY_ONLY.items():
+        if getattr(args, key, default) != default:
+            flag = {"global_method": "--global"}.get(key, "--" + key.replace("_", "-"))
+            raise CliError(
+                f"{flag}: an option of the 3RRR's identification; a described architecture's is bounded least "
+                f"squares of dotted paths from its file's values (docs/architectures.md); drop {flag}"
+            )
+    groups = [g.strip() for g in args.free.split(",") if g.strip()]
+    if any("." not in g.partition("=")[0] for g in groups):
+        raise CliError(
+            f"--free {args.free}: the 3RRR's parameter groups; on a described architecture give dotted paths into "
+            "its file, e.g. --free sections.bar.height_m,materials.steel.young_pa=150e9:250e9"
+        )
+    if len(args.measured or []) != 1:
+        raise CliError("--measured: give one measured file (its task coordinates' columns, f1_hz, ...)")
+    path, file_opts = parse_measured_arg(args.measured[0])
+    if "reading" in file_opts:
+        raise CliError("--measured ...,reading=: the study's table form is the 3RRR's; give task coordinates' columns")
+    desc = load_description(args.config)
+    free = parse_free_paths(args.free, desc)
+    data = read_task_measured_csv(path, desc, sigma_pct=float(file_opts.get("sigma_pct", args.sigma_pct)))
+    if args.segments < 1 or args.max_nfev < 1:
+        raise CliError("--segments and --max-nfev must be >= 1")
+    opts = ModelOptions(segments=args.segments, gravity=False, axial=False)
+    result = identify_description(desc, data, free, options=opts, max_nfev=args.max_nfev)
+    with atomic_dir(args.out, overwrite=args.overwrite) as tmp:
+        (tmp / "description.toml").write_text(
+            description_toml(result.fitted, header=f"{desc.name}, fitted by: {args.command_line}")
+        )
+        (tmp / "identify.json").write_text(json.dumps(to_jsonable(result.to_dict()), indent=2))
+        fig = result.plot()
+        fig.savefig(tmp / "identify.png", dpi=110)
+        plt.close(fig)
+    names = ("description.toml", "identify.json", "identify.png")
+    text = result.table() + f"\n  wrote {', '.join(str(args.out / n) for n in names)}"
+    emit(args, {"result": result.to_dict(), "out": str(args.out)}, text)
+    return 0
+
+
 def cmd_identify(args: argparse.Namespace) -> int:
     from fpm_sim.study.identify import (
         IdentifyOptions,
@@ -93,6 +157,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
     from fpm_sim.study.identify.report import summary, write_identification
 
     check_output_dir(args.out, "--out", overwrite=args.overwrite)
+    if is_described(args):
+        return _identify_described(args)
     start = load_manipulator(args)
     groups, datasets, tests = read_data_args(args)
     observations = [o for ds in datasets for o in ds.observations]

@@ -16,6 +16,7 @@ from fpm_sim.cli.common import (
     emit,
     engine_options,
     finish_store,
+    held_task_coordinates,
     is_described,
     resolution_line,
     with_resolution,
@@ -44,7 +45,7 @@ def _sweep_described(args: argparse.Namespace, desc: Description) -> int:
     if args.grid == "paper":
         raise CliError("--grid paper: the study's 25 poses are the 3RRR's; use --grid dense or --poses on this machine")
     opts = study_options(args)
-    held = _held_coordinates(args, desc)
+    held = held_task_coordinates(args, desc)
     if args.poses is not None:
         poses, grid = read_task_poses_csv(args.poses, desc), "poses"
     else:
@@ -64,18 +65,6 @@ def _sweep_described(args: argparse.Namespace, desc: Description) -> int:
     payload = {**sw.to_dict(), "files": [str(p) for p in paths]}
     emit(args, with_resolution(payload, sw.options or opts), text)
     return 0
-
-
-def _held_coordinates(args: argparse.Namespace, desc: Description) -> dict[str, float]:
-    """The task coordinates a dense grid holds: z (spatial; ``--z-mm``, default the first check pose's) and phi
-    (``--phi-rad``, where the architecture sets it)."""
-    if args.phi_rad and "phi" not in desc.task:
-        raise CliError(f"--phi-rad: {desc.name} has no task coordinate phi; drop --phi-rad")
-    if args.z_mm is not None and "z" not in desc.task:
-        raise CliError(f"--z-mm: {desc.name} has no task coordinate z; drop --z-mm")
-    home = desc.check_poses[0] if desc.check_poses else {}
-    z = args.z_mm * 1e-3 if args.z_mm is not None else home.get("z", 0.0)
-    return {"z": z, "phi": args.phi_rad}
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:

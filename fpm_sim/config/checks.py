@@ -15,6 +15,7 @@ __all__ = [
     "check_finite",
 ]
 
+
 def check_finite(name: str, value: Any, *, positive: bool = False) -> np.ndarray:
     """``value`` as a float array, all finite (and ``> 0`` with ``positive``).
 

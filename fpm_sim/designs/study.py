@@ -1,10 +1,12 @@
 """Design studies: the pose loop over every design x pose, as one xarray Dataset with a per-design summary.
 
 A design is the manipulator description with some dotted fields changed (``section.thickness_m``,
-``hardware.payload.mass_kg``, ``geometry.distal_length_m``, ...). :func:`design_study` runs the pose loop's
-chunks for all designs on the engine (:mod:`fpm_sim.batch.engine`: Dask, streamed to disk, resumable):
-every task is one design and one chunk of poses, and every worker compiles one model per design
-(:class:`fpm_sim.batch.pose_loop.PoseModel`) and re-poses it.
+``hardware.payload.mass_kg``, ``geometry.distal_length_m``, ...), or a described architecture with some dotted paths
+of its file changed (``sections.bar.height_m``, ``chains.left.proximal.length_m``: :mod:`fpm_sim.architecture.edit`).
+:func:`design_study` runs the pose loop's chunks for all designs on the engine (:mod:`fpm_sim.batch.engine`: Dask,
+streamed to disk, resumable): every task is one design and one chunk of poses, and every worker compiles one model
+per design (:class:`fpm_sim.batch.pose_loop.PoseModel`) and re-poses it. A described architecture's designs run on
+its own pose loop over task poses (:func:`fpm_sim.batch.task_sweep.sweep_task_many`, :mod:`fpm_sim.designs.described`).
 """
 
 from __future__ import annotations
@@ -19,10 +21,11 @@ import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
+from fpm_sim.architecture import Description, TaskPose, machine_parameter, with_machine_parameter
 from fpm_sim.batch.engine import EngineOptions
 from fpm_sim.batch.pose_loop import (
     STATUS_UNREACHABLE,
@@ -31,7 +34,8 @@ from fpm_sim.batch.pose_loop import (
     read_poses_csv,
     solve_configs,
 )
-from fpm_sim.config import Manipulator, parameter_value, with_parameter
+from fpm_sim.config import Manipulator
+from fpm_sim.designs.described import description_link_mass_kg, description_moving_mass_kg, solve_descriptions
 from fpm_sim.errors import FpmSimError, FpmSimWarning, read_text_input
 from fpm_sim.figures import wrap_title
 from fpm_sim.kinematics import Pose
@@ -55,6 +59,10 @@ __all__ = [
 
 COMPUTED = ("ok", "near_singular")
 """Statuses whose frequencies are computed."""
+
+
+M = TypeVar("M", Manipulator, Description)
+P = TypeVar("P", Pose, TaskPose)
 
 
 class DesignError(FpmSimError):
@@ -91,21 +99,29 @@ def parse_spec(spec: str, *, name: str = "SPEC", parameter: str | None = None) -
     return values
 
 
-def _check_field(config: Manipulator, name: str, parameter: str = "vary") -> None:
+Machine = Manipulator | Description
+"""What a design study varies: the 3RRR's description or a described architecture."""
+
+
+def _check_field(config: Machine, name: str, parameter: str = "vary") -> None:
     """Raise :class:`DesignError` naming ``parameter`` (``vary`` or ``designs``) unless ``name`` is a settable
     numeric field of ``config``."""
     try:
-        parameter_value(config, name)
+        machine_parameter(config, name)
     except FpmSimError as exc:
+        where = (
+            "fields are dotted paths into the description's file (docs/architectures.md, Dotted paths)"
+            if isinstance(config, Description)
+            else "fields are dotted paths of the description (see `fpm-sim config`)"
+        )
         raise DesignError(
             f"field {name!r}: {exc.message}",
             parameter=parameter,
-            hint=f"{exc.hint + '; ' if exc.hint else ''}fields are dotted paths of the description "
-            "(see `fpm-sim config`)",
+            hint=f"{exc.hint + '; ' if exc.hint else ''}{where}",
         ) from None
 
 
-def parse_vary(items: Sequence[str], config: Manipulator) -> dict[str, list[float]]:
+def parse_vary(items: Sequence[str], config: Machine) -> dict[str, list[float]]:
     """``["FIELD=SPEC", ...]`` (the ``vary`` items) as ``{field: values}``, fields checked on ``config``."""
     out: dict[str, list[float]] = {}
     for item in items:
@@ -118,6 +134,9 @@ def parse_vary(items: Sequence[str], config: Manipulator) -> dict[str, list[floa
         if name in out:
             raise DesignError(f"{name} given twice", parameter="vary", hint="give all its values in one SPEC")
         out[name] = parse_spec(spec, name=name, parameter="vary")
+        if isinstance(config, Description):  # each value read into the file now (cheap), before any warning or work
+            for v in out[name]:
+                apply_design(config, {name: v})
     return out
 
 
@@ -127,7 +146,7 @@ def factorial(vary: Mapping[str, Sequence[float]]) -> list[dict[str, float]]:
     return [dict(zip(names, combo)) for combo in itertools.product(*(vary[n] for n in names))]
 
 
-def read_designs_csv(path: str | Path, config: Manipulator) -> list[dict[str, float]]:
+def read_designs_csv(path: str | Path, config: Machine) -> list[dict[str, float]]:
     """Designs from a CSV file: one column per dotted field, one row per design."""
     p = Path(path)
     if not p.is_file():
@@ -148,9 +167,7 @@ def read_designs_csv(path: str | Path, config: Manipulator) -> list[dict[str, fl
     designs: list[dict[str, float]] = []
     for line, r in enumerate(rows, start=2):
         if len(r) != len(header):
-            raise DesignError(
-                f"{p}: row {line} has {len(r)} cells for {len(header)} columns", parameter="designs"
-            )
+            raise DesignError(f"{p}: row {line} has {len(r)} cells for {len(header)} columns", parameter="designs")
         try:
             values = [float(v) for v in r]
         except ValueError:
@@ -162,23 +179,32 @@ def read_designs_csv(path: str | Path, config: Manipulator) -> list[dict[str, fl
         if not all(math.isfinite(v) for v in values):
             raise DesignError(f"{p}: row {line}: cells must be finite", parameter="designs", value=r)
         designs.append(dict(zip(header, values)))
+        if isinstance(config, Description):  # each row read into the file now (cheap), before any work
+            apply_design(config, designs[-1])
     return designs
 
 
-def apply_design(config: Manipulator, values: Mapping[str, float]) -> Manipulator:
+def apply_design(config: M, values: Mapping[str, float]) -> M:
     """``config`` with the dotted fields set (validated; a name that says what changed)."""
     out = config
     for name, v in values.items():
         try:
-            out = with_parameter(out, name, float(v))
+            out = with_machine_parameter(out, name, float(v))
+        except FpmSimError as exc:
+            if isinstance(config, Description):  # the file's own error, naming the path
+                raise DesignError(exc.message, parameter=name, value=v, hint=exc.hint) from None
+            raise DesignError(f"design {dict(values)}: {name} = {v} is not valid ({exc})") from None
         except ValueError as exc:
             raise DesignError(f"design {dict(values)}: {name} = {v} is not valid ({exc})") from None
     label = ", ".join(f"{k}={v:g}" for k, v in values.items())
     return dataclasses.replace(out, name=f"{config.name} [{label}]") if label else out
 
 
-def link_mass_kg(config: Manipulator) -> float:
-    """Mass of the six links (kg): section area x density x link lengths."""
+def link_mass_kg(config: Machine) -> float:
+    """Mass of the six links (kg): section area x density x link lengths (a described architecture: of all its
+    links)."""
+    if isinstance(config, Description):
+        return description_link_mass_kg(config)
     g = config.geometry
     p, d = g.proximal_length_m, g.distal_length_m
     if isinstance(p, (tuple, list)) or isinstance(d, (tuple, list)):
@@ -188,9 +214,12 @@ def link_mass_kg(config: Manipulator) -> float:
     return total_length_m * config.section.area_m2 * config.material.density_kg_m3
 
 
-def moving_mass_kg(config: Manipulator) -> float:
+def moving_mass_kg(config: Machine) -> float:
     """Everything that moves with the platform or the links (kg): links, joint hardware, platform, payload
-    (the motor flanges turn in place and are left out)."""
+    (the motor flanges turn in place and are left out; a described architecture: its lumps but those on the
+    ground, :func:`fpm_sim.designs.described.description_moving_mass_kg`)."""
+    if isinstance(config, Description):
+        return description_moving_mass_kg(config)
     hw = config.hardware
     return (
         link_mass_kg(config)
@@ -210,7 +239,7 @@ class DesignResult:
     Attributes
     ----------
     config
-        The base description.
+        The base description (the 3RRR's or a described architecture).
     fields
         The varied dotted fields (SI units in their names).
     designs
@@ -220,13 +249,15 @@ class DesignResult:
     levels
         ``{field: values}`` of a factorial study (in order), else each field's distinct values.
     poses
-        The poses (shared by all designs).
+        The poses (shared by all designs): the 3RRR's, or a described architecture's task poses.
     frequencies_hz
         ``(n_designs, n_poses, n_modes)``; NaN where not computed.
     in_plane
-        ``(n_designs, n_poses)``: mode 1's share of strain energy in in-plane springs.
+        ``(n_designs, n_poses)``: mode 1's share of strain energy in in-plane springs (NaN on a described
+        architecture: not computed there).
     singularity
-        ``(n_designs, n_poses)`` singularity measure (NaN where unreachable).
+        ``(n_designs, n_poses)`` singularity measure (NaN where unreachable; a described architecture: the smaller of
+        its type 1 and type 2 measures).
     status
         ``(n_designs, n_poses)`` ``ok``, ``near_singular``, ``singular`` or ``unreachable``.
     f_min_hz
@@ -237,12 +268,12 @@ class DesignResult:
         Wall time of the study.
     """
 
-    config: Manipulator
+    config: Machine
     fields: list[str]
     designs: list[dict[str, float]]
     factorial: bool
     levels: dict[str, list[float]]
-    poses: list[Pose]
+    poses: Sequence[Pose | TaskPose]
     frequencies_hz: np.ndarray
     in_plane: np.ndarray
     singularity: np.ndarray
@@ -257,10 +288,15 @@ class DesignResult:
     def n_modes(self) -> int:
         return int(self.frequencies_hz.shape[2])
 
+    @property
+    def spatial(self) -> bool:
+        """The poses have a z coordinate (a spatial described architecture)."""
+        return isinstance(self.config, Description) and "z" in self.config.task
+
     def pose_frequencies(self, design: int) -> PoseFrequencies:
         """Design ``design``'s result as the pose loop returns it."""
         return PoseFrequencies(
-            poses=list(self.poses),
+            poses=list(self.poses),  # type: ignore[arg-type]
             frequencies_hz=self.frequencies_hz[design],
             in_plane=np.column_stack([self.in_plane[design]] + [np.full(len(self.poses), np.nan)] * (self.n_modes - 1)),
             singularity=self.singularity[design],
@@ -332,6 +368,7 @@ class DesignResult:
             "f_min_hz": self.f_min_hz,
             "n_modes": self.n_modes,
             "poses_mm_rad": [[p.x_m * 1e3, p.y_m * 1e3, p.phi_rad] for p in self.poses],
+            **({"poses_z_mm": [p.z_m * 1e3 for p in self.poses if isinstance(p, TaskPose)]} if self.spatial else {}),
             "summary": self.summary(),
             "frequencies_hz": np.where(np.isfinite(self.frequencies_hz), self.frequencies_hz, np.array(None)).tolist(),
             "status": self.status.tolist(),
@@ -359,7 +396,10 @@ class DesignResult:
             phi_rad=[p.phi_rad for p in self.poses],
             status=self.status,
             leading={"design": np.arange(len(self.designs))},
-            coords={f: ("design", np.array([d[f] for d in self.designs])) for f in self.fields},
+            coords={
+                **{f: ("design", np.array([d[f] for d in self.designs])) for f in self.fields},
+                **({"z_mm": ("pose", [getattr(p, "z_m", 0.0) * 1e3 for p in self.poses])} if self.spatial else {}),
+            },
             data_vars={
                 "in_plane_mode1": (("design", "pose"), self.in_plane),
                 "singularity": (("design", "pose"), self.singularity),
@@ -397,6 +437,7 @@ class DesignResult:
                     {
                         "x_mm": round(p.x_m * 1e3, 6),
                         "y_mm": round(p.y_m * 1e3, 6),
+                        **({"z_mm": round(getattr(p, "z_m", 0.0) * 1e3, 6)} if self.spatial else {}),
                         "phi_rad": p.phi_rad,
                         "status": str(self.status[d, i]),
                         "singularity": float(self.singularity[d, i]),
@@ -499,8 +540,10 @@ class DesignResult:
             a.set_ylabel("y (mm)", fontsize=7)
         if sc is not None:
             fig.colorbar(sc, ax=axes, label="f1 (Hz)", shrink=0.8)
-        shown = f"designs 1-{n} of {len(self.designs)} (the rest in design.csv)" if n < len(self.designs) else (
-            f"all {n} designs"
+        shown = (
+            f"designs 1-{n} of {len(self.designs)} (the rest in design.csv)"
+            if n < len(self.designs)
+            else (f"all {n} designs")
         )
         fig.suptitle(f"f1 over the poses, {shown}; small grey marks: no f1 (out of reach or failed)", fontsize=9)
         return fig
@@ -572,8 +615,8 @@ def check_request(
     *,
     n_modes: int,
     f_min_hz: float | None,
-    poses: Sequence[Pose],
-) -> list[Pose]:
+    poses: Sequence[P],
+) -> list[P]:
     """The checks of a design study's request (:func:`design_study`, :func:`fpm_sim.designs.robust.design_over_draws`):
     exactly one of ``vary``/``designs``, ``n_modes >= 1``, ``f_min_hz >= 0`` (when given), at least one pose.
     Returns the poses as a list."""
@@ -592,10 +635,59 @@ def check_request(
     return out
 
 
-def design_study(
-    config: Manipulator,
+def _solve(
+    config: Machine,
+    configs: list[Any],
+    poses: Sequence[Pose] | Sequence[TaskPose],
     *,
-    poses: Sequence[Pose],
+    n_modes: int,
+    options: ModelOptions,
+    engine: EngineOptions,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(frequencies, in-plane share of mode 1, singularity, status)`` over designs x poses: the 3RRR's pose loop on
+    the engine, or a described architecture's (:func:`fpm_sim.designs.described.solve_descriptions`, on
+    ``engine.workers`` processes)."""
+    wanted = TaskPose if isinstance(config, Description) else Pose
+    wrong = next((p for p in poses if not isinstance(p, wanted)), None)
+    if wrong is not None:
+        raise DesignError(
+            f"{config.name} takes poses as {wanted.__name__}, got a {type(wrong).__name__}",
+            parameter="poses",
+            hint="a described architecture's poses are in its task coordinates (fpm_sim.architecture.TaskPose)",
+        )
+    if isinstance(config, Description):
+        return solve_descriptions(configs, poses, n_modes=n_modes, options=options, workers=engine.workers or 1)  # type: ignore[arg-type]
+    merged = solve_configs(configs, poses, n_modes=n_modes, options=options, engine=engine)  # type: ignore[arg-type]
+    return (
+        np.stack([m.frequencies_hz for m in merged]),
+        np.stack([m.in_plane[:, 0] for m in merged]),
+        np.stack([m.singularity for m in merged]),
+        np.array([m.status for m in merged], dtype=object),
+    )
+
+
+def _designs_of(
+    config: Machine, vary: Mapping[str, Sequence[float]] | None, designs: Sequence[Mapping[str, float]] | None
+) -> tuple[list[dict[str, float]], dict[str, list[float]], bool]:
+    """``(designs, levels, factorial)``: the full factorial of ``vary`` (fields checked on ``config``), or the rows
+    of ``designs`` with each field's distinct values as its levels."""
+    if vary is not None:
+        levels = {k: [float(v) for v in vals] for k, vals in vary.items()}
+        for name, vals in levels.items():
+            _check_field(config, name)
+            if not vals:
+                raise DesignError(f"{name}: no values", parameter="vary")
+        return factorial(levels), levels, True
+    design_list = [{k: float(v) for k, v in d.items()} for d in designs or []]
+    if not design_list:
+        raise DesignError("no designs", parameter="designs")
+    return design_list, {k: sorted({d[k] for d in design_list}) for k in design_list[0]}, False
+
+
+def design_study(
+    config: Machine,
+    *,
+    poses: Sequence[Pose] | Sequence[TaskPose],
     vary: Mapping[str, Sequence[float]] | None = None,
     designs: Sequence[Mapping[str, float]] | None = None,
     n_modes: int = 3,
@@ -608,13 +700,16 @@ def design_study(
     Parameters
     ----------
     config
-        The base description.
+        The base description: the 3RRR's (:class:`fpm_sim.config.Manipulator`) or a described architecture
+        (:class:`fpm_sim.architecture.Description`, read from its file).
     poses
         The poses (the same for every design; e.g. :func:`fpm_sim.study.sweep.dense_grid` or
-        :func:`fpm_sim.batch.pose_loop.read_poses_csv`). A design that moves the workspace marks the poses
-        it cannot reach.
+        :func:`fpm_sim.batch.pose_loop.read_poses_csv`; a described architecture: task poses, e.g. its check poses,
+        :func:`fpm_sim.batch.task_sweep.task_grid` or :func:`fpm_sim.batch.task_sweep.read_task_poses_csv`). A design
+        that moves the workspace marks the poses it cannot reach.
     vary
-        ``{dotted field: values}``: the full factorial (SI units, as the field names say).
+        ``{dotted field: values}``: the full factorial (SI units, as the field names say; a described architecture:
+        dotted paths into its file, ``sections.bar.height_m``).
     designs
         Instead of ``vary``: a list of ``{field: value}`` designs (e.g. :func:`read_designs_csv`).
     n_modes
@@ -625,35 +720,24 @@ def design_study(
         Discretisation (default :func:`fpm_sim.batch.pose_loop.fast_options`, as ``sweep``).
     engine
         Where the chunks run (default: a local Dask cluster sized to the machine; see
-        :class:`fpm_sim.batch.engine.EngineOptions`).
+        :class:`fpm_sim.batch.engine.EngineOptions`; a described architecture: ``engine.workers`` processes, default
+        one).
 
     Raises
     ------
     DesignError
         Unknown field, invalid value, both or neither of ``vary``/``designs``, no poses.
     """
-    poses = check_request(vary, designs, n_modes=n_modes, f_min_hz=f_min_hz, poses=poses)
-    if vary is not None:
-        levels = {k: [float(v) for v in vals] for k, vals in vary.items()}
-        for name, vals in levels.items():
-            _check_field(config, name)
-            if not vals:
-                raise DesignError(f"{name}: no values", parameter="vary")
-        design_list = factorial(levels)
-        is_factorial = True
-    else:
-        design_list = [{k: float(v) for k, v in d.items()} for d in designs or []]
-        if not design_list:
-            raise DesignError("no designs", parameter="designs")
-        levels = {k: sorted({d[k] for d in design_list}) for k in design_list[0]}
-        is_factorial = False
+    pose_list: list[Any] = check_request(vary, designs, n_modes=n_modes, f_min_hz=f_min_hz, poses=list(poses))
+    design_list, levels, is_factorial = _designs_of(config, vary, designs)
     fields = list(levels)
-    configs = [apply_design(config, d) for d in design_list]
+    base: Any = config  # either form; apply_design keeps it
+    configs = [apply_design(base, d) for d in design_list]
     opts = options or fast_options()
     eng = engine or EngineOptions()
     eng = dataclasses.replace(eng, desc="design x poses" if eng.desc == "poses" else eng.desc)
     t0 = time.perf_counter()
-    merged = solve_configs(configs, poses, n_modes=n_modes, options=opts, engine=eng)
+    freq, in_plane, singularity, status = _solve(config, configs, pose_list, n_modes=n_modes, options=opts, engine=eng)
     elapsed = time.perf_counter() - t0
     return DesignResult(
         config=config,
@@ -661,11 +745,11 @@ def design_study(
         designs=design_list,
         factorial=is_factorial,
         levels=levels,
-        poses=poses,
-        frequencies_hz=np.stack([m.frequencies_hz for m in merged]),
-        in_plane=np.stack([m.in_plane[:, 0] for m in merged]),
-        singularity=np.stack([m.singularity for m in merged]),
-        status=np.array([m.status for m in merged], dtype=object),
+        poses=pose_list,
+        frequencies_hz=freq,
+        in_plane=in_plane,
+        singularity=singularity,
+        status=status,
         f_min_hz=f_min_hz,
         link_mass_kg=np.array([link_mass_kg(c) for c in configs]),
         moving_mass_kg=np.array([moving_mass_kg(c) for c in configs]),

@@ -125,7 +125,11 @@ def unit_scales(model: mujoco.MjModel, data: mujoco.MjData, length_m: float) -> 
 
 
 def scaled_null_space(
-    jac: np.ndarray, row_scale: np.ndarray, col_scale: np.ndarray, *, rcond: float = NULLSPACE_RCOND,
+    jac: np.ndarray,
+    row_scale: np.ndarray,
+    col_scale: np.ndarray,
+    *,
+    rcond: float = NULLSPACE_RCOND,
     top: float | None = None,
 ) -> tuple[int, np.ndarray, np.ndarray]:
     """``(rank, singular_values, basis)`` of ``jac`` decided on the dimensionless ``R J C`` (:func:`unit_scales`).

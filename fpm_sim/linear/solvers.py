@@ -21,6 +21,7 @@ Timestep: the step map (semi-implicit Euler on the springs) raises an undamped m
 ``omega h = 0.130`` against 0.070 % predicted); :func:`modes_transition_fd` warns
 (:class:`TimestepWarning`) when a reported mode has ``omega h > OMEGA_H_WARN`` (error > 0.4 %).
 """
+
 from __future__ import annotations
 
 import copy

@@ -17,6 +17,7 @@ __all__ = [
     "route_mujoco_warnings",
 ]
 
+
 class MujocoWarning(FpmSimWarning):
     """A warning raised inside MuJoCo (e.g. "Nan, Inf or huge value in QACC": the simulation is unstable)."""
 

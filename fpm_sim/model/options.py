@@ -81,9 +81,7 @@ class ResolutionWarning(FpmSimWarning):
     """The estimated discretisation error of the first frequency exceeds :data:`RESOLUTION_WARN`."""
 
 
-def resolve_segments(
-    *, fidelity: str | None = None, segments: int | None = None, link_model: str = "segments"
-) -> int:
+def resolve_segments(*, fidelity: str | None = None, segments: int | None = None, link_model: str = "segments") -> int:
     """Resolution per link of ``link_model``: ``segments`` if given, else the ``fidelity`` preset.
 
     Parameters

@@ -22,6 +22,7 @@ __all__ = [
     "tangent_jacobian",
 ]
 
+
 def dof_stiffness(model: mujoco.MjModel) -> np.ndarray:
     """Linear spring stiffness of each degree of freedom (0 for free joints)."""
     k = np.zeros(model.nv)

@@ -26,6 +26,8 @@ INPUT_DESTS = {
 """Path-typed arguments that are read, not written (every other path-typed argument is an output)."""
 
 VARY = ["--vary", "section.thickness_m=0.01,0.02"]
+FREE_HEIGHT = ["--free", "sections.bar.height_m"]
+FIVE_BAR = Path(__file__).resolve().parents[2] / "examples" / "architectures" / "five_bar.toml"
 # (command, the arguments the parser requires, output option, suffix of the output's name: "" a folder)
 OUTPUTS: list[tuple[str, list[str], str, str]] = [
     ("modes", [], "--plot", ".png"),
@@ -50,8 +52,10 @@ OUTPUTS: list[tuple[str, list[str], str, str]] = [
     ("atlas build", ["--out", "{tmp}/a.npz"], "--plot", ".png"),
     ("atlas query", ["{tmp}/in.npz"], "--out", ".npz"),
     ("design", VARY, "--out", ""),
+    ("design", ["--config", str(FIVE_BAR), "--vary", "sections.bar.height_m=0.004"], "--out", ""),
     ("calibrate", ["--priors", "{tmp}/priors.toml", "--measured", "{tmp}/m.csv"], "--out", ""),
     ("identify", ["--measured", "{tmp}/m.csv"], "--out", ""),
+    ("identify", ["--config", str(FIVE_BAR), "--measured", "{tmp}/m.csv", *FREE_HEIGHT], "--out", ""),
     ("ema", ["{tmp}/frf.csv"], "--out", ""),
     ("check", ["{tmp}/req.toml"], "--junit-xml", ".xml"),
     ("check", ["{tmp}/req.toml"], "--plot", ".png"),

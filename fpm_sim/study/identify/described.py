@@ -1,0 +1,319 @@
+"""Identification of a described architecture (``fpm-sim identify --config machine.toml``): dotted paths into its file
+fitted to measured natural frequencies at poses in its task coordinates.
+
+The measured file has one column per task coordinate (``x_mm``, ``y_mm``, ``z_mm``, ``phi_rad``), any of
+``f1_hz, f2_hz, ...`` (the K-th lowest mode; blank: not measured) and an optional ``sigma_hz`` (one standard deviation
+of every frequency of its row; else the file's relative sigma). The free parameters are dotted paths
+(:mod:`fpm_sim.architecture.edit`) with bounds (``PATH=lo:hi``; default a factor of 4 either side of the file's
+positive value). The fit is bounded least squares from the file's values (SciPy's trust-region reflective) on the
+described architecture's own pose loop; the uncertainty is the Gauss-Newton covariance ``(J'J)^-1`` at the optimum.
+The 3RRR's global searches, elbow-branch classes, rig tests, workspace prior and cross-validation are its own
+(:mod:`fpm_sim.study.identify.engine`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fpm_sim.architecture import Description, TaskPose, description_value, with_description_value
+from fpm_sim.batch.task_sweep import sweep_task_many
+from fpm_sim.errors import FpmSimError
+from fpm_sim.model.options import ModelOptions
+from fpm_sim.study.identify.data import DEFAULT_SIGMA_PCT, DataError, read_csv_rows
+
+__all__ = [
+    "DescribedIdentification",
+    "TaskMeasurements",
+    "identify_description",
+    "parse_free_paths",
+    "read_task_measured_csv",
+]
+
+UNREACHED_RESIDUAL = 1e3
+"""The residual of a measured frequency the model cannot compute (its pose unreachable or singular there)."""
+
+
+@dataclass
+class TaskMeasurements:
+    """Measured frequencies at task poses: ``freq_hz`` and ``sigma_hz`` are ``(pose, mode)``, NaN where not measured."""
+
+    source: str
+    poses: list[TaskPose]
+    freq_hz: np.ndarray
+    sigma_hz: np.ndarray
+    lines: list[int] = field(default_factory=list)
+    """Each pose's line in its file (for messages)."""
+
+    @property
+    def n_modes(self) -> int:
+        return int(self.freq_hz.shape[1])
+
+
+def _cell(text: str | None, path: Path, line: int, col: str) -> float:
+    if text is None or not text.strip():
+        return math.nan
+    try:
+        v = float(text)
+    except ValueError:
+        raise DataError("not a number", parameter=col, value=text, file=path, row=line) from None
+    if not math.isfinite(v):
+        raise DataError("must be finite (blank: not measured)", parameter=col, value=text, file=path, row=line)
+    return v
+
+
+def read_task_measured_csv(
+    path: str | Path, desc: Description, *, sigma_pct: float = DEFAULT_SIGMA_PCT
+) -> TaskMeasurements:
+    """The measured frequencies of ``path`` (module docstring) at poses in ``desc``'s task coordinates."""
+    p = Path(path)
+    rows = read_csv_rows(p)
+    columns = {c: ("phi_rad" if c == "phi" else f"{c}_mm") for c in desc.task}
+    header = set(rows[0][1])
+    missing = sorted(set(columns.values()) - header)
+    modes = sorted(int(h[1:-3]) for h in header if h.startswith("f") and h.endswith("_hz") and h[1:-3].isdigit())
+    if missing or not modes:
+        raise DataError(
+            f"missing column(s) {', '.join(missing) or 'f1_hz'}",
+            file=p,
+            hint=f"{desc.name}'s measured file has {','.join(columns.values())}, f1_hz, f2_hz, ... [, sigma_hz]",
+        )
+    if "mode" in header:
+        raise DataError("a mode column (in/out-of-plane labels) is the 3RRR's; give fK_hz as the K-th lowest", file=p)
+    if not sigma_pct > 0:
+        raise DataError("must be > 0", parameter="sigma_pct", value=sigma_pct, file=p)
+    n = max(modes)
+    poses, freq, sigma = [], np.full((len(rows), n), np.nan), np.full((len(rows), n), np.nan)
+    for i, (line, row) in enumerate(rows):
+        vals = {c: _cell(row.get(col), p, line, col) for c, col in columns.items()}
+        if any(math.isnan(v) for v in vals.values()):
+            raise DataError("every task coordinate must be given", file=p, row=line)
+        poses.append(TaskPose(*(vals.get(c, 0.0) * (1.0 if c == "phi" else 1e-3) for c in ("x", "y", "z", "phi"))))
+        for k in modes:
+            f = _cell(row.get(f"f{k}_hz"), p, line, f"f{k}_hz")
+            if not (math.isnan(f) or f > 0):
+                raise DataError("must be > 0", parameter=f"f{k}_hz", value=f, file=p, row=line)
+            freq[i, k - 1] = f
+        s = _cell(row.get("sigma_hz"), p, line, "sigma_hz")
+        if not (math.isnan(s) or s > 0):
+            raise DataError("must be > 0", parameter="sigma_hz", value=s, file=p, row=line)
+        sigma[i] = s if not math.isnan(s) else freq[i] * sigma_pct / 100.0
+    if not np.isfinite(freq).any():
+        raise DataError("no measured frequency", file=p, hint="fill f1_hz, f2_hz, ... on some rows")
+    return TaskMeasurements(p.name, poses, freq, sigma, [line for line, _ in rows])
+
+
+def parse_free_paths(text: str, desc: Description) -> dict[str, tuple[float, float]]:
+    """``PATH[=lo:hi],...`` as ``{path: (lo, hi)}``: each path read in ``desc``'s file, its value inside its bounds
+    (default ``value / 4 .. 4 value`` for a positive value; any other needs bounds)."""
+    out: dict[str, tuple[float, float]] = {}
+    for item in (s.strip() for s in text.split(",")):
+        if not item:
+            continue
+        path, _, spec = item.partition("=")
+        path = path.strip()
+        try:
+            value = description_value(desc, path)
+        except FpmSimError as exc:
+            raise FpmSimError(f"field {path!r}: {exc.message}", parameter="free", hint=exc.hint) from None
+        if spec:
+            try:
+                lo, hi = (float(x) for x in spec.split(":"))
+            except ValueError:
+                raise FpmSimError(
+                    "bounds are lo:hi", parameter="free", value=item, hint=f"e.g. {path}=0.004:0.01"
+                ) from None
+        elif value > 0:
+            lo, hi = value / 4.0, value * 4.0
+        else:
+            raise FpmSimError(
+                f"{path} is {value:g} in the file: give its bounds", parameter="free", hint=f"{path}=lo:hi"
+            )
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi and lo <= value <= hi):
+            raise FpmSimError(
+                f"{path}: bounds must hold the file's value {value:g} (lo < hi)", parameter="free", value=item
+            )
+        out[path] = (lo, hi)
+    if not out:
+        raise FpmSimError("give at least one dotted path", parameter="free", hint="e.g. sections.bar.height_m")
+    return out
+
+
+@dataclass
+class DescribedIdentification:
+    """The fitted dotted paths of a described architecture (:func:`identify_description`); a :class:`fpm_sim.Result`."""
+
+    name: str
+    paths: list[str]
+    start: np.ndarray
+    values: np.ndarray
+    std: np.ndarray
+    bounds: list[tuple[float, float]]
+    measured: TaskMeasurements
+    model_hz: np.ndarray
+    cost: float
+    nfev: int
+    message: str
+    fitted: Description = field(repr=False)
+
+    def rows(self) -> list[dict[str, Any]]:
+        """One row per measured frequency: pose (task coordinates), mode, measured, model, error (%)."""
+        out = []
+        for i, p in enumerate(self.measured.poses):
+            for k in range(self.measured.n_modes):
+                f = self.measured.freq_hz[i, k]
+                if math.isnan(f):
+                    continue
+                m = self.model_hz[i, k]
+                out.append(
+                    {
+                        **{
+                            ("phi_rad" if c == "phi" else f"{c}_mm"): p.value(c) * (1 if c == "phi" else 1e3)
+                            for c in self.fitted.task
+                        },
+                        "mode": k + 1,
+                        "measured_hz": float(f),
+                        "model_hz": None if math.isnan(m) else float(m),
+                        "error_pct": None if math.isnan(m) else float(100.0 * (m / f - 1.0)),
+                    }
+                )
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "config": self.name,
+            "method": "bounded least squares from the file's values (trf)",
+            "parameters": [
+                {
+                    "path": p,
+                    "start": float(s),
+                    "value": float(v),
+                    "std": None if not math.isfinite(e) else float(e),
+                    "bounds": list(b),
+                }
+                for p, s, v, e, b in zip(self.paths, self.start, self.values, self.std, self.bounds)
+            ],
+            "cost": self.cost,
+            "nfev": self.nfev,
+            "message": self.message,
+            "data": self.measured.source,
+            "rows": self.rows(),
+        }
+
+    def table(self) -> str:
+        head = f"{self.name}: {len(self.paths)} free, {len(self.rows())} measured frequencies, {self.nfev} evaluations"
+        lines = [head]
+        for p, s, v, e in zip(self.paths, self.start, self.values, self.std):
+            lines.append(f"  {p}: {s:.6g} -> {v:.6g} +- {e:.3g}")
+        errs = [abs(r["error_pct"]) for r in self.rows() if r["error_pct"] is not None]
+        if errs:
+            lines.append(f"  mean |error| {np.mean(errs):.3f} %, max {np.max(errs):.3f} %")
+        return "\n".join(lines)
+
+    def plot(self, ax: Any = None) -> Any:
+        """Model against measured frequency, one point per measured frequency."""
+        import matplotlib.pyplot as plt
+
+        fig, ax = plt.subplots(figsize=(4.5, 4), constrained_layout=True) if ax is None else (ax.figure, ax)
+        rows = [r for r in self.rows() if r["model_hz"] is not None]
+        x = [r["measured_hz"] for r in rows]
+        ax.scatter(x, [r["model_hz"] for r in rows], s=12)
+        if x:
+            ax.plot([min(x), max(x)], [min(x), max(x)], "k:", lw=0.8)
+        ax.set_xlabel("measured (Hz)")
+        ax.set_ylabel("fitted model (Hz)")
+        ax.set_title(f"{self.name}: fitted {', '.join(self.paths)}", fontsize=8)
+        return fig
+
+
+def _edited(desc: Description, values: Mapping[str, float], source: str) -> Description:
+    for path, v in values.items():
+        desc = with_description_value(desc, path, float(v), source=source)
+    return desc
+
+
+def _model(desc: Description, data: TaskMeasurements, options: ModelOptions) -> np.ndarray:
+    (sw,) = sweep_task_many([desc], data.poses, options=options, n_modes=data.n_modes)
+    return sw.freq_hz
+
+
+def _check_start(desc: Description, data: TaskMeasurements, options: ModelOptions) -> None:
+    """Every measured frequency is computed by the file's machine (its pose reachable and not singular there, the
+    mode among those computed): else the row is named."""
+    model = _model(desc, data, options)
+    for i, line in enumerate(data.lines or range(2, len(data.poses) + 2)):
+        bad = np.isfinite(data.freq_hz[i]) & ~np.isfinite(model[i])
+        if bad.any():
+            raise DataError(
+                f"the file's machine computes no f{int(np.flatnonzero(bad)[0]) + 1} at this pose (unreachable or "
+                "singular in its working mode)",
+                parameter="measured",
+                file=data.source,
+                row=line,
+                hint="check the pose's columns and units (mm, rad) and the description's working mode",
+            )
+
+
+def identify_description(
+    desc: Description,
+    data: TaskMeasurements,
+    free: Mapping[str, tuple[float, float]],
+    *,
+    options: ModelOptions | None = None,
+    max_nfev: int = 30,
+) -> DescribedIdentification:
+    """Fit the dotted paths ``free`` (``{path: (lo, hi)}``) of ``desc`` to ``data`` (module docstring)."""
+    from scipy.optimize import least_squares
+
+    opts = options or ModelOptions(gravity=False, axial=False)
+    paths = list(free)
+    start = np.array([description_value(desc, p) for p in paths])
+    scale = np.where(start != 0, np.abs(start), [hi - lo for lo, hi in free.values()])
+    lo = np.array([b[0] for b in free.values()])
+    hi = np.array([b[1] for b in free.values()])
+    measured = np.isfinite(data.freq_hz)
+    _check_start(desc, data, opts)
+    source = f"identified: {data.source}, fpm-sim identify (bounded least squares)"
+
+    def values_of(u: np.ndarray) -> np.ndarray:
+        return np.clip(start + u * scale, lo, hi)
+
+    def residuals(u: Sequence[float]) -> np.ndarray:
+        model = _model(_edited(desc, dict(zip(paths, values_of(np.asarray(u)))), source), data, opts)
+        r = (model[measured] - data.freq_hz[measured]) / data.sigma_hz[measured]
+        return np.where(np.isfinite(r), r, UNREACHED_RESIDUAL)
+
+    fit = least_squares(
+        residuals,
+        np.zeros(len(paths)),
+        bounds=((lo - start) / scale, (hi - start) / scale),
+        method="trf",
+        diff_step=1e-5,
+        max_nfev=max_nfev,
+    )
+    values = values_of(fit.x)
+    try:
+        cov = np.linalg.inv(fit.jac.T @ fit.jac)
+        std = np.sqrt(np.clip(np.diag(cov), 0.0, None)) * scale
+    except np.linalg.LinAlgError:
+        std = np.full(len(paths), np.inf)
+    fitted = _edited(desc, dict(zip(paths, values)), source)
+    return DescribedIdentification(
+        name=desc.name,
+        paths=paths,
+        start=start,
+        values=values,
+        std=std,
+        bounds=[(float(a), float(b)) for a, b in zip(lo, hi)],
+        measured=data,
+        model_hz=_model(fitted, data, opts),
+        cost=float(fit.cost),
+        nfev=int(fit.nfev),
+        message=str(fit.message),
+        fitted=fitted,
+    )
