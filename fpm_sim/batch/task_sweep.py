@@ -399,5 +399,5 @@ def _check_batched(desc: Description, backend: str) -> None:
                 "only, and a spherical end joint is a point (connect) constraint",
                 parameter="backend",
                 value=backend,
-                hint="use --backend mjx (MJX's own pipeline takes it) or cpu",
+                hint="use the mjx backend (MJX's own pipeline takes it) or cpu",
             )

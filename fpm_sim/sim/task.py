@@ -55,7 +55,9 @@ from fpm_sim.sim.trajectory import (
     MoveError,
     MoveResult,
     check_move,
-    profile,
+    check_profile,
+    path_duration_s,
+    path_poses,
     read_path_csv,
     residual_vibration,
     shaper,
@@ -160,30 +162,16 @@ class TaskPath:
         return cls(task, s[0, 1:], s[-1, 1:], float(s[-1, 0]), samples=s)
 
     def check(self) -> None:
-        if self.samples is None:
-            profile(self.kind, 0.0)
-            if not (math.isfinite(self.move_s) and self.move_s > 0):
-                raise MoveError(
-                    "the move time must be a positive finite time (s)", parameter="move_s", value=self.move_s
-                )
+        check_profile(self.kind, self.move_s, self.samples)
 
     @property
     def duration_s(self) -> float:
         """When the command stops changing (s)."""
-        if self.samples is not None:
-            return float(self.samples[-1, 0])
-        return self.move_s + float(self.impulses[1][-1])
+        return path_duration_s(self.move_s, self.samples, self.impulses)
 
     def poses(self, t_s: np.ndarray) -> np.ndarray:
         """``(n, len(task))`` commanded task coordinates at ``t_s``."""
-        t = np.asarray(t_s, float)
-        if self.samples is not None:
-            return np.column_stack(
-                [np.interp(t, self.samples[:, 0], self.samples[:, k]) for k in range(1, 1 + len(self.task))]
-            )
-        amps, times = self.impulses
-        s = sum(a * profile(self.kind, (t - t0) / self.move_s) for a, t0 in zip(amps, times))
-        return self.start[None, :] + np.asarray(s)[:, None] * (self.end - self.start)[None, :]
+        return path_poses(t_s, np.asarray(self.start, float), np.asarray(self.end, float), self)
 
 
 def _joint_targets(

@@ -58,7 +58,10 @@ __all__ = [
     "MoveResult",
     "ResidualVibration",
     "check_move",
+    "check_profile",
     "dominant_frequency_hz",
+    "path_duration_s",
+    "path_poses",
     "profile",
     "read_path_csv",
     "residual_vibration",
@@ -171,29 +174,43 @@ class MovePath:
         return cls(Pose(*samples[0, 1:]), Pose(*samples[-1, 1:]), float(samples[-1, 0]), samples=samples)
 
     def check(self) -> None:
-        if self.samples is None:
-            profile(self.kind, 0.0)
-            if not (math.isfinite(self.move_s) and self.move_s > 0):
-                raise MoveError(
-                    "the move time must be a positive finite time (s)", parameter="move_s", value=self.move_s
-                )
+        check_profile(self.kind, self.move_s, self.samples)
 
     @property
     def duration_s(self) -> float:
         """When the command stops changing (s): the move plus the shaper's last impulse time."""
-        if self.samples is not None:
-            return float(self.samples[-1, 0])
-        return self.move_s + float(self.impulses[1][-1])
+        return path_duration_s(self.move_s, self.samples, self.impulses)
 
     def poses(self, t_s: np.ndarray) -> np.ndarray:
         """``(n, 3)`` commanded ``x, y, phi`` (m, m, rad) at ``t_s``."""
-        t = np.asarray(t_s, float)
-        if self.samples is not None:
-            return np.column_stack([np.interp(t, self.samples[:, 0], self.samples[:, k]) for k in (1, 2, 3)])
-        amps, times = self.impulses
-        s = sum(a * profile(self.kind, (t - t0) / self.move_s) for a, t0 in zip(amps, times))
-        a0, a1 = self.start.as_array(), self.end.as_array()
-        return a0[None, :] + np.asarray(s)[:, None] * (a1 - a0)[None, :]
+        return path_poses(t_s, self.start.as_array(), self.end.as_array(), self)
+
+
+def check_profile(kind: str, move_s: float, samples: np.ndarray | None) -> None:
+    """Refuse an unknown profile or a move time that is not a positive finite time (a sampled path has neither)."""
+    if samples is None:
+        profile(kind, 0.0)
+        if not (math.isfinite(move_s) and move_s > 0):
+            raise MoveError("the move time must be a positive finite time (s)", parameter="move_s", value=move_s)
+
+
+def path_duration_s(move_s: float, samples: np.ndarray | None, impulses: tuple[np.ndarray, np.ndarray]) -> float:
+    """When a commanded path stops changing (s): a sampled path's last time, or the move plus the shaper's last
+    impulse time."""
+    if samples is not None:
+        return float(samples[-1, 0])
+    return move_s + float(impulses[1][-1])
+
+
+def path_poses(t_s: np.ndarray, start: np.ndarray, end: np.ndarray, path: Any) -> np.ndarray:
+    """``(n, len(start))`` commanded coordinates at ``t_s`` of ``path`` (its ``samples``, or its ``kind`` of profile
+    over ``move_s`` from ``start`` to ``end``, convolved with its shaper's ``impulses``)."""
+    t = np.asarray(t_s, float)
+    if path.samples is not None:
+        return np.column_stack([np.interp(t, path.samples[:, 0], path.samples[:, k]) for k in range(1, 1 + start.size)])
+    amps, times = path.impulses
+    s = sum(a * profile(path.kind, (t - t0) / path.move_s) for a, t0 in zip(amps, times))
+    return start[None, :] + np.asarray(s)[:, None] * (end - start)[None, :]
 
 
 def read_path_csv(path: str | Path, coordinates: tuple[str, ...] = ("x", "y", "phi")) -> np.ndarray:

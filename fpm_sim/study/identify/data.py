@@ -32,6 +32,7 @@ __all__ = [
     "DataError",
     "DataSet",
     "Observation",
+    "read_cell",
     "read_csv_rows",
     "read_measured_csv",
     "read_subsystems_csv",
@@ -109,7 +110,7 @@ def read_csv_rows(path: Path, parameter: str = "measured") -> list[tuple[int, di
     return out
 
 
-def _float(text: str | None, path: Path, line: int, col: str) -> float:
+def read_cell(text: str | None, path: Path, line: int, col: str) -> float:
     """The number in a cell, NaN for a blank one; anything else (``n/a``, ``inf``, ``nan``) is refused."""
     if text is None or not text.strip():
         return math.nan
@@ -202,10 +203,10 @@ def _pose_row_observations(
         raise DataError(
             "unknown mode kind", parameter="mode", value=label, hint="use in_plane or out_of_plane", file=p, row=line
         )
-    sig = _float(r.get("sigma_hz"), p, line, "sigma_hz")
+    sig = read_cell(r.get("sigma_hz"), p, line, "sigma_hz")
     out = []
     for c in fcols:
-        f = _float(r[c], p, line, c)
+        f = read_cell(r[c], p, line, c)
         if math.isnan(f):
             continue
         if not f > 0:
@@ -224,10 +225,10 @@ def _table_row_observation(
     v = (r[fcol] or "").strip()
     if not v or v.lower() == "unreadable":
         return None
-    f = _float(v, p, line, fcol)
+    f = read_cell(v, p, line, fcol)
     if not f > 0:
         raise DataError("a frequency must be > 0", parameter=fcol, value=f, file=p, row=line)
-    rm, cm = _float(r["row_mm"], p, line, "row_mm"), _float(r["col_mm"], p, line, "col_mm")
+    rm, cm = read_cell(r["row_mm"], p, line, "row_mm"), read_cell(r["col_mm"], p, line, "col_mm")
     if math.isnan(rm) or math.isnan(cm):
         raise DataError("row_mm and col_mm must both be given", file=p, row=line)
     return Observation(reading.pose(rm, cm), 1, f, f * sigma_pct / 100.0, None, p.name, rm, cm, line=line)

@@ -25,7 +25,7 @@ from fpm_sim.architecture import Description, TaskPose, description_value, with_
 from fpm_sim.batch.task_sweep import sweep_task_many
 from fpm_sim.errors import FpmSimError
 from fpm_sim.model.options import ModelOptions
-from fpm_sim.study.identify.data import DEFAULT_SIGMA_PCT, DataError, read_csv_rows
+from fpm_sim.study.identify.data import DEFAULT_SIGMA_PCT, DataError, read_cell, read_csv_rows
 
 __all__ = [
     "DescribedIdentification",
@@ -55,18 +55,6 @@ class TaskMeasurements:
         return int(self.freq_hz.shape[1])
 
 
-def _cell(text: str | None, path: Path, line: int, col: str) -> float:
-    if text is None or not text.strip():
-        return math.nan
-    try:
-        v = float(text)
-    except ValueError:
-        raise DataError("not a number", parameter=col, value=text, file=path, row=line) from None
-    if not math.isfinite(v):
-        raise DataError("must be finite (blank: not measured)", parameter=col, value=text, file=path, row=line)
-    return v
-
-
 def read_task_measured_csv(
     path: str | Path, desc: Description, *, sigma_pct: float = DEFAULT_SIGMA_PCT
 ) -> TaskMeasurements:
@@ -90,16 +78,16 @@ def read_task_measured_csv(
     n = max(modes)
     poses, freq, sigma = [], np.full((len(rows), n), np.nan), np.full((len(rows), n), np.nan)
     for i, (line, row) in enumerate(rows):
-        vals = {c: _cell(row.get(col), p, line, col) for c, col in columns.items()}
+        vals = {c: read_cell(row.get(col), p, line, col) for c, col in columns.items()}
         if any(math.isnan(v) for v in vals.values()):
             raise DataError("every task coordinate must be given", file=p, row=line)
         poses.append(TaskPose(*(vals.get(c, 0.0) * (1.0 if c == "phi" else 1e-3) for c in ("x", "y", "z", "phi"))))
         for k in modes:
-            f = _cell(row.get(f"f{k}_hz"), p, line, f"f{k}_hz")
+            f = read_cell(row.get(f"f{k}_hz"), p, line, f"f{k}_hz")
             if not (math.isnan(f) or f > 0):
                 raise DataError("must be > 0", parameter=f"f{k}_hz", value=f, file=p, row=line)
             freq[i, k - 1] = f
-        s = _cell(row.get("sigma_hz"), p, line, "sigma_hz")
+        s = read_cell(row.get("sigma_hz"), p, line, "sigma_hz")
         if not (math.isnan(s) or s > 0):
             raise DataError("must be > 0", parameter="sigma_hz", value=s, file=p, row=line)
         sigma[i] = s if not math.isnan(s) else freq[i] * sigma_pct / 100.0
