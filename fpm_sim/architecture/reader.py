@@ -464,3 +464,10 @@ def is_description_file(path: str | Path) -> bool:
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
         return False
     return isinstance(data.get("chains"), list)
+
+
+# The readers shared with the imported description (fpm_sim.architecture.imported): same validation, same paths.
+ValueReader = _Values
+read_material = _material
+read_section = _section
+table_keys = _keys
