@@ -33,15 +33,15 @@ from fpm_sim.architecture.imported import FlexibleBody, ImportedDescription
 from fpm_sim.errors import FpmSimError
 from fpm_sim.model.links import add_link
 from fpm_sim.model.options import ModelOptions
-from fpm_sim.model.parts import LinkSpec, box_part
+from fpm_sim.model.parts import LinkSpec, box_part, set_inertial
 from fpm_sim.model.spec import BuiltModel, compile_model
 
-__all__ = ["ImportError_", "ImportReport", "build_imported", "import_report"]
+__all__ = ["ModelImportError", "ImportReport", "build_imported", "import_report"]
 
 _ALONG_TYPES = {int(mujoco.mjtGeom.mjGEOM_CAPSULE), int(mujoco.mjtGeom.mjGEOM_CYLINDER), int(mujoco.mjtGeom.mjGEOM_BOX)}
 
 
-class ImportError_(FpmSimError):  # noqa: N801 - ImportError is Python's own
+class ModelImportError(FpmSimError):
     """What cannot be imported: a body, joint or file the description names, or a model fpm-sim cannot analyse."""
 
 
@@ -68,8 +68,8 @@ class ImportReport:
         return "\n".join(lines)
 
 
-def _fail(message: str, parameter: str, value: Any = None, hint: str | None = None) -> ImportError_:
-    return ImportError_(message, parameter=parameter, value=value, hint=hint)
+def _fail(message: str, parameter: str, value: Any = None, hint: str | None = None) -> ModelImportError:
+    return ModelImportError(message, parameter=parameter, value=value, hint=hint)
 
 
 def _load_spec(desc: ImportedDescription) -> mujoco.MjSpec:
@@ -150,6 +150,7 @@ class _Beam:
     to: str
     replaced: list[str]
     kept: list[str]
+    lump: tuple[float, np.ndarray, np.ndarray] | None = None
 
 
 def _local(model: mujoco.MjModel, data: mujoco.MjData, bid: int, p_world: np.ndarray) -> np.ndarray:
@@ -196,7 +197,7 @@ def _frame(model: mujoco.MjModel, bid: int, f: FlexibleBody, x: np.ndarray) -> n
     candidates = [np.array(f.z_axis)] if f.z_axis is not None else []
     if model.body_jntnum[bid]:
         candidates.append(model.jnt_axis[model.body_jntadr[bid]].copy())
-    candidates += [np.eye(3)[i] for i in np.argsort(np.abs(x))]
+    candidates += [np.eye(3)[2], np.eye(3)[1], np.eye(3)[0]]
     for z in candidates:
         z = z - x * float(z @ x)
         if np.linalg.norm(z) > 1e-6:
@@ -298,6 +299,8 @@ def _remainder(
 def _kept_by_geoms(spec: mujoco.MjSpec, beams: list[_Beam]) -> dict[str, tuple[float, np.ndarray, np.ndarray]]:
     """The mass of each flexible body's kept geoms, as MuJoCo computes it: a copy without the replaced geoms, with a
     1 kg probe sphere at the origin (MuJoCo needs mass on a moving body), less the probe."""
+    if not beams:
+        return {}
     copy = spec.copy()
     radius = 1e-3
     for beam in beams:
@@ -332,19 +335,21 @@ def _explicit_mass(spec: mujoco.MjSpec, beams: list[_Beam], opts: ModelOptions, 
     """Every body's inertial made explicit as the model states it; a flexible body's replaced by its rigid lump."""
     model = spec.compile()
     from_geoms = spec.compiler.inertiafromgeom != mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
-    kept = _kept_by_geoms(spec, beams)
+    explicit_bodies = {b.flex.body for b in beams if spec.body(b.flex.body).explicitinertial or not from_geoms}
+    kept = _kept_by_geoms(spec, [b for b in beams if b.flex.body not in explicit_bodies])
     lumps = {}
     for beam in beams:
         body = spec.body(beam.flex.body)
         bid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, beam.flex.body)
-        explicit = bool(body.explicitinertial) or not from_geoms
-        if explicit and spec.compiler.inertiafromgeom != mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_TRUE:
+        if body.name in explicit_bodies:
             lumps[beam.flex.body] = _remainder(_inertia_matrix(model, bid), _beam_inertia(beam, opts), body.name, 0)
             report.mass_rule[body.name] = "its <inertial> less the beam's mass"
         else:
             lumps[beam.flex.body] = kept[beam.flex.body]
             report.mass_rule[body.name] = "its kept geoms' mass"
         report.lump_kg[body.name] = lumps[beam.flex.body][0]
+        beam.lump = lumps[beam.flex.body]
+        lumps[beam.flex.body] = (0.0, np.zeros(3), np.zeros((3, 3)))  # it rides on the beam (_hang_lump)
     for bid in range(1, model.nbody):
         name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, bid)
         body = spec.body(name) if name else None
@@ -352,10 +357,14 @@ def _explicit_mass(spec: mujoco.MjSpec, beams: list[_Beam], opts: ModelOptions, 
             continue
         m, c, i_c = lumps[name] if name in lumps else _inertia_matrix(model, bid)
         if m <= 0.0:  # nothing left: the body's mass is its beam's (no inertial; geoms carry none now)
-            body.explicitinertial = False
+            body.explicitinertial, body.mass, body.inertia = False, 0.0, [0.0, 0.0, 0.0]
+            body.fullinertia = [math.nan] * 6
             continue
-        body.mass, body.ipos = m, c.tolist()
-        body.fullinertia = [i_c[0, 0], i_c[1, 1], i_c[2, 2], i_c[0, 1], i_c[0, 2], i_c[1, 2]]
+        w, v = np.linalg.eigh(0.5 * (i_c + i_c.T))
+        if np.linalg.det(v) < 0:
+            v[:, 0] = -v[:, 0]
+        body.mass, body.ipos, body.inertia, body.iquat = m, c.tolist(), np.maximum(w, 0.0).tolist(), _quat(v).tolist()
+        body.fullinertia = [math.nan] * 6  # principal inertia and iquat, not a full matrix
         body.explicitinertial = True
     spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
 
@@ -406,6 +415,7 @@ def _add_beams(
             damping_beta_s=desc.damping_beta_s,
         )
         build = add_link(spec, body, link)
+        _hang_lump(beam, build)
         links[name] = build.sites
         kinds.update(dict(build.joints))
         p_last = beam.start + beam.rot[:, 0] * (beam.length_m - build.last_length_m)
@@ -416,6 +426,23 @@ def _add_beams(
                 rc = _rot(model.body_quat[c])
                 moves[child] = (build.last.name, beam.rot.T @ (model.body_pos[c] - p_last), _quat(beam.rot.T @ rc))
     return links, kinds, moves
+
+
+def _hang_lump(beam: _Beam, build: Any) -> None:
+    """The body's rigid lump onto the beam's piece that holds its centre (a motor at the link's far end rides on
+    the end, one at its joint on the start)."""
+    if beam.lump is None or beam.lump[0] <= 0.0:
+        return
+    m, c, i_c = beam.lump
+    s = float(np.clip((c - beam.start) @ beam.rot[:, 0], 0.0, beam.length_m))
+    edges = np.cumsum([0.0, *build.piece_lengths_m])
+    j = min(int(np.searchsorted(edges, s, side="right")) - 1, len(build.bodies) - 1)
+    piece = build.bodies[j]
+    origin = beam.start + beam.rot[:, 0] * edges[j]
+    f = piece.fullinertia
+    i_piece = np.array([[f[0], f[3], f[4]], [f[3], f[1], f[5]], [f[4], f[5], f[2]]])
+    parts = [(float(piece.mass), np.array(piece.ipos), i_piece), (m, beam.rot.T @ (c - origin), beam.rot.T @ i_c @ beam.rot)]
+    set_inertial(piece, parts)
 
 
 def _rehang(xml: str, moves: dict[str, tuple[str, np.ndarray, np.ndarray]]) -> str:
@@ -489,7 +516,7 @@ def build_imported(
 
     Raises
     ------
-    ImportError_
+    ModelImportError
         A body, joint or site the description names that the model lacks, a free joint, a zero-length beam, a body
         whose stated mass is less than its beam's, a link model other than ``segments`` or ``rigid``.
     """
