@@ -116,7 +116,7 @@ def _pose(spec: mujoco.MjSpec, q: dict[str, float]) -> None:
         if jid < 0:
             names = ", ".join(j.name for j in spec.joints if j.name)
             raise _fail(f"no joint {name!r} in the model", "q", name, hint=f"joints: {names}")
-        if model.jnt_type[jid] not in (mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtJoint.mjJNT_SLIDE):
+        if int(model.jnt_type[jid]) not in (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE)):
             raise _fail(f"joint {name!r} is not a hinge or slide: pose it in the model file", "q", name)
         if not math.isfinite(value):
             raise _fail(f"joint {name!r}: value must be finite", "q", value)
