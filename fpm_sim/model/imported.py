@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import mujoco
@@ -36,7 +36,7 @@ from fpm_sim.model.options import ModelOptions
 from fpm_sim.model.parts import LinkSpec, box_part, set_inertial
 from fpm_sim.model.spec import BuiltModel, compile_model
 
-__all__ = ["ModelImportError", "ImportReport", "build_imported", "import_report"]
+__all__ = ["ImportReport", "ModelImportError", "build_imported", "import_report"]
 
 _ALONG_TYPES = {int(mujoco.mjtGeom.mjGEOM_CAPSULE), int(mujoco.mjtGeom.mjGEOM_CYLINDER), int(mujoco.mjtGeom.mjGEOM_BOX)}
 
@@ -441,7 +441,10 @@ def _hang_lump(beam: _Beam, build: Any) -> None:
     origin = beam.start + beam.rot[:, 0] * edges[j]
     f = piece.fullinertia
     i_piece = np.array([[f[0], f[3], f[4]], [f[3], f[1], f[5]], [f[4], f[5], f[2]]])
-    parts = [(float(piece.mass), np.array(piece.ipos), i_piece), (m, beam.rot.T @ (c - origin), beam.rot.T @ i_c @ beam.rot)]
+    parts = [
+        (float(piece.mass), np.array(piece.ipos), i_piece),
+        (m, beam.rot.T @ (c - origin), beam.rot.T @ i_c @ beam.rot),
+    ]
     set_inertial(piece, parts)
 
 
@@ -541,6 +544,7 @@ def build_imported(
             "model": str(desc.model_path),
             "q": {k: float(v) for k, v in (q or {}).items()},
             "locked_joints": report.locked,
+            "options": asdict(opts),
             "timestep_s": float(model.opt.timestep),
             "nv": int(model.nv),
         },

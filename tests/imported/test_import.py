@@ -113,7 +113,7 @@ def test_round_trip_of_the_rigid_serial_arm(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("extra", "edit", "words"),
     [
-        ("", ("body = \"lower_arm\"", "body = \"forearm\""), "no body 'forearm'"),
+        ("", ('body = "lower_arm"', 'body = "forearm"'), "no body 'forearm'"),
         ("", ('end_site = "tip"', "end_m = [0, 0, 0]"), "zero length"),
         ("", ('end_site = "tip"', ""), "no child body with a joint"),
     ],
