@@ -24,6 +24,7 @@ path in the file, as the architecture reader's.
 from __future__ import annotations
 
 import copy
+import os
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -115,10 +116,10 @@ def parse_imported(data: dict[str, Any], *, base_dir: Path, source: str = "user"
     model = data.get("model")
     if not isinstance(model, str) or not model.lower().endswith((".xml", ".urdf", ".mjcf")):
         raise_at("model", "must name a MuJoCo model file (.xml MJCF or .urdf)", model)
-    path = Path(model) if Path(model).is_absolute() else base_dir / model
+    path = Path(model) if Path(model).is_absolute() else Path(os.path.normpath(base_dir / model))  # as relpath
     if not path.is_file():
         raise_at("model", f"file not found: {path}", model, hint="give the path relative to the description file")
-    libs = {
+    libs: dict[str, dict[str, Any]] = {
         "materials": {k: read_material(r, v, f"materials.{k}") for k, v in data.get("materials", {}).items()},
         "sections": {k: read_section(r, v, f"sections.{k}") for k, v in data.get("sections", {}).items()},
     }

@@ -62,6 +62,7 @@ if TYPE_CHECKING:
 __all__ = ["COMMAND_MODULES", "build_parser", "main", "save_figure"]
 
 COMMAND_MODULES: list[str] = [
+    "fpm_sim.cli.imported",
     "fpm_sim.cli.reproduce",
     "fpm_sim.cli.sweep",
     "fpm_sim.cli.rollout",

@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 import xml.etree.ElementTree as ET
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 from typing import Any
 
 import mujoco
@@ -36,7 +37,7 @@ from fpm_sim.model.options import ModelOptions
 from fpm_sim.model.parts import LinkSpec, box_part, set_inertial
 from fpm_sim.model.spec import BuiltModel, compile_model
 
-__all__ = ["ImportReport", "ModelImportError", "build_imported", "import_report"]
+__all__ = ["ImportReport", "ModelImportError", "build_imported", "end_sites", "import_report"]
 
 _ALONG_TYPES = {int(mujoco.mjtGeom.mjGEOM_CAPSULE), int(mujoco.mjtGeom.mjGEOM_CYLINDER), int(mujoco.mjtGeom.mjGEOM_BOX)}
 
@@ -404,7 +405,7 @@ def _add_beams(
             name=name,
             pos_m=(float(beam.start[0]), float(beam.start[1]), float(beam.start[2])),
             angle_rad=0.0,
-            quat=tuple(_quat(beam.rot).tolist()),  # type: ignore[arg-type]
+            quat=tuple(_quat(beam.rot).tolist()),
             length_m=beam.length_m,
             section=beam.flex.section,
             material=beam.flex.material,
@@ -476,6 +477,33 @@ def _fpm_options(spec: mujoco.MjSpec, desc: ImportedDescription, opts: ModelOpti
     spec.option.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
     if not opts.gravity:
         spec.option.gravity = [0.0, 0.0, 0.0]
+
+
+def end_sites(model_path: str | Path, bodies: list[str]) -> dict[str, str]:
+    """For each of ``bodies`` whose beam has no default end (not one child body with a joint), the body's own site
+    farthest from its joint (or origin), if it has one: what ``fpm-sim import`` writes as ``end_site``. Bodies the
+    model lacks are left out (the import report names them)."""
+    try:
+        model = mujoco.MjSpec.from_file(str(model_path)).compile()
+    except ValueError as e:
+        raise _fail(f"MuJoCo cannot read {model_path}: {str(e).splitlines()[0]}", "model") from e
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    out = {}
+    for name in bodies:
+        bid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
+        if bid < 0:
+            continue
+        children = [
+            c for c in range(model.nbody) if model.body_parentid[c] == bid and c != bid and model.body_jntnum[c]
+        ]
+        sites = [s for s in range(model.nsite) if model.site_bodyid[s] == bid]
+        if len(children) == 1 or not sites:
+            continue
+        start = data.xanchor[model.body_jntadr[bid]] if model.body_jntnum[bid] else data.xpos[bid]
+        far = max(sites, key=lambda s: float(np.linalg.norm(data.site_xpos[s] - start)))
+        out[name] = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_SITE, far) or ""
+    return {k: v for k, v in out.items() if v}
 
 
 def import_report(desc: ImportedDescription, options: ModelOptions | None = None) -> ImportReport:

@@ -140,3 +140,63 @@ def test_free_joint_refused_by_name(tmp_path: Path) -> None:
     )
     with pytest.raises(FpmSimError, match=r"float.*free joint"):
         build_imported(load_imported(toml))
+
+
+def _cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
+    from fpm_sim.cli.main import main
+
+    code = main(argv)
+    out = capsys.readouterr()
+    return code, out.out + out.err
+
+
+def test_import_command_writes_the_description(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``fpm-sim import`` writes a description that reads back to the flags' values (mm on the command line, SI in
+    the file, each with its provenance), names the model relative to itself, and is refused when it exists."""
+    out = tmp_path / "sub" / "acrobot.toml"
+    argv = ["import", str(_acrobot()), "--flexible", "upper_arm,lower_arm", "--section", "tube:100x5mm"]
+    argv += ["--material", "aluminium", "--lock", "shoulder", "--out", str(out)]
+    code, text = _cli(argv, capsys)
+    assert code == 0, text
+    assert "replaced geoms [upper_arm]" in text
+    assert f"wrote {out}" in text
+    body = out.read_text()
+    assert 'source = "fpm-sim import --section tube:100x5mm"' in body
+    assert not Path(body.split('model = "')[1].split('"')[0]).is_absolute()
+    desc = load_imported(out)
+    assert desc.model_path == _acrobot().resolve()
+    assert desc.locked_joints == ("shoulder",)
+    assert [f.body for f in desc.flexible] == ["upper_arm", "lower_arm"]
+    assert desc.flexible[1].end_site == "tip"  # lower_arm has no child joint: its site farthest from its joint
+    tube = desc.flexible[0].section
+    assert (tube.outer_diameter_m, tube.inner_diameter_m) == (0.1, 0.09)  # type: ignore[union-attr]
+    assert (desc.flexible[0].material.young_pa, desc.flexible[0].material.density_kg_m3) == (70e9, 2700.0)
+    code, text = _cli(argv, capsys)
+    assert code == 2, text
+    assert text.startswith("error: --out"), text
+    assert "--overwrite" in text, text
+    code, text = _cli([*argv, "--overwrite", "--json"], capsys)
+    assert code == 0, text
+    assert '"locked": [' in text, text
+
+
+@pytest.mark.parametrize(
+    ("edit", "words"),
+    [
+        (("tube:100x5mm", "tube:100x60mm"), "error: --section tube:100x60mm"),
+        (("tube:100x5mm", "rect:25mm"), "error: --section rect:25mm"),
+        (("aluminium", "gold"), "error: --material gold"),
+        (("upper_arm,lower_arm", "upper_arm,forearm"), "error: --flexible: no body 'forearm'"),
+        (("shoulder", "knee"), "error: --lock: no joint 'knee'"),
+    ],
+)
+def test_import_command_bad_flags_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], edit: tuple[str, str], words: str
+) -> None:
+    argv = ["import", str(_acrobot()), "--flexible", "upper_arm,lower_arm", "--section", "tube:100x5mm"]
+    argv += ["--material", "aluminium", "--lock", "shoulder", "--out", str(tmp_path / "a.toml")]
+    code, text = _cli([a.replace(*edit) if a == edit[0] else a for a in argv], capsys)
+    assert code == 2, text
+    assert len(text.strip().splitlines()) == 1, text
+    assert text.startswith(words), text
+    assert list(tmp_path.iterdir()) == []  # nothing written
