@@ -109,6 +109,7 @@ OPTION_NAMES: dict[str, tuple[str, float]] = {
     "reduce:n_modes": ("--modes", 1.0),
     "transient:n_modes": ("--modes", 1.0),
     "modes:mode": ("--mode", 1.0),
+    "q": ("--q", 1.0),
     "n_extra": ("--extra", 1.0),
     "band_hz": ("--band-hz", 1.0),
     "error_bound": ("--error-bound", 1.0),

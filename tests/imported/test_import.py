@@ -200,3 +200,44 @@ def test_import_command_bad_flags_one_line(
     assert len(text.strip().splitlines()) == 1, text
     assert text.startswith(words), text
     assert list(tmp_path.iterdir()) == []  # nothing written
+
+
+@pytest.mark.filterwarnings("ignore::fpm_sim.model.options.ResolutionWarning")
+def test_facade_modes_take_joint_values(tmp_path: Path) -> None:
+    """``fs.modes(desc, q=...)`` is the builder's analysis (same numbers), and, both joints locked without gravity,
+    turning the shoulder turns the whole clamped structure rigidly: the frequencies do not change (symmetry; rtol
+    1e-7, the transition-FD eigenvalues' repeatability at these sizes)."""
+    import fpm_sim as fs
+
+    desc = fs.load_imported(_acrobot_toml(tmp_path))
+    opts = ModelOptions(segments=2, gravity=False)
+    straight = fs.modes(desc, q={"shoulder": 0.0, "elbow": 0.0}, options=opts, n_modes=4)
+    direct = analyse(build_imported(desc, {"shoulder": 0.0, "elbow": 0.0}, opts), "transition_fd", 4)
+    assert list(straight.frequencies_hz) == list(direct.frequencies_hz)
+    turned = fs.modes(desc, q={"shoulder": 0.7, "elbow": 0.0}, options=opts, n_modes=4)
+    np.testing.assert_allclose(turned.frequencies_hz, straight.frequencies_hz, rtol=1e-7)
+    with pytest.raises(FpmSimError, match="imported model") as info:
+        fs.modes(q={"shoulder": 0.3})  # the 3RRR is posed by a pose
+    assert info.value.parameter == "q"
+    with pytest.raises(FpmSimError, match="load_imported"):
+        fs.load_description(_acrobot_toml(tmp_path))
+
+
+@pytest.mark.parametrize(
+    ("q", "words"),
+    [
+        (["shoulder=0", "elbow=0"], None),
+        (["elbow=abc"], "error: --q elbow=abc: give a joint's value as NAME=VALUE"),
+        (["knee=0"], "error: --q: no joint 'knee' in the model"),
+    ],
+)
+def test_modes_cli_q(tmp_path: Path, capsys: pytest.CaptureFixture[str], q: list[str], words: str | None) -> None:
+    argv = ["modes", "--config", str(_acrobot_toml(tmp_path)), "--n-modes", "2", "--json"]
+    argv += [w for v in q for w in ("--q", v)]
+    code, text = _cli(argv, capsys)
+    if words is None:
+        assert code == 0, text
+        assert '"frequency_hz"' in text
+        return
+    assert code == 2, text
+    assert text.strip().splitlines()[-1].startswith(words), text
