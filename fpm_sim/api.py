@@ -24,7 +24,6 @@ from typing import TYPE_CHECKING, Any, Literal, overload
 if TYPE_CHECKING:
     from fpm_sim.architecture import Description, TaskPose
     from fpm_sim.architecture.imported import ImportedDescription
-    from fpm_sim.architecture.imported import ImportedDescription
     from fpm_sim.batch.task_sweep import TaskSweep
     from fpm_sim.config import Manipulator, RigConfig
     from fpm_sim.designs.study import DesignResult
