@@ -36,6 +36,7 @@ from fpm_sim.model.links import add_link
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.model.parts import LinkSpec, box_part, set_inertial
 from fpm_sim.model.spec import BuiltModel, compile_model
+from fpm_sim.model.xml_precision import full_precision_xml
 
 __all__ = ["ImportReport", "ModelImportError", "build_imported", "end_sites", "import_report"]
 
@@ -536,7 +537,7 @@ def _assemble(
     )
     _fpm_options(spec, desc, opts)
     links, kinds, moves = _add_beams(spec, desc, beams, opts)
-    spec = mujoco.MjSpec.from_string(_rehang(spec.to_xml(), moves))
+    spec = mujoco.MjSpec.from_string(_rehang(full_precision_xml(spec), moves))
     return spec, report, links, kinds
 
 
