@@ -7,7 +7,9 @@ header declares it), so fpm-sim does not call it. Instead :func:`full_precision_
 rewrites the numbers of bodies, inertials, joints, geoms, sites and equalities with the spec's own values, printed
 with :func:`repr` (the shortest text that reads back to the same double). Each rewritten attribute is first checked
 against the writer's six digits (relative 1e-5): an attribute the spec states differently (an angle in degrees, an
-alternative orientation) is left as the writer printed it.
+alternative orientation) is left as the writer printed it. Solver settings (the timestep, ``solref``, ``solimp``) stay
+at six digits: fpm-sim derives them from an eigenvalue estimate whose last digits vary between machines, and the
+reference files in ``mjcf/`` must not.
 """
 
 from __future__ import annotations
@@ -37,9 +39,7 @@ _FIELDS: dict[str, dict[str, _Field]] = {
     },
     "geom": {k: k for k in ("size", "pos", "quat", "fromto", "mass", "density")},
     "site": {k: k for k in ("size", "pos", "quat")},
-    "equality": {
-        "solref": "solref",
-        "solimp": "solimp",
+    "equality": {  # solref and solimp stay at six digits, as the timestep: solver settings, not geometry
         "anchor": lambda e: e.data[:3],
         "relpose": lambda e: e.data[3:10],
         "torquescale": lambda e: e.data[10:11],
