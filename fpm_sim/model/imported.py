@@ -389,10 +389,11 @@ def _lock(spec: mujoco.MjSpec, desc: ImportedDescription, report: ImportReport) 
 
 
 def _add_beams(
-    spec: mujoco.MjSpec, desc: ImportedDescription, beams: list[_Beam], opts: ModelOptions
+    spec: mujoco.MjSpec, desc: ImportedDescription, beams: list[_Beam], opts: ModelOptions, model: mujoco.MjModel
 ) -> tuple[dict[str, list[str]], dict[str, str], dict[str, tuple[str, np.ndarray, np.ndarray]]]:
-    """Each beam's segment chain on its body (replaced geoms removed); the children's new parent and placement."""
-    model = spec.compile()
+    """Each beam's segment chain on its body (replaced geoms removed); the children's new parent and placement
+    (from ``model``, the spec compiled before its masses were split: a body whose mass is all its beam's has none
+    until the beam hangs on it)."""
     links: dict[str, list[str]] = {}
     kinds: dict[str, str] = {}
     moves: dict[str, tuple[str, np.ndarray, np.ndarray]] = {}
@@ -531,12 +532,13 @@ def _assemble(
         b = beam.flex.body
         report.replaced[b], report.kept[b] = beam.replaced, beam.kept
         report.beam[b] = {"length_m": beam.length_m, "from": beam.frm, "to": beam.to}
+    tree = spec.compile()  # the bodies' places, compiled while every moving body still has its mass
     _explicit_mass(spec, beams, opts, report)
     report.loops = sum(
         1 for e in spec.equalities if e.type in (mujoco.mjtEq.mjEQ_CONNECT, mujoco.mjtEq.mjEQ_WELD) and e.active
     )
     _fpm_options(spec, desc, opts)
-    links, kinds, moves = _add_beams(spec, desc, beams, opts)
+    links, kinds, moves = _add_beams(spec, desc, beams, opts, tree)
     spec = mujoco.MjSpec.from_string(_rehang(full_precision_xml(spec), moves))
     return spec, report, links, kinds
 
