@@ -27,6 +27,8 @@ else keyword-only; the model options are one ``options=fs.ModelOptions(...)``::
     fs.export_mjcf(cfg, pose)                 # the generated MJCF
     delta = fs.load_description("examples/architectures/delta.toml")  # any architecture (docs/architectures.md)
     fs.modes(delta, fs.TaskPose.from_mm(x_mm=50, z_mm=-320))          # in its own task coordinates
+    arm = fs.load_imported("acrobot.toml")    # a MuJoCo model with links made flexible (fpm-sim import)
+    fs.modes(arm, q={"shoulder": 0.3})        # posed in joint space (rad, m)
     fs.check_requirements(fs.load_requirements("fpm-requirements.toml"), cfg)  # docs/testing.md
     fs.predict_bands("posterior.nc", pose)    # median and 5-95 % bands over a posterior's draws
 
@@ -46,6 +48,7 @@ _API = {
     "Pose": "fpm_sim.kinematics",
     "load_description": "fpm_sim.architecture",
     "TaskPose": "fpm_sim.architecture",
+    "load_imported": "fpm_sim.architecture.imported",
     "ModelOptions": "fpm_sim.model.options",
     "LinkPoint": "fpm_sim.response",
     "FpmSimError": "fpm_sim.errors",

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any, Literal, overload
 
 if TYPE_CHECKING:
     from fpm_sim.architecture import Description, TaskPose
+    from fpm_sim.architecture.imported import ImportedDescription
     from fpm_sim.batch.task_sweep import TaskSweep
     from fpm_sim.config import Manipulator, RigConfig
     from fpm_sim.designs.study import DesignResult
@@ -185,9 +186,10 @@ def _task_load(
 
 @overload
 def modes(
-    config: Manipulator | Description | None = None,
+    config: Manipulator | Description | ImportedDescription | None = None,
     pose: Pose | TaskPose | None = None,
     *,
+    q: dict[str, float] | None = None,
     options: ModelOptions | None = None,
     n_modes: int | None = 10,
     method: Literal["transition_fd", "constrained"] = "transition_fd",
@@ -196,9 +198,10 @@ def modes(
 
 @overload
 def modes(
-    config: Manipulator | Description | None = None,
+    config: Manipulator | Description | ImportedDescription | None = None,
     pose: Pose | TaskPose | None = None,
     *,
+    q: dict[str, float] | None = None,
     options: ModelOptions | None = None,
     n_modes: int | None = 10,
     method: Literal["both"],
@@ -206,9 +209,10 @@ def modes(
 
 
 def modes(
-    config: Manipulator | Description | None = None,
+    config: Manipulator | Description | ImportedDescription | None = None,
     pose: Pose | TaskPose | None = None,
     *,
+    q: dict[str, float] | None = None,
     options: ModelOptions | None = None,
     n_modes: int | None = 10,
     method: str = "transition_fd",
@@ -220,11 +224,15 @@ def modes(
     config
         Manipulator description: the 3RRR's (:class:`fpm_sim.config.Manipulator`; ``None``: the embedded study
         prototype) or any described architecture (:class:`fpm_sim.architecture.Description`,
-        ``fs.load_description``).
+        ``fs.load_description``), or an imported MuJoCo model with links made flexible
+        (:class:`fpm_sim.architecture.imported.ImportedDescription`, ``fs.load_imported``; ``fpm-sim import``).
     pose
         End-effector pose: a :class:`fpm_sim.kinematics.Pose` (m, m, rad; ``None``: ``(0, 0, 0)``) for the 3RRR,
         a :class:`fpm_sim.architecture.TaskPose` in the architecture's task coordinates for a described one
-        (``None``: its first check pose).
+        (``None``: its first check pose). An imported model is posed by ``q`` instead.
+    q
+        An imported model's joint values, ``{joint name: value}`` in SI: rad for a hinge, m for a slide (MuJoCo's
+        joint coordinates; joints not named stay at the model's reference). Only for an imported model.
     options
         Model options; ``None``: ``ModelOptions()`` (standard resolution, gravity, axial springs).
     n_modes
@@ -238,8 +246,19 @@ def modes(
     ModalResult or ModalComparison
         ``.frequencies_hz``, ``.damping_ratios``, ``.modes``; ``.to_dict()``, ``.table()``, ``.plot()``.
     """
+    from fpm_sim.architecture.imported import ImportedDescription
     from fpm_sim.linear.analysis import analyse
 
+    if isinstance(config, ImportedDescription):
+        from fpm_sim.model.imported import build_imported
+
+        if pose is not None:
+            raise TypeError("an imported model is posed by its joint values: fs.modes(desc, q={'joint': value})")
+        return analyse(build_imported(config, q, _options(options)), method, n_modes)
+    if q is not None:
+        from fpm_sim.errors import FpmSimError
+
+        raise FpmSimError("joint values are for an imported model", parameter="q", hint="give a pose instead")
     return analyse(_built(config, pose, options), method, n_modes)
 
 

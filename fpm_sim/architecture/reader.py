@@ -449,6 +449,13 @@ def load_description(path: str | Path) -> Description:
     """Load a description file (see the module docstring); :class:`fpm_sim.config.ConfigError` names the path."""
     p = Path(path)
     data = read_toml_file(p, what="description")
+    if data.get("kind") == "imported":
+        raise ConfigError(
+            f"{p} is an imported model (kind = 'imported'), not a described architecture",
+            parameter="kind",
+            file=str(p),
+            hint="read it with fs.load_imported",
+        )
     try:
         desc = parse_description(data, source=f"user: {p.name}")
     except ConfigError as exc:
@@ -464,3 +471,10 @@ def is_description_file(path: str | Path) -> bool:
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
         return False
     return isinstance(data.get("chains"), list)
+
+
+# The readers shared with the imported description (fpm_sim.architecture.imported): same validation, same paths.
+ValueReader = _Values
+read_material = _material
+read_section = _section
+table_keys = _keys

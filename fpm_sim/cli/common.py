@@ -109,6 +109,7 @@ OPTION_NAMES: dict[str, tuple[str, float]] = {
     "reduce:n_modes": ("--modes", 1.0),
     "transient:n_modes": ("--modes", 1.0),
     "modes:mode": ("--mode", 1.0),
+    "q": ("--q", 1.0),
     "n_extra": ("--extra", 1.0),
     "band_hz": ("--band-hz", 1.0),
     "error_bound": ("--error-bound", 1.0),
@@ -391,8 +392,13 @@ def load_machine(args: argparse.Namespace, command: str) -> Manipulator | Descri
     """The 3RRR description of ``--config``, or a described architecture (``[[chains]]``, :mod:`fpm_sim.architecture`)
     for the commands of :data:`GENERAL_COMMANDS`."""
     from fpm_sim.architecture import is_description_file, load_description
+    from fpm_sim.architecture.imported import is_imported_file, load_imported
 
     path = getattr(args, "config", None)
+    if path and Path(path).is_file() and is_imported_file(path):
+        if command != "modes":
+            raise CliError(f"--config {path} is an imported model (kind = 'imported'); only 'modes' runs on it so far")
+        return load_imported(path)  # type: ignore[return-value]
     if path and Path(path).is_file() and is_description_file(path):
         if command not in GENERAL_COMMANDS:
             raise CliError(_not_yet(command, Path(path)))
@@ -443,7 +449,13 @@ def build_machine(args: argparse.Namespace, machine: Manipulator | Description, 
     """The :class:`~fpm_sim.model.spec.BuiltModel` of the 3RRR (at :func:`pose_of`) or of a described architecture
     (at :func:`task_pose_of`), and the pose's label."""
     from fpm_sim.architecture import Description
+    from fpm_sim.architecture.imported import ImportedDescription
 
+    if isinstance(machine, ImportedDescription):
+        from fpm_sim.model.imported import build_imported
+
+        q = joint_values(getattr(args, "q", None) or [])
+        return build_imported(machine, q, opts), ", ".join(f"{k} = {v:g}" for k, v in q.items()) or "as the model"
     if isinstance(machine, Description):
         from fpm_sim.model.general import build_general
 
@@ -453,6 +465,21 @@ def build_machine(args: argparse.Namespace, machine: Manipulator | Description, 
 
     pose = pose_of(args)
     return build_manipulator(machine, pose, opts), pose.label()
+
+
+def joint_values(items: list[str]) -> dict[str, float]:
+    """``--q NAME=VALUE`` options as a mapping (rad for hinges, m for slides: MuJoCo's joint coordinates)."""
+    out: dict[str, float] = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        try:
+            v = float(value)
+        except ValueError:
+            v = math.nan
+        if not sep or not name or not math.isfinite(v):
+            raise CliError(f"--q {item}: give a joint's value as NAME=VALUE (rad for a hinge, m for a slide)")
+        out[name] = v
+    return out
 
 
 def held_task_coordinates(args: argparse.Namespace, desc: Description) -> dict[str, float]:

@@ -62,6 +62,7 @@ if TYPE_CHECKING:
 __all__ = ["COMMAND_MODULES", "build_parser", "main", "save_figure"]
 
 COMMAND_MODULES: list[str] = [
+    "fpm_sim.cli.imported",
     "fpm_sim.cli.reproduce",
     "fpm_sim.cli.sweep",
     "fpm_sim.cli.rollout",
@@ -402,6 +403,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--mode", type=count_arg("--mode"), metavar="K", help="the mode --animate draws, 1-based (default 1)"
+    )
+    p.add_argument(
+        "--q",
+        action="append",
+        metavar="NAME=VALUE",
+        help="an imported model's joint value (rad for a hinge, m for a slide; repeat per joint)",
     )
     add_posterior_args(p)
     add_output_args(p)

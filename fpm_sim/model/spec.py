@@ -123,8 +123,10 @@ class BuiltModel:
         return float(self.model.opt.timestep)
 
     def to_xml(self) -> str:
-        xml: str = self.spec.to_xml()
-        return xml
+        """The MJCF, numbers at full precision (:func:`fpm_sim.model.xml_precision.full_precision_xml`)."""
+        from fpm_sim.model.xml_precision import full_precision_xml
+
+        return full_precision_xml(self.spec)
 
 
 def new_spec(model_name: str, *, gravity: bool) -> mujoco.MjSpec:

@@ -21,7 +21,7 @@ from fpm_sim.cli.main import build_parser, main
 
 INPUT_DESTS = {
     "config", "posterior", "poses", "designs", "subsystems", "workspace", "priors", "path_csv", "atlas", "file",
-    "files",
+    "files", "model",
 }  # fmt: skip
 """Path-typed arguments that are read, not written (every other path-typed argument is an output)."""
 
@@ -59,6 +59,12 @@ OUTPUTS: list[tuple[str, list[str], str, str]] = [
     ("ema", ["{tmp}/frf.csv"], "--out", ""),
     ("check", ["{tmp}/req.toml"], "--junit-xml", ".xml"),
     ("check", ["{tmp}/req.toml"], "--plot", ".png"),
+    (
+        "import",
+        ["{tmp}/m.xml", "--flexible", "arm", "--section", "rect:25x6mm", "--material", "steel"],
+        "--out",
+        ".toml",
+    ),
 ]
 """One case per output option of every command (checked against the parser)."""
 

@@ -1,0 +1,158 @@
+"""An *imported description*: a MuJoCo model (MJCF or URDF) with some of its bodies made flexible links.
+
+The file's form (``docs/import.md``)::
+
+    kind = "imported"
+    name = "acrobot"
+    model = "acrobot.xml"            # relative to this file, or absolute; .xml (MJCF) or .urdf
+    locked_joints = ["shoulder"]     # locked besides the actuated ones (those an <actuator> drives)
+
+    [materials.aluminium]            # as a described architecture's (fpm_sim.architecture.reader)
+    [sections.tube]
+
+    [[flexible]]
+    body = "upper_arm"               # the body whose link becomes a flexible beam
+    section = "tube"
+    material = "aluminium"
+    # optional: start_m / end_m ([x, y, z] in the body's frame), end_site (a site's name), z_axis (the section's
+    # height_m direction, in the body's frame), replace_geoms (the geoms the beam replaces)
+
+The beam runs by default from the body's own joint to its child body's joint (or to ``end_site``). Errors name the
+path in the file, as the architecture reader's.
+"""
+
+from __future__ import annotations
+
+import copy
+import os
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from fpm_sim.architecture.description import AnySection, raise_at
+from fpm_sim.architecture.reader import ValueReader, read_material, read_section, table_keys
+from fpm_sim.config import Material
+from fpm_sim.config.schema import read_toml_file
+
+__all__ = ["FlexibleBody", "ImportedDescription", "is_imported_file", "load_imported", "parse_imported"]
+
+_TOP = {"kind", "name", "model", "default_source", "materials", "sections", "flexible", "locked_joints", "damping"}
+_FLEX = {"body", "section", "material", "start_m", "end_m", "end_site", "z_axis", "replace_geoms"}
+
+
+@dataclass(frozen=True)
+class FlexibleBody:
+    """One body of the model made a flexible link (see the module docstring for the defaults)."""
+
+    body: str
+    section: AnySection
+    material: Material
+    start_m: tuple[float, float, float] | None = None
+    end_m: tuple[float, float, float] | None = None
+    end_site: str | None = None
+    z_axis: tuple[float, float, float] | None = None
+    replace_geoms: tuple[str, ...] | None = None
+
+
+@dataclass(frozen=True)
+class ImportedDescription:
+    """A MuJoCo model and the bodies of it made flexible (:func:`fpm_sim.model.imported.build_imported`)."""
+
+    name: str
+    model_path: Path
+    flexible: tuple[FlexibleBody, ...]
+    locked_joints: tuple[str, ...] = ()
+    damping_beta_s: float = 0.0
+    provenance: dict[str, str] = field(default_factory=dict)
+    data: dict[str, Any] = field(default_factory=dict)
+    source: str = "user"
+
+    def to_dict(self) -> dict[str, Any]:
+        """The description as read (JSON-ready)."""
+        return {"kind": "imported", "name": self.name, "model": str(self.model_path), **copy.deepcopy(self.data)}
+
+
+def _strings(v: Any, path: str) -> tuple[str, ...]:
+    if not isinstance(v, list) or not all(isinstance(x, str) and x for x in v):
+        raise_at(path, "must be a list of names", v)
+    return tuple(v)
+
+
+def _flexible(r: ValueReader, t: Any, path: str, libs: dict[str, dict[str, Any]]) -> FlexibleBody:
+    table_keys(t, path, _FLEX)
+    body = t.get("body")
+    if not isinstance(body, str) or not body:
+        raise_at(f"{path}.body", "must name a body of the model")
+    picked = {}
+    for kind in ("section", "material"):
+        name = t.get(kind)
+        if not isinstance(name, str) or name not in libs[kind + "s"]:
+            raise_at(f"{path}.{kind}", f"no {kind} of that name", name, hint=f"define it under [{kind}s]")
+        picked[kind] = libs[kind + "s"][name]
+    end_site = t.get("end_site")
+    if end_site is not None and not isinstance(end_site, str):
+        raise_at(f"{path}.end_site", "must name a site of the model", end_site)
+    if end_site is not None and "end_m" in t:
+        raise_at(f"{path}.end_site", "give end_site or end_m, not both")
+    return FlexibleBody(
+        body=body,
+        section=picked["section"],
+        material=picked["material"],
+        start_m=r.vec3(t, path, "start_m") if "start_m" in t else None,
+        end_m=r.vec3(t, path, "end_m") if "end_m" in t else None,
+        end_site=end_site,
+        z_axis=r.vec3(t, path, "z_axis") if "z_axis" in t else None,
+        replace_geoms=_strings(t["replace_geoms"], f"{path}.replace_geoms") if "replace_geoms" in t else None,
+    )
+
+
+def parse_imported(data: dict[str, Any], *, base_dir: Path, source: str = "user") -> ImportedDescription:
+    """A validated :class:`ImportedDescription` from parsed TOML; ``model`` is resolved against ``base_dir``."""
+    table_keys(data, "<top>", _TOP)
+    if data.get("kind") != "imported":
+        raise_at("kind", "must be 'imported'", data.get("kind"))
+    r = ValueReader(str(data.get("default_source", source)))
+    model = data.get("model")
+    if not isinstance(model, str) or not model.lower().endswith((".xml", ".urdf", ".mjcf")):
+        raise_at("model", "must name a MuJoCo model file (.xml MJCF or .urdf)", model)
+    path = Path(model) if Path(model).is_absolute() else Path(os.path.normpath(base_dir / model))  # as relpath
+    if not path.is_file():
+        raise_at("model", f"file not found: {path}", model, hint="give the path relative to the description file")
+    libs: dict[str, dict[str, Any]] = {
+        "materials": {k: read_material(r, v, f"materials.{k}") for k, v in data.get("materials", {}).items()},
+        "sections": {k: read_section(r, v, f"sections.{k}") for k, v in data.get("sections", {}).items()},
+    }
+    raw = data.get("flexible")
+    if not isinstance(raw, list) or not raw:
+        raise_at("flexible", "an imported description needs at least one [[flexible]] table")
+    flexible = tuple(_flexible(r, t, f"flexible[{i}]", libs) for i, t in enumerate(raw))
+    names = [f.body for f in flexible]
+    if len(set(names)) != len(names):
+        raise_at("flexible", "a body is named flexible twice", names)
+    damping = table_keys(data.get("damping", {}), "damping", {"stiffness_proportional_s"})
+    return ImportedDescription(
+        name=str(data.get("name", path.stem)),
+        model_path=path.resolve(),
+        flexible=flexible,
+        locked_joints=_strings(data.get("locked_joints", []), "locked_joints"),
+        damping_beta_s=r.number(damping, "damping", "stiffness_proportional_s", 0.0),
+        provenance=r.provenance,
+        data=copy.deepcopy(data),
+        source=source,
+    )
+
+
+def load_imported(path: str | Path) -> ImportedDescription:
+    """Read an imported description (module docstring) from a TOML file."""
+    p = Path(path)
+    return parse_imported(read_toml_file(p, what="imported description"), base_dir=p.resolve().parent, source=str(p))
+
+
+def is_imported_file(path: str | Path) -> bool:
+    """Whether a TOML file is an imported description (``kind = "imported"``)."""
+    try:
+        data = tomllib.loads(Path(path).read_text())
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return False
+    return data.get("kind") == "imported"
