@@ -467,7 +467,8 @@ class DesignResult:
             ):
                 if fig is None:
                     continue
-                fig.savefig(out / name, dpi=110)
+                # tight: the maps keep their aspect ratio, which the constrained layout cannot fit to the height
+                fig.savefig(out / name, dpi=110, bbox_inches="tight", pad_inches=0.08)
                 plt.close(fig)
                 paths.append(out / name)
         return paths
@@ -533,6 +534,7 @@ class DesignResult:
             ok = np.isfinite(f1[d])
             sc = a.scatter(x[ok], y[ok], c=f1[d, ok], s=max(4.0, 2000.0 / max(len(x), 1)), vmin=vmin, vmax=vmax)
             a.scatter(x[~ok], y[~ok], marker="x", s=6, color="0.7")
+            a.margins(0.1)  # the markers at the outermost poses whole, not cut by the axes
             a.set_title("\n".join(f"{k}={v:g}" for k, v in self.designs[d].items()) or "design", fontsize=7)
             a.set_aspect("equal")
             a.tick_params(labelsize=6)
@@ -556,6 +558,7 @@ class DesignResult:
         fig, ax = plt.subplots(figsize=(5, 4), constrained_layout=True)
         # the y axis is summary.csv's min_f1_ok_hz (the weakest pose away from singularities), as labelled
         ax.scatter([r["moving_mass_kg"] for r in rows], [r["min_f1_ok_hz"] for r in rows])
+        ax.margins(0.12)  # room for the outermost points' labels
         for r in rows:
             ax.annotate(
                 ", ".join(f"{r[f]:g}" for f in self.fields), (r["moving_mass_kg"], r["min_f1_ok_hz"]), fontsize=6
