@@ -480,6 +480,7 @@ class DesignResult:
         of the other fields; solid: the ``ok`` poses, dotted: near-singular poses included); with ``ax`` only
         the first field, on that axes. Returns the ``Figure``."""
         import matplotlib.pyplot as plt
+        from matplotlib.ticker import MaxNLocator
 
         rows = self.summary()
         fields = self.fields or ["design"]
@@ -501,6 +502,7 @@ class DesignResult:
             if self.f_min_hz is not None:
                 a.axhline(self.f_min_hz, color="red", ls="--", lw=1, label=f"f_min {self.f_min_hz:g} Hz")
             a.set_xlabel(f)
+            a.xaxis.set_major_locator(MaxNLocator(nbins=5))  # SI values of many digits (0.0045 m) stay apart
             a.set_ylabel("minimum f1 over the workspace (Hz)")
             a.plot([], [], "k.:", lw=0.8, label="dotted: near-singular poses included")
             a.grid(alpha=0.3)
