@@ -44,6 +44,7 @@ import numpy as np
 
 from fpm_sim.config import Manipulator
 from fpm_sim.study.identify.data import Observation
+from fpm_sim.study.identify.diagnosis import Diagnosis, diagnose
 from fpm_sim.study.identify.objective import Objective
 from fpm_sim.study.identify.problem import (
     GLOBAL_METHODS,
@@ -108,6 +109,9 @@ class Identification:
     their starts."""
     start_elbow_branch: tuple[int, int, int] | None = None
     """The start description's elbow branches (the global search may pick another class)."""
+    diagnosis: Diagnosis | None = None
+    """Whether the fit found the machine (:mod:`.diagnosis`): the noise-floor test, what the data determine, the
+    measured poses the identified machine cannot reach or puts near a singularity."""
 
     @property
     def names(self) -> list[str]:
@@ -150,6 +154,7 @@ class Identification:
             ],
             "options": vars(self.options),
             "seconds": self.seconds,
+            "diagnosis": self.diagnosis.to_dict() if self.diagnosis is not None else None,
         }
 
     def table(self) -> str:
@@ -160,6 +165,8 @@ class Identification:
         ]
         for n, v, s in zip(self.names, self.values, self.std):
             lines.append(f"  {n:<42} {v:>12.5g} +- {s:.3g}" + ("  (at bound)" if n in self.at_bound else ""))
+        if self.diagnosis is not None:
+            lines += ["  " + line for line in self.diagnosis.lines()]
         return "\n".join(lines)
 
     def plot(self, ax: Any = None, *, cv: CrossValidation | None = None) -> Any:
@@ -304,6 +311,10 @@ def identify(problem: Problem, *, options: IdentifyOptions | None = None, progre
     ob = obj if problem_b is problem else Objective(problem_b, opts)
     x = ob.x(best.z)
     jx, std, corr, chi2_dof, dof = _uncertainty(best, ob, len(problem.workspace))
+    assert best.residuals is not None
+    n_data = len(best.residuals) - len(problem.workspace)  # the workspace residuals are a prior, not data
+    config = problem_b.parameters.apply(x)
+    diagnosis = diagnose(problem_b, config, best.residuals[:n_data], jx[:n_data], ob.width)
     eps = 1e-6
     return Identification(
         problem=problem_b,
@@ -318,10 +329,11 @@ def identify(problem: Problem, *, options: IdentifyOptions | None = None, progre
         history=history.steps,
         options=opts,
         seconds=time.time() - history.t_start,
-        config=problem_b.parameters.apply(x),
+        config=config,
         jacobian=jx,
         candidates=ends,
         start_elbow_branch=ps.start.geometry.elbow_branch,
+        diagnosis=diagnosis,
     )
 
 

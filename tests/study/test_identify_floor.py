@@ -1,0 +1,109 @@
+"""Issue 31, items 3 and 5: the report says whether the fit found the machine (noise-floor test, what the data
+determine, troubled poses), and the local steps' exact frequency derivatives."""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from fpm_sim.batch.pose_loop import fast_options
+from fpm_sim.config import load_config
+from fpm_sim.kinematics import Pose
+from fpm_sim.study.identify import IdentifyOptions, Observation, Problem, identify, parameter_set, predict_observations
+from fpm_sim.study.identify.diagnosis import UNDETERMINED_SD, determination, noise_floor
+from tests.conftest import REFERENCE_CONFIG
+from tests.helpers.jitter import JITTER_SEEDS, jitter
+
+SEG = 2
+MM_RAD = [(0, 0, 0.2), (50, -50, 0), (50, 50, 0), (0, -50, 0), (-40, 0, 0.1), (20, 30, -0.1)]
+POSES = [Pose.from_mm(x, y, p) for x, y, p in MM_RAD]
+NOISE = 0.005  # 0.5 % of each frequency, as the issue's rich data
+
+
+def _twin_data(truth, seed=0):
+    """f1..f3 at POSES from ``truth`` with 0.5 % Gaussian noise (seeded), sigma the noise's."""
+    obs = [Observation(p, k, 1.0, 1.0, None, "twin") for p in POSES for k in (1, 2, 3)]
+    f = predict_observations(truth, obs, options=fast_options(segments=SEG))
+    sig = NOISE * f
+    meas = f + sig * np.random.default_rng(seed).standard_normal(len(f))
+    return [dataclasses.replace(o, freq_hz=float(m), sigma_hz=float(s)) for o, m, s in zip(obs, meas, sig)]
+
+
+def _start(truth):
+    """A start with the three hardware masses 30-40 % off the truth's."""
+    ps = parameter_set(truth, ["hardware"])
+    return ps.apply(ps.x0 * np.array([1.3, 0.7, 1.4]))
+
+
+OPTS = IdentifyOptions(segments=SEG, global_method="none", max_nfev=30)
+
+
+def test_a_twin_fit_reports_the_noise_floor_and_a_misspecified_one_how_far_above_it():
+    truth = load_config(REFERENCE_CONFIG)
+    fit = identify(Problem(parameter_set(_start(truth), ["hardware"]), _twin_data(truth)), options=OPTS)
+    d = fit.diagnosis
+    # the model contains the truth: chi2 ~ chi2(15 dof); this seed's draw gives p ~ 0.6, far from the 1e-3 line
+    assert d.floor.dof == 18 - 3
+    assert d.floor.at_floor
+    assert d.floor.p_value > 0.05, d.summary()
+    assert d.summary().startswith("fit at the noise floor")
+    assert all(d.determination.determined)
+    # each mass within 4 posterior sd of the truth (the sd is with the stated sigmas, the noise's own)
+    truth_x = parameter_set(truth, ["hardware"]).x0
+    assert np.all(np.abs(fit.values - truth_x) < 4 * d.determination.posterior_sd)
+    # the summary reaches the table and the dict (the facade's and --json's)
+    assert "fit at the noise floor" in fit.table()
+    assert fit.to_dict()["diagnosis"]["noise_floor"]["at_floor"] is True
+
+    # the truth's proximal links 3 % longer, the fit holding them at the start's: outside the model family
+    g = truth.geometry
+    longer = truth.replace(geometry=dataclasses.replace(g, proximal_length_m=1.03 * g.proximal_length_m))
+    bad = identify(Problem(parameter_set(_start(truth), ["hardware"]), _twin_data(longer)), options=OPTS)
+    fb = bad.diagnosis.floor
+    assert not fb.at_floor
+    assert fb.ratio > 10, fb.summary()
+    assert f"fit {fb.ratio:.3g} times above the noise floor: the model or the search is missing something" in (
+        bad.table()
+    )
+
+
+def test_the_noise_floor_test_is_the_chi_squared_tail():
+    # 100 residuals of exactly 1 sigma, 4 parameters: chi2 = 100 on 96 dof. For an even dof 2k the tail is the
+    # closed form exp(-x/2) sum_{i<k} (x/2)^i / i! (a Poisson sum), independent of scipy's incomplete gamma
+    f = noise_floor(np.ones(100), 4)
+    assert (f.chi2, f.dof) == (100.0, 96)
+    closed = math.exp(-50.0) * sum(50.0**i / math.factorial(i) for i in range(48))
+    assert f.p_value == pytest.approx(closed, rel=1e-9)
+    assert f.at_floor
+    # twice the noise in every residual: chi2/dof = 4.17, p ~ 1e-40
+    g = noise_floor(2 * np.ones(100), 4)
+    assert not g.at_floor
+    assert g.ratio == pytest.approx(400 / 96)
+
+
+@pytest.mark.parametrize("seed", [None, *JITTER_SEEDS])
+def test_a_jacobian_with_a_null_direction_names_the_parameters_that_trade_off(seed):
+    # four parameters, bounds' widths 2, 0.5, 1, 3; the data see the first two only through z_a - z_b
+    # (a platform mass against its joints' masses, in bound-normalised units); the other two directly.
+    names = ["platform", "joint", "length", "angle"]
+    width = np.array([2.0, 0.5, 1.0, 3.0])
+    rng = np.random.default_rng(7)
+    jz = np.zeros((20, 4))
+    jz[:, 0] = rng.standard_normal(20) * 30
+    jz[:, 1] = -jz[:, 0]  # in z: only z_platform - z_joint is seen
+    jz[:, 2] = rng.standard_normal(20) * 30
+    jz[:, 3] = rng.standard_normal(20) * 30 + 0.5 * jz[:, 2]
+    jx = jz / width[None, :]  # the Jacobian in the parameters' units
+    if seed is not None:
+        jx = jitter(jx, seed)
+    det = determination(jx, width, names)
+    assert det.determined == [False, False, True, True]
+    assert len(det.undetermined_directions) == 1
+    d = det.undetermined_directions[0]
+    # the null direction is (1, 1, 0, 0)/sqrt(2) in z: equal weights of the same sign, sd >> the threshold
+    assert set(d["weights"]) == {"platform", "joint"}
+    np.testing.assert_allclose(list(d["weights"].values()), [2**-0.5, 2**-0.5], atol=1e-3)
+    assert d["sd_fraction"] > 1e6 * UNDETERMINED_SD
+    # the determined parameters' sd: ~1/(30 sqrt(20)) of their widths, far below the threshold
+    assert np.all(det.posterior_sd[2:] / width[2:] < 0.05)
