@@ -31,6 +31,7 @@ __all__ = [
     "ELBOW_BRANCHES",
     "GLOBAL_METHODS",
     "IN_PLANE_THRESHOLD",
+    "JACOBIANS",
     "MODE_MARGIN",
     "PENALTY_SIGMAS",
     "SURROGATE_BRANCHES",
@@ -48,6 +49,7 @@ __all__ = [
 ]
 
 GLOBAL_METHODS = ("de", "hybrid", "multistart", "surrogate-de", "none")
+JACOBIANS = ("fd", "exact")
 IN_PLANE_THRESHOLD = 0.5
 """A mode is ``in_plane`` when more than this fraction of its strain energy is in in-plane springs."""
 PENALTY_SIGMAS = 30.0
@@ -117,6 +119,11 @@ class IdentifyOptions:
     subsystem_segments: int = 8
     timoshenko: bool = False
     """Links as Timoshenko beams (shear springs and section rotary inertia, :class:`ModelOptions`)."""
+    jacobian: str = "fd"
+    """The local refinement's Jacobian: ``"fd"`` (forward finite differences of the whole frequency computation,
+    step ``1e-3`` of the bounds' width; what the study's shipped numbers were made with) or ``"exact"`` (the
+    eigen-solve's sensitivities, :mod:`fpm_sim.study.identify.sensitivity`, for the observations and the
+    manipulator's parameters; finite differences for the rig tests and the workspace prior)."""
 
     def model_options(self) -> ModelOptions:
         if self.timoshenko:
