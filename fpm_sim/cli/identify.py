@@ -92,6 +92,7 @@ _STUDY_ONLY = {
     "global_method": "de",
     "timoshenko": False,
     "workers": None,
+    "jacobian": "fd",
 }
 """Options of the 3RRR's identification (their defaults): on a described architecture they are refused by name."""
 
@@ -181,6 +182,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         max_nfev=args.max_nfev,
         workers=args.workers,
         timoshenko=args.timoshenko,
+        jacobian=args.jacobian,
     )
     workspace = []
     if args.workspace is not None:
@@ -313,6 +315,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--max-nfev", type=int, default=30, help="local least squares: max residual evaluations (default 30)"
+    )
+    p.add_argument(
+        "--jacobian",
+        choices=("fd", "exact"),
+        default="fd",
+        help="local least squares' Jacobian: fd (finite differences of the frequencies, default) or exact (the "
+        "eigen-solve's sensitivities, geometry included)",
     )
     p.add_argument("--folds", type=int, default=0, help="k-fold cross-validation over poses (0 = none)")
     p.add_argument("--cv-max-nfev", type=int, default=10, help="per-fold refit budget (default 10)")

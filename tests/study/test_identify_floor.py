@@ -158,3 +158,36 @@ def test_the_exact_jacobian_refinement_reaches_the_noise_floor_with_fewer_evalua
     np.testing.assert_allclose(ex.values, fd.values, atol=1e-2 * ex.diagnosis.determination.posterior_sd.max())
     # an exact Jacobian costs one frequency evaluation instead of one per parameter
     assert ex.history[-1].evaluations < fd.history[-1].evaluations
+
+
+def test_cli_exact_jacobian_writes_the_verdict_to_the_report_the_json_and_stdout(tmp_path, capsys):
+    import json
+
+    from fpm_sim.cli.main import main
+
+    truth = load_config(REFERENCE_CONFIG)
+    obs = _twin_data(truth)
+    meas = tmp_path / "meas.csv"
+    rows = {}
+    for o in obs:
+        rows.setdefault((o.pose.x_m, o.pose.y_m, o.pose.phi_rad), []).append(o.freq_hz)
+    meas.write_text(
+        "x_mm,y_mm,phi_rad,f1_hz,f2_hz,f3_hz\n"
+        + "".join(
+            f"{x * 1e3:g},{y * 1e3:g},{p:g},{','.join(f'{f:.6f}' for f in fs)}\n" for (x, y, p), fs in rows.items()
+        )
+    )
+    ws = tmp_path / "ws.csv"
+    ws.write_text("x_mm,y_mm,phi_rad\n0,0,0\n")  # the workspace prior's rows go through the fd part of the Jacobian
+    out = tmp_path / "id"
+    argv = ["identify", "--config", str(REFERENCE_CONFIG), "--measured", f"{meas},sigma_pct=0.5", "--free", "hardware"]
+    argv += ["--global", "none", "--segments", str(SEG), "--max-nfev", "20", "--quiet", "--jacobian", "exact"]
+    assert main([*argv, "--workspace", str(ws), "--out", str(out), "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    verdict = printed["result"]["diagnosis"]["summary"]
+    assert verdict.startswith("fit at the noise floor"), verdict
+    assert json.loads((out / "identify.json").read_text())["result"]["diagnosis"]["summary"] == verdict
+    report = (out / "report.md").read_text()
+    assert "## Did the fit find the machine?" in report
+    assert f"**{verdict}**" in report
+    assert "exact Jacobian of the frequencies" in report

@@ -21,13 +21,14 @@ Search (:func:`identify`):
    :mod:`.strategies.lsq`): bounded least squares (:func:`scipy.optimize.least_squares`, trust-region
    reflective) on the full segment model; the lowest end is the optimum, every end is kept
    (``Identification.candidates``). The Jacobian is by forward finite differences in parameters normalised
-   to their bounds (step ``1e-3`` of the bound width). The model's geometry enters through MjSpec
-   compilation, which is not differentiable, so the gradients are finite differences, not exact (stated in
-   the report).
+   to their bounds (step ``1e-3`` of the bound width; the default), or with ``jacobian="exact"`` from the
+   eigen-solve's sensitivities (:mod:`.sensitivity`; stated in the report).
 3. uncertainty: the Gauss-Newton covariance ``s^2 (J'J)^+`` at the optimum with
    ``s^2 = chi^2 / dof`` (the residuals' own scale: model error included, never below what the
    stated sigmas imply when ``chi^2/dof > 1``; with ``chi^2/dof < 1`` the stated sigmas, ``s^2 = 1``).
-4. k-fold cross-validation over poses (:func:`cross_validate`): all observations at a held-out pose,
+4. diagnosis (:mod:`.diagnosis`): the chi-squared test of the cost against the noise floor, which parameters
+   the data determine, the measured poses the identified machine cannot reach or puts near a singularity.
+5. k-fold cross-validation over poses (:func:`cross_validate`): all observations at a held-out pose,
    from every file, leave together; each fold is refitted from the full-data optimum and predicts
    its held-out poses.
 """

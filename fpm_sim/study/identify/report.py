@@ -137,6 +137,16 @@ def render_report(
     return "\n".join(lines) + "\n"
 
 
+def _jacobian_note(result: Identification) -> str:
+    """How the local steps' Jacobian was computed, in words."""
+    if result.options.jacobian == "exact":
+        return (
+            "exact Jacobian of the frequencies from the eigen-solve's sensitivities, geometry included "
+            "(fpm_sim.study.identify.sensitivity); rig tests and the workspace prior by finite differences"
+        )
+    return "forward finite-difference Jacobian of the frequencies in bound-normalised parameters"
+
+
 def _header_lines(result: Identification, *, command: str, data_files: Sequence[str]) -> list[str]:
     """The command, the data, the search and the workspace prior."""
     lines = [
@@ -148,8 +158,7 @@ def _header_lines(result: Identification, *, command: str, data_files: Sequence[
         f"{len(result.measured)}; residual degrees of freedom {result.dof}; chi^2/dof {result.chi2_per_dof:.3g}.",
         "",
         f"Search: global `{result.options.global_method}` (seed {result.options.seed}), then bounded least squares "
-        f"(trust-region reflective, forward finite-difference Jacobian in bound-normalised parameters: the model's "
-        f"geometry enters through MjSpec compilation, which is not differentiable); {result.options.segments} spring "
+        f"(trust-region reflective, {_jacobian_note(result)}); {result.options.segments} spring "
         f"locations per link. {result.history[-1].evaluations} model evaluations, {result.seconds:.0f} s.",
         "",
     ]
