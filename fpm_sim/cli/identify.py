@@ -93,6 +93,7 @@ _STUDY_ONLY = {
     "timoshenko": False,
     "workers": None,
     "jacobian": "fd",
+    "pairing": "order",
 }
 """Options of the 3RRR's identification (their defaults): on a described architecture they are refused by name."""
 
@@ -183,6 +184,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         workers=args.workers,
         timoshenko=args.timoshenko,
         jacobian=args.jacobian,
+        pairing=args.pairing,
     )
     workspace = []
     if args.workspace is not None:
@@ -322,6 +324,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         default="fd",
         help="local least squares' Jacobian: fd (finite differences of the frequencies, default) or exact (the "
         "eigen-solve's sensitivities, geometry included)",
+    )
+    p.add_argument(
+        "--pairing",
+        choices=("order", "frequency"),
+        default="order",
+        help="pair a pose's measured modes with the model's by order (fK = K-th lowest, default) or by frequency "
+        "(the assignment problem: a model mode the file did not measure does not shift the others)",
     )
     p.add_argument("--folds", type=int, default=0, help="k-fold cross-validation over poses (0 = none)")
     p.add_argument("--cv-max-nfev", type=int, default=10, help="per-fold refit budget (default 10)")

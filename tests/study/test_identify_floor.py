@@ -191,3 +191,31 @@ def test_cli_exact_jacobian_writes_the_verdict_to_the_report_the_json_and_stdout
     assert "## Did the fit find the machine?" in report
     assert f"**{verdict}**" in report
     assert "exact Jacobian of the frequencies" in report
+
+
+def test_pairing_by_frequency_survives_a_mode_the_file_did_not_measure():
+    # the file measured the model's 1st, 3rd and 4th modes at each pose (the 2nd crossed into the band unseen) and
+    # numbered them f1, f2, f3. By order, f2 and f3 are paired with the wrong modes; by frequency (the assignment
+    # problem), each with its own, and the derivatives follow the same pairing.
+    truth = load_config(REFERENCE_CONFIG)
+    opts = fast_options(segments=SEG)
+    # not the symmetric first pose: its 3rd and 4th modes are a repeated pair (only their sum has a derivative)
+    full = [Observation(p, k, 1.0, 1.0, None, "f") for p in POSES[1:] for k in (1, 2, 3, 4)]
+    f = predict_observations(truth, full, options=opts)
+    seen = [o for o in full if o.mode != 2]
+    renumbered = [
+        dataclasses.replace(o, mode={1: 1, 3: 2, 4: 3}[o.mode], freq_hz=float(v), sigma_hz=NOISE * float(v))
+        for o, v in zip(full, f)
+        if o.mode != 2
+    ]
+    want = np.array([v for o, v in zip(full, f) if o.mode != 2])
+    by_order = predict_observations(truth, renumbered, options=opts)
+    by_freq = predict_observations(truth, renumbered, options=opts, pairing="frequency")
+    assert np.max(np.abs(by_order / want - 1)) > 0.05  # the wrong modes: off by far more than the noise
+    # the same modes, from a solve asked for more of them (the pairing's margin): equal to round-off
+    np.testing.assert_allclose(by_freq, want, rtol=1e-10)
+    ps = parameter_set(truth, ["geometry", "hardware"])
+    exact = observation_gradients(ps, ps.x0, list(range(len(ps.x0))), renumbered, opts, pairing="frequency")
+    direct = observation_gradients(ps, ps.x0, list(range(len(ps.x0))), seen, opts)  # the modes by their own number
+    scale = np.abs(direct * ps.width).max()
+    np.testing.assert_allclose(exact * ps.width, direct * ps.width, rtol=0, atol=1e-8 * scale)

@@ -49,6 +49,8 @@ from fpm_sim.study.identify.diagnosis import Diagnosis, diagnose
 from fpm_sim.study.identify.objective import Objective
 from fpm_sim.study.identify.problem import (
     GLOBAL_METHODS,
+    JACOBIANS,
+    PAIRINGS,
     SURROGATE_BRANCHES,
     IdentificationError,
     IdentifyOptions,
@@ -228,6 +230,11 @@ def _check_request(problem: Problem, opts: IdentifyOptions) -> None:
             value=opts.global_method,
             hint=f"choose from {', '.join(GLOBAL_METHODS)}",
         )
+    for name, value, allowed in (("pairing", opts.pairing, PAIRINGS), ("jacobian", opts.jacobian, JACOBIANS)):
+        if value not in allowed:
+            raise IdentificationError(
+                f"unknown {name}", parameter=name, value=value, hint=f"choose from {', '.join(allowed)}"
+            )
     if not problem.observations and not problem.subsystem_tests:
         raise IdentificationError("no data", parameter="measured", hint="give measured and/or subsystems data")
     check_problem(problem)

@@ -87,7 +87,7 @@ class Objective:
         if key_m not in self._cache:
             self.nfev += 1
             self._cache[key_m] = predict_observations(
-                cfg, self.obs, options=self.opts.model_options(), workers=self.opts.workers
+                cfg, self.obs, options=self.opts.model_options(), workers=self.opts.workers, pairing=self.opts.pairing
             )
         if key_s not in self._cache:
             self._cache[key_s] = subsystem_predictions(cfg, self.problem.subsystem_tests, self.opts.subsystem_segments)
@@ -129,7 +129,9 @@ class Objective:
         n_obs = len(self.obs)
         jac = np.zeros((len(r0), len(z)))
         try:
-            dfdx = observation_gradients(self.ps, x, self.man_idx, self.obs, self.opts.model_options())
+            dfdx = observation_gradients(
+                self.ps, x, self.man_idx, self.obs, self.opts.model_options(), pairing=self.opts.pairing
+            )
         except (ConfigError, ValueError):  # an impossible description at x or a step from it: a flat penalty
             dfdx = np.zeros((n_obs, len(z)))
         finite = np.isfinite((self.predictions(x)[:n_obs] - self.measured[:n_obs]) / self.sigma[:n_obs])

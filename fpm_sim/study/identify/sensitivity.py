@@ -42,7 +42,7 @@ from fpm_sim.linear.matrices import mass_matrix
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.study.identify.data import Observation
 from fpm_sim.study.identify.parameters import ParameterSet
-from fpm_sim.study.identify.problem import IN_PLANE_THRESHOLD, MODE_MARGIN, predict_observations, unique_poses
+from fpm_sim.study.identify.problem import modes_needed, pair_modes, predict_observations, unique_poses
 
 __all__ = ["REL_STEP", "PoseMatrices", "observation_gradients", "pose_matrices", "supported"]
 
@@ -95,19 +95,6 @@ def pose_matrices(
     return out, model
 
 
-def _mode_index(o: Observation, freq: np.ndarray, frac: np.ndarray) -> int | None:
-    """Which of the pose's sorted modes the observation is (as :func:`predict_observations` matches it)."""
-    if o.label is None:
-        return o.mode - 1 if o.mode - 1 < len(freq) and np.isfinite(freq[o.mode - 1]) else None
-    want = frac > IN_PLANE_THRESHOLD if o.label == "in_plane" else frac <= IN_PLANE_THRESHOLD
-    idx = np.flatnonzero(want & np.isfinite(freq))
-    return int(idx[o.mode - 1]) if len(idx) >= o.mode else None
-
-
-def _which(o: Observation, modes: tuple[np.ndarray, np.ndarray, np.ndarray] | None) -> int | None:
-    return None if modes is None else _mode_index(o, modes[0], modes[1])
-
-
 def _eigen_derivatives(nominal: PoseMatrices, tangent: PoseMatrices, shapes: np.ndarray, w2: np.ndarray) -> np.ndarray:
     """``d(w^2)`` of each mode (columns of ``shapes``, mass-normalised) along the matrices' tangent (module
     docstring)."""
@@ -140,21 +127,27 @@ def _nominal_modes(
 
 
 def observation_gradients(
-    ps: ParameterSet, x: np.ndarray, columns: Sequence[int], observations: Sequence[Observation], options: ModelOptions
+    ps: ParameterSet,
+    x: np.ndarray,
+    columns: Sequence[int],
+    observations: Sequence[Observation],
+    options: ModelOptions,
+    *,
+    pairing: str = "order",
 ) -> np.ndarray:
     """``d f_j / d x_k`` (Hz per unit of ``x_k``) of each observation ``j`` for each parameter ``k`` in
     ``columns`` (the others: 0), at parameters ``x`` (module docstring). 0 where the model gives no frequency
-    (unreachable or singular pose, too few modes of the kind): the residual there is a constant penalty."""
+    (unreachable or singular pose, too few modes of the kind): the residual there is a constant penalty. Modes
+    paired with the observations as :func:`~fpm_sim.study.identify.problem.pair_modes` pairs them."""
     x = np.asarray(x, float)
     grad = np.zeros((len(observations), len(x)))
     if not observations or not columns:
         return grad
     poses, index = unique_poses(observations)
-    labelled = any(o.label for o in observations)
-    n_modes = max(o.mode for o in observations) + (MODE_MARGIN if labelled else 0)
     config = ps.apply(x)
-    modes, mats, _ = _nominal_modes(config, poses, options, n_modes)
-    which = [_which(o, modes[ip]) for o, ip in zip(observations, index)]
+    modes, mats, _ = _nominal_modes(config, poses, options, modes_needed(observations, pairing))
+    freqs = [None if m is None else m[0] for m in modes]
+    which = pair_modes(observations, index, freqs, [None if m is None else m[1] for m in modes], pairing)
     width = ps.width
     for k in columns:
         h = REL_STEP * width[k] * (1.0 if x[k] + REL_STEP * width[k] <= ps.upper[k] else -1.0)
@@ -162,7 +155,7 @@ def observation_gradients(
         xk[k] += h
         mats_k, _ = pose_matrices(ps.apply(xk), poses, options)
         if any(a is not None and (b is None or not _same_structure(a, b)) for a, b in zip(mats, mats_k)):
-            grad[:, k] = _fd_column(ps, x, k, observations, options)
+            grad[:, k] = _fd_column(ps, x, k, observations, options, pairing)
             continue
         dw2: dict[int, np.ndarray] = {}  # per pose: df (Hz per unit) of each mode
         for ip, (md, a, b) in enumerate(zip(modes, mats, mats_k)):
@@ -173,19 +166,19 @@ def observation_gradients(
             tangent = PoseMatrices((b.mass - a.mass) / h, (b.stiffness - a.stiffness) / h, (b.jac - a.jac) / h)
             dw2[ip] = _eigen_derivatives(a, tangent, shapes, w2) / (8 * math.pi**2 * freq[: shapes.shape[1]])
         for j, (ip, i) in enumerate(zip(index, which)):
-            if i is not None and ip in dw2:
+            if i is not None and ip in dw2 and i < len(dw2[ip]):
                 grad[j, k] = dw2[ip][i]
     return grad
 
 
 def _fd_column(
-    ps: ParameterSet, x: np.ndarray, k: int, observations: Sequence[Observation], options: ModelOptions
+    ps: ParameterSet, x: np.ndarray, k: int, observations: Sequence[Observation], options: ModelOptions, pairing: str
 ) -> np.ndarray:
     """A central-difference column of the frequencies (step ``1e-4`` of the width), for a parameter whose step
     changes the model's structure."""
     h = 1e-4 * ps.width[k]
     lo, hi = x.copy(), x.copy()
     lo[k], hi[k] = max(x[k] - h, ps.lower[k]), min(x[k] + h, ps.upper[k])
-    fl = predict_observations(ps.apply(lo), observations, options=options)
-    fh = predict_observations(ps.apply(hi), observations, options=options)
+    fl = predict_observations(ps.apply(lo), observations, options=options, pairing=pairing)
+    fh = predict_observations(ps.apply(hi), observations, options=options, pairing=pairing)
     return np.nan_to_num((fh - fl) / (hi[k] - lo[k]))
