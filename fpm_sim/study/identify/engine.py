@@ -62,7 +62,7 @@ from fpm_sim.study.identify.problem import (
 )
 from fpm_sim.study.identify.strategies import Candidate, Strategy
 from fpm_sim.study.identify.strategies.de import DifferentialEvolution
-from fpm_sim.study.identify.strategies.lsq import LeastSquares, least_squares_z
+from fpm_sim.study.identify.strategies.lsq import LeastSquares, least_squares_z, objective_jacobian
 from fpm_sim.study.identify.strategies.multistart import LatinHypercube
 from fpm_sim.study.identify.strategies.surrogate import SurrogateDE
 
@@ -353,7 +353,9 @@ def predict_with_std(
     prediction, step ``rel_step`` of each parameter's bound width)."""
     ps = result.problem.parameters
     opts = result.options.model_options()
-    f0 = predict_observations(result.config, observations, options=opts, workers=result.options.workers)
+    f0 = predict_observations(
+        result.config, observations, options=opts, workers=result.options.workers, pairing=result.options.pairing
+    )
     cov = np.outer(result.std, result.std) * np.nan_to_num(result.correlation)
     grads = []
     for i, p in enumerate(ps.parameters):
@@ -361,7 +363,9 @@ def predict_with_std(
         x = result.values.copy()
         x[i] = x[i] + h if x[i] + h <= p.upper else x[i] - h
         step = x[i] - result.values[i]
-        f = predict_observations(ps.apply(x), observations, options=opts, workers=result.options.workers)
+        f = predict_observations(
+            ps.apply(x), observations, options=opts, workers=result.options.workers, pairing=result.options.pairing
+        )
         grads.append((f - f0) / step)
     g = np.array(grads).T  # (n_obs, n_params)
     return f0, np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", g, cov, g), 0.0))
@@ -457,10 +461,10 @@ def cross_validate(
         train = np.array([fold[i] != k for i in index])
         ob = Objective(problem, opts, obs_mask=train)
         z_best = ob.z(result.values)
-        sol = least_squares_z(ob.residuals, z_best, max_nfev=max_nfev)
+        sol = least_squares_z(ob.residuals, z_best, max_nfev=max_nfev, jac=objective_jacobian(ob))
         cfg = problem.parameters.apply(ob.x(sol.x))
         test = [o for o, t in zip(obs, train) if not t]
-        f = predict_observations(cfg, test, options=opts.model_options(), workers=opts.workers)
+        f = predict_observations(cfg, test, options=opts.model_options(), workers=opts.workers, pairing=opts.pairing)
         pred[~train] = f
         if progress:
             print(

@@ -274,7 +274,8 @@ def pair_modes(
     ``"frequency"``: the observations of one pose, kind and file are paired with that pose's modes of the kind by
     the assignment problem (:func:`scipy.optimize.linear_sum_assignment`) on ``((f_model - f_measured) / sigma)^2``,
     so that a model mode the file did not measure (one that crossed into the band) does not shift the pairing of
-    the others; a group of one observation, or one with fewer candidates than observations, is paired by order.
+    the others; a group of one observation, one with fewer candidates than observations, or one without finite
+    measured values and positive sigmas (observations to predict), is paired by order.
     """
     groups: dict[tuple[int, str | None, str], list[int]] = {}
     for j, (o, ip) in enumerate(zip(observations, index)):
@@ -288,10 +289,11 @@ def pair_modes(
         if label is not None and frac is not None:
             want &= frac > IN_PLANE_THRESHOLD if label == "in_plane" else frac <= IN_PLANE_THRESHOLD
         cand = np.flatnonzero(want)
-        if pairing == "frequency" and 1 < len(members) <= len(cand):
+        meas = np.array([[observations[j].freq_hz, observations[j].sigma_hz] for j in members])
+        measured = bool(np.all(np.isfinite(meas)) and np.all(meas[:, 1] > 0))  # a prediction's placeholder: not
+        if pairing == "frequency" and measured and 1 < len(members) <= len(cand):
             from scipy.optimize import linear_sum_assignment
 
-            meas = np.array([[observations[j].freq_hz, observations[j].sigma_hz] for j in members])
             cost = ((f[cand][None, :] - meas[:, :1]) / meas[:, 1:]) ** 2
             rows, cols = linear_sum_assignment(cost)
             for r, c in zip(rows, cols):
