@@ -39,6 +39,7 @@ from fpm_sim.config import Manipulator
 from fpm_sim.kinematics import NearSingularityWarning, Pose, assemble_many
 from fpm_sim.linear.equilibrium import equality_jacobian
 from fpm_sim.linear.matrices import mass_matrix
+from fpm_sim.linear.threads import blas_threads
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.study.identify.data import Observation
 from fpm_sim.study.identify.parameters import ParameterSet
@@ -95,16 +96,22 @@ def pose_matrices(
     return out, model
 
 
-def _eigen_derivatives(nominal: PoseMatrices, tangent: PoseMatrices, shapes: np.ndarray, w2: np.ndarray) -> np.ndarray:
-    """``d(w^2)`` of each mode (columns of ``shapes``, mass-normalised) along the matrices' tangent (module
-    docstring)."""
-    out = np.empty(shapes.shape[1])
-    for j in range(shapes.shape[1]):
-        x = shapes[:, j]
-        r = nominal.stiffness * x - w2[j] * (nominal.mass @ x)
-        mu = np.linalg.lstsq(nominal.jac.T, r, rcond=None)[0]
-        out[j] = x @ (tangent.stiffness * x - w2[j] * (tangent.mass @ x)) - 2.0 * mu @ (tangent.jac @ x)
-    return out
+@dataclass
+class _Modes:
+    """The nominal modes at one pose: frequencies (Hz), in-plane fractions, mass-normalised shapes ``(nv, m)``,
+    ``w^2`` and the weld constraint's multipliers ``(n_rows, m)`` of each shape."""
+
+    freq: np.ndarray
+    frac: np.ndarray
+    shapes: np.ndarray
+    w2: np.ndarray
+    mu: np.ndarray
+
+    def dw2(self, tangent: PoseMatrices) -> np.ndarray:
+        """``d(w^2)`` of each mode along the matrices' tangent (module docstring)."""
+        x = self.shapes
+        quad = np.einsum("ij,ij->j", x, tangent.stiffness[:, None] * x - (tangent.mass @ x) * self.w2[None, :])
+        return quad - 2.0 * np.einsum("ij,ij->j", self.mu, tangent.jac @ x)
 
 
 def _same_structure(a: PoseMatrices, b: PoseMatrices) -> bool:
@@ -113,17 +120,30 @@ def _same_structure(a: PoseMatrices, b: PoseMatrices) -> bool:
 
 def _nominal_modes(
     config: Manipulator, poses: list[Pose], options: ModelOptions, n_modes: int
-) -> tuple[list[tuple[np.ndarray, np.ndarray, np.ndarray] | None], list[PoseMatrices | None], PoseModel | None]:
-    """Per pose: (frequencies, in-plane fractions, shapes) of the nominal model, its matrices, and the model."""
-    mats, model = pose_matrices(config, poses, options)
-    modes: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] = []
-    for asm, m in zip(_assemble(config, poses), mats):
-        if asm is None or m is None or model is None:
+) -> tuple[list[_Modes | None], list[PoseMatrices | None]]:
+    """Per pose: the nominal modes (``None`` unreachable or singular) and matrices (``None`` unreachable)."""
+    model: PoseModel | None = None
+    modes: list[_Modes | None] = []
+    mats: list[PoseMatrices | None] = []
+    for asm in _assemble(config, poses):
+        if asm is None:
+            modes.append(None)
+            mats.append(None)
+            continue
+        model = model or PoseModel(config, options, asm)
+        freq, frac, deficient, shapes = model.solve_shapes(asm, n_modes)  # leaves the pose's position stage
+        m = PoseMatrices(
+            mass_matrix(model.model, model.data), model.stiffness, equality_jacobian(model.model, model.data)
+        )
+        mats.append(m)
+        if deficient:
             modes.append(None)
             continue
-        freq, frac, deficient, shapes = model.solve_shapes(asm, n_modes)
-        modes.append(None if deficient else (freq, frac, shapes))
-    return modes, mats, model
+        w2 = (2 * math.pi * freq[: shapes.shape[1]]) ** 2
+        residual = m.stiffness[:, None] * shapes - (m.mass @ shapes) * w2[None, :]  # = G' mu
+        mu = np.linalg.lstsq(m.jac.T, residual, rcond=None)[0]
+        modes.append(_Modes(freq, frac, shapes, w2, mu))
+    return modes, mats
 
 
 def observation_gradients(
@@ -140,14 +160,27 @@ def observation_gradients(
     (unreachable or singular pose, too few modes of the kind): the residual there is a constant penalty. Modes
     paired with the observations as :func:`~fpm_sim.study.identify.problem.pair_modes` pairs them."""
     x = np.asarray(x, float)
-    grad = np.zeros((len(observations), len(x)))
     if not observations or not columns:
-        return grad
+        return np.zeros((len(observations), len(x)))
+    with blas_threads():  # one BLAS thread around the small dense products, as the pose loop (fpm_sim.linear.threads)
+        return _gradients(ps, x, columns, observations, options, pairing)
+
+
+def _gradients(
+    ps: ParameterSet,
+    x: np.ndarray,
+    columns: Sequence[int],
+    observations: Sequence[Observation],
+    options: ModelOptions,
+    pairing: str,
+) -> np.ndarray:
+    """:func:`observation_gradients` (its arguments checked)."""
+    grad = np.zeros((len(observations), len(x)))
     poses, index = unique_poses(observations)
     config = ps.apply(x)
-    modes, mats, _ = _nominal_modes(config, poses, options, modes_needed(observations, pairing))
-    freqs = [None if m is None else m[0] for m in modes]
-    which = pair_modes(observations, index, freqs, [None if m is None else m[1] for m in modes], pairing)
+    modes, mats = _nominal_modes(config, poses, options, modes_needed(observations, pairing))
+    freqs = [None if m is None else m.freq for m in modes]
+    which = pair_modes(observations, index, freqs, [None if m is None else m.frac for m in modes], pairing)
     width = ps.width
     for k in columns:
         h = REL_STEP * width[k] * (1.0 if x[k] + REL_STEP * width[k] <= ps.upper[k] else -1.0)
@@ -161,10 +194,8 @@ def observation_gradients(
         for ip, (md, a, b) in enumerate(zip(modes, mats, mats_k)):
             if md is None or a is None or b is None:
                 continue
-            freq, _, shapes = md
-            w2 = (2 * math.pi * freq[: shapes.shape[1]]) ** 2
             tangent = PoseMatrices((b.mass - a.mass) / h, (b.stiffness - a.stiffness) / h, (b.jac - a.jac) / h)
-            dw2[ip] = _eigen_derivatives(a, tangent, shapes, w2) / (8 * math.pi**2 * freq[: shapes.shape[1]])
+            dw2[ip] = md.dw2(tangent) / (8 * math.pi**2 * md.freq[: md.shapes.shape[1]])
         for j, (ip, i) in enumerate(zip(index, which)):
             if i is not None and ip in dw2 and i < len(dw2[ip]):
                 grad[j, k] = dw2[ip][i]
