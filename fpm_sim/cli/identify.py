@@ -92,6 +92,8 @@ _STUDY_ONLY = {
     "global_method": "de",
     "timoshenko": False,
     "workers": None,
+    "jacobian": "fd",
+    "pairing": "order",
 }
 """Options of the 3RRR's identification (their defaults): on a described architecture they are refused by name."""
 
@@ -181,6 +183,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
         max_nfev=args.max_nfev,
         workers=args.workers,
         timoshenko=args.timoshenko,
+        jacobian=args.jacobian,
+        pairing=args.pairing,
     )
     workspace = []
     if args.workspace is not None:
@@ -313,6 +317,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--max-nfev", type=int, default=30, help="local least squares: max residual evaluations (default 30)"
+    )
+    p.add_argument(
+        "--jacobian",
+        choices=("fd", "exact"),
+        default="fd",
+        help="local least squares' Jacobian: fd (finite differences of the frequencies, default) or exact (the "
+        "eigen-solve's sensitivities, geometry included)",
+    )
+    p.add_argument(
+        "--pairing",
+        choices=("order", "frequency"),
+        default="order",
+        help="pair a pose's measured modes with the model's by order (fK = K-th lowest, default) or by frequency "
+        "(the assignment problem: a model mode the file did not measure does not shift the others)",
     )
     p.add_argument("--folds", type=int, default=0, help="k-fold cross-validation over poses (0 = none)")
     p.add_argument("--cv-max-nfev", type=int, default=10, help="per-fold refit budget (default 10)")

@@ -148,6 +148,10 @@ class DescribedIdentification:
     nfev: int
     message: str
     fitted: Description = field(repr=False)
+    diagnosis: dict[str, Any] = field(default_factory=dict)
+    """Whether the fit found the machine (:mod:`fpm_sim.study.identify.diagnosis`): ``summary`` (the one-line
+    verdict), ``noise_floor``, ``determination``, and ``poses_without_frequency`` (measured poses where the fitted
+    machine computes no frequency: unreachable or singular in its working mode)."""
 
     def rows(self) -> list[dict[str, Any]]:
         """One row per measured frequency: pose (task coordinates), mode, measured, model, error (%)."""
@@ -191,6 +195,7 @@ class DescribedIdentification:
             "message": self.message,
             "data": self.measured.source,
             "rows": self.rows(),
+            "diagnosis": self.diagnosis,
         }
 
     def table(self) -> str:
@@ -201,6 +206,16 @@ class DescribedIdentification:
         errs = [abs(r["error_pct"]) for r in self.rows() if r["error_pct"] is not None]
         if errs:
             lines.append(f"  mean |error| {np.mean(errs):.3f} %, max {np.max(errs):.3f} %")
+        if self.diagnosis:
+            lines.append(f"  {self.diagnosis['summary']}")
+            und = [p for p, d in self.diagnosis["determination"]["parameters"].items() if not d["determined"]]
+            if und:
+                lines.append(f"  not determined by the data: {', '.join(und)}")
+            if self.diagnosis["poses_without_frequency"]:
+                lines.append(
+                    "  measured poses where the fitted machine computes no frequency: "
+                    + ", ".join(self.diagnosis["poses_without_frequency"])
+                )
         return "\n".join(lines)
 
     def plot(self, ax: Any = None) -> Any:
@@ -291,6 +306,7 @@ def identify_description(
     except np.linalg.LinAlgError:
         std = np.full(len(paths), np.inf)
     fitted = _edited(desc, dict(zip(paths, values)), source)
+    model_hz = _model(fitted, data, opts)
     return DescribedIdentification(
         name=desc.name,
         paths=paths,
@@ -299,9 +315,37 @@ def identify_description(
         std=std,
         bounds=[(float(a), float(b)) for a, b in zip(lo, hi)],
         measured=data,
-        model_hz=_model(fitted, data, opts),
+        model_hz=model_hz,
         cost=float(fit.cost),
         nfev=int(fit.nfev),
         message=str(fit.message),
         fitted=fitted,
+        diagnosis=_diagnosis(fit.fun, fit.jac / scale[None, :], hi - lo, paths, data, model_hz, fitted.task),
     )
+
+
+def _diagnosis(
+    residuals: np.ndarray,
+    jac: np.ndarray,
+    width: np.ndarray,
+    paths: list[str],
+    data: TaskMeasurements,
+    model_hz: np.ndarray,
+    task: Sequence[str],
+) -> dict[str, Any]:
+    """The noise-floor test and what the data determine (:mod:`fpm_sim.study.identify.diagnosis`; ``jac`` in the
+    paths' units), and the measured poses where the fitted machine computes no frequency."""
+    from fpm_sim.study.identify.diagnosis import determination, noise_floor
+
+    floor = noise_floor(residuals, len(paths))
+    lost = [
+        "(" + ", ".join(f"{c}={p.value(c):g}" if c == "phi" else f"{c}={p.value(c) * 1e3:g} mm" for c in task) + ")"
+        for i, p in enumerate(data.poses)
+        if (np.isfinite(data.freq_hz[i]) & ~np.isfinite(model_hz[i])).any()
+    ]
+    return {
+        "summary": floor.summary(),
+        "noise_floor": floor.to_dict(),
+        "determination": determination(jac, np.where(width > 0, width, 1.0), paths).to_dict(),
+        "poses_without_frequency": lost,
+    }

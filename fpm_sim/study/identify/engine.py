@@ -21,13 +21,14 @@ Search (:func:`identify`):
    :mod:`.strategies.lsq`): bounded least squares (:func:`scipy.optimize.least_squares`, trust-region
    reflective) on the full segment model; the lowest end is the optimum, every end is kept
    (``Identification.candidates``). The Jacobian is by forward finite differences in parameters normalised
-   to their bounds (step ``1e-3`` of the bound width). The model's geometry enters through MjSpec
-   compilation, which is not differentiable, so the gradients are finite differences, not exact (stated in
-   the report).
+   to their bounds (step ``1e-3`` of the bound width; the default), or with ``jacobian="exact"`` from the
+   eigen-solve's sensitivities (:mod:`.sensitivity`; stated in the report).
 3. uncertainty: the Gauss-Newton covariance ``s^2 (J'J)^+`` at the optimum with
    ``s^2 = chi^2 / dof`` (the residuals' own scale: model error included, never below what the
    stated sigmas imply when ``chi^2/dof > 1``; with ``chi^2/dof < 1`` the stated sigmas, ``s^2 = 1``).
-4. k-fold cross-validation over poses (:func:`cross_validate`): all observations at a held-out pose,
+4. diagnosis (:mod:`.diagnosis`): the chi-squared test of the cost against the noise floor, which parameters
+   the data determine, the measured poses the identified machine cannot reach or puts near a singularity.
+5. k-fold cross-validation over poses (:func:`cross_validate`): all observations at a held-out pose,
    from every file, leave together; each fold is refitted from the full-data optimum and predicts
    its held-out poses.
 """
@@ -44,9 +45,12 @@ import numpy as np
 
 from fpm_sim.config import Manipulator
 from fpm_sim.study.identify.data import Observation
+from fpm_sim.study.identify.diagnosis import Diagnosis, diagnose
 from fpm_sim.study.identify.objective import Objective
 from fpm_sim.study.identify.problem import (
     GLOBAL_METHODS,
+    JACOBIANS,
+    PAIRINGS,
     SURROGATE_BRANCHES,
     IdentificationError,
     IdentifyOptions,
@@ -58,7 +62,7 @@ from fpm_sim.study.identify.problem import (
 )
 from fpm_sim.study.identify.strategies import Candidate, Strategy
 from fpm_sim.study.identify.strategies.de import DifferentialEvolution
-from fpm_sim.study.identify.strategies.lsq import LeastSquares, least_squares_z
+from fpm_sim.study.identify.strategies.lsq import LeastSquares, least_squares_z, objective_jacobian
 from fpm_sim.study.identify.strategies.multistart import LatinHypercube
 from fpm_sim.study.identify.strategies.surrogate import SurrogateDE
 
@@ -108,6 +112,9 @@ class Identification:
     their starts."""
     start_elbow_branch: tuple[int, int, int] | None = None
     """The start description's elbow branches (the global search may pick another class)."""
+    diagnosis: Diagnosis | None = None
+    """Whether the fit found the machine (:mod:`.diagnosis`): the noise-floor test, what the data determine, the
+    measured poses the identified machine cannot reach or puts near a singularity."""
 
     @property
     def names(self) -> list[str]:
@@ -150,6 +157,7 @@ class Identification:
             ],
             "options": vars(self.options),
             "seconds": self.seconds,
+            "diagnosis": self.diagnosis.to_dict() if self.diagnosis is not None else None,
         }
 
     def table(self) -> str:
@@ -160,6 +168,8 @@ class Identification:
         ]
         for n, v, s in zip(self.names, self.values, self.std):
             lines.append(f"  {n:<42} {v:>12.5g} +- {s:.3g}" + ("  (at bound)" if n in self.at_bound else ""))
+        if self.diagnosis is not None:
+            lines += ["  " + line for line in self.diagnosis.lines()]
         return "\n".join(lines)
 
     def plot(self, ax: Any = None, *, cv: CrossValidation | None = None) -> Any:
@@ -220,6 +230,11 @@ def _check_request(problem: Problem, opts: IdentifyOptions) -> None:
             value=opts.global_method,
             hint=f"choose from {', '.join(GLOBAL_METHODS)}",
         )
+    for name, value, allowed in (("pairing", opts.pairing, PAIRINGS), ("jacobian", opts.jacobian, JACOBIANS)):
+        if value not in allowed:
+            raise IdentificationError(
+                f"unknown {name}", parameter=name, value=value, hint=f"choose from {', '.join(allowed)}"
+            )
     if not problem.observations and not problem.subsystem_tests:
         raise IdentificationError("no data", parameter="measured", hint="give measured and/or subsystems data")
     check_problem(problem)
@@ -304,6 +319,10 @@ def identify(problem: Problem, *, options: IdentifyOptions | None = None, progre
     ob = obj if problem_b is problem else Objective(problem_b, opts)
     x = ob.x(best.z)
     jx, std, corr, chi2_dof, dof = _uncertainty(best, ob, len(problem.workspace))
+    assert best.residuals is not None
+    n_data = len(best.residuals) - len(problem.workspace)  # the workspace residuals are a prior, not data
+    config = problem_b.parameters.apply(x)
+    diagnosis = diagnose(problem_b, config, best.residuals[:n_data], jx[:n_data], ob.width)
     eps = 1e-6
     return Identification(
         problem=problem_b,
@@ -318,10 +337,11 @@ def identify(problem: Problem, *, options: IdentifyOptions | None = None, progre
         history=history.steps,
         options=opts,
         seconds=time.time() - history.t_start,
-        config=problem_b.parameters.apply(x),
+        config=config,
         jacobian=jx,
         candidates=ends,
         start_elbow_branch=ps.start.geometry.elbow_branch,
+        diagnosis=diagnosis,
     )
 
 
@@ -333,7 +353,9 @@ def predict_with_std(
     prediction, step ``rel_step`` of each parameter's bound width)."""
     ps = result.problem.parameters
     opts = result.options.model_options()
-    f0 = predict_observations(result.config, observations, options=opts, workers=result.options.workers)
+    f0 = predict_observations(
+        result.config, observations, options=opts, workers=result.options.workers, pairing=result.options.pairing
+    )
     cov = np.outer(result.std, result.std) * np.nan_to_num(result.correlation)
     grads = []
     for i, p in enumerate(ps.parameters):
@@ -341,7 +363,9 @@ def predict_with_std(
         x = result.values.copy()
         x[i] = x[i] + h if x[i] + h <= p.upper else x[i] - h
         step = x[i] - result.values[i]
-        f = predict_observations(ps.apply(x), observations, options=opts, workers=result.options.workers)
+        f = predict_observations(
+            ps.apply(x), observations, options=opts, workers=result.options.workers, pairing=result.options.pairing
+        )
         grads.append((f - f0) / step)
     g = np.array(grads).T  # (n_obs, n_params)
     return f0, np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", g, cov, g), 0.0))
@@ -437,10 +461,10 @@ def cross_validate(
         train = np.array([fold[i] != k for i in index])
         ob = Objective(problem, opts, obs_mask=train)
         z_best = ob.z(result.values)
-        sol = least_squares_z(ob.residuals, z_best, max_nfev=max_nfev)
+        sol = least_squares_z(ob.residuals, z_best, max_nfev=max_nfev, jac=objective_jacobian(ob))
         cfg = problem.parameters.apply(ob.x(sol.x))
         test = [o for o, t in zip(obs, train) if not t]
-        f = predict_observations(cfg, test, options=opts.model_options(), workers=opts.workers)
+        f = predict_observations(cfg, test, options=opts.model_options(), workers=opts.workers, pairing=opts.pairing)
         pred[~train] = f
         if progress:
             print(

@@ -87,7 +87,7 @@ class Objective:
         if key_m not in self._cache:
             self.nfev += 1
             self._cache[key_m] = predict_observations(
-                cfg, self.obs, options=self.opts.model_options(), workers=self.opts.workers
+                cfg, self.obs, options=self.opts.model_options(), workers=self.opts.workers, pairing=self.opts.pairing
             )
         if key_s not in self._cache:
             self._cache[key_s] = subsystem_predictions(cfg, self.problem.subsystem_tests, self.opts.subsystem_segments)
@@ -115,6 +115,46 @@ class Objective:
         if not self.problem.workspace:
             return r
         return np.concatenate([r, self.workspace_residuals(x)])
+
+    def jacobian(self, z: np.ndarray) -> np.ndarray:
+        """``d residuals / d z`` (``IdentifyOptions.jacobian == "exact"``): the observations' rows from the
+        eigen-solve's sensitivities for the manipulator's parameters (:mod:`.sensitivity`), zero where a residual
+        is the constant penalty; the rig tests' and the workspace prior's rows, and the rig parameters' columns,
+        by forward differences (step ``1e-3`` of the bounds' width, as the ``"fd"`` Jacobian)."""
+        from fpm_sim.study.identify.sensitivity import observation_gradients
+
+        z = np.clip(np.asarray(z, float), 0.0, 1.0)
+        x = self.x(z)
+        r0 = self.residuals(z)
+        n_obs = len(self.obs)
+        jac = np.zeros((len(r0), len(z)))
+        try:
+            dfdx = observation_gradients(
+                self.ps, x, self.man_idx, self.obs, self.opts.model_options(), pairing=self.opts.pairing
+            )
+        except (ConfigError, ValueError):  # an impossible description at x or a step from it: a flat penalty
+            dfdx = np.zeros((n_obs, len(z)))
+        finite = np.isfinite((self.predictions(x)[:n_obs] - self.measured[:n_obs]) / self.sigma[:n_obs])
+        jac[:n_obs] = np.where(finite[:, None], dfdx * self.width[None, :] / self.sigma[:n_obs, None], 0.0)
+        if len(r0) == n_obs:
+            return jac
+        for k in range(len(z)):  # the rig tests' and the workspace prior's rows: no pose eigen-solve
+            h = 1e-3 if z[k] + 1e-3 <= 1.0 else -1e-3
+            zk = z.copy()
+            zk[k] += h
+            jac[n_obs:, k] = (self._other_residuals(self.x(zk)) - r0[n_obs:]) / h
+        return jac
+
+    def _other_residuals(self, x: np.ndarray) -> np.ndarray:
+        """The rig tests' residuals (in sigmas, the penalty where not finite), then the workspace prior's."""
+        n_obs, tests = len(self.obs), self.problem.subsystem_tests
+        try:
+            cfg = self.ps.apply(np.asarray(x, float))
+        except (ConfigError, ValueError):
+            return np.full(len(tests) + len(self.problem.workspace), PENALTY_SIGMAS)
+        f = subsystem_predictions(cfg, tests, self.opts.subsystem_segments)
+        r = (f - self.measured[n_obs:]) / self.sigma[n_obs:]
+        return np.concatenate([np.where(np.isfinite(r), r, PENALTY_SIGMAS), workspace_residuals(self.problem, cfg)])
 
     def cost(self, z: np.ndarray) -> float:
         """``sum(residuals(z)^2)``."""

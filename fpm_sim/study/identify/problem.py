@@ -31,7 +31,9 @@ __all__ = [
     "ELBOW_BRANCHES",
     "GLOBAL_METHODS",
     "IN_PLANE_THRESHOLD",
+    "JACOBIANS",
     "MODE_MARGIN",
+    "PAIRINGS",
     "PENALTY_SIGMAS",
     "SURROGATE_BRANCHES",
     "IdentificationError",
@@ -39,6 +41,8 @@ __all__ = [
     "IdentifyOptions",
     "Problem",
     "check_problem",
+    "modes_needed",
+    "pair_modes",
     "predict_observations",
     "subsystem_predictions",
     "unique_poses",
@@ -48,6 +52,7 @@ __all__ = [
 ]
 
 GLOBAL_METHODS = ("de", "hybrid", "multistart", "surrogate-de", "none")
+JACOBIANS = ("fd", "exact")
 IN_PLANE_THRESHOLD = 0.5
 """A mode is ``in_plane`` when more than this fraction of its strain energy is in in-plane springs."""
 PENALTY_SIGMAS = 30.0
@@ -117,6 +122,14 @@ class IdentifyOptions:
     subsystem_segments: int = 8
     timoshenko: bool = False
     """Links as Timoshenko beams (shear springs and section rotary inertia, :class:`ModelOptions`)."""
+    pairing: str = "order"
+    """How measured modes are paired with the model's at a pose (:func:`pair_modes`): ``"order"`` (the default,
+    the study's numbers) or ``"frequency"`` (the assignment problem, surviving crossings)."""
+    jacobian: str = "fd"
+    """The local refinement's Jacobian: ``"fd"`` (forward finite differences of the whole frequency computation,
+    step ``1e-3`` of the bounds' width; what the study's shipped numbers were made with) or ``"exact"`` (the
+    eigen-solve's sensitivities, :mod:`fpm_sim.study.identify.sensitivity`, for the observations and the
+    manipulator's parameters; finite differences for the rig tests and the workspace prior)."""
 
     def model_options(self) -> ModelOptions:
         if self.timoshenko:
@@ -244,34 +257,88 @@ def unique_poses(obs: Sequence[Observation]) -> tuple[list[Pose], list[int]]:
     return poses, index
 
 
+PAIRINGS = ("order", "frequency")
+"""How measured modes are paired with the model's (:func:`pair_modes`)."""
+
+
+def pair_modes(
+    observations: Sequence[Observation],
+    index: Sequence[int],
+    freqs: Sequence[np.ndarray | None],
+    fracs: Sequence[np.ndarray | None],
+    pairing: str = "order",
+) -> list[int | None]:
+    """Which of its pose's sorted model modes each observation is (``None``: none of its kind).
+
+    ``"order"`` (the default; the study's numbers): ``fK`` is the K-th lowest (of its kind, when labelled).
+    ``"frequency"``: the observations of one pose, kind and file are paired with that pose's modes of the kind by
+    the assignment problem (:func:`scipy.optimize.linear_sum_assignment`) on ``((f_model - f_measured) / sigma)^2``,
+    so that a model mode the file did not measure (one that crossed into the band) does not shift the pairing of
+    the others; a group of one observation, one with fewer candidates than observations, or one without finite
+    measured values and positive sigmas (observations to predict), is paired by order.
+    """
+    groups: dict[tuple[int, str | None, str], list[int]] = {}
+    for j, (o, ip) in enumerate(zip(observations, index)):
+        groups.setdefault((ip, o.label, o.source), []).append(j)
+    out: list[int | None] = [None] * len(observations)
+    for (ip, label, _), members in groups.items():
+        f, frac = freqs[ip], fracs[ip]
+        if f is None:
+            continue
+        want = np.isfinite(f)
+        if label is not None and frac is not None:
+            want &= frac > IN_PLANE_THRESHOLD if label == "in_plane" else frac <= IN_PLANE_THRESHOLD
+        cand = np.flatnonzero(want)
+        meas = np.array([[observations[j].freq_hz, observations[j].sigma_hz] for j in members])
+        measured = bool(np.all(np.isfinite(meas)) and np.all(meas[:, 1] > 0))  # a prediction's placeholder: not
+        if pairing == "frequency" and measured and 1 < len(members) <= len(cand):
+            from scipy.optimize import linear_sum_assignment
+
+            cost = ((f[cand][None, :] - meas[:, :1]) / meas[:, 1:]) ** 2
+            rows, cols = linear_sum_assignment(cost)
+            for r, c in zip(rows, cols):
+                out[members[r]] = int(cand[c])
+            continue
+        for j in members:
+            k = observations[j].mode - 1
+            if label is None:
+                out[j] = k if k < len(f) and np.isfinite(f[k]) else None
+            elif k < len(cand):
+                out[j] = int(cand[k])
+    return out
+
+
+def modes_needed(observations: Sequence[Observation], pairing: str = "order") -> int:
+    """Model modes to compute at each pose: the highest asked for, and :data:`MODE_MARGIN` more where labelled
+    matching or pairing by frequency needs candidates beyond it."""
+    labelled = any(o.label for o in observations)
+    return max(o.mode for o in observations) + (MODE_MARGIN if labelled or pairing == "frequency" else 0)
+
+
 def predict_observations(
     config: Manipulator,
     observations: Sequence[Observation],
     *,
     options: ModelOptions | None = None,
     workers: int = 1,
+    pairing: str = "order",
 ) -> np.ndarray:
-    """The model's frequency (Hz) for each observation (mode matching as in the module docstring);
-    NaN where the model cannot give it."""
+    """The model's frequency (Hz) for each observation (mode matching as in the module docstring, pairing as
+    :func:`pair_modes`); NaN where the model cannot give it."""
     if not observations:
         return np.zeros(0)
     poses, index = unique_poses(observations)
-    labelled = any(o.label for o in observations)
-    n_modes = max(o.mode for o in observations) + (MODE_MARGIN if labelled else 0)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", NearSingularityWarning)
-        pf = pose_frequencies(config, poses, n_modes=n_modes, options=options or fast_options(), workers=workers)
+        pf = pose_frequencies(
+            config, poses, n_modes=modes_needed(observations, pairing), options=options or fast_options(),
+            workers=workers,
+        )  # fmt: skip
+    which = pair_modes(observations, index, list(pf.frequencies_hz), list(pf.in_plane), pairing)
     out = np.full(len(observations), np.nan)
-    for j, (o, ip) in enumerate(zip(observations, index)):
-        f = pf.frequencies_hz[ip]
-        if o.label is None:
-            out[j] = f[o.mode - 1]
-            continue
-        frac = pf.in_plane[ip]
-        want = frac > IN_PLANE_THRESHOLD if o.label == "in_plane" else frac <= IN_PLANE_THRESHOLD
-        cand = f[want & np.isfinite(f)]
-        if len(cand) >= o.mode:
-            out[j] = cand[o.mode - 1]
+    for j, (ip, k) in enumerate(zip(index, which)):
+        if k is not None:
+            out[j] = pf.frequencies_hz[ip][k]
     return out
 
 

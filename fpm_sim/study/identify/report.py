@@ -126,6 +126,7 @@ def render_report(
 ) -> str:
     """The Markdown report."""
     lines = _header_lines(result, command=command, data_files=data_files)
+    lines += diagnosis_lines(result)
     lines += _statistics_lines(result, cv)
     lines += _parameter_lines(result)
     lines += _residual_lines(result, cv)
@@ -134,6 +135,16 @@ def render_report(
         lines += ["", extra]
     lines += ["", "Figures: `measured_vs_predicted.png`, `residuals_workspace.png`."]
     return "\n".join(lines) + "\n"
+
+
+def _jacobian_note(result: Identification) -> str:
+    """How the local steps' Jacobian was computed, in words."""
+    if result.options.jacobian == "exact":
+        return (
+            "exact Jacobian of the frequencies from the eigen-solve's sensitivities, geometry included "
+            "(fpm_sim.study.identify.sensitivity); rig tests and the workspace prior by finite differences"
+        )
+    return "forward finite-difference Jacobian of the frequencies in bound-normalised parameters"
 
 
 def _header_lines(result: Identification, *, command: str, data_files: Sequence[str]) -> list[str]:
@@ -147,8 +158,7 @@ def _header_lines(result: Identification, *, command: str, data_files: Sequence[
         f"{len(result.measured)}; residual degrees of freedom {result.dof}; chi^2/dof {result.chi2_per_dof:.3g}.",
         "",
         f"Search: global `{result.options.global_method}` (seed {result.options.seed}), then bounded least squares "
-        f"(trust-region reflective, forward finite-difference Jacobian in bound-normalised parameters: the model's "
-        f"geometry enters through MjSpec compilation, which is not differentiable); {result.options.segments} spring "
+        f"(trust-region reflective, {_jacobian_note(result)}); {result.options.segments} spring "
         f"locations per link. {result.history[-1].evaluations} model evaluations, {result.seconds:.0f} s.",
         "",
     ]
@@ -161,6 +171,35 @@ def _header_lines(result: Identification, *, command: str, data_files: Sequence[
             + (f"; below the threshold: {', '.join(ws['below_threshold'])}." if ws["below_threshold"] else "."),
             "",
         ]
+    return lines
+
+
+def diagnosis_lines(result: Identification) -> list[str]:
+    """Whether the fit found the machine (:mod:`fpm_sim.study.identify.diagnosis`): the verdict, the chi-squared
+    test, what the data determine and the troubled poses."""
+    d = result.diagnosis
+    if d is None:
+        return []
+    f = d.floor
+    lines = [
+        "## Did the fit find the machine?",
+        "",
+        f"**{d.summary()}**",
+        "",
+        f"Noise floor: chi2 = sum((model - measured) / sigma)^2 = {f.chi2:.4g} over {f.n_data} data with their stated "
+        f"sigmas, {f.n_parameters} free parameters, {f.dof} degrees of freedom: chi2/dof = {f.ratio:.3g}, p-value "
+        f"{f.p_value:.3g} (at the floor when p >= 0.001).",
+        "",
+        "Posterior sd with the stated sigmas (Gauss-Newton, (J'J)^-1), and whether the data determine each parameter "
+        "(an undetermined one lies along a direction whose sd exceeds a quarter of the bounds' width):",
+        "",
+        "| parameter | posterior sd | determined |",
+        "|---|---|---|",
+    ]
+    det = d.determination
+    for n, s, ok in zip(det.names, det.posterior_sd, det.determined):
+        lines.append(f"| {n} | {s:.3g} | {'yes' if ok else 'no'} |")
+    lines += ["", *[f"- {x}" for x in d.lines()[1:]], ""]
     return lines
 
 

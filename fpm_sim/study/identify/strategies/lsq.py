@@ -1,10 +1,12 @@
 """Local refinement: bounded least squares (:func:`scipy.optimize.least_squares`, trust-region reflective) on
 the full segment model from each start, in parameters normalised to their bounds.
 
-The Jacobian is by forward finite differences (step ``1e-3`` of the bound width): the model's geometry enters
-through MjSpec compilation, which is not differentiable. With ``workers > 1`` and several starts, the starts
-are refined in that many ``spawn`` processes, one pose loop each (fewer, longer jobs than splitting each
-evaluation's pose loop); otherwise one after the other, each pose loop in the options' ``workers`` processes.
+The Jacobian is by forward finite differences (step ``1e-3`` of the bound width) of the whole frequency
+computation (``IdentifyOptions.jacobian = "fd"``, the default), or exact (``"exact"``): the eigen-solve's
+sensitivities of :mod:`fpm_sim.study.identify.sensitivity`, geometry included. With ``workers > 1`` and several
+starts, the starts are refined in that many ``spawn`` processes, one pose loop each (fewer, longer jobs than
+splitting each evaluation's pose loop); otherwise one after the other, each pose loop in the options' ``workers``
+processes.
 """
 
 from __future__ import annotations
@@ -21,26 +23,48 @@ from fpm_sim.study.identify.objective import Objective
 from fpm_sim.study.identify.problem import IdentifyOptions, Problem
 from fpm_sim.study.identify.strategies import Candidate, spawn_pool
 
-__all__ = ["LeastSquares", "least_squares_z", "refine"]
+__all__ = ["LeastSquares", "least_squares_z", "objective_jacobian", "refine"]
 
 _WORKER: tuple[Problem, IdentifyOptions] | None = None
 """The problem of this pool worker process (set by :func:`_init_worker`; unused in the parent)."""
 
 
-def least_squares_z(fun: Callable[[np.ndarray], np.ndarray], z0: np.ndarray, max_nfev: int) -> Any:
+def least_squares_z(
+    fun: Callable[[np.ndarray], np.ndarray],
+    z0: np.ndarray,
+    max_nfev: int,
+    jac: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> Any:
     """Bounded least squares (trust-region reflective) in parameters normalised to their bounds, ``z in [0, 1]``;
-    forward finite differences with a step of ``1e-3`` of the bound width. Every local fit here goes through it.
-    Returns SciPy's ``OptimizeResult`` (Any: SciPy has no types)."""
+    the Jacobian ``jac`` where given, else forward finite differences with a step of ``1e-3`` of the bound width.
+    Every local fit here goes through it. Returns SciPy's ``OptimizeResult`` (Any: SciPy has no types)."""
     return least_squares(
-        fun, np.clip(z0, 0.0, 1.0), bounds=(0.0, 1.0), method="trf", diff_step=1e-3, max_nfev=max_nfev, x_scale=1.0
+        fun,
+        np.clip(z0, 0.0, 1.0),
+        jac="2-point" if jac is None else jac,
+        bounds=(0.0, 1.0),
+        method="trf",
+        diff_step=1e-3,
+        max_nfev=max_nfev,
+        x_scale=1.0,
     )
+
+
+def objective_jacobian(ob: Objective) -> Callable[[np.ndarray], np.ndarray] | None:
+    """The exact Jacobian of ``ob`` where its options ask for it and its model allows it, else ``None`` (finite
+    differences)."""
+    from fpm_sim.study.identify.sensitivity import supported
+
+    if ob.opts.jacobian == "exact" and supported(ob.opts.model_options()):
+        return ob.jacobian
+    return None
 
 
 def refine(problem: Problem, opts: IdentifyOptions, start: Candidate) -> Candidate:
     """Bounded least squares from ``start`` (on its elbow branches when it has some); the end as a candidate
     with its residuals, Jacobian in ``z``, success and the evaluations spent."""
     ob = Objective(problem, opts, branch=start.branch)
-    sol = least_squares_z(ob.residuals, start.z, max_nfev=opts.max_nfev)
+    sol = least_squares_z(ob.residuals, start.z, max_nfev=opts.max_nfev, jac=objective_jacobian(ob))
     return Candidate(
         z=sol.x,
         cost=float(np.sum(sol.fun**2)),
