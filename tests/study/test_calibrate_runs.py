@@ -1,0 +1,117 @@
+"""The elbow-branch classes enumerated and weighted by their evidences, several runs merged, and the
+between-run check (:mod:`fpm_sim.study.calibrate.runs`), on a toy problem whose evidences are known."""
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from fpm_sim.study.calibrate import SamplerOptions
+from fpm_sim.study.calibrate.runs import ClassResult, allocate, between_run_check, combine_classes, evidence_weights
+from fpm_sim.study.calibrate.sampler import _init_worker, sample_classes
+
+HALF = 10.0
+"""The continuous prior: uniform on [-HALF, HALF]^2 (density 1 / (2 HALF)^2)."""
+AMPLITUDE = (1.0, 3.0, 0.0)
+"""Class k's likelihood: AMPLITUDE[k] times a unit 2-D Gaussian density (far inside the box), so
+Z_k = AMPLITUDE[k] / (2 HALF)^2 exactly and the weights are 1/4, 3/4 and 0 (class 2 is impossible)."""
+CENTRES = ((-4.0, 0.0), (4.0, 2.0), (0.0, 0.0))
+
+
+@dataclass(frozen=True)
+class Toy:
+    """A problem-like object for :func:`sample_classes`: coordinates (x, y, class), three classes."""
+
+    parameters: object = None
+    names = ("x", "y", "geometry.elbow_branch")
+    ndim = 3
+    branch_classes = (0, 1, 2)
+
+    def prior_transform(self, u):
+        u = np.asarray(u, float)
+        return np.array([2 * HALF * u[0] - HALF, 2 * HALF * u[1] - HALF, float(min(int(3 * u[2]), 2))])
+
+    def possible(self, theta):
+        return int(round(theta[-1])) != 2
+
+    def log_likelihood(self, theta):
+        k = int(round(theta[-1]))
+        if not self.possible(theta):
+            return -math.inf
+        r2 = (theta[0] - CENTRES[k][0]) ** 2 + (theta[1] - CENTRES[k][1]) ** 2
+        return math.log(AMPLITUDE[k]) - 0.5 * r2 - math.log(2 * math.pi)
+
+
+@pytest.fixture(scope="module")
+def toy_result():
+    toy = Toy()
+    _init_worker(toy)
+    opts = SamplerOptions(live_points=80, dlogz=0.1, sample="unif", runs=3, seed=4, draws=2000, probe_draws=200)
+    return sample_classes(toy, opts, None, checkpoint=None, resume=False, print_func=None)
+
+
+def test_classes_are_weighted_by_their_evidences(toy_result):
+    comb, check, summaries, _ = toy_result
+    z = np.array(AMPLITUDE[:2]) / (2 * HALF) ** 2
+    # the impossible class is skipped and reported, not sampled
+    assert summaries[2].skipped and summaries[2].weight == 0.0 and "skipped" in summaries[2].line()
+    assert comb.classes == [0, 1]
+    # nested sampling states its ln Z errors (~0.1 for 3 x 80 live points here): the weights must agree with
+    # the analytic 1/4, 3/4 within 3 of their propagated sd, and the total evidence within 3 of its error
+    assert np.all(np.abs(comb.weights - z / z.sum()) <= 3 * comb.weights_sd)
+    assert comb.weights_sd[1] < 0.1
+    assert abs(comb.log_evidence - math.log(z.sum() / 3)) <= 3 * comb.log_evidence_err
+    for k in (0, 1):
+        assert abs(summaries[k].log_evidence - math.log(z[k])) <= 3 * summaries[k].log_evidence_err + 1e-9
+    # the draws carry their class, in the proportion of the weights (largest remainder: within one draw)
+    n = len(comb.draws)
+    assert n == 2000
+    for j, k in enumerate(comb.classes):
+        mine = comb.klass == k
+        assert abs(mine.sum() - comb.weights[j] * n) <= 1
+        # and each class's draws are its own posterior (the unit Gaussian at its centre: mean within 4 SE)
+        assert np.allclose(comb.draws[mine].mean(axis=0), CENTRES[k], atol=4 / math.sqrt(mine.sum()) + 0.05)
+    assert check is not None and check.passed, check.failures
+
+
+def test_weights_and_their_errors_are_the_first_order_propagation():
+    # two classes, equal evidences, ln Z errors 0.1 and 0.2: w = 1/2 each and
+    # var ln w_0 = (1/2)^2 0.1^2 + (1/2)^2 0.2^2 (from d ln w_k / d ln Z_j = delta_kj - w_j)
+    w, sd = evidence_weights(np.array([-3.0, -3.0]), np.array([0.1, 0.2]))
+    assert np.allclose(w, [0.5, 0.5])
+    assert np.allclose(sd, 0.5 * math.sqrt(0.25 * 0.01 + 0.25 * 0.04))
+    assert allocate(np.array([0.2, 0.3, 0.5]), 7).tolist() == [1, 2, 4]
+    assert allocate(np.array([1 / 3] * 3), 10).sum() == 10
+
+
+def _equal_run(klass, draws, log_z, err):
+    """A 'run' of equal-weight samples (each carrying 1/n of the evidence)."""
+    n = len(draws)
+    return ClassResult(klass, draws, np.full(n, log_z - math.log(n)), np.zeros(n), log_z, err)
+
+
+def test_the_check_passes_for_agreeing_runs_and_names_a_disagreeing_parameter():
+    rng = np.random.default_rng(0)
+    n = 4000
+
+    def run(shift_b, log_z):
+        d = rng.standard_normal((n, 2))
+        d[:, 1] += shift_b
+        return [_equal_run(0, d, log_z, 0.1)]
+
+    def check(per_run):
+        merged = combine_classes([_equal_run(0, np.concatenate([r[0].samples for r in per_run]), 0.0, 0.1)], 1, n, rng)
+        return between_run_check(per_run, merged, [0, 1, 2], ["a", "b"], n_classes=1, n_draws=n, rng=rng)
+
+    # three draws of the same posterior: quantile spreads ~0.1 sd (sampling), far below the 0.5 sd tolerance
+    same = check([run(0.0, 0.0), run(0.0, 0.05), run(0.0, -0.05)])
+    assert same.passed, same.failures
+    assert "PASSED" in same.table()
+    # one run with b moved by 2 sd and ln Z 2 away (14 sigma): flagged, naming b and not a
+    bad = check([run(0.0, 0.0), run(2.0, 2.0), run(0.0, 0.0)])
+    assert not bad.passed
+    assert bad.bad_parameters == ["b"]
+    assert any("ln Z differs" in f for f in bad.failures)
+    assert "runs disagree" in bad.table()
+    assert bad.to_dict()["bad_parameters"] == ["b"]
