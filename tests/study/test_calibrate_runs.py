@@ -33,10 +33,10 @@ class Toy:
         return np.array([2 * HALF * u[0] - HALF, 2 * HALF * u[1] - HALF, float(min(int(3 * u[2]), 2))])
 
     def possible(self, theta):
-        return int(round(theta[-1])) != 2
+        return round(theta[-1]) != 2
 
     def log_likelihood(self, theta):
-        k = int(round(theta[-1]))
+        k = round(theta[-1])
         if not self.possible(theta):
             return -math.inf
         r2 = (theta[0] - CENTRES[k][0]) ** 2 + (theta[1] - CENTRES[k][1]) ** 2
@@ -55,7 +55,9 @@ def test_classes_are_weighted_by_their_evidences(toy_result):
     comb, check, summaries, _ = toy_result
     z = np.array(AMPLITUDE[:2]) / (2 * HALF) ** 2
     # the impossible class is skipped and reported, not sampled
-    assert summaries[2].skipped and summaries[2].weight == 0.0 and "skipped" in summaries[2].line()
+    assert summaries[2].skipped
+    assert summaries[2].weight == 0.0
+    assert "skipped" in summaries[2].line()
     assert comb.classes == [0, 1]
     # nested sampling states its ln Z errors (~0.1 for 3 x 80 live points here): the weights must agree with
     # the analytic 1/4, 3/4 within 3 of their propagated sd, and the total evidence within 3 of its error
@@ -72,7 +74,8 @@ def test_classes_are_weighted_by_their_evidences(toy_result):
         assert abs(mine.sum() - comb.weights[j] * n) <= 1
         # and each class's draws are its own posterior (the unit Gaussian at its centre: mean within 4 SE)
         assert np.allclose(comb.draws[mine].mean(axis=0), CENTRES[k], atol=4 / math.sqrt(mine.sum()) + 0.05)
-    assert check is not None and check.passed, check.failures
+    assert check is not None
+    assert check.passed, check.failures
 
 
 def test_weights_and_their_errors_are_the_first_order_propagation():
@@ -115,3 +118,87 @@ def test_the_check_passes_for_agreeing_runs_and_names_a_disagreeing_parameter():
     assert any("ln Z differs" in f for f in bad.failures)
     assert "runs disagree" in bad.table()
     assert bad.to_dict()["bad_parameters"] == ["b"]
+
+
+PRIORS = """
+[parameters."section.height_m"]
+dist = "loguniform"
+lower = 0.005
+upper = 0.03
+reason = "assumed: bar stock"
+
+[likelihood.discrepancy_rel]
+dist = "loguniform"
+lower = 0.005
+upper = 0.5
+reason = "assumed: model error"
+"""
+
+
+def _cheap_frequencies(config, observations, *, options=None, workers=1):
+    """A stand-in for the segment model (the CLI's wiring is tested, not the model): f grows as h^1.5."""
+    h = config.section.height_m
+    return np.array([55.0 * (h / 0.01) ** 1.5 * (1 + 0.01 * o.pose.x_m) for o in observations])
+
+
+@pytest.fixture
+def cli_files(tmp_path, monkeypatch):
+    monkeypatch.setattr("fpm_sim.study.calibrate.problem.predict_observations", _cheap_frequencies)
+    (tmp_path / "p.toml").write_text(PRIORS)
+    (tmp_path / "m.csv").write_text("x_mm,y_mm,phi_rad,f1_hz\n0,-50,0,54\n50,50,0,56\n-50,50,0,53\n")
+    return tmp_path
+
+
+def _argv(d, *extra):
+    return [
+        "calibrate", "--measured", str(d / "m.csv"), "--priors", str(d / "p.toml"), "--free", "section-height",
+        "--live-points", "30", "--sample", "unif", "--workers", "1", "--runs", "3", "--seed", "5", "--quiet",
+        "--out", str(d / "out"), *extra,
+    ]  # fmt: skip
+
+
+def test_the_cli_prints_the_between_run_check(cli_files, capsys):
+    import json
+
+    from fpm_sim.cli.main import main
+
+    assert main(_argv(cli_files)) == 0
+    out = capsys.readouterr().out
+    assert "between-run check (3 runs, seeds 5, 6, 7): PASSED" in out
+    assert "section.height_m" in out
+    text = (cli_files / "out" / "report.md").read_text()
+    assert "## Independent runs (between-run check)" in text
+    assert "| ln Z |" in text
+    assert "seed 7" in text
+    assert main([*_argv(cli_files), "--overwrite", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["result"]["runs_check"]["passed"] is True
+    assert doc["result"]["runs_check"]["seeds"] == [5, 6, 7]
+    assert doc["result"]["options"]["runs"] == 3
+
+
+def test_the_cli_warns_loudly_naming_the_parameters_when_runs_disagree(cli_files, capsys, monkeypatch):
+    from fpm_sim.cli.main import main
+    from fpm_sim.study.calibrate import sampler
+
+    real = sampler.between_run_check
+    # tolerances no finite sample meets (the runs' quantiles and ln Z necessarily differ by more): the check fails
+    strict = {"quantile_tol": 1e-9, "nsigma": 1e-9}
+    monkeypatch.setattr(sampler, "between_run_check", lambda *a, **k: real(*a, **{**k, **strict}))
+    assert main(_argv(cli_files)) == 0
+    cap = capsys.readouterr()
+    assert "FAILED" in cap.out
+    assert "runs disagree" in cap.out
+    assert "warning: the 3 independent runs DISAGREE" in cap.err
+    assert "Parameters whose quantiles disagree: section.height_m, likelihood.discrepancy_rel" in cap.err
+    assert "**disagree**" in (cli_files / "out" / "report.md").read_text()
+
+
+def test_runs_below_one_exit_2_naming_the_option(cli_files, capsys):
+    from fpm_sim.cli.main import main
+
+    argv = _argv(cli_files)
+    argv[argv.index("--runs") + 1] = "0"
+    assert main(argv) == 2
+    assert capsys.readouterr().err.startswith("error: --runs: must be >= 1, got 0")
+    assert not (cli_files / "out").exists()
