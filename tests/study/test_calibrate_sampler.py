@@ -1,8 +1,9 @@
-"""The sampler's checkpoint: a run stopped early resumes from its checkpoint file to convergence, and a
+"""The sampler's checkpoints: runs stopped early resume from their checkpoint files to convergence, and a
 checkpoint is refused for another problem."""
 
 import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -36,10 +37,15 @@ def test_a_stopped_run_resumes_from_its_checkpoint(default_manip, tmp_path):
     opts = SamplerOptions(live_points=20, dlogz=0.5, sample="unif", checkpoint_every_s=0.0, max_calls=150)
     first = run_calibration(prob, opts, checkpoint=ck, progress=False)
     assert not first.converged
-    assert ck.exists()
+    # one checkpoint per run (the branches are fixed here: one class, seeds 0, 1, 2), none finished
+    runs = [tmp_path / f"ck.dynesty.seed{s}" for s in range(opts.runs)]
+    assert all(f.exists() for f in runs)
+    assert not list(tmp_path.glob("*.done"))
     done = run_calibration(prob, dataclasses.replace(opts, max_calls=None), checkpoint=ck, resume=True, progress=False)
     assert done.converged
     assert done.n_calls > first.n_calls
+    assert all(Path(f"{f}.done").exists() for f in runs)
+    assert done.runs_check is not None
     assert math.isfinite(done.log_evidence)
     assert np.all(np.isfinite(done.f_pred))
     other = dataclasses.replace(prob, observations=obs[:1])
