@@ -74,6 +74,8 @@ def test_classes_are_weighted_by_their_evidences(toy_result):
         assert abs(mine.sum() - comb.weights[j] * n) <= 1
         # and each class's draws are its own posterior (the unit Gaussian at its centre: mean within 4 SE)
         assert np.allclose(comb.draws[mine].mean(axis=0), CENTRES[k], atol=4 / math.sqrt(mine.sum()) + 0.05)
+    # in random order: the first draws (what a thinned file or a figure takes) hold both classes
+    assert set(comb.klass[:50].tolist()) == {0, 1}
     assert check is not None
     assert check.passed, check.failures
 

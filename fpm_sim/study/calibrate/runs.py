@@ -126,7 +126,7 @@ class Combined:
 def combine_classes(results: Sequence[ClassResult], n_classes: int, n: int, rng: np.random.Generator) -> Combined:
     """``n`` equal-weight draws of the mixture of ``results`` (one per class sampled; a class not among them has
     ``Z_k = 0``) under a uniform prior over ``n_classes`` classes: ``n_k`` draws of class ``k`` in proportion to
-    ``Z_k / sum Z`` (:func:`allocate`), ``ln Z = ln sum_k Z_k / n_classes`` with the error
+    ``Z_k / sum Z`` (:func:`allocate`), in random order; ``ln Z = ln sum_k Z_k / n_classes`` with the error
     ``sqrt(sum_k w_k^2 s_k^2)``."""
     lz = np.array([r.log_evidence for r in results])
     ls = np.array([r.log_evidence_err for r in results])
@@ -141,10 +141,11 @@ def combine_classes(results: Sequence[ClassResult], n_classes: int, n: int, rng:
     lmax = float(np.max(lz))
     log_z = lmax + math.log(float(np.sum(np.exp(lz - lmax)))) - math.log(n_classes)
     pooled = np.concatenate([r.logwt for r in results])
+    order = rng.permutation(n)  # shuffled: the first m draws of the file are a fair sample, not one class's
     return Combined(
-        draws=np.concatenate([p[0] for p in parts]),
-        klass=np.concatenate([p[1] for p in parts]),
-        log_likelihood=np.concatenate([p[2] for p in parts]),
+        draws=np.concatenate([p[0] for p in parts])[order],
+        klass=np.concatenate([p[1] for p in parts])[order],
+        log_likelihood=np.concatenate([p[2] for p in parts])[order],
         log_evidence=log_z,
         log_evidence_err=float(np.sqrt(np.sum(w**2 * ls**2))),
         classes=[r.klass for r in results],
