@@ -161,6 +161,7 @@ def _argv(d, *extra):
 
 def test_the_cli_prints_the_between_run_check(cli_files, capsys):
     import json
+    import warnings
 
     from fpm_sim.cli.main import main
 
@@ -168,6 +169,12 @@ def test_the_cli_prints_the_between_run_check(cli_files, capsys):
     out = capsys.readouterr().out
     assert "between-run check (3 runs, seeds 5, 6, 7): PASSED" in out
     assert "section.height_m" in out
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)
+        import arviz as az
+    stats = az.from_netcdf(cli_files / "out" / "posterior.nc").sample_stats.attrs
+    assert stats["runs_check_passed"] == 1
+    assert json.loads(stats["classes"])[0]["run_log_evidence"].__len__() == 3
     text = (cli_files / "out" / "report.md").read_text()
     assert "## Independent runs (between-run check)" in text
     assert "| ln Z |" in text
