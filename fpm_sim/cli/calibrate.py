@@ -148,7 +148,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         default="geometry,hardware,section-height",
         help=f"comma-separated parameter groups: {', '.join(GROUPS)} (default geometry,hardware,section-height)",
     )
-    p.add_argument("--live-points", type=int, default=250, help="nested sampling live points (default 250)")
+    p.add_argument("--live-points", type=int, default=250, help="nested sampling live points of each run (default 250)")
     p.add_argument(
         "--dlogz", type=float, default=0.5, help="stop when the remaining evidence is below this (default 0.5)"
     )
@@ -161,7 +161,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--walks", type=int, default=None, help="rwalk: steps per random walk (default: dynesty's, 20 + dimensions)"
     )
-    p.add_argument("--max-calls", type=int, default=None, help="stop after this many likelihood calls (not converged)")
+    p.add_argument(
+        "--max-calls", type=int, default=None, help="stop each run after this many likelihood calls (not converged)"
+    )
     p.add_argument("--draws", type=int, default=1000, help="equal-weight draws written to posterior.nc (default 1000)")
     p.add_argument("--thin", type=int, default=0, help="also write posterior_thin.nc with this many draws (0: no)")
     p.add_argument("--segments", type=int, default=4, help="spring locations per link of the model (default 4)")
@@ -173,7 +175,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=int,
         default=3,
         help="independent runs per elbow-branch class (seeds SEED, SEED+1, ...), merged and checked against each "
-        "other: ln Z within 3 sigma, each parameter's 5/50/95 %% quantiles within 0.5 posterior sd, every class a "
+        "other: ln Z within 3 sigma, each parameter's 5/50/95 %% quantiles within 0.5 posterior sd (or "
+        "3 sigma of their Monte Carlo error where larger), every class a "
         "run weights above 1 %% present in the merged posterior (default 3; 1: no check)",
     )
     p.add_argument(
