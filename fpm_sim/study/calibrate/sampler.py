@@ -82,11 +82,15 @@ def _class_prior_transform(u: np.ndarray, klass: int | None) -> np.ndarray:
     return out
 
 
-def _worker_run(job: tuple[int | None, int, SamplerOptions, str | None, bool]) -> tuple[int | None, int, Any, float]:
-    """One (class, seed) run in this process (serial dynesty): ``(class, seed, Results, seconds)``."""
+def _worker_run(
+    job: tuple[int | None, int, SamplerOptions, str | None, bool], pool: Any = None
+) -> tuple[int | None, int, Any, float]:
+    """One (class, seed) run in this process (its likelihood calls on ``pool`` when given):
+    ``(class, seed, Results, seconds)``."""
     klass, seed, opts, checkpoint, resume = job
     t0 = time.time()
-    res = _run_class(klass, seed, opts, checkpoint=None if checkpoint is None else Path(checkpoint), resume=resume)
+    ck = None if checkpoint is None else Path(checkpoint)
+    res = _run_class(klass, seed, opts, checkpoint=ck, resume=resume, pool=pool)
     return klass, seed, res, time.time() - t0
 
 
@@ -450,10 +454,12 @@ def _digest_file(checkpoint: Path) -> Path:
     return Path(str(checkpoint) + ".digest")
 
 
-def _run_class(klass: int | None, seed: int, opts: SamplerOptions, *, checkpoint: Path | None, resume: bool) -> Any:
-    """dynesty's static sampler on class ``klass``'s continuous posterior, serially in this process, to
-    ``opts.dlogz``: a finished run's saved results (``.done``), or restored from its checkpoint, or fresh.
-    Returns dynesty's ``Results``."""
+def _run_class(
+    klass: int | None, seed: int, opts: SamplerOptions, *, checkpoint: Path | None, resume: bool, pool: Any = None
+) -> Any:
+    """dynesty's static sampler on class ``klass``'s continuous posterior to ``opts.dlogz`` (the likelihood
+    calls here, or on ``pool``'s workers): a finished run's saved results (``.done``), or restored from its
+    checkpoint, or fresh. Returns dynesty's ``Results``."""
     import pickle
 
     import dynesty
@@ -467,7 +473,7 @@ def _run_class(klass: int | None, seed: int, opts: SamplerOptions, *, checkpoint
         with done.open("rb") as fh:
             return pickle.load(fh)
     if resume and checkpoint is not None and checkpoint.exists():
-        sampler = dynesty.NestedSampler.restore(str(checkpoint))
+        sampler = dynesty.NestedSampler.restore(str(checkpoint), pool=pool)
         # a run interrupted mid-way continues (resume=True); one that ended on max_calls has its final live
         # points added to the results, which dynesty takes out again and continues from with resume=False
         sampler.run_nested(resume=not bool(getattr(sampler, "added_live", False)), **kw)
@@ -480,6 +486,8 @@ def _run_class(klass: int | None, seed: int, opts: SamplerOptions, *, checkpoint
             sample=opts.sample,
             walks=opts.walks,
             rstate=np.random.default_rng(seed),
+            pool=pool,
+            queue_size=opts.workers if pool is not None else None,
         )
         sampler.run_nested(**kw)
     res = sampler.results
@@ -531,9 +539,13 @@ def _sample_jobs(
     print_func: Callable[..., None] | None,
     label: Callable[[int | None], str],
 ) -> dict[tuple[int | None, int], tuple[Any, float]]:
-    """Every (class, seed) run, on the pool's workers (one run each) or here; ``{(class, seed): (Results, s)}``."""
+    """Every (class, seed) run, ``{(class, seed): (Results, s)}``: one run per worker of the pool, or, with fewer
+    runs than workers (fixed branches), one run after another here with their likelihood calls on the pool."""
     out = {}
-    it = pool.imap_unordered(_worker_run, jobs) if pool is not None else map(_worker_run, jobs)
+    if pool is not None and len(jobs) >= jobs[0][2].workers:
+        it = pool.imap_unordered(_worker_run, jobs)
+    else:
+        it = (_worker_run(j, pool) for j in jobs)
     for klass, seed, res, sec in it:
         out[(klass, seed)] = (res, sec)
         if print_func is not None:
