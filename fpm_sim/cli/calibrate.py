@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import warnings
 from pathlib import Path
@@ -85,6 +86,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         cal = saved
         if math.isnan(cal.start_log_likelihood):  # saved before the start check existed
             cal.start_log_likelihood = problem.start_log_likelihood()
+        if "classes" not in vars(cal):  # saved before the classes were enumerated: one run, the class sampled
+            cal.classes = []
+            cal.options = dataclasses.replace(cal.options, runs=1)
     command = args.command_line  # set by main(argv): the command that ran, also when run from Python
     if cal is None:
         cal = run_calibration(problem, opts, checkpoint=out / CHECKPOINT, resume=args.resume, progress=not args.quiet)
