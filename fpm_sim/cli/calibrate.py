@@ -7,6 +7,7 @@ import dataclasses
 import math
 import warnings
 from pathlib import Path
+from typing import Any
 
 from fpm_sim.cli.common import (
     WORKERS_HELP,
@@ -35,7 +36,6 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from fpm_sim.study.calibrate import CalibrationProblem, SamplerOptions, read_priors, run_calibration
     from fpm_sim.study.calibrate.posterior import thin, write_config, write_posterior
     from fpm_sim.study.calibrate.report import write_report
-    from fpm_sim.study.calibrate.sampler import problem_digest
     from fpm_sim.study.identify import parameter_set
 
     out = Path(args.out)
@@ -77,18 +77,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         for f in [out / RUN_FILE, *out.glob(CHECKPOINT + "*")]:
             f.unlink(missing_ok=True)
     run_file = out / RUN_FILE
-    cal = None
-    if args.resume and run_file.exists():
-        with run_file.open("rb") as fh:
-            saved = pickle.load(fh)
-        if problem_digest(saved.problem) != problem_digest(problem):
-            raise CliError(f"--resume: {run_file} belongs to another problem; run without --resume (and --overwrite)")
-        cal = saved
-        if math.isnan(cal.start_log_likelihood):  # saved before the start check existed
-            cal.start_log_likelihood = problem.start_log_likelihood()
-        if "classes" not in vars(cal):  # saved before the classes were enumerated: one run, the class sampled
-            cal.classes = []
-            cal.options = dataclasses.replace(cal.options, runs=1)
+    cal = _saved_calibration(run_file, problem) if args.resume and run_file.exists() else None
     command = args.command_line  # set by main(argv): the command that ran, also when run from Python
     if cal is None:
         cal = run_calibration(problem, opts, checkpoint=out / CHECKPOINT, resume=args.resume, progress=not args.quiet)
@@ -109,6 +98,24 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         cal.table() + f"\nwrote {out}/posterior.nc, config.toml, report.md, figures",
     )
     return 0
+
+
+def _saved_calibration(run_file: Path, problem: Any) -> Any:
+    """A finished calibration saved in ``run_file`` (refused for another problem), brought up to date."""
+    import pickle
+
+    from fpm_sim.study.calibrate.sampler import problem_digest
+
+    with run_file.open("rb") as fh:
+        cal = pickle.load(fh)
+    if problem_digest(cal.problem) != problem_digest(problem):
+        raise CliError(f"--resume: {run_file} belongs to another problem; run without --resume (and --overwrite)")
+    if math.isnan(cal.start_log_likelihood):  # saved before the start check existed
+        cal.start_log_likelihood = problem.start_log_likelihood()
+    if "classes" not in vars(cal):  # saved before the classes were enumerated: one run, the class sampled
+        cal.classes = []
+        cal.options = dataclasses.replace(cal.options, runs=1)
+    return cal
 
 
 def _warn_if_runs_disagree(cal: object) -> None:
