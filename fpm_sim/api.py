@@ -1157,7 +1157,9 @@ def calibrate(
     segments
         Resolution (spring locations per link) of the likelihood's model.
     sampler
-        Live points, stopping, workers, seed (:class:`fpm_sim.study.calibrate.SamplerOptions`).
+        Live points, stopping, workers, seed, independent runs per elbow-branch class and the between-run
+        check's tolerances (:class:`fpm_sim.study.calibrate.SamplerOptions`; the check is
+        ``result.runs_check``).
     progress
         Show dynesty's progress line.
     """

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import warnings
 from pathlib import Path
+from typing import Any
 
 from fpm_sim.cli.common import (
     WORKERS_HELP,
@@ -34,12 +36,11 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from fpm_sim.study.calibrate import CalibrationProblem, SamplerOptions, read_priors, run_calibration
     from fpm_sim.study.calibrate.posterior import thin, write_config, write_posterior
     from fpm_sim.study.calibrate.report import write_report
-    from fpm_sim.study.calibrate.sampler import problem_digest
     from fpm_sim.study.identify import parameter_set
 
     out = Path(args.out)
     if args.resume:
-        if not (out / CHECKPOINT).exists() and not (out / RUN_FILE).exists():
+        if not (out / (CHECKPOINT + ".digest")).exists() and not (out / RUN_FILE).exists():
             raise CliError(f"--resume: {out} holds no checkpoint ({CHECKPOINT}); run without --resume first")
     else:
         check_output_dir(out, "--out", overwrite=args.overwrite)
@@ -68,22 +69,15 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         walks=args.walks,
         max_calls=args.max_calls,
         draws=args.draws,
+        runs=args.runs,
     )
     opts.check()
     out.mkdir(parents=True, exist_ok=True)
     if args.overwrite and not args.resume:
-        for name in (CHECKPOINT, CHECKPOINT + ".digest", RUN_FILE):
-            (out / name).unlink(missing_ok=True)
+        for f in [out / RUN_FILE, *out.glob(CHECKPOINT + "*")]:
+            f.unlink(missing_ok=True)
     run_file = out / RUN_FILE
-    cal = None
-    if args.resume and run_file.exists():
-        with run_file.open("rb") as fh:
-            saved = pickle.load(fh)
-        if problem_digest(saved.problem) != problem_digest(problem):
-            raise CliError(f"--resume: {run_file} belongs to another problem; run without --resume (and --overwrite)")
-        cal = saved
-        if math.isnan(cal.start_log_likelihood):  # saved before the start check existed
-            cal.start_log_likelihood = problem.start_log_likelihood()
+    cal = _saved_calibration(run_file, problem) if args.resume and run_file.exists() else None
     command = args.command_line  # set by main(argv): the command that ran, also when run from Python
     if cal is None:
         cal = run_calibration(problem, opts, checkpoint=out / CHECKPOINT, resume=args.resume, progress=not args.quiet)
@@ -91,6 +85,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         with atomic_file(run_file) as tmp:
             tmp.write_bytes(pickle.dumps(cal, protocol=4))
     command = cal.extra.get("command", command)
+    _warn_if_runs_disagree(cal)
     data_note = ", ".join([ds.source for ds in datasets] + ([Path(args.subsystems).name] if tests else []))
     write_posterior(cal, out / "posterior.nc", command=command)
     if args.thin:
@@ -105,6 +100,42 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _saved_calibration(run_file: Path, problem: Any) -> Any:
+    """A finished calibration saved in ``run_file`` (refused for another problem), brought up to date."""
+    import pickle
+
+    from fpm_sim.study.calibrate.sampler import problem_digest
+
+    with run_file.open("rb") as fh:
+        cal = pickle.load(fh)
+    if problem_digest(cal.problem) != problem_digest(problem):
+        raise CliError(f"--resume: {run_file} belongs to another problem; run without --resume (and --overwrite)")
+    if math.isnan(cal.start_log_likelihood):  # saved before the start check existed
+        cal.start_log_likelihood = problem.start_log_likelihood()
+    if "classes" not in vars(cal):  # saved before the classes were enumerated: one run, the class sampled
+        cal.classes = []
+        cal.options = dataclasses.replace(cal.options, runs=1)
+    return cal
+
+
+def _warn_if_runs_disagree(cal: object) -> None:
+    """A loud warning naming what disagrees when the independent runs do not pass the between-run check."""
+    from fpm_sim.errors import FpmSimWarning
+
+    check = getattr(cal, "runs_check", None)
+    if check is None or check.passed:
+        return
+    names = ", ".join(check.bad_parameters) if check.bad_parameters else "none (the evidences or classes differ)"
+    warnings.warn(
+        f"the {len(check.seeds)} independent runs DISAGREE: this posterior depends on the run ("
+        + "; ".join(check.failures)
+        + f"). Parameters whose quantiles disagree: {names}. Use more live points (--live-points) or more runs "
+        "(--runs) before trusting it",
+        FpmSimWarning,
+        stacklevel=1,
+    )
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "calibrate",
@@ -115,7 +146,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "model-discrepancy term (independent, or a Gaussian process over the pose with [likelihood.length_scale_m]; "
         "with [likelihood.mode_read] the mode behind each measured first frequency is latent), by nested sampling "
         "(dynesty). Writes OUT/posterior.nc (ArviZ), OUT/report.md (diagnostics, evidence, leave-one-out checks), "
-        "OUT/config.toml (the posterior median) and figures; checkpoints to OUT/checkpoint.dynesty (--resume).",
+        "OUT/config.toml (the posterior median) and figures; checkpoints to OUT/checkpoint.dynesty.* (--resume). "
+        "The elbow-branch classes, when free, are each sampled on their own and weighted by their evidences; "
+        "each is sampled --runs times and the runs are checked against each other "
+        "(printed, in report.md and --json; a warning names what disagrees).",
     )
     add_data_args(p)
     p.add_argument("--priors", type=Path, required=True, help="priors TOML (e.g. fpm_sim/data/study_priors.toml)")
@@ -125,7 +159,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         default="geometry,hardware,section-height",
         help=f"comma-separated parameter groups: {', '.join(GROUPS)} (default geometry,hardware,section-height)",
     )
-    p.add_argument("--live-points", type=int, default=250, help="nested sampling live points (default 250)")
+    p.add_argument("--live-points", type=int, default=250, help="nested sampling live points of each run (default 250)")
     p.add_argument(
         "--dlogz", type=float, default=0.5, help="stop when the remaining evidence is below this (default 0.5)"
     )
@@ -138,13 +172,24 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--walks", type=int, default=None, help="rwalk: steps per random walk (default: dynesty's, 20 + dimensions)"
     )
-    p.add_argument("--max-calls", type=int, default=None, help="stop after this many likelihood calls (not converged)")
+    p.add_argument(
+        "--max-calls", type=int, default=None, help="stop each run after this many likelihood calls (not converged)"
+    )
     p.add_argument("--draws", type=int, default=1000, help="equal-weight draws written to posterior.nc (default 1000)")
     p.add_argument("--thin", type=int, default=0, help="also write posterior_thin.nc with this many draws (0: no)")
     p.add_argument("--segments", type=int, default=4, help="spring locations per link of the model (default 4)")
     likelihood_workers = WORKERS_HELP.replace("for the pose loop", "evaluating the likelihood")
     p.add_argument("--workers", type=int, default=None, help=likelihood_workers)
-    p.add_argument("--seed", type=int, default=0, help="seed of the sampler (default 0)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the first run; run r has seed + r (default 0)")
+    p.add_argument(
+        "--runs",
+        type=int,
+        default=3,
+        help="independent runs per elbow-branch class (seeds SEED, SEED+1, ...), merged and checked against each "
+        "other: ln Z within 3 sigma, each parameter's 5/50/95 %% quantiles within 0.5 posterior sd (or "
+        "3 sigma of their Monte Carlo error where larger), every class a "
+        "run weights above 1 %% present in the merged posterior (default 3; 1: no check)",
+    )
     p.add_argument(
         "--resume",
         action=argparse.BooleanOptionalAction,

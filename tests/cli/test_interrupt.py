@@ -138,3 +138,42 @@ def test_ctrl_c_during_identify_is_one_line_and_130(tmp_path):
         "interrupted (Ctrl-C); unfinished outputs were not written"
     ], err
     assert not out.exists()
+
+
+@pytest.mark.slow  # ~30-90 s on the shared machine: the first of the 16 (class, seed) runs must finish first
+def test_ctrl_c_during_calibrate_is_one_line_and_130_and_stops_the_workers(tmp_path):
+    """Ctrl-C to the whole process group while the (class, seed) runs of ``calibrate`` occupy a pool of worker
+    processes: exit 130, the one "interrupted" line (besides the finished runs' progress lines), no worker's
+    traceback, no posterior written, and no process of the group left (issue 31)."""
+    from importlib.resources import files
+
+    data = files("fpm_sim.data")
+    out = tmp_path / "cal"
+    argv = [sys.executable, "-m", "fpm_sim.cli.main", "calibrate", "--measured",
+            f"{data.joinpath('measured_table4_train.csv')},reading=x+", "--priors",
+            str(data.joinpath("study_priors.toml")), "--live-points", "25", "--walks", "3", "--dlogz", "2",
+            "--runs", "2", "--workers", "2", "--out", str(out)]  # fmt: skip
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        for line in proc.stderr:  # a run has finished: the workers are busy with the next ones
+            if "(1/16 runs)" in line:
+                break
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+        gone = False  # every worker of the group stops (a stopped worker is reaped by init within a few s)
+        for _ in range(30):
+            try:
+                os.killpg(proc.pid, 0)
+            except ProcessLookupError:
+                gone = True
+                break
+            time.sleep(0.5)
+        assert gone, "a worker process outlived the interrupted command"
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err, err
+    lines = [ln for ln in err.strip().splitlines() if not ln.startswith(("warning:", "  "))]
+    assert lines == ["interrupted (Ctrl-C); unfinished outputs were not written"], err
+    assert not (out / "posterior.nc").exists()

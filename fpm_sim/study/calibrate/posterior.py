@@ -8,7 +8,8 @@ predictions) and ``config.toml`` (the posterior median with its provenance).
   elbow branches are sampled, ``geometry.elbow_branch`` (int8, dims ``chain, draw, arm``, values +-1).
   Attributes ``fpm_sim_base_config`` (TOML), ``fpm_sim_free_groups``, ``fpm_sim_segments``, ``fpm_sim_command``;
 - ``sample_stats``: ``log_likelihood`` per draw; attributes ``log_evidence``, ``log_evidence_err``,
-  ``n_calls``, ``ess_kish``;
+  ``n_calls``, ``ess_kish``; with enumerated classes ``classes`` (JSON: each class's ln Z, weight, runs), ``runs``,
+  and with several runs ``runs_check_passed`` (0/1) and ``runs_check`` (the check's summary line);
 - ``observed_data``: ``f_hz`` (dim ``obs``; coordinates ``x_mm``, ``y_mm``, ``phi_rad``, ``label``);
 - ``posterior_predictive``: ``f_hz`` (the model's frequencies at each draw) and ``f_hz_measurement`` (plus
   one draw of the likelihood's noise), dims ``chain, draw, obs``; under the latent-mode model also
@@ -19,6 +20,7 @@ predictions) and ``config.toml`` (the posterior median with its provenance).
 
 from __future__ import annotations
 
+import json
 import math
 import warnings
 from pathlib import Path
@@ -95,6 +97,12 @@ def inference_data(cal: Calibration, *, command: str, idx: np.ndarray | None = N
         ess_kish=cal.ess_kish,
         converged=int(cal.converged),
     )
+    if cal.classes:  # the enumerated classes' evidences and weights, the runs and their check (JSON)
+        stats.attrs["classes"] = json.dumps([c.to_dict() for c in cal.classes])
+        stats.attrs["runs"] = int(getattr(cal.options, "runs", 1))
+    if cal.runs_check is not None:
+        stats.attrs["runs_check_passed"] = int(cal.runs_check.passed)
+        stats.attrs["runs_check"] = cal.runs_check.summary_line()
     observed = xr.Dataset({"f_hz": xr.DataArray(p.measured, dims=("obs",))}, coords=oc)
     observed["sigma_hz"] = xr.DataArray(p.sigma, dims=("obs",))
     ppc = xr.Dataset(

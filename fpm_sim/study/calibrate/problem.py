@@ -182,6 +182,23 @@ class CalibrationProblem:
     def labels(self) -> list[str]:
         return [o.describe() for o in self.observations] + [f"rig {t.label}" for t in self.rig_tests]
 
+    @property
+    def branch_classes(self) -> tuple[int | None, ...]:
+        """The elbow-branch classes enumerated (indices into :data:`ELBOW_BRANCHES`), each sampled on its own;
+        ``(None,)`` when the branches are fixed (one class: the base's)."""
+        return tuple(range(len(ELBOW_BRANCHES))) if self.priors.sample_branches else (None,)
+
+    def possible(self, theta: np.ndarray) -> bool:
+        """The description at ``theta`` is valid and reaches every measured pose (else ``log L = -inf``)."""
+        try:
+            cfg = self.config(theta)
+        except (ConfigError, ValueError):
+            return False
+        if not self.observations:
+            return True
+        xyz = self._pose_array
+        return bool(assemble_many(cfg.geometry, xyz[:, 0], xyz[:, 1], xyz[:, 2]).reachable.all())
+
     # -- the unit cube -> parameters
     def prior_transform(self, u: np.ndarray) -> np.ndarray:
         """Unit-cube point -> ``theta`` (each prior's inverse CDF; the branch class ``floor(8 u)``)."""

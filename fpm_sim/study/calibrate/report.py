@@ -76,10 +76,11 @@ def render_report(cal: Calibration, *, command: str, data_note: str) -> str:
         "",
         "## Diagnostics",
         "",
-        f"- nested sampling (dynesty, {cal.options.live_points} live points, stop at dlogz {cal.options.dlogz:g}, "
+        f"- nested sampling (dynesty, {cal.options.live_points} live points per run, "
+        f"{getattr(cal.options, 'runs', 1)} run(s) per class, stop at dlogz {cal.options.dlogz:g}, "
         f"proposal {cal.options.sample}"
         + (f" with {cal.options.walks} steps per walk" if cal.options.walks else "")
-        + f", seed {cal.options.seed}): {cal.n_iterations} iterations, "
+        + f", first seed {cal.options.seed}): {cal.n_iterations} iterations, "
         f"{cal.n_calls} likelihood calls, {cal.seconds:.0f} s"
         + ("" if cal.converged else " -- stopped on the likelihood-call limit (max_calls): NOT converged"),
         f"- log-evidence ln Z = {cal.log_evidence:.3f} +- {cal.log_evidence_err:.3f} (the error is nested "
@@ -107,11 +108,7 @@ def render_report(cal: Calibration, *, command: str, data_note: str) -> str:
             f"{_prior_of(cal, n)} |"
         )
     if BRANCH_PARAMETER in cal.names:
-        k = cal.names.index(BRANCH_PARAMETER)
-        classes, counts = np.unique(np.round(cal.draws[:, k]).astype(int), return_counts=True)
-        lines += ["", "Elbow-branch classes (prior: uniform over the 8):", ""]
-        for c, m in sorted(zip(classes, counts), key=lambda t: -t[1]):
-            lines.append(f"- {ELBOW_BRANCHES[c]}: {100.0 * m / len(cal.draws):.1f} % of the draws")
+        lines += _class_lines(cal)
     if DISCREPANCY_PARAMETER in cal.names:
         i = cal.names.index(DISCREPANCY_PARAMETER)
         lines += [
@@ -137,10 +134,76 @@ def render_report(cal: Calibration, *, command: str, data_note: str) -> str:
     ]
     for lab, y, m, a, b, c, d, ok in zip(p.labels, p.measured, med, lo50, hi50, lo90, hi90, c90):
         lines.append(f"| {lab} | {y:.4g} | {m:.4g} | {a:.4g}-{b:.4g} | {c:.4g}-{d:.4g} | {'yes' if ok else 'NO'} |")
+    lines += _runs_lines(cal)
     lines += _read_lines(cal)
     lines += _loo_lines(cal)
     lines += ["", "Figures: `corner.png` (pairwise draws), `predicted_vs_measured.png`, `leave_one_out.png`.", ""]
     return "\n".join(lines)
+
+
+def _class_lines(cal: Calibration) -> list[str]:
+    """The elbow-branch classes: each sampled on its own, its evidence and weight, its share of the draws."""
+    k = cal.names.index(BRANCH_PARAMETER)
+    classes, counts = np.unique(np.round(cal.draws[:, k]).astype(int), return_counts=True)
+    share = dict(zip(classes.tolist(), counts.tolist()))
+    if not cal.classes:  # a run saved before the classes were enumerated
+        lines = ["", "Elbow-branch classes (prior: uniform over the 8):", ""]
+        for c, m in sorted(share.items(), key=lambda t: -t[1]):
+            lines.append(f"- {ELBOW_BRANCHES[c]}: {100.0 * m / len(cal.draws):.1f} % of the draws")
+        return lines
+    lines = [
+        "",
+        "Elbow-branch classes (prior: uniform over the 8; each class's continuous posterior sampled on its own, "
+        "the classes weighted by their evidences, `w_k = Z_k / sum Z`):",
+        "",
+        "| class | reachable prior draws | ln Z (runs merged) | ln Z per run | weight | draws |",
+        "|---|---|---|---|---|---|",
+    ]
+    for c in sorted(cal.classes, key=lambda c: -c.weight):
+        if c.skipped:
+            lines.append(f"| {c.label} | 0 of {c.probe_draws} | skipped (Z = 0) | | 0 | 0 |")
+            continue
+        runs = ", ".join(f"{z:.2f}" for z in c.run_log_evidence)
+        n = share.get(-1 if c.klass is None else c.klass, 0)
+        lines.append(
+            f"| {c.label} | {100 * c.prior_mass:.0f} % of {c.probe_draws} | {c.log_evidence:.2f} +- "
+            f"{c.log_evidence_err:.2f} | {runs} | {100 * c.weight:.1f} +- {100 * c.weight_sd:.1f} % | {n} |"
+        )
+    return lines
+
+
+def _runs_lines(cal: Calibration) -> list[str]:
+    """The independent runs side by side and the between-run check."""
+    chk = cal.runs_check
+    if chk is None:
+        return ["", "## Independent runs", "", "One run (`--runs 1`): no between-run check."]
+    head = "| | " + " | ".join(f"seed {s}" for s in chk.seeds) + " | spread of 5/50/95 % over the runs (sd) |"
+    lines = [
+        "",
+        "## Independent runs (between-run check)",
+        "",
+        ("**" + chk.summary_line() + "**") if not chk.passed else chk.summary_line(),
+        "",
+        f"Criteria: {chk.criteria()}.",
+        "",
+        head,
+        "|---|" + "---|" * (len(chk.seeds) + 1),
+        "| ln Z | "
+        + " | ".join(f"{z:.2f} +- {e:.2f}" for z, e in zip(chk.log_evidence, chk.log_evidence_err))
+        + " | |",
+    ]
+    for j, k in enumerate(chk.classes):
+        if np.max(chk.class_weights[:, j]) > chk.class_threshold:
+            label = "base's branches" if k is None else str(ELBOW_BRANCHES[k])
+            lines.append(
+                f"| weight {label} | " + " | ".join(f"{100 * w:.1f} %" for w in chk.class_weights[:, j]) + " | |"
+            )
+    sp = chk.spread()
+    for i, n in enumerate(chk.names):
+        qs = " | ".join(f"{q[0]:.4g} / {q[1]:.4g} / {q[2]:.4g}" for q in chk.quantiles[:, i, :])
+        flag = " **disagree**" if n in chk.bad_parameters else ""
+        lines.append(f"| `{n}` 5/50/95 % | {qs} | {sp[i, 0]:.2f} / {sp[i, 1]:.2f} / {sp[i, 2]:.2f}{flag} |")
+    return lines
 
 
 def _read_lines(cal: Calibration) -> list[str]:

@@ -21,11 +21,22 @@ import numpy as np
 
 from fpm_sim.batch.engine import spawn_pool
 from fpm_sim.figures import bands_against_measured
+from fpm_sim.study.calibrate.priors import BRANCH_PARAMETER
 from fpm_sim.study.calibrate.problem import CalibrationError, CalibrationProblem
+from fpm_sim.study.calibrate.runs import ClassResult, Combined, RunsCheck, between_run_check, combine_classes
+from fpm_sim.study.identify.problem import ELBOW_BRANCHES
 from fpm_sim.study.loo import LeaveOneOut, leave_one_out, loo_from_components
 from fpm_sim.study.readout import draws_components, responsibilities
 
-__all__ = ["Calibration", "SamplerOptions", "problem_digest", "run_calibration"]
+__all__ = [
+    "Calibration",
+    "ClassSummary",
+    "SamplerOptions",
+    "class_prior_mass",
+    "problem_digest",
+    "run_calibration",
+    "sample_classes",
+]
 
 _PROBLEM: CalibrationProblem | None = None
 """The problem of this worker process (set by :func:`_init_worker`)."""
@@ -52,6 +63,37 @@ def _worker_predict(theta: np.ndarray) -> np.ndarray:
     return _PROBLEM.predict(theta)
 
 
+def _with_class(theta: np.ndarray, klass: int | None) -> np.ndarray:
+    """The problem's coordinates: the continuous ones, then the class index (when the branches are enumerated)."""
+    return np.asarray(theta, float) if klass is None else np.append(np.asarray(theta, float), float(klass))
+
+
+def _class_log_likelihood(theta: np.ndarray, klass: int | None) -> float:
+    assert _PROBLEM is not None, "the pool was started without _init_worker"
+    return _PROBLEM.log_likelihood(_with_class(theta, klass))
+
+
+def _class_prior_transform(u: np.ndarray, klass: int | None) -> np.ndarray:
+    assert _PROBLEM is not None, "the pool was started without _init_worker"
+    if klass is None:
+        return _PROBLEM.prior_transform(u)
+    full = _PROBLEM.prior_transform(np.append(np.asarray(u, float), (klass + 0.5) / len(_PROBLEM.branch_classes)))
+    out: np.ndarray = full[:-1]
+    return out
+
+
+def _worker_run(
+    job: tuple[int | None, int, SamplerOptions, str | None, bool], pool: Any = None
+) -> tuple[int | None, int, Any, float]:
+    """One (class, seed) run in this process (its likelihood calls on ``pool`` when given):
+    ``(class, seed, Results, seconds)``."""
+    klass, seed, opts, checkpoint, resume = job
+    t0 = time.time()
+    ck = None if checkpoint is None else Path(checkpoint)
+    res = _run_class(klass, seed, opts, checkpoint=ck, resume=resume, pool=pool)
+    return klass, seed, res, time.time() - t0
+
+
 def problem_digest(problem: CalibrationProblem) -> str:
     """A fingerprint of the problem's data (the repr of its fields: deterministic, unlike a pickle's bytes),
     stored beside a checkpoint to refuse a mismatched resume."""
@@ -75,8 +117,21 @@ class SamplerOptions:
     draws: int = 1000
     """Equal-weight draws resampled from the weighted samples for the posterior file."""
     checkpoint_every_s: float = 60.0
+    runs: int = 3
+    """Independent runs per elbow-branch class (seeds ``seed, seed + 1, ...``), merged, and checked against each
+    other (:mod:`fpm_sim.study.calibrate.runs`); ``max_calls`` is per run."""
+    nsigma: float = 3.0
+    """The between-run check: ln Z of every pair of runs within this many sigma of their combined error."""
+    quantile_tol: float = 0.5
+    """The between-run check: each parameter's 5/50/95 % quantiles within this fraction of its sd over the runs."""
+    class_threshold: float = 0.01
+    """The between-run check: a class some run weights above this must be in the merged posterior."""
+    probe_draws: int = 400
+    """Prior draws per class to find whether it reaches the measured poses at all (none: the class is skipped)."""
 
     def check(self) -> None:
+        if self.runs < 1:
+            raise CalibrationError("must be >= 1", parameter="runs", value=self.runs)
         if self.live_points < 2:
             raise CalibrationError("must be >= 2", parameter="live_points", value=self.live_points)
         if not self.dlogz > 0:
@@ -94,6 +149,52 @@ class SamplerOptions:
                 value=self.max_calls,
                 hint="allow more likelihood calls or use fewer live points",
             )
+
+
+@dataclass(frozen=True)
+class ClassSummary:
+    """One elbow-branch class of an enumerated calibration (:func:`sample_classes`)."""
+
+    klass: int | None
+    label: str
+    prior_mass: float
+    """The fraction of its prior draws that are valid and reach every measured pose."""
+    probe_draws: int
+    log_evidence: float
+    """ln Z of the class's continuous posterior (its runs merged); NaN when skipped."""
+    log_evidence_err: float
+    weight: float
+    """``Z_k / sum Z``: the class's posterior probability."""
+    weight_sd: float
+    run_log_evidence: list[float]
+    """ln Z of each run (seeds in order)."""
+    skipped: bool
+    """No prior draw reached the measured poses: ``Z_k = 0``, not sampled."""
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "class": self.klass,
+            "branches": self.label,
+            "prior_reachable_fraction": self.prior_mass,
+            "log_evidence": self.log_evidence,
+            "log_evidence_err": self.log_evidence_err,
+            "weight": self.weight,
+            "weight_sd": self.weight_sd,
+            "run_log_evidence": self.run_log_evidence,
+            "skipped": self.skipped,
+        }
+
+    def line(self) -> str:
+        if self.skipped:
+            return (
+                f"{self.label:<16} skipped: none of {self.probe_draws} prior draws reaches every measured pose (Z = 0)"
+            )
+        runs = ", ".join(f"{z:.2f}" for z in self.run_log_evidence)
+        return (
+            f"{self.label:<16} ln Z {self.log_evidence:8.2f} +- {self.log_evidence_err:.2f}  weight "
+            f"{100 * self.weight:5.1f} +- {100 * self.weight_sd:.1f} %  (runs: {runs}; reachable prior "
+            f"{100 * self.prior_mass:.0f} %)"
+        )
 
 
 @dataclass
@@ -123,6 +224,11 @@ class Calibration:
     start_log_likelihood: float = math.nan
     """:meth:`CalibrationProblem.start_log_likelihood`: compare with ``log_likelihood.max()``."""
     extra: dict[str, Any] = field(default_factory=dict)
+    classes: list[ClassSummary] = field(default_factory=list)
+    """Each elbow-branch class sampled (or skipped): its evidence and weight (one entry when the branches are
+    fixed)."""
+    runs_check: RunsCheck | None = None
+    """The between-run check (:mod:`fpm_sim.study.calibrate.runs`); ``None``: one run."""
 
     @property
     def missed_start(self) -> bool:
@@ -274,8 +380,11 @@ class Calibration:
             "leave_one_out": self.leave_one_out().to_dict() if len(self.problem.observations) > 1 else None,
             "data": data,
             "options": {
-                k: getattr(self.options, k) for k in ("live_points", "dlogz", "seed", "sample", "walks", "max_calls")
+                k: getattr(self.options, k)
+                for k in ("live_points", "dlogz", "seed", "sample", "walks", "max_calls", "runs")
             },
+            "classes": [c.to_dict() for c in self.classes],
+            "runs_check": None if self.runs_check is None else self.runs_check.to_dict(),
         }
 
     def table(self) -> str:
@@ -298,6 +407,14 @@ class Calibration:
         c50, c90 = self.coverage(0.5), self.coverage(0.9)
         lines.append(
             f"measured values inside the 50 % / 90 % predictive bands: {c50.sum()}/{len(c50)} / {c90.sum()}/{len(c90)}"
+        )
+        if len(self.classes) > 1:
+            lines.append("elbow-branch classes (each sampled on its own, weighted by its evidence):")
+            lines += ["  " + c.line() for c in self.classes]
+        lines.append(
+            "between-run check: one run (--runs 1), none"
+            if self.runs_check is None
+            else self.runs_check.table(class_label=_class_label)
         )
         return "\n".join(lines)
 
@@ -322,81 +439,204 @@ class Calibration:
         return fig
 
 
-def _ess_kish(logwt: np.ndarray) -> float:
-    w = np.exp(logwt - np.max(logwt))
-    return float(w.sum() ** 2 / np.sum(w**2))
-
-
 def _pool(problem: CalibrationProblem, workers: int) -> Any:
     """A spawn pool whose workers hold ``problem`` and ignore Ctrl-C (:func:`fpm_sim.batch.engine.spawn_pool`)."""
     return spawn_pool(workers, _init_worker, (problem,))
 
 
-def _run_sampler(
+def _job_file(checkpoint: Path, klass: int | None, seed: int) -> Path:
+    """The checkpoint file of one (class, seed) run, beside ``checkpoint``."""
+    tag = f"seed{seed}" if klass is None else f"class{klass}.seed{seed}"
+    return Path(f"{checkpoint}.{tag}")
+
+
+def _digest_file(checkpoint: Path) -> Path:
+    return Path(str(checkpoint) + ".digest")
+
+
+def _run_class(
+    klass: int | None, seed: int, opts: SamplerOptions, *, checkpoint: Path | None, resume: bool, pool: Any = None
+) -> Any:
+    """dynesty's static sampler on class ``klass``'s continuous posterior to ``opts.dlogz`` (the likelihood
+    calls here, or on ``pool``'s workers): a finished run's saved results (``.done``), or restored from its
+    checkpoint, or fresh. Returns dynesty's ``Results``."""
+    import pickle
+
+    import dynesty
+
+    assert _PROBLEM is not None, "the pool was started without _init_worker"
+    kw: dict[str, Any] = {"print_progress": False, "dlogz": opts.dlogz, "maxcall": opts.max_calls}
+    done = None if checkpoint is None else Path(f"{checkpoint}.done")
+    if checkpoint is not None:
+        kw.update(checkpoint_file=str(checkpoint), checkpoint_every=opts.checkpoint_every_s)
+    if resume and done is not None and done.exists():
+        with done.open("rb") as fh:
+            return pickle.load(fh)
+    if resume and checkpoint is not None and checkpoint.exists():
+        sampler = dynesty.NestedSampler.restore(str(checkpoint), pool=pool)
+        # a run interrupted mid-way continues (resume=True); one that ended on max_calls has its final live
+        # points added to the results, which dynesty takes out again and continues from with resume=False
+        sampler.run_nested(resume=not bool(getattr(sampler, "added_live", False)), **kw)
+    else:
+        sampler = dynesty.NestedSampler(
+            functools.partial(_class_log_likelihood, klass=klass),
+            functools.partial(_class_prior_transform, klass=klass),
+            _PROBLEM.ndim - (klass is not None),
+            nlive=opts.live_points,
+            sample=opts.sample,
+            walks=opts.walks,
+            rstate=np.random.default_rng(seed),
+            pool=pool,
+            queue_size=opts.workers if pool is not None else None,
+        )
+        sampler.run_nested(**kw)
+    res = sampler.results
+    if done is not None and (opts.max_calls is None or int(np.sum(res["ncall"])) < opts.max_calls):
+        with done.open("wb") as fh:
+            pickle.dump(res, fh, protocol=4)
+    return res
+
+
+def _check_resume(problem: CalibrationProblem, checkpoint: Path | None, resume: bool) -> None:
+    """Refuse a resume without a checkpoint, or from another problem's (the ``.digest`` file); record the
+    problem's fingerprint for a fresh run."""
+    if not resume:
+        if checkpoint is not None:
+            _digest_file(checkpoint).write_text(problem_digest(problem))
+        return
+    if checkpoint is None or not _digest_file(checkpoint).exists():
+        raise CalibrationError(
+            "no checkpoint file to resume from",
+            parameter="resume",
+            value=None if checkpoint is None else str(checkpoint),
+            hint="start a fresh run (resume off) first",
+        )
+    if _digest_file(checkpoint).read_text().strip() != problem_digest(problem):
+        raise CalibrationError(
+            "the checkpoint belongs to another problem (data, priors, free groups, base description or "
+            "segments differ)",
+            parameter="resume",
+            file=checkpoint,
+            hint="start a fresh run (resume off) into an empty or overwritten output folder",
+        )
+
+
+def class_prior_mass(problem: CalibrationProblem, klass: int | None, n: int, seed: int) -> float:
+    """The fraction of ``n`` prior draws of class ``klass`` that are valid and reach every measured pose."""
+    rng = np.random.default_rng(seed)
+    ok = 0
+    for u in rng.random((n, problem.ndim)):
+        t = problem.prior_transform(u)
+        if klass is not None:
+            t[-1] = float(klass)
+        ok += problem.possible(t)
+    return ok / n
+
+
+def _sample_jobs(
+    jobs: list[tuple[int | None, int, SamplerOptions, str | None, bool]],
+    pool: Any,
+    print_func: Callable[..., None] | None,
+    label: Callable[[int | None], str],
+) -> dict[tuple[int | None, int], tuple[Any, float]]:
+    """Every (class, seed) run, ``{(class, seed): (Results, s)}``: one run per worker of the pool, or, with fewer
+    runs than workers (fixed branches), one run after another here with their likelihood calls on the pool."""
+    out = {}
+    if pool is not None and len(jobs) >= jobs[0][2].workers:
+        it = pool.imap_unordered(_worker_run, jobs)
+    else:
+        it = (_worker_run(j, pool) for j in jobs)
+    for klass, seed, res, sec in it:
+        out[(klass, seed)] = (res, sec)
+        if print_func is not None:
+            print_func(
+                f"  {label(klass)}seed {seed}: ln Z = {float(res['logz'][-1]):.2f} +- "
+                f"{float(res['logzerr'][-1]):.2f}, {int(np.sum(res['ncall']))} calls, {sec:.0f} s "
+                f"({len(out)}/{len(jobs)} runs)"
+            )
+    return out
+
+
+def _class_label(klass: int | None) -> str:
+    return "the base's branches" if klass is None else str(ELBOW_BRANCHES[klass])
+
+
+def _merge(results: list[Any]) -> Any:
+    from dynesty.utils import merge_runs
+
+    return results[0] if len(results) == 1 else merge_runs(results, print_progress=False)
+
+
+def sample_classes(
     problem: CalibrationProblem,
     opts: SamplerOptions,
     pool: Any,
     *,
     checkpoint: Path | None,
     resume: bool,
-    progress: bool,
-) -> Any:
-    """dynesty's static sampler run to ``opts.dlogz``: a fresh one, or restored from ``checkpoint`` (checked
-    against the problem's fingerprint in the ``.digest`` file beside it)."""
-    import dynesty
+    print_func: Callable[..., None] | None,
+) -> tuple[Combined, RunsCheck | None, list[ClassSummary], dict[str, Any]]:
+    """Sample every elbow-branch class ``opts.runs`` times, merge each class's runs, combine the classes by
+    their evidences (:mod:`fpm_sim.study.calibrate.runs`) and check the runs against each other."""
+    classes = problem.branch_classes
+    seeds = [opts.seed + r for r in range(opts.runs)]
+    mass = {k: class_prior_mass(problem, k, opts.probe_draws, opts.seed) for k in classes}
+    live = [k for k in classes if mass[k] > 0]
+    if not live:
+        raise CalibrationError(
+            f"no prior draw (of {opts.probe_draws} per class) reaches every measured pose: the likelihood is nil",
+            parameter="priors",
+            hint="widen the geometry priors or check the measured poses",
+        )
+    _check_resume(problem, checkpoint, resume)
+    ck = [None if checkpoint is None else str(_job_file(checkpoint, k, s)) for k in live for s in seeds]
+    jobs = [(k, s, opts, c, resume) for (k, s), c in zip(((k, s) for k in live for s in seeds), ck)]
+    prefix = (lambda k: f"class {_class_label(k)}, ") if classes != (None,) else (lambda k: "")
+    done = _sample_jobs(jobs, pool, print_func, prefix)
+    merged = [ClassResult.of_results(k, _merge([done[(k, s)][0] for s in seeds])) for k in live]
+    rng = np.random.default_rng(opts.seed + 1)
+    comb = combine_classes(merged, len(classes), opts.draws, rng)
+    names = [n for n in problem.names if n != BRANCH_PARAMETER]
+    check = None
+    if opts.runs > 1:
+        per_run = [[ClassResult.of_results(k, done[(k, s)][0]) for k in live] for s in seeds]
+        check = between_run_check(
+            per_run, comb, seeds, names, n_classes=len(classes), n_draws=opts.draws, rng=rng,
+            class_label=_class_label, nsigma=opts.nsigma, quantile_tol=opts.quantile_tol,
+            class_threshold=opts.class_threshold,
+        )  # fmt: skip
+    summaries = _summaries(classes, mass, live, comb, merged, done, seeds, opts.probe_draws)
+    stats = {
+        "n_calls": int(sum(np.sum(r["ncall"]) for r, _ in done.values())),
+        "n_iterations": int(sum(int(r["niter"]) for r, _ in done.values())),
+        "converged": opts.max_calls is None or all(np.sum(r["ncall"]) < opts.max_calls for r, _ in done.values()),
+    }
+    return comb, check, summaries, stats
 
-    digest = problem_digest(problem)
-    kw: dict[str, Any] = {}
-    if checkpoint is not None:
-        kw.update(checkpoint_file=str(checkpoint), checkpoint_every=opts.checkpoint_every_s)
-    digest_file = Path(str(checkpoint) + ".digest")
-    if resume:
-        if checkpoint is None or not Path(checkpoint).exists():
-            raise CalibrationError(
-                "no checkpoint file to resume from",
-                parameter="resume",
-                value=None if checkpoint is None else str(checkpoint),
-                hint="start a fresh run (resume off) first",
+
+def _summaries(
+    classes: tuple[int | None, ...],
+    mass: dict[int | None, float],
+    live: list[int | None],
+    comb: Combined,
+    merged: list[ClassResult],
+    done: dict[tuple[int | None, int], tuple[Any, float]],
+    seeds: list[int],
+    probe: int,
+) -> list[ClassSummary]:
+    out = []
+    for k in classes:
+        if k not in live:
+            out.append(ClassSummary(k, _class_label(k), 0.0, probe, math.nan, math.nan, 0.0, 0.0, [], True))
+            continue
+        j = live.index(k)
+        out.append(
+            ClassSummary(
+                k, _class_label(k), mass[k], probe, merged[j].log_evidence, merged[j].log_evidence_err,
+                float(comb.weights[j]), float(comb.weights_sd[j]),
+                [float(done[(k, s)][0]["logz"][-1]) for s in seeds], False,
             )
-        if not digest_file.exists() or digest_file.read_text().strip() != digest:
-            raise CalibrationError(
-                "the checkpoint belongs to another problem (data, priors, free groups, base description or "
-                "segments differ)",
-                parameter="resume",
-                file=checkpoint,
-                hint="start a fresh run (resume off) into an empty or overwritten output folder",
-            )
-        sampler = dynesty.NestedSampler.restore(str(checkpoint), pool=pool)
-        # a run interrupted mid-way continues (resume=True); one that ended on max_calls has its final live
-        # points added to the results, which dynesty takes out again and continues from with resume=False
-        finished = bool(getattr(sampler, "added_live", False))
-        sampler.run_nested(dlogz=opts.dlogz, maxcall=opts.max_calls, print_progress=progress, resume=not finished, **kw)
-        return sampler
-    if checkpoint is not None:
-        digest_file.write_text(digest)
-    sampler = dynesty.NestedSampler(
-        _worker_log_likelihood,
-        _worker_prior_transform,
-        problem.ndim,
-        nlive=opts.live_points,
-        sample=opts.sample,
-        walks=opts.walks,
-        rstate=np.random.default_rng(opts.seed),
-        pool=pool,
-        queue_size=opts.workers if pool is not None else None,
-    )
-    sampler.run_nested(dlogz=opts.dlogz, maxcall=opts.max_calls, print_progress=progress, **kw)
-    return sampler
-
-
-def _equal_weight_indices(logwt: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
-    """Indices of ``n`` equal-weight draws (at most as many as the run has samples) from the weighted samples."""
-    from dynesty.utils import resample_equal
-
-    w = np.exp(logwt - np.max(logwt))
-    w /= w.sum()
-    idx_all = resample_equal(np.arange(len(w)), w, rstate=rng)
-    out: np.ndarray = rng.choice(idx_all, size=min(n, len(idx_all)), replace=False)
+        )  # fmt: skip
     return out
 
 
@@ -409,35 +649,32 @@ def run_calibration(
     progress: bool = True,
     print_func: Callable[..., None] | None = None,
 ) -> Calibration:
-    """Sample the posterior of ``problem`` with dynesty's static nested sampler.
+    """Sample the posterior of ``problem`` with dynesty's static nested sampler: every elbow-branch class on its
+    own, ``options.runs`` times (seeds ``seed, seed + 1, ...``; the (class, seed) runs on ``options.workers``
+    processes), each class's runs merged, the classes combined by their evidences, and the runs checked against
+    each other (:mod:`fpm_sim.study.calibrate.runs`; :attr:`Calibration.runs_check`).
 
-    ``checkpoint``: dynesty's checkpoint file, written every ``options.checkpoint_every_s`` seconds (a
-    ``.digest`` file beside it records the problem's fingerprint); ``resume``: continue from it (refused when
-    the problem differs).
+    ``checkpoint``: the prefix of each run's dynesty checkpoint file (``PREFIX.classK.seedS``, written every
+    ``options.checkpoint_every_s`` seconds; a finished run's results beside it as ``.done``; ``PREFIX.digest``
+    records the problem's fingerprint); ``resume``: continue from them (refused when the problem differs).
+    ``progress``: one line per finished run (on ``print_func``, else standard error).
     """
+    import sys
+
     opts = options or SamplerOptions()
     opts.check()
-    _init_worker(problem)  # this process too: dynesty may call the functions here
+    _init_worker(problem)  # this process too: serial runs and the probes run here
     t0 = time.time()
+    say = print_func if print_func is not None else (lambda m: print(m, file=sys.stderr))
     pool = _pool(problem, opts.workers) if opts.workers > 1 else None
     try:
-        sampler = _run_sampler(problem, opts, pool, checkpoint=checkpoint, resume=resume, progress=progress)
-        res = sampler.results
-        logwt = np.asarray(res["logwt"])
-        rng = np.random.default_rng(opts.seed + 1)
-        idx = _equal_weight_indices(logwt, opts.draws, rng)
-        draws = np.asarray(res["samples"])[idx]
-        logl = np.asarray(res["logl"])[idx]
-        uniq, inverse = np.unique(idx, return_inverse=True)
-        thetas = [np.asarray(res["samples"])[i] for i in uniq]
-        preds = pool.map(_worker_predict, thetas) if pool is not None else [problem.predict(t) for t in thetas]
+        comb, check, summaries, stats = sample_classes(
+            problem, opts, pool, checkpoint=checkpoint, resume=resume, print_func=say if progress else None
+        )
+        draws = comb.draws if problem.branch_classes == (None,) else np.column_stack([comb.draws, comb.klass])
+        uniq, inverse = np.unique(draws, axis=0, return_inverse=True)
+        preds = pool.map(_worker_predict, list(uniq)) if pool is not None else [problem.predict(t) for t in uniq]
         f_pred = np.asarray(preds)[inverse.ravel()]
-        n_calls = int(np.sum(res["ncall"]))
-        niter = int(res["niter"])
-        logz, logzerr = float(res["logz"][-1]), float(res["logzerr"][-1])
-        ess = _ess_kish(logwt)
-        # the run stops on dlogz unless max_calls came first
-        converged = opts.max_calls is None or n_calls < opts.max_calls
     except BaseException:  # Ctrl-C or an error: the workers (which ignore Ctrl-C) stop now, their queued work unrun
         if pool is not None:
             pool.terminate()
@@ -445,23 +682,26 @@ def run_calibration(
     if pool is not None:
         pool.close()
         pool.join()
+    rng = np.random.default_rng(opts.seed + 2)
     f_noisy = np.stack([problem.simulate_measurement(f, t, rng) for f, t in zip(f_pred, draws)])
-    start_ll = problem.start_log_likelihood()
     if print_func is not None:
-        print_func(f"nested sampling: {n_calls} calls, log Z = {logz:.2f} +- {logzerr:.2f}")
+        print_func(f"nested sampling: {stats['n_calls']} calls, log Z = {comb.log_evidence:.2f} +- "
+                   f"{comb.log_evidence_err:.2f}")  # fmt: skip
     return Calibration(
         problem=problem,
         options=opts,
         draws=draws,
-        log_likelihood=logl,
-        log_evidence=logz,
-        log_evidence_err=logzerr if math.isfinite(logzerr) else math.nan,
-        n_calls=n_calls,
-        n_iterations=niter,
-        ess_kish=ess,
+        log_likelihood=comb.log_likelihood,
+        log_evidence=comb.log_evidence,
+        log_evidence_err=comb.log_evidence_err,
+        n_calls=stats["n_calls"],
+        n_iterations=stats["n_iterations"],
+        ess_kish=comb.ess_kish,
         seconds=time.time() - t0,
-        converged=converged,
+        converged=stats["converged"],
         f_pred=f_pred,
         f_noisy=f_noisy,
-        start_log_likelihood=start_ll,
+        start_log_likelihood=problem.start_log_likelihood(),
+        classes=summaries,
+        runs_check=check,
     )
