@@ -292,6 +292,8 @@ def test_every_public_result_class_is_built_here():
         "SubsystemResult": "one row of StudyReproduction (its subsystems)",
         "FpmSweep": "the pytest plugin's session cache of sweeps (a fixture, not an answer)",
         "ModeFrequencies": "the pytest plugin's comparison operand (one column of a PoseFrequencies)",
+        "ClassResult": "one elbow-branch class's samples inside a Calibration (its classes)",
+        "RunsCheck": "the between-run check inside a Calibration (its runs_check, in its table and to_dict)",
     }
     assert found - set(rows) <= set(BUILDERS), found - set(rows) - set(BUILDERS)
 

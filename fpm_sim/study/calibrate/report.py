@@ -176,7 +176,7 @@ def _runs_lines(cal: Calibration) -> list[str]:
     """The independent runs side by side and the between-run check."""
     chk = cal.runs_check
     if chk is None:
-        return ["", "## Independent runs", "", "One run (`--runs 1`): no between-run check."]
+        return ["", "## Independent runs", "", "One run: no between-run check (several independent runs give one)."]
     head = "| | " + " | ".join(f"seed {s}" for s in chk.seeds) + " | spread of 5/50/95 % over the runs (sd) |"
     lines = [
         "",

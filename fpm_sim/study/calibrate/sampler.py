@@ -412,7 +412,7 @@ class Calibration:
             lines.append("elbow-branch classes (each sampled on its own, weighted by its evidence):")
             lines += ["  " + c.line() for c in self.classes]
         lines.append(
-            "between-run check: one run (--runs 1), none"
+            "between-run check: none (one run)"
             if self.runs_check is None
             else self.runs_check.table(class_label=_class_label)
         )
