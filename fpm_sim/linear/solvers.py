@@ -282,14 +282,16 @@ def _buckling_error(built: BuiltModel, grows: str, worst_w2: float | None, filt:
             f"the structure buckles under gravity's prestress at this pose{at}: at its static equilibrium the "
             f"gravity-prestressed stiffness has {negative} (constrained eigen-solve, no time step), while without "
             f"gravity it is stable with f1 = {f1_free:.3g} Hz; {grows}, and no timestep_s helps",
-            hint="move the pose away from the singularity, lighten the platform and payload (hardware.*.mass_kg) "
-            "or stiffen the links (section.*); gravity off gives the unloaded modes",
+            hint="move the pose away from the singularity, lighten the moving masses (the 3RRR's hardware.*.mass_kg, "
+            "a described or imported machine's lumps) or stiffen the links (their sections); gravity off gives the "
+            "unloaded modes",
         )
     return BucklingError(
         f"the structure is unstable at this pose{at}{' even without gravity' if gravity else ''}: at its "
         f"equilibrium the stiffness has {negative} (constrained eigen-solve, no time step); {grows}, and no "
         "timestep_s helps",
-        hint="check the description: section.*, material.*, compliance.* and hardware.*.mass_kg",
+        hint="check the description's sections, materials, compliances and masses (the 3RRR's section.*, "
+        "material.*, compliance.*, hardware.*.mass_kg)",
     )
 
 
