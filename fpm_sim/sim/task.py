@@ -28,10 +28,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import mujoco
 import numpy as np
@@ -48,7 +46,7 @@ from fpm_sim.errors import FpmSimError
 from fpm_sim.model.general import actuated_joint_names, build_general
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.model.spec import BuiltModel
-from fpm_sim.sim.rollout import RolloutMachine, aligned_step, rollout
+from fpm_sim.sim.rollout import RolloutMachine, aligned_step
 from fpm_sim.sim.stepping import DEFAULT_INTEGRATOR
 from fpm_sim.sim.trajectory import (
     DEFAULT_SETTLE_TOL_M,
@@ -61,6 +59,7 @@ from fpm_sim.sim.trajectory import (
     read_path_csv,
     residual_vibration,
     shaper,
+    track_servos,
 )
 
 __all__ = [
@@ -262,28 +261,23 @@ def simulate_task_move(
     cmd = path.poses(t)
     ref, dref = _joint_targets(desc, path, asm0, t)
     types = [j.type for c in desc.chains for j in c.joints if j.actuated]
-    k, c = (np.array([desc.servos.gains(ty)[i] for ty in types]) for i in (0, 1))
-
-    def sample(arr: np.ndarray) -> Any:
-        return lambda tt: arr[min(round(tt / output_step_s), n)]
-
-    wall0 = time.perf_counter()
-    res = rollout(
+    gains = tuple(np.array([desc.servos.gains(ty)[i] for ty in types]) for i in (0, 1))
+    res, torque, wall = track_servos(
         built,
         machine,
+        ref,
+        dref,
+        machine.motor0,
+        (gains[0], gains[1]),
         duration_s=float(t[-1]),
         output_step_s=output_step_s,
-        motor_reference=sample(ref - machine.motor0),
-        motor_torque=sample(c * dref),
         integrator=integrator,
         band_hz=band_hz,
         f1_hz=f1_end,
         progress=progress,
     )
-    wall = time.perf_counter() - wall0
     m = len(res.t_s)
     theta = res.motor_angles_rad
-    torque = k * (ref[:m] - theta) + c * (dref[:m] - np.gradient(theta, output_step_s, axis=0))
     jac_end = rigid_jacobian(desc, solve_task_pose(desc, end))
     deflection = res.ee_pose - (cmd[:m] + (theta - ref[:m]) @ jac_end.T)
     tr = [i for i, x in enumerate(desc.task) if x != "phi"]

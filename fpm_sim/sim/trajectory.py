@@ -45,6 +45,7 @@ from fpm_sim.config import Geometry, Manipulator, Motors
 from fpm_sim.errors import FpmSimError, read_text_input
 from fpm_sim.kinematics import Pose, inverse_kinematics
 from fpm_sim.model.options import ModelOptions
+from fpm_sim.model.spec import BuiltModel
 from fpm_sim.sim.stepping import DEFAULT_INTEGRATOR, Stepping
 
 __all__ = [
@@ -68,6 +69,7 @@ __all__ = [
     "settling_time_s",
     "shaper",
     "simulate_move",
+    "track_servos",
     "with_servo_motors",
 ]
 
@@ -615,7 +617,7 @@ def simulate_move(
     """
     from fpm_sim.model.manipulator import build_manipulator
     from fpm_sim.rom.reduction import modal_system
-    from fpm_sim.sim.rollout import aligned_options, rollout
+    from fpm_sim.sim.rollout import aligned_options
 
     check_move(path, shaper_kind, settle_s=settle_s, settle_tol_m=settle_tol_m, output_step_s=output_step_s)
     manip = with_servo_motors(manip)
@@ -638,27 +640,22 @@ def simulate_move(
     cmd = path.poses(t)
     ref, dref = _motor_references(g, cmd, theta0, output_step_s)
     k, c = manip.motors.servo_stiffness_nm_per_rad, manip.motors.servo_damping_nms_per_rad
-
-    def sample(arr: np.ndarray) -> Any:
-        return lambda tt: arr[min(round(tt / output_step_s), n)]
-
-    start_wall = time.perf_counter()
-    res = rollout(
+    res, torque, wall = track_servos(
         built,
         manip,
+        ref,
+        dref,
+        theta0,
+        (k, c),
         duration_s=duration,
         output_step_s=output_step_s,
-        motor_reference=sample(ref - theta0),
-        motor_torque=sample(c * dref),
         integrator=integrator,
         band_hz=band_hz,
         f1_hz=f1_end,
         progress=progress,
     )
-    wall = time.perf_counter() - start_wall
     m = len(res.t_s)
     angles = res.motor_angles_rad
-    torque = k * (ref[:m] - angles) + c * (dref[:m] - np.gradient(angles, output_step_s, axis=0))
     err = res.ee_pose - cmd[:m]
     residual = residual_vibration(res.t_s, err[:, :2], path.duration_s, settle_tol_m, (f1_end, f_in, z_in))
     return MoveResult(
@@ -686,6 +683,54 @@ def simulate_move(
             "servo_damping_nms_per_rad": c,
         },
     )
+
+
+def track_servos(
+    built: BuiltModel,
+    machine: Any,
+    ref: np.ndarray,
+    dref: np.ndarray,
+    start: np.ndarray,
+    gains: tuple[Any, Any],
+    *,
+    duration_s: float,
+    output_step_s: float,
+    integrator: str,
+    band_hz: float | None,
+    f1_hz: float,
+    progress: bool,
+) -> tuple[Any, np.ndarray, float]:
+    """The rollout of the servos tracking the motor references ``ref`` (rad or m, one row per output sample,
+    ``start`` the assembled coordinates) with the rates ``dref`` fed forward through the damping, and the servo
+    torques (N m or N) the servo law ``k (ref - q) + c (dref - dq/dt)`` gives along it (``gains = (k, c)``, scalars
+    or one per motor): ``(rollout result, torques, wall seconds of the rollout)``. ``machine``: the rollout's
+    (:func:`fpm_sim.sim.rollout.rollout`), the 3RRR's description or a described machine's adapter."""
+    from fpm_sim.sim.rollout import rollout  # imported when called, as simulate_move always did
+
+    k, c = gains
+    n = len(ref) - 1
+
+    def sample(arr: np.ndarray) -> Any:
+        return lambda tt: arr[min(round(tt / output_step_s), n)]
+
+    wall0 = time.perf_counter()
+    res = rollout(
+        built,
+        machine,
+        duration_s=duration_s,
+        output_step_s=output_step_s,
+        motor_reference=sample(ref - start),
+        motor_torque=sample(c * dref),
+        integrator=integrator,
+        band_hz=band_hz,
+        f1_hz=f1_hz,
+        progress=progress,
+    )
+    wall = time.perf_counter() - wall0
+    m = len(res.t_s)
+    q = res.motor_angles_rad
+    torque = k * (ref[:m] - q) + c * (dref[:m] - np.gradient(q, output_step_s, axis=0))
+    return res, torque, wall
 
 
 def check_move(path: Any, shaper_kind: str, *, settle_s: float, settle_tol_m: float, output_step_s: float) -> None:
