@@ -8,7 +8,7 @@ Built with :class:`mujoco.MjSpec` like the 3RRR's own builder, with every body p
   own frame (x along the link, y along the section's ``thickness_m``, z along its ``height_m``);
 - actuated joints are locked (``motors="locked"``, the default: no joint, the next body is rigid on the one before;
   what modal analysis uses) or position servos (``motors="servo"``: a hinge or slide with the description's servo
-  stiffness and damping about the assembled coordinate, kind ``motor``, :class:`ServoGains`; what rollouts with
+  stiffness and damping about the assembled coordinate, kind ``motor``, :class:`~fpm_sim.architecture.description.ServoGains`; what rollouts with
   motor torques and moves drive); passive joints are MuJoCo
   joints on the next body (revolute: hinge, prismatic: slide, universal: two hinges, spherical: ball), at the
   joint's centre;
@@ -114,7 +114,7 @@ class _Pending:
 
 @dataclass
 class PoseFrames:
-    """What the pose sets in a described machine's model, by name (:func:`general_frames`): each body's placement in
+    """What the pose sets in a described machine's model, by name (:class:`Reposer`): each body's placement in
     its parent (``pos``, ``quat``), each joint's centre and axis in its body, each equality's ``data``. Everything else
     (masses, inertias in the bodies' own frames, springs, the bodies inside a link) is the same at every pose."""
 
@@ -124,7 +124,7 @@ class PoseFrames:
 
 
 class _Recorder:
-    """A stand-in for the spec and its bodies in the frames pass (:func:`general_frames`): it records the placements
+    """A stand-in for the spec and its bodies in the frames pass (:class:`Reposer`): it records the placements
     that :class:`PoseFrames` holds and adds nothing else."""
 
     def __init__(self, frames: PoseFrames, name: str = "world") -> None:
@@ -171,7 +171,7 @@ class _Builder:
         *,
         servo: bool = False,
     ) -> None:
-        """``shapes``: the links of a model already built (its :attr:`shapes`): a frames pass into a
+        """``shapes``: the links of a model already built (its ``shapes``): a frames pass into a
         :class:`_Recorder` instead of a spec. ``servo``: the actuated joints as servo-driven joints."""
         self.desc, self.asm, self.opts, self.servo = desc, asm, opts, servo
         self.frames_only = shapes is not None
