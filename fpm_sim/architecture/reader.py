@@ -351,7 +351,8 @@ def parse_description(data: dict[str, Any], *, source: str = "user") -> Descript
 
 
 def _servos(r: _Values, t: Any) -> ServoGains:
-    """``[servos]``: the actuated joints' servo gains, each optional (its default: :data:`~fpm_sim.architecture.description.SERVO_SOURCE`)."""
+    """``[servos]``: the actuated joints' servo gains, each optional (its default:
+    :data:`~fpm_sim.architecture.description.SERVO_SOURCE`)."""
     keys = ("stiffness_nm_per_rad", "damping_nms_per_rad", "stiffness_n_per_m", "damping_ns_per_m")
     table = _keys(t, "servos", set(keys))
     d = ServoGains()

@@ -53,8 +53,9 @@ def _check_numbers(args: argparse.Namespace) -> None:
 
 
 def _path(args: argparse.Namespace, machine: Any) -> Any:
-    """The commanded path: the 3RRR's :class:`~fpm_sim.sim.trajectory.MovePath`, or a described architecture's ``TaskPath`` (its task
-    coordinates; an end coordinate not given is the start's, x 30 mm further when none is given)."""
+    """The commanded path: the 3RRR's :class:`~fpm_sim.sim.trajectory.MovePath`, or a described architecture's
+    ``TaskPath`` (its task coordinates; an end coordinate not given is the start's, x 30 mm further when none is
+    given)."""
     from fpm_sim.architecture import Description
     from fpm_sim.kinematics import Pose
     from fpm_sim.sim.task import TaskPath, pose_vector

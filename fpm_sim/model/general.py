@@ -8,10 +8,10 @@ Built with :class:`mujoco.MjSpec` like the 3RRR's own builder, with every body p
   own frame (x along the link, y along the section's ``thickness_m``, z along its ``height_m``);
 - actuated joints are locked (``motors="locked"``, the default: no joint, the next body is rigid on the one before;
   what modal analysis uses) or position servos (``motors="servo"``: a hinge or slide with the description's servo
-  stiffness and damping about the assembled coordinate, kind ``motor``, :class:`~fpm_sim.architecture.description.ServoGains`; what rollouts with
-  motor torques and moves drive); passive joints are MuJoCo
-  joints on the next body (revolute: hinge, prismatic: slide, universal: two hinges, spherical: ball), at the
-  joint's centre;
+  stiffness and damping about the assembled coordinate, kind ``motor``,
+  :class:`~fpm_sim.architecture.description.ServoGains`; what rollouts with motor torques and moves drive);
+  passive joints are MuJoCo joints on the next body (revolute: hinge, prismatic: slide, universal: two hinges,
+  spherical: ball), at the joint's centre;
 - a joint's lump sits on the body before it (the previous link's end); a link's ``end_lump`` on its end;
 - the end effector (its lumps and attachment points) is a child of the first chain that ends on it, through that
   chain's end joint; every other chain closes its loop with an equality: a ``connect`` for a spherical end joint, a
