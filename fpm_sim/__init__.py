@@ -31,6 +31,7 @@ else keyword-only; the model options are one ``options=fs.ModelOptions(...)``::
     fs.modes(arm, q={"shoulder": 0.3})        # posed in joint space (rad, m)
     fs.check_requirements(fs.load_requirements("fpm-requirements.toml"), cfg)  # docs/testing.md
     fs.predict_bands("posterior.nc", pose)    # median and 5-95 % bands over a posterior's draws
+    fs.plan_tests("posterior.nc", k=3)        # which measurements would narrow those bands most
 
 Every result keeps :class:`fpm_sim.results.Result`: ``.to_dict()`` (JSON-ready), ``.table()`` (text) and
 ``.plot(ax=None)`` (a ``matplotlib`` ``Figure``); frequencies over poses are ``.to_xarray()``.
@@ -75,6 +76,7 @@ _API = {
     "load_requirements": "fpm_sim.study.requirements",
     "check_requirements": "fpm_sim.study.requirements",
     "predict_bands": "fpm_sim.api",
+    "plan_tests": "fpm_sim.api",
 }
 
 __all__ = ["__version__", *_API]

@@ -60,6 +60,7 @@ __all__ = [
     "impact",
     "modes",
     "move",
+    "plan_tests",
     "predict_bands",
     "readability",
     "reduce",
@@ -1264,6 +1265,7 @@ def export_mjcf(
 if TYPE_CHECKING:
     from pathlib import Path
 
+    from fpm_sim.study.planning import PlanResult, Target
     from fpm_sim.study.posterior import Posterior, PredictiveBands
 
 
@@ -1316,4 +1318,82 @@ def predict_bands(
     pose_list = [_pose(None)] if poses is None else [poses] if isinstance(poses, Pose) else list(poses)
     return study_posterior.predict_bands(
         post, pose_list, n_draws=draws, seed=seed, n_modes=n_modes, options=opts, engine=EngineOptions(workers=workers)
+    )
+
+
+def plan_tests(
+    posterior: Posterior | str | Path | None = None,
+    *,
+    candidates: str | Sequence[Pose] = "study",
+    quantities: Sequence[str] = ("f1", "f1+f2", "f1..f3"),
+    target: Target | Sequence[Pose] | None = None,
+    k: int = 3,
+    sigma_rel: float | None = None,
+    draws: int | None = 200,
+    outcomes: int = 64,
+    seed: int = 0,
+    options: ModelOptions | None = None,
+    workers: int | None = None,
+) -> PlanResult:
+    """Plan the next tests: rank candidate measurements by the target's expected band after each, choose ``k``.
+
+    Each candidate's value is how much it is expected to narrow the target's band under the posterior; ``k`` are
+    chosen greedily (:mod:`fpm_sim.study.plan`).
+
+    Parameters
+    ----------
+    posterior
+        A :class:`fpm_sim.study.posterior.Posterior` or the path of its file (default: the embedded default's).
+    candidates
+        ``"study"`` (the study's 25 cells), ``"grid"`` (the workspace every 50 mm) or poses of your own.
+    quantities
+        What each candidate pose measures: any of ``"f1"``, ``"f1+f2"``, ``"f1..f3"``.
+    target
+        Where predictions matter: a :class:`fpm_sim.study.planning.Target` (e.g. a requirement's, with its level),
+        poses (f1's band there), or ``None``: f1 over the workspace every 50 mm.
+    k
+        Measurements to choose.
+    sigma_rel
+        The planned measurement's sd relative to the frequency (default: the posterior's data's).
+    draws, outcomes, seed
+        Posterior draws used, simulated outcomes per set, and their seed.
+    options
+        Pose-loop model options (default: the posterior's own resolution).
+    workers
+        Local Dask workers of the pose loop.
+    """
+    from fpm_sim.batch.engine import EngineOptions
+    from fpm_sim.model.options import ModelOptions
+    from fpm_sim.study import planning
+    from fpm_sim.study import posterior as study_posterior
+
+    if posterior is None:
+        posterior = study_posterior.default_posterior_path()
+        if posterior is None:
+            raise study_posterior.PosteriorError(
+                "no posterior shipped", parameter="posterior", hint="give posterior.nc"
+            )
+    post = (
+        posterior
+        if isinstance(posterior, study_posterior.Posterior)
+        else study_posterior.Posterior.from_netcdf(posterior)
+    )
+    if candidates == "study":
+        cands = planning.study_candidates(quantities)
+    elif candidates == "grid":
+        cands = planning.grid_candidates(post, quantities, step_mm=50.0)
+    elif isinstance(candidates, str):
+        raise planning.PlanError(f"unknown {candidates!r}", parameter="candidates", hint="'study', 'grid' or poses")
+    else:
+        cands = planning.candidates_of(list(candidates), quantities)
+    if target is None:
+        tgt = planning.workspace_target(post)
+    elif isinstance(target, planning.Target):
+        tgt = target
+    else:
+        tgt = planning.Target(tuple(target), 1, None, "f1 at the given poses")
+    opts = _options(options) or ModelOptions(segments=post.segments, axial=False, gravity=False)
+    return planning.plan_tests(
+        post, cands, tgt, k=k, sigma_rel=sigma_rel, n_draws=draws, outcomes=outcomes, seed=seed, options=opts,
+        engine=EngineOptions(workers=workers),
     )

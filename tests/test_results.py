@@ -204,7 +204,22 @@ BUILDERS = {
     "CheckReport": lambda: _check_report(),
     "Calibration": lambda: _calibration(),
     "LeaveOneOut": lambda: _leave_one_out(),
+    "PlanResult": lambda: _plan(),
 }
+
+
+def _plan():
+    """A small plan on the shipped posterior: 12 draws, two candidate poses, two target poses."""
+    return _quiet_call(
+        fs.plan_tests,
+        candidates=[fs.Pose.from_mm(0, 0, 0.2), fs.Pose.from_mm(50, 50, 0.2)],
+        quantities=["f1"],
+        target=[fs.Pose.from_mm(0, 50, 0.0), fs.Pose.from_mm(-50, 0, 0.0)],
+        k=1,
+        draws=12,
+        outcomes=8,
+        workers=1,
+    )
 
 
 def _leave_one_out():

@@ -78,6 +78,7 @@ COMMAND_MODULES: list[str] = [
     "fpm_sim.cli.identify",
     "fpm_sim.cli.ema",
     "fpm_sim.cli.check",
+    "fpm_sim.cli.plan_tests",
 ]
 """Command modules beyond the core ones (each exposes ``register(subparsers)``)."""
 

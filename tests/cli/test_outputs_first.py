@@ -59,6 +59,7 @@ OUTPUTS: list[tuple[str, list[str], str, str]] = [
     ("ema", ["{tmp}/frf.csv"], "--out", ""),
     ("check", ["{tmp}/req.toml"], "--junit-xml", ".xml"),
     ("check", ["{tmp}/req.toml"], "--plot", ".png"),
+    ("plan-tests", [], "--out", ""),
     (
         "import",
         ["{tmp}/m.xml", "--flexible", "arm", "--section", "rect:25x6mm", "--material", "steel"],

@@ -1,0 +1,479 @@
+"""What to measure next, on a posterior: candidates and target from poses, the draws through the pose loop, and
+the plan as a result (:func:`plan_tests`; the method is :mod:`fpm_sim.study.plan`'s).
+
+Candidates are the pairs (pose, quantity) of the given poses and quantities (:data:`~fpm_sim.study.plan.QUANTITIES`:
+``f1``, ``f1+f2``, ``f1..f3``, the modes an experimental modal analysis labels at the pose). The target is
+frequency ``mode`` at the target poses: its 90 % band (default), or, with a level ``f_min_hz``, whether it is
+at least that level (a requirement). The draws' frequencies at every candidate and target pose come from one
+call of the pose loop (:func:`fpm_sim.study.posterior.predict_bands`), at the likelihood's resolution.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import time
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fpm_sim.batch.engine import EngineOptions
+from fpm_sim.errors import FpmSimWarning
+from fpm_sim.kinematics import SINGULAR_TOL, Pose, assemble_many
+from fpm_sim.model.options import ModelOptions
+from fpm_sim.study.plan import (
+    BAND_Z,
+    QUANTITIES,
+    Ensemble,
+    PlanError,
+    PlanStep,
+    Score,
+    describe_candidates,
+    greedy_plan,
+    jsonable_score,
+)
+from fpm_sim.study.posterior import Posterior, predict_bands
+from fpm_sim.study.sweep import dense_grid
+
+__all__ = ["DEFAULT_DRAWS", "Candidate", "PlanResult", "Target", "plan_tests", "workspace_target"]
+
+DEFAULT_DRAWS = 200
+"""Posterior draws the plan uses by default: a single measurement at 2 % keeps a few hundred of 200 draws'
+weight (effective sample size), enough for a band's 5 % and 95 % points; fewer collapse sooner."""
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One candidate measurement: a pose and the modes read there."""
+
+    pose: Pose
+    quantity: str
+    """A key of :data:`~fpm_sim.study.plan.QUANTITIES`."""
+    label: str = ""
+
+    @property
+    def modes(self) -> tuple[int, ...]:
+        return QUANTITIES[self.quantity]
+
+    def name(self) -> str:
+        p = self.pose
+        at = self.label or f"({p.x_m * 1e3:g}, {p.y_m * 1e3:g}) mm, phi {p.phi_rad:g}"
+        return f"{self.quantity} at {at}"
+
+
+@dataclass(frozen=True)
+class Target:
+    """Where the predictions matter: frequency ``mode`` at ``poses``; its band, or (``f_min_hz`` given) whether it
+    is at least that level."""
+
+    poses: tuple[Pose, ...]
+    mode: int = 1
+    f_min_hz: float | None = None
+    description: str = "target poses"
+
+    @property
+    def kind(self) -> str:
+        return "band" if self.f_min_hz is None else "requirement"
+
+
+def candidates_of(
+    poses: Sequence[Pose], quantities: Sequence[str], labels: Sequence[str] | None = None
+) -> list[Candidate]:
+    """Every (pose, quantity) pair, refusing an unknown quantity by name."""
+    for q in quantities:
+        if q not in QUANTITIES:
+            raise PlanError(f"unknown quantity {q!r}", parameter="quantities", hint=f"use {', '.join(QUANTITIES)}")
+    if not quantities:
+        raise PlanError("no quantity to measure", parameter="quantities", hint=f"use {', '.join(QUANTITIES)}")
+    if labels is not None and len(labels) != len(poses):
+        raise PlanError(f"{len(labels)} labels for {len(poses)} poses", parameter="labels")
+    return [Candidate(p, q, labels[i] if labels else "") for i, p in enumerate(poses) for q in quantities]
+
+
+def workspace_target(posterior: Posterior, *, step_mm: float = 50.0, phi_rad: float = 0.0, mode: int = 1) -> Target:
+    """The default target: frequency ``mode`` over the posterior median description's reachable, non-singular
+    workspace on a ``step_mm`` grid."""
+    cfg = posterior.median_config()
+    grid = dense_grid(cfg, step_mm=step_mm, phi_rad=phi_rad)
+    many = assemble_many(cfg.geometry, [p.x_m for p in grid], [p.y_m for p in grid], [p.phi_rad for p in grid])
+    keep = many.reachable & (many.singularity >= SINGULAR_TOL)
+    poses = tuple(p for p, k in zip(grid, keep) if k)
+    return Target(poses, mode, None, f"f{mode} over the workspace ({step_mm:g} mm grid, phi {phi_rad:g} rad)")
+
+
+def _discrepancy(posterior: Posterior, index: np.ndarray, poses: Sequence[Pose]) -> tuple[np.ndarray, np.ndarray]:
+    """``(shift, sd)``, each ``(len(index), len(poses))``, zero where the posterior has no discrepancy."""
+    shift, sd = posterior.discrepancy_at(index, poses)
+    shape = (len(index), len(poses))
+    sh = np.zeros(shape) if shift is None else np.broadcast_to(np.asarray(shift, float), shape)
+    if sd is None:
+        d = np.zeros(shape)
+    else:
+        d_arr = np.asarray(sd, float)
+        d = np.broadcast_to(d_arr[:, None] if d_arr.ndim == 1 else d_arr, shape)
+    return np.array(sh), np.array(d)
+
+
+def _sigma_rel(posterior: Posterior, sigma_rel: float | None) -> float:
+    """The measurement's relative sd: given, or the posterior's data's median (the same rig)."""
+    if sigma_rel is None:
+        if posterior.data is None:
+            raise PlanError(
+                "the posterior holds no data to take the measurement's sd from",
+                parameter="sigma_rel",
+                hint="give the planned measurement's relative sd (e.g. 0.02 for 2 %)",
+            )
+        return float(np.median(posterior.data.sigma_hz / posterior.data.measured_hz))
+    if not (math.isfinite(sigma_rel) and sigma_rel > 0):
+        raise PlanError("must be > 0", parameter="sigma_rel", value=sigma_rel, hint="e.g. 0.02 for 2 %")
+    return float(sigma_rel)
+
+
+def plan_tests(
+    posterior: Posterior,
+    candidates: Sequence[Candidate],
+    target: Target,
+    *,
+    k: int = 3,
+    sigma_rel: float | None = None,
+    n_draws: int | None = DEFAULT_DRAWS,
+    outcomes: int = 64,
+    seed: int = 0,
+    ess_min: float = 20.0,
+    options: ModelOptions | None = None,
+    engine: EngineOptions | None = None,
+) -> PlanResult:
+    """Rank single measurements and choose ``k`` greedily by the target's expected spread after them.
+
+    Parameters
+    ----------
+    posterior
+        The calibration's posterior (:meth:`Posterior.from_netcdf`).
+    candidates
+        The candidate measurements (:func:`candidates_of`).
+    target
+        Where the predictions matter (:func:`workspace_target`, or poses of your own).
+    k
+        How many measurements to choose (1 .. the number of candidates).
+    sigma_rel
+        The planned measurement's sd relative to the frequency (default: the posterior's data's median).
+    n_draws, seed
+        Posterior draws used (``None``: all) and which (:meth:`Posterior.draws`); ``seed`` also seeds the outcomes.
+    outcomes
+        Simulated outcomes per set (the Monte Carlo size of each expectation).
+    ess_min
+        Effective sample size below which an outcome's re-weighting counts as collapsed (Bayes-linear update).
+    options, engine
+        The pose loop's discretisation (default: the likelihood's resolution) and where it runs.
+    """
+    if not candidates:
+        raise PlanError("no candidate measurements", parameter="candidates", hint="give at least one pose")
+    if not target.poses:
+        raise PlanError("the target has no poses", parameter="target", hint="give at least one pose to predict at")
+    if not 1 <= k <= len(candidates):
+        raise PlanError(f"must be 1..{len(candidates)} (the number of candidates)", parameter="k", value=k)
+    if not 1 <= target.mode <= 3:
+        raise PlanError("must be 1..3", parameter="target.mode", value=target.mode)
+    sig = _sigma_rel(posterior, sigma_rel)
+    if posterior.length_scale_m is not None:
+        warnings.warn(
+            "the posterior's discrepancy is a Gaussian process: the plan conditions it on the calibration's data, "
+            "not on the planned outcomes, so it understates what measuring near a target pose buys",
+            FpmSimWarning,
+            stacklevel=2,
+        )
+    t0 = time.perf_counter()
+    ens, n_used = _ensemble(
+        posterior, candidates, target, sig, n_draws=n_draws, seed=seed, options=options, engine=engine
+    )
+    before, singles, steps = greedy_plan(ens, k, outcomes=outcomes, seed=seed, mode=target.kind, ess_min=ess_min)
+    floor = float(BAND_Z * np.median(ens.target_disc)) if target.kind == "band" else math.nan
+    return PlanResult(
+        list(candidates), target, before, singles, steps, sig, n_used, outcomes, ess_min, time.perf_counter() - t0,
+        posterior.base.name, discrepancy_floor=floor,
+    )  # fmt: skip
+
+
+def _ensemble(
+    posterior: Posterior,
+    candidates: Sequence[Candidate],
+    target: Target,
+    sigma_rel: float,
+    *,
+    n_draws: int | None,
+    seed: int,
+    options: ModelOptions | None,
+    engine: EngineOptions | None,
+) -> tuple[Ensemble, int]:
+    """The draws' predictions at every candidate and target pose, in one call of the pose loop; and the number
+    of draws used."""
+    cand_poses = list(dict.fromkeys(c.pose for c in candidates))
+    poses = cand_poses + list(target.poses)
+    used = describe_candidates([c.modes for c in candidates])
+    n_modes = max(used.shape[1], target.mode)
+    bands = predict_bands(posterior, poses, n_draws=n_draws, seed=seed, n_modes=n_modes, options=options, engine=engine)
+    f = bands.frequencies_hz  # (S, P, M)
+    shift, disc = _discrepancy(posterior, bands.draw_index, poses)
+    where = {p: i for i, p in enumerate(cand_poses)}
+    ci = np.array([where[c.pose] for c in candidates])
+    ti = np.arange(len(cand_poses), len(poses))
+    ens = Ensemble(
+        cand_hz=f[:, ci, : used.shape[1]],
+        cand_used=used,
+        cand_shift=shift[:, ci],
+        cand_disc=disc[:, ci],
+        sigma_rel=sigma_rel,
+        target_hz=f[:, ti, target.mode - 1],
+        target_shift=shift[:, ti],
+        target_disc=disc[:, ti],
+        f_min_hz=None if target.f_min_hz is None else np.full(len(ti), target.f_min_hz),
+    )
+    return ens, len(bands.draw_index)
+
+
+@dataclass
+class PlanResult:
+    """The plan (:func:`plan_tests`): the target's spread now, every single candidate's expected spread after
+    it, and the greedy set with the spread after each step. Spreads are relative half-widths of the 90 % band
+    (``band`` target) or mean pass/fail entropies in bits (``requirement`` target)."""
+
+    candidates: list[Candidate]
+    target: Target
+    before: Score
+    singles: list[Score]
+    steps: list[PlanStep]
+    sigma_rel: float
+    n_draws: int
+    outcomes: int
+    ess_min: float
+    elapsed_s: float
+    name: str = ""
+    discrepancy_floor: float = math.nan
+    """The band target's half-width if the parameters were known exactly: the model discrepancy's alone
+    (1.645 times its posterior median), which no measurement elsewhere narrows under an independent discrepancy."""
+
+    def _fmt(self, v: float) -> str:
+        return f"+-{100 * v:.1f} %" if self.target.kind == "band" else f"{v:.3f} bits"
+
+    @property
+    def after(self) -> float:
+        """The target's expected spread after the whole set."""
+        return self.steps[-1].score.spread
+
+    @property
+    def collapsed(self) -> int:
+        """Outcomes whose re-weighting collapsed, over every set scored in the plan's steps and singles."""
+        return sum(s.collapsed for s in self.singles) + sum(p.score.collapsed for p in self.steps[1:])
+
+    def summary(self) -> str:
+        """The one line a person reads first."""
+        chosen = [self.candidates[p.candidate] for p in self.steps]
+        qs = sorted({c.quantity for c in chosen}, key=list(QUANTITIES).index)
+        what = " / ".join(qs)
+        n = len(chosen)
+        where = f"at these {n} poses" if n > 1 else "at this pose"
+        if self.target.kind == "band":
+            return (
+                f"measuring {what} {where} is expected to narrow the median 90 % band of f{self.target.mode} from "
+                f"{self._fmt(self.before.spread)} to {self._fmt(self.after)}"
+            )
+        return (
+            f"measuring {what} {where} is expected to lower the pass/fail uncertainty of f{self.target.mode} >= "
+            f"{self.target.f_min_hz:g} Hz from {self._fmt(self.before.spread)} to {self._fmt(self.after)} (entropy)"
+        )
+
+    def ranking(self) -> list[int]:
+        """Candidates by their single measurement's expected spread, best first (NaN last)."""
+        key = [(math.inf if math.isnan(s.spread) else s.spread, i) for i, s in enumerate(self.singles)]
+        return [i for _, i in sorted(key)]
+
+    def rows(self) -> list[dict[str, Any]]:
+        """The plan's table: one row per chosen measurement, the spread after the set up to it and the gain."""
+        out = []
+        prev = self.before.spread
+        for r, step in enumerate(self.steps, 1):
+            c, s = self.candidates[step.candidate], step.score
+            out.append(
+                {
+                    "rank": r,
+                    "x_mm": c.pose.x_m * 1e3,
+                    "y_mm": c.pose.y_m * 1e3,
+                    "phi_rad": c.pose.phi_rad,
+                    "label": c.label,
+                    "quantity": c.quantity,
+                    "spread_after": s.spread,
+                    "gain": prev - s.spread,
+                    "ess_median": s.ess_median,
+                    "collapsed_outcomes": s.collapsed,
+                }
+            )
+            prev = s.spread
+        return out
+
+    def table(self) -> str:
+        unit = "90 % band half-width" if self.target.kind == "band" else "pass/fail entropy"
+        lines = [
+            self.summary(),
+            f"  target: {self.target.description}; now {self._fmt(self.before.spread)} ({unit}, "
+            f"{'median' if self.target.kind == 'band' else 'mean'} over {len(self.target.poses)} poses)",
+            f"  {self.n_draws} draws, {self.outcomes} simulated outcomes per set, measurement sd "
+            f"{100 * self.sigma_rel:.2f} %",
+        ]
+        if math.isfinite(self.discrepancy_floor):
+            lines.append(
+                f"  the model discrepancy at its posterior median alone gives {self._fmt(self.discrepancy_floor)}: "
+                "new data narrow the rest, and the discrepancy only by pinning its size"
+            )
+        lines.append(f"  {'rank':>4}  {'pose':<34} {'quantity':<8} {'after':>12} {'gain':>10} {'ESS':>7}")
+        for r in self.rows():
+            pose = r["label"] or f"({r['x_mm']:g}, {r['y_mm']:g}) mm, {r['phi_rad']:g} rad"
+            lines.append(
+                f"  {r['rank']:>4}  {pose:<34} {r['quantity']:<8} {self._fmt(r['spread_after']):>12} "
+                f"{self._fmt(r['gain']).replace('+-', ''):>10} {r['ess_median']:>7.0f}"
+            )
+        if self.collapsed:
+            lines.append(
+                f"  note: {self.collapsed} simulated outcomes re-weighted to an effective sample size below "
+                f"{self.ess_min:g}; their update is the Bayes-linear one (module fpm_sim.study.plan)"
+            )
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict[str, Any]:
+        singles = []
+        for i in self.ranking():
+            c, s = self.candidates[i], self.singles[i]
+            singles.append(
+                {
+                    "x_mm": c.pose.x_m * 1e3,
+                    "y_mm": c.pose.y_m * 1e3,
+                    "phi_rad": c.pose.phi_rad,
+                    "label": c.label,
+                    "quantity": c.quantity,
+                    **jsonable_score(s),
+                    "gain": self.before.spread - s.spread,
+                }
+            )
+        return {
+            "summary": self.summary(),
+            "target": {
+                "kind": self.target.kind,
+                "mode": self.target.mode,
+                "f_min_hz": self.target.f_min_hz,
+                "description": self.target.description,
+                "n_poses": len(self.target.poses),
+            },
+            "spread_now": self.before.spread,
+            "spread_after": self.after,
+            "discrepancy_floor": self.discrepancy_floor,
+            "plan": self.rows(),
+            "singles": singles,
+            "sigma_rel": self.sigma_rel,
+            "n_draws": self.n_draws,
+            "outcomes": self.outcomes,
+            "ess_min": self.ess_min,
+            "collapsed_outcomes": self.collapsed,
+            "elapsed_s": self.elapsed_s,
+        }
+
+    def plot(self, ax: Any = None) -> Any:
+        """The expected gain of one measurement of the best quantity at each candidate pose over the workspace,
+        the chosen poses numbered."""
+        import matplotlib.pyplot as plt
+
+        fig = ax.figure if ax is not None else plt.figure(figsize=(6.4, 5.2))
+        ax = ax if ax is not None else fig.add_subplot()
+        best: dict[Pose, float] = {}
+        for c, s in zip(self.candidates, self.singles):
+            g = self.before.spread - s.spread
+            if math.isfinite(g):
+                best[c.pose] = max(best.get(c.pose, -math.inf), g)
+        xs = np.array([p.x_m * 1e3 for p in best])
+        ys = np.array([p.y_m * 1e3 for p in best])
+        gain = np.array(list(best.values())) * (100.0 if self.target.kind == "band" else 1.0)
+        sc = ax.scatter(xs, ys, c=gain, s=160, cmap="viridis", edgecolors="k", linewidths=0.4)
+        unit = "points of the 90 % half-width, %" if self.target.kind == "band" else "bits of entropy"
+        fig.colorbar(sc, ax=ax, label=f"expected gain ({unit})", shrink=0.85)
+        tx = [p.x_m * 1e3 for p in self.target.poses]
+        ty = [p.y_m * 1e3 for p in self.target.poses]
+        ax.scatter(tx, ty, s=6, c="0.6", marker=".", label="target poses", zorder=0)
+        for r, step in enumerate(self.steps, 1):
+            c = self.candidates[step.candidate]
+            ax.annotate(
+                f"{r}",
+                (c.pose.x_m * 1e3, c.pose.y_m * 1e3),
+                color="red",
+                fontsize=11,
+                fontweight="bold",
+                ha="center",
+                va="center",
+            )
+        ax.set_xlabel("x (mm)")
+        ax.set_ylabel("y (mm)")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_title(
+            f"Where to measure next: the expected gain of one measurement\nat each candidate pose; the chosen "
+            f"{len(self.steps)} numbered in red",
+            fontsize=10,
+        )
+        ax.legend(loc="lower right", fontsize=8)
+        return fig
+
+    def write(self, out_dir: str | Path) -> list[Path]:
+        """``plan.csv`` (the chosen set), ``candidates.csv`` (every single candidate, best first) and
+        ``gain_map.png`` into ``out_dir`` (which must exist)."""
+        out = Path(out_dir)
+        paths = [out / "plan.csv", out / "candidates.csv", out / "gain_map.png"]
+        _write_csv(paths[0], self.rows())
+        _write_csv(paths[1], self.to_dict()["singles"])
+        fig = self.plot()
+        fig.savefig(paths[2], dpi=130, bbox_inches="tight")
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
+        return paths
+
+
+def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
+    with path.open("w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+
+
+def study_candidates(quantities: Sequence[str]) -> list[Candidate]:
+    """The study's 25 cells (reading ``x+``, the shipped data's) as candidates, labelled ``row,col`` (mm)."""
+    from fpm_sim.study.poses import study_poses
+
+    sp = study_poses()
+    return candidates_of([p.pose for p in sp], quantities, [f"{p.row_mm:g},{p.col_mm:g}" for p in sp])
+
+
+def grid_candidates(posterior: Posterior, quantities: Sequence[str], *, step_mm: float) -> list[Candidate]:
+    """The posterior median description's reachable, non-singular workspace on a ``step_mm`` grid (phi 0)."""
+    return candidates_of(list(workspace_target(posterior, step_mm=step_mm).poses), quantities)
+
+
+def requirement_target(posterior: Posterior, path: str | Path, name: str | None = None) -> Target:
+    """The target of a requirements file's ``min_frequency`` requirement (``name``, else the first): its poses
+    (resolved on the posterior median description), mode and level."""
+    from fpm_sim.study.requirements import load_requirements
+
+    reqs = load_requirements(path)
+    mins = [r for r in reqs.requirements if r.kind == "min_frequency"]
+    if name is not None:
+        mins = [r for r in mins if r.name == name]
+    if not mins:
+        what = f"no min_frequency requirement named {name!r}" if name else "no min_frequency requirement"
+        raise PlanError(f"{path}: {what}", parameter="target", hint="name one of the file's min_frequency requirements")
+    req = mins[0]
+    if not 1 <= req.mode <= 3:
+        raise PlanError(
+            f"{path}: requirement {req.name!r} is on mode {req.mode}", parameter="target", hint="modes 1..3"
+        )
+    poses = req.poses.resolve(posterior.median_config(), f"requirement {req.name!r}")
+    assert all(isinstance(p, Pose) for p in poses)
+    return Target(tuple(p for p in poses if isinstance(p, Pose)), req.mode, req.at_least_hz, req.describe())
