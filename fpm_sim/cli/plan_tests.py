@@ -120,7 +120,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "plan-tests",
         help="which measurements would narrow the posterior's bands most",
         description="Rank candidate measurements (poses x quantities) by how much each is expected to narrow the "
-        "target's 90 %% band (or the pass/fail uncertainty of a requirement) under the posterior, and choose --k of "
+        "target's 90 % band (or the pass/fail uncertainty of a requirement) under the posterior, and choose --k of "
         "them greedily. The outcomes come from the posterior predictive; each update re-weights the draws "
         "(docs/identification.md, 'Planning the next tests').",
     )

@@ -57,6 +57,7 @@ __all__ = [
     "PlanError",
     "PlanStep",
     "Score",
+    "band_half_widths",
     "greedy_plan",
     "score_set",
     "target_spread",
@@ -161,6 +162,14 @@ def target_spread(ens: Ensemble, weights: np.ndarray, mode: str = "band") -> np.
     w = np.atleast_2d(np.asarray(weights, float))
     if mode == "requirement":
         return _entropy_spread(ens, w)
+    out: np.ndarray = np.nanmedian(band_half_widths(ens, w), axis=1)
+    return out
+
+
+def band_half_widths(ens: Ensemble, w: np.ndarray) -> np.ndarray:
+    """``(M, T)`` the 90 % band's relative half-width ``(q95 - q05) / (2 q50)`` at each target pose under each row
+    of weights ``w`` (``(M, S)``): the weighted quantiles of the draws' predictive points (NaN where no draw with
+    weight reaches the pose)."""
     vals, draw = ens.target_samples()
     wt = w[:, draw]  # (M, T, S*Q): each point carries its draw's weight
     wt = np.where(np.isfinite(vals)[None], wt, 0.0)
@@ -172,9 +181,8 @@ def target_spread(ens: Ensemble, weights: np.ndarray, mode: str = "band") -> np.
         qs.append(np.take_along_axis(np.broadcast_to(vals, wt.shape), idx[:, :, None], axis=2)[:, :, 0])
     q05, q50, q95 = qs
     with np.errstate(invalid="ignore", divide="ignore"):
-        half = np.where(tot[:, :, 0] > 0, (q95 - q05) / (2.0 * q50), np.nan)
-    out: np.ndarray = np.nanmedian(half, axis=1)
-    return out
+        half: np.ndarray = np.where(tot[:, :, 0] > 0, (q95 - q05) / (2.0 * q50), np.nan)
+    return half
 
 
 def _entropy_spread(ens: Ensemble, w: np.ndarray) -> np.ndarray:
@@ -279,28 +287,43 @@ def _bayes_linear(
     mode: str,
 ) -> np.ndarray:
     """The target spread after a linear-Gaussian (ensemble Kalman) update of the draws' ensemble by the set's
-    measurements, for the collapsed outcomes (their measured values enter through the updated mean only)."""
+    measurements, for the collapsed outcomes (their measured values enter through the updated mean).
+
+    Per target pose, over the draws that reach it and every measured pose: the update's variance and mean
+    (``var - C_gy C_yy^-1 C_yg``, ``mean + C_gy C_yy^-1 (y - E y)``). A band target keeps its quantile band and
+    scales it by the update (half-width times ``sqrt(var_after / var_now) mean_now / mean_after``), so that a
+    collapsed outcome is scored on the same footing as a re-weighted one; a requirement target takes the
+    Gaussian's pass probability."""
     mu, sd = ens.means(), ens.sds()
     cols = [(c, j) for c in members for j in np.flatnonzero(ens.cand_used[c])]
     y_s = np.stack([mu[:, c, j] for c, j in cols], axis=1)  # (S, n)
     noise = np.stack([sd[:, c, j] for c, j in cols], axis=1)
-    ok = np.isfinite(y_s).all(axis=1) & np.isfinite(ens.target_hz).all(axis=1)
-    y_s, noise = y_s[ok], noise[ok]
-    g = ens.target_hz[ok] * (1.0 + ens.target_shift[ok])  # (S', T) the draws' target means
-    g_var_in = (ens.target_hz[ok] * ens.target_disc[ok]) ** 2
-    cy = np.cov(y_s, rowvar=False).reshape(len(cols), len(cols)) + np.diag(np.mean(noise**2, axis=0))
-    cgy = (g - g.mean(axis=0)).T @ (y_s - y_s.mean(axis=0)) / max(len(g) - 1, 1)  # (T, n)
-    var = g.var(axis=0, ddof=1) + g_var_in.mean(axis=0) - np.einsum("tn,nm,tm->t", cgy, np.linalg.inv(cy), cgy)
-    var = np.maximum(var, 0.0)
+    ok_y = np.isfinite(y_s).all(axis=1)
+    g = ens.target_hz * (1.0 + ens.target_shift)  # (S, T) the draws' target means
+    valid = ok_y[:, None] & np.isfinite(g)  # (S, T)
+    n_t = np.maximum(valid.sum(axis=0), 2)
+    gz = np.where(valid, g, 0.0)
+    g_mean = gz.sum(axis=0) / n_t
+    y_mean = y_s[ok_y].mean(axis=0)
+    dy = np.where(ok_y[:, None], y_s - y_mean, 0.0)
+    dg = np.where(valid, g - g_mean, 0.0)
+    var_in = np.where(valid, (ens.target_hz * ens.target_disc) ** 2, 0.0).sum(axis=0) / n_t
+    var_now = (dg**2).sum(axis=0) / (n_t - 1) + var_in
+    cy = np.atleast_2d(np.cov(y_s[ok_y], rowvar=False)) + np.diag(np.mean(noise[ok_y] ** 2, axis=0))
+    cgy = dg.T @ dy / (n_t - 1)[:, None]  # (T, n)
+    gain = np.linalg.solve(cy, cgy.T)  # (n, T)
+    var = np.maximum(var_now - np.einsum("tn,nt->t", cgy, gain), 0.0)
     idx = np.flatnonzero(keep)[bad]
     y_obs = np.array([[mu[out.draw[i], c, j] + sd[out.draw[i], c, j] * out.z[i, c, j] for c, j in cols] for i in idx])
-    mean = g.mean(axis=0)[None] + (y_obs - y_s.mean(axis=0)[None]) @ np.linalg.solve(cy, cgy.T)  # (B, T)
+    mean = g_mean[None] + (y_obs - y_mean[None]) @ gain  # (B, T)
     if mode == "requirement":
         assert ens.f_min_hz is not None
         p = ndtr((mean - ens.f_min_hz[None]) / np.sqrt(np.maximum(var, 1e-300))[None])
         result: np.ndarray = np.mean(_bits(p), axis=1)
         return result
-    half = BAND_Z * np.sqrt(var)[None] / mean
+    half_now = band_half_widths(ens, np.ones((1, ens.n_draws)))[0]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        half = half_now[None] * np.sqrt(var / var_now)[None] * (g_mean[None] / mean)
     result = np.nanmedian(half, axis=1)
     return result
 
