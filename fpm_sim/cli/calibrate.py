@@ -121,8 +121,7 @@ def _described_problem(args: argparse.Namespace) -> tuple[Any, str]:
     """A described machine's problem (:mod:`fpm_sim.study.calibrate.described`): priors on dotted paths (the priors
     file and/or ``--free PATH=lo:hi``), its measured file, the row of a pose the file's machine cannot reach named."""
     from fpm_sim.architecture import load_description
-    from fpm_sim.study.calibrate.described import DescribedCalibrationProblem, described_priors
-    from fpm_sim.study.identify.described import check_measured_poses
+    from fpm_sim.study.calibrate.described import described_problem
 
     load_machine(args, "calibrate")  # an imported model is refused by name
     for flag, given in (("--subsystems", args.subsystems), ("--reading", args.reading)):
@@ -139,10 +138,8 @@ def _described_problem(args: argparse.Namespace) -> tuple[Any, str]:
     if args.priors is None and not args.free:
         raise CliError("--priors or --free: give the priors of the free dotted paths (a file, or PATH=lo:hi)")
     desc = load_description(args.config)
-    priors = described_priors(desc, args.priors, args.free)
     data = read_described_measured(args, desc)
-    problem = DescribedCalibrationProblem(desc, priors, data, segments=args.segments)
-    check_measured_poses(desc, data, problem.options)
+    problem = described_problem(desc, data, priors=args.priors, free=args.free, segments=args.segments)
     return problem, data.source
 
 

@@ -41,6 +41,7 @@ from fpm_sim.study.calibrate.priors import Prior, PriorError, Priors, prior_name
 from fpm_sim.study.calibrate.problem import CalibrationError, FrequencyLikelihood
 from fpm_sim.study.identify.described import (
     TaskMeasurements,
+    check_measured_poses,
     edited_description,
     parse_free_paths,
     task_frequencies,
@@ -53,7 +54,9 @@ __all__ = [
     "ONE_CLASS",
     "DescribedCalibrationProblem",
     "TaskObservation",
+    "check_prior_paths",
     "described_priors",
+    "described_problem",
     "median_description",
 ]
 
@@ -253,6 +256,26 @@ def described_priors(
     if not items and not listed:
         raise PriorError("no free parameter", parameter="priors", hint='give [parameters."PATH"] tables')
     return read_priors(where, paths or listed, text=body + "".join(extra))
+
+
+def described_problem(
+    desc: Description,
+    data: TaskMeasurements,
+    *,
+    priors: str | Path | None,
+    free: str | None = None,
+    segments: int = 4,
+) -> DescribedCalibrationProblem:
+    """The calibration problem of ``desc`` (:func:`described_priors` from ``priors`` and ``free``; ``data`` read by
+    :func:`~fpm_sim.study.identify.described.read_task_measured_csv`); a measured frequency the file's own machine does
+    not compute (its pose unreachable or singular) is refused naming its row, before any sampling."""
+    if priors is None and not free:
+        raise PriorError(
+            "no priors", parameter="priors", hint='give a priors file ([parameters."PATH"] tables) or PATH=lo:hi bounds'
+        )
+    problem = DescribedCalibrationProblem(desc, described_priors(desc, priors, free), data, segments=segments)
+    check_measured_poses(desc, data, problem.options)
+    return problem
 
 
 def median_description(problem: DescribedCalibrationProblem, draws: np.ndarray, *, data_note: str) -> Description:
