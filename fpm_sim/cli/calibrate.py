@@ -19,7 +19,6 @@ from fpm_sim.cli.common import (
     emit,
     is_described,
     load_machine,
-    load_manipulator,
     workers_of,
 )
 from fpm_sim.cli.identify import GROUPS, add_data_args, read_data_args, read_described_measured
@@ -90,6 +89,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
 def _study_problem(args: argparse.Namespace) -> tuple[Any, str]:
     """The 3RRR's problem of the options (free groups, the study's data forms, rig tests) and its data note."""
+    from fpm_sim.config import Manipulator
     from fpm_sim.errors import FpmSimWarning
     from fpm_sim.study.calibrate import CalibrationProblem, read_priors
     from fpm_sim.study.identify import parameter_set
@@ -97,7 +97,8 @@ def _study_problem(args: argparse.Namespace) -> tuple[Any, str]:
     if args.priors is None:
         raise CliError("--priors: give the priors TOML file (e.g. fpm_sim/data/study_priors.toml)")
     args.free = args.free or DEFAULT_FREE
-    start = load_manipulator(args)
+    start = load_machine(args, "calibrate")  # the 3RRR's form; an imported model is refused by name
+    assert isinstance(start, Manipulator)
     groups, datasets, tests = read_data_args(args)
     observations = [o for ds in datasets for o in ds.observations]
     ps = parameter_set(start, groups)
@@ -123,7 +124,6 @@ def _described_problem(args: argparse.Namespace) -> tuple[Any, str]:
     from fpm_sim.architecture import load_description
     from fpm_sim.study.calibrate.described import described_problem
 
-    load_machine(args, "calibrate")  # an imported model is refused by name
     for flag, given in (("--subsystems", args.subsystems), ("--reading", args.reading)):
         if given:
             raise CliError(

@@ -178,7 +178,7 @@ class DescribedCalibrationProblem(FrequencyLikelihood):
         return "the file's working modes"
 
     def notes(self) -> dict[str, str]:
-        return {"compared": COMPARED, "classes": ONE_CLASS}
+        return {"compared": COMPARED, "working_mode": ONE_CLASS}
 
     def config(self, theta: np.ndarray) -> Description:
         """The description at ``theta``. Raises :class:`~fpm_sim.config.ConfigError` for an invalid file."""

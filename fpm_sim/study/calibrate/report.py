@@ -73,7 +73,7 @@ def render_report(cal: Calibration, *, command: str, data_note: str) -> str:
         f"Data: {data_note}. Free {'paths' if p.notes() else 'groups'}: {', '.join(p.groups)}; {p.segments} "
         "segments per link.",
         "",
-        *[f"{k.capitalize()}: {v}.\n" for k, v in p.notes().items()],
+        *[f"{k.replace('_', ' ').capitalize()}: {v}.\n" for k, v in p.notes().items()],
         f"Reproduce: `{command}`",
         "",
         "## Diagnostics",

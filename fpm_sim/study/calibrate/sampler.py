@@ -412,7 +412,7 @@ class Calibration:
         lines.append(
             f"measured values inside the 50 % / 90 % predictive bands: {c50.sum()}/{len(c50)} / {c90.sum()}/{len(c90)}"
         )
-        lines += [f"{k}: {v}" for k, v in self.problem.notes().items()]
+        lines += [f"{k.replace('_', ' ')}: {v}" for k, v in self.problem.notes().items()]
         if len(self.classes) > 1:
             lines.append("elbow-branch classes (each sampled on its own, weighted by its evidence):")
             lines += ["  " + c.line() for c in self.classes]
