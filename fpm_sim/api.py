@@ -1130,12 +1130,12 @@ def identify(
 
 
 def calibrate(
-    config: Manipulator | None = None,
+    config: Manipulator | Description | None = None,
     *,
-    priors: str | Path,
+    priors: str | Path | None = None,
     measured: Sequence[str | Path] = (),
     subsystems: str | Path | None = None,
-    free: Sequence[str] = ("geometry", "hardware", "section-height"),
+    free: Sequence[str] | None = None,
     reading: str | None = None,
     sigma_pct: float | None = None,
     segments: int = 4,
@@ -1147,14 +1147,21 @@ def calibrate(
     Parameters
     ----------
     config
-        The base description the free parameters are applied to; ``None``: the embedded one.
+        The base description the free parameters are applied to; ``None``: the embedded one. A described
+        architecture (:class:`~fpm_sim.architecture.description.Description` read from its file) is calibrated by
+        dotted paths into its file (:mod:`fpm_sim.study.calibrate.described`: one measured file in its task
+        coordinates, each ``fK_hz`` compared with its K-th lowest elastic mode, one class).
     priors
         The priors TOML file (one distribution and reason per free parameter; e.g.
-        ``fpm_sim/data/study_priors.toml``).
+        ``fpm_sim/data/study_priors.toml``); required on the 3RRR. On a described architecture its
+        ``[parameters."PATH"]`` tables name dotted paths.
     measured, subsystems, reading, sigma_pct
-        The data, as :func:`identify` reads them (the ``rig`` group is freed when rig tests are given).
+        The data, as :func:`identify` reads them (the ``rig`` group is freed when rig tests are given). A described
+        architecture takes one measured file and no rig tests or reading.
     free
-        Parameter groups sampled (:data:`fpm_sim.study.identify.GROUPS`).
+        Parameter groups sampled (:data:`fpm_sim.study.identify.GROUPS`; ``None``: geometry, hardware,
+        section-height); on a described architecture dotted paths, ``PATH`` (its prior in ``priors``) or
+        ``PATH=lo:hi`` (uniform between them); ``None``: every path ``priors`` names.
     segments
         Resolution (spring locations per link) of the likelihood's model.
     sampler
@@ -1164,10 +1171,19 @@ def calibrate(
     progress
         Show dynesty's progress line.
     """
+    from fpm_sim.architecture import Description
     from fpm_sim.study import identify as idf
-    from fpm_sim.study.calibrate import CalibrationProblem, read_priors, run_calibration
+    from fpm_sim.study.calibrate import CalibrationError, CalibrationProblem, read_priors, run_calibration
 
+    if isinstance(config, Description):
+        problem = _described_calibration(config, priors, measured, subsystems, free, reading, sigma_pct, segments)
+        return run_calibration(problem, sampler, progress=progress)
+    if priors is None:
+        raise CalibrationError(
+            "give the priors TOML file", parameter="priors", hint="e.g. fpm_sim/data/study_priors.toml"
+        )
     start = _config(config)
+    free = ("geometry", "hardware", "section-height") if free is None else free
     observations, tests, groups = _measured_data(measured, subsystems, free, reading, sigma_pct)
     names = idf.parameter_set(start, groups).names
     problem = CalibrationProblem(
@@ -1179,6 +1195,39 @@ def calibrate(
         segments=segments,
     )
     return run_calibration(problem, sampler, progress=progress)
+
+
+def _described_calibration(
+    desc: Description,
+    priors: str | Path | None,
+    measured: Sequence[str | Path],
+    subsystems: str | Path | None,
+    free: Sequence[str] | None,
+    reading: str | None,
+    sigma_pct: float | None,
+    segments: int,
+) -> Any:
+    """:func:`calibrate`'s problem on a described architecture.
+
+    See :func:`fpm_sim.study.calibrate.described.described_problem`.
+    """
+    from fpm_sim.study import identify as idf
+    from fpm_sim.study.calibrate import CalibrationError
+    from fpm_sim.study.calibrate.described import described_problem
+    from fpm_sim.study.identify.described import read_task_measured_csv
+
+    for name, given in (("subsystems", subsystems), ("reading", reading)):
+        if given is not None:
+            raise CalibrationError("is the 3RRR's (its rig tests, its table's reading)", parameter=name, hint="drop it")
+    if len(measured) != 1:
+        raise CalibrationError(
+            "give one measured file (its task coordinates' columns, f1_hz, ...)", parameter="measured"
+        )
+    sigma = idf.DEFAULT_SIGMA_PCT if sigma_pct is None else sigma_pct
+    data = read_task_measured_csv(measured[0], desc, sigma_pct=sigma)
+    return described_problem(
+        desc, data, priors=priors, free=None if free is None else ",".join(free), segments=segments
+    )
 
 
 def reproduce(

@@ -17,26 +17,27 @@ from fpm_sim.cli.common import (
     add_overwrite_arg,
     check_output_dir,
     emit,
-    load_manipulator,
+    is_described,
+    load_machine,
     workers_of,
 )
-from fpm_sim.cli.identify import GROUPS, add_data_args, read_data_args
+from fpm_sim.cli.identify import GROUPS, add_data_args, read_data_args, read_described_measured
 
 __all__ = ["cmd_calibrate", "register"]
 
 CHECKPOINT = "checkpoint.dynesty"
+DEFAULT_FREE = "geometry,hardware,section-height"
+"""The 3RRR's free groups when --free is not given."""
 RUN_FILE = "calibration.pkl"
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
     import pickle
 
-    from fpm_sim.errors import FpmSimWarning
     from fpm_sim.outputs import atomic_file
-    from fpm_sim.study.calibrate import CalibrationProblem, SamplerOptions, read_priors, run_calibration
+    from fpm_sim.study.calibrate import SamplerOptions, run_calibration
     from fpm_sim.study.calibrate.posterior import thin, write_config, write_posterior
     from fpm_sim.study.calibrate.report import write_report
-    from fpm_sim.study.identify import parameter_set
 
     out = Path(args.out)
     if args.resume:
@@ -44,22 +45,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             raise CliError(f"--resume: {out} holds no checkpoint ({CHECKPOINT}); run without --resume first")
     else:
         check_output_dir(out, "--out", overwrite=args.overwrite)
-    start = load_manipulator(args)
-    groups, datasets, tests = read_data_args(args)
-    observations = [o for ds in datasets for o in ds.observations]
-    ps = parameter_set(start, groups)
-    priors = read_priors(args.priors, ps.names)
-    problem = CalibrationProblem(
-        start, tuple(groups), priors, tuple(observations), tuple(tests), segments=args.segments
-    )
-    if problem.n_data < len(ps.names):
-        warnings.warn(
-            f"{problem.n_data} data for {len(ps.names)} free parameters: the data cannot determine them all; the "
-            "posterior of the undetermined combinations is their prior (read report.md's marginals against the "
-            "priors before using any value)",
-            FpmSimWarning,
-            stacklevel=1,
-        )
+    described = is_described(args)
+    problem, data_note = _described_problem(args) if described else _study_problem(args)
     opts = SamplerOptions(
         live_points=args.live_points,
         dlogz=args.dlogz,
@@ -86,18 +73,74 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             tmp.write_bytes(pickle.dumps(cal, protocol=4))
     command = cal.extra.get("command", command)
     _warn_if_runs_disagree(cal)
-    data_note = ", ".join([ds.source for ds in datasets] + ([Path(args.subsystems).name] if tests else []))
     write_posterior(cal, out / "posterior.nc", command=command)
     if args.thin:
         write_posterior(cal, out / "posterior_thin.nc", command=command, idx=thin(cal, args.thin, seed=args.seed))
-    write_config(cal, out / "config.toml", data_note=data_note, command=command)
+    median = "description.toml" if described else "config.toml"
+    write_config(cal, out / median, data_note=data_note, command=command)
     write_report(cal, out, command=command, data_note=data_note)
     emit(
         args,
         {"result": cal.to_dict(), "out": str(out)},
-        cal.table() + f"\nwrote {out}/posterior.nc, config.toml, report.md, figures",
+        cal.table() + f"\nwrote {out}/posterior.nc, {median}, report.md, figures",
     )
     return 0
+
+
+def _study_problem(args: argparse.Namespace) -> tuple[Any, str]:
+    """The 3RRR's problem of the options (free groups, the study's data forms, rig tests) and its data note."""
+    from fpm_sim.config import Manipulator
+    from fpm_sim.errors import FpmSimWarning
+    from fpm_sim.study.calibrate import CalibrationProblem, read_priors
+    from fpm_sim.study.identify import parameter_set
+
+    if args.priors is None:
+        raise CliError("--priors: give the priors TOML file (e.g. fpm_sim/data/study_priors.toml)")
+    args.free = args.free or DEFAULT_FREE
+    start = load_machine(args, "calibrate")  # the 3RRR's form; an imported model is refused by name
+    assert isinstance(start, Manipulator)
+    groups, datasets, tests = read_data_args(args)
+    observations = [o for ds in datasets for o in ds.observations]
+    ps = parameter_set(start, groups)
+    priors = read_priors(args.priors, ps.names)
+    problem = CalibrationProblem(
+        start, tuple(groups), priors, tuple(observations), tuple(tests), segments=args.segments
+    )
+    if problem.n_data < len(ps.names):
+        warnings.warn(
+            f"{problem.n_data} data for {len(ps.names)} free parameters: the data cannot determine them all; the "
+            "posterior of the undetermined combinations is their prior (read report.md's marginals against the "
+            "priors before using any value)",
+            FpmSimWarning,
+            stacklevel=1,
+        )
+    data_note = ", ".join([ds.source for ds in datasets] + ([Path(args.subsystems).name] if tests else []))
+    return problem, data_note
+
+
+def _described_problem(args: argparse.Namespace) -> tuple[Any, str]:
+    """A described machine's problem (:mod:`fpm_sim.study.calibrate.described`): priors on dotted paths (the priors
+    file and/or ``--free PATH=lo:hi``), its measured file, the row of a pose the file's machine cannot reach named."""
+    from fpm_sim.architecture import load_description
+    from fpm_sim.study.calibrate.described import described_problem
+
+    for flag, given in (("--subsystems", args.subsystems), ("--reading", args.reading)):
+        if given:
+            raise CliError(
+                f"{flag}: the 3RRR's (its rig tests, its table's reading); drop {flag} on a described machine"
+            )
+    if args.free and any("." not in g.partition("=")[0] for g in args.free.split(",") if g.strip()):
+        raise CliError(
+            f"--free {args.free}: the 3RRR's parameter groups; on a described architecture give dotted paths into "
+            "its file (PATH with a prior in --priors, or PATH=lo:hi for a uniform prior), e.g. --free "
+            "lumps.end_effector.mass_kg=0.05:1.0"
+        )
+    if args.priors is None and not args.free:
+        raise CliError("--priors or --free: give the priors of the free dotted paths (a file, or PATH=lo:hi)")
+    desc = load_description(args.config)
+    data = read_described_measured(args, desc)
+    problem = described_problem(desc, data, priors=args.priors, free=args.free, segments=args.segments)
+    return problem, data.source
 
 
 def _saved_calibration(run_file: Path, problem: Any) -> Any:
@@ -149,15 +192,27 @@ def register(sub: argparse._SubParsersAction) -> None:
         "OUT/config.toml (the posterior median) and figures; checkpoints to OUT/checkpoint.dynesty.* (--resume). "
         "The elbow-branch classes, when free, are each sampled on their own and weighted by their evidences; "
         "each is sampled --runs times and the runs are checked against each other "
-        "(printed, in report.md and --json; a warning names what disagrees).",
+        "(printed, in report.md and --json; a warning names what disagrees). On a described architecture "
+        "(--config machine.toml with [[chains]]): priors on dotted paths into its file, one measured file in its "
+        "task coordinates (x_mm, y_mm, z_mm, phi_rad as it has them; f1_hz, f2_hz, ...; sigma_hz), each fK_hz "
+        "compared with its K-th lowest elastic mode (actuators locked), one class (its working modes are fixed); "
+        "writes OUT/description.toml (the posterior median) in place of config.toml (docs/architectures.md).",
     )
     add_data_args(p)
-    p.add_argument("--priors", type=Path, required=True, help="priors TOML (e.g. fpm_sim/data/study_priors.toml)")
+    p.add_argument(
+        "--priors",
+        type=Path,
+        default=None,
+        help="priors TOML (e.g. fpm_sim/data/study_priors.toml; required on the 3RRR); on a described architecture "
+        'its [parameters."PATH"] tables name dotted paths into its file',
+    )
     add_config_args(p)
     p.add_argument(
         "--free",
-        default="geometry,hardware,section-height",
-        help=f"comma-separated parameter groups: {', '.join(GROUPS)} (default geometry,hardware,section-height)",
+        default=None,
+        help=f"comma-separated parameter groups: {', '.join(GROUPS)} (default {DEFAULT_FREE}); on a described "
+        "architecture dotted paths into its file, PATH (its prior in --priors) or PATH=lo:hi (uniform between them; "
+        "default: every path --priors names)",
     )
     p.add_argument("--live-points", type=int, default=250, help="nested sampling live points of each run (default 250)")
     p.add_argument(

@@ -377,6 +377,7 @@ GENERAL_COMMANDS = (
     "atlas",
     "rollout",
     "move",
+    "calibrate",
 )
 """The commands that run on a described architecture (``[[chains]]``) so far; the others say so."""
 

@@ -21,7 +21,14 @@ from fpm_sim.cli.common import (
 )
 from fpm_sim.study.identify.parameters import GROUPS
 
-__all__ = ["add_data_args", "cmd_identify", "parse_measured_arg", "read_data_args", "register"]
+__all__ = [
+    "add_data_args",
+    "cmd_identify",
+    "parse_measured_arg",
+    "read_data_args",
+    "read_described_measured",
+    "register",
+]
 
 GLOBAL_METHODS = ("de", "hybrid", "multistart", "surrogate-de", "none")
 """:data:`fpm_sim.study.identify.GLOBAL_METHODS` (checked by a test)."""
@@ -98,6 +105,19 @@ _STUDY_ONLY = {
 """Options of the 3RRR's identification (their defaults): on a described architecture they are refused by name."""
 
 
+def read_described_measured(args: argparse.Namespace, desc: Any) -> Any:
+    """``--measured FILE[,sigma_pct=P]`` of a described architecture: one file in its task coordinates
+    (:func:`fpm_sim.study.identify.described.read_task_measured_csv`)."""
+    from fpm_sim.study.identify.described import read_task_measured_csv
+
+    if len(args.measured or []) != 1:
+        raise CliError("--measured: give one measured file (its task coordinates' columns, f1_hz, ...)")
+    path, file_opts = parse_measured_arg(args.measured[0])
+    if "reading" in file_opts:
+        raise CliError("--measured ...,reading=: the study's table form is the 3RRR's; give task coordinates' columns")
+    return read_task_measured_csv(path, desc, sigma_pct=float(file_opts.get("sigma_pct", args.sigma_pct)))
+
+
 def _identify_described(args: argparse.Namespace) -> int:
     """``fpm-sim identify --config machine.toml --free PATH[=lo:hi],...``: bounded least squares of dotted paths into
     its file (:mod:`fpm_sim.study.identify.described`); writes the fitted file, identify.json and a figure."""
@@ -107,7 +127,7 @@ def _identify_described(args: argparse.Namespace) -> int:
     from fpm_sim.model.options import ModelOptions
     from fpm_sim.outputs import atomic_dir
     from fpm_sim.results import to_jsonable
-    from fpm_sim.study.identify.described import identify_description, parse_free_paths, read_task_measured_csv
+    from fpm_sim.study.identify.described import identify_description, parse_free_paths
 
     for key, default in _STUDY_ONLY.items():
         if getattr(args, key, default) != default:
@@ -122,14 +142,9 @@ def _identify_described(args: argparse.Namespace) -> int:
             f"--free {args.free}: the 3RRR's parameter groups; on a described architecture give dotted paths into "
             "its file, e.g. --free sections.bar.height_m,materials.steel.young_pa=150e9:250e9"
         )
-    if len(args.measured or []) != 1:
-        raise CliError("--measured: give one measured file (its task coordinates' columns, f1_hz, ...)")
-    path, file_opts = parse_measured_arg(args.measured[0])
-    if "reading" in file_opts:
-        raise CliError("--measured ...,reading=: the study's table form is the 3RRR's; give task coordinates' columns")
     desc = load_description(args.config)
     free = parse_free_paths(args.free, desc)
-    data = read_task_measured_csv(path, desc, sigma_pct=float(file_opts.get("sigma_pct", args.sigma_pct)))
+    data = read_described_measured(args, desc)
     if args.segments < 1 or args.max_nfev < 1:
         raise CliError("--segments and --max-nfev must be >= 1")
     opts = ModelOptions(segments=args.segments, gravity=False, axial=False)

@@ -54,6 +54,12 @@ OUTPUTS: list[tuple[str, list[str], str, str]] = [
     ("design", VARY, "--out", ""),
     ("design", ["--config", str(FIVE_BAR), "--vary", "sections.bar.height_m=0.004"], "--out", ""),
     ("calibrate", ["--priors", "{tmp}/priors.toml", "--measured", "{tmp}/m.csv"], "--out", ""),
+    (
+        "calibrate",
+        ["--config", str(FIVE_BAR), "--priors", "{tmp}/priors.toml", "--measured", "{tmp}/m.csv"],
+        "--out",
+        "",
+    ),
     ("identify", ["--measured", "{tmp}/m.csv"], "--out", ""),
     ("identify", ["--config", str(FIVE_BAR), "--measured", "{tmp}/m.csv", *FREE_HEIGHT], "--out", ""),
     ("ema", ["{tmp}/frf.csv"], "--out", ""),

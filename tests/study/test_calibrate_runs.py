@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from fpm_sim.study.calibrate import SamplerOptions
+from fpm_sim.study.calibrate.problem import FrequencyLikelihood
 from fpm_sim.study.calibrate.runs import ClassResult, allocate, between_run_check, combine_classes, evidence_weights
 from fpm_sim.study.calibrate.sampler import _init_worker, sample_classes
 
@@ -20,8 +21,9 @@ CENTRES = ((-4.0, 0.0), (4.0, 2.0), (0.0, 0.0))
 
 
 @dataclass(frozen=True)
-class Toy:
-    """A problem-like object for :func:`sample_classes`: coordinates (x, y, class), three classes."""
+class Toy(FrequencyLikelihood):
+    """A problem for :func:`sample_classes`: coordinates (x, y, class), three classes (its class labels and
+    per-worker preparation the base's)."""
 
     parameters: object = None
     names = ("x", "y", "geometry.elbow_branch")

@@ -10,7 +10,9 @@ predictions) and ``config.toml`` (the posterior median with its provenance).
 - ``sample_stats``: ``log_likelihood`` per draw; attributes ``log_evidence``, ``log_evidence_err``,
   ``n_calls``, ``ess_kish``; with enumerated classes ``classes`` (JSON: each class's ln Z, weight, runs), ``runs``,
   and with several runs ``runs_check_passed`` (0/1) and ``runs_check`` (the check's summary line);
-- ``observed_data``: ``f_hz`` (dim ``obs``; coordinates ``x_mm``, ``y_mm``, ``phi_rad``, ``label``);
+- ``observed_data``: ``f_hz`` (dim ``obs``; coordinates ``x_mm``, ``y_mm``, ``phi_rad``, ``label``; for a described
+  machine also ``mode``, the K of its ``fK_hz``, and ``z_mm`` where its task has z; its ``fpm_sim_base_config`` is
+  its file and ``fpm_sim_free_groups`` its free dotted paths);
 - ``posterior_predictive``: ``f_hz`` (the model's frequencies at each draw) and ``f_hz_measurement`` (plus
   one draw of the likelihood's noise), dims ``chain, draw, obs``; under the latent-mode model also
   ``f_hz_modes`` (``chain, draw, obs, mode``: the lowest modes) and ``read_probability`` (``chain, draw,
@@ -28,9 +30,12 @@ from typing import Any
 
 import numpy as np
 
+from fpm_sim.architecture import Description, description_toml
 from fpm_sim.config import Manipulator, config_to_toml
 from fpm_sim.outputs import atomic_file
+from fpm_sim.study.calibrate.described import DescribedCalibrationProblem, median_description
 from fpm_sim.study.calibrate.priors import BRANCH_PARAMETER
+from fpm_sim.study.calibrate.problem import CalibrationProblem, FrequencyLikelihood
 from fpm_sim.study.calibrate.sampler import Calibration
 from fpm_sim.study.identify.problem import ELBOW_BRANCHES
 from fpm_sim.study.readout import MODE_READ_ATTR, mode_read_text
@@ -47,17 +52,31 @@ def _import_arviz() -> Any:
 
 
 def _obs_coords(cal: Calibration) -> dict[str, Any]:
+    """The data's coordinates: each observation's pose (``z_mm`` too for a described machine that has it) and label."""
     p = cal.problem
     xs = [o.pose.x_m * 1e3 for o in p.observations] + [math.nan] * len(p.rig_tests)
     ys = [o.pose.y_m * 1e3 for o in p.observations] + [math.nan] * len(p.rig_tests)
     ph = [o.pose.phi_rad for o in p.observations] + [math.nan] * len(p.rig_tests)
-    return {
+    out = {
         "obs": np.arange(p.n_data),
         "x_mm": ("obs", np.array(xs)),
         "y_mm": ("obs", np.array(ys)),
         "phi_rad": ("obs", np.array(ph)),
         "label": ("obs", np.array(p.labels, dtype=str)),
     }
+    if isinstance(p, DescribedCalibrationProblem):
+        out["mode"] = ("obs", np.array([o.mode for o in p.observations], dtype=np.int64))
+        if "z" in p.base.task:
+            out["z_mm"] = ("obs", np.array([o.pose.z_m * 1e3 for o in p.observations]))
+    return out
+
+
+def _base_text(p: FrequencyLikelihood) -> str:
+    """The base description as TOML (the 3RRR's form, or a described machine's file)."""
+    if isinstance(p, DescribedCalibrationProblem):
+        return description_toml(p.base)
+    assert isinstance(p, CalibrationProblem)
+    return config_to_toml(p.base, default_source="start description")
 
 
 def inference_data(cal: Calibration, *, command: str, idx: np.ndarray | None = None) -> Any:
@@ -79,7 +98,7 @@ def inference_data(cal: Calibration, *, command: str, idx: np.ndarray | None = N
     coords = {"chain": [0], "draw": np.arange(n), "arm": [0, 1, 2]}
     posterior = xr.Dataset(post, coords=coords if BRANCH_PARAMETER in p.names else {"chain": [0], "draw": np.arange(n)})
     posterior.attrs.update(
-        fpm_sim_base_config=config_to_toml(p.base, default_source="start description"),
+        fpm_sim_base_config=_base_text(p),
         fpm_sim_free_groups=",".join(p.groups),
         fpm_sim_segments=int(p.segments),
         fpm_sim_command=command,
@@ -152,6 +171,7 @@ def median_config(cal: Calibration, *, data_note: str) -> Manipulator:
     from fpm_sim.study.identify.report import provenance_key
 
     p = cal.problem
+    assert isinstance(p, CalibrationProblem), "a described machine's median is median_description's"
     theta = np.median(cal.draws, axis=0)
     if p.priors.sample_branches:
         k = p.names.index(BRANCH_PARAMETER)
@@ -179,13 +199,19 @@ def median_config(cal: Calibration, *, data_note: str) -> Manipulator:
     return cfg.replace(provenance=prov)
 
 
-def write_config(cal: Calibration, path: str | Path, *, data_note: str, command: str) -> Manipulator:
-    """``config.toml``: :func:`median_config`, atomically."""
-    cfg = median_config(cal, data_note=data_note)
+def write_config(cal: Calibration, path: str | Path, *, data_note: str, command: str) -> Manipulator | Description:
+    """``config.toml``: :func:`median_config`, atomically; for a described machine its file at the posterior median
+    (:func:`~fpm_sim.study.calibrate.described.median_description`)."""
     hdr = (
         "fpm-sim calibrate: the posterior median of every free parameter (a summary of the posterior, not a fit;\n"
         "the posterior itself is posterior.nc beside this file)\n" + f"Reproduce: {command}"
     )
+    if isinstance(cal.problem, DescribedCalibrationProblem):
+        desc = median_description(cal.problem, cal.draws, data_note=data_note)
+        with atomic_file(path) as tmp:
+            tmp.write_text(description_toml(desc, header=hdr))
+        return desc
+    cfg = median_config(cal, data_note=data_note)
     with atomic_file(path) as tmp:
         tmp.write_text(config_to_toml(cfg, header=hdr, default_source="start description"))
     return cfg

@@ -74,7 +74,9 @@ __all__ = [
     "PriorError",
     "Priors",
     "SingularAtPhi0",
+    "prior_names",
     "read_priors",
+    "read_priors_text",
 ]
 
 DISTRIBUTIONS = ("uniform", "loguniform", "normal", "lognormal", "truncnormal")
@@ -278,11 +280,8 @@ def read_priors(source: str | Path, free: Sequence[str], *, text: str | None = N
         unknown distribution, section or key, or a missing ``reason``; each names the key.
     """
     where = str(source)
-    text = _priors_text(source) if text is None else text
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise PriorError(f"{where}: not valid TOML: {exc}") from exc
+    text = read_priors_text(source) if text is None else text
+    doc = _document(where, text)
     unknown = set(doc) - {"parameters", "likelihood", "statements"}
     if unknown:
         raise PriorError(
@@ -313,7 +312,22 @@ def read_priors(source: str | Path, free: Sequence[str], *, text: str | None = N
     return Priors(params, sample_branches, branch_reason, disc, disc_fixed, rig_sigma, a, b, where, text, length, read)
 
 
-def _priors_text(source: str | Path) -> str:
+def _document(where: str, text: str) -> dict[str, Any]:
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise PriorError(f"{where}: not valid TOML: {exc}") from exc
+
+
+def prior_names(source: str | Path, text: str) -> list[str]:
+    """The free parameters a priors file's ``text`` gives a prior for, in its order (the branch choice aside)."""
+    ptab = _document(str(source), text).get("parameters", {})
+    if not isinstance(ptab, Mapping):
+        raise PriorError(f"{source}: [parameters] must be a table of tables, one per free parameter")
+    return [k for k in ptab if k != BRANCH_PARAMETER]
+
+
+def read_priors_text(source: str | Path) -> str:
     """The file's text; a missing file, a folder or a binary file is refused naming it."""
     try:
         return read_text_input(

@@ -28,6 +28,7 @@ import dataclasses
 import functools
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -45,7 +46,7 @@ from fpm_sim.study.readout import mixture_log_likelihood, read_probabilities, se
 from fpm_sim.study.rigs import subsystem_frequencies
 from fpm_sim.study.tables import SubsystemTest
 
-__all__ = ["MODELS", "CalibrationError", "CalibrationProblem", "log_sigmoid_soft"]
+__all__ = ["MODELS", "CalibrationError", "CalibrationProblem", "FrequencyLikelihood", "log_sigmoid_soft"]
 
 MODELS = ("segments", "inplane")
 
@@ -69,8 +70,175 @@ def _independent_log_likelihood(residual: np.ndarray, sd: np.ndarray) -> float:
     return float(-0.5 * np.sum(r**2) - np.sum(np.log(sd)) - 0.5 * r.size * math.log(2 * math.pi))
 
 
+class FrequencyLikelihood:
+    """What the sampler, the posterior and the report need of a calibration problem: the data (observations, then
+    rig tests), the prior transform and the Gaussian likelihood's parts shared by the 3RRR's problem
+    (:class:`CalibrationProblem`) and a described architecture's
+    (:class:`~fpm_sim.study.calibrate.described.DescribedCalibrationProblem`). A subclass gives the data fields,
+    :meth:`possible`, :meth:`predict`, :meth:`log_likelihood`, :meth:`start_values` and :meth:`start_class`."""
+
+    priors: Priors
+    observations: tuple[Any, ...]
+    """Each with ``pose`` (``x_m``, ``y_m``, ``phi_rad``), ``mode``, ``freq_hz``, ``sigma_hz`` and ``describe()``."""
+    rig_tests: tuple[SubsystemTest, ...]
+    groups: tuple[str, ...]
+    """What is free, as the report names it (the 3RRR's groups, a described machine's dotted paths)."""
+    segments: int
+
+    @functools.cached_property
+    def _measured(self) -> np.ndarray:
+        return np.array([o.freq_hz for o in self.observations] + [t.experimental_hz for t in self.rig_tests])
+
+    @functools.cached_property
+    def _sigma(self) -> np.ndarray:
+        return np.array(
+            [o.sigma_hz for o in self.observations]
+            + [t.experimental_hz * self.priors.rig_sigma_pct / 100.0 for t in self.rig_tests]
+        )
+
+    @functools.cached_property
+    def features(self) -> np.ndarray:
+        """``(n_observations, 3)`` pose features of the observations (:func:`pose_features`)."""
+        o = self.observations
+        return pose_features(
+            np.array([x.pose.x_m for x in o]), np.array([x.pose.y_m for x in o]), np.array([x.pose.phi_rad for x in o])
+        )
+
+    @property
+    def names(self) -> list[str]:
+        """The sampled coordinates (module docstring)."""
+        return self.priors.names
+
+    @property
+    def ndim(self) -> int:
+        return len(self.names)
+
+    @property
+    def n_data(self) -> int:
+        return len(self.observations) + len(self.rig_tests)
+
+    @property
+    def measured(self) -> np.ndarray:
+        return self._measured.copy()
+
+    @property
+    def sigma(self) -> np.ndarray:
+        return self._sigma.copy()
+
+    @property
+    def labels(self) -> list[str]:
+        return [o.describe() for o in self.observations] + [f"rig {t.label}" for t in self.rig_tests]
+
+    @property
+    def branch_classes(self) -> tuple[int | None, ...]:
+        """The classes sampled each on its own; ``(None,)``: one."""
+        return (None,)
+
+    def class_label(self, klass: int | None) -> str:
+        """The name of a class (an index into :data:`ELBOW_BRANCHES`; ``None``: the one class)."""
+        return "the base's branches" if klass is None else str(ELBOW_BRANCHES[klass])
+
+    def notes(self) -> dict[str, str]:
+        """Statements the result carries about what was compared (none for the 3RRR's study form)."""
+        return {}
+
+    def prepare(self) -> None:
+        """Build what every likelihood call shares (once per worker process)."""
+
+    def possible(self, theta: np.ndarray) -> bool:
+        raise NotImplementedError
+
+    def predict(self, theta: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def log_likelihood(self, theta: np.ndarray) -> float:
+        raise NotImplementedError
+
+    def start_values(self) -> np.ndarray:
+        """The free parameters' values in the base description."""
+        raise NotImplementedError
+
+    def start_class(self) -> list[float]:
+        """The base description's class coordinate (empty: the classes are not sampled)."""
+        return []
+
+    # -- the unit cube -> parameters
+    def prior_transform(self, u: np.ndarray) -> np.ndarray:
+        """Unit-cube point -> ``theta`` (each prior's inverse CDF; the branch class ``floor(8 u)``)."""
+        u = np.asarray(u, float)
+        theta = np.empty(self.ndim)
+        k = 0
+        for p in self.priors.parameters:
+            theta[k] = p.transform(u[k])
+            k += 1
+        for h in self.priors.hyperpriors:
+            theta[k] = h.transform(u[k])
+            k += 1
+        if self.priors.sample_branches:
+            theta[k] = float(min(int(u[k] * len(ELBOW_BRANCHES)), len(ELBOW_BRANCHES) - 1))
+        return theta
+
+    def discrepancy(self, theta: np.ndarray) -> float:
+        """The relative model discrepancy at ``theta`` (sampled, or the priors' fixed value)."""
+        if self.priors.discrepancy is None:
+            return self.priors.discrepancy_fixed
+        return float(theta[len(self.priors.parameters)])
+
+    def length_scale_m(self, theta: np.ndarray) -> float | None:
+        """The Gaussian-process discrepancy's correlation length (m) at ``theta``; ``None``: independent."""
+        if self.priors.length_scale is None:
+            return None
+        return float(theta[len(self.priors.parameters) + (self.priors.discrepancy is not None)])
+
+    def noise_sd(self, f_pred: np.ndarray, discrepancy: float) -> np.ndarray:
+        """``s_i`` of the module docstring at predictions ``f_pred``."""
+        s2 = self._sigma**2
+        n = len(self.observations)
+        s2[:n] += (discrepancy * f_pred[:n]) ** 2
+        sd: np.ndarray = np.sqrt(s2)
+        return sd
+
+    def simulate_measurement(self, f: np.ndarray, theta: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """One draw of the likelihood's measurement at model frequencies ``f`` (the posterior predictive)."""
+        d = self.discrepancy(theta)
+        length = self.length_scale_m(theta)
+        sd = self.noise_sd(f, d)
+        out: np.ndarray = f + sd * rng.standard_normal(f.shape)
+        n = len(self.observations)
+        if length is not None and n and np.all(np.isfinite(f[:n])):
+            cov = covariance(f[:n], self._sigma[:n], self.features, d, length)
+            out[:n] = f[:n] + np.linalg.cholesky(cov) @ rng.standard_normal(n)
+        return out
+
+    def start_log_likelihood(self) -> float:
+        """``log L`` at the base description (its own elbow branches, :meth:`start_class`), the discrepancy at its
+        best on a grid over its prior (when sampled): a check of the sampler. A posterior whose draws all fit worse
+        than the start missed the start's region (nested sampling with too few live points misses narrow modes)."""
+        theta = list(self.start_values())
+        ds = [self.priors.discrepancy_fixed]
+        if self.priors.discrepancy is not None:
+            ds = [float(self.priors.discrepancy.transform(u)) for u in np.linspace(0.01, 0.99, 25)]
+        ls = [] if self.priors.length_scale is None else [float(self.priors.length_scale.transform(0.01))]
+        best = -math.inf
+        for d in ds:  # (the shortest correlation length: nearest to the independent model)
+            t = theta + ([d] if self.priors.discrepancy is not None else []) + ls
+            t += self.start_class()
+            best = max(best, self.log_likelihood(np.asarray(t)))
+        return best
+
+    def data_log_likelihood(self, f: np.ndarray, d: float, length_scale_m: float | None) -> float:
+        """The data's ``log L`` at model frequencies ``f`` (module docstring), without the statements."""
+        s = self.noise_sd(f, d)
+        residual = f - self._measured
+        n = len(self.observations)
+        if length_scale_m is None or n == 0:
+            return _independent_log_likelihood(residual, s)
+        cov = covariance(f[:n], self._sigma[:n], self.features, d, length_scale_m)
+        return gaussian_log_likelihood(residual[:n], cov) + _independent_log_likelihood(residual[n:], s[n:])
+
+
 @dataclass(frozen=True)
-class CalibrationProblem:
+class CalibrationProblem(FrequencyLikelihood):
     """Base description, free groups, priors, data and likelihood settings (see module docstring).
 
     Picklable (plain data, its parameter set too: :class:`~fpm_sim.study.identify.parameters.ParameterSpec`),
@@ -133,54 +301,21 @@ class CalibrationProblem:
     def parameters(self) -> ParameterSet:
         return parameter_set(self.base, list(self.groups))
 
-    @functools.cached_property
-    def _measured(self) -> np.ndarray:
-        return np.array([o.freq_hz for o in self.observations] + [t.experimental_hz for t in self.rig_tests])
+    def prepare(self) -> None:
+        _ = self.parameters
 
-    @functools.cached_property
-    def _sigma(self) -> np.ndarray:
-        return np.array(
-            [o.sigma_hz for o in self.observations]
-            + [t.experimental_hz * self.priors.rig_sigma_pct / 100.0 for t in self.rig_tests]
-        )
+    def start_values(self) -> np.ndarray:
+        return self.parameters.x0
+
+    def start_class(self) -> list[float]:
+        if not self.priors.sample_branches:
+            return []
+        return [float(ELBOW_BRANCHES.index(self.base.geometry.elbow_branch))]
 
     @functools.cached_property
     def _pose_array(self) -> np.ndarray:
         """``(n, 3)`` the distinct measured poses (x_m, y_m, phi_rad)."""
         return np.array(sorted({(o.pose.x_m, o.pose.y_m, o.pose.phi_rad) for o in self.observations}))
-
-    @functools.cached_property
-    def features(self) -> np.ndarray:
-        """``(n_observations, 3)`` pose features of the observations (:func:`pose_features`)."""
-        o = self.observations
-        return pose_features(
-            np.array([x.pose.x_m for x in o]), np.array([x.pose.y_m for x in o]), np.array([x.pose.phi_rad for x in o])
-        )
-
-    @property
-    def names(self) -> list[str]:
-        """The sampled coordinates (module docstring)."""
-        return self.priors.names
-
-    @property
-    def ndim(self) -> int:
-        return len(self.names)
-
-    @property
-    def n_data(self) -> int:
-        return len(self.observations) + len(self.rig_tests)
-
-    @property
-    def measured(self) -> np.ndarray:
-        return self._measured.copy()
-
-    @property
-    def sigma(self) -> np.ndarray:
-        return self._sigma.copy()
-
-    @property
-    def labels(self) -> list[str]:
-        return [o.describe() for o in self.observations] + [f"rig {t.label}" for t in self.rig_tests]
 
     @property
     def branch_classes(self) -> tuple[int | None, ...]:
@@ -199,43 +334,16 @@ class CalibrationProblem:
         xyz = self._pose_array
         return bool(assemble_many(cfg.geometry, xyz[:, 0], xyz[:, 1], xyz[:, 2]).reachable.all())
 
-    # -- the unit cube -> parameters
-    def prior_transform(self, u: np.ndarray) -> np.ndarray:
-        """Unit-cube point -> ``theta`` (each prior's inverse CDF; the branch class ``floor(8 u)``)."""
-        u = np.asarray(u, float)
-        theta = np.empty(self.ndim)
-        k = 0
-        for p in self.priors.parameters:
-            theta[k] = p.transform(u[k])
-            k += 1
-        for h in self.priors.hyperpriors:
-            theta[k] = h.transform(u[k])
-            k += 1
-        if self.priors.sample_branches:
-            theta[k] = float(min(int(u[k] * len(ELBOW_BRANCHES)), len(ELBOW_BRANCHES) - 1))
-        return theta
-
     def split(self, theta: np.ndarray) -> tuple[np.ndarray, float, tuple[int, int, int]]:
         """``theta`` -> (free-parameter values, discrepancy, elbow branches)."""
         n = len(self.priors.parameters)
         x = np.asarray(theta[:n], float)
-        k = n
-        d = self.priors.discrepancy_fixed
-        if self.priors.discrepancy is not None:
-            d = float(theta[k])
-            k += 1
-        if self.priors.length_scale is not None:
-            k += 1
+        d = self.discrepancy(theta)
+        k = n + (self.priors.discrepancy is not None) + (self.priors.length_scale is not None)
         branch = self.base.geometry.elbow_branch
         if self.priors.sample_branches:
             branch = ELBOW_BRANCHES[round(float(theta[k]))]
         return x, d, branch
-
-    def length_scale_m(self, theta: np.ndarray) -> float | None:
-        """The Gaussian-process discrepancy's correlation length (m) at ``theta``; ``None``: independent."""
-        if self.priors.length_scale is None:
-            return None
-        return float(theta[len(self.priors.parameters) + (self.priors.discrepancy is not None)])
 
     def config(self, theta: np.ndarray) -> Manipulator:
         """The description at ``theta``. Raises :class:`ConfigError` for an impossible one."""
@@ -266,26 +374,6 @@ class CalibrationProblem:
         ]
         return np.asarray(rigs, float)
 
-    def noise_sd(self, f_pred: np.ndarray, discrepancy: float) -> np.ndarray:
-        """``s_i`` of the module docstring at predictions ``f_pred``."""
-        s2 = self._sigma**2
-        n = len(self.observations)
-        s2[:n] += (discrepancy * f_pred[:n]) ** 2
-        sd: np.ndarray = np.sqrt(s2)
-        return sd
-
-    def simulate_measurement(self, f: np.ndarray, theta: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """One draw of the likelihood's measurement at model frequencies ``f`` (the posterior predictive)."""
-        _, d, _ = self.split(theta)
-        length = self.length_scale_m(theta)
-        sd = self.noise_sd(f, d)
-        out: np.ndarray = f + sd * rng.standard_normal(f.shape)
-        n = len(self.observations)
-        if length is not None and n and np.all(np.isfinite(f[:n])):
-            cov = covariance(f[:n], self._sigma[:n], self.features, d, length)
-            out[:n] = f[:n] + np.linalg.cholesky(cov) @ rng.standard_normal(n)
-        return out
-
     def statements_log_likelihood(self, cfg: Manipulator) -> float:
         """The enabled study statements' soft terms (:mod:`.priors`) under ``cfg``."""
         total = 0.0
@@ -304,24 +392,6 @@ class CalibrationProblem:
             m = assemble_many(g, p[:, 0], p[:, 1], p[:, 2]).singularity
             total += float(np.sum(log_sigmoid_soft((m - b.min_measure) / b.width, b.eps)))
         return total
-
-    def start_log_likelihood(self) -> float:
-        """``log L`` at the base description (its own elbow branches), the discrepancy at its best on a grid
-        over its prior (when sampled): a check of the sampler. A posterior whose draws all fit worse than the
-        start missed the start's region (nested sampling with too few live points misses narrow modes)."""
-        x0 = self.parameters.x0
-        theta = list(x0)
-        ds = [self.priors.discrepancy_fixed]
-        if self.priors.discrepancy is not None:
-            ds = [float(self.priors.discrepancy.transform(u)) for u in np.linspace(0.01, 0.99, 25)]
-        ls = [] if self.priors.length_scale is None else [float(self.priors.length_scale.transform(0.01))]
-        best = -math.inf
-        for d in ds:  # (the shortest correlation length: nearest to the independent model)
-            t = theta + ([d] if self.priors.discrepancy is not None else []) + ls
-            if self.priors.sample_branches:
-                t.append(float(ELBOW_BRANCHES.index(self.base.geometry.elbow_branch)))
-            best = max(best, self.log_likelihood(np.asarray(t)))
-        return best
 
     def log_likelihood(self, theta: np.ndarray) -> float:
         """``log L(theta)`` (module docstring); ``-inf`` for an impossible description."""
@@ -368,13 +438,3 @@ class CalibrationProblem:
                 return -math.inf
             ll += _independent_log_likelihood(f_rig - self._measured[n:], self._sigma[n:])
         return ll + self.statements_log_likelihood(cfg)
-
-    def data_log_likelihood(self, f: np.ndarray, d: float, length_scale_m: float | None) -> float:
-        """The data's ``log L`` at model frequencies ``f`` (module docstring), without the statements."""
-        s = self.noise_sd(f, d)
-        residual = f - self._measured
-        n = len(self.observations)
-        if length_scale_m is None or n == 0:
-            return _independent_log_likelihood(residual, s)
-        cov = covariance(f[:n], self._sigma[:n], self.features, d, length_scale_m)
-        return gaussian_log_likelihood(residual[:n], cov) + _independent_log_likelihood(residual[n:], s[n:])

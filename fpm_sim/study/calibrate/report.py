@@ -70,8 +70,10 @@ def render_report(cal: Calibration, *, command: str, data_note: str) -> str:
     lines = [
         "# fpm-sim calibrate: Bayesian model updating",
         "",
-        f"Data: {data_note}. Free groups: {', '.join(p.groups)}; {p.segments} segments per link.",
+        f"Data: {data_note}. Free {'paths' if p.notes() else 'groups'}: {', '.join(p.groups)}; {p.segments} "
+        "segments per link.",
         "",
+        *[f"{k.replace('_', ' ').capitalize()}: {v}.\n" for k, v in p.notes().items()],
         f"Reproduce: `{command}`",
         "",
         "## Diagnostics",
@@ -194,7 +196,7 @@ def _runs_lines(cal: Calibration) -> list[str]:
     ]
     for j, k in enumerate(chk.classes):
         if np.max(chk.class_weights[:, j]) > chk.class_threshold:
-            label = "base's branches" if k is None else str(ELBOW_BRANCHES[k])
+            label = cal.problem.class_label(k).removeprefix("the ")
             lines.append(
                 f"| weight {label} | " + " | ".join(f"{100 * w:.1f} %" for w in chk.class_weights[:, j]) + " | |"
             )

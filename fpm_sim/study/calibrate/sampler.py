@@ -1,5 +1,6 @@
-"""Nested sampling of a :class:`CalibrationProblem` with dynesty (multimodal posteriors, the evidence with its
-error), likelihood calls in a ``spawn`` process pool, a checkpoint file and resuming from it.
+"""Nested sampling of a calibration problem (:class:`~fpm_sim.study.calibrate.problem.FrequencyLikelihood`: the
+3RRR's or a described machine's) with dynesty (multimodal posteriors, the evidence with its error), likelihood calls
+in a ``spawn`` process pool, a checkpoint file and resuming from it.
 
 The pool's workers receive the problem once, in their initializer (:func:`_init_worker`), and evaluate the
 module-level :func:`_worker_log_likelihood` / :func:`_worker_prior_transform`; nothing relies on ``fork``.
@@ -22,9 +23,8 @@ import numpy as np
 from fpm_sim.batch.engine import spawn_pool
 from fpm_sim.figures import bands_against_measured
 from fpm_sim.study.calibrate.priors import BRANCH_PARAMETER
-from fpm_sim.study.calibrate.problem import CalibrationError, CalibrationProblem
+from fpm_sim.study.calibrate.problem import CalibrationError, CalibrationProblem, FrequencyLikelihood
 from fpm_sim.study.calibrate.runs import ClassResult, Combined, RunsCheck, between_run_check, combine_classes
-from fpm_sim.study.identify.problem import ELBOW_BRANCHES
 from fpm_sim.study.loo import LeaveOneOut, leave_one_out, loo_from_components
 from fpm_sim.study.readout import draws_components, responsibilities
 
@@ -38,14 +38,14 @@ __all__ = [
     "sample_classes",
 ]
 
-_PROBLEM: CalibrationProblem | None = None
+_PROBLEM: FrequencyLikelihood | None = None
 """The problem of this worker process (set by :func:`_init_worker`)."""
 
 
-def _init_worker(problem: CalibrationProblem) -> None:
+def _init_worker(problem: FrequencyLikelihood) -> None:
     global _PROBLEM
     _PROBLEM = problem
-    _ = problem.parameters  # build the parameter set once per worker
+    problem.prepare()  # build what every call shares once per worker (the 3RRR's parameter set)
 
 
 def _worker_log_likelihood(theta: np.ndarray) -> float:
@@ -94,10 +94,10 @@ def _worker_run(
     return klass, seed, res, time.time() - t0
 
 
-def problem_digest(problem: CalibrationProblem) -> str:
+def problem_digest(problem: FrequencyLikelihood) -> str:
     """A fingerprint of the problem's data (the repr of its fields: deterministic, unlike a pickle's bytes),
     stored beside a checkpoint to refuse a mismatched resume."""
-    fields = tuple(getattr(problem, f.name) for f in dataclasses.fields(problem))
+    fields = tuple(getattr(problem, f.name) for f in dataclasses.fields(problem))  # type: ignore[arg-type]
     return hashlib.sha256(repr(fields).encode()).hexdigest()[:16]
 
 
@@ -201,10 +201,11 @@ class ClassSummary:
 class Calibration:
     """The result of :func:`run_calibration`: equal-weight draws and the run's diagnostics."""
 
-    problem: CalibrationProblem
+    problem: FrequencyLikelihood
     options: SamplerOptions
     draws: np.ndarray
-    """``(n_draws, ndim)`` equal-weight draws of ``theta`` (:attr:`CalibrationProblem.names`)."""
+    """``(n_draws, ndim)`` equal-weight draws of ``theta``
+    (:attr:`~fpm_sim.study.calibrate.problem.FrequencyLikelihood.names`)."""
     log_likelihood: np.ndarray
     """``(n_draws,)``"""
     log_evidence: float
@@ -222,7 +223,8 @@ class Calibration:
     """``(n_draws, n_data)`` ``f_pred`` plus one draw of the likelihood's noise (``s_i``): the predictive of a
     new measurement, what coverage is checked against."""
     start_log_likelihood: float = math.nan
-    """:meth:`CalibrationProblem.start_log_likelihood`: compare with ``log_likelihood.max()``."""
+    """:meth:`~fpm_sim.study.calibrate.problem.FrequencyLikelihood.start_log_likelihood`: compare with
+    ``log_likelihood.max()``."""
     extra: dict[str, Any] = field(default_factory=dict)
     classes: list[ClassSummary] = field(default_factory=list)
     """Each elbow-branch class sampled (or skipped): its evidence and weight (one entry when the branches are
@@ -248,10 +250,11 @@ class Calibration:
         p = self.problem
         if p.priors.mode_read is None:
             return None
+        assert isinstance(p, CalibrationProblem), "the latent-mode model is the 3RRR's"
         out = []
         for t in self.draws:
             freq, probs = p.read_modes(p.config(t))
-            out.append((freq, probs, p.split(t)[1]))
+            out.append((freq, probs, p.discrepancy(t)))
         return out
 
     def _components(self, *, leave_out: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -321,7 +324,7 @@ class Calibration:
         if self.readouts is not None:
             mu, sd, w = self._components(leave_out=True)
             return loo_from_components(mu, sd, w, p.measured[:n], labels=p.labels[:n])
-        d = np.array([p.split(t)[1] for t in self.draws])
+        d = np.array([p.discrepancy(t) for t in self.draws])
         ls = None if p.priors.length_scale is None else np.array([p.length_scale_m(t) for t in self.draws])
         return leave_one_out(
             self.f_pred[:, :n],
@@ -384,6 +387,7 @@ class Calibration:
                 for k in ("live_points", "dlogz", "seed", "sample", "walks", "max_calls", "runs")
             },
             "classes": [c.to_dict() for c in self.classes],
+            **self.problem.notes(),
             "runs_check": None if self.runs_check is None else self.runs_check.to_dict(),
         }
 
@@ -408,13 +412,14 @@ class Calibration:
         lines.append(
             f"measured values inside the 50 % / 90 % predictive bands: {c50.sum()}/{len(c50)} / {c90.sum()}/{len(c90)}"
         )
+        lines += [f"{k.replace('_', ' ')}: {v}" for k, v in self.problem.notes().items()]
         if len(self.classes) > 1:
             lines.append("elbow-branch classes (each sampled on its own, weighted by its evidence):")
             lines += ["  " + c.line() for c in self.classes]
         lines.append(
             "between-run check: none (one run)"
             if self.runs_check is None
-            else self.runs_check.table(class_label=_class_label)
+            else self.runs_check.table(class_label=self.problem.class_label)
         )
         return "\n".join(lines)
 
@@ -439,7 +444,7 @@ class Calibration:
         return fig
 
 
-def _pool(problem: CalibrationProblem, workers: int) -> Any:
+def _pool(problem: FrequencyLikelihood, workers: int) -> Any:
     """A spawn pool whose workers hold ``problem`` and ignore Ctrl-C (:func:`fpm_sim.batch.engine.spawn_pool`)."""
     return spawn_pool(workers, _init_worker, (problem,))
 
@@ -497,7 +502,7 @@ def _run_class(
     return res
 
 
-def _check_resume(problem: CalibrationProblem, checkpoint: Path | None, resume: bool) -> None:
+def _check_resume(problem: FrequencyLikelihood, checkpoint: Path | None, resume: bool) -> None:
     """Refuse a resume without a checkpoint, or from another problem's (the ``.digest`` file); record the
     problem's fingerprint for a fresh run."""
     if not resume:
@@ -521,7 +526,7 @@ def _check_resume(problem: CalibrationProblem, checkpoint: Path | None, resume: 
         )
 
 
-def class_prior_mass(problem: CalibrationProblem, klass: int | None, n: int, seed: int) -> float:
+def class_prior_mass(problem: FrequencyLikelihood, klass: int | None, n: int, seed: int) -> float:
     """The fraction of ``n`` prior draws of class ``klass`` that are valid and reach every measured pose."""
     rng = np.random.default_rng(seed)
     ok = 0
@@ -557,10 +562,6 @@ def _sample_jobs(
     return out
 
 
-def _class_label(klass: int | None) -> str:
-    return "the base's branches" if klass is None else str(ELBOW_BRANCHES[klass])
-
-
 def _merge(results: list[Any]) -> Any:
     from dynesty.utils import merge_runs
 
@@ -568,7 +569,7 @@ def _merge(results: list[Any]) -> Any:
 
 
 def sample_classes(
-    problem: CalibrationProblem,
+    problem: FrequencyLikelihood,
     opts: SamplerOptions,
     pool: Any,
     *,
@@ -591,7 +592,7 @@ def sample_classes(
     _check_resume(problem, checkpoint, resume)
     ck = [None if checkpoint is None else str(_job_file(checkpoint, k, s)) for k in live for s in seeds]
     jobs = [(k, s, opts, c, resume) for (k, s), c in zip(((k, s) for k in live for s in seeds), ck)]
-    prefix = (lambda k: f"class {_class_label(k)}, ") if classes != (None,) else (lambda k: "")
+    prefix = (lambda k: f"class {problem.class_label(k)}, ") if classes != (None,) else (lambda k: "")
     done = _sample_jobs(jobs, pool, print_func, prefix)
     merged = [ClassResult.of_results(k, _merge([done[(k, s)][0] for s in seeds])) for k in live]
     rng = np.random.default_rng(opts.seed + 1)
@@ -602,10 +603,10 @@ def sample_classes(
         per_run = [[ClassResult.of_results(k, done[(k, s)][0]) for k in live] for s in seeds]
         check = between_run_check(
             per_run, comb, seeds, names, n_classes=len(classes), n_draws=opts.draws, rng=rng,
-            class_label=_class_label, nsigma=opts.nsigma, quantile_tol=opts.quantile_tol,
+            class_label=problem.class_label, nsigma=opts.nsigma, quantile_tol=opts.quantile_tol,
             class_threshold=opts.class_threshold,
         )  # fmt: skip
-    summaries = _summaries(classes, mass, live, comb, merged, done, seeds, opts.probe_draws)
+    summaries = _summaries(problem, classes, mass, live, comb, merged, done, seeds, opts.probe_draws)
     stats = {
         "n_calls": int(sum(np.sum(r["ncall"]) for r, _ in done.values())),
         "n_iterations": int(sum(int(r["niter"]) for r, _ in done.values())),
@@ -615,6 +616,7 @@ def sample_classes(
 
 
 def _summaries(
+    problem: FrequencyLikelihood,
     classes: tuple[int | None, ...],
     mass: dict[int | None, float],
     live: list[int | None],
@@ -627,12 +629,12 @@ def _summaries(
     out = []
     for k in classes:
         if k not in live:
-            out.append(ClassSummary(k, _class_label(k), 0.0, probe, math.nan, math.nan, 0.0, 0.0, [], True))
+            out.append(ClassSummary(k, problem.class_label(k), 0.0, probe, math.nan, math.nan, 0.0, 0.0, [], True))
             continue
         j = live.index(k)
         out.append(
             ClassSummary(
-                k, _class_label(k), mass[k], probe, merged[j].log_evidence, merged[j].log_evidence_err,
+                k, problem.class_label(k), mass[k], probe, merged[j].log_evidence, merged[j].log_evidence_err,
                 float(comb.weights[j]), float(comb.weights_sd[j]),
                 [float(done[(k, s)][0]["logz"][-1]) for s in seeds], False,
             )
@@ -641,7 +643,7 @@ def _summaries(
 
 
 def run_calibration(
-    problem: CalibrationProblem,
+    problem: FrequencyLikelihood,
     options: SamplerOptions | None = None,
     *,
     checkpoint: Path | None = None,

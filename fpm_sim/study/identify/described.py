@@ -30,9 +30,12 @@ from fpm_sim.study.identify.data import DEFAULT_SIGMA_PCT, DataError, read_cell,
 __all__ = [
     "DescribedIdentification",
     "TaskMeasurements",
+    "check_measured_poses",
+    "edited_description",
     "identify_description",
     "parse_free_paths",
     "read_task_measured_csv",
+    "task_frequencies",
 ]
 
 UNREACHED_RESIDUAL = 1e3
@@ -234,21 +237,23 @@ class DescribedIdentification:
         return fig
 
 
-def _edited(desc: Description, values: Mapping[str, float], source: str) -> Description:
+def edited_description(desc: Description, values: Mapping[str, float], source: str) -> Description:
+    """``desc`` with each dotted path of ``values`` set (:func:`~fpm_sim.architecture.edit.with_description_value`)."""
     for path, v in values.items():
         desc = with_description_value(desc, path, float(v), source=source)
     return desc
 
 
-def _model(desc: Description, data: TaskMeasurements, options: ModelOptions) -> np.ndarray:
+def task_frequencies(desc: Description, data: TaskMeasurements, options: ModelOptions) -> np.ndarray:
+    """``(pose, mode)`` the lowest elastic frequencies (Hz, actuators locked) at the measured poses; NaN where none."""
     (sw,) = sweep_task_many([desc], data.poses, options=options, n_modes=data.n_modes)
     return sw.freq_hz
 
 
-def _check_start(desc: Description, data: TaskMeasurements, options: ModelOptions) -> None:
+def check_measured_poses(desc: Description, data: TaskMeasurements, options: ModelOptions) -> None:
     """Every measured frequency is computed by the file's machine (its pose reachable and not singular there, the
     mode among those computed): else the row is named."""
-    model = _model(desc, data, options)
+    model = task_frequencies(desc, data, options)
     for i, line in enumerate(data.lines or range(2, len(data.poses) + 2)):
         bad = np.isfinite(data.freq_hz[i]) & ~np.isfinite(model[i])
         if bad.any():
@@ -280,14 +285,15 @@ def identify_description(
     lo = np.array([b[0] for b in free.values()])
     hi = np.array([b[1] for b in free.values()])
     measured = np.isfinite(data.freq_hz)
-    _check_start(desc, data, opts)
+    check_measured_poses(desc, data, opts)
     source = f"identified: {data.source}, fpm-sim identify (bounded least squares)"
 
     def values_of(u: np.ndarray) -> np.ndarray:
         return np.clip(start + u * scale, lo, hi)
 
     def residuals(u: Sequence[float]) -> np.ndarray:
-        model = _model(_edited(desc, dict(zip(paths, values_of(np.asarray(u)))), source), data, opts)
+        edited = edited_description(desc, dict(zip(paths, values_of(np.asarray(u)))), source)
+        model = task_frequencies(edited, data, opts)
         r = (model[measured] - data.freq_hz[measured]) / data.sigma_hz[measured]
         return np.where(np.isfinite(r), r, UNREACHED_RESIDUAL)
 
@@ -305,8 +311,8 @@ def identify_description(
         std = np.sqrt(np.clip(np.diag(cov), 0.0, None)) * scale
     except np.linalg.LinAlgError:
         std = np.full(len(paths), np.inf)
-    fitted = _edited(desc, dict(zip(paths, values)), source)
-    model_hz = _model(fitted, data, opts)
+    fitted = edited_description(desc, dict(zip(paths, values)), source)
+    model_hz = task_frequencies(fitted, data, opts)
     return DescribedIdentification(
         name=desc.name,
         paths=paths,
