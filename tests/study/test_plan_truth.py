@@ -44,12 +44,24 @@ dist = "loguniform"
 lower = 0.05
 upper = 1.0
 reason = "assumed: test"
+[parameters."section.height_m"]
+dist = "loguniform"
+lower = 0.004
+upper = 0.03
+reason = "assumed: test"
+[parameters."section.thickness_m"]
+dist = "loguniform"
+lower = 0.005
+upper = 0.03
+reason = "assumed: test"
 """
+GROUPS = ("hardware", "section")
 NOISE = 0.015
 K = 3
 RANDOM_SETS = 2
 SAMPLER = SamplerOptions(live_points=80, dlogz=0.1, sample="unif", draws=400, runs=1)
-TARGET_MM = [(x, y) for x in (-100, -50, 0, 50, 100) for y in (-100, -50, 0, 50, 100)]
+TARGET_MM = [(x, y) for x in (50, 75, 100) for y in (-100, -50, 0, 50, 100)]
+"""Where the predictions matter: one side of the cell (the design decision is about x >= 50 mm)."""
 
 
 def _obs(poses: list[Pose], f: np.ndarray | None = None) -> tuple[Observation, ...]:
@@ -79,12 +91,12 @@ def _one_truth(default_manip, truth_seed: int) -> dict[str, float]:
     """The planned, widest and random sets' widths after recalibration on one hidden truth, and the plan's
     expected width. Every strategy measuring a pose gets the same noisy value (drawn once per pose) and every
     recalibration the same seed: the strategies differ by the poses they choose, nothing else."""
-    names = parameter_set(default_manip, ["hardware"]).names
+    names = parameter_set(default_manip, list(GROUPS)).names
     priors = read_priors("plan.toml", names, text=PRIORS)
     poses = [sp.pose for sp in study_poses()]
     fit, cands = poses[:12], poses[12:]
     target = [Pose.from_mm(x, y, 0.0) for x, y in TARGET_MM]
-    base = CalibrationProblem(default_manip, ("hardware",), priors, _obs(fit), model="inplane")
+    base = CalibrationProblem(default_manip, GROUPS, priors, _obs(fit), model="inplane")
     rng = np.random.default_rng(truth_seed)
     truth = base.prior_transform(rng.random(base.ndim))
     f_true = _predict(base, truth[None], fit + cands)[0]
