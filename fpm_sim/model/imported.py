@@ -38,7 +38,12 @@ from fpm_sim.model.parts import LinkSpec, box_part, set_inertial
 from fpm_sim.model.spec import BuiltModel, compile_model
 from fpm_sim.model.xml_precision import full_precision_xml
 
-__all__ = ["ImportReport", "ModelImportError", "build_imported", "end_sites", "import_report"]
+__all__ = ["ImportReport", "ModelImportError", "build_imported", "end_sites", "import_report", "posable_joints"]
+
+LOOP_TOL = 1e-6
+"""Largest loop-closure residual (m for a connect's points, m or rad for a weld's) accepted at a requested pose: a
+loop closed by the user's kinematics to solver precision is far below it, one left open by a joint not given far
+above."""
 
 _ALONG_TYPES = {int(mujoco.mjtGeom.mjGEOM_CAPSULE), int(mujoco.mjtGeom.mjGEOM_CYLINDER), int(mujoco.mjtGeom.mjGEOM_BOX)}
 
@@ -106,13 +111,49 @@ def _rot(quat: np.ndarray) -> np.ndarray:
     return r.reshape(3, 3)
 
 
-def _pose(spec: mujoco.MjSpec, q: dict[str, float]) -> None:
-    """Set the joint values ``q`` into the bodies' frames (module docstring)."""
-    if not q:
+def _loop_residuals(model: mujoco.MjModel, data: mujoco.MjData, q: dict[str, float]) -> None:
+    """Refuse a pose at which an active ``<equality connect|weld>`` does not close (its residual in the model as
+    read, whose closures MuJoCo's compiler set at the model's own reference pose)."""
+    if model.neq == 0:
         return
+    model.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
+    mujoco.mj_forward(model, data)
+    worst: dict[int, float] = {}
+    for r in range(data.nefc):
+        if int(data.efc_type[r]) == int(mujoco.mjtConstraint.mjCNSTR_EQUALITY):
+            e = int(data.efc_id[r])
+            worst[e] = max(worst.get(e, 0.0), abs(float(data.efc_pos[r])))
+    for e, res in worst.items():
+        if int(model.eq_type[e]) in (int(mujoco.mjtEq.mjEQ_CONNECT), int(mujoco.mjtEq.mjEQ_WELD)) and res > LOOP_TOL:
+            name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_EQUALITY, e) or f"(equality {e})"
+            given = ", ".join(f"{k} = {v:g}" for k, v in q.items()) or "the model's reference pose"
+            raise _fail(
+                f"the loop closure {name} does not close at {given}: residual {res:.3g} (m or rad) > {LOOP_TOL:g}",
+                "q",
+                hint="give every joint of the loop values that close it (the passive joints too)",
+            )
+
+
+def posable_joints(desc: ImportedDescription) -> list[str]:
+    """The names of the hinge and slide joints of ``desc``'s model (those a joint-space pose may set)."""
+    model = _load_spec(desc).compile()
+    kinds = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
+    return [
+        mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j)
+        for j in range(model.njnt)
+        if int(model.jnt_type[j]) in kinds and mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j)
+    ]
+
+
+def _pose(spec: mujoco.MjSpec, q: dict[str, float]) -> None:
+    """Set the joint values ``q`` into the bodies' frames (module docstring); a loop that does not close there is
+    refused by the equality's name (:func:`_loop_residuals`)."""
     model = spec.compile()
     data = mujoco.MjData(model)
     data.qpos[:] = model.qpos0
+    if not q:
+        _loop_residuals(model, data, q)
+        return
     for name, value in q.items():
         jid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)
         if jid < 0:
@@ -123,6 +164,7 @@ def _pose(spec: mujoco.MjSpec, q: dict[str, float]) -> None:
         if not math.isfinite(value):
             raise _fail(f"joint {name!r}: value must be finite", "q", value)
         data.qpos[model.jnt_qposadr[jid]] = value
+    _loop_residuals(model, data, q)
     mujoco.mj_kinematics(model, data)
     posed = {int(model.jnt_bodyid[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n)]) for n in q}
     for bid in posed:
@@ -564,6 +606,7 @@ def build_imported(
         adr = int(model.jnt_dofadr[j])
         dof_kinds[adr : adr + width] = [kinds.get(name, "passive")] * width
     first = next(iter(links))
+    tip = links[list(links)[-1]][-1]  # the last flexible body's beam end: the FRF's and reductions' reference point
     return BuiltModel(
         model=model,
         spec=spec,
@@ -579,6 +622,7 @@ def build_imported(
             "timestep_s": float(model.opt.timestep),
             "nv": int(model.nv),
         },
+        end_effector_site=tip,
         accelerometer_links=tuple(links),
         test_point=(first, 0.5, "z"),
         planar=False,
