@@ -463,14 +463,23 @@ def _add_beams(
         _hang_lump(beam, build)
         links[name] = build.sites
         kinds.update(dict(build.joints))
-        p_last = beam.start + beam.rot[:, 0] * (beam.length_m - build.last_length_m)
         bid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, beam.flex.body)
         for c in range(model.nbody):
             if c != bid and model.body_parentid[c] == bid:
                 child = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, c)
+                j = _piece_of(beam, build, model.body_pos[c]) if model.body_jntnum[c] == 0 else len(build.bodies) - 1
+                origin = beam.start + beam.rot[:, 0] * float(np.sum(build.piece_lengths_m[:j]))
                 rc = _rot(model.body_quat[c])
-                moves[child] = (build.last.name, beam.rot.T @ (model.body_pos[c] - p_last), _quat(beam.rot.T @ rc))
+                pos = beam.rot.T @ (model.body_pos[c] - origin)
+                moves[child] = (build.bodies[j].name, pos, _quat(beam.rot.T @ rc))
     return links, kinds, moves
+
+
+def _piece_of(beam: _Beam, build: Any, p: np.ndarray) -> int:
+    """The index of the beam's piece that holds the point ``p`` (body frame), by its place along the beam."""
+    s = float(np.clip((p - beam.start) @ beam.rot[:, 0], 0.0, beam.length_m))
+    edges = np.cumsum([0.0, *build.piece_lengths_m])
+    return min(int(np.searchsorted(edges, s, side="right")) - 1, len(build.bodies) - 1)
 
 
 def _hang_lump(beam: _Beam, build: Any) -> None:
@@ -479,9 +488,8 @@ def _hang_lump(beam: _Beam, build: Any) -> None:
     if beam.lump is None or beam.lump[0] <= 0.0:
         return
     m, c, i_c = beam.lump
-    s = float(np.clip((c - beam.start) @ beam.rot[:, 0], 0.0, beam.length_m))
     edges = np.cumsum([0.0, *build.piece_lengths_m])
-    j = min(int(np.searchsorted(edges, s, side="right")) - 1, len(build.bodies) - 1)
+    j = _piece_of(beam, build, c)
     piece = build.bodies[j]
     origin = beam.start + beam.rot[:, 0] * edges[j]
     f = piece.fullinertia
