@@ -22,6 +22,7 @@ What the builder does (``docs/import.md``):
 from __future__ import annotations
 
 import math
+import warnings
 import xml.etree.ElementTree as ET
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -31,14 +32,22 @@ import mujoco
 import numpy as np
 
 from fpm_sim.architecture.imported import FlexibleBody, ImportedDescription
-from fpm_sim.errors import FpmSimError
+from fpm_sim.errors import FpmSimError, FpmSimWarning
 from fpm_sim.model.links import add_link
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.model.parts import LinkSpec, box_part, set_inertial
 from fpm_sim.model.spec import BuiltModel, compile_model
 from fpm_sim.model.xml_precision import full_precision_xml
 
-__all__ = ["ImportReport", "ModelImportError", "build_imported", "end_sites", "import_report", "posable_joints"]
+__all__ = [
+    "ImportReport",
+    "MissingMeshWarning",
+    "ModelImportError",
+    "build_imported",
+    "end_sites",
+    "import_report",
+    "posable_joints",
+]
 
 LOOP_TOL = 1e-6
 """Largest loop-closure residual (m for a connect's points, m or rad for a weld's) accepted at a requested pose: a
@@ -79,9 +88,45 @@ def _fail(message: str, parameter: str, value: Any = None, hint: str | None = No
     return ModelImportError(message, parameter=parameter, value=value, hint=hint)
 
 
+class MissingMeshWarning(FpmSimWarning):
+    """A mesh file of the model is missing: its geoms were dropped (their bodies state their inertia)."""
+
+
+def _drop_missing_meshes(spec: mujoco.MjSpec, model_path: Path) -> None:
+    """Drop the geoms of mesh files that cannot be found, with a warning naming each, when every body they belong to
+    states its ``<inertial>`` (the mesh then carries no mass the analysis needs: fpm-sim has no contacts and draws no
+    meshes); refuse naming the mesh, its file and the body when a body takes its mass from it."""
+    base = model_path.parent / (spec.meshdir or "")
+    from_geoms = spec.compiler.inertiafromgeom == mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_TRUE
+    for mesh in list(spec.meshes):
+        if not mesh.file or (base / mesh.file).is_file() or Path(mesh.file).is_file():
+            continue
+        users = [g for g in spec.geoms if g.type == mujoco.mjtGeom.mjGEOM_MESH and g.meshname == mesh.name]
+        bodies = sorted({g.parent.name for g in users})
+        massless = [g.parent.name for g in users if g.parent.explicitinertial and not from_geoms]
+        if len(massless) != len(users):
+            body = next(b for b in bodies if b not in massless)
+            raise _fail(
+                f"mesh {mesh.name!r} of body {body!r}: file not found: {base / mesh.file}",
+                "model",
+                hint="the body takes its mass from the mesh: give the mesh file, or the body an <inertial>",
+            )
+        for g in users:
+            spec.delete(g)
+        spec.delete(mesh)
+        warnings.warn(
+            f"mesh {mesh.name!r} ({base / mesh.file}) not found: its geoms on {', '.join(bodies)} dropped (their "
+            "bodies state their inertia, so the modes do not depend on it)",
+            MissingMeshWarning,
+            stacklevel=4,
+        )
+
+
 def _load_spec(desc: ImportedDescription) -> mujoco.MjSpec:
     try:
         spec = mujoco.MjSpec.from_file(str(desc.model_path))
+        spec.compiler.fusestatic = False  # a URDF's default: a body left without joints by locking keeps its name
+        _drop_missing_meshes(spec, desc.model_path)
         spec.compile()
     except ValueError as e:
         raise _fail(f"MuJoCo cannot read {desc.model_path}: {str(e).splitlines()[0]}", "model") from e
