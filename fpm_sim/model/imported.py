@@ -54,6 +54,7 @@ LOOP_TOL = 1e-6
 loop closed by the user's kinematics to solver precision is far below it, one left open by a joint not given far
 above."""
 
+_JOINTISH = (mujoco.mjtObj.mjOBJ_JOINT, mujoco.mjtObj.mjOBJ_TENDON)
 _ALONG_TYPES = {int(mujoco.mjtGeom.mjGEOM_CAPSULE), int(mujoco.mjtGeom.mjGEOM_CYLINDER), int(mujoco.mjtGeom.mjGEOM_BOX)}
 
 
@@ -72,9 +73,12 @@ class ImportReport:
     beam: dict[str, dict[str, Any]] = field(default_factory=dict)
     mass_rule: dict[str, str] = field(default_factory=dict)
     loops: int = 0
+    dropped: list[str] = field(default_factory=list)
 
     def table(self) -> str:
         lines = [f"locked joints: {', '.join(self.locked) or 'none'}; loop closures kept: {self.loops}"]
+        if self.dropped:
+            lines.append(f"dropped with the locked joints: {', '.join(self.dropped)}")
         for b, beam in self.beam.items():
             lines.append(
                 f"{b}: beam {beam['length_m'] * 1e3:.1f} mm ({beam['from']} -> {beam['to']}), "
@@ -468,11 +472,37 @@ def _lock(spec: mujoco.MjSpec, desc: ImportedDescription, report: ImportReport) 
     for a in list(spec.actuators):  # a locked joint drives nothing
         if a.trntype == mujoco.mjtTrn.mjTRN_JOINT and a.target in locked:
             spec.delete(a)
+    _drop_with_locked(spec, locked, report)
     for name in dict.fromkeys([*actuated, *desc.locked_joints]):
         joint = spec.joint(name)
         if joint is not None:
             spec.delete(joint)
             report.locked.append(name)
+
+
+def _drop_with_locked(spec: mujoco.MjSpec, locked: set[str], report: ImportReport) -> None:
+    """Delete what a locked joint leaves dangling: the tendons that span it (with the actuators, equalities and
+    sensors on those tendons) and the sensors on the joint; named in ``report.dropped``."""
+    model = spec.compile()
+    jids = {mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n) for n in locked}
+    tendons = set()
+    for t in range(model.ntendon):
+        adr, num = int(model.tendon_adr[t]), int(model.tendon_num[t])
+        wraps = range(adr, adr + num)
+        if any(model.wrap_type[w] == mujoco.mjtWrap.mjWRAP_JOINT and model.wrap_objid[w] in jids for w in wraps):
+            tendons.add(spec.tendons[t].name or f"(tendon {t})")
+    for t in [t for t in spec.tendons if (t.name or f"(tendon {list(spec.tendons).index(t)})") in tendons]:
+        spec.delete(t)
+        report.dropped.append(f"tendon {t.name}")
+    for a in [a for a in spec.actuators if a.trntype == mujoco.mjtTrn.mjTRN_TENDON and a.target in tendons]:
+        report.dropped.append(f"actuator {a.name}")
+        spec.delete(a)
+    for e in [e for e in spec.equalities if e.type == mujoco.mjtEq.mjEQ_TENDON and {e.name1, e.name2} & tendons]:
+        report.dropped.append(f"equality {e.name}")
+        spec.delete(e)
+    for x in [x for x in spec.sensors if x.objname in tendons | locked and x.objtype in _JOINTISH]:
+        report.dropped.append(f"sensor {x.name}")
+        spec.delete(x)
 
 
 def _add_beams(
@@ -505,6 +535,8 @@ def _add_beams(
             damping_beta_s=desc.damping_beta_s,
         )
         build = add_link(spec, body, link)
+        for jn, _ in build.joints:  # springs, whatever the body's joint class says (a class may limit its joints)
+            spec.joint(jn).limited = mujoco.mjtLimited.mjLIMITED_FALSE
         _hang_lump(beam, build)
         links[name] = build.sites
         kinds.update(dict(build.joints))
