@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any, Literal, overload
 if TYPE_CHECKING:
     from fpm_sim.architecture import Description, TaskPose
     from fpm_sim.architecture.imported import ImportedDescription
+    from fpm_sim.batch.joint_sweep import JointSweep
     from fpm_sim.batch.task_sweep import TaskSweep
     from fpm_sim.config import Manipulator, RigConfig
     from fpm_sim.designs.study import DesignResult
@@ -209,15 +210,27 @@ def modes(
 ) -> ModalComparison: ...
 
 
+@overload
+def modes(
+    config: ImportedDescription,
+    pose: None = None,
+    *,
+    q: Sequence[dict[str, float]],
+    options: ModelOptions | None = None,
+    n_modes: int | None = 10,
+    method: str = "transition_fd",
+) -> list[ModalResult | ModalComparison]: ...
+
+
 def modes(
     config: Manipulator | Description | ImportedDescription | None = None,
     pose: Pose | TaskPose | None = None,
     *,
-    q: dict[str, float] | None = None,
+    q: dict[str, float] | Sequence[dict[str, float]] | None = None,
     options: ModelOptions | None = None,
     n_modes: int | None = 10,
     method: str = "transition_fd",
-) -> ModalResult | ModalComparison:
+) -> ModalResult | ModalComparison | list[ModalResult | ModalComparison]:
     """Natural frequencies (Hz), damping ratios and mode shapes of the manipulator at ``pose`` (``fpm-sim modes``).
 
     Parameters
@@ -233,7 +246,8 @@ def modes(
         (``None``: its first check pose). An imported model is posed by ``q`` instead.
     q
         An imported model's joint values, ``{joint name: value}`` in SI: rad for a hinge, m for a slide (MuJoCo's
-        joint coordinates; joints not named stay at the model's reference). Only for an imported model.
+        joint coordinates; joints not named stay at the model's reference). Only for an imported model. A list of
+        such mappings: the modes at each of those joint-space poses (a list of results, in order).
     options
         Model options; ``None``: ``ModelOptions()`` (standard resolution, gravity, axial springs).
     n_modes
@@ -255,6 +269,10 @@ def modes(
 
         if pose is not None:
             raise TypeError("an imported model is posed by its joint values: fs.modes(desc, q={'joint': value})")
+        if isinstance(q, Sequence):
+            from fpm_sim.batch.joint_sweep import modes_at_joint_poses
+
+            return modes_at_joint_poses(config, q, options=_options(options), n_modes=n_modes, method=method)
         return analyse(build_imported(config, q, _options(options)), method, n_modes)
     if q is not None:
         from fpm_sim.errors import FpmSimError
@@ -307,11 +325,46 @@ def rig_modes(
     )
 
 
+def _sweep_joints(config: ImportedDescription, poses: Sequence[Any] | None, options: ModelOptions | None) -> JointSweep:
+    """:func:`sweep` of an imported model: its poses are ``{joint: value}`` mappings."""
+    from fpm_sim.batch.joint_sweep import sweep_joints
+
+    joint_poses = [p for p in poses or [] if isinstance(p, dict)]
+    if not joint_poses or len(joint_poses) != len(poses or []):
+        raise TypeError("an imported model is swept over joint-space poses: fs.sweep(desc, poses=[{'joint': 0.1}])")
+    return sweep_joints(config, joint_poses, options=_options(options, stacklevel=4))
+
+
+def _sweep_described(
+    config: Description,
+    grid: str,
+    poses: Sequence[Any] | None,
+    step_mm: float,
+    phi_rad: float,
+    z_mm: float | None,
+    options: ModelOptions | None,
+    workers: int,
+) -> TaskSweep:
+    """:func:`sweep` of a described architecture: over its dense task grid, or ``poses`` (task poses)."""
+    from fpm_sim.architecture import TaskPose
+    from fpm_sim.batch.task_sweep import sweep_task, task_grid
+
+    if grid == "dense":
+        home = config.check_poses[0] if config.check_poses else {}
+        held = {"z": z_mm * 1e-3 if z_mm is not None else home.get("z", 0.0), "phi": phi_rad}
+        task_poses, _, _ = task_grid(config, step_mm=step_mm, held=held)
+    else:
+        task_poses = [p for p in poses or [] if isinstance(p, TaskPose)]
+        if len(task_poses) != len(poses or []) or not task_poses:
+            raise TypeError("a described architecture's poses are fs.TaskPose values (grid='poses')")
+    return sweep_task(config, task_poses, options=options, workers=workers, grid=grid, step_mm=step_mm)
+
+
 def sweep(
-    config: Manipulator | Description | None = None,
+    config: Manipulator | Description | ImportedDescription | None = None,
     *,
     grid: str = "dense",
-    poses: Sequence[Pose] | Sequence[TaskPose] | None = None,
+    poses: Sequence[Pose] | Sequence[TaskPose] | Sequence[dict[str, float]] | None = None,
     step_mm: float = 10.0,
     phi_rad: float = 0.0,
     z_mm: float | None = None,
@@ -320,7 +373,7 @@ def sweep(
     backend: str = "cpu",
     workers: int = 1,
     progress: bool = False,
-) -> WorkspaceSweep | TaskSweep:
+) -> WorkspaceSweep | TaskSweep | JointSweep:
     """First three natural frequencies (Hz) over the workspace, the study's 25 poses or given poses.
 
     The ``fpm-sim sweep`` command.
@@ -331,7 +384,8 @@ def sweep(
         Manipulator description; ``None``: the embedded one. A described architecture
         (:class:`fpm_sim.architecture.Description`) is swept by its own pose loop
         (:func:`fpm_sim.batch.task_sweep.sweep_task`; ``grid`` ``"dense"`` or ``"poses"``, the result a
-        :class:`fpm_sim.batch.task_sweep.TaskSweep`).
+        :class:`fpm_sim.batch.task_sweep.TaskSweep`). An imported model's ``poses`` are ``{joint: value}`` mappings
+        (:func:`fpm_sim.batch.joint_sweep.sweep_joints`, a :class:`fpm_sim.batch.joint_sweep.JointSweep`).
     grid
         ``"dense"`` (a square grid of ``step_mm`` at rotation ``phi_rad``), ``"paper"`` (the study's poses) or
         ``"poses"`` (``poses``).
@@ -353,20 +407,13 @@ def sweep(
     progress
         Show a progress bar.
     """
-    from fpm_sim.architecture import Description, TaskPose
+    from fpm_sim.architecture import Description
+    from fpm_sim.architecture.imported import ImportedDescription
 
+    if isinstance(config, ImportedDescription):  # joint-space poses
+        return _sweep_joints(config, poses, options)
     if isinstance(config, Description):
-        from fpm_sim.batch.task_sweep import sweep_task, task_grid
-
-        if grid == "dense":
-            home = config.check_poses[0] if config.check_poses else {}
-            held = {"z": z_mm * 1e-3 if z_mm is not None else home.get("z", 0.0), "phi": phi_rad}
-            task_poses, _, _ = task_grid(config, step_mm=step_mm, held=held)
-        else:
-            task_poses = [p for p in poses or [] if isinstance(p, TaskPose)]
-            if len(task_poses) != len(poses or []) or not task_poses:
-                raise TypeError("a described architecture's poses are fs.TaskPose values (grid='poses')")
-        return sweep_task(config, task_poses, options=_options(options), workers=workers, grid=grid, step_mm=step_mm)
+        return _sweep_described(config, grid, poses, step_mm, phi_rad, z_mm, _options(options), workers)
     from fpm_sim.kinematics import Pose
     from fpm_sim.study.poses import parse_reading
     from fpm_sim.study.sweep import sweep_workspace

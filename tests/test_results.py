@@ -100,6 +100,25 @@ def _quiet_call(fn, *args, **kwargs):
         return fn(*args, **kwargs)
 
 
+def _joint_sweep():
+    """A one-link pendulum arm (inline MJCF) made flexible, swept over two joint-space poses."""
+    import tempfile
+
+    folder = Path(tempfile.mkdtemp())
+    (folder / "arm.xml").write_text(
+        '<mujoco><worldbody><body name="arm"><joint name="j" axis="0 1 0"/>'
+        '<geom type="capsule" fromto="0 0 0 0.5 0 0" size="0.01"/><site name="tip" pos="0.5 0 0"/>'
+        "</body></worldbody></mujoco>"
+    )
+    (folder / "arm.toml").write_text(
+        'kind = "imported"\nmodel = "arm.xml"\nlocked_joints = ["j"]\n[materials.steel]\nyoung_pa = 200e9\n'
+        'poisson = 0.3\ndensity_kg_m3 = 7850.0\n[sections.bar]\nshape = "rect"\nthickness_m = 0.006\n'
+        'height_m = 0.025\n[[flexible]]\nbody = "arm"\nsection = "bar"\nmaterial = "steel"\nend_site = "tip"\n'
+    )
+    desc = fs.load_imported(folder / "arm.toml")
+    return _quiet_call(fs.sweep, desc, poses=[{"j": 0.0}, {"j": 0.5}], options=fs.ModelOptions(segments=SEG))
+
+
 def _described_identification():
     from fpm_sim.study.identify.described import TaskMeasurements, identify_description
 
@@ -184,6 +203,7 @@ BUILDERS = {
         poses=[fs.TaskPose(0.0, 0.25), fs.TaskPose(0.04, 0.18), fs.TaskPose(0.0, 0.6)],
         options=fs.ModelOptions(segments=SEG),
     ),
+    "JointSweep": _joint_sweep,
     "PoseFrequencies": lambda: _sweep().frequencies,
     "StudyReproduction": _reproduction,
     "DescribedIdentification": _described_identification,

@@ -33,6 +33,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "FIDELITY_CHOICES",
+    "IMPORTED_COMMANDS",
     "LINK_MODEL_CHOICES",
     "MAX_MODES",
     "OPTION_NAMES",
@@ -40,6 +41,7 @@ __all__ = [
     "CliError",
     "add_config_args",
     "add_engine_args",
+    "add_joint_args",
     "add_model_args",
     "add_output_args",
     "add_overwrite_arg",
@@ -54,12 +56,14 @@ __all__ = [
     "error_line",
     "finish_store",
     "is_described",
+    "joint_values",
     "load_machine",
     "load_manipulator",
     "mm",
     "model_options",
     "pose_of",
     "read_input_file",
+    "refuse_task_pose",
     "task_pose_of",
     "with_resolution",
     "workers_of",
@@ -329,9 +333,12 @@ def load_manipulator(args: argparse.Namespace) -> Manipulator:
     if not path.exists():
         raise CliError(f"--config {path}: file not found; check the path (fpm-sim config prints a template)")
     from fpm_sim.architecture import is_description_file
+    from fpm_sim.architecture.imported import is_imported_file
 
     if is_description_file(path):
         raise CliError(_not_yet(str(getattr(args, "command", None) or "this command"), path))
+    if is_imported_file(path):
+        raise CliError(_not_on_imported(str(getattr(args, "command", None) or "this command"), path))
     return load_config(path)
 
 
@@ -398,14 +405,38 @@ def load_machine(args: argparse.Namespace, command: str) -> Manipulator | Descri
 
     path = getattr(args, "config", None)
     if path and Path(path).is_file() and is_imported_file(path):
-        if command != "modes":
-            raise CliError(f"--config {path} is an imported model (kind = 'imported'); only 'modes' runs on it so far")
+        if command not in IMPORTED_COMMANDS:
+            raise CliError(_not_on_imported(command, Path(path)))
         return load_imported(path)  # type: ignore[return-value]
     if path and Path(path).is_file() and is_description_file(path):
         if command not in GENERAL_COMMANDS:
             raise CliError(_not_yet(command, Path(path)))
         return load_description(path)
     return load_manipulator(args)
+
+
+IMPORTED_COMMANDS = ("modes", "sweep", "frf", "export-mjcf")
+"""The commands that run on an imported model (``kind = "imported"``), posed by joint values (``--q``, ``--poses``)."""
+
+_WHY_NOT_IMPORTED = {
+    "check": "a requirements file's poses are task poses (x, y, phi) and an imported model has no task coordinates",
+    "design": "its --vary paths edit a described architecture's chains; an imported model's sections are edited in "
+    "its own file (run sweep --poses on each edited copy)",
+    "identify": "it identifies a described architecture's or the 3RRR's parameters from their task-pose modes",
+    "reduce": "its reduced models are the described architectures' (task poses, motors as inputs)",
+    "impact": "its hammer points and poses are a described architecture's",
+    "atlas": "its atlas is over task poses and an imported model has no task coordinates",
+    "rollout": "it drives motors that an imported model's actuated joints, locked by the import, no longer have",
+    "move": "a move is a task-space path and an imported model has no task coordinates",
+}
+
+
+def _not_on_imported(command: str, path: Path) -> str:
+    why = _WHY_NOT_IMPORTED.get(command, "it is the study's 3RRR's own command (docs/study.md)")
+    return (
+        f"--config {path} is an imported model (kind = 'imported'); '{command}' does not run on it: {why}. On an "
+        f"imported model run: {', '.join(IMPORTED_COMMANDS)}"
+    )
 
 
 STUDY_COMMANDS = ("reproduce", "rig", "readability", "transient")
@@ -456,6 +487,7 @@ def build_machine(args: argparse.Namespace, machine: Manipulator | Description, 
     if isinstance(machine, ImportedDescription):
         from fpm_sim.model.imported import build_imported
 
+        refuse_task_pose(args)
         q = joint_values(getattr(args, "q", None) or [])
         return build_imported(machine, q, opts), ", ".join(f"{k} = {v:g}" for k, v in q.items()) or "as the model"
     if isinstance(machine, Description):
@@ -467,6 +499,28 @@ def build_machine(args: argparse.Namespace, machine: Manipulator | Description, 
 
     pose = pose_of(args)
     return build_manipulator(machine, pose, opts), pose.label()
+
+
+def add_joint_args(p: argparse.ArgumentParser) -> None:
+    """``--q NAME=VALUE``: an imported model's joint values (:func:`joint_values`)."""
+    p.add_argument(
+        "--q",
+        action="append",
+        metavar="NAME=VALUE",
+        help="an imported model's joint value (rad for a hinge, m for a slide; repeat per joint)",
+    )
+
+
+def refuse_task_pose(args: argparse.Namespace) -> None:
+    """An imported model is posed by joint values: a task-pose option is refused by name."""
+    for flag in ("x_mm", "y_mm", "z_mm", "phi_rad"):
+        value = getattr(args, flag, None)
+        if value is not None and not (flag == "phi_rad" and value == 0.0):  # sweep's --phi-rad defaults to 0
+            option = "--" + flag.replace("_", "-")
+            raise CliError(
+                f"{option}: an imported model has no task coordinates (no end-effector kinematics); pose it by its "
+                "joints' values: --q NAME=VALUE or --poses FILE.csv (one column per joint)"
+            )
 
 
 def joint_values(items: list[str]) -> dict[str, float]:

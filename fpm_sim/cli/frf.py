@@ -9,6 +9,7 @@ from typing import Any
 from fpm_sim.cli.common import (
     CliError,
     add_config_args,
+    add_joint_args,
     add_model_args,
     add_output_args,
     add_pose_args,
@@ -103,6 +104,11 @@ def cmd_frf(args: argparse.Namespace) -> int:
     exc.check(built, "input")
     resp.check(built, "output")
     system = modal_system(built)
+    if args.damping_ratio is None and not (abs(system.xi.diagonal()) > 0.0).any():
+        raise CliError(
+            "--damping-ratio: the model has no damping (its FRF peaks would be infinite); give --damping-ratio "
+            "(e.g. 0.01) or damping in the description"
+        )
     freq = frf_grid(args.f_min_hz, args.f_max_hz, args.df_hz, system.frequencies_hz)
     frf = modal_frf(
         system,
@@ -148,7 +154,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         p,
         "input",
         "force input (default: the machine's test point: on the 3RRR distal_0 mid-span, z; on a described "
-        "architecture mid-span of the first chain's last flexible link, z)",
+        "architecture mid-span of the first chain's last flexible link, z; on an imported model mid-span of its "
+        "first flexible body's beam, z)",
         LinkPointDefault("distal_0", 0.5, "z"),
     )
     add_point_args(p, "output", "response (default: the input point and axis, a driving-point FRF)", None)
@@ -163,6 +170,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--csv", type=Path, help="write the FRF (re, im, magnitude, dB, phase) to this CSV")
     p.add_argument("--plot", type=Path, help="magnitude/phase plot (.png, .pdf, .svg)")
     add_pose_args(p)
+    add_joint_args(p)
     add_config_args(p)
     add_model_args(p)
     add_output_args(p)

@@ -32,6 +32,7 @@ try:  # Ctrl-C while the modules load (a second or so): one line and 130, as at 
         OPTION_NAMES,
         CliError,
         add_config_args,
+        add_joint_args,
         add_model_args,
         add_output_args,
         add_overwrite_arg,
@@ -46,6 +47,7 @@ try:  # Ctrl-C while the modules load (a second or so): one line and 130, as at 
         load_manipulator,
         mm,
         model_options,
+        refuse_task_pose,
         with_resolution,
     )
     from fpm_sim.errors import FpmSimError, FpmSimWarning
@@ -181,6 +183,8 @@ def cmd_modes(args: argparse.Namespace) -> int:
     machine = load_machine(args, "modes")
     opts = model_options(args)
     warn_if_coarse(opts)
+    if args.poses is not None:
+        return _modes_at_joint_poses(args, machine, opts)
     built, pose_label = build_machine(args, machine, opts)
     # --mode K beyond --n-modes: every physical mode (a K beyond them is then refused by name, as --mode)
     result = analyse(built, args.method, args.n_modes if (args.mode or 1) <= args.n_modes else None)
@@ -197,6 +201,37 @@ def cmd_modes(args: argparse.Namespace) -> int:
         + note
     )
     emit(args, payload, text)
+    return 0
+
+
+def _modes_at_joint_poses(args: argparse.Namespace, machine: Any, opts: Any) -> int:
+    """``fpm-sim modes --config imported.toml --poses poses.csv``: the modes at each joint-space pose."""
+    from fpm_sim.architecture.imported import ImportedDescription
+    from fpm_sim.batch.joint_sweep import modes_at_joint_poses, read_joint_poses_csv
+
+    if not isinstance(machine, ImportedDescription):
+        raise CliError(
+            "--poses: a CSV of joint values poses an imported model (kind = 'imported'); pose this machine "
+            "with --x-mm/--y-mm/--phi-rad"
+        )
+    for option, given in (
+        ("--q", args.q),
+        ("--shapes", args.shapes),
+        ("--plot", args.plot),
+        ("--animate", args.animate),
+    ):
+        if given:
+            raise CliError(f"{option}: one pose's option; drop it with --poses (or give that pose with --q)")
+    refuse_task_pose(args)
+    poses = read_joint_poses_csv(args.poses, machine)
+    results = modes_at_joint_poses(machine, poses, options=opts, n_modes=args.n_modes, method=args.method)
+    rows, blocks = [], [machine.name]
+    for k, (q, result) in enumerate(zip(poses, results, strict=True)):
+        label = ", ".join(f"{j} = {v:g}" for j, v in q.items())
+        rows.append({"pose": k + 1, "q": q, **result.to_dict(args.n_modes)})
+        blocks.append(f"\npose {k + 1}: {label}\n" + result.table(args.n_modes))
+    payload = {"config": machine.name, "manipulator": machine.to_dict(), "poses": rows}
+    emit(args, with_resolution(payload, opts), "\n".join(blocks))
     return 0
 
 
@@ -405,11 +440,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--mode", type=count_arg("--mode"), metavar="K", help="the mode --animate draws, 1-based (default 1)"
     )
+    add_joint_args(p)
     p.add_argument(
-        "--q",
-        action="append",
-        metavar="NAME=VALUE",
-        help="an imported model's joint value (rad for a hinge, m for a slide; repeat per joint)",
+        "--poses",
+        type=Path,
+        help="an imported model's joint-space poses: CSV with one column per joint name (rad or m), modes at each",
     )
     add_posterior_args(p)
     add_output_args(p)
@@ -434,6 +469,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, help="output file (.xml; default: stdout)")
     add_overwrite_arg(p)
     add_pose_args(p)
+    add_joint_args(p)
     _add_rig_overrides(p)
     add_config_args(p)
     add_model_args(p)

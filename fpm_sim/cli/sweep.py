@@ -18,6 +18,7 @@ from fpm_sim.cli.common import (
     finish_store,
     held_task_coordinates,
     is_described,
+    refuse_task_pose,
     resolution_line,
     with_resolution,
 )
@@ -25,6 +26,7 @@ from fpm_sim.cli.reproduce import add_study_args, default_out, study_manipulator
 
 if TYPE_CHECKING:
     from fpm_sim.architecture import Description
+    from fpm_sim.architecture.imported import ImportedDescription
 
 __all__ = ["cmd_sweep", "register"]
 
@@ -67,7 +69,41 @@ def _sweep_described(args: argparse.Namespace, desc: Description) -> int:
     return 0
 
 
+def _sweep_imported(args: argparse.Namespace, desc: ImportedDescription) -> int:
+    """``fpm-sim sweep --config imported.toml --poses joints.csv``: the frequencies at each joint-space pose
+    (:func:`fpm_sim.batch.joint_sweep.sweep_joints`)."""
+    from fpm_sim.batch.joint_sweep import read_joint_poses_csv, sweep_joints
+    from fpm_sim.model.options import warn_if_coarse
+    from fpm_sim.outputs import atomic_dir
+
+    for key, default in {**_STUDY_ONLY, "grid": "dense", "step_mm": 10.0, "backend": "cpu"}.items():
+        if getattr(args, key, default) != default:
+            flag = "--" + key.replace("_", "-")
+            raise CliError(f"{flag}: not an option of an imported model's sweep (its poses are --poses, joint values)")
+    refuse_task_pose(args)
+    if args.poses is None:
+        raise CliError(
+            "--poses: an imported model has no task grid; give its joint-space poses as a CSV with one column per "
+            "joint name (rad for a hinge, m for a slide)"
+        )
+    opts = study_options(args)
+    poses = read_joint_poses_csv(args.poses, desc)
+    out = args.out or Path("out") / f"sweep_poses_{Path(args.config).stem}"
+    check_output_dir(out, "--out", overwrite=args.overwrite)
+    warn_if_coarse(opts)
+    sw = sweep_joints(desc, poses, options=opts)
+    with atomic_dir(out, overwrite=args.overwrite) as tmp:
+        names = [p.name for p in sw.write(tmp)]
+    finish_store(out)
+    paths = [Path(out) / n for n in names]
+    text = sw.table() + "\n" + resolution_line(sw.options or opts) + "\n  wrote " + ", ".join(str(p) for p in paths)
+    payload = {**sw.to_dict(), "files": [str(p) for p in paths]}
+    emit(args, with_resolution(payload, sw.options or opts), text)
+    return 0
+
+
 def cmd_sweep(args: argparse.Namespace) -> int:
+    from fpm_sim.architecture.imported import is_imported_file, load_imported
     from fpm_sim.model.options import warn_if_coarse
     from fpm_sim.outputs import atomic_dir
     from fpm_sim.study.poses import parse_reading
@@ -75,6 +111,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
     if args.out is not None:  # before the inputs are read (a posterior: seconds) and anything is computed
         check_output_dir(args.out, "--out", overwrite=args.overwrite)
+    if args.config is not None and Path(args.config).is_file() and is_imported_file(args.config):
+        return _sweep_imported(args, load_imported(args.config))
     if is_described(args):
         from fpm_sim.architecture import load_description
 
@@ -160,7 +198,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="height of the dense grid's horizontal slice (mm; spatial architectures; default: the first check pose's)",
     )
     add_config_args(p)
-    p.add_argument("--poses", type=Path, help="CSV of poses (columns x_mm,y_mm,phi_rad) instead of --grid")
+    p.add_argument(
+        "--poses",
+        type=Path,
+        help="CSV of poses (columns x_mm,y_mm,phi_rad) instead of --grid; on an imported model, one column per joint "
+        "name (rad or m)",
+    )
     add_study_args(p)
     add_posterior_args(p, what="the first three frequencies at each pose")
     add_engine_args(p)

@@ -221,8 +221,15 @@ class ModalResult:
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
         ax.set_zlabel("z (m)")
-        span = max(float(np.ptp(np.concatenate(list(pos.values()))[:, :2], axis=0).max()), 1e-3)
-        ax.set_zlim(-span / 2, span / 2)
+        points = np.concatenate(list(pos.values()))
+        span = max(float(np.ptp(points, axis=0).max()), 1e-3)  # a planar machine's: its x-y extent
+        mid = 0.5 * (points.min(axis=0) + points.max(axis=0))
+        ax.set_zlim(mid[2] - span / 2, mid[2] + span / 2)
+        if np.ptp(points[:, 2]) > np.ptp(points[:, :2], axis=0).max():  # a machine standing up (an imported arm)
+            half = span / 2 + scale_m
+            ax.set_xlim(mid[0] - half, mid[0] + half)
+            ax.set_ylim(mid[1] - half, mid[1] + half)
+            ax.set_zlim(mid[2] - half, mid[2] + half)
         m = self.modes[index]
         ax.set_title(f"mode {index + 1}: {m.frequency_hz:.2f} Hz, {m.dominant}")
 

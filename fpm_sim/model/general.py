@@ -240,6 +240,7 @@ class _Builder:
             section=lk.section,
             material=lk.material,
             link_model=self.opts.link_model if lk.flexible else "rigid",
+            lump_bodies=lk.flexible and self.opts.link_model == "rigid",
             segments=int(self.opts.segments or 1),
             axial=self.opts.axial,
             rotary_inertia=self.opts.rotary_inertia,

@@ -22,6 +22,7 @@ What the builder does (``docs/import.md``):
 from __future__ import annotations
 
 import math
+import warnings
 import xml.etree.ElementTree as ET
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -31,15 +32,29 @@ import mujoco
 import numpy as np
 
 from fpm_sim.architecture.imported import FlexibleBody, ImportedDescription
-from fpm_sim.errors import FpmSimError
+from fpm_sim.errors import FpmSimError, FpmSimWarning
 from fpm_sim.model.links import add_link
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.model.parts import LinkSpec, box_part, set_inertial
 from fpm_sim.model.spec import BuiltModel, compile_model
 from fpm_sim.model.xml_precision import full_precision_xml
 
-__all__ = ["ImportReport", "ModelImportError", "build_imported", "end_sites", "import_report"]
+__all__ = [
+    "ImportReport",
+    "MissingMeshWarning",
+    "ModelImportError",
+    "build_imported",
+    "end_sites",
+    "import_report",
+    "posable_joints",
+]
 
+LOOP_TOL = 1e-6
+"""Largest loop-closure residual (m for a connect's points, m or rad for a weld's) accepted at a requested pose: a
+loop closed by the user's kinematics to solver precision is far below it, one left open by a joint not given far
+above."""
+
+_JOINTISH = (mujoco.mjtObj.mjOBJ_JOINT, mujoco.mjtObj.mjOBJ_TENDON)
 _ALONG_TYPES = {int(mujoco.mjtGeom.mjGEOM_CAPSULE), int(mujoco.mjtGeom.mjGEOM_CYLINDER), int(mujoco.mjtGeom.mjGEOM_BOX)}
 
 
@@ -58,9 +73,12 @@ class ImportReport:
     beam: dict[str, dict[str, Any]] = field(default_factory=dict)
     mass_rule: dict[str, str] = field(default_factory=dict)
     loops: int = 0
+    dropped: list[str] = field(default_factory=list)
 
     def table(self) -> str:
         lines = [f"locked joints: {', '.join(self.locked) or 'none'}; loop closures kept: {self.loops}"]
+        if self.dropped:
+            lines.append(f"dropped with the locked joints: {', '.join(self.dropped)}")
         for b, beam in self.beam.items():
             lines.append(
                 f"{b}: beam {beam['length_m'] * 1e3:.1f} mm ({beam['from']} -> {beam['to']}), "
@@ -74,9 +92,45 @@ def _fail(message: str, parameter: str, value: Any = None, hint: str | None = No
     return ModelImportError(message, parameter=parameter, value=value, hint=hint)
 
 
+class MissingMeshWarning(FpmSimWarning):
+    """A mesh file of the model is missing: its geoms were dropped (their bodies state their inertia)."""
+
+
+def _drop_missing_meshes(spec: mujoco.MjSpec, model_path: Path) -> None:
+    """Drop the geoms of mesh files that cannot be found, with a warning naming each, when every body they belong to
+    states its ``<inertial>`` (the mesh then carries no mass the analysis needs: fpm-sim has no contacts and draws no
+    meshes); refuse naming the mesh, its file and the body when a body takes its mass from it."""
+    base = model_path.parent / (spec.meshdir or "")
+    from_geoms = spec.compiler.inertiafromgeom == mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_TRUE
+    for mesh in list(spec.meshes):
+        if not mesh.file or (base / mesh.file).is_file() or Path(mesh.file).is_file():
+            continue
+        users = [g for g in spec.geoms if g.type == mujoco.mjtGeom.mjGEOM_MESH and g.meshname == mesh.name]
+        bodies = sorted({g.parent.name for g in users})
+        massless = [g.parent.name for g in users if g.parent.explicitinertial and not from_geoms]
+        if len(massless) != len(users):
+            body = next(b for b in bodies if b not in massless)
+            raise _fail(
+                f"mesh {mesh.name!r} of body {body!r}: file not found: {base / mesh.file}",
+                "model",
+                hint="the body takes its mass from the mesh: give the mesh file, or the body an <inertial>",
+            )
+        for g in users:
+            spec.delete(g)
+        spec.delete(mesh)
+        warnings.warn(
+            f"mesh {mesh.name!r} ({base / mesh.file}) not found: its geoms on {', '.join(bodies)} dropped (their "
+            "bodies state their inertia, so the modes do not depend on it)",
+            MissingMeshWarning,
+            stacklevel=4,
+        )
+
+
 def _load_spec(desc: ImportedDescription) -> mujoco.MjSpec:
     try:
         spec = mujoco.MjSpec.from_file(str(desc.model_path))
+        spec.compiler.fusestatic = False  # a URDF's default: a body left without joints by locking keeps its name
+        _drop_missing_meshes(spec, desc.model_path)
         spec.compile()
     except ValueError as e:
         raise _fail(f"MuJoCo cannot read {desc.model_path}: {str(e).splitlines()[0]}", "model") from e
@@ -106,13 +160,49 @@ def _rot(quat: np.ndarray) -> np.ndarray:
     return r.reshape(3, 3)
 
 
-def _pose(spec: mujoco.MjSpec, q: dict[str, float]) -> None:
-    """Set the joint values ``q`` into the bodies' frames (module docstring)."""
-    if not q:
+def _loop_residuals(model: mujoco.MjModel, data: mujoco.MjData, q: dict[str, float]) -> None:
+    """Refuse a pose at which an active ``<equality connect|weld>`` does not close (its residual in the model as
+    read, whose closures MuJoCo's compiler set at the model's own reference pose)."""
+    if model.neq == 0:
         return
+    model.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
+    mujoco.mj_forward(model, data)
+    worst: dict[int, float] = {}
+    for r in range(data.nefc):
+        if int(data.efc_type[r]) == int(mujoco.mjtConstraint.mjCNSTR_EQUALITY):
+            e = int(data.efc_id[r])
+            worst[e] = max(worst.get(e, 0.0), abs(float(data.efc_pos[r])))
+    for e, res in worst.items():
+        if int(model.eq_type[e]) in (int(mujoco.mjtEq.mjEQ_CONNECT), int(mujoco.mjtEq.mjEQ_WELD)) and res > LOOP_TOL:
+            name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_EQUALITY, e) or f"(equality {e})"
+            given = ", ".join(f"{k} = {v:g}" for k, v in q.items()) or "the model's reference pose"
+            raise _fail(
+                f"the loop closure {name} does not close at {given}: residual {res:.3g} (m or rad) > {LOOP_TOL:g}",
+                "q",
+                hint="give every joint of the loop values that close it (the passive joints too)",
+            )
+
+
+def posable_joints(desc: ImportedDescription) -> list[str]:
+    """The names of the hinge and slide joints of ``desc``'s model (those a joint-space pose may set)."""
+    model = _load_spec(desc).compile()
+    kinds = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
+    return [
+        mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j)
+        for j in range(model.njnt)
+        if int(model.jnt_type[j]) in kinds and mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j)
+    ]
+
+
+def _pose(spec: mujoco.MjSpec, q: dict[str, float]) -> None:
+    """Set the joint values ``q`` into the bodies' frames (module docstring); a loop that does not close there is
+    refused by the equality's name (:func:`_loop_residuals`)."""
     model = spec.compile()
     data = mujoco.MjData(model)
     data.qpos[:] = model.qpos0
+    if not q:
+        _loop_residuals(model, data, q)
+        return
     for name, value in q.items():
         jid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)
         if jid < 0:
@@ -123,6 +213,7 @@ def _pose(spec: mujoco.MjSpec, q: dict[str, float]) -> None:
         if not math.isfinite(value):
             raise _fail(f"joint {name!r}: value must be finite", "q", value)
         data.qpos[model.jnt_qposadr[jid]] = value
+    _loop_residuals(model, data, q)
     mujoco.mj_kinematics(model, data)
     posed = {int(model.jnt_bodyid[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n)]) for n in q}
     for bid in posed:
@@ -381,11 +472,37 @@ def _lock(spec: mujoco.MjSpec, desc: ImportedDescription, report: ImportReport) 
     for a in list(spec.actuators):  # a locked joint drives nothing
         if a.trntype == mujoco.mjtTrn.mjTRN_JOINT and a.target in locked:
             spec.delete(a)
+    _drop_with_locked(spec, locked, report)
     for name in dict.fromkeys([*actuated, *desc.locked_joints]):
         joint = spec.joint(name)
         if joint is not None:
             spec.delete(joint)
             report.locked.append(name)
+
+
+def _drop_with_locked(spec: mujoco.MjSpec, locked: set[str], report: ImportReport) -> None:
+    """Delete what a locked joint leaves dangling: the tendons that span it (with the actuators, equalities and
+    sensors on those tendons) and the sensors on the joint; named in ``report.dropped``."""
+    model = spec.compile()
+    jids = {mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n) for n in locked}
+    tendons = set()
+    for t in range(model.ntendon):
+        adr, num = int(model.tendon_adr[t]), int(model.tendon_num[t])
+        wraps = range(adr, adr + num)
+        if any(model.wrap_type[w] == mujoco.mjtWrap.mjWRAP_JOINT and model.wrap_objid[w] in jids for w in wraps):
+            tendons.add(spec.tendons[t].name or f"(tendon {t})")
+    for t in [t for t in spec.tendons if (t.name or f"(tendon {list(spec.tendons).index(t)})") in tendons]:
+        spec.delete(t)
+        report.dropped.append(f"tendon {t.name}")
+    for a in [a for a in spec.actuators if a.trntype == mujoco.mjtTrn.mjTRN_TENDON and a.target in tendons]:
+        report.dropped.append(f"actuator {a.name}")
+        spec.delete(a)
+    for e in [e for e in spec.equalities if e.type == mujoco.mjtEq.mjEQ_TENDON and {e.name1, e.name2} & tendons]:
+        report.dropped.append(f"equality {e.name}")
+        spec.delete(e)
+    for x in [x for x in spec.sensors if x.objname in tendons | locked and x.objtype in _JOINTISH]:
+        report.dropped.append(f"sensor {x.name}")
+        spec.delete(x)
 
 
 def _add_beams(
@@ -418,17 +535,28 @@ def _add_beams(
             damping_beta_s=desc.damping_beta_s,
         )
         build = add_link(spec, body, link)
+        for jn, _ in build.joints:  # springs, whatever the body's joint class says (a class may limit its joints)
+            spec.joint(jn).limited = mujoco.mjtLimited.mjLIMITED_FALSE
         _hang_lump(beam, build)
         links[name] = build.sites
         kinds.update(dict(build.joints))
-        p_last = beam.start + beam.rot[:, 0] * (beam.length_m - build.last_length_m)
         bid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, beam.flex.body)
         for c in range(model.nbody):
             if c != bid and model.body_parentid[c] == bid:
                 child = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, c)
+                j = _piece_of(beam, build, model.body_pos[c]) if model.body_jntnum[c] == 0 else len(build.bodies) - 1
+                origin = beam.start + beam.rot[:, 0] * float(np.sum(build.piece_lengths_m[:j]))
                 rc = _rot(model.body_quat[c])
-                moves[child] = (build.last.name, beam.rot.T @ (model.body_pos[c] - p_last), _quat(beam.rot.T @ rc))
+                pos = beam.rot.T @ (model.body_pos[c] - origin)
+                moves[child] = (build.bodies[j].name, pos, _quat(beam.rot.T @ rc))
     return links, kinds, moves
+
+
+def _piece_of(beam: _Beam, build: Any, p: np.ndarray) -> int:
+    """The index of the beam's piece that holds the point ``p`` (body frame), by its place along the beam."""
+    s = float(np.clip((p - beam.start) @ beam.rot[:, 0], 0.0, beam.length_m))
+    edges = np.cumsum([0.0, *build.piece_lengths_m])
+    return min(int(np.searchsorted(edges, s, side="right")) - 1, len(build.bodies) - 1)
 
 
 def _hang_lump(beam: _Beam, build: Any) -> None:
@@ -437,9 +565,8 @@ def _hang_lump(beam: _Beam, build: Any) -> None:
     if beam.lump is None or beam.lump[0] <= 0.0:
         return
     m, c, i_c = beam.lump
-    s = float(np.clip((c - beam.start) @ beam.rot[:, 0], 0.0, beam.length_m))
     edges = np.cumsum([0.0, *build.piece_lengths_m])
-    j = min(int(np.searchsorted(edges, s, side="right")) - 1, len(build.bodies) - 1)
+    j = _piece_of(beam, build, c)
     piece = build.bodies[j]
     origin = beam.start + beam.rot[:, 0] * edges[j]
     f = piece.fullinertia
@@ -564,6 +691,7 @@ def build_imported(
         adr = int(model.jnt_dofadr[j])
         dof_kinds[adr : adr + width] = [kinds.get(name, "passive")] * width
     first = next(iter(links))
+    tip = links[list(links)[-1]][-1]  # the last flexible body's beam end: the FRF's and reductions' reference point
     return BuiltModel(
         model=model,
         spec=spec,
@@ -579,6 +707,7 @@ def build_imported(
             "timestep_s": float(model.opt.timestep),
             "nv": int(model.nv),
         },
+        end_effector_site=tip,
         accelerometer_links=tuple(links),
         test_point=(first, 0.5, "z"),
         planar=False,

@@ -154,6 +154,8 @@ def add_segment_link(spec: mujoco.MjSpec, parent: mujoco.MjsBody, link: LinkSpec
             parts += [lump_part(lump, np.zeros(3)) for lump in link.start_lumps if lump.mass_kg > 0]
         if j == len(lengths) - 1:
             parts += [lump_part(lump, np.array([piece, 0.0, 0.0])) for lump in link.end_lumps if lump.mass_kg > 0]
+        if link.link_model == "rigid" and link.lump_bodies:  # LinkSpec.lump_bodies
+            parts = parts[:1] + _lump_bodies(body, name, parts[1:])
         set_inertial(body, parts)
         add_box_geom(body, f"{name}_g{j}", piece, sec, 0.0, link.rgba)
         site = f"{name}_p{j}"
@@ -164,6 +166,17 @@ def add_segment_link(spec: mujoco.MjSpec, parent: mujoco.MjsBody, link: LinkSpec
     body.add_site(name=end_site, pos=[lengths[-1], 0.0, 0.0], size=[0.002, 0, 0])
     build.sites.append(end_site)
     return build
+
+
+def _lump_bodies(
+    body: mujoco.MjsBody, name: str, lumps: list[tuple[float, np.ndarray, np.ndarray]]
+) -> list[tuple[float, np.ndarray, np.ndarray]]:
+    """Each lump of a rigid link as a jointless child body at its place (MuJoCo welds it to ``body``: the same
+    dynamics as the lump in ``body``'s inertial); what is left for ``body``'s own inertial (nothing)."""
+    for k, lump in enumerate(lumps):
+        child = body.add_body(name=f"{name}_lump{k}", pos=[float(v) for v in lump[1]])
+        set_inertial(child, [(lump[0], np.zeros(3), lump[2])])
+    return []
 
 
 LinkBuilder = Callable[[mujoco.MjSpec, mujoco.MjsBody, LinkSpec], LinkBuild]

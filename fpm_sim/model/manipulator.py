@@ -92,6 +92,7 @@ def build_manipulator(
         section=manip.section,
         material=manip.material,
         link_model=opts.link_model,
+        lump_bodies=opts.link_model == "rigid",
         segments=opts.segments,
         axial=opts.axial,
         rotary_inertia=opts.rotary_inertia,

@@ -135,6 +135,10 @@ class LinkSpec:
     """False: the pieces' inertia about the link's own axis is dropped (to 1e-6 of the others: MuJoCo needs it
     positive): a link whose spin is free between two ball joints carries none of it into the other modes, and no
     torque along itself, so it gets no twist springs either (``segments`` and ``rigid`` only)."""
+    lump_bodies: bool = False
+    """``rigid`` only: each lump its own jointless child body at its place rather than folded into the link's
+    inertial (the same dynamics): an exported flexible link built rigid keeps where its masses sit, so that it can
+    be imported back flexible (``fpm-sim import``)."""
     quat: tuple[float, float, float, float] | None = None
     """Orientation of the link frame in the parent's (w, x, y, z), for links out of the base plane (``segments``
     and ``rigid`` only); None: ``angle_rad`` about z."""
