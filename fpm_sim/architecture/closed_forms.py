@@ -13,9 +13,9 @@ Patterns (a root chain, from its base frame ``(p0, R0)``; ``u = R0 x``, ``w`` th
 ``v = w x u``):
 
 * **planar dyad** ``revolute - link L1 - revolute - link L2 - end joint`` with both revolute axes equal (unit, and
-  perpendicular to the frame's x axis): the 3RRR's and the five-bar's chains. The end joint's centre is
-  ``p0 + L1 e(q1) + L2 e(q1 + q2)`` with ``e(a) = cos a u + sin a v``: circle-circle intersection,
-  ``cos q2 = (r^2 - L1^2 - L2^2) / (2 L1 L2)``, ``q2 = +-acos``.
+  perpendicular to the frame's x axis): the 3RRR's chains (the five-bar's too, but its free ``phi`` leaves it to
+  Newton). The end joint's centre is ``p0 + L1 e(q1) + L2 e(q1 + q2)`` with ``e(a) = cos a u + sin a v``:
+  circle-circle intersection, ``cos q2 = (r^2 - L1^2 - L2^2) / (2 L1 L2)``, ``q2 = +-acos``.
 * **prismatic-revolute** ``prismatic - revolute - link L - end joint`` (revolute axis unit, perpendicular to the
   frame's x axis): the 3PRR's chains. The end joint's centre is ``p0 + q1 s + L e(q2)`` with ``s = R0 axis``:
   line-circle intersection, ``|d - q1 s| = L``, two roots of a quadratic.

@@ -12,7 +12,11 @@ spherical nothing more. Rotation rows are scaled by the characteristic length (:
 **Inverse kinematics** solves the closures for the unknowns at the task coordinates by Gauss-Newton with
 minimum-norm steps (a rod between two spherical joints keeps its spin at zero), from the working mode's start
 (each branch interval's middle), then from seeded random starts; the first solution whose coordinates lie in every
-working-mode interval is taken. A pose no start reaches is refused (:class:`UnreachableTaskPoseError`).
+working-mode interval is taken. A pose no start reaches is refused (:class:`UnreachableTaskPoseError`). Where the
+end effector's pose is all given and every chain has a closed form (:mod:`fpm_sim.architecture.closed_forms`: the
+3RRR's and the 3PRR's chains), the closed forms' assembly is taken instead when it passes the same closure tolerance
+and working-mode test; Newton decides everything else. What a description needs at every pose (layouts, lengths,
+attachment points, the closed forms) is worked out once per description (``_plan``).
 
 **Mobility and singularity** come from the closure's Jacobian in consistent units (rotation columns times the
 characteristic length ``ell``): with the actuated joints locked, the free end effector and the passive joints must
@@ -165,7 +169,13 @@ def chain_frames(chain: ChainDesc, q: dict[str, np.ndarray], base_p: np.ndarray,
     for e in chain.path:
         if isinstance(e, LinkDesc):
             p = p + r[:, 0] * e.length_m
-        elif e is not end:
+        elif e is end or e.type == "fixed":
+            pass
+        elif e.type == "revolute":  # no translation (adding r @ 0 changes nothing)
+            r = r @ rotation(np.array(e.axis), float(q[e.name][0]))
+        elif e.type == "prismatic":  # no rotation (r @ I is r)
+            p = p + r @ (np.array(e.axis) * float(q[e.name][0]))
+        else:
             dp, dr = joint_motion(e, q[e.name])
             p, r = p + r @ dp, r @ dr
         ps.append(p)
@@ -420,8 +430,10 @@ def _end_frames(ends: _Ends, frames: dict[str, ChainFrames]) -> tuple[np.ndarray
 
 
 def _vee(d: np.ndarray) -> np.ndarray:
-    """Half the skew part of ``(..., 3, 3)`` matrices as vectors: a relative rotation's vector to first order."""
-    return 0.5 * np.stack([d[..., 2, 1] - d[..., 1, 2], d[..., 0, 2] - d[..., 2, 0], d[..., 1, 0] - d[..., 0, 1]], -1)
+    """Half the skew part of ``(..., 3, 3)`` matrices as vectors: a relative rotation's vector to first order
+    (``d21 - d12, d02 - d20, d10 - d01``, halved)."""
+    out: np.ndarray = 0.5 * (d[..., [2, 0, 1], [1, 2, 0]] - d[..., [1, 2, 0], [2, 0, 1]])
+    return out
 
 
 def _residual(
@@ -441,9 +453,9 @@ def _residual(
     p, r = _end_frames(ends, frames)
     blocks = [p - (pe + ends.attach @ re.T)]
     if ends.rev.size:
-        blocks.append(ell * _cross(np.einsum("kij,kj->ki", r[ends.rev], ends.rev_axis), ends.rev_axis @ re.T))
+        blocks.append(ell * _cross((r[ends.rev] @ ends.rev_axis[:, :, None])[:, :, 0], ends.rev_axis @ re.T))
     if ends.fixed.size:  # the relative rotation's vector (its norm is the angle, to first order)
-        blocks.append(ell * _vee(np.einsum("ji,kjl->kil", re, r[ends.fixed])))
+        blocks.append(ell * _vee(re.T @ r[ends.fixed]))
     out: np.ndarray = np.concatenate(blocks)[ends.order].ravel()
     return out
 
@@ -515,7 +527,7 @@ def _rows_rate(
     dpe = (cols.v + _cross(w_e, (ends.attach @ re.T)[:, None, :])) * ee[None]
     blocks = [dp - dpe]
     if ends.rev.size:
-        n_c = np.einsum("kij,kj->ki", r[ends.rev], ends.rev_axis)[:, None, :]
+        n_c = (r[ends.rev] @ ends.rev_axis[:, :, None]).transpose(0, 2, 1)
         n_e = (ends.rev_axis @ re.T)[:, None, :]
         blocks.append(ell * (_cross(_cross(w_c[ends.rev], n_c), n_e) + _cross(n_c, _cross(w_e, n_e))))
     if ends.fixed.size:  # d/dt of R_E' R's vector: R_E' [u]x R with u the relative angular velocity
@@ -738,10 +750,10 @@ def solve_task_pose(desc: Description, pose: TaskPose, *, start: np.ndarray | No
         No start converges to an assembly inside every working-mode interval.
     """
     plan = _plan(desc)
-    _check_reach(desc, pose)
     fast = _closed_form_assembly(desc, plan, pose)
-    if fast is not None:
+    if fast is not None:  # an assembly closed to round-off: within every chain's reach
         return fast
+    _check_reach(desc, pose)
     return _assembly(desc, plan.lay, pose, _general_unknowns(desc, plan, pose, start), plan.ell)
 
 
