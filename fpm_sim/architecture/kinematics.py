@@ -12,7 +12,11 @@ spherical nothing more. Rotation rows are scaled by the characteristic length (:
 **Inverse kinematics** solves the closures for the unknowns at the task coordinates by Gauss-Newton with
 minimum-norm steps (a rod between two spherical joints keeps its spin at zero), from the working mode's start
 (each branch interval's middle), then from seeded random starts; the first solution whose coordinates lie in every
-working-mode interval is taken. A pose no start reaches is refused (:class:`UnreachableTaskPoseError`).
+working-mode interval is taken. A pose no start reaches is refused (:class:`UnreachableTaskPoseError`). Where the
+end effector's pose is all given and every chain has a closed form (:mod:`fpm_sim.architecture.closed_forms`: the
+3RRR's and the 3PRR's chains), the closed forms' assembly is taken instead when it passes the same closure tolerance
+and working-mode test; Newton decides everything else. What a description needs at every pose (layouts, lengths,
+attachment points, the closed forms) is worked out once per description (``_plan``).
 
 **Mobility and singularity** come from the closure's Jacobian in consistent units (rotation columns times the
 characteristic length ``ell``): with the actuated joints locked, the free end effector and the passive joints must
@@ -26,11 +30,13 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+import weakref
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
 
+from fpm_sim.architecture.closed_forms import ChainSolver, chain_solver
 from fpm_sim.architecture.description import ChainDesc, Description, JointDesc, LinkDesc
 from fpm_sim.errors import FpmSimError
 
@@ -163,7 +169,13 @@ def chain_frames(chain: ChainDesc, q: dict[str, np.ndarray], base_p: np.ndarray,
     for e in chain.path:
         if isinstance(e, LinkDesc):
             p = p + r[:, 0] * e.length_m
-        elif e is not end:
+        elif e is end or e.type == "fixed":
+            pass
+        elif e.type == "revolute":  # no translation (adding r @ 0 changes nothing)
+            r = r @ rotation(np.array(e.axis), float(q[e.name][0]))
+        elif e.type == "prismatic":  # no rotation (r @ I is r)
+            p = p + r @ (np.array(e.axis) * float(q[e.name][0]))
+        else:
             dp, dr = joint_motion(e, q[e.name])
             p, r = p + r @ dp, r @ dr
         ps.append(p)
@@ -177,12 +189,19 @@ def chain_frames(chain: ChainDesc, q: dict[str, np.ndarray], base_p: np.ndarray,
 
 @dataclass(frozen=True)
 class _Layout:
-    """Where each joint's and end-effector coordinate sits in the unknown vector."""
+    """Where each joint's and end-effector coordinate sits in the unknown vector; per joint also its index in its
+    chain's path and the chains it moves (its own and those on it)."""
 
     joints: list[tuple[str, JointDesc, slice]]  # (chain name, joint, slice)
     ee_free: list[str]  # end-effector coordinates that are unknowns
     ee_slice: slice
     size: int
+    path_index: list[int] = dataclasses.field(default_factory=list)  # per joint: its index in its chain's path
+    moves: list[set[str]] = dataclasses.field(default_factory=list)  # per joint: the chains it moves
+    wrap: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, int))  # revolute/universal coordinates
+    own: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 0), bool))  # (closed chain, column)
+    axes: np.ndarray | None = None  # (joint, 3) when every joint is revolute or prismatic (one column each)
+    turns: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))  # per joint: 1 revolute, 0 prismatic
 
 
 def _ee_coordinates(desc: Description) -> list[str]:
@@ -196,15 +215,158 @@ def _layout(desc: Description, *, ee_free: list[str] | None = None) -> _Layout:
             joints.append((c.name, j, slice(k, k + j.dof)))
             k += j.dof
     free = [c for c in _ee_coordinates(desc) if c not in desc.task] if ee_free is None else ee_free
-    return _Layout(joints, free, slice(k, k + len(free)), k + len(free))
+    index = [next(i for i, e in enumerate(desc.chain(cn).path) if e is j) for cn, j, _ in joints]
+    moves = [_descendants(desc, cn) for cn, _, _ in joints]
+    wrap = np.array([i for _, j, s in joints if j.type in ("revolute", "universal") for i in range(s.start, s.stop)])
+    closed = [c.name for c in desc.chains if c.end_joint is not None]
+    own = np.zeros((len(closed), k + len(free)), bool)  # the joint's column moves the closed chain's end
+    for (_, _, s), m in zip(joints, moves):
+        own[[i for i, n in enumerate(closed) if n in m], s] = True
+    simple = all(j.type in ("revolute", "prismatic") for _, j, _ in joints)
+    axes = np.array([j.axis for _, j, _ in joints], float).reshape(-1, 3) if simple else None
+    turns = np.array([j.type == "revolute" for _, j, _ in joints], float)
+    size = k + len(free)
+    return _Layout(joints, free, slice(k, size), size, index, moves, wrap.astype(int), own, axes, turns)
+
+
+@dataclass(frozen=True)
+class _Drives:
+    """The singularity measures' columns of the layout with every end-effector coordinate free: the passive joints'
+    (``passive``), each end-effector column's divisor (``ee_div``: ``ell_c`` for rotations), and per actuated joint
+    ``(chain, path index, path index of the next joint or the chain's end, its axis or None when prismatic,
+    columns)`` with the groups of actuated columns (index into the actuated ones) hanging from one base chain."""
+
+    passive: list[int]
+    ee_div: np.ndarray
+    acts: list[tuple[str, int, int, np.ndarray | None, list[int]]]
+    groups: list[list[int]]
+
+
+def _drives(desc: Description) -> _Drives:
+    full = _layout(desc, ee_free=_ee_coordinates(desc))
+    ell_c = singularity_char_length_m(desc)
+    acts, roots = [], []
+    for (cn, j, s), k in zip(full.joints, full.path_index):
+        if not j.actuated:
+            continue
+        path = desc.chain(cn).path
+        nxt = next((i for i in range(k + 1, len(path)) if isinstance(path[i], JointDesc)), len(path))
+        axis = None if j.type == "prismatic" else np.array(j.axis, float)
+        acts.append((cn, k, nxt, axis, list(range(s.start, s.stop))))
+        roots += [_root(desc, cn)] * (s.stop - s.start)
+    return _Drives(
+        [k for _, j, s in full.joints if not j.actuated for k in range(s.start, s.stop)],
+        np.array([ell_c if c in ("phi", "rx", "ry", "rz") else 1.0 for c in full.ee_free]),
+        acts,
+        [[k for k, g in enumerate(roots) if g == root] for root in dict.fromkeys(roots)],
+    )
+
+
+@dataclass(frozen=True)
+class _Plan:
+    """What the kinematics of one description needs at every pose, worked out once (:func:`_plan`): its layouts
+    (the task's, and one with every end-effector coordinate free), lengths, attachment points, reach bounds, the
+    independent parts a given end-effector pose splits it into, and the chains' closed forms."""
+
+    lay: _Layout
+    full: _Layout
+    ell: float
+    attach: dict[str, np.ndarray]
+    reach: list[tuple[int, ChainDesc, np.ndarray, float]]
+    parts: list[tuple[Description, list[int]]] | None  # None: one solve of the whole
+    closed: _ChainForms | None  # None: no closed form of the whole
+    rods: bool  # a chain of one spherical joint and one link (aimed at its attachment point before Newton)
+    span_m: float
+    ends: _Ends
+    ell_c: float
+    drives: _Drives
+
+
+_PLANS: dict[int, tuple[weakref.ref[Description], _Plan]] = {}
+"""Plans by the description's ``id`` (checked against a weak reference: a dead description's id may be reused)."""
+
+
+def _plan(desc: Description) -> _Plan:
+    """``desc``'s :class:`_Plan`, made on first use (a description is not changed once built)."""
+    hit = _PLANS.get(id(desc))
+    if hit is not None and hit[0]() is desc:
+        return hit[1]
+    plan = _make_plan(desc)
+    if len(_PLANS) > 256:
+        _PLANS.clear()
+    _PLANS[id(desc)] = (weakref.ref(desc), plan)
+    return plan
+
+
+def _make_plan(desc: Description) -> _Plan:
+    lay = _layout(desc)
+    roots = [c.name for c in desc.chains if c.parent is None]
+    parts = None
+    if not lay.ee_free and len(roots) > 1:  # the end effector's pose is all given: each base chain closes on its own
+        where = {(cn, j.name): s for cn, j, s in lay.joints}
+        parts = []
+        for root in roots:
+            part = dataclasses.replace(desc, chains=tuple(c for c in desc.chains if _root(desc, c.name) == root))
+            slices = [where[cn, j.name] for cn, j, _ in _layout(part).joints]
+            idx = [k for s in slices for k in range(s.start, s.stop)]
+            parts.append((part, idx))
+    return _Plan(
+        lay,
+        _layout(desc, ee_free=_ee_coordinates(desc)),
+        characteristic_length_m(desc),
+        {k: np.array(a, float) for k, a in desc.end_effector.attachments_m.items()},
+        closure_reach(desc),
+        parts,
+        _closed_forms(desc, lay),
+        any(_is_rod(c) for c in desc.chains),
+        sum(lk.length_m for c in desc.chains for lk in c.links),
+        _ends(desc),
+        singularity_char_length_m(desc),
+        _drives(desc),
+    )
+
+
+_ChainForms = list[tuple[slice, ChainSolver, tuple[JointDesc, ...], str]]
+"""Per chain: its coordinates' slice, closed-form solver, moving joints and attachment point's name."""
+
+
+def _closed_forms(desc: Description, lay: _Layout) -> _ChainForms | None:
+    """The closed forms (:mod:`fpm_sim.architecture.closed_forms`) of ``desc``'s chains, when the end effector's
+    pose is all given (each chain's attachment point follows from the task coordinates) and every chain has one;
+    else ``None``.
+
+    A free end-effector coordinate is left to Newton even where it would follow from a closed form (a five-bar's or
+    a serial arm's ``phi`` from the chain its tool is fixed on): Newton may settle on the fixed joint's spurious
+    root half a turn away (its closure rows vanish there too), and the closed form must not change a result."""
+    if lay.ee_free:
+        return None
+    out = []
+    for c in desc.chains:
+        solver, end = chain_solver(c), c.end_joint
+        slices = [s for cn, _, s in lay.joints if cn == c.name]
+        if solver is None or end is None or not slices:
+            return None
+        out.append((slice(slices[0].start, slices[-1].stop), solver, c.moving_joints, str(end.at)))
+    return out
+
+
+def _is_rod(chain: ChainDesc) -> bool:
+    """A chain of one spherical moving joint and one link, closed on the end effector (:func:`_aimed`)."""
+    moving = chain.moving_joints
+    return len(moving) == 1 and moving[0].type == "spherical" and chain.end_joint is not None and len(chain.links) == 1
+
+
+_Z_AXIS = np.array([0.0, 0.0, 1.0])
 
 
 def _ee_frame(desc: Description, pose: TaskPose, free: list[str], zf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    vals = {c: (pose.value(c) if c in ("x", "y", "z", "phi") else 0.0) for c in _ee_coordinates(desc)}
-    vals.update(dict(zip(free, zf)))
-    p = np.array([vals["x"], vals["y"], 0.0 if desc.planar else vals["z"]])
     if desc.planar:
-        return p, rotation(np.array([0.0, 0.0, 1.0]), vals["phi"])
+        vals = {"x": pose.x_m, "y": pose.y_m, "phi": pose.phi_rad}
+        vals.update(zip(free, zf))
+        return np.array([vals["x"], vals["y"], 0.0]), rotation(_Z_AXIS, vals["phi"])
+    vals = {"x": pose.x_m, "y": pose.y_m, "z": pose.z_m, "rx": 0.0, "ry": 0.0, "rz": 0.0}
+    vals.update(zip(free, zf))
+    p = np.array([vals["x"], vals["y"], vals["z"]])
     return p, rotvec_matrix(np.array([vals["rx"], vals["ry"], vals["rz"]]))
 
 
@@ -222,40 +384,80 @@ def _frames(desc: Description, lay: _Layout, z: np.ndarray) -> dict[str, ChainFr
     return out
 
 
-def _closed_ends(
-    desc: Description, frames: dict[str, ChainFrames], re: np.ndarray
-) -> Iterator[tuple[ChainDesc, JointDesc, np.ndarray, np.ndarray, np.ndarray]]:
-    """Each closed chain, its end joint, its end frame (position m, rotation) and its attachment point relative to
-    the end effector's origin in world axes (m)."""
-    for c in desc.chains:
-        end = c.end_joint
-        if end is not None:
-            f = frames[c.name]
-            a_w = re @ np.array(desc.end_effector.attachments_m[str(end.at)])
-            yield c, end, f.positions_m[-1], f.rotations[-1], a_w
+@dataclass(frozen=True)
+class _Ends:
+    """The closed chains (those ending on the end effector), for the closure rows of all of them at once: their
+    names, attachment points (end effector's frame, m), which end on a revolute joint (``rev``, with its axis) or a
+    fixed one (``fixed``), and ``order``: the stacked row blocks ``[positions, revolute rows, fixed rows]`` (three
+    rows each) in chain order (each chain's position rows, then its rotation rows)."""
+
+    names: list[str]
+    attach: np.ndarray  # (m, 3)
+    rev: np.ndarray  # indices into names
+    rev_axis: np.ndarray  # (len(rev), 3)
+    fixed: np.ndarray  # indices into names
+    order: np.ndarray
 
 
-def _residual_blocks(
-    desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray, ell: float
-) -> list[tuple[str, np.ndarray]]:
-    """Each closed chain's closure residual (module docstring), by chain name."""
-    frames = _frames(desc, lay, z)
-    pe, re = _ee_frame(desc, pose, lay.ee_free, z[lay.ee_slice])
-    out: list[tuple[str, np.ndarray]] = []
-    for c, end, p, r, a_w in _closed_ends(desc, frames, re):
-        rows = [p - (pe + a_w)]
-        if end.type == "revolute":
-            rows.append(ell * _cross(r @ np.array(end.axis), re @ np.array(end.axis)))
-        elif end.type == "fixed":  # the relative rotation's vector (its norm is the angle, to first order)
-            d = re.T @ r
-            rows.append(ell * 0.5 * np.array([d[2, 1] - d[1, 2], d[0, 2] - d[2, 0], d[1, 0] - d[0, 1]]))
-        out.append((c.name, np.concatenate(rows)))
+def _ends(desc: Description) -> _Ends:
+    closed = [(c, c.end_joint) for c in desc.chains if c.end_joint is not None]
+    attach = desc.end_effector.attachments_m
+    rev = [i for i, (_, e) in enumerate(closed) if e is not None and e.type == "revolute"]
+    fixed = [i for i, (_, e) in enumerate(closed) if e is not None and e.type == "fixed"]
+    order = []
+    for i in range(len(closed)):
+        order.append(i)
+        if i in rev:
+            order.append(len(closed) + rev.index(i))
+        elif i in fixed:
+            order.append(len(closed) + len(rev) + fixed.index(i))
+    return _Ends(
+        [c.name for c, _ in closed],
+        np.array([attach[str(e.at)] for _, e in closed if e is not None], float).reshape(-1, 3),
+        np.array(rev, int),
+        np.array([closed[i][1].axis for i in rev if closed[i][1] is not None], float).reshape(-1, 3),
+        np.array(fixed, int),
+        np.array(order, int),
+    )
+
+
+def _end_frames(ends: _Ends, frames: dict[str, ChainFrames]) -> tuple[np.ndarray, np.ndarray]:
+    """The closed chains' end positions ``(m, 3)`` and rotations ``(m, 3, 3)``."""
+    return (
+        np.array([frames[n].positions_m[-1] for n in ends.names]).reshape(-1, 3),
+        np.array([frames[n].rotations[-1] for n in ends.names]).reshape(-1, 3, 3),
+    )
+
+
+def _vee(d: np.ndarray) -> np.ndarray:
+    """Half the skew part of ``(..., 3, 3)`` matrices as vectors: a relative rotation's vector to first order
+    (``d21 - d12, d02 - d20, d10 - d01``, halved)."""
+    out: np.ndarray = 0.5 * (d[..., [2, 0, 1], [1, 2, 0]] - d[..., [1, 2, 0], [2, 0, 1]])
     return out
 
 
-def _residual(desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray, ell: float) -> np.ndarray:
-    blocks = _residual_blocks(desc, lay, pose, z, ell)
-    return np.concatenate([b for _, b in blocks]) if blocks else np.zeros(0)
+def _residual(
+    desc: Description,
+    lay: _Layout,
+    pose: TaskPose,
+    z: np.ndarray,
+    ell: float,
+    frames: dict[str, ChainFrames] | None = None,
+) -> np.ndarray:
+    """Every closed chain's closure residual (module docstring), chain by chain: its end frame ``(p, R)`` against
+    its attachment point (three rows) and, by its end joint's type, the axes' cross product or the relative
+    rotation (three rows each, times ``ell``). ``frames``: :func:`_frames` at ``z``, when already built."""
+    ends = _plan(desc).ends
+    frames = _frames(desc, lay, z) if frames is None else frames
+    pe, re = _ee_frame(desc, pose, lay.ee_free, z[lay.ee_slice])
+    p, r = _end_frames(ends, frames)
+    blocks = [p - (pe + ends.attach @ re.T)]
+    if ends.rev.size:
+        blocks.append(ell * _cross((r[ends.rev] @ ends.rev_axis[:, :, None])[:, :, 0], ends.rev_axis @ re.T))
+    if ends.fixed.size:  # the relative rotation's vector (its norm is the angle, to first order)
+        blocks.append(ell * _vee(re.T @ r[ends.fixed]))
+    out: np.ndarray = np.concatenate(blocks)[ends.order].ravel()
+    return out
 
 
 def characteristic_length_m(desc: Description) -> float:
@@ -268,7 +470,7 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     product at these sizes; the inverse kinematics takes thousands per pose)."""
     a1, a2, a3 = a[..., 0], a[..., 1], a[..., 2]
     b1, b2, b3 = b[..., 0], b[..., 1], b[..., 2]
-    out = np.empty(np.broadcast_shapes(np.shape(a), np.shape(b)))
+    out = np.empty(a.shape if a.shape == b.shape else np.broadcast_shapes(a.shape, b.shape))
     out[..., 0] = a2 * b3 - a3 * b2
     out[..., 1] = a3 * b1 - a1 * b3
     out[..., 2] = a1 * b2 - a2 * b1
@@ -314,49 +516,48 @@ def _rows_rate(
     ell: float,
 ) -> np.ndarray:
     """Rate of every closure row (rows) for each column's motion (columns): a joint's twist ``w``, ``v`` about its
-    ``centre`` moving the chains downstream of it (``moved``), or the end effector's (``ee``). All columns at once: a
-    few array operations per closed chain."""
-    out = []
-    for c, end, p, r, a_w in _closed_ends(desc, frames, re):
-        own = cols.moved[c.name][:, None]  # the chain's end moves with the column's joint
-        w_c, w_e = cols.w * own, cols.w * cols.ee[:, None]
-        dp = _cross(w_c, p - cols.centre) + cols.v * own
-        dpe = (cols.v + _cross(w_e, a_w)) * cols.ee[:, None]
-        rows = [dp - dpe]
-        if end.type == "revolute":
-            n_c, n_e = r @ np.array(end.axis), re @ np.array(end.axis)
-            rows.append(ell * (_cross(_cross(w_c, n_c), n_e) + _cross(n_c, _cross(w_e, n_e))))
-        elif end.type == "fixed":
-            u = w_c - w_e
-            zero = np.zeros(len(u))
-            skew = np.stack(
-                [
-                    np.stack([zero, -u[:, 2], u[:, 1]], axis=1),
-                    np.stack([u[:, 2], zero, -u[:, 0]], axis=1),
-                    np.stack([-u[:, 1], u[:, 0], zero], axis=1),
-                ],
-                axis=1,
-            )
-            dd = np.einsum("ji,njk,kl->nil", re, skew, r)
-            rows.append(
-                ell
-                * 0.5
-                * np.stack([dd[:, 2, 1] - dd[:, 1, 2], dd[:, 0, 2] - dd[:, 2, 0], dd[:, 1, 0] - dd[:, 0, 1]], axis=1)
-            )
-        out.append(np.concatenate(rows, axis=1).T)
-    return np.concatenate(out, axis=0) if out else np.zeros((0, len(cols.w)))
+    ``centre`` moving the ends of the closed chains downstream of it (``own``), or the end effector's (``ee``). All
+    columns and all closed chains at once (arrays ``(chain, column, 3)``)."""
+    ends = _plan(desc).ends
+    p, r = _end_frames(ends, frames)
+    own = cols.own[:, :, None]
+    ee = cols.ee[:, None]
+    w_c, w_e = cols.w[None] * own, (cols.w * ee)[None]
+    dp = _cross(w_c, p[:, None, :] - cols.centre[None]) + cols.v[None] * own
+    dpe = (cols.v + _cross(w_e, (ends.attach @ re.T)[:, None, :])) * ee[None]
+    blocks = [dp - dpe]
+    if ends.rev.size:
+        n_c = (r[ends.rev] @ ends.rev_axis[:, :, None]).transpose(0, 2, 1)
+        n_e = (ends.rev_axis @ re.T)[:, None, :]
+        blocks.append(ell * (_cross(_cross(w_c[ends.rev], n_c), n_e) + _cross(n_c, _cross(w_e, n_e))))
+    if ends.fixed.size:  # d/dt of R_E' R's vector: R_E' [u]x R with u the relative angular velocity
+        u = w_c[ends.fixed] - w_e
+        zero = np.zeros(u.shape[:2])
+        skew = np.stack(
+            [
+                np.stack([zero, -u[..., 2], u[..., 1]], -1),
+                np.stack([u[..., 2], zero, -u[..., 0]], -1),
+                np.stack([-u[..., 1], u[..., 0], zero], -1),
+            ],
+            -2,
+        )
+        blocks.append(ell * _vee(np.einsum("ji,fnjk,fkl->fnil", re, skew, r[ends.fixed])))
+    stacked = np.concatenate(blocks)[ends.order]  # (blocks, columns, 3)
+    out: np.ndarray = stacked.transpose(0, 2, 1).reshape(-1, len(cols.w))
+    return out
 
 
 @dataclass
 class _Columns:
     """The unknowns' motions, one row each: angular and linear velocity (world), the point the rotation is about,
-    whether it moves the end effector (``ee``) or, per chain, that chain's end (``moved``)."""
+    whether it moves the end effector (``ee``), and per closed chain whether it moves that chain's end (``own``:
+    ``(chains, columns)``)."""
 
     w: np.ndarray
     v: np.ndarray
     centre: np.ndarray
     ee: np.ndarray
-    moved: dict[str, np.ndarray]
+    own: np.ndarray
 
 
 def _descendants(desc: Description, name: str) -> set[str]:
@@ -367,17 +568,21 @@ def _descendants(desc: Description, name: str) -> set[str]:
     return out
 
 
-def _jacobian(desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray, ell: float) -> np.ndarray:
+def _jacobian(
+    desc: Description,
+    lay: _Layout,
+    pose: TaskPose,
+    z: np.ndarray,
+    ell: float,
+    frames: dict[str, ChainFrames] | None = None,
+) -> np.ndarray:
     """The closure residual's Jacobian over the unknowns, from the joints' twists (the geometric Jacobian; tested
-    against central differences)."""
-    frames = _frames(desc, lay, z)
+    against central differences). ``frames``: :func:`_frames` at ``z``, when already built."""
+    frames = _frames(desc, lay, z) if frames is None else frames
     pe, re = _ee_frame(desc, pose, lay.ee_free, z[lay.ee_slice])
-    rows: list[tuple[np.ndarray, np.ndarray, np.ndarray, set[str], bool]] = []  # w, v, centre, moved, ee
-    for cname, j, s in lay.joints:
-        k = desc.chain(cname).path.index(j)
-        f = frames[cname]
-        moved = _descendants(desc, cname)
-        rows += [(wj, vj, f.positions_m[k], moved, False) for wj, vj in _joint_twists(j, z[s], f.rotations[k])]
+    if lay.size == 0:
+        return np.zeros((_residual(desc, lay, pose, z, ell, frames).size, 0))
+    w, v, centre = _joint_columns(lay, z, frames)
     zf = z[lay.ee_slice]
     for c in lay.ee_free:
         we, ve = np.zeros(3), np.zeros(3)
@@ -388,20 +593,31 @@ def _jacobian(desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray, el
         else:
             rv = np.array([dict(zip(lay.ee_free, zf)).get(k, 0.0) for k in ("rx", "ry", "rz")])
             we = re @ _right_jacobian(rv)[:, "xyz".index(c[1])]
-        rows.append((we, ve, pe, set(), True))
-    if not rows:
-        n_rows = sum(b.size for _, b in _residual_blocks(desc, lay, pose, z, ell))
-        return np.zeros((n_rows, 0))
-    w, v, centre, moves, ee = zip(*rows)
-    ee_a = np.array(ee)
-    cols = _Columns(
-        np.array(w),
-        np.array(v),
-        np.array(centre),
-        ee_a.astype(float),
-        {c.name: np.array([c.name in m for m in moves]) & ~ee_a for c in desc.chains},
-    )
+        w, v, centre = [*w, we], [*v, ve], [*centre, pe]
+    ee = np.zeros(lay.size)
+    ee[lay.ee_slice] = 1.0
+    cols = _Columns(np.vstack(w), np.vstack(v), np.vstack(centre), ee, lay.own)
     return _rows_rate(desc, frames, re, cols, ell)
+
+
+def _joint_columns(
+    lay: _Layout, z: np.ndarray, frames: dict[str, ChainFrames]
+) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
+    """The joints' columns' angular and linear velocities (world) and centres (blocks of rows): all at once when
+    every joint is revolute or prismatic (``lay.axes``), else joint by joint (:func:`_joint_twists`)."""
+    at = [(frames[cn], k) for (cn, _, _), k in zip(lay.joints, lay.path_index)]
+    centre = np.array([f.positions_m[k] for f, k in at]).reshape(-1, 3)
+    if lay.axes is not None:
+        axes = np.einsum("nij,nj->ni", np.array([f.rotations[k] for f, k in at]).reshape(-1, 3, 3), lay.axes)
+        turns = lay.turns[:, None]
+        return [axes * turns], [axes * (1.0 - turns)], [centre]
+    w, v, c = [], [], []
+    for (_, j, s), (f, k), p in zip(lay.joints, at, centre):
+        for wj, vj in _joint_twists(j, z[s], f.rotations[k]):
+            w.append(wj)
+            v.append(vj)
+            c.append(p)
+    return [np.array(w).reshape(-1, 3)], [np.array(v).reshape(-1, 3)], [np.array(c).reshape(-1, 3)]
 
 
 def _jacobian_fd(desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray, ell: float) -> np.ndarray:
@@ -433,11 +649,10 @@ def _in_branch(j: JointDesc, q: np.ndarray) -> bool:
 def _wrapped(lay: _Layout, z: np.ndarray) -> np.ndarray:
     """Revolute coordinates into (-pi, pi]; a branch interval keeps its own window."""
     z = z.copy()
-    for _, j, s in lay.joints:
-        if j.type in ("revolute", "universal"):
-            v = z[s]
-            z[s] = np.where(v > math.pi, v - 2 * math.pi * np.floor((v + math.pi) / (2 * math.pi)), v)
-            z[s] = z[s] - 2 * math.pi * np.floor((z[s] + math.pi) / (2 * math.pi))
+    if lay.wrap.size:
+        v = z[lay.wrap]
+        v = np.where(v > math.pi, v - 2 * math.pi * np.floor((v + math.pi) / (2 * math.pi)), v)
+        z[lay.wrap] = v - 2 * math.pi * np.floor((v + math.pi) / (2 * math.pi))
     return z
 
 
@@ -510,7 +725,7 @@ def _aimed(desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray) -> np
             continue
         k = chain.path.index(j)
         p0, r0 = frames[cname].positions_m[k], frames[cname].rotations[k]
-        d = r0.T @ (pe + re @ np.array(desc.end_effector.attachments_m[str(end.at)]) - p0)
+        d = r0.T @ (pe + re @ _plan(desc).attach[str(end.at)] - p0)
         norm = float(np.linalg.norm(d))
         if norm == 0.0:
             continue
@@ -526,36 +741,63 @@ def solve_task_pose(desc: Description, pose: TaskPose, *, start: np.ndarray | No
 
     ``start``: the unknowns of a neighbouring pose (``TaskAssembly`` of a sweep) to try first.
 
+    Where every chain has a closed form (:mod:`fpm_sim.architecture.closed_forms`), its assembly is taken when it
+    passes the same closure tolerance and working-mode test as Newton's; otherwise Newton runs.
+
     Raises
     ------
     UnreachableTaskPoseError
         No start converges to an assembly inside every working-mode interval.
     """
+    plan = _plan(desc)
+    fast = _closed_form_assembly(desc, plan, pose)
+    if fast is not None:  # an assembly closed to round-off: within every chain's reach
+        return fast
     _check_reach(desc, pose)
-    lay = _layout(desc)
-    ell = characteristic_length_m(desc)
-    roots = [c.name for c in desc.chains if c.parent is None]
-    if lay.ee_free or len(roots) == 1:
-        return _assembly(desc, lay, pose, _solve(desc, lay, pose, start, ell), ell)
-    # the end effector's pose is all given: each base chain (with the chains on it) closes on its own
+    return _assembly(desc, plan.lay, pose, _general_unknowns(desc, plan, pose, start), plan.ell)
+
+
+def _general_unknowns(desc: Description, plan: _Plan, pose: TaskPose, start: np.ndarray | None) -> np.ndarray:
+    """The unknowns by Newton (:func:`_solve`): of the whole, or part by part when the end effector's pose is all
+    given and several base chains carry it (each base chain, with the chains on it, closes on its own)."""
+    if plan.parts is None:
+        return _solve(desc, plan.lay, pose, start, plan.ell)
+    z = np.zeros(plan.lay.size)
+    for part, idx in plan.parts:
+        z[idx] = _solve(part, _plan(part).lay, pose, None if start is None else np.asarray(start)[idx], plan.ell)
+    return z
+
+
+def _closed_form_assembly(desc: Description, plan: _Plan, pose: TaskPose) -> TaskAssembly | None:
+    """The assembly from the chains' closed forms (:func:`_closed_forms`), or ``None`` (no closed form, no assembly
+    or two inside the working-mode intervals, or a closure residual above :data:`CLOSURE_TOL_M`: Newton decides)."""
+    if plan.closed is None:
+        return None
+    lay = plan.lay
+    pe, re = _ee_frame(desc, pose, [], np.zeros(0))
     z = np.zeros(lay.size)
-    where = {(cn, j.name): s for cn, j, s in lay.joints}
-    for root in roots:
-        part = dataclasses.replace(desc, chains=tuple(c for c in desc.chains if _root(desc, c.name) == root))
-        part_lay = _layout(part)
-        idx = [k for cn, j, _ in part_lay.joints for k in range(where[cn, j.name].start, where[cn, j.name].stop)]
-        zs = _solve(part, part_lay, pose, None if start is None else np.asarray(start)[idx], ell)
-        z[idx] = zs
-    return _assembly(desc, lay, pose, z, ell)
+    for sl, solver, joints, at in plan.closed:
+        target = pe + re @ plan.attach[at]
+        fits = [q for q in solver(target) if all(_in_branch(j, q[k : k + 1]) for k, j in enumerate(joints))]
+        if len(fits) != 1:
+            return None
+        z[sl] = fits[0]
+    z = _wrapped(lay, z)
+    frames = _frames(desc, lay, z)
+    r = _residual(desc, lay, pose, z, plan.ell, frames)
+    if r.size and not float(np.max(np.abs(r))) < CLOSURE_TOL_M:
+        return None
+    return _assembly(desc, lay, pose, z, plan.ell, frames=frames, r=r)
 
 
 def _solve(desc: Description, lay: _Layout, pose: TaskPose, start: np.ndarray | None, ell: float) -> np.ndarray:
     """Newton from ``start``, the working mode's start and the random ones: the first solution in every working-mode
     interval, wrapped."""
-    span = sum(lk.length_m for c in desc.chains for lk in c.links)
-    starts = itertools.chain([start] if start is not None else [], _lazy(lambda: _starts(desc, lay, span)))
+    plan = _plan(desc)
+    starts = itertools.chain([start] if start is not None else [], _lazy(lambda: _starts(desc, lay, plan.span_m)))
     for z0 in starts:  # a neighbour's solution first; the working mode's and random starts only when it fails
-        z, res = _newton(desc, lay, pose, _aimed(desc, lay, pose, np.array(z0, float)), ell)
+        z0 = np.array(z0, float)
+        z, res = _newton(desc, lay, pose, _aimed(desc, lay, pose, z0) if plan.rods else z0, ell)
         if res < CLOSURE_TOL_M and all(_in_branch(j, z[s]) for _, j, s in lay.joints):
             return _wrapped(lay, z)
     raise UnreachableTaskPoseError(
@@ -585,11 +827,12 @@ def closure_reach(desc: Description) -> list[tuple[int, ChainDesc, np.ndarray, f
 
 def _check_reach(desc: Description, pose: TaskPose) -> None:
     """Refuse a pose beyond a chain's reach (:func:`closure_reach`), naming the chain, before any Newton step."""
-    for i, chain, base, reach in closure_reach(desc):
+    plan = _plan(desc)
+    pe, re = _ee_frame(desc, pose, [c for c in ("x", "y", "phi") if c not in desc.task], np.zeros(3))
+    for i, chain, base, reach in plan.reach:
         at = str(chain.end_joint.at) if chain.end_joint is not None else ""
-        a = np.array(desc.end_effector.attachments_m[at])
+        a = plan.attach[at]
         if desc.planar:
-            pe, re = _ee_frame(desc, pose, [c for c in ("x", "y", "phi") if c not in desc.task], np.zeros(3))
             target = pe + (re @ a if "phi" in desc.task else np.zeros(3))
             slack = 0.0 if "phi" in desc.task else float(np.linalg.norm(a))
         else:
@@ -604,11 +847,21 @@ def _check_reach(desc: Description, pose: TaskPose) -> None:
             )
 
 
-def _assembly(desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray, ell: float) -> TaskAssembly:
-    frames = _frames(desc, lay, z)
+def _assembly(
+    desc: Description,
+    lay: _Layout,
+    pose: TaskPose,
+    z: np.ndarray,
+    ell: float,
+    *,
+    frames: dict[str, ChainFrames] | None = None,
+    r: np.ndarray | None = None,
+) -> TaskAssembly:
+    """The assembly at the unknowns ``z`` (``frames`` and the residual ``r`` at ``z``, when already built)."""
+    frames = _frames(desc, lay, z) if frames is None else frames
     pe, re = _ee_frame(desc, pose, lay.ee_free, z[lay.ee_slice])
-    r = _residual(desc, lay, pose, z, ell)
-    t1, t2 = singularity_measures(desc, lay, pose, z, ell)
+    r = _residual(desc, lay, pose, z, ell, frames) if r is None else r
+    t1, t2 = singularity_measures(desc, lay, pose, z, ell, frames)
     return TaskAssembly(pose, frames, pe, re, float(np.max(np.abs(r))) if r.size else 0.0, t1, t2)
 
 
@@ -645,14 +898,13 @@ def singularity_char_length_m(desc: Description) -> float:
     return max(radius, float(np.mean(last)) / 4.0 if last else 0.0)
 
 
-def _without(b: np.ndarray, m: np.ndarray) -> np.ndarray:
-    """``m`` with the column space of ``b`` projected out (rank of ``b`` at :data:`RANK_RTOL`)."""
+def _basis(b: np.ndarray) -> np.ndarray:
+    """An orthonormal basis (columns) of the column space of ``b`` (rank at :data:`RANK_RTOL`)."""
     if b.size == 0:
-        return m
+        return np.zeros((b.shape[0], 0))
     u, sv, _ = np.linalg.svd(b, full_matrices=False)
     keep = sv > RANK_RTOL * sv[0] if sv.size and sv[0] > 0 else np.zeros(0, bool)
-    basis = u[:, keep]
-    out: np.ndarray = m - basis @ (basis.T @ m)
+    out: np.ndarray = u[:, keep]
     return out
 
 
@@ -661,66 +913,74 @@ def _root(desc: Description, name: str) -> str:
     return name if chain.parent is None else _root(desc, chain.parent)
 
 
-def _drive_length(chain: ChainDesc, frames: ChainFrames, k: int) -> float:
-    """How far the next joint (or the chain's end) moves per unit of the actuated joint at path index ``k`` (m per
-    rad or m per m): the lever of a revolute actuator, 1 for a prismatic one."""
-    j = chain.path[k]
-    assert isinstance(j, JointDesc)
-    if j.type == "prismatic":
+def _lever(frames: ChainFrames, k: int, nxt: int, axis: np.ndarray | None) -> float:
+    """How far the next joint (path index ``nxt``, or the chain's end) moves per unit of the actuated joint at path
+    index ``k`` (m per rad or m per m): the lever of a revolute actuator (``axis``), 1 for a prismatic one
+    (``None``)."""
+    if axis is None:
         return 1.0
-    nxt = next((i for i in range(k + 1, len(chain.path)) if isinstance(chain.path[i], JointDesc)), len(chain.path))
-    axis = frames.rotations[k] @ np.array(j.axis)
-    lever = float(np.linalg.norm(_cross(axis, frames.positions_m[nxt] - frames.positions_m[k])))
+    a1, a2, a3 = (frames.rotations[k] @ axis).tolist()
+    d1, d2, d3 = (frames.positions_m[nxt] - frames.positions_m[k]).tolist()
+    lever = math.sqrt((a2 * d3 - a3 * d2) ** 2 + (a3 * d1 - a1 * d3) ** 2 + (a1 * d2 - a2 * d1) ** 2)
     return lever if lever > 0 else 1.0
 
 
 def singularity_measures(
-    desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray, ell: float
+    desc: Description,
+    lay: _Layout,
+    pose: TaskPose,
+    z: np.ndarray,
+    ell: float,
+    frames: dict[str, ChainFrames] | None = None,
 ) -> tuple[float, float]:
     """Type 1 and type 2 singularity measures (0 at a singularity; the 3RRR's serial and parallel measures).
 
     Type 2: with the actuators locked, the closures' Jacobian over the end effector's coordinates (rotations over
     :func:`singularity_char_length_m`) with every passive joint's effect projected out; its smallest singular value
     over its largest. Type 1: for each group of chains hanging from one base chain, the Jacobian over its actuated
-    joints (each over its lever, :func:`_drive_length`) with the passive joints' and the free end-effector
+    joints (each over its lever, :func:`_lever`) with the passive joints' and the free end-effector
     coordinates' effects projected out; ``sqrt(det(C' C))``, the smallest over the groups (``|sin|`` of a 3RRR's
-    elbow angle).
+    elbow angle). ``frames``: :func:`_frames` at ``z``, when already built (the end effector's coordinates do not
+    move the chains).
     """
-    full = _layout(desc, ee_free=_ee_coordinates(desc))
+    plan = _plan(desc)
+    full = plan.full
     zf = np.concatenate([z[: lay.ee_slice.start], _full_ee(desc, lay, pose, z)])
-    jac = _jacobian(desc, full, pose, zf, ell)
+    frames = _frames(desc, full, zf) if frames is None else frames
+    jac = _jacobian(desc, full, pose, zf, ell, frames)
     if jac.size == 0:
         return 1.0, 1.0
-    ell_c = singularity_char_length_m(desc)
-    ee_cols = list(range(full.ee_slice.start, full.ee_slice.stop))
-    jx = jac[:, ee_cols] / np.array([ell_c if c in ("phi", "rx", "ry", "rz") else 1.0 for c in full.ee_free])
-    passive = [k for _, j, s in full.joints if not j.actuated for k in range(s.start, s.stop)]
-    sv = np.linalg.svd(_without(jac[:, passive], jx), compute_uv=False)
-    type2 = float(sv[len(ee_cols) - 1] / sv[0]) if sv.size >= len(ee_cols) and sv[0] > 0 else 0.0
-    return _type1(desc, full, pose, zf, jac, lay), type2
+    n_ee = full.ee_slice.stop - full.ee_slice.start
+    jx = jac[:, full.ee_slice] / plan.drives.ee_div
+    basis = _basis(jac[:, plan.drives.passive])
+    sv = np.linalg.svd(jx - basis @ (basis.T @ jx), compute_uv=False)
+    type2 = float(sv[n_ee - 1] / sv[0]) if sv.size >= n_ee and sv[0] > 0 else 0.0
+    return _type1(plan, jac, lay, frames, basis), type2
 
 
-def _type1(desc: Description, full: _Layout, pose: TaskPose, zf: np.ndarray, jac: np.ndarray, lay: _Layout) -> float:
+def _type1(plan: _Plan, jac: np.ndarray, lay: _Layout, frames: dict[str, ChainFrames], basis: np.ndarray) -> float:
     """Type 1 (module docstring): ``C`` = the actuated joints' columns (each over its lever) with the passive joints'
     and the free end-effector coordinates' columns projected out; per group of chains hanging from one base chain,
-    ``sqrt(det(C_g' C_g))``; the smallest."""
-    frames = _frames(desc, full, zf)
-    free = [full.ee_slice.start + k for k, c in enumerate(full.ee_free) if c in lay.ee_free]
-    passive = [k for _, j, s in full.joints if not j.actuated for k in range(s.start, s.stop)]
-    acts = [(cn, j, s) for cn, j, s in full.joints if j.actuated]
-    if not acts:
+    ``sqrt(det(C_g' C_g))``; the smallest. ``basis``: :func:`_basis` of the passive joints' columns (used as it is
+    when no end-effector coordinate is free)."""
+    full, drives = plan.full, plan.drives
+    if not drives.acts:
         return 1.0
-    cols, levers, groups = [], [], []
-    for cn, j, s in acts:
-        chain = desc.chain(cn)
-        cols += list(range(s.start, s.stop))
-        levers += [_drive_length(chain, frames[cn], chain.path.index(j))] * (s.stop - s.start)
-        groups += [_root(desc, cn)] * (s.stop - s.start)
-    c = _without(jac[:, passive + free], jac[:, cols] / np.array(levers))
+    free = [full.ee_slice.start + k for k, c in enumerate(full.ee_free) if c in lay.ee_free]
+    cols: list[int] = []
+    levers: list[float] = []
+    for cn, k, nxt, axis, cs in drives.acts:
+        cols += cs
+        levers += [_lever(frames[cn], k, nxt, axis)] * len(cs)
+    if free:
+        basis = _basis(jac[:, drives.passive + free])
+    m = jac[:, cols] / np.array(levers)
+    c = m - basis @ (basis.T @ m)
     worst = 1.0
-    for g in dict.fromkeys(groups):
-        cg = c[:, [k for k, gg in enumerate(groups) if gg == g]]
-        worst = min(worst, float(math.sqrt(max(np.linalg.det(cg.T @ cg), 0.0))))
+    for g in drives.groups:
+        cg = c[:, g]
+        gram = float(cg[:, 0] @ cg[:, 0]) if len(g) == 1 else float(np.linalg.det(cg.T @ cg))  # det of 1x1: itself
+        worst = min(worst, math.sqrt(max(gram, 0.0)))
     return worst
 
 
@@ -733,7 +993,7 @@ def _full_ee(desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray) -> 
 def check_mobility(desc: Description, assembly: TaskAssembly) -> None:
     """Refuse a machine that moves with its actuators locked (:class:`MobilityError`), naming how many degrees of
     freedom it keeps. Counted from the closure Jacobian's rank at the assembly (:data:`RANK_RTOL`)."""
-    full = _layout(desc, ee_free=_ee_coordinates(desc))
+    full = _plan(desc).full
     z = _unknowns_of(desc, full, assembly)
     ell = characteristic_length_m(desc)
     jac = _scaled_columns(full, _jacobian(desc, full, assembly.pose, z, ell), ell)
@@ -756,7 +1016,7 @@ def check_mobility(desc: Description, assembly: TaskAssembly) -> None:
 def task_unknowns(desc: Description, assembly: TaskAssembly) -> np.ndarray:
     """The unknowns of :func:`solve_task_pose` at ``assembly``: its ``start`` for a neighbouring pose (a sweep's
     continuation)."""
-    return _unknowns_of(desc, _layout(desc), assembly)
+    return _unknowns_of(desc, _plan(desc).lay, assembly)
 
 
 def actuated_coordinates(desc: Description, asm: TaskAssembly) -> np.ndarray:

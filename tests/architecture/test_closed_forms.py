@@ -1,0 +1,138 @@
+"""The closed forms of the common chains (:mod:`fpm_sim.architecture.closed_forms`) against the general solver.
+
+Truth: the general Newton solver with the closed forms left out (``kinematics._general_unknowns``: the same starts
+and steps as before the fast path existed). Both solve to round-off (Newton stops at 1e-11 m and takes one more
+chord step; the closed forms are exact formulas), so the coordinates agree to ~1e-11; 1e-9 (the issue's bound)
+leaves two orders of margin. The singularity measures are the same function at those coordinates: 1e-9 as well.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fpm_sim.architecture import TaskPose, load_description, solve_task_pose, task_unknowns
+from fpm_sim.architecture import kinematics as kin
+from fpm_sim.architecture.description import Description
+from fpm_sim.architecture.kinematics import UnreachableTaskPoseError
+from fpm_sim.architecture.three_rrr import description_of_3rrr
+from fpm_sim.config import default_config
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples" / "architectures"
+AGREE = 1e-9  # the issue's bound; both ways close to 1e-11 m or better
+
+
+def _newton(desc: Description, pose: TaskPose, start: np.ndarray | None = None) -> kin.TaskAssembly:
+    """The general solver alone (no closed form)."""
+    plan = kin._plan(desc)
+    kin._check_reach(desc, pose)
+    return kin._assembly(desc, plan.lay, pose, kin._general_unknowns(desc, plan, pose, start), plan.ell)
+
+
+def _no_newton(*args: object, **kwargs: object) -> None:
+    raise AssertionError("Newton ran: the closed form did not serve this pose")
+
+
+def _machine(name: str) -> Description:
+    return description_of_3rrr(default_config()) if name == "3RRR" else load_description(EXAMPLES / f"{name}.toml")
+
+
+def _row(desc: Description) -> list[TaskPose]:
+    """The benchmark's row: 24 poses 5 mm apart through the first check pose."""
+    h = desc.check_poses[0] if desc.check_poses else {}
+    x, y, phi = h.get("x", 0.0), h.get("y", 0.0), h.get("phi", 0.0)
+    return [TaskPose(x - 0.06 + 0.005 * k, y, 0.0, phi) for k in range(24)]
+
+
+def _assert_same(fast: kin.TaskAssembly, slow: kin.TaskAssembly, desc: Description, atol: float = AGREE) -> None:
+    np.testing.assert_allclose(task_unknowns(desc, fast), task_unknowns(desc, slow), rtol=0.0, atol=atol)
+    assert fast.closure_residual_m < kin.CLOSURE_TOL_M
+    assert abs(fast.singularity_type1 - slow.singularity_type1) < atol
+    assert abs(fast.singularity_type2 - slow.singularity_type2) < atol
+
+
+@pytest.mark.parametrize("name", ["three_rrr", "three_prr", "3RRR"])
+def test_the_closed_form_serves_and_equals_newton_at_the_check_poses_and_along_a_row(name, monkeypatch):
+    """Every check pose and a warm-started row: no Newton step, and Newton's own answer to 1e-9."""
+    desc = _machine(name)
+    poses = [TaskPose(p.get("x", 0.0), p.get("y", 0.0), 0.0, p.get("phi", 0.0)) for p in desc.check_poses]
+    start = None
+    for pose in poses + _row(desc):
+        with monkeypatch.context() as m:
+            m.setattr(kin, "_newton", _no_newton)
+            fast = solve_task_pose(desc, pose, start=start)
+        slow = _newton(desc, pose, start)
+        _assert_same(fast, slow, desc)
+        start = task_unknowns(desc, fast)
+
+
+@pytest.mark.parametrize("name", ["five_bar", "delta", "serial_arm"])
+def test_machines_without_a_closed_form_keep_newton(name):
+    """A free end-effector coordinate (the five-bar's and the serial arm's phi, the Delta's rotation) or a chain of
+    no pattern (the Delta's rods): Newton, as before."""
+    assert kin._plan(_machine(name)).closed is None
+
+
+def test_near_the_3prr_s_workspace_edge_and_beyond_it():
+    """Rail 1's link nearly perpendicular to its rail (the platform 10 um inside the edge, y = -0.06 m + 1e-5): the
+    two roots nearly meet, the closed form still picks the working mode's and equals Newton. Beyond the edge no
+    assembly exists: refused (by Newton's exhausted starts, as before; no reach bound covers a prismatic chain)."""
+    desc = _machine("three_prr")
+    near = TaskPose(0.0, -0.06 + 1e-5)
+    _assert_same(solve_task_pose(desc, near), _newton(desc, near), desc)
+    with pytest.raises(UnreachableTaskPoseError):
+        solve_task_pose(desc, TaskPose(0.0, -0.06 - 1e-3))
+
+
+def _reach_edge_x(desc: Description) -> float:
+    """The x (y = phi = 0) where the first chain to stretch reaches its links' length: bisection on the distance
+    from each base to its attachment point."""
+    spans = [sum(lk.length_m for lk in c.links) for c in desc.chains]
+    attach = desc.end_effector.attachments_m
+
+    def slack(x: float) -> float:
+        return max(
+            math.dist((x + attach[str(c.end_joint.at)][0], attach[str(c.end_joint.at)][1]), c.base_position_m[:2]) - s
+            for c, s in zip(desc.chains, spans)
+            if c.end_joint is not None
+        )
+
+    lo, hi = 0.0, 1.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if slack(mid) < 0 else (lo, mid)
+    return lo
+
+
+def test_near_the_3rrr_s_reach_and_beyond_it():
+    """A chain stretched to 1 um of its reach (an elbow near straight: a serial singularity, type 1 ~ 0.004). Both
+    ways close (the closed form to round-off, Newton to its 1e-11 m), but there a closure of ``r`` metres leaves the
+    coordinates uncertain by ``r / (link * type 1)``: they agree to ten times Newton's tolerance over that (~1e-7
+    rad; the other working mode would differ by ~0.1 rad). Beyond the reach the pose is refused by name."""
+    desc = _machine("three_rrr")
+    edge = _reach_edge_x(desc)
+    near = TaskPose(edge - 1e-6, 0.0)
+    fast, slow = solve_task_pose(desc, near), _newton(desc, near)
+    shortest = min(lk.length_m for c in desc.chains for lk in c.links)
+    _assert_same(fast, slow, desc, atol=10 * kin.CLOSURE_TOL_M / (shortest * slow.singularity_type1))
+    with pytest.raises(UnreachableTaskPoseError, match="cannot reach"):
+        solve_task_pose(desc, TaskPose(edge + 1e-4, 0.0))
+
+
+def test_a_wrong_closed_form_is_caught_by_the_closure_check(monkeypatch):
+    """Closed forms that are off by 1e-6 rad fail the closure check (1e-11 m): Newton answers, unchanged."""
+    from fpm_sim.architecture import closed_forms
+
+    def off(chain):
+        solver = closed_forms.chain_solver(chain)
+        return None if solver is None else (lambda target: [q + 1e-6 for q in solver(target)])
+
+    monkeypatch.setattr(kin, "chain_solver", off)
+    desc = dataclasses.replace(_machine("three_rrr"))  # a new description: a new plan with the wrong forms
+    pose = TaskPose(0.01, -0.02, 0.0, 0.05)
+    assert kin._plan(desc).closed is not None
+    _assert_same(solve_task_pose(desc, pose), _newton(desc, pose), desc)
