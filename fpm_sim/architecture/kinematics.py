@@ -798,13 +798,36 @@ def _solve(desc: Description, lay: _Layout, pose: TaskPose, start: np.ndarray | 
     for z0 in starts:  # a neighbour's solution first; the working mode's and random starts only when it fails
         z0 = np.array(z0, float)
         z, res = _newton(desc, lay, pose, _aimed(desc, lay, pose, z0) if plan.rods else z0, ell)
-        if res < CLOSURE_TOL_M and all(_in_branch(j, z[s]) for _, j, s in lay.joints):
+        if res < CLOSURE_TOL_M and not _upright(desc, lay, pose, z) and "phi" in lay.ee_free:
+            z, res = _newton(desc, lay, pose, _half_turned(lay, z), ell)  # the same closure, the end effector upright
+        if res < CLOSURE_TOL_M and all(_in_branch(j, z[s]) for _, j, s in lay.joints) and _upright(desc, lay, pose, z):
             return _wrapped(lay, z)
     raise UnreachableTaskPoseError(
         f"no assembly of {desc.name!r} in its working mode reaches {pose.label(desc.task)}",
         parameter="pose",
         hint="choose a pose inside the workspace, or check the chains' lengths and working modes (branch_deg)",
     )
+
+
+def _upright(desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray) -> bool:
+    """Every chain fixed to the end effector turned less than 90 deg against it. The closure's rotation rows (the
+    skew part of the relative rotation) vanish at a half turn too, which is not an assembly: a tool turned by pi
+    against the link it is fixed on."""
+    ends = _plan(desc).ends
+    if not ends.fixed.size:
+        return True
+    _, re = _ee_frame(desc, pose, lay.ee_free, z[lay.ee_slice])
+    _, r = _end_frames(ends, _frames(desc, lay, z))
+    rel = re.T @ r[ends.fixed]
+    return bool(np.all(np.trace(rel, axis1=-2, axis2=-1) > 1.0))
+
+
+def _half_turned(lay: _Layout, z: np.ndarray) -> np.ndarray:
+    """``z`` with the end effector's free in-plane rotation turned by pi."""
+    z = z.copy()
+    k = lay.ee_free.index("phi")
+    z[lay.ee_slice.start + k] += math.pi
+    return z
 
 
 def closure_reach(desc: Description) -> list[tuple[int, ChainDesc, np.ndarray, float]]:

@@ -136,3 +136,19 @@ def test_a_wrong_closed_form_is_caught_by_the_closure_check(monkeypatch):
     pose = TaskPose(0.01, -0.02, 0.0, 0.05)
     assert kin._plan(desc).closed is not None
     _assert_same(solve_task_pose(desc, pose), _newton(desc, pose), desc)
+
+
+@pytest.mark.parametrize("name", ["five_bar", "serial_arm"])
+def test_a_tool_fixed_on_a_link_is_assembled_upright_not_half_turned(name):
+    """A chain fixed to the end effector closes with the tool along its link, not turned by pi against it: the
+    closure's rotation rows vanish at a half turn too, and the solver must not take that root (it did, at all six
+    five-bar check poses and one of the serial arm's). Checked on the assembly's own frames: the relative rotation
+    of each fixed end is the identity to the closure tolerance."""
+    desc = load_description(EXAMPLES / f"{name}.toml")
+    fixed = [c.name for c in desc.chains if c.end_joint is not None and c.end_joint.type == "fixed"]
+    assert fixed
+    for p in desc.check_poses:
+        asm = solve_task_pose(desc, TaskPose(p.get("x", 0.0), p.get("y", 0.0), p.get("z", 0.0), p.get("phi", 0.0)))
+        for c in fixed:
+            rel = asm.ee_rotation.T @ asm.chains[c].rotations[-1]
+            np.testing.assert_allclose(rel, np.eye(3), atol=1e-9)
