@@ -168,6 +168,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=20.0,
         help="effective sample size below which an update is Bayes-linear (default 20)",
     )
+    p.add_argument(
+        "--screen",
+        type=count_arg("--screen", high=100_000),
+        default=40,
+        help="with more candidates than this, screen them all by the band's moments and score this many best with "
+        "quantiles (default 40)",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the draws and the outcomes (default 0)")
     p.add_argument("--segments", type=int, default=None, help="spring locations per link (default: the posterior's)")
     p.add_argument(

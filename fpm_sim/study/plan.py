@@ -54,6 +54,7 @@ __all__ = [
     "QUANTITIES",
     "Z_POINTS",
     "Ensemble",
+    "Greedy",
     "PlanError",
     "PlanStep",
     "Score",
@@ -336,6 +337,22 @@ class PlanStep:
     score: Score
 
 
+@dataclass(frozen=True)
+class Greedy:
+    """What :func:`greedy_plan` found."""
+
+    before: Score
+    """The target's spread now."""
+    singles: list[Score]
+    """Every candidate's score alone (spread NaN for a candidate the screening left out)."""
+    steps: list[PlanStep]
+    """The greedy set, in order, each with the set's score up to it."""
+    screening: np.ndarray | None
+    """``(C + 1,)`` every candidate's screening estimate of its spread alone (the band's moments), and last the
+    estimate with no measurement, when the candidates were screened (more than ``screen`` of them, band target);
+    else ``None``."""
+
+
 def greedy_plan(
     ens: Ensemble,
     k: int,
@@ -344,36 +361,87 @@ def greedy_plan(
     seed: int = 0,
     mode: str = "band",
     ess_min: float = 20.0,
-) -> tuple[Score, list[Score], list[PlanStep]]:
+    screen: int = 40,
+) -> Greedy:
     """The target's spread now, every single candidate's score, and the greedy set of ``k`` measurements (a
-    candidate is chosen at most once). The same simulated outcomes score every set."""
+    candidate is chosen at most once). The same simulated outcomes score every set.
+
+    ``screen``: with more candidates than this and a band target, every candidate is first scored by the band's
+    moments under its weights (the predictive mean and sd, two matrix products per candidate: a dense grid's
+    thousands of candidates in seconds), and the ``screen`` best (at least ``k``) are scored and chosen from with
+    the quantile band."""
     if not 1 <= k <= ens.n_candidates:
         raise PlanError(f"must be 1..{ens.n_candidates} (the number of candidate measurements)", parameter="k", value=k)
     if not ess_min >= 1:
         raise PlanError("must be >= 1", parameter="ess_min", value=ess_min)
+    if screen < 1:
+        raise PlanError("must be >= 1", parameter="screen", value=screen)
     out = Outcomes.make(ens, outcomes, seed)
     mu, sd = ens.means(), ens.sds()
-    terms = [_log_terms(ens, c, out, mu, sd) for c in range(ens.n_candidates)]
     now = target_spread(ens, np.ones((1, ens.n_draws)), mode)[0]
     before = Score(float(now), 0.0, float(ens.n_draws), float(ens.n_draws), 0, 1)
-    singles = [score_set(ens, t, out, mode=mode, ess_min=ess_min, members=[c]) for c, t in enumerate(terms)]
+    screening = None
+    shortlist = list(range(ens.n_candidates))
+    if mode == "band" and ens.n_candidates > max(screen, k):
+        screening = _screening(ens, out, mu, sd)
+        order = np.argsort(np.where(np.isnan(screening[:-1]), np.inf, screening[:-1]), kind="stable")
+        shortlist = sorted(int(c) for c in order[: max(screen, k)])
+    terms = {c: _log_terms(ens, c, out, mu, sd) for c in shortlist}
+    nan = Score(math.nan, math.nan, 0.0, 0.0, 0, 0)
+    singles = [nan] * ens.n_candidates
+    for c in shortlist:
+        singles[c] = score_set(ens, terms[c], out, mode=mode, ess_min=ess_min, members=[c])
     chosen: list[PlanStep] = []
     acc = np.zeros((outcomes, ens.n_draws))
     for step in range(k):
-        scores: dict[int, Score] = {}
-        for c in range(ens.n_candidates):
-            if any(p.candidate == c for p in chosen):
-                continue
-            members = [p.candidate for p in chosen] + [c]
-            scores[c] = (
-                singles[c]
-                if step == 0
-                else score_set(ens, acc + terms[c], out, mode=mode, ess_min=ess_min, members=members)
+        picked = {p.candidate for p in chosen}
+        scores = {
+            c: singles[c]
+            if step == 0
+            else score_set(
+                ens, acc + terms[c], out, mode=mode, ess_min=ess_min, members=[p.candidate for p in chosen] + [c]
             )
+            for c in shortlist
+            if c not in picked
+        }
         best = min(scores, key=lambda c: (math.inf if math.isnan(scores[c].spread) else scores[c].spread, c))
         chosen.append(PlanStep(best, scores[best]))
         acc = acc + terms[best]
-    return before, singles, chosen
+    return Greedy(before, singles, chosen, screening)
+
+
+def _screening(ens: Ensemble, out: Outcomes, mu: np.ndarray, sd: np.ndarray) -> np.ndarray:
+    """``(C + 1,)`` each candidate's expected band half-width alone from the weighted moments of the target's
+    predictive (``1.645 sd / mean`` per target pose, the median over poses, the mean over outcomes), and last the
+    same with no measurement (the baseline its gains are taken from)."""
+    first, second, count = _moment_parts(ens)
+    res = np.full(ens.n_candidates + 1, np.nan)
+    res[-1] = _moment_spread(np.ones((1, ens.n_draws)), first, second, count)
+    for c in range(ens.n_candidates):
+        lw = _log_terms(ens, c, out, mu, sd)
+        lw = lw[np.isfinite(lw).any(axis=1) & ~np.isnan(lw).any(axis=1)]
+        if len(lw):
+            res[c] = _moment_spread(np.exp(lw - lw.max(axis=1, keepdims=True)), first, second, count)
+    return res
+
+
+def _moment_parts(ens: Ensemble) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(S, T)`` each draw's predictive first and second moments at each target pose (0 where it has none), and
+    where it has one."""
+    g = ens.target_hz * (1.0 + ens.target_shift)
+    ok = np.isfinite(g)
+    first = np.where(ok, g, 0.0)
+    second = np.where(ok, g**2 + (ens.target_hz * ens.target_disc) ** 2, 0.0)
+    return first, second, ok.astype(float)
+
+
+def _moment_spread(w: np.ndarray, first: np.ndarray, second: np.ndarray, count: np.ndarray) -> float:
+    """The mean over the rows of weights ``w`` of the median over target poses of ``1.645 sd / mean``."""
+    n = w @ count
+    with np.errstate(invalid="ignore", divide="ignore"):
+        m1 = (w @ first) / n
+        var = np.maximum((w @ second) / n - m1**2, 0.0)
+        return float(np.mean(np.nanmedian(BAND_Z * np.sqrt(var) / m1, axis=1)))
 
 
 def describe_candidates(modes: Sequence[tuple[int, ...]]) -> np.ndarray:

@@ -144,6 +144,7 @@ def plan_tests(
     outcomes: int = 64,
     seed: int = 0,
     ess_min: float = 20.0,
+    screen: int = 40,
     options: ModelOptions | None = None,
     engine: EngineOptions | None = None,
 ) -> PlanResult:
@@ -167,6 +168,9 @@ def plan_tests(
         Simulated outcomes per set (the Monte Carlo size of each expectation).
     ess_min
         Effective sample size below which an outcome's re-weighting counts as collapsed (Bayes-linear update).
+    screen
+        With more candidates than this (band target), all are screened by the band's moments and this many best
+        are scored and chosen from (:func:`~fpm_sim.study.plan.greedy_plan`).
     options, engine
         The pose loop's discretisation (default: the likelihood's resolution) and where it runs.
     """
@@ -190,11 +194,11 @@ def plan_tests(
     ens, n_used = _ensemble(
         posterior, candidates, target, sig, n_draws=n_draws, seed=seed, options=options, engine=engine
     )
-    before, singles, steps = greedy_plan(ens, k, outcomes=outcomes, seed=seed, mode=target.kind, ess_min=ess_min)
+    g = greedy_plan(ens, k, outcomes=outcomes, seed=seed, mode=target.kind, ess_min=ess_min, screen=screen)
     floor = float(BAND_Z * np.median(ens.target_disc)) if target.kind == "band" else math.nan
     return PlanResult(
-        list(candidates), target, before, singles, steps, sig, n_used, outcomes, ess_min, time.perf_counter() - t0,
-        posterior.base.name, discrepancy_floor=floor,
+        list(candidates), target, g.before, g.singles, g.steps, sig, n_used, outcomes, ess_min,
+        time.perf_counter() - t0, posterior.base.name, discrepancy_floor=floor, screening=g.screening,
     )  # fmt: skip
 
 
@@ -253,6 +257,8 @@ class PlanResult:
     elapsed_s: float
     name: str = ""
     discrepancy_floor: float = math.nan
+    screening: np.ndarray | None = None
+    """Every candidate's screening estimate (the band's moments) when the candidates were screened, else ``None``."""
     """The band target's half-width if the parameters were known exactly: the model discrepancy's alone
     (1.645 times its posterior median), which no measurement elsewhere narrows under an independent discrepancy."""
 
@@ -288,8 +294,12 @@ class PlanResult:
 
     def ranking(self) -> list[int]:
         """Candidates by their single measurement's expected spread, best first (NaN last)."""
-        key = [(math.inf if math.isnan(s.spread) else s.spread, i) for i, s in enumerate(self.singles)]
-        return [i for _, i in sorted(key)]
+        scr = self.screening[:-1] if self.screening is not None else np.full(len(self.singles), np.nan)
+        key = [
+            (math.isnan(s.spread), s.spread if not math.isnan(s.spread) else 0.0, np.nan_to_num(scr[i], nan=np.inf), i)
+            for i, s in enumerate(self.singles)
+        ]
+        return [k[-1] for k in sorted(key)]
 
     def rows(self) -> list[dict[str, Any]]:
         """The plan's table: one row per chosen measurement, the spread after the set up to it and the gain."""
@@ -355,6 +365,7 @@ class PlanResult:
                     "quantity": c.quantity,
                     **jsonable_score(s),
                     "gain": self.before.spread - s.spread,
+                    "screening_spread": None if self.screening is None else float(self.screening[i]),
                 }
             )
         return {
@@ -387,15 +398,19 @@ class PlanResult:
         fig = ax.figure if ax is not None else plt.figure(figsize=(6.4, 5.2))
         ax = ax if ax is not None else fig.add_subplot()
         best: dict[Pose, float] = {}
-        for c, s in zip(self.candidates, self.singles):
-            g = self.before.spread - s.spread
+        scr = self.screening
+        for i, (c, s) in enumerate(zip(self.candidates, self.singles)):
+            g = self.before.spread - s.spread if scr is None else scr[-1] - scr[i]
             if math.isfinite(g):
                 best[c.pose] = max(best.get(c.pose, -math.inf), g)
         xs = np.array([p.x_m * 1e3 for p in best])
         ys = np.array([p.y_m * 1e3 for p in best])
         gain = np.array(list(best.values())) * (100.0 if self.target.kind == "band" else 1.0)
-        sc = ax.scatter(xs, ys, c=gain, s=160, cmap="viridis", edgecolors="k", linewidths=0.4)
+        size = 160 if len(best) <= 60 else max(4.0, 9000.0 / len(best))
+        sc = ax.scatter(xs, ys, c=gain, s=size, cmap="viridis", edgecolors="k", linewidths=0.4 if size > 40 else 0)
         unit = "points of the 90 % half-width, %" if self.target.kind == "band" else "bits of entropy"
+        if scr is not None:
+            unit += "; screening by the band's moments"
         fig.colorbar(sc, ax=ax, label=f"expected gain ({unit})", shrink=0.85)
         tx = [p.x_m * 1e3 for p in self.target.poses]
         ty = [p.y_m * 1e3 for p in self.target.poses]

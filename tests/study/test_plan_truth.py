@@ -28,6 +28,13 @@ from fpm_sim.study.identify import Observation, parameter_set
 from fpm_sim.study.plan import Ensemble, describe_candidates, greedy_plan
 from fpm_sim.study.poses import study_poses
 
+
+def _plan3(*args, **kwargs):
+    """``greedy_plan``'s before, singles and steps."""
+    g = greedy_plan(*args, **kwargs)
+    return g.before, g.singles, g.steps
+
+
 PRIORS = """
 [parameters."hardware.platform.mass_kg"]
 dist = "loguniform"
@@ -110,7 +117,7 @@ def _one_truth(default_manip, truth_seed: int, realizations: int, random_sets: i
         cand_f[:, :, None], describe_candidates([(1,)] * len(cands)), np.zeros((s, len(cands))),
         np.zeros((s, len(cands))), NOISE, target_f, np.zeros_like(target_f), np.zeros_like(target_f),
     )  # fmt: skip
-    _, _, steps = greedy_plan(ens, K, outcomes=256, seed=truth_seed)
+    _, _, steps = _plan3(ens, K, outcomes=256, seed=truth_seed)
     q05, q50, q95 = np.nanquantile(cand_f, (0.05, 0.5, 0.95), axis=0)
     sets = {
         "plan": [c.candidate for c in steps],
