@@ -13,10 +13,10 @@ Stages (:func:`stages`), each skipped where it frees nothing new:
    for ``geometry-per-chain``'s eighteen.
 3. ``per-chain``: every parameter, each chain's own.
 
-Each stage minimises the robust loss :data:`ROBUST_LOSS` of the residuals (in sigmas), in a linear subspace ``z = z_prev + B u`` of the parameters normalised to their bounds, ``u``
-bounded so that ``z`` stays in [0, 1]; its Jacobian is the objective's (exact where the model allows it,
-:mod:`fpm_sim.study.identify.sensitivity`, else forward differences) times ``B``, the columns outside the
-stage never computed.
+Each stage minimises the robust loss :data:`ROBUST_LOSS` of the residuals (in sigmas), in a linear subspace
+``z = z_prev + B u`` of the parameters normalised to their bounds, ``u`` bounded so that ``z`` stays in [0, 1];
+its Jacobian is the objective's (exact where the model allows it, :mod:`fpm_sim.study.identify.sensitivity`,
+else forward differences) times ``B``, the columns outside the stage never computed.
 
 Starts (:func:`prior_starts`): the start description, then ``staged_starts - 1`` samples of the prior (seeded):
 every parameter outside the geometry groups uniform over its bounds (the first stage fits them from anywhere
@@ -37,7 +37,7 @@ from fpm_sim.study.identify.objective import Objective
 from fpm_sim.study.identify.parameters import GEOMETRY_GROUPS
 from fpm_sim.study.identify.strategies import Candidate
 
-__all__ = ["Stage", "StagedLeastSquares", "prior_starts", "stages"]
+__all__ = ["ROBUST_LOSS", "ROBUST_SCALE", "Stage", "StagedLeastSquares", "fit_stage", "prior_starts", "stages"]
 
 
 @dataclass(frozen=True)
