@@ -180,3 +180,19 @@ def test_as_built_machines_are_identified_to_the_noise_floor_and_predict_other_p
     # sensitivity to the geometry there) covers the error at 3 sd. Measured (seed 2, a check pose at measure
     # 0.039): f1 0.84 % off, stated sd 2.0 %
     assert np.all(err[near] < 3 * (sd / pred)[near]), (err[near], (sd / pred)[near])
+
+
+def test_cli_default_runs_staged_on_rich_data_and_reports_the_masses_that_trade_off(tmp_path):
+    from importlib.resources import files
+
+    from fpm_sim.cli.main import main
+
+    measured = files("fpm_sim.data").joinpath("measured_table4_train.csv")
+    out = tmp_path / "id"
+    argv = ["identify", "--measured", f"{measured},reading=x+", "--free", "hardware", "--segments", "2"]
+    assert main([*argv, "--staged-starts", "2", "--out", str(out), "--quiet"]) == 0
+    report = (out / "report.md").read_text()
+    assert "Search: global `staged` (seed 0; 2 starts" in report
+    assert "auto: staged (12 data for 3 free parameters" in report
+    # the study's f1..f3 at four poses see the platform and its joints mostly through their sum (measured -0.96)
+    assert "hardware.platform.mass_kg ~ hardware.platform_joint.mass_kg (-0.9" in report
