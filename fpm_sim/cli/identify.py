@@ -30,7 +30,7 @@ __all__ = [
     "register",
 ]
 
-GLOBAL_METHODS = ("de", "hybrid", "multistart", "surrogate-de", "none")
+GLOBAL_METHODS = ("auto", "de", "hybrid", "multistart", "surrogate-de", "staged", "none")
 """:data:`fpm_sim.study.identify.GLOBAL_METHODS` (checked by a test)."""
 DEFAULT_SIGMA_PCT = 2.0
 """:data:`fpm_sim.study.identify.DEFAULT_SIGMA_PCT` (checked by a test)."""
@@ -96,7 +96,7 @@ _STUDY_ONLY = {
     "workspace": None,
     "reading": None,
     "folds": 0,
-    "global_method": "de",
+    "global_method": "auto",
     "timoshenko": False,
     "workers": None,
     "jacobian": "fd",
@@ -188,6 +188,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         segments=args.segments,
         global_method=args.global_method,
         n_starts=args.starts,
+        staged_starts=args.staged_starts,
         n_refine=args.refine,
         refine_per_class=args.refine_per_class,
         de_strategy=args.de_strategy,
@@ -240,6 +241,7 @@ def _check_counts(args: argparse.Namespace) -> None:
         ("--popsize", args.popsize),
         ("--refine", args.refine),
         ("--refine-per-class", args.refine_per_class),
+        ("--staged-starts", args.staged_starts),
     )
     for flag, value in counts:
         if value < 1:
@@ -300,10 +302,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--global",
         dest="global_method",
-        default="de",
+        default="auto",
         choices=GLOBAL_METHODS,
-        help="global exploration before the local refinement (default de: differential evolution on the full "
-        "model; see docs/identification.md)",
+        help="global exploration before the local refinement (default auto: staged for rich data, at least 3 "
+        "data per free parameter, else de; staged: least squares with exact derivatives freeing masses and "
+        "sections, then the collective geometry, then each chain's, from the start and prior samples; de: "
+        "differential evolution on the full model; see docs/identification.md)",
+    )
+    p.add_argument(
+        "--staged-starts",
+        type=int,
+        default=4,
+        help="staged: starts, the start description and prior samples (default 4)",
     )
     p.add_argument("--generations", type=int, default=200, help="de: generations (default 200)")
     p.add_argument("--popsize", type=int, default=8, help="de: population per free parameter (default 8)")

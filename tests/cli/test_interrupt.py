@@ -121,7 +121,7 @@ def test_ctrl_c_during_identify_is_one_line_and_130(tmp_path):
     measured = files("fpm_sim.data").joinpath("measured_table4_train.csv")
     out = tmp_path / "id"
     argv = [sys.executable, "-m", "fpm_sim.cli.main", "identify", "--measured", f"{measured},reading=x+", "--free",
-            "section", "--segments", "2", "--workers", "2", "--out", str(out)]  # fmt: skip
+            "section", "--segments", "2", "--workers", "2", "--global", "de", "--out", str(out)]  # fmt: skip
     proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
         for line in proc.stdout:  # the workers are busy once a generation is reported

@@ -15,7 +15,10 @@ and the measured poses the identified machine cannot reach.
    :data:`DIRECTION_WEIGHT`) trade off against each other along it (signs: which move together). A parameter is
    undetermined when it weighs in an undetermined direction. The decision is a ratio of singular values far from
    its threshold for an exact null direction (sd ~1e12 of the width) and for a determined one, so round-off
-   does not flip it.
+   does not flip it. Parameters that the data determine only together are named too: every pair whose posterior
+   correlation (from the same ``(J_z'J_z)^+``) is at least :data:`CORRELATED` in magnitude (e.g. the platform's
+   mass against its joints' masses: the data see mostly their sum), so that a report shows where a value trades
+   off against another instead of hiding it in two standard deviations.
 3. **Poses.** Each distinct measured pose under the identified description: unreachable, or with a singularity
    measure (:mod:`fpm_sim.kinematics`) below the problem's ``min_singularity``.
 """
@@ -35,6 +38,7 @@ from fpm_sim.kinematics import assemble_many
 from fpm_sim.study.identify.problem import Problem, unique_poses
 
 __all__ = [
+    "CORRELATED",
     "DIRECTION_WEIGHT",
     "P_VALUE_FLOOR",
     "UNDETERMINED_SD",
@@ -53,6 +57,8 @@ UNDETERMINED_SD = 0.25
 """Posterior sd (fraction of the bounds' width) above which a direction is not determined by the data."""
 DIRECTION_WEIGHT = 0.2
 """Smallest weight ``|v_ik|`` (unit vector) of a parameter named in an undetermined direction."""
+CORRELATED = 0.9
+"""Smallest posterior correlation (magnitude) of a pair of parameters reported as trading off."""
 
 
 @dataclass(frozen=True)
@@ -118,13 +124,20 @@ class Determination:
     undetermined_directions: list[dict[str, Any]] = field(default_factory=list)
     """Each: ``sd_fraction`` (posterior sd along it, fraction of the bounds' width) and ``weights`` (parameter ->
     signed weight)."""
+    correlated: list[dict[str, Any]] = field(default_factory=list)
+    """The pairs of parameters whose posterior correlation is at least :data:`CORRELATED` in magnitude, strongest
+    first: each ``{"a": name, "b": name, "correlation": rho}`` (positive: an error in one comes with an error of
+    the same sign in the other; negative: of opposite signs, the data seeing mostly a sum)."""
 
     def lines(self) -> list[str]:
-        """The directions, in words."""
+        """The directions and the strongly correlated pairs, in words."""
         out = []
         for d in self.undetermined_directions:
             terms = " ".join(f"{w:+.2f} {n}" for n, w in d["weights"].items())
             out.append(f"undetermined (sd {d['sd_fraction']:.3g} of the bounds' width): {terms}")
+        if self.correlated:
+            pairs = ", ".join(f"{c['a']} ~ {c['b']} ({c['correlation']:+.3f})" for c in self.correlated)
+            out.append(f"trade off (posterior correlation >= {CORRELATED:g} in magnitude): {pairs}")
         return out
 
     def to_dict(self) -> dict[str, Any]:
@@ -134,6 +147,7 @@ class Determination:
                 for n, s, d in zip(self.names, self.posterior_sd, self.determined)
             },
             "undetermined_directions": self.undetermined_directions,
+            "correlated": self.correlated,
         }
 
 
@@ -161,7 +175,25 @@ def determination(jacobian: np.ndarray, width: np.ndarray, names: Sequence[str])
         directions.append(
             {"sd_fraction": float(sd_dir[j]), "weights": {names[i]: round(float(v[i]), 3) for i in heavy}}
         )
-    return Determination(list(names), sd_x, determined, directions)
+    return Determination(list(names), sd_x, determined, directions, correlated_pairs(s_full, vt, names))
+
+
+def correlated_pairs(s: np.ndarray, vt: np.ndarray, names: Sequence[str]) -> list[dict[str, Any]]:
+    """The pairs with posterior correlation at least :data:`CORRELATED` in magnitude, from the singular values ``s``
+    and right singular vectors ``vt`` of ``J_z`` (the covariance ``V S^-2 V'`` restricted to the determined
+    directions: a pair trading off along an exact null direction is named by the undetermined directions)."""
+    keep = s > s.max() * 1e-10 if s.size and s.max() > 0 else np.zeros(len(s), bool)
+    v = vt[keep].T
+    cov = (v / s[keep][None, :] ** 2) @ v.T
+    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    out = []
+    for i in range(len(names)):
+        for j in range(i + 1, len(names)):
+            if sd[i] > 0 and sd[j] > 0:
+                rho = float(cov[i, j] / (sd[i] * sd[j]))
+                if abs(rho) >= CORRELATED:
+                    out.append({"a": names[i], "b": names[j], "correlation": round(rho, 4)})
+    return sorted(out, key=lambda c: -abs(c["correlation"]))
 
 
 def pose_problems(problem: Problem, config: Manipulator) -> dict[str, list[str]]:

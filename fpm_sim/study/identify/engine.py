@@ -7,7 +7,13 @@ file) and every rig test, each with its own standard deviation: :mod:`.objective
 
 Search (:func:`identify`):
 
-1. global exploration: ``"de"`` (the default: differential evolution of every free parameter on the
+1. global exploration: ``"auto"`` (the default) is ``"staged"`` where the data are rich (at least
+   :data:`~fpm_sim.study.identify.problem.RICH_DATA_RATIO` data per free parameter), else ``"de"``;
+   ``"staged"`` (a continuation from the start description and a few prior samples, ``staged_starts``: the
+   parameters freed in stages, masses and sections, then the collective geometry, then each chain's, each stage
+   a bounded least-squares fit with the exact Jacobian where the model allows it; every start's end is a
+   candidate; :mod:`.strategies.staged`; it stays on the start's elbow branches), ``"de"`` (differential
+   evolution of every free parameter on the
    full model at the fitted resolution, the elbow-branch combination an integer variable when the
    geometry is free, mutation ``de_strategy``; the best ``refine_per_class`` final-population members of
    each branch combination are candidates, class leaders first; :mod:`.strategies.de`),
@@ -35,6 +41,7 @@ Search (:func:`identify`):
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Sequence
@@ -51,6 +58,7 @@ from fpm_sim.study.identify.problem import (
     GLOBAL_METHODS,
     JACOBIANS,
     PAIRINGS,
+    RICH_DATA_RATIO,
     SURROGATE_BRANCHES,
     IdentificationError,
     IdentifyOptions,
@@ -64,6 +72,7 @@ from fpm_sim.study.identify.strategies import Candidate, Strategy
 from fpm_sim.study.identify.strategies.de import DifferentialEvolution
 from fpm_sim.study.identify.strategies.lsq import LeastSquares, least_squares_z, objective_jacobian
 from fpm_sim.study.identify.strategies.multistart import LatinHypercube
+from fpm_sim.study.identify.strategies.staged import StagedLeastSquares
 from fpm_sim.study.identify.strategies.surrogate import SurrogateDE
 
 __all__ = [
@@ -74,6 +83,7 @@ __all__ = [
     "fold_assignment",
     "identify",
     "predict_with_std",
+    "resolve_global_method",
     "variance_scale",
 ]
 
@@ -235,6 +245,15 @@ def _check_request(problem: Problem, opts: IdentifyOptions) -> None:
             raise IdentificationError(
                 f"unknown {name}", parameter=name, value=value, hint=f"choose from {', '.join(allowed)}"
             )
+    for name in ("staged_starts", "staged_max_nfev"):
+        if getattr(opts, name) < 1:
+            raise IdentificationError("must be >= 1", parameter=name, value=getattr(opts, name))
+    if not 0.0 <= opts.staged_spread <= 1.0:
+        raise IdentificationError(
+            "must be between 0 and 1 (a fraction of each bound's width)",
+            parameter="staged_spread",
+            value=opts.staged_spread,
+        )
     if not problem.observations and not problem.subsystem_tests:
         raise IdentificationError("no data", parameter="measured", hint="give measured and/or subsystems data")
     check_problem(problem)
@@ -264,6 +283,16 @@ def _global_candidates(
             min(c.cost for c in scored),
             "best geometry of each elbow-branch class, scored with the full model",
         )
+    if method == "staged":
+        from fpm_sim.study.identify.sensitivity import supported
+
+        staged: Strategy = StagedLeastSquares(
+            opts.staged_starts, opts.staged_spread, opts.staged_max_nfev, supported(opts.model_options())
+        )
+        found = staged.search(obj, seed=opts.seed, workers=opts.workers, progress=progress)
+        for c in found:
+            history.log("staged least squares", c.cost, c.origin)
+        return sorted(found, key=lambda c: c.cost)[: max(1, opts.n_refine)]
     if method == "de":
         de: Strategy = DifferentialEvolution()
         found = de.search(obj, seed=opts.seed, workers=opts.workers, progress=progress)
@@ -298,16 +327,33 @@ def _uncertainty(
     return jx, std, corr, chi2_dof, dof
 
 
+def resolve_global_method(problem: Problem, opts: IdentifyOptions) -> tuple[str, str]:
+    """The global method that runs for ``opts.global_method`` (``"auto"``: ``"staged"`` for rich data,
+    :data:`~fpm_sim.study.identify.problem.RICH_DATA_RATIO`, else ``"de"``) and why, in words."""
+    if opts.global_method != "auto":
+        return opts.global_method, ""
+    n_data = len(problem.observations) + len(problem.subsystem_tests)
+    n_free = len(problem.parameters.parameters)
+    rich = n_data >= RICH_DATA_RATIO * n_free
+    return ("staged" if rich else "de"), (
+        f"auto: {'staged' if rich else 'de'} ({n_data} data for {n_free} free parameters, rich from "
+        f"{RICH_DATA_RATIO} per parameter)"
+    )
+
+
 def identify(problem: Problem, *, options: IdentifyOptions | None = None, progress: bool = False) -> Identification:
-    """Fit ``problem`` (see module docstring). Returns the optimum with its uncertainty and history."""
+    """Fit ``problem`` (see module docstring). Returns the optimum with its uncertainty and history (its options
+    name the global method that ran: ``"auto"`` resolved)."""
     opts = options or IdentifyOptions()
     _check_request(problem, opts)
+    method, why = resolve_global_method(problem, opts)
+    opts = dataclasses.replace(opts, global_method=method)
     obj = Objective(problem, opts)
     history = _History(obj, progress=progress)
     ps = problem.parameters
     z_start = obj.z(ps.x0)
     start = Candidate(z_start, obj.cost(z_start), "start description")
-    history.log("start", start.cost)
+    history.log("start", start.cost, why)
     starts = _global_candidates(obj, opts, start, history, progress=progress)
     ends: list[Candidate] = []
     for end in LeastSquares(tuple(starts)).ends(obj, workers=opts.workers):

@@ -116,11 +116,12 @@ class Objective:
             return r
         return np.concatenate([r, self.workspace_residuals(x)])
 
-    def jacobian(self, z: np.ndarray) -> np.ndarray:
+    def jacobian(self, z: np.ndarray, columns: list[int] | None = None) -> np.ndarray:
         """``d residuals / d z`` (``IdentifyOptions.jacobian == "exact"``): the observations' rows from the
         eigen-solve's sensitivities for the manipulator's parameters (:mod:`.sensitivity`), zero where a residual
         is the constant penalty; the rig tests' and the workspace prior's rows, and the rig parameters' columns,
-        by forward differences (step ``1e-3`` of the bounds' width, as the ``"fd"`` Jacobian)."""
+        by forward differences (step ``1e-3`` of the bounds' width, as the ``"fd"`` Jacobian). ``columns``: the
+        parameters whose columns are wanted (default all; the others' columns are 0)."""
         from fpm_sim.study.identify.sensitivity import observation_gradients
 
         z = np.clip(np.asarray(z, float), 0.0, 1.0)
@@ -128,9 +129,15 @@ class Objective:
         r0 = self.residuals(z)
         n_obs = len(self.obs)
         jac = np.zeros((len(r0), len(z)))
+        wanted = list(range(len(z))) if columns is None else list(columns)
         try:
             dfdx = observation_gradients(
-                self.ps, x, self.man_idx, self.obs, self.opts.model_options(), pairing=self.opts.pairing
+                self.ps,
+                x,
+                [k for k in self.man_idx if k in wanted],
+                self.obs,
+                self.opts.model_options(),
+                pairing=self.opts.pairing,
             )
         except (ConfigError, ValueError):  # an impossible description at x or a step from it: a flat penalty
             dfdx = np.zeros((n_obs, len(z)))
@@ -138,7 +145,7 @@ class Objective:
         jac[:n_obs] = np.where(finite[:, None], dfdx * self.width[None, :] / self.sigma[:n_obs, None], 0.0)
         if len(r0) == n_obs:
             return jac
-        for k in range(len(z)):  # the rig tests' and the workspace prior's rows: no pose eigen-solve
+        for k in wanted:  # the rig tests' and the workspace prior's rows: no pose eigen-solve
             h = 1e-3 if z[k] + 1e-3 <= 1.0 else -1e-3
             zk = z.copy()
             zk[k] += h

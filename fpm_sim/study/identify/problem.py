@@ -12,7 +12,7 @@ from __future__ import annotations
 import dataclasses
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import KW_ONLY, dataclass, field
 
 import numpy as np
 
@@ -35,6 +35,7 @@ __all__ = [
     "MODE_MARGIN",
     "PAIRINGS",
     "PENALTY_SIGMAS",
+    "RICH_DATA_RATIO",
     "SURROGATE_BRANCHES",
     "IdentificationError",
     "IdentificationWarning",
@@ -51,7 +52,11 @@ __all__ = [
     "workspace_residuals",
 ]
 
-GLOBAL_METHODS = ("de", "hybrid", "multistart", "surrogate-de", "none")
+GLOBAL_METHODS = ("auto", "de", "hybrid", "multistart", "surrogate-de", "staged", "none")
+RICH_DATA_RATIO = 3
+"""``global_method="auto"`` runs ``"staged"`` where the data (observations and rig tests) number at least this many
+times the free parameters (rich data: the continuation reaches the noise floor from the start's basin), else
+``"de"``."""
 JACOBIANS = ("fd", "exact")
 IN_PLANE_THRESHOLD = 0.5
 """A mode is ``in_plane`` when more than this fraction of its strain energy is in in-plane springs."""
@@ -97,7 +102,10 @@ class IdentifyOptions:
     """Search settings. ``segments``: spring locations per link of the model fitted."""
 
     segments: int = 4
-    global_method: str = "de"
+    global_method: str = "auto"
+    """The global exploration (:data:`GLOBAL_METHODS`, :mod:`fpm_sim.study.identify.engine`): ``"auto"`` (the
+    default) is ``"staged"`` for rich data (:data:`RICH_DATA_RATIO`), else ``"de"``; the result's options name the
+    one that ran."""
     n_starts: int = 24
     n_refine: int = 4
     generations: int = 200
@@ -130,6 +138,16 @@ class IdentifyOptions:
     step ``1e-3`` of the bounds' width; what the study's shipped numbers were made with) or ``"exact"`` (the
     eigen-solve's sensitivities, :mod:`fpm_sim.study.identify.sensitivity`, for the observations and the
     manipulator's parameters; finite differences for the rig tests and the workspace prior)."""
+    _: KW_ONLY
+    staged_starts: int = 4
+    """``staged``: starts of the continuation, the start description and ``staged_starts - 1`` samples of the
+    prior (:mod:`fpm_sim.study.identify.strategies.staged`); each start's end is a candidate."""
+    staged_max_nfev: int = 100
+    """``staged``: residual evaluations of each stage's least squares at most (each with an exact Jacobian where the
+    model allows it: cheap; the per-chain stage of 23 parameters takes 25-60)."""
+    staged_spread: float = 0.3
+    """``staged``: the prior samples' spread of each geometry parameter about its start, as a fraction of its
+    bounds' width (uniform within +-half of it); the other parameters are drawn over their whole bounds."""
 
     def model_options(self) -> ModelOptions:
         if self.timoshenko:

@@ -157,7 +157,13 @@ def _header_lines(result: Identification, *, command: str, data_files: Sequence[
         f"Data: {', '.join(data_files)}. Free parameters: {len(result.names)}; observations: "
         f"{len(result.measured)}; residual degrees of freedom {result.dof}; chi^2/dof {result.chi2_per_dof:.3g}.",
         "",
-        f"Search: global `{result.options.global_method}` (seed {result.options.seed}), then bounded least squares "
+        f"Search: global `{result.options.global_method}` (seed {result.options.seed}"
+        + (
+            f"; {result.options.staged_starts} starts, each freeing its parameters in stages with exact derivatives"
+            if result.options.global_method == "staged"
+            else ""
+        )
+        + "), then bounded least squares "
         f"(trust-region reflective, {_jacobian_note(result)}); {result.options.segments} spring "
         f"locations per link. {result.history[-1].evaluations} model evaluations, {result.seconds:.0f} s.",
         "",

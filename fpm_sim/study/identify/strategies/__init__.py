@@ -1,6 +1,8 @@
 """Search strategies of an identification, one module each, behind one small protocol (:class:`Strategy`).
 
-- :mod:`.de`: differential evolution of every free parameter on the full model (the default global search);
+- :mod:`.staged`: the continuation (masses and sections, then the collective geometry, then each chain's) with
+  exact derivatives from the start and a few prior samples (the default global search for rich data);
+- :mod:`.de`: differential evolution of every free parameter on the full model (the default otherwise);
 - :mod:`.multistart`: a Latin hypercube of starts scored with the full model;
 - :mod:`.surrogate`: differential evolution of the geometry on the in-plane surrogate, per elbow-branch class;
 - :mod:`.lsq`: bounded least squares from given starts (the local refinement every search ends with).
