@@ -83,10 +83,14 @@ def load_posterior(
 
 def band_options(args: argparse.Namespace, posterior: Posterior) -> ModelOptions:
     """The pose loop's options (gravity off) at the likelihood's resolution (the posterior's ``segments``)
-    unless ``--segments`` or ``--fidelity`` says otherwise."""
+    unless ``--segments`` or ``--fidelity`` says otherwise; a described machine's pose loop is inextensible."""
+    import dataclasses
+
     if getattr(args, "segments", None) is None and getattr(args, "fidelity", None) is None and posterior.segments:
-        return model_options(args, gravity=False, segments=posterior.segments)
-    return model_options(args, gravity=False)
+        opts = model_options(args, gravity=False, segments=posterior.segments)
+    else:
+        opts = model_options(args, gravity=False)
+    return dataclasses.replace(opts, axial=False) if posterior.described else opts
 
 
 def posterior_payload(posterior: Posterior) -> dict[str, Any]:
@@ -182,7 +186,7 @@ def bands_summary(bands: Any, *, full_table_max: int = 40) -> str:
         at = (
             f"({nxt['x_mm']:g}, {nxt['y_mm']:g}) mm, phi {nxt['phi_rad']:g} rad"
             if bands.task is None
-            else f"{bands.label(nxt['pose'])} (mm, rad)"
+            else f"{bands.label(nxt['pose'])} ({'mm, rad' if 'phi' in bands.task else 'mm'})"
         )
         lines.append(
             f"  measure here next: {at}: the widest "

@@ -927,7 +927,8 @@ class PredictiveBands:
         if w is not None:
             axes[1].plot(x[w], y[w], ls="", marker="*", ms=16, color="red", mec="k", label="measure here next")
             axes[1].legend(fontsize=7, loc="lower right")
-            at = f"({x[w]:g}, {y[w]:g}) mm" if self.task is None else f"{self.label(w)} (mm, rad)"
+            units = "mm, rad" if "phi" in (self.task or ()) else "mm"
+            at = f"({x[w]:g}, {y[w]:g}) mm" if self.task is None else f"{self.label(w)} ({units})"
             title += f"\nmeasure here next: {at}, band {width[w]:.1f} % of the median"
         axes[0].set_title(f"{_short(self.name)}: median over {self.n_draws} draws", fontsize=8)
         axes[1].set_title(title, fontsize=8)
