@@ -20,7 +20,7 @@ from fpm_sim.batch.engine import EngineOptions
 from fpm_sim.batch.task_sweep import sweep_task
 from fpm_sim.cli.main import main
 from fpm_sim.model.options import ModelOptions
-from fpm_sim.study.planning import PlanError, pose_file_candidates, study_candidates
+from fpm_sim.study.planning import PlanError, pose_file_candidates, reachable, requirement_target, study_candidates
 from fpm_sim.study.posterior import Posterior, PredictiveBands, predict_bands
 from tests.helpers.posterior import FIVE_BAR, MASS_PATH, MASSES_KG, write_described_posterior, write_posterior
 
@@ -213,3 +213,23 @@ def test_plan_tests_on_the_3rrr_names_an_unreachable_candidate_row(tmp_path, cap
     assert len(err) == 1, err
     assert "row 3: --candidates: pose (5000, 0) mm, 0 rad is unreachable" in err[0], err
     assert not out.exists()
+
+
+def test_a_requirement_target_on_a_described_posterior(posterior, posterior_file, tmp_path, capsys):
+    """A requirements file's task grid (resolved on the posterior median's five-bar, its unreachable points dropped)
+    is the target: the plan is on the pass/fail entropy of f1 >= 30 Hz there."""
+    (tmp_path / "req.toml").write_text(
+        '[[requirement]]\nname = "f1 above 30 Hz"\nkind = "min_frequency"\nat_least_hz = 30.0\nmode = 1\n'
+        'poses = { grid = "dense", step_mm = 100 }\n'
+    )
+    target = requirement_target(posterior, tmp_path / "req.toml")
+    assert target.kind == "requirement"
+    assert target.f_min_hz == 30.0
+    assert all(isinstance(p, TaskPose) for p in target.poses)
+    assert reachable(posterior.median_config(), target.poses).all()
+    out = tmp_path / "plan"
+    argv = ["plan-tests", "--posterior", str(posterior_file), *SMALL, "--quantities", "f1", "--k", "1"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main([*argv, "--target", str(tmp_path / "req.toml"), "--sigma-pct", "2", "--out", str(out)]) == 0
+    assert "pass/fail uncertainty of f1 >= 30 Hz" in capsys.readouterr().out
