@@ -233,3 +233,32 @@ def test_a_requirement_target_on_a_described_posterior(posterior, posterior_file
         warnings.simplefilter("ignore")
         assert main([*argv, "--target", str(tmp_path / "req.toml"), "--sigma-pct", "2", "--out", str(out)]) == 0
     assert "pass/fail uncertainty of f1 >= 30 Hz" in capsys.readouterr().out
+
+
+def test_a_spatial_machines_posterior_carries_z(tmp_path, capsys):
+    """The delta (task x, y, z): ``sweep --posterior --poses`` in its task coordinates writes z_mm beside x and y,
+    and each draw's frequencies are its own file's at those poses (as above, 1e-9)."""
+    import arviz as az
+
+    from fpm_sim.architecture import description_toml
+
+    delta = load_description(FIVE_BAR.parent / "delta.toml")
+    masses = np.array([0.05, 0.2])
+    idata = az.from_dict(posterior={"lumps.elbow.mass_kg": masses[None, :]})
+    idata.posterior.attrs.update(fpm_sim_base_config=description_toml(delta), fpm_sim_free_groups="lumps.elbow.mass_kg",
+                                 fpm_sim_segments=1, fpm_sim_command="test")  # fmt: skip
+    idata.to_netcdf(str(tmp_path / "post.nc"))
+    (tmp_path / "p.csv").write_text("x_mm,y_mm,z_mm\n0,0,-300\n50,0,-320\n")
+    out = tmp_path / "sweep"
+    argv = ["sweep", "--posterior", str(tmp_path / "post.nc"), "--poses", str(tmp_path / "p.csv"), "--out", str(out)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main([*argv, "--workers", "1", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert [(r["x_mm"], r["y_mm"], r["z_mm"]) for r in doc["bands"]] == [(0.0, 0.0, -300.0), (50.0, 0.0, -320.0)]
+    assert (out / "bands.csv").read_text().startswith("x_mm,y_mm,z_mm,computed_fraction")
+    poses = [TaskPose.from_mm(0.0, 0.0, -300.0), TaskPose.from_mm(50.0, 0.0, -320.0)]
+    opts = ModelOptions(segments=1, gravity=False, axial=False)
+    for row, m in enumerate(masses):
+        alone = sweep_task(with_description_value(delta, "lumps.elbow.mass_kg", float(m)), poses, options=opts)
+        np.testing.assert_allclose(doc["frequencies_hz"][row], alone.freq_hz, rtol=1e-9)
