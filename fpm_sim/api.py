@@ -1367,7 +1367,7 @@ if TYPE_CHECKING:
 
 def predict_bands(
     posterior: Posterior | str | Path,
-    poses: Pose | Sequence[Pose] | None = None,
+    poses: Pose | TaskPose | Sequence[Pose] | Sequence[TaskPose] | None = None,
     *,
     draws: int | None = 100,
     n_modes: int = 3,
@@ -1387,7 +1387,8 @@ def predict_bands(
     posterior
         A :class:`fpm_sim.study.posterior.Posterior` or the path of its file.
     poses
-        One pose or several (default: the origin).
+        One pose or several (default: the origin). A described machine's posterior (``fpm-sim calibrate --config
+        machine.toml``) takes :class:`fpm_sim.architecture.TaskPose` values (default: its first check pose).
     draws
         Posterior draws to use (a seeded random subset; ``None``: all).
     n_modes
@@ -1400,6 +1401,7 @@ def predict_bands(
     seed
         Which draws (:meth:`fpm_sim.study.posterior.Posterior.draws`).
     """
+    from fpm_sim.architecture import Description, TaskPose
     from fpm_sim.batch.engine import EngineOptions
     from fpm_sim.kinematics import Pose
     from fpm_sim.model.options import ModelOptions
@@ -1411,7 +1413,12 @@ def predict_bands(
         else study_posterior.Posterior.from_netcdf(posterior)
     )
     opts = _options(options) or ModelOptions(segments=post.segments, axial=False, gravity=False)
-    pose_list = [_pose(None)] if poses is None else [poses] if isinstance(poses, Pose) else list(poses)
+    base = post.base
+    pose_list: list[Pose | TaskPose]
+    if poses is None:
+        pose_list = [_task_pose(base, None) if isinstance(base, Description) else _pose(None)]
+    else:
+        pose_list = [poses] if isinstance(poses, Pose | TaskPose) else list(poses)
     return study_posterior.predict_bands(
         post, pose_list, n_draws=draws, seed=seed, n_modes=n_modes, options=opts, engine=EngineOptions(workers=workers)
     )
@@ -1420,7 +1427,7 @@ def predict_bands(
 def plan_tests(
     posterior: Posterior | str | Path | None = None,
     *,
-    candidates: str | Sequence[Pose] = "study",
+    candidates: str | Sequence[Pose] | Sequence[TaskPose] | None = None,
     quantities: Sequence[str] = ("f1", "f1+f2", "f1..f3"),
     target: Target | Sequence[Pose] | None = None,
     k: int = 3,
@@ -1441,12 +1448,15 @@ def plan_tests(
     posterior
         A :class:`fpm_sim.study.posterior.Posterior` or the path of its file (default: the embedded default's).
     candidates
-        ``"study"`` (the study's 25 cells), ``"grid"`` (the workspace every 50 mm) or poses of your own.
+        ``"study"`` (the study's 25 cells; the 3RRR's only), ``"grid"`` (the workspace every 50 mm) or poses of your
+        own (:class:`fpm_sim.architecture.TaskPose` values for a described machine's posterior); ``None``:
+        ``"study"`` for the 3RRR, ``"grid"`` for a described machine.
     quantities
         What each candidate pose measures: any of ``"f1"``, ``"f1+f2"``, ``"f1..f3"``.
     target
         Where predictions matter: a :class:`fpm_sim.study.planning.Target` (e.g. a requirement's, with its level),
-        poses (f1's band there), or ``None``: f1 over the workspace every 50 mm.
+        poses (f1's band there), or ``None``: f1 over the workspace every 50 mm (a described machine: over the
+        posterior median's task grid).
     k
         Measurements to choose.
     sigma_rel
@@ -1474,8 +1484,9 @@ def plan_tests(
         if isinstance(posterior, study_posterior.Posterior)
         else study_posterior.Posterior.from_netcdf(posterior)
     )
+    candidates = candidates if candidates is not None else "grid" if post.described else "study"
     if candidates == "study":
-        cands = planning.study_candidates(quantities)
+        cands = planning.study_candidates(quantities, post)
     elif candidates == "grid":
         cands = planning.grid_candidates(post, quantities, step_mm=50.0)
     elif isinstance(candidates, str):

@@ -88,7 +88,7 @@ def test_facade_signatures_put_config_first_and_options_once():
 
     # a posterior IS a set of descriptions (its draws'): it stands in the description's place, its poses (one or
     # several, as modes' pose) in the pose's
-    in_place = {"predict_bands": {"posterior": "config", "poses": "pose"}}
+    in_place = {"predict_bands": {"posterior": "config", "poses": "pose"}, "plan_tests": {"posterior": "config"}}
     for name in api.__all__:
         if name == "ema":  # a file of measured FRFs first: no description, no pose
             continue

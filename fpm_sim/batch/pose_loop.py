@@ -639,10 +639,10 @@ class PosesFileError(FpmSimError):
     """A poses CSV file (``poses``) is missing, empty or malformed."""
 
 
-def read_poses_csv(path: str | Path, *, parameter: str = "poses") -> list[Pose]:
+def read_poses_csv(path: str | Path, *, parameter: str = "poses", lines: list[int] | None = None) -> list[Pose]:
     """Poses from a CSV file with columns ``x_mm,y_mm,phi_rad`` (other columns are ignored; UTF-8 with or without
     a byte-order mark, any line ending); each row checked by :func:`fpm_sim.kinematics.checked_pose_mm`. Errors
-    name ``parameter``, the file and the row."""
+    name ``parameter``, the file and the row. ``lines``: if given, each pose's row (line number) is appended to it."""
     p = Path(path)
     if not p.is_file():
         raise PosesFileError(f"{p}: no such file", parameter=parameter)
@@ -663,6 +663,8 @@ def read_poses_csv(path: str | Path, *, parameter: str = "poses") -> list[Pose]:
             poses.append(checked_pose_mm(r["x_mm"], r["y_mm"], r["phi_rad"], row=reader.line_num))
         except PoseValueError as e:
             raise PosesFileError(f"{p}: {e}", parameter=parameter) from None
+        if lines is not None:
+            lines.append(reader.line_num)
     if not poses:
         raise PosesFileError(f"{p}: no rows after the header", parameter=parameter)
     return poses

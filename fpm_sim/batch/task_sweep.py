@@ -36,7 +36,7 @@ from fpm_sim.kinematics import NEAR_SINGULAR_WARN, SINGULAR_TOL
 from fpm_sim.linear.threads import blas_threads
 from fpm_sim.model.options import ModelOptions
 
-__all__ = ["TaskSweep", "read_task_poses_csv", "sweep_task", "sweep_task_many", "task_grid"]
+__all__ = ["TaskSweep", "read_task_poses_csv", "sweep_task", "sweep_task_many", "task_grid", "task_statuses"]
 
 MAX_GRID_POINTS = 40_000
 
@@ -72,9 +72,12 @@ def task_grid(
     return poses, xs, ys
 
 
-def read_task_poses_csv(path: str | Path, desc: Description, *, parameter: str = "poses") -> list[TaskPose]:
+def read_task_poses_csv(
+    path: str | Path, desc: Description, *, parameter: str = "poses", lines: list[int] | None = None
+) -> list[TaskPose]:
     """Task poses from a CSV with one column per task coordinate of ``desc`` (``x_mm``, ``y_mm``, ``z_mm``,
-    ``phi_rad``; other columns ignored); errors name ``parameter``, the file and the row."""
+    ``phi_rad``; other columns ignored); errors name ``parameter``, the file and the row. ``lines``: if given, each
+    pose's row (line number) is appended to it."""
     import csv
 
     from fpm_sim.batch.pose_loop import PosesFileError
@@ -109,6 +112,8 @@ def read_task_poses_csv(path: str | Path, desc: Description, *, parameter: str =
                     )
                 vals[c] = v if c == "phi" else v * 1e-3
             poses.append(TaskPose(vals.get("x", 0.0), vals.get("y", 0.0), vals.get("z", 0.0), vals.get("phi", 0.0)))
+            if lines is not None:
+                lines.append(reader.line_num)
     if not poses:
         raise PosesFileError(f"{p}: no rows after the header", parameter=parameter)
     return poses
@@ -126,6 +131,18 @@ def _kinematics_row(desc: Description, pose: TaskPose, n_modes: int, start: np.n
     if min(t1, t2) < SINGULAR_TOL:
         return "singular", nan, t1, t2, z, None
     return ("near_singular" if min(t1, t2) < NEAR_SINGULAR_WARN else "ok"), nan, t1, t2, z, asm
+
+
+def task_statuses(desc: Description, poses: Sequence[TaskPose]) -> list[str]:
+    """Each pose's status from the kinematics alone (no model built): ``ok``, ``near_singular``, ``singular`` or
+    ``unreachable`` as the pose loop gives them (less its constraint rank decision), each pose's inverse kinematics
+    started from the last assembled pose's."""
+    start, out = None, []
+    for p in poses:
+        row = _kinematics_row(desc, p, 1, start)
+        start = row[4] if row[4] is not None else start
+        out.append(str(row[0]))
+    return out
 
 
 def _one(

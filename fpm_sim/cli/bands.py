@@ -16,9 +16,11 @@ from fpm_sim.cli.common import (
     emit,
     engine_options,
     finish_store,
+    held_task_coordinates,
     model_options,
     pose_of,
     resolution_line,
+    task_pose_of,
     with_resolution,
 )
 
@@ -52,9 +54,12 @@ def add_posterior_args(p: argparse.ArgumentParser, *, what: str = "each frequenc
     )
 
 
-def load_posterior(args: argparse.Namespace, path: Path | None = None) -> Posterior | None:
+def load_posterior(
+    args: argparse.Namespace, path: Path | None = None, *, study_only: str | None = None
+) -> Posterior | None:
     """The posterior of ``--posterior`` (or ``path``), or ``None``; refuses ``--config``/``--thickness-mm``
-    beside it (the posterior carries its own description)."""
+    beside it (the posterior carries its own description), and a described machine's posterior where the command's
+    use of it is the 3RRR's (``study_only``: what is the 3RRR's)."""
     path = path if path is not None else getattr(args, "posterior", None)
     if path is None:
         return None
@@ -67,15 +72,25 @@ def load_posterior(args: argparse.Namespace, path: Path | None = None) -> Poster
             )
     from fpm_sim.study.posterior import Posterior
 
-    return Posterior.from_netcdf(path)
+    posterior = Posterior.from_netcdf(path)
+    if study_only and posterior.described:
+        raise CliError(
+            f"--posterior {path}: {study_only} is the study's 3RRR's; this posterior is the described machine "
+            f"{posterior.base.name!r}'s (use it with modes, sweep or plan-tests)"
+        )
+    return posterior
 
 
 def band_options(args: argparse.Namespace, posterior: Posterior) -> ModelOptions:
     """The pose loop's options (gravity off) at the likelihood's resolution (the posterior's ``segments``)
-    unless ``--segments`` or ``--fidelity`` says otherwise."""
+    unless ``--segments`` or ``--fidelity`` says otherwise; a described machine's pose loop is inextensible."""
+    import dataclasses
+
     if getattr(args, "segments", None) is None and getattr(args, "fidelity", None) is None and posterior.segments:
-        return model_options(args, gravity=False, segments=posterior.segments)
-    return model_options(args, gravity=False)
+        opts = model_options(args, gravity=False, segments=posterior.segments)
+    else:
+        opts = model_options(args, gravity=False)
+    return dataclasses.replace(opts, axial=False) if posterior.described else opts
 
 
 def posterior_payload(posterior: Posterior) -> dict[str, Any]:
@@ -104,11 +119,19 @@ def posterior_line(posterior: Posterior, n_used: int) -> str:
 def modes_bands(args: argparse.Namespace) -> tuple[Any, dict[str, Any], str]:
     """``modes --posterior``: the bands of the lowest ``--n-modes`` frequencies at the pose (the pose loop's
     constrained eigenproblem, gravity off). Returns the bands, the JSON payload and the text."""
-    from fpm_sim.study.posterior import predict_bands
+    from fpm_sim.architecture import Description
+    from fpm_sim.study.posterior import AnyPose, predict_bands
 
     posterior = load_posterior(args)
     assert posterior is not None
-    pose = pose_of(args)
+    base = posterior.base
+    pose: AnyPose
+    if isinstance(base, Description):
+        task_pose = task_pose_of(args, base)
+        pose, where = task_pose, task_pose.label(base.task)
+    else:
+        pose = pose_of(args)
+        where = pose.label()
     opts = band_options(args, posterior)
     eng = engine_options(args, None)
     bands = predict_bands(posterior, [pose], n_draws=args.draws, n_modes=args.n_modes, options=opts, engine=eng)
@@ -117,7 +140,7 @@ def modes_bands(args: argparse.Namespace) -> tuple[Any, dict[str, Any], str]:
     text = "\n".join(
         [
             posterior_line(posterior, bands.n_draws),
-            f"  pose {pose.label()}; the pose loop (constrained eigenproblem, gravity off)",
+            f"  pose {where}; the pose loop (constrained eigenproblem, gravity off)",
             bands.table(),
             resolution_line(opts),
         ]
@@ -133,12 +156,9 @@ def measure_next(bands: Any, mode: int = 1) -> dict[str, Any] | None:
     w = bands.widest(mode)
     if w is None:
         return None
-    p = bands.poses[w]
     return {
         "pose": w,
-        "x_mm": round(p.x_m * 1e3, 6),
-        "y_mm": round(p.y_m * 1e3, 6),
-        "phi_rad": p.phi_rad,
+        **bands.coordinates(w),
         "relative_width": float(bands.relative_width[w, mode - 1]),
         "median_hz": float(bands.median_hz[w, mode - 1]),
     }
@@ -163,37 +183,66 @@ def bands_summary(bands: Any, *, full_table_max: int = 40) -> str:
         )
     nxt = measure_next(bands)
     if nxt is not None:
+        at = (
+            f"({nxt['x_mm']:g}, {nxt['y_mm']:g}) mm, phi {nxt['phi_rad']:g} rad"
+            if bands.task is None
+            else f"{bands.label(nxt['pose'])} ({'mm, rad' if 'phi' in bands.task else 'mm'})"
+        )
         lines.append(
-            f"  measure here next: ({nxt['x_mm']:g}, {nxt['y_mm']:g}) mm, phi {nxt['phi_rad']:g} rad: the widest "
+            f"  measure here next: {at}: the widest "
             f"relative 90 % band of f1 ({100 * nxt['relative_width']:.1f} % of the median {nxt['median_hz']:.2f} Hz)"
         )
     return "\n".join(lines)
 
 
+def _described_sweep_poses(args: argparse.Namespace, desc: Any) -> tuple[list[Any], str]:
+    """A described machine's poses of ``sweep --posterior``: ``--poses`` in its task coordinates, or the task grid of
+    the posterior median's machine every ``--step-mm`` (z and phi held: ``--z-mm``, ``--phi-rad``)."""
+    from fpm_sim.batch.task_sweep import read_task_poses_csv, task_grid
+
+    if args.grid == "paper":
+        raise CliError("--grid paper: the study's 25 poses are the 3RRR's; use --grid dense or --poses on this machine")
+    if args.reading != "x+":
+        raise CliError("--reading: an option of the study's 3RRR sweep; a described machine's posterior has none")
+    if args.poses is not None:
+        return read_task_poses_csv(args.poses, desc, parameter="--poses"), "poses"
+    return task_grid(desc, step_mm=args.step_mm, held=held_task_coordinates(args, desc))[0], "dense"
+
+
+def _sweep_poses(args: argparse.Namespace, posterior: Posterior) -> tuple[list[Any], str, list[str] | None]:
+    """The poses of ``sweep --posterior``, the grid's name and the poses' labels (the study's cells)."""
+    from fpm_sim.architecture import Description
+    from fpm_sim.batch.pose_loop import read_poses_csv
+    from fpm_sim.study.poses import parse_reading, study_poses
+    from fpm_sim.study.sweep import dense_grid
+
+    median = posterior.median_config()
+    if isinstance(median, Description):
+        return (*_described_sweep_poses(args, median), None)
+    if args.z_mm is not None:
+        raise CliError("--z-mm: the 3RRR's task coordinates are x, y and phi; drop --z-mm")
+    if args.poses is not None:
+        return read_poses_csv(args.poses), "poses", None
+    if args.grid == "paper":
+        sp = study_poses(parse_reading(args.reading))
+        return [p.pose for p in sp], "paper", [f"{p.row_mm:g},{p.col_mm:g}" for p in sp]
+    return dense_grid(median, step_mm=args.step_mm, phi_rad=args.phi_rad), "dense", None
+
+
 def sweep_bands(args: argparse.Namespace) -> int:
     """``sweep --posterior``: per pose of the grid (or ``--poses``) the median and bands of the first three
     frequencies; writes ``bands.csv``, ``bands.nc``, ``bands.png`` and ``bands_map.png`` (the median f1 map, the
-    band-width map and the pose of the widest band)."""
-    from fpm_sim.batch.pose_loop import read_poses_csv
+    band-width map and the pose of the widest band). A described machine's posterior: its task poses."""
     from fpm_sim.model.options import warn_if_coarse
     from fpm_sim.outputs import atomic_dir
-    from fpm_sim.study.poses import parse_reading, study_poses
     from fpm_sim.study.posterior import predict_bands
-    from fpm_sim.study.sweep import dense_grid
 
     posterior = load_posterior(args)
     assert posterior is not None
     if args.backend != "cpu":
         raise CliError(f"--posterior runs the cpu pose loop (one model per draw), not --backend {args.backend}")
     opts = band_options(args, posterior)
-    labels = None
-    if args.poses is not None:
-        poses, grid = read_poses_csv(args.poses), "poses"
-    elif args.grid == "paper":
-        sp = study_poses(parse_reading(args.reading))
-        poses, grid, labels = [p.pose for p in sp], "paper", [f"{p.row_mm:g},{p.col_mm:g}" for p in sp]
-    else:
-        poses, grid = dense_grid(posterior.median_config(), step_mm=args.step_mm, phi_rad=args.phi_rad), "dense"
+    poses, grid, labels = _sweep_poses(args, posterior)
     out = args.out or Path("out") / f"sweep_bands_{grid}"
     check_output_dir(out, "--out", overwrite=args.overwrite)
     warn_if_coarse(opts)
@@ -230,7 +279,7 @@ def reproduce_posterior(args: argparse.Namespace) -> tuple[Posterior | None, str
     from fpm_sim.study.posterior import DEFAULT_POSTERIOR_NAME, default_posterior_path
 
     if args.posterior is not None:
-        return load_posterior(args), ""
+        return load_posterior(args, study_only="the reproduction of the study"), ""
     if args.config is not None or args.thickness_mm is not None:
         return None, ""
     path = default_posterior_path()
@@ -293,8 +342,11 @@ def design_bands(
 
     if args.f_min_hz is None:
         raise CliError("--posterior on design needs --f-min-hz (the target whose probability it reports)")
+    from fpm_sim.config import Manipulator
+
     out = args.out
-    draws = posterior.configs(args.draws)
+    draws = [c for c in posterior.configs(args.draws) if isinstance(c, Manipulator)]
+    assert len(draws) == min(args.draws, posterior.n_draws)  # a described machine's posterior: refused when loaded
     result = design_over_draws(
         draws,
         poses=poses,

@@ -140,7 +140,8 @@ def cmd_design(args: argparse.Namespace) -> int:
         from fpm_sim.architecture import load_description
 
         return _design_described(args, load_description(args.config))
-    posterior = load_posterior(args)  # --posterior: designs over its draws (fpm_sim.cli.bands)
+    # --posterior: designs over its draws (fpm_sim.cli.bands)
+    posterior = load_posterior(args, study_only="robust design over a calibration's draws")
     config = posterior.median_config() if posterior is not None else load_manipulator(args)
     if bool(args.vary) == bool(args.designs):
         raise CliError("give --vary FIELD=SPEC (one or more) or --designs FILE.csv, not both and not neither")

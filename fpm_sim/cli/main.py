@@ -42,7 +42,6 @@ try:  # Ctrl-C while the modules load (a second or so): one line and 130, as at 
         count_arg,
         emit,
         error_line,
-        is_described,
         load_machine,
         load_manipulator,
         mm,
@@ -165,8 +164,6 @@ def cmd_modes(args: argparse.Namespace) -> int:
     check_output_file(args.animate, "--animate", (".gif",))
     if args.mode is not None and args.animate is None:
         raise CliError("--mode picks the mode that --animate draws; add --animate FILE.gif")
-    if args.posterior is not None and is_described(args):
-        raise CliError("--posterior: the posterior's draws are the study's 3RRR's; a described architecture has none")
     if args.posterior is not None:  # predictions with bands (fpm_sim.cli.bands)
         from fpm_sim.cli.bands import modes_bands
 

@@ -39,19 +39,25 @@ def _quantities(text: str) -> list[str]:
 
 
 def _candidates(args: argparse.Namespace, posterior: Any) -> list[Any]:
-    from fpm_sim.batch.pose_loop import read_poses_csv
-    from fpm_sim.study.planning import candidates_of, grid_candidates, study_candidates
+    from fpm_sim.study.planning import grid_candidates, pose_file_candidates, study_candidates
 
     qs = _quantities(args.quantities)
-    if args.candidates == "study":
+    which = args.candidates or ("grid" if posterior.described else "study")
+    if which == "study":
+        if posterior.described:
+            raise CliError(
+                f"--candidates study: the study's 25 cells are the 3RRR's; {posterior.base.name!r} has its own task "
+                f"coordinates ({', '.join(posterior.base.task)}); use --candidates grid or a CSV of its task poses"
+            )
         return study_candidates(qs)
-    if args.candidates == "grid":
+    if which == "grid":
         return grid_candidates(posterior, qs, step_mm=args.candidate_step_mm)
-    return candidates_of(read_poses_csv(args.candidates, parameter="--candidates"), qs)
+    return pose_file_candidates(posterior, which, qs, parameter="--candidates")
 
 
 def _target(args: argparse.Namespace, posterior: Any) -> Any:
     from fpm_sim.batch.pose_loop import read_poses_csv
+    from fpm_sim.batch.task_sweep import read_task_poses_csv
     from fpm_sim.study.planning import Target, requirement_target, workspace_target
 
     if args.target == "workspace":
@@ -59,7 +65,12 @@ def _target(args: argparse.Namespace, posterior: Any) -> Any:
     path = Path(args.target)
     if path.suffix == ".toml":
         return requirement_target(posterior, path, args.requirement)
-    poses = read_poses_csv(path, parameter="--target")
+    base = posterior.base
+    poses = (
+        read_task_poses_csv(path, base, parameter="--target")
+        if posterior.described
+        else read_poses_csv(path, parameter="--target")
+    )
     return Target(tuple(poses), args.target_mode, None, f"f{args.target_mode} at the poses of {path.name}")
 
 
@@ -127,9 +138,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--posterior", type=Path, default=None, help="posterior.nc (default: the embedded default's)")
     p.add_argument(
         "--candidates",
-        default="study",
-        help="candidate poses: 'study' (the study's 25 cells, default), 'grid' (the workspace every "
-        "--candidate-step-mm, phi 0) or a CSV file with x_mm,y_mm,phi_rad",
+        default=None,
+        help="candidate poses: 'study' (the study's 25 cells; the default for the 3RRR), 'grid' (the workspace every "
+        "--candidate-step-mm, phi 0; the default for a described machine) or a CSV file with x_mm,y_mm,phi_rad (a "
+        "described machine: its task coordinates, e.g. x_mm,y_mm)",
     )
     p.add_argument("--candidate-step-mm", type=float, default=50.0, help="grid step of --candidates grid (default 50)")
     p.add_argument(

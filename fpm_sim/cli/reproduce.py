@@ -99,8 +99,12 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         check_output_dir(default_out("reproduce", manip, args.reading), "--out", overwrite=args.overwrite)
     posterior, note = reproduce_posterior(args)  # --posterior, or the shipped default's (fpm_sim.cli.bands)
     if manip is None:
+        from fpm_sim.config import Manipulator
+
         assert posterior is not None  # --posterior given: its median is the description
-        manip = posterior.median_config()
+        median = posterior.median_config()
+        assert isinstance(median, Manipulator)  # a described machine's posterior: refused when loaded
+        manip = median
     opts = study_options(args)
     out = args.out or default_out("reproduce", manip, args.reading)
     check_output_dir(out, "--out", overwrite=args.overwrite)

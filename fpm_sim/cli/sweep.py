@@ -117,10 +117,10 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         from fpm_sim.architecture import load_description
 
         return _sweep_described(args, load_description(args.config))
+    if args.posterior is not None:  # predictions with bands (fpm_sim.cli.bands; --z-mm for a described machine's)
+        return sweep_bands(args)
     if args.z_mm is not None:
         raise CliError("--z-mm: the 3RRR's task coordinates are x, y and phi; drop --z-mm")
-    if args.posterior is not None:  # predictions with bands (fpm_sim.cli.bands)
-        return sweep_bands(args)
     reading = parse_reading(args.reading)
     manip = study_manipulator(args)
     opts = study_options(args)

@@ -6,6 +6,11 @@ Candidates are the pairs (pose, quantity) of the given poses and quantities (:da
 frequency ``mode`` at the target poses: its 90 % band (default), or, with a level ``f_min_hz``, whether it is
 at least that level (a requirement). The draws' frequencies at every candidate and target pose come from one
 call of the pose loop (:func:`fpm_sim.study.posterior.predict_bands`), at the likelihood's resolution.
+
+A described machine's posterior (:mod:`fpm_sim.study.calibrate.described`) plans in its own task coordinates: its
+candidates are its task grid or poses of your own (:class:`~fpm_sim.architecture.TaskPose`), its default target f1
+over the posterior median's task grid, and its requirement targets the requirements file's task pose sets; the
+study's 25 cells are the 3RRR's and are refused for it.
 """
 
 from __future__ import annotations
@@ -21,7 +26,11 @@ from typing import Any
 
 import numpy as np
 
+from fpm_sim.architecture import Description, TaskPose
 from fpm_sim.batch.engine import EngineOptions
+from fpm_sim.batch.pose_loop import STATUS_NEAR, STATUS_OK, pose_assembly, read_poses_csv
+from fpm_sim.batch.task_sweep import read_task_poses_csv, task_grid, task_statuses
+from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimWarning
 from fpm_sim.kinematics import SINGULAR_TOL, Pose, assemble_many
 from fpm_sim.model.options import ModelOptions
@@ -36,10 +45,19 @@ from fpm_sim.study.plan import (
     greedy_plan,
     jsonable_score,
 )
-from fpm_sim.study.posterior import Posterior, predict_bands
+from fpm_sim.study.posterior import AnyPose, Posterior, pose_columns, pose_text, predict_bands
 from fpm_sim.study.sweep import dense_grid
 
-__all__ = ["DEFAULT_DRAWS", "Candidate", "PlanResult", "Target", "plan_tests", "workspace_target"]
+__all__ = [
+    "DEFAULT_DRAWS",
+    "Candidate",
+    "PlanResult",
+    "Target",
+    "plan_tests",
+    "pose_file_candidates",
+    "reachable",
+    "workspace_target",
+]
 
 DEFAULT_DRAWS = 200
 """Posterior draws the plan uses by default: a single measurement at 2 % keeps a few hundred of 200 draws'
@@ -48,9 +66,9 @@ weight (effective sample size), enough for a band's 5 % and 95 % points; fewer c
 
 @dataclass(frozen=True)
 class Candidate:
-    """One candidate measurement: a pose and the modes read there."""
+    """One candidate measurement: a pose (the 3RRR's, or a described machine's task pose) and the modes read there."""
 
-    pose: Pose
+    pose: AnyPose
     quantity: str
     """A key of :data:`~fpm_sim.study.plan.QUANTITIES`."""
     label: str = ""
@@ -59,9 +77,15 @@ class Candidate:
     def modes(self) -> tuple[int, ...]:
         return QUANTITIES[self.quantity]
 
-    def name(self) -> str:
+    def name(self, task: tuple[str, ...] | None = None) -> str:
+        """``QUANTITY at POSE`` (``task``: a described machine's task coordinates)."""
         p = self.pose
-        at = self.label or f"({p.x_m * 1e3:g}, {p.y_m * 1e3:g}) mm, phi {p.phi_rad:g}"
+        if self.label:
+            at = self.label
+        elif task is None and isinstance(p, Pose):
+            at = f"({p.x_m * 1e3:g}, {p.y_m * 1e3:g}) mm, phi {p.phi_rad:g}"
+        else:
+            at = pose_text(p, task or ("x", "y", "z", "phi"))
         return f"{self.quantity} at {at}"
 
 
@@ -70,7 +94,7 @@ class Target:
     """Where the predictions matter: frequency ``mode`` at ``poses``; its band, or (``f_min_hz`` given) whether it
     is at least that level."""
 
-    poses: tuple[Pose, ...]
+    poses: tuple[AnyPose, ...]
     mode: int = 1
     f_min_hz: float | None = None
     description: str = "target poses"
@@ -81,7 +105,7 @@ class Target:
 
 
 def candidates_of(
-    poses: Sequence[Pose], quantities: Sequence[str], labels: Sequence[str] | None = None
+    poses: Sequence[AnyPose], quantities: Sequence[str], labels: Sequence[str] | None = None
 ) -> list[Candidate]:
     """Every (pose, quantity) pair, refusing an unknown quantity by name."""
     for q in quantities:
@@ -94,10 +118,29 @@ def candidates_of(
     return [Candidate(p, q, labels[i] if labels else "") for i, p in enumerate(poses) for q in quantities]
 
 
+def reachable(config: Manipulator | Description, poses: Sequence[AnyPose]) -> np.ndarray:
+    """``(len(poses),)`` whether ``config``'s machine reaches each pose away from singularities (status ``ok`` or
+    ``near_singular`` by the kinematics alone)."""
+    if isinstance(config, Description):
+        task = [p for p in poses if isinstance(p, TaskPose)]
+        return np.array([s in (STATUS_OK, STATUS_NEAR) for s in task_statuses(config, task)], dtype=bool)
+    return np.array([isinstance(p, Pose) and pose_assembly(config, p)[2] in (STATUS_OK, STATUS_NEAR) for p in poses])
+
+
 def workspace_target(posterior: Posterior, *, step_mm: float = 50.0, phi_rad: float = 0.0, mode: int = 1) -> Target:
     """The default target: frequency ``mode`` over the posterior median description's reachable, non-singular
-    workspace on a ``step_mm`` grid."""
+    workspace on a ``step_mm`` grid (a described machine: its task grid, z at its first check pose's, phi at
+    ``phi_rad`` where it sets phi)."""
     cfg = posterior.median_config()
+    if isinstance(cfg, Description):
+        home = cfg.check_poses[0] if cfg.check_poses else {}
+        z = home.get("z", 0.0)
+        grid_t = task_grid(cfg, step_mm=step_mm, held={"z": z, "phi": phi_rad})[0]
+        keep_t = reachable(cfg, grid_t)
+        held = f", z {z * 1e3:g} mm" if "z" in cfg.task else ""
+        held += f", phi {phi_rad:g} rad" if "phi" in cfg.task else ""
+        what = f"f{mode} over the workspace ({step_mm:g} mm task grid{held})"
+        return Target(tuple(p for p, k in zip(grid_t, keep_t) if k), mode, None, what)
     grid = dense_grid(cfg, step_mm=step_mm, phi_rad=phi_rad)
     many = assemble_many(cfg.geometry, [p.x_m for p in grid], [p.y_m for p in grid], [p.phi_rad for p in grid])
     keep = many.reachable & (many.singularity >= SINGULAR_TOL)
@@ -105,7 +148,7 @@ def workspace_target(posterior: Posterior, *, step_mm: float = 50.0, phi_rad: fl
     return Target(poses, mode, None, f"f{mode} over the workspace ({step_mm:g} mm grid, phi {phi_rad:g} rad)")
 
 
-def _discrepancy(posterior: Posterior, index: np.ndarray, poses: Sequence[Pose]) -> tuple[np.ndarray, np.ndarray]:
+def _discrepancy(posterior: Posterior, index: np.ndarray, poses: Sequence[AnyPose]) -> tuple[np.ndarray, np.ndarray]:
     """``(shift, sd)``, each ``(len(index), len(poses))``, zero where the posterior has no discrepancy."""
     shift, sd = posterior.discrepancy_at(index, poses)
     shape = (len(index), len(poses))
@@ -199,6 +242,7 @@ def plan_tests(
     return PlanResult(
         list(candidates), target, g.before, g.singles, g.steps, sig, n_used, outcomes, ess_min,
         time.perf_counter() - t0, posterior.base.name, discrepancy_floor=floor, screening=g.screening,
+        task=posterior.base.task if isinstance(posterior.base, Description) else None,
     )  # fmt: skip
 
 
@@ -261,6 +305,8 @@ class PlanResult:
     """Every candidate's screening estimate (the band's moments) when the candidates were screened, else ``None``."""
     """The band target's half-width if the parameters were known exactly: the model discrepancy's alone
     (1.645 times its posterior median), which no measurement elsewhere narrows under an independent discrepancy."""
+    task: tuple[str, ...] | None = None
+    """A described machine's task coordinates (the poses' columns); ``None``: the 3RRR's x, y, phi."""
 
     def _fmt(self, v: float) -> str:
         return f"+-{100 * v:.1f} %" if self.target.kind == "band" else f"{v:.3f} bits"
@@ -310,9 +356,7 @@ class PlanResult:
             out.append(
                 {
                     "rank": r,
-                    "x_mm": c.pose.x_m * 1e3,
-                    "y_mm": c.pose.y_m * 1e3,
-                    "phi_rad": c.pose.phi_rad,
+                    **pose_columns(c.pose, self.task),
                     "label": c.label,
                     "quantity": c.quantity,
                     "spread_after": s.spread,
@@ -339,8 +383,8 @@ class PlanResult:
                 "new data narrow the rest, and the discrepancy only by pinning its size"
             )
         lines.append(f"  {'rank':>4}  {'pose':<34} {'quantity':<8} {'after':>12} {'gain':>10} {'ESS':>7}")
-        for r in self.rows():
-            pose = r["label"] or f"({r['x_mm']:g}, {r['y_mm']:g}) mm, {r['phi_rad']:g} rad"
+        for r, step in zip(self.rows(), self.steps):
+            pose = r["label"] or pose_text(self.candidates[step.candidate].pose, self.task)
             lines.append(
                 f"  {r['rank']:>4}  {pose:<34} {r['quantity']:<8} {self._fmt(r['spread_after']):>12} "
                 f"{self._fmt(r['gain']).replace('+-', ''):>10} {r['ess_median']:>7.0f}"
@@ -358,9 +402,7 @@ class PlanResult:
             c, s = self.candidates[i], self.singles[i]
             singles.append(
                 {
-                    "x_mm": c.pose.x_m * 1e3,
-                    "y_mm": c.pose.y_m * 1e3,
-                    "phi_rad": c.pose.phi_rad,
+                    **pose_columns(c.pose, self.task),
                     "label": c.label,
                     "quantity": c.quantity,
                     **jsonable_score(s),
@@ -370,6 +412,7 @@ class PlanResult:
             )
         return {
             "summary": self.summary(),
+            "task": list(self.task) if self.task is not None else None,
             "target": {
                 "kind": self.target.kind,
                 "mode": self.target.mode,
@@ -397,7 +440,7 @@ class PlanResult:
 
         fig = ax.figure if ax is not None else plt.figure(figsize=(6.4, 5.2))
         ax = ax if ax is not None else fig.add_subplot()
-        best: dict[Pose, float] = {}
+        best: dict[AnyPose, float] = {}
         scr = self.screening
         for i, (c, s) in enumerate(zip(self.candidates, self.singles)):
             g = self.before.spread - s.spread if scr is None else scr[-1] - scr[i]
@@ -459,17 +502,54 @@ def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
         w.writerows(rows)
 
 
-def study_candidates(quantities: Sequence[str]) -> list[Candidate]:
-    """The study's 25 cells (reading ``x+``, the shipped data's) as candidates, labelled ``row,col`` (mm)."""
+def study_candidates(quantities: Sequence[str], posterior: Posterior | None = None) -> list[Candidate]:
+    """The study's 25 cells (reading ``x+``, the shipped data's) as candidates, labelled ``row,col`` (mm); refused
+    for a described machine's ``posterior`` (the cells are the 3RRR's)."""
     from fpm_sim.study.poses import study_poses
 
+    if posterior is not None and isinstance(posterior.base, Description):
+        raise PlanError(
+            f"'study': the study's 25 cells are the 3RRR's; {posterior.base.name!r} has its own task coordinates "
+            f"({', '.join(posterior.base.task)})",
+            parameter="candidates",
+            hint="use 'grid' (its task grid) or a CSV of poses in its task coordinates",
+        )
     sp = study_poses()
     return candidates_of([p.pose for p in sp], quantities, [f"{p.row_mm:g},{p.col_mm:g}" for p in sp])
 
 
 def grid_candidates(posterior: Posterior, quantities: Sequence[str], *, step_mm: float) -> list[Candidate]:
-    """The posterior median description's reachable, non-singular workspace on a ``step_mm`` grid (phi 0)."""
+    """The posterior median description's reachable, non-singular workspace on a ``step_mm`` grid (phi 0; a
+    described machine: its task grid, :func:`workspace_target`)."""
     return candidates_of(list(workspace_target(posterior, step_mm=step_mm).poses), quantities)
+
+
+def pose_file_candidates(
+    posterior: Posterior, path: str | Path, quantities: Sequence[str], *, parameter: str = "candidates"
+) -> list[Candidate]:
+    """The poses of a CSV file as candidates: ``x_mm,y_mm,phi_rad`` for the 3RRR, the machine's task coordinates
+    for a described one (:func:`~fpm_sim.batch.task_sweep.read_task_poses_csv`). A pose the posterior median's
+    machine does not reach away from singularities is refused, naming its row (no draw's measurement there could be
+    simulated reliably)."""
+    cfg = posterior.median_config()
+    lines: list[int] = []
+    poses: list[AnyPose] = (
+        list(read_task_poses_csv(path, cfg, parameter=parameter, lines=lines))
+        if isinstance(cfg, Description)
+        else list(read_poses_csv(path, parameter=parameter, lines=lines))
+    )
+    task = cfg.task if isinstance(cfg, Description) else None
+    ok = reachable(cfg, poses)
+    for i, pose in enumerate(poses):
+        if not ok[i]:
+            raise PlanError(
+                f"pose {pose_text(pose, task)} is unreachable or singular for the posterior median's machine",
+                parameter=parameter,
+                file=str(path),
+                row=lines[i],
+                hint="remove the row or move the pose inside the reachable workspace (a sweep shows it)",
+            )
+    return candidates_of(poses, quantities)
 
 
 def requirement_target(posterior: Posterior, path: str | Path, name: str | None = None) -> Target:
@@ -489,6 +569,13 @@ def requirement_target(posterior: Posterior, path: str | Path, name: str | None 
         raise PlanError(
             f"{path}: requirement {req.name!r} is on mode {req.mode}", parameter="target", hint="modes 1..3"
         )
-    poses = req.poses.resolve(posterior.median_config(), f"requirement {req.name!r}")
-    assert all(isinstance(p, Pose) for p in poses)
-    return Target(tuple(p for p in poses if isinstance(p, Pose)), req.mode, req.at_least_hz, req.describe())
+    median = posterior.median_config()
+    poses: Sequence[AnyPose] = req.poses.resolve(median, f"requirement {req.name!r}")
+    if isinstance(median, Description):  # a grid's unreachable points are dropped (the 3RRR's resolve drops them)
+        poses = [p for p, ok in zip(poses, reachable(median, poses)) if ok]
+        if not poses:
+            raise PlanError(
+                f"{path}: requirement {req.name!r}: none of its poses is reachable by the posterior median's machine",
+                parameter="target",
+            )
+    return Target(tuple(poses), req.mode, req.at_least_hz, req.describe())

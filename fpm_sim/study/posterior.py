@@ -19,6 +19,14 @@ The file (the contract with the calibration):
 - optional groups ``sample_stats``, ``observed_data`` (``f_hz`` over ``obs`` with ``x_mm``, ``y_mm``,
   ``phi_rad``, ``label``) and ``posterior_predictive``.
 
+A described machine's posterior (``fpm-sim calibrate --config machine.toml``,
+:mod:`fpm_sim.study.calibrate.described`) has its file as ``fpm_sim_base_config`` (a TOML with ``[[chains]]``) and
+its free dotted paths (:mod:`fpm_sim.architecture.edit`) as ``fpm_sim_free_groups``, one variable per path; its
+draws are the file with each path set (:func:`~fpm_sim.study.identify.described.edited_description`) and its poses
+are :class:`~fpm_sim.architecture.TaskPose` values in the machine's task coordinates. Each draw's frequencies are
+then the K-th lowest elastic modes with the actuators locked, as its likelihood compared them
+(:func:`~fpm_sim.batch.task_sweep.sweep_task_many`).
+
 The bands are the quantiles (:data:`QUANTILES`) over the draws of each frequency at each pose. A draw that
 cannot reach a pose (or meets a singularity there) has no frequency there: it is left out of that pose's
 quantiles and counted (:attr:`PredictiveBands.computed_fraction`).
@@ -39,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from fpm_sim.architecture import Description, TaskPose, description_value, parse_description
 from fpm_sim.batch.engine import EngineOptions
 from fpm_sim.batch.pose_loop import STATUS_NEAR, STATUS_OK, STATUS_UNREACHABLE, fast_options, solve_configs
 from fpm_sim.config import ConfigError, Manipulator, parse_config
@@ -47,6 +56,7 @@ from fpm_sim.kinematics import Pose
 from fpm_sim.model.options import ModelOptions, resolution_summary
 from fpm_sim.results import frequencies_dataset
 from fpm_sim.study.discrepancy import LENGTH_SCALE_PARAMETER, conditional, pose_features
+from fpm_sim.study.identify.described import edited_description
 from fpm_sim.study.identify.parameters import ParameterSet, parameter_set
 from fpm_sim.study.loo import LeaveOneOut, leave_one_out, loo_from_components, mixture_quantiles
 from fpm_sim.study.poses import TableReading
@@ -66,12 +76,14 @@ __all__ = [
     "DEFAULT_POSTERIOR_NAME",
     "ELBOW_BRANCH_VAR",
     "QUANTILES",
+    "AnyPose",
     "CalibrationData",
     "Posterior",
     "PosteriorError",
     "PredictiveBands",
     "StudyBands",
     "default_posterior_path",
+    "pose_columns",
     "predict_bands",
     "study_bands",
 ]
@@ -92,6 +104,12 @@ QUANTILES = (0.05, 0.25, 0.5, 0.75, 0.95)
 """The quantiles of the bands: the 90 % band (5-95 %), the 50 % band (25-75 %) and the median."""
 COMPUTED = (STATUS_OK, STATUS_NEAR)
 WRITTEN_BY = "give the posterior.nc written by 'fpm-sim calibrate'"
+DRAW_SOURCE = "posterior draw (fpm-sim calibrate)"
+"""The provenance of a value a described machine's draw sets."""
+
+AnyPose = Pose | TaskPose
+"""A pose of the 3RRR (:class:`~fpm_sim.kinematics.Pose`) or of a described machine
+(:class:`~fpm_sim.architecture.TaskPose`)."""
 
 
 class PosteriorError(FpmSimError):
@@ -179,11 +197,14 @@ class Posterior:
     Attributes
     ----------
     base
-        The description the parameters are applied to.
+        The description the parameters are applied to: the 3RRR's, or a described machine's
+        (:class:`~fpm_sim.architecture.Description`).
     groups
-        The free parameter groups (:func:`~fpm_sim.study.identify.parameters.parameter_set`).
+        The free parameter groups (:func:`~fpm_sim.study.identify.parameters.parameter_set`); a described machine's
+        free dotted paths.
     names
-        The free parameters, in the parameter set's order (SI units in the names).
+        The free parameters, in the parameter set's order (SI units in the names); a described machine's dotted
+        paths.
     values
         ``(n_draws, n_parameters)``.
     elbow_branch
@@ -203,7 +224,7 @@ class Posterior:
         was mode 1.
     """
 
-    base: Manipulator
+    base: Manipulator | Description
     groups: tuple[str, ...]
     names: list[str]
     values: np.ndarray
@@ -214,7 +235,7 @@ class Posterior:
     source: Path | None = None
     data: CalibrationData | None = None
     mode_read: ModeRead | None = None
-    _ps: ParameterSet = field(init=False, repr=False, compare=False)
+    _ps: ParameterSet | None = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         self.values = np.atleast_2d(np.asarray(self.values, dtype=float))
@@ -235,7 +256,9 @@ class Posterior:
                     hint="dims chain, draw, arm (3 arms)",
                 )
             self.elbow_branch = eb.astype(int)
-        self._ps = self._parameter_set()
+        self._ps = None if isinstance(self.base, Description) else self._parameter_set()
+        if isinstance(self.base, Description):
+            self._check_paths(self.base)
 
     def _error(self, message: str, **fields: Any) -> PosteriorError:
         """A :class:`PosteriorError` naming the file read (when built in memory: the parameter, else ``posterior``)."""
@@ -244,12 +267,42 @@ class Posterior:
         return PosteriorError(message, file=self.source, **fields)
 
     @property
+    def described(self) -> bool:
+        """Whether the base is a described machine's (:class:`~fpm_sim.architecture.Description`)."""
+        return isinstance(self.base, Description)
+
+    @property
     def parameter_set(self) -> ParameterSet:
-        """``parameter_set(base, groups)`` (its names are :attr:`names`, checked when built)."""
+        """``parameter_set(base, groups)`` (its names are :attr:`names`, checked when built); the 3RRR's only."""
+        if self._ps is None:
+            raise self._error(
+                "a described machine's parameters are dotted paths into its file, not the 3RRR's parameter set",
+                parameter=GROUPS_ATTR,
+            )
         return self._ps
+
+    def _check_paths(self, base: Description) -> None:
+        """A described machine's draws: one variable per free path, each a number of the file, no elbow branches."""
+        if self.elbow_branch is not None:
+            raise self._error(
+                "elbow branches are the 3RRR's; a described machine fixes its working mode in its file",
+                parameter=ELBOW_BRANCH_VAR,
+            )
+        if sorted(self.names) != sorted(self.groups):
+            raise self._error(
+                f"the draws' parameters {', '.join(self.names)} are not the free paths {', '.join(self.groups)}",
+                parameter=GROUPS_ATTR,
+                hint="one variable per free dotted path, as 'fpm-sim calibrate' writes them",
+            )
+        for path in self.names:
+            try:
+                description_value(base, path)
+            except FpmSimError as exc:
+                raise self._error(f"{path}: {exc.message}", parameter=GROUPS_ATTR, hint=exc.hint) from None
 
     def _parameter_set(self) -> ParameterSet:
         groups = ",".join(self.groups)
+        assert isinstance(self.base, Manipulator)
         try:
             ps = parameter_set(self.base, list(self.groups))
         except FpmSimError as exc:
@@ -322,28 +375,41 @@ class Posterior:
             raise PosteriorError("must be >= 1", parameter="n_draws", value=n, hint="or None for all draws")
         return np.sort(np.random.default_rng(seed).choice(self.n_draws, size=n, replace=False))
 
-    def config(self, i: int) -> Manipulator:
-        """The description of draw ``i``: the base with the draw's elbow branches and parameter values."""
+    def config(self, i: int) -> Manipulator | Description:
+        """The description of draw ``i``: the base with the draw's elbow branches and parameter values (a described
+        machine: its file with each free path at the draw's value)."""
         base = self.base
+        if isinstance(base, Description):
+            return self._apply_paths(self.values[i], base, f"draw {i}")
         if self.elbow_branch is not None:
             b0, b1, b2 = (int(b) for b in self.elbow_branch[i])
             branch = (b0, b1, b2)
             base = dataclasses.replace(base, geometry=dataclasses.replace(base.geometry, elbow_branch=branch))
         return self._apply(self.values[i], base, f"draw {i}")
 
-    def configs(self, n: int | None = None, seed: int = 0) -> list[Manipulator]:
+    def configs(self, n: int | None = None, seed: int = 0) -> list[Manipulator | Description]:
         """The descriptions of :meth:`draws` ``(n, seed)``."""
         return [self.config(int(i)) for i in self.draws(n, seed)]
 
-    def median_config(self) -> Manipulator:
+    def median_config(self) -> Manipulator | Description:
         """The base with each parameter at its posterior median (and the most frequent elbow-branch combination)."""
         base = self.base
+        if isinstance(base, Description):
+            return self._apply_paths(np.median(self.values, axis=0), base, "median")
         if self.elbow_branch is not None:
             combos, counts = np.unique(self.elbow_branch, axis=0, return_counts=True)
             b0, b1, b2 = (int(b) for b in combos[int(np.argmax(counts))])
             branch = (b0, b1, b2)
             base = dataclasses.replace(base, geometry=dataclasses.replace(base.geometry, elbow_branch=branch))
         return self._apply(np.median(self.values, axis=0), base, "median")
+
+    def _apply_paths(self, x: np.ndarray, base: Description, label: str) -> Description:
+        """``base`` with each free path at ``x`` (:func:`~fpm_sim.study.identify.described.edited_description`)."""
+        try:
+            desc = edited_description(base, dict(zip(self.names, np.asarray(x, float))), f"{DRAW_SOURCE}, {label}")
+        except (ConfigError, ValueError) as exc:
+            raise self._error(f"{label} is not a valid description ({exc})") from None
+        return dataclasses.replace(desc, name=f"{base.name} [posterior {label}]")
 
     def _apply(self, x: np.ndarray, base: Manipulator, label: str) -> Manipulator:
         ps = self.parameter_set
@@ -360,7 +426,9 @@ class Posterior:
         v = self.likelihood.get(LENGTH_SCALE_PARAMETER)
         return None if v is None else np.asarray(v, float)
 
-    def discrepancy_at(self, index: np.ndarray, poses: Sequence[Pose]) -> tuple[np.ndarray | None, np.ndarray | None]:
+    def discrepancy_at(
+        self, index: np.ndarray, poses: Sequence[AnyPose]
+    ) -> tuple[np.ndarray | None, np.ndarray | None]:
         """The model discrepancy at ``poses`` for draws ``index``, relative (a frequency is ``f (1 + shift + sd
         z)``): ``(shift, sd)`` as :class:`PredictiveBands` holds them.
 
@@ -391,12 +459,14 @@ class Posterior:
             )
         return shift, sd
 
-    def read_at(self, index: np.ndarray, poses: Sequence[Pose], options: ModelOptions) -> tuple[np.ndarray, np.ndarray]:
+    def read_at(
+        self, index: np.ndarray, poses: Sequence[AnyPose], options: ModelOptions
+    ) -> tuple[np.ndarray, np.ndarray]:
         """What a hammer test like the data's would read at ``poses`` (latent-mode model): ``(freq_hz, weight)``,
         each ``(len(index), len(poses), modes)``: the lowest modes of each draw and the probability that the
         first clear peak is each one (the setups weighted by their posterior given the draw and the data)."""
         read, dat = self.mode_read, self.data
-        if read is None or dat is None or dat.f_modes_hz is None or dat.read_probability is None:
+        if read is None or dat is None or dat.f_modes_hz is None or dat.read_probability is None or self.described:
             raise self._error(
                 "no latent-mode model in this posterior", parameter=MODE_READ_ATTR, hint="calibrate with mode_read"
             )
@@ -404,8 +474,12 @@ class Posterior:
         freq = np.full((len(index), len(poses), read.modes), np.nan)
         weight = np.full_like(freq, np.nan)
         for row, i in enumerate(index):
+            cfg = self.config(int(i))
+            assert isinstance(cfg, Manipulator)
+            assert all(isinstance(p, Pose) for p in poses)
             f, res = sensor_residues(
-                self.config(int(i)), poses, n_modes=read.reference_modes, points=read.points, options=options
+                cfg, [p for p in poses if isinstance(p, Pose)], n_modes=read.reference_modes, points=read.points,
+                options=options,
             )
             probs = read_probabilities(np.transpose(res, (1, 0, 2)), read)  # (setups, poses, modes)
             w = setup_weights(dat.measured_hz, dat.sigma_hz, dat.f_modes_hz[i], dat.read_probability[i], float(d[i]))
@@ -504,7 +578,7 @@ class PredictiveBands:
     name
         The base description's name.
     poses
-        The poses.
+        The poses: the 3RRR's, or a described machine's :class:`~fpm_sim.architecture.TaskPose` values.
     draw_index
         ``(n_draws,)`` index of each draw in the posterior.
     frequencies_hz
@@ -530,7 +604,7 @@ class PredictiveBands:
     """
 
     name: str
-    poses: list[Pose]
+    poses: list[AnyPose]
     draw_index: np.ndarray
     frequencies_hz: np.ndarray
     status: np.ndarray
@@ -546,6 +620,12 @@ class PredictiveBands:
     """``(n_draws, n_poses, modes)`` the probability that the first clear peak is each of them."""
     read_noise_rel: float = 0.0
     """The measurement's relative sd added to a read value's predictive (the data's median)."""
+    task: tuple[str, ...] | None = None
+    """A described machine's task coordinates (the poses' columns and labels); ``None``: the 3RRR's x, y, phi."""
+
+    def coordinates(self, i: int) -> dict[str, float]:
+        """Pose ``i``'s coordinates as the tables name them (:func:`pose_columns`)."""
+        return pose_columns(self.poses[i], self.task)
 
     @property
     def read_quantiles_hz(self) -> np.ndarray | None:
@@ -655,8 +735,7 @@ class PredictiveBands:
     def label(self, i: int) -> str:
         if self.labels is not None:
             return self.labels[i]
-        p = self.poses[i]
-        return f"({p.x_m * 1e3:g}, {p.y_m * 1e3:g}) mm, {p.phi_rad:g} rad"
+        return pose_text(self.poses[i], self.task)
 
     def rows(self) -> list[dict[str, Any]]:
         """One row per pose: coordinates, shares of computed and unreachable draws, and per mode the median and
@@ -664,12 +743,8 @@ class PredictiveBands:
         q = self.quantiles_hz
         comp, unreach = self.computed_fraction, self.unreachable_fraction
         out = []
-        for i, p in enumerate(self.poses):
-            row: dict[str, Any] = {
-                "x_mm": round(p.x_m * 1e3, 6),
-                "y_mm": round(p.y_m * 1e3, 6),
-                "phi_rad": p.phi_rad,
-            }
+        for i in range(len(self.poses)):
+            row: dict[str, Any] = self.coordinates(i)
             if self.labels is not None:
                 row["label"] = self.labels[i]
             row.update({"computed_fraction": float(comp[i]), "unreachable_fraction": float(unreach[i])})
@@ -732,6 +807,7 @@ class PredictiveBands:
         w = self.widest()
         return {
             "config": self.name,
+            "task": list(self.task) if self.task is not None else None,
             "n_draws": self.n_draws,
             "n_modes": self.n_modes,
             "quantiles": list(QUANTILES),
@@ -754,7 +830,10 @@ class PredictiveBands:
     def dataset(self) -> Any:
         """An :class:`xarray.Dataset`: ``freq_hz`` over ``(draw, pose, mode)``, ``freq_quantile_hz`` over
         ``(quantile, pose, mode)`` and ``computed_fraction`` over ``pose``; coordinates ``x_mm``, ``y_mm``,
-        ``phi_rad`` (on ``pose``) and ``status`` (on ``draw, pose``)."""
+        ``phi_rad`` (and ``z_mm`` for a described machine; on ``pose``) and ``status`` (on ``draw, pose``)."""
+        coords: dict[str, Any] = {"quantile": np.array(QUANTILES)}
+        if self.task is not None:
+            coords["z_mm"] = ("pose", [_value(p, "z") * 1e3 for p in self.poses])
         return frequencies_dataset(
             self.frequencies_hz,
             x_mm=[p.x_m * 1e3 for p in self.poses],
@@ -766,8 +845,8 @@ class PredictiveBands:
                 "freq_quantile_hz": (("quantile", "pose", "mode"), self.quantiles_hz),
                 "computed_fraction": ("pose", self.computed_fraction),
             },
-            coords={"quantile": np.array(QUANTILES)},
-            attrs={"config": self.name, "segments": int(self.options.segments or 0)},
+            coords=coords,
+            attrs={"config": self.name, "segments": int(self.options.segments or 0), "task": ",".join(self.task or ())},
         )
 
     def write(self, out_dir: str | Path, *, stem: str = "bands", figures: bool = True) -> list[Path]:
@@ -848,7 +927,9 @@ class PredictiveBands:
         if w is not None:
             axes[1].plot(x[w], y[w], ls="", marker="*", ms=16, color="red", mec="k", label="measure here next")
             axes[1].legend(fontsize=7, loc="lower right")
-            title += f"\nmeasure here next: ({x[w]:g}, {y[w]:g}) mm, band {width[w]:.1f} % of the median"
+            units = "mm, rad" if "phi" in (self.task or ()) else "mm"
+            at = f"({x[w]:g}, {y[w]:g}) mm" if self.task is None else f"{self.label(w)} ({units})"
+            title += f"\nmeasure here next: {at}, band {width[w]:.1f} % of the median"
         axes[0].set_title(f"{_short(self.name)}: median over {self.n_draws} draws", fontsize=8)
         axes[1].set_title(title, fontsize=8)
         return fig
@@ -865,13 +946,78 @@ def _write_rows(path: Path, rows: list[dict[str, Any]]) -> None:
         )
 
 
+def _value(pose: AnyPose, coordinate: str) -> float:
+    """A task coordinate of either pose kind (SI; the 3RRR's has no z: 0)."""
+    if isinstance(pose, TaskPose):
+        return pose.value(coordinate)
+    return float({"x": pose.x_m, "y": pose.y_m, "z": 0.0, "phi": pose.phi_rad}[coordinate])
+
+
+def pose_columns(pose: AnyPose, task: tuple[str, ...] | None) -> dict[str, float]:
+    """A pose's coordinates as the tables name them: ``x_mm``, ``y_mm``, ``phi_rad`` (``task`` ``None``: the
+    3RRR's), or one entry per task coordinate of a described machine (``z_mm`` where it has z)."""
+    return {
+        ("phi_rad" if c == "phi" else f"{c}_mm"): (_value(pose, c) if c == "phi" else round(_value(pose, c) * 1e3, 6))
+        for c in task or ("x", "y", "phi")
+    }
+
+
+def pose_text(pose: AnyPose, task: tuple[str, ...] | None) -> str:
+    """A pose in words: ``(x, y) mm, phi rad`` (the 3RRR's), or ``x=.., y=..`` in a described machine's task
+    coordinates (mm, rad)."""
+    if task is None:
+        return f"({pose.x_m * 1e3:g}, {pose.y_m * 1e3:g}) mm, {pose.phi_rad:g} rad"
+    return ", ".join(f"{c}={_value(pose, c):g}" if c == "phi" else f"{c}={_value(pose, c) * 1e3:g}" for c in task)
+
+
 def _short(name: str, n: int = 40) -> str:
     return name if len(name) <= n else name[: n - 3] + "..."
 
 
+def _draw_frequencies(
+    posterior: Posterior,
+    index: np.ndarray,
+    poses: list[AnyPose],
+    n_modes: int,
+    opts: ModelOptions,
+    engine: EngineOptions | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(frequencies_hz, status)`` of the draws ``index`` at ``poses``: the 3RRR's pose loop on the engine
+    (:func:`~fpm_sim.batch.pose_loop.solve_configs`), or a described machine's
+    (:func:`~fpm_sim.batch.task_sweep.sweep_task_many`, its chunks on ``engine.workers`` processes; the likelihood's
+    own frequencies: the K-th lowest elastic modes, actuators locked)."""
+    configs = [posterior.config(int(i)) for i in index]
+    eng = engine or EngineOptions()
+    if isinstance(posterior.base, Description):
+        from fpm_sim.batch.task_sweep import sweep_task_many
+
+        bad = [i for i, p in enumerate(poses) if not isinstance(p, TaskPose)]
+        if bad:
+            raise FpmSimError(
+                f"pose {bad[0] + 1} is not a task pose",
+                parameter="poses",
+                hint=f"{posterior.base.name}'s poses are fs.TaskPose values in its task coordinates "
+                f"({', '.join(posterior.base.task)})",
+            )
+        workers = 1 if eng.scheduler == "serial" or not eng.workers else int(eng.workers)
+        descs = [c for c in configs if isinstance(c, Description)]
+        task_poses = [p for p in poses if isinstance(p, TaskPose)]
+        sweeps = sweep_task_many(descs, task_poses, options=opts, n_modes=n_modes, workers=workers)
+        return np.stack([sw.freq_hz for sw in sweeps]), np.array([sw.status for sw in sweeps], dtype=object)
+    bad = [i for i, p in enumerate(poses) if not isinstance(p, Pose)]
+    if bad:
+        raise FpmSimError(
+            f"pose {bad[0] + 1} is a task pose", parameter="poses", hint="the 3RRR's poses are fs.Pose values"
+        )
+    eng = dataclasses.replace(eng, desc="draws x poses" if eng.desc == "poses" else eng.desc)
+    manips = [c for c in configs if isinstance(c, Manipulator)]
+    parts = solve_configs(manips, [p for p in poses if isinstance(p, Pose)], n_modes=n_modes, options=opts, engine=eng)
+    return np.stack([m.frequencies_hz for m in parts]), np.array([m.status for m in parts], dtype=object)
+
+
 def predict_bands(
     posterior: Posterior,
-    poses: Sequence[Pose],
+    poses: Sequence[AnyPose],
     *,
     n_draws: int | None = 100,
     seed: int = 0,
@@ -885,7 +1031,8 @@ def predict_bands(
     with their quantiles.
 
     The loop over draws x poses runs on the engine exactly as a design study's designs x poses
-    (:func:`fpm_sim.batch.pose_loop.solve_configs`).
+    (:func:`fpm_sim.batch.pose_loop.solve_configs`); a described machine's through its own pose loop
+    (:func:`fpm_sim.batch.task_sweep.sweep_task_many`), at :class:`~fpm_sim.architecture.TaskPose` values.
 
     Parameters
     ----------
@@ -918,12 +1065,11 @@ def predict_bands(
             f"{len(labels)} labels for {len(poses)} poses", parameter="labels", hint="give one label per pose"
         )
     index = posterior.draws(n_draws, seed)
-    configs = [posterior.config(int(i)) for i in index]
     opts = options or (fast_options(segments=posterior.segments) if posterior.segments else fast_options())
-    eng = engine or EngineOptions()
-    eng = dataclasses.replace(eng, desc="draws x poses" if eng.desc == "poses" else eng.desc)
+    if isinstance(posterior.base, Description):  # its pose loop's policy (the likelihood's): inextensible, no gravity
+        opts = dataclasses.replace(opts, gravity=False, axial=False)
     t0 = time.perf_counter()
-    parts = solve_configs(configs, poses, n_modes=n_modes, options=opts, engine=eng)
+    freq, status = _draw_frequencies(posterior, index, poses, n_modes, opts, engine)
     shift, sd = posterior.discrepancy_at(index, poses)
     read_f = read_w = None
     noise = 0.0
@@ -934,8 +1080,8 @@ def predict_bands(
         name=posterior.base.name,
         poses=poses,
         draw_index=index,
-        frequencies_hz=np.stack([m.frequencies_hz for m in parts]),
-        status=np.array([m.status for m in parts], dtype=object),
+        frequencies_hz=freq,
+        status=status,
         options=opts,
         labels=list(labels) if labels is not None else None,
         elapsed_s=time.perf_counter() - t0,
@@ -944,6 +1090,7 @@ def predict_bands(
         read_freq_hz=read_f,
         read_weight=read_w,
         read_noise_rel=noise,
+        task=posterior.base.task if isinstance(posterior.base, Description) else None,
     )
 
 
@@ -1095,6 +1242,12 @@ def study_bands(
 ) -> StudyBands:
     """Bands of f1 at the study's measured poses (:func:`fpm_sim.study.tables.measured_table`) and at its
     withheld poses (:func:`fpm_sim.study.tables.withheld_cells`: coordinates only) under ``reading``."""
+    if isinstance(posterior.base, Description):
+        raise PosteriorError(
+            f"the study's measured and withheld poses are the 3RRR's; {posterior.base.name!r} has its own",
+            parameter="posterior",
+            hint="predict at its own task poses (predict_bands)",
+        )
     rd = reading or TableReading()
     measured = [(m.row_mm, m.col_mm, m.measured_hz) for m in measured_table() if m.readable]
     cells = [(r, c, f) for r, c, f in measured] + [(r, c, math.nan) for r, c in withheld_cells()]
@@ -1166,10 +1319,16 @@ def _inference_data(p: Path) -> Any:
     return idata
 
 
-def _posterior_attributes(post: Any, p: Path) -> tuple[Manipulator, tuple[str, ...], int]:
-    """The base description, free groups and model resolution the posterior ``post`` (of file ``p``) states."""
+def _posterior_attributes(post: Any, p: Path) -> tuple[Manipulator | Description, tuple[str, ...], int]:
+    """The base description, free groups and model resolution the posterior ``post`` (of file ``p``) states: the
+    3RRR's form, or a described machine's file (it has ``[[chains]]``)."""
+    base: Manipulator | Description
     try:
-        base = parse_config(tomllib.loads(str(post.attrs[BASE_CONFIG_ATTR])), source=f"posterior: {p.name}")
+        data = tomllib.loads(str(post.attrs[BASE_CONFIG_ATTR]))
+        if isinstance(data.get("chains"), list):
+            base = parse_description(data, source=f"posterior: {p.name}")
+        else:
+            base = parse_config(data, source=f"posterior: {p.name}")
     except (tomllib.TOMLDecodeError, ConfigError) as exc:
         raise PosteriorError(f"not a valid description ({exc})", parameter=BASE_CONFIG_ATTR, file=p) from None
     groups = tuple(g.strip() for g in str(post.attrs[GROUPS_ATTR]).split(",") if g.strip())
@@ -1182,11 +1341,12 @@ def _posterior_attributes(post: Any, p: Path) -> tuple[Manipulator, tuple[str, .
     return base, groups, segments
 
 
-def _parameter_names(post: Any, base: Manipulator, groups: tuple[str, ...], p: Path) -> list[str]:
-    """The posterior's parameter variables, in the order of the free groups' parameter set first."""
+def _parameter_names(post: Any, base: Manipulator | Description, groups: tuple[str, ...], p: Path) -> list[str]:
+    """The posterior's parameter variables, in the order of the free groups' parameter set first (a described
+    machine's: of its free paths)."""
     names = [str(n) for n in post.data_vars if str(n) != ELBOW_BRANCH_VAR and not str(n).startswith(LIKELIHOOD_PREFIX)]
     try:
-        ps_names = parameter_set(base, list(groups)).names
+        ps_names = list(groups) if isinstance(base, Description) else parameter_set(base, list(groups)).names
     except FpmSimError as exc:
         raise PosteriorError(
             f"free groups unusable ({exc})", parameter=GROUPS_ATTR, value=",".join(groups), file=p

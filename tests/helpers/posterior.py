@@ -65,3 +65,33 @@ def write_posterior(
             idata.posterior.attrs[key] = attrs[key]
     idata.to_netcdf(str(path))
     return Path(path)
+
+
+FIVE_BAR = Path(__file__).resolve().parents[2] / "examples" / "architectures" / "five_bar.toml"
+MASS_PATH = "lumps.end_effector.mass_kg"
+"""The free path of the described posterior."""
+MASSES_KG = np.array([0.15, 0.25, 0.35, 0.45, 0.30])
+"""The draws of the five-bar's end-effector mass (its file: 0.25 kg)."""
+
+
+def write_described_posterior(path: str | Path, *, segments: int = 2, masses: Any = MASSES_KG) -> Path:
+    """A described machine's posterior.nc, as ``fpm-sim calibrate --config five_bar.toml`` writes it: the five-bar's
+    file as the base (its TOML), one free dotted path (:data:`MASS_PATH`, the draws :data:`MASSES_KG`) and an
+    independent relative discrepancy."""
+    import arviz as az
+
+    from fpm_sim.architecture import description_toml, load_description
+
+    n = len(masses)
+    post = {MASS_PATH: np.asarray(masses, float)[None, :], "likelihood.discrepancy_rel": np.full((1, n), 0.02)}
+    idata = az.from_dict(posterior=post)
+    idata.posterior.attrs.update(
+        {
+            "fpm_sim_base_config": description_toml(load_description(FIVE_BAR)),
+            "fpm_sim_free_groups": MASS_PATH,
+            "fpm_sim_segments": segments,
+            "fpm_sim_command": "test fixture (described)",
+        }
+    )
+    idata.to_netcdf(str(path))
+    return Path(path)
