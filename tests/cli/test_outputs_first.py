@@ -98,6 +98,18 @@ class _Tripped(Exception):
     pass
 
 
+def _import_all() -> None:
+    """Import every module of the package (the optional backends and the dm_env wrapper aside, as the result
+    contract's walk leaves them)."""
+    import pkgutil
+
+    import fpm_sim
+
+    for mod in pkgutil.walk_packages(fpm_sim.__path__, "fpm_sim."):
+        if not mod.name.endswith(("jax_backend", "mjx_backend", "dm_env")):
+            importlib.import_module(mod.name)
+
+
 def _output_options() -> set[tuple[str, str]]:
     """``(command, option)`` of every path-typed argument of the parser that is not an input."""
     found: set[tuple[str, str]] = set()
@@ -121,7 +133,11 @@ def test_every_output_option_has_a_case():
 
 @pytest.fixture
 def tripwires(monkeypatch):
-    """Replace every input reader and the model compiler, wherever imported, by a function that raises."""
+    """Replace every input reader and the model compiler, wherever imported, by a function that raises.
+
+    Every module of the package is imported first: a module imported for the first time while the tripwires are in
+    place would bind a tripwire by ``from ... import`` and keep it after the test (a later test then trips on it)."""
+    _import_all()
     originals = {}
     for module, names in TRIPWIRES.items():
         mod = importlib.import_module(module)
