@@ -415,11 +415,10 @@ def load_machine(args: argparse.Namespace, command: str) -> Manipulator | Descri
     return load_manipulator(args)
 
 
-IMPORTED_COMMANDS = ("modes", "sweep", "frf", "export-mjcf")
+IMPORTED_COMMANDS = ("modes", "sweep", "frf", "export-mjcf", "check")
 """The commands that run on an imported model (``kind = "imported"``), posed by joint values (``--q``, ``--poses``)."""
 
 _WHY_NOT_IMPORTED = {
-    "check": "a requirements file's poses are task poses (x, y, phi) and an imported model has no task coordinates",
     "design": "its --vary paths edit a described architecture's chains; an imported model's sections are edited in "
     "its own file (run sweep --poses on each edited copy)",
     "identify": "it identifies a described architecture's or the 3RRR's parameters from their task-pose modes",
