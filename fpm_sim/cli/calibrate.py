@@ -198,7 +198,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "(--config machine.toml with [[chains]]): priors on dotted paths into its file, one measured file in its "
         "task coordinates (x_mm, y_mm, z_mm, phi_rad as it has them; f1_hz, f2_hz, ...; sigma_hz), each fK_hz "
         "compared with its K-th lowest elastic mode (actuators locked), one class (its working modes are fixed); "
-        "writes OUT/description.toml (the posterior median) in place of config.toml (docs/architectures.md).",
+        "writes OUT/description.toml (the posterior median) in place of config.toml (docs/architectures.md). On an "
+        "imported model (kind = 'imported'): the same, its measured file with one column per joint (docs/import.md).",
     )
     add_data_args(p)
     p.add_argument(
@@ -213,8 +214,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--free",
         default=None,
         help=f"comma-separated parameter groups: {', '.join(GROUPS)} (default {DEFAULT_FREE}); on a described "
-        "architecture dotted paths into its file, PATH (its prior in --priors) or PATH=lo:hi (uniform between them; "
-        "default: every path --priors names)",
+        "architecture or an imported model dotted paths into its file, PATH (its prior in --priors) or PATH=lo:hi "
+        "(uniform between them; default: every path --priors names)",
     )
     p.add_argument("--live-points", type=int, default=250, help="nested sampling live points of each run (default 250)")
     p.add_argument(

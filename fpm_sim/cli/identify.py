@@ -59,7 +59,8 @@ def add_data_args(p: argparse.ArgumentParser) -> None:
         action="append",
         metavar="FILE[,sigma_pct=P][,reading=R]",
         help="measured frequencies (repeatable); sigma_pct: relative std of its values where no sigma_hz column "
-        "(default --sigma-pct); reading: for row_mm,col_mm files",
+        "(default --sigma-pct); reading: for row_mm,col_mm files. A described architecture takes one file in its "
+        "task coordinates, an imported model one with a column per joint (docs/import.md)",
     )
     p.add_argument("--subsystems", type=Path, help="rig tests CSV (rig,setting,experimental_hz), frees the rig group")
     p.add_argument("--reading", default=None, help="how to read row_mm,col_mm files: x+, x-, y+ or y-")
@@ -109,7 +110,8 @@ _STUDY_ONLY = {
 
 def read_described_measured(args: argparse.Namespace, desc: Any) -> Any:
     """``--measured FILE[,sigma_pct=P]`` of a described architecture: one file in its task coordinates
-    (:func:`fpm_sim.study.identify.described.read_task_measured_csv`)."""
+    (:func:`fpm_sim.study.identify.described.read_task_measured_csv`); of an imported model, one column per joint
+    (:func:`fpm_sim.study.identify.described.read_joint_measured_csv`)."""
     from fpm_sim.architecture.imported import ImportedDescription
     from fpm_sim.study.identify.described import read_joint_measured_csv, read_task_measured_csv
 
