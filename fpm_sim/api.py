@@ -1177,7 +1177,7 @@ def identify(
 
 
 def calibrate(
-    config: Manipulator | Description | None = None,
+    config: Manipulator | Description | ImportedDescription | None = None,
     *,
     priors: str | Path | None = None,
     measured: Sequence[str | Path] = (),
@@ -1197,7 +1197,9 @@ def calibrate(
         The base description the free parameters are applied to; ``None``: the embedded one. A described
         architecture (:class:`~fpm_sim.architecture.description.Description` read from its file) is calibrated by
         dotted paths into its file (:mod:`fpm_sim.study.calibrate.described`: one measured file in its task
-        coordinates, each ``fK_hz`` compared with its K-th lowest elastic mode, one class).
+        coordinates, each ``fK_hz`` compared with its K-th lowest elastic mode, one class); an imported model
+        (:class:`~fpm_sim.architecture.imported.ImportedDescription`) likewise, its measured file in joint space (one
+        column per joint, :func:`~fpm_sim.study.identify.described.read_joint_measured_csv`).
     priors
         The priors TOML file (one distribution and reason per free parameter; e.g.
         ``fpm_sim/data/study_priors.toml``); required on the 3RRR. On a described architecture its
@@ -1219,10 +1221,11 @@ def calibrate(
         Show dynesty's progress line.
     """
     from fpm_sim.architecture import Description
+    from fpm_sim.architecture.imported import ImportedDescription
     from fpm_sim.study import identify as idf
     from fpm_sim.study.calibrate import CalibrationError, CalibrationProblem, read_priors, run_calibration
 
-    if isinstance(config, Description):
+    if isinstance(config, Description | ImportedDescription):
         problem = _described_calibration(config, priors, measured, subsystems, free, reading, sigma_pct, segments)
         return run_calibration(problem, sampler, progress=progress)
     if priors is None:
@@ -1245,7 +1248,7 @@ def calibrate(
 
 
 def _described_calibration(
-    desc: Description,
+    desc: Description | ImportedDescription,
     priors: str | Path | None,
     measured: Sequence[str | Path],
     subsystems: str | Path | None,
@@ -1258,10 +1261,11 @@ def _described_calibration(
 
     See :func:`fpm_sim.study.calibrate.described.described_problem`.
     """
+    from fpm_sim.architecture.imported import ImportedDescription
     from fpm_sim.study import identify as idf
     from fpm_sim.study.calibrate import CalibrationError
     from fpm_sim.study.calibrate.described import described_problem
-    from fpm_sim.study.identify.described import read_task_measured_csv
+    from fpm_sim.study.identify.described import read_joint_measured_csv, read_task_measured_csv
 
     for name, given in (("subsystems", subsystems), ("reading", reading)):
         if given is not None:
@@ -1271,7 +1275,10 @@ def _described_calibration(
             "give one measured file (its task coordinates' columns, f1_hz, ...)", parameter="measured"
         )
     sigma = idf.DEFAULT_SIGMA_PCT if sigma_pct is None else sigma_pct
-    data = read_task_measured_csv(measured[0], desc, sigma_pct=sigma)
+    if isinstance(desc, ImportedDescription):
+        data = read_joint_measured_csv(measured[0], desc, sigma_pct=sigma)
+    else:
+        data = read_task_measured_csv(measured[0], desc, sigma_pct=sigma)
     return described_problem(
         desc, data, priors=priors, free=None if free is None else ",".join(free), segments=segments
     )

@@ -112,13 +112,17 @@ class _State:
         return fallback
 
     def description(self, path: Path | None) -> Manipulator:
-        """The 3RRR's description, or a described architecture's (``[[chains]]``: fpm_sim.architecture)."""
+        """The 3RRR's description, a described architecture's (``[[chains]]``: fpm_sim.architecture) or an imported
+        model's (``kind = "imported"``)."""
         key = str(path) if path else ""
         if key not in self._descriptions:
             from fpm_sim.architecture import is_description_file, load_description
+            from fpm_sim.architecture.imported import is_imported_file, load_imported
             from fpm_sim.config import default_config, load_config
 
-            if path and is_description_file(path):
+            if path and is_imported_file(path):  # posed by its joints: joint-space pose sets (docs/import.md)
+                self._descriptions[key] = load_imported(path)  # type: ignore[assignment]
+            elif path and is_description_file(path):
                 self._descriptions[key] = load_description(path)  # type: ignore[assignment]
             else:
                 self._descriptions[key] = load_config(path) if path else default_config()

@@ -189,3 +189,22 @@ def test_fpm_config_option_loads_the_given_description(pytester, tmp_path):
     pytester.makeconftest(CONFTEST)
     pytester.makepyfile("def test_name(fpm_config):\n    assert fpm_config.name == 'my cell'\n")
     pytester.runpytest("-q", f"--fpm-config={path}").assert_outcomes(passed=1)
+
+
+def test_requirements_on_an_imported_model_are_collected(pytester):
+    """A requirements file whose settings.config is an imported model (joint-space pose sets, docs/import.md) is
+    collected and evaluated like any: f1 >= 20 Hz holds on the clamped 2 m tube (24 Hz), f3 >= 120 Hz fails at the
+    bent pose (98 Hz), the failure naming the pose by its joint values."""
+    pytest.importorskip("dm_control")
+    from tests.imported.test_import import _acrobot_toml
+
+    toml = _acrobot_toml(pytester.path)
+    pytester.makeconftest(CONFTEST)
+    body = f'[settings]\nconfig = "{toml.name}"\nsegments = 2\n'
+    for name, mode, bound in (("f1 above 20 Hz", 1, 20.0), ("f3 above 120 Hz", 3, 120.0)):
+        body += f'\n[[requirement]]\nname = "{name}"\nkind = "min_frequency"\nmode = {mode}\nat_least_hz = {bound}\n'
+        body += "poses = { joints = [{ shoulder = 0.0, elbow = 0.0 }, { shoulder = 0.3, elbow = -1.1 }] }\n"
+    pytester.makefile(".toml", **{"fpm-requirements": body})
+    result = pytester.runpytest("-q", "-W", "ignore::UserWarning")
+    result.assert_outcomes(passed=1, failed=1)
+    result.stdout.fnmatch_lines(["*'f3 above 120 Hz'*FAILED: worst mode 3 at pose (shoulder=0.3, elbow=-1.1)*"])

@@ -18,6 +18,12 @@ A list of tables is entered by an item's name (a chain's ``name``, a path entry'
 are settable (a value left to its default is settable once written). An edit changes the parsed TOML mapping the
 description keeps (:attr:`Description.data`) and reads it again, so the edited machine is validated exactly as the file
 is (a negative height is the reader's error, naming the path) and its provenance says ``design study`` (or ``source``).
+
+An imported description (:mod:`fpm_sim.architecture.imported`) is edited the same way:
+``sections.tube.outer_diameter_m``, ``materials.aluminium.density_kg_m3``, ``flexible.upper_arm.end_m[0]`` (a
+``[[flexible]]`` table by its ``body``),
+``damping.stiffness_proportional_s``; it is read again by :func:`~fpm_sim.architecture.imported.parse_imported`, its
+``model`` kept as the file writes it.
 """
 
 from __future__ import annotations
@@ -26,9 +32,11 @@ import copy
 import dataclasses
 import math
 import re
+from pathlib import Path
 from typing import Any, overload
 
 from fpm_sim.architecture.description import Description
+from fpm_sim.architecture.imported import ImportedDescription, parse_imported
 from fpm_sim.architecture.reader import parse_description
 from fpm_sim.config import Manipulator, parameter_value, with_parameter
 from fpm_sim.config.schema import ConfigError
@@ -85,7 +93,7 @@ def _examples() -> str:
 
 def _item_name(item: Any) -> str | None:
     if isinstance(item, dict):
-        for key in ("name", "joint", "link"):
+        for key in ("name", "joint", "link", "body"):
             if isinstance(item.get(key), str):
                 return str(item[key])
     return None
@@ -193,7 +201,7 @@ def _is_number_list(v: Any) -> bool:
     return isinstance(v, list) and bool(v) and all(_is_number(x) for x in v)
 
 
-def _data(desc: Description, name: str) -> dict[str, Any]:
+def _data(desc: Description | ImportedDescription, name: str) -> dict[str, Any]:
     if desc.data is None:
         raise ParameterPathError(
             f"{desc.name} was built in code, not read from a file: it has no dotted paths",
@@ -209,7 +217,7 @@ def _get(data: Any, keys: list[Key]) -> Any:
     return data
 
 
-def description_value(desc: Description, name: str) -> float:
+def description_value(desc: Description | ImportedDescription, name: str) -> float:
     """The number (SI, as the file writes it) at the dotted path ``name`` (module docstring).
 
     Raises
@@ -232,7 +240,15 @@ def _file_path(keys: list[Key]) -> str:
     return out
 
 
-def with_description_value(desc: Description, name: str, value: float, *, source: str = DESIGN_SOURCE) -> Description:
+@overload
+def with_description_value(desc: Description, name: str, value: float, *, source: str = ...) -> Description: ...
+@overload
+def with_description_value(
+    desc: ImportedDescription, name: str, value: float, *, source: str = ...
+) -> ImportedDescription: ...
+def with_description_value(
+    desc: Description | ImportedDescription, name: str, value: float, *, source: str = DESIGN_SOURCE
+) -> Description | ImportedDescription:
     """A copy of ``desc`` with the number at ``name`` set to ``value``, read again from the edited file (validated as
     the file is; its provenance ``source``). A section, material or lump shared by several links changes in all.
 
@@ -255,6 +271,8 @@ def with_description_value(desc: Description, name: str, value: float, *, source
     else:
         holder[key] = {"value": holder[key], "source": source}
     try:
+        if isinstance(desc, ImportedDescription):
+            return _reparse_imported(desc, new)
         edited = parse_description(new, source=desc.source)
     except ConfigError as exc:
         here = _file_path(keys[:value_at])
@@ -268,7 +286,14 @@ def with_description_value(desc: Description, name: str, value: float, *, source
     return dataclasses.replace(edited, source_file=desc.source_file)
 
 
-def settable_paths(desc: Description) -> list[str]:
+def _reparse_imported(desc: ImportedDescription, new: dict[str, Any]) -> ImportedDescription:
+    """The edited file of an imported description, read again at its model (resolved already), the file's own
+    ``model`` text kept."""
+    edited = parse_imported({**new, "model": str(desc.model_path)}, base_dir=Path(desc.model_path).parent)
+    return dataclasses.replace(edited, data=new, source=desc.source)
+
+
+def settable_paths(desc: Description | ImportedDescription) -> list[str]:
     """Every dotted path of a number in ``desc``'s file (chains and path entries by name, other lists by index)."""
     out: list[str] = []
 

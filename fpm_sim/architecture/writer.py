@@ -9,6 +9,7 @@ import re
 from typing import Any
 
 from fpm_sim.architecture.description import Description
+from fpm_sim.architecture.imported import ImportedDescription
 from fpm_sim.config.schema import ConfigError
 
 __all__ = ["description_toml"]
@@ -39,15 +40,19 @@ def _value(v: Any) -> str:
     raise ConfigError(f"cannot write a {type(v).__name__} as TOML", value=v)
 
 
-def description_toml(desc: Description, *, header: str = "") -> str:
+def description_toml(desc: Description | ImportedDescription, *, header: str = "") -> str:
     """``desc``'s file as TOML text: top-level values first, each table under its header, each chain as a
-    ``[[chains]]`` table with its path one entry a line; ``header`` lines become ``#`` comments."""
+    ``[[chains]]`` table with its path one entry a line; ``header`` lines become ``#`` comments. An imported
+    description's ``model`` is written as its absolute path (the text is read from anywhere), its ``[[flexible]]``
+    tables inline."""
     if desc.data is None:
         raise ConfigError(
             f"{desc.name} was built in code, not read from a file: nothing to write",
             hint="fpm_sim.architecture.three_rrr.three_rrr_toml writes the 3RRR",
         )
     data = desc.data
+    if isinstance(desc, ImportedDescription):
+        data = {**data, "model": str(desc.model_path)}
     lines = [f"# {ln}" for ln in header.splitlines()]
     tables = {k: v for k, v in data.items() if isinstance(v, dict) and k != "chains"}
     for k, v in data.items():

@@ -18,6 +18,7 @@ from fpm_sim.cli.common import (
     check_output_dir,
     emit,
     is_described,
+    is_imported,
     load_machine,
     workers_of,
 )
@@ -45,7 +46,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             raise CliError(f"--resume: {out} holds no checkpoint ({CHECKPOINT}); run without --resume first")
     else:
         check_output_dir(out, "--out", overwrite=args.overwrite)
-    described = is_described(args)
+    described = is_described(args) or is_imported(args)
     problem, data_note = _described_problem(args) if described else _study_problem(args)
     opts = SamplerOptions(
         live_points=args.live_points,
@@ -121,7 +122,7 @@ def _study_problem(args: argparse.Namespace) -> tuple[Any, str]:
 def _described_problem(args: argparse.Namespace) -> tuple[Any, str]:
     """A described machine's problem (:mod:`fpm_sim.study.calibrate.described`): priors on dotted paths (the priors
     file and/or ``--free PATH=lo:hi``), its measured file, the row of a pose the file's machine cannot reach named."""
-    from fpm_sim.architecture import load_description
+    from fpm_sim.config import Manipulator
     from fpm_sim.study.calibrate.described import described_problem
 
     for flag, given in (("--subsystems", args.subsystems), ("--reading", args.reading)):
@@ -137,7 +138,8 @@ def _described_problem(args: argparse.Namespace) -> tuple[Any, str]:
         )
     if args.priors is None and not args.free:
         raise CliError("--priors or --free: give the priors of the free dotted paths (a file, or PATH=lo:hi)")
-    desc = load_description(args.config)
+    desc = load_machine(args, "calibrate")  # a described architecture or an imported model
+    assert not isinstance(desc, Manipulator)
     data = read_described_measured(args, desc)
     problem = described_problem(desc, data, priors=args.priors, free=args.free, segments=args.segments)
     return problem, data.source
@@ -196,7 +198,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "(--config machine.toml with [[chains]]): priors on dotted paths into its file, one measured file in its "
         "task coordinates (x_mm, y_mm, z_mm, phi_rad as it has them; f1_hz, f2_hz, ...; sigma_hz), each fK_hz "
         "compared with its K-th lowest elastic mode (actuators locked), one class (its working modes are fixed); "
-        "writes OUT/description.toml (the posterior median) in place of config.toml (docs/architectures.md).",
+        "writes OUT/description.toml (the posterior median) in place of config.toml (docs/architectures.md). On an "
+        "imported model (kind = 'imported'): the same, its measured file with one column per joint (docs/import.md).",
     )
     add_data_args(p)
     p.add_argument(
@@ -211,8 +214,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--free",
         default=None,
         help=f"comma-separated parameter groups: {', '.join(GROUPS)} (default {DEFAULT_FREE}); on a described "
-        "architecture dotted paths into its file, PATH (its prior in --priors) or PATH=lo:hi (uniform between them; "
-        "default: every path --priors names)",
+        "architecture or an imported model dotted paths into its file, PATH (its prior in --priors) or PATH=lo:hi "
+        "(uniform between them; default: every path --priors names)",
     )
     p.add_argument("--live-points", type=int, default=250, help="nested sampling live points of each run (default 250)")
     p.add_argument(

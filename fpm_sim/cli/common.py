@@ -56,6 +56,7 @@ __all__ = [
     "error_line",
     "finish_store",
     "is_described",
+    "is_imported",
     "joint_values",
     "load_machine",
     "load_manipulator",
@@ -389,6 +390,14 @@ GENERAL_COMMANDS = (
 """The commands that run on a described architecture (``[[chains]]``) so far; the others say so."""
 
 
+def is_imported(args: argparse.Namespace) -> bool:
+    """Whether ``--config`` names an imported model's file (``kind = "imported"``)."""
+    from fpm_sim.architecture.imported import is_imported_file
+
+    path = getattr(args, "config", None)
+    return path is not None and Path(path).is_file() and is_imported_file(path)
+
+
 def is_described(args: argparse.Namespace) -> bool:
     """Whether ``--config`` names a described architecture's file (``[[chains]]``)."""
     from fpm_sim.architecture import is_description_file
@@ -415,14 +424,12 @@ def load_machine(args: argparse.Namespace, command: str) -> Manipulator | Descri
     return load_manipulator(args)
 
 
-IMPORTED_COMMANDS = ("modes", "sweep", "frf", "export-mjcf")
+IMPORTED_COMMANDS = ("modes", "sweep", "frf", "export-mjcf", "check", "identify", "calibrate")
 """The commands that run on an imported model (``kind = "imported"``), posed by joint values (``--q``, ``--poses``)."""
 
 _WHY_NOT_IMPORTED = {
-    "check": "a requirements file's poses are task poses (x, y, phi) and an imported model has no task coordinates",
     "design": "its --vary paths edit a described architecture's chains; an imported model's sections are edited in "
     "its own file (run sweep --poses on each edited copy)",
-    "identify": "it identifies a described architecture's or the 3RRR's parameters from their task-pose modes",
     "reduce": "its reduced models are the described architectures' (task poses, motors as inputs)",
     "impact": "its hammer points and poses are a described architecture's",
     "atlas": "its atlas is over task poses and an imported model has no task coordinates",

@@ -16,6 +16,8 @@ from fpm_sim.cli.common import (
     check_output_dir,
     emit,
     is_described,
+    is_imported,
+    load_machine,
     load_manipulator,
     workers_of,
 )
@@ -57,7 +59,8 @@ def add_data_args(p: argparse.ArgumentParser) -> None:
         action="append",
         metavar="FILE[,sigma_pct=P][,reading=R]",
         help="measured frequencies (repeatable); sigma_pct: relative std of its values where no sigma_hz column "
-        "(default --sigma-pct); reading: for row_mm,col_mm files",
+        "(default --sigma-pct); reading: for row_mm,col_mm files. A described architecture takes one file in its "
+        "task coordinates, an imported model one with a column per joint (docs/import.md)",
     )
     p.add_argument("--subsystems", type=Path, help="rig tests CSV (rig,setting,experimental_hz), frees the rig group")
     p.add_argument("--reading", default=None, help="how to read row_mm,col_mm files: x+, x-, y+ or y-")
@@ -107,23 +110,29 @@ _STUDY_ONLY = {
 
 def read_described_measured(args: argparse.Namespace, desc: Any) -> Any:
     """``--measured FILE[,sigma_pct=P]`` of a described architecture: one file in its task coordinates
-    (:func:`fpm_sim.study.identify.described.read_task_measured_csv`)."""
-    from fpm_sim.study.identify.described import read_task_measured_csv
+    (:func:`fpm_sim.study.identify.described.read_task_measured_csv`); of an imported model, one column per joint
+    (:func:`fpm_sim.study.identify.described.read_joint_measured_csv`)."""
+    from fpm_sim.architecture.imported import ImportedDescription
+    from fpm_sim.study.identify.described import read_joint_measured_csv, read_task_measured_csv
 
+    imported = isinstance(desc, ImportedDescription)
+    columns = "one column per joint" if imported else "its task coordinates' columns"
     if len(args.measured or []) != 1:
-        raise CliError("--measured: give one measured file (its task coordinates' columns, f1_hz, ...)")
+        raise CliError(f"--measured: give one measured file ({columns}, f1_hz, ...)")
     path, file_opts = parse_measured_arg(args.measured[0])
     if "reading" in file_opts:
-        raise CliError("--measured ...,reading=: the study's table form is the 3RRR's; give task coordinates' columns")
-    return read_task_measured_csv(path, desc, sigma_pct=float(file_opts.get("sigma_pct", args.sigma_pct)))
+        raise CliError(f"--measured ...,reading=: the study's table form is the 3RRR's; give {columns}")
+    read = read_joint_measured_csv if imported else read_task_measured_csv
+    return read(path, desc, sigma_pct=float(file_opts.get("sigma_pct", args.sigma_pct)))
 
 
 def _identify_described(args: argparse.Namespace) -> int:
     """``fpm-sim identify --config machine.toml --free PATH[=lo:hi],...``: bounded least squares of dotted paths into
-    its file (:mod:`fpm_sim.study.identify.described`); writes the fitted file, identify.json and a figure."""
+    its file (:mod:`fpm_sim.study.identify.described`; an imported model's too, posed in joint space); writes the
+    fitted file, identify.json and a figure."""
     import matplotlib.pyplot as plt
 
-    from fpm_sim.architecture import description_toml, load_description
+    from fpm_sim.architecture import description_toml
     from fpm_sim.model.options import ModelOptions
     from fpm_sim.outputs import atomic_dir
     from fpm_sim.results import to_jsonable
@@ -142,7 +151,10 @@ def _identify_described(args: argparse.Namespace) -> int:
             f"--free {args.free}: the 3RRR's parameter groups; on a described architecture give dotted paths into "
             "its file, e.g. --free sections.bar.height_m,materials.steel.young_pa=150e9:250e9"
         )
-    desc = load_description(args.config)
+    from fpm_sim.config import Manipulator
+
+    desc = load_machine(args, "identify")
+    assert not isinstance(desc, Manipulator)  # _identify_described runs on a described or imported file only
     free = parse_free_paths(args.free, desc)
     data = read_described_measured(args, desc)
     if args.segments < 1 or args.max_nfev < 1:
@@ -174,7 +186,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     from fpm_sim.study.identify.report import summary, write_identification
 
     check_output_dir(args.out, "--out", overwrite=args.overwrite)
-    if is_described(args):
+    if is_described(args) or is_imported(args):
         return _identify_described(args)
     start = load_manipulator(args)
     groups, datasets, tests = read_data_args(args)

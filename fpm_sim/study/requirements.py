@@ -23,6 +23,12 @@ workspace), ``{ grid = "paper", reading = "x+" }`` (the study's 25 poses), ``{ f
 (columns ``x_mm,y_mm,phi_rad``, relative to the requirements file), ``{ list = [[x_mm, y_mm, phi_rad], ...] }``.
 A pose named explicitly (file or list) that is unreachable or singular is an error, not a skipped point.
 
+An imported model (:mod:`fpm_sim.architecture.imported`) has no task coordinates: its pose sets are in joint space,
+``{ joints_file = "q.csv" }`` (one column per joint, rad for a hinge, m for a slide, as
+:func:`~fpm_sim.batch.joint_sweep.read_joint_poses_csv` reads it) or ``{ joints = [{ shoulder = 0.3, elbow = -1.1 },
+...] }``; a task-space pose set on it (and a joint-space one on any other machine) is refused naming the requirement.
+Its frequencies are :func:`~fpm_sim.batch.joint_sweep.sweep_joints`'s (gravity off, inextensible links).
+
 Sweeps are shared: :class:`SweepCache` keys the pose loop's results on the description, the poses, the
 payload and the resolution, and :func:`check_requirements` asks each key once, for the most modes any
 requirement needs from it.
@@ -43,7 +49,9 @@ from typing import Any
 import numpy as np
 
 from fpm_sim.architecture import Description, TaskPose
+from fpm_sim.architecture.imported import ImportedDescription
 from fpm_sim.batch.frequencies import pose_frequencies
+from fpm_sim.batch.joint_sweep import JointSweep, check_joint_poses, read_joint_poses_csv, sweep_joints
 from fpm_sim.batch.pose_loop import PoseFrequencies, fast_options, pose_assembly, read_poses_csv
 from fpm_sim.batch.task_sweep import TaskSweep, read_task_poses_csv, sweep_task, task_grid
 from fpm_sim.config import Manipulator
@@ -88,6 +96,14 @@ _KIND_KEYS = {
     "match_measurements": {"name", "kind", "payload_kg", "segments", "measured_csv", "tolerance_pct"},
 }
 _POSE_KEYS = {"grid", "step_mm", "phi_rad", "reading", "file", "list", "min_singularity", "cylinder"}
+_POSE_KEYS |= {"joints", "joints_file"}
+JOINT_KINDS = ("joints", "joints_file")
+"""The pose sets of an imported model (joint space, module docstring)."""
+Machine = Manipulator | Description | ImportedDescription
+"""What a requirement is evaluated on."""
+JointPose = dict[str, float]
+"""An imported model's pose: ``{joint: value}`` (rad for a hinge, m for a slide)."""
+AnyPose = Pose | TaskPose | JointPose
 _CYLINDER_KEYS = {"radius_mm", "z_mm", "step_mm"}
 USABLE = ("ok", "near_singular")
 """The pose loop's statuses a requirement evaluates (a workspace grid's other points lie outside the workspace)."""
@@ -97,8 +113,11 @@ class RequirementError(FpmSimError):
     """A requirements file or a requirement that cannot be evaluated; the message names the requirement and key."""
 
 
-def pose_text(pose: Pose | TaskPose) -> str:
-    """``(x=50.0 mm, y=-20.0 mm, phi=0.000 rad)``; a task pose with its non-zero z and phi."""
+def pose_text(pose: AnyPose) -> str:
+    """``(x=50.0 mm, y=-20.0 mm, phi=0.000 rad)``; a task pose with its non-zero z and phi; a joint-space pose
+    ``(shoulder=0.3, elbow=-1.1)`` (rad or m)."""
+    if isinstance(pose, dict):
+        return "(" + ", ".join(f"{j}={v:g}" for j, v in pose.items()) + ")"
     if isinstance(pose, TaskPose):
         return pose.label(("x", "y") + (("z",) if pose.z_m else ()) + (("phi",) if pose.phi_rad else ()))
     return pose.label()
@@ -136,6 +155,9 @@ class PoseSpec:
     z_mm: tuple[float, float] = (0.0, 0.0)
     """``kind = "cylinder"`` (a described spatial architecture): points within ``radius_mm`` of the z axis on a
     ``step_mm`` grid in x, y and z, from ``z_mm[0]`` to ``z_mm[1]``."""
+    joints: tuple[tuple[tuple[str, float], ...], ...] = ()
+    """``kind = "joints"`` (an imported model): each pose's ``(joint, value)`` pairs (``kind = "joints_file"`` reads
+    them from ``file``)."""
 
     def describe(self) -> str:
         if self.kind == "cylinder":
@@ -148,11 +170,18 @@ class PoseSpec:
             return f"the study's 25 poses (reading {self.reading})"
         if self.kind == "file":
             return f"poses of {self.file}"
+        if self.kind == "joints_file":
+            return f"joint-space poses of {self.file}"
+        if self.kind == "joints":
+            return f"{len(self.joints)} listed joint-space poses"
         return f"{len(self.points)} listed poses"
 
-    def resolve(self, config: Manipulator | Description, where: str) -> list[Pose] | list[TaskPose]:
+    def resolve(self, config: Machine, where: str) -> list[Pose] | list[TaskPose] | list[JointPose]:
         """The poses; an explicitly named pose that is unreachable or singular raises, naming ``where``. For a
-        described architecture, task poses (a grid's unreachable points are left to the evaluation to drop)."""
+        described architecture, task poses (a grid's unreachable points are left to the evaluation to drop); for an
+        imported model, joint-space poses (module docstring)."""
+        if isinstance(config, ImportedDescription) or self.kind in JOINT_KINDS:
+            return self._joint_poses(config, where)
         if isinstance(config, Description):
             return self._task_poses(config, where)
         if self.kind == "cylinder":
@@ -184,6 +213,24 @@ class PoseSpec:
         if not poses:
             raise RequirementError(f"{where}.poses: the pose set ({self.describe()}) is empty; give at least one pose")
         return poses
+
+    def _joint_poses(self, config: Machine, where: str) -> list[JointPose]:
+        """The joint-space poses of an imported model; a task-space set on it, or a joint-space one on another
+        machine, is refused naming ``where``."""
+        if not isinstance(config, ImportedDescription):
+            raise RequirementError(
+                f"{where}.poses: {self.describe()} are an imported model's joint values; {config.name!r} is posed by "
+                "its task coordinates: give a task-space pose set (docs/testing.md)"
+            )
+        if self.kind not in JOINT_KINDS:
+            raise RequirementError(
+                f"{where}.poses: {self.describe()} is a task-space pose set and {config.name!r} is an imported model "
+                'posed by its joints: give poses = { joints_file = "q.csv" } (one column per joint) or '
+                "{ joints = [{ NAME = VALUE, ... }, ...] } (rad for a hinge, m for a slide)"
+            )
+        if self.kind == "joints_file":
+            return read_joint_poses_csv(self.file or "", config, parameter=f"{where}.poses.joints_file")
+        return check_joint_poses(config, [dict(p) for p in self.joints], parameter=f"{where}.poses.joints")
 
     def _task_poses(self, desc: Description, where: str) -> list[TaskPose]:
         """The pose set of a described architecture, in its task coordinates (module docstring)."""
@@ -229,9 +276,13 @@ def parse_pose_spec(value: Any, where: str, base: Path) -> PoseSpec:
     unknown = set(value) - _POSE_KEYS
     if unknown:
         raise RequirementError(f"{where}: unknown key(s) {', '.join(sorted(unknown))}; allowed: {sorted(_POSE_KEYS)}")
-    forms = [k for k in ("grid", "file", "list", "cylinder") if k in value]
+    forms = [k for k in ("grid", "file", "list", "cylinder", *JOINT_KINDS) if k in value]
     if len(forms) != 1:
-        raise RequirementError(f"{where} needs exactly one of grid, file, list or cylinder, got {forms or 'none'}")
+        raise RequirementError(
+            f"{where} needs exactly one of grid, file, list, cylinder, joints or joints_file, got {forms or 'none'}"
+        )
+    if forms[0] in JOINT_KINDS:
+        return _joint_spec(value, forms[0], where, base)
     if "cylinder" in value:
         return _cylinder(value["cylinder"], f"{where}.cylinder")
     if "file" in value:
@@ -263,6 +314,27 @@ def parse_pose_spec(value: Any, where: str, base: Path) -> PoseSpec:
         parse_reading(str(reading))
         return PoseSpec(kind="paper", reading=str(reading))
     raise RequirementError(f'{where}.grid must be "dense" or "paper", got {grid!r}')
+
+
+def _joint_spec(value: dict[str, Any], form: str, where: str, base: Path) -> PoseSpec:
+    """``{ joints_file = "q.csv" }`` or ``{ joints = [{ NAME = VALUE, ... }, ...] }`` (an imported model's)."""
+    extra = sorted(set(value) - {form})
+    if extra:
+        raise RequirementError(f"{where}: {form} takes no other key; remove {', '.join(extra)}")
+    if form == "joints_file":
+        if not isinstance(value[form], str):
+            raise RequirementError(f"{where}.joints_file must be a path (string), got {value[form]!r}")
+        return PoseSpec(kind="joints_file", file=str(base / value[form]))
+    rows = value[form]
+    if not isinstance(rows, list) or not rows or not all(isinstance(r, dict) and r for r in rows):
+        raise RequirementError(
+            f"{where}.joints must be a list of {{ NAME = VALUE, ... }} tables (rad for a hinge, m for a slide), "
+            f"got {rows!r}"
+        )
+    poses = tuple(
+        tuple((str(j), _number(v, f"{where}.joints[{i}].{j}")) for j, v in r.items()) for i, r in enumerate(rows)
+    )
+    return PoseSpec(kind="joints", joints=poses)
 
 
 def _cylinder(value: Any, where: str) -> PoseSpec:
@@ -455,9 +527,11 @@ def load_requirements(path: str | Path) -> RequirementsFile:
 # --------------------------------------------------------------------------------------------- the shared sweeps
 
 
-def _pose_key(poses: Sequence[Pose] | Sequence[TaskPose]) -> tuple[tuple[float, ...], ...]:
+def _pose_key(poses: Sequence[AnyPose]) -> tuple[tuple[Any, ...], ...]:
     return tuple(
-        (round(p.x_m, 9), round(p.y_m, 9), round(p.phi_rad, 9))
+        tuple(sorted((j, round(v, 12)) for j, v in p.items()))
+        if isinstance(p, dict)
+        else (round(p.x_m, 9), round(p.y_m, 9), round(p.phi_rad, 9))
         + ((round(p.z_m, 9),) if isinstance(p, TaskPose) else ())
         for p in poses
     )
@@ -476,18 +550,26 @@ class SweepCache:
 
     def frequencies(
         self,
-        config: Manipulator | Description,
-        poses: Sequence[Pose] | Sequence[TaskPose],
+        config: Machine,
+        poses: Sequence[AnyPose],
         payload_kg: float | None,
         options: ModelOptions,
         n_modes: int,
-    ) -> PoseFrequencies | TaskSweep:
+    ) -> PoseFrequencies | TaskSweep | JointSweep:
         """The lowest ``n_modes`` frequencies at ``poses`` with ``payload_kg`` (None: the description's); a
-        described architecture's come from its own pose loop (:func:`fpm_sim.batch.task_sweep.sweep_task`)."""
+        described architecture's come from its own pose loop (:func:`fpm_sim.batch.task_sweep.sweep_task`), an
+        imported model's from :func:`fpm_sim.batch.joint_sweep.sweep_joints` at joint-space poses."""
         # a Description holds tables (unhashable): the session's one object stands for it
-        who = ("described", id(config)) if isinstance(config, Description) else config
+        who = ("described", id(config)) if isinstance(config, Description | ImportedDescription) else config
         key = (who, _pose_key(poses), payload_kg, options)
         hit = self._store.get(key)
+        if isinstance(config, ImportedDescription):
+            if hit is None or hit.frequencies_hz.shape[1] < n_modes:
+                joint_poses = [p for p in poses if isinstance(p, dict)]
+                hit = sweep_joints(config, joint_poses, options=options, n_modes=n_modes)
+                self._store[key] = hit
+                self.computed += 1
+            return hit
         if isinstance(config, Description):
             if hit is None or hit.frequencies_hz.shape[1] < n_modes:
                 task_poses = [p for p in poses if isinstance(p, TaskPose)]
@@ -516,7 +598,8 @@ class RequirementOutcome:
     passed: bool
     margin_hz: float
     margin_pct: float
-    worst_pose: Pose | TaskPose | None
+    worst_pose: AnyPose | None
+    """The worst pose: the 3RRR's, a task pose, or an imported model's ``{joint: value}`` (rad or m)."""
     worst_mode: int
     worst_value_hz: float
     worst_payload_kg: float | None
@@ -537,6 +620,8 @@ class RequirementOutcome:
             "margin_pct": self.margin_pct,
             "worst_pose": None
             if p is None
+            else dict(p)
+            if isinstance(p, dict)
             else {"x_mm": p.x_m * 1e3, "y_mm": p.y_m * 1e3, "phi_rad": p.phi_rad}
             | ({"z_mm": p.z_m * 1e3} if isinstance(p, TaskPose) else {}),
             "worst_mode": self.worst_mode,
@@ -556,7 +641,7 @@ def _payload_text(m: float | None) -> str:
 
 def _grid_outcome(
     req: Requirement,
-    poses: Sequence[Pose] | Sequence[TaskPose],
+    poses: Sequence[AnyPose],
     margins: np.ndarray,
     refs: np.ndarray,
     values: np.ndarray,
@@ -598,11 +683,16 @@ def _needed_payloads(req: Requirement) -> list[float | None]:
     return pays[-1:] if req.kind == "min_frequency" else pays
 
 
-def _check_payload(req: Requirement, config: Manipulator | Description) -> None:
+def _check_payload(req: Requirement, config: Machine) -> None:
     if req.payload_kg and isinstance(config, Description):
         raise RequirementError(
             f"requirement {req.name!r}: payload_kg varies the 3RRR's hardware.payload; a described architecture "
             "carries its payload as an end-effector lump (remove payload_kg)"
+        )
+    if req.payload_kg and isinstance(config, ImportedDescription):
+        raise RequirementError(
+            f"requirement {req.name!r}: payload_kg varies the 3RRR's hardware.payload; an imported model carries "
+            "its payload as bodies of its MuJoCo file (remove payload_kg)"
         )
 
 
@@ -616,11 +706,11 @@ def _check_probability(req: Requirement) -> None:
 
 def evaluate(
     req: Requirement,
-    config: Manipulator | Description,
+    config: Machine,
     *,
     cache: SweepCache | None = None,
     default_segments: int | None = None,
-    poses: Sequence[Pose] | Sequence[TaskPose] | None = None,
+    poses: Sequence[AnyPose] | None = None,
 ) -> RequirementOutcome:
     """Evaluate one requirement on ``config`` (``poses`` overrides the requirement's pose set, already resolved)."""
     t0 = time.perf_counter()
@@ -681,10 +771,11 @@ def evaluate(
 
 
 def _usable(
-    req: Requirement, config: Manipulator | Description, pts: list[Any], sweeps: list[Any], n: int
+    req: Requirement, config: Machine, pts: list[Any], sweeps: list[Any], n: int
 ) -> tuple[list[Any], list[np.ndarray]]:
     """The poses a requirement evaluates and their lowest ``n`` frequencies per payload. A described architecture's
-    grid keeps its reachable, non-singular points (:data:`USABLE`); a pose it names explicitly must be one."""
+    grid keeps its reachable, non-singular points (:data:`USABLE`); a pose it names explicitly must be one. An
+    imported model's joint-space poses are all evaluated (a pose it cannot be built at raises in its sweep)."""
     if not isinstance(config, Description):
         return pts, [s.frequencies_hz[:, :n] for s in sweeps]
     status = sweeps[0].status
@@ -700,11 +791,9 @@ def _usable(
     return [pts[i] for i in keep], [s.frequencies_hz[keep, :n] for s in sweeps]
 
 
-def _evaluate_measurements(
-    req: Requirement, config: Manipulator | Description, opts: ModelOptions
-) -> RequirementOutcome:
+def _evaluate_measurements(req: Requirement, config: Machine, opts: ModelOptions) -> RequirementOutcome:
     where = f"requirement {req.name!r}"
-    if isinstance(config, Description):
+    if isinstance(config, Description | ImportedDescription):
         raise RequirementError(f"{where}: match_measurements reads the 3RRR's measured poses; not for {config.name!r}")
     ds = read_measured_csv(req.measured_csv or "")
     obs = ds.observations
@@ -790,10 +879,12 @@ class CheckReport:
         }
 
     def table(self) -> str:
-        """Requirement, worst pose (mm, rad), mode, margin (Hz, %), pass/fail."""
+        """Requirement, worst pose (mm, rad; an imported model's joint values), mode, margin (Hz, %), pass/fail."""
         w = max(len("requirement"), *(len(o.name) for o in self.outcomes))
         spatial = any(isinstance(o.worst_pose, TaskPose) and o.worst_pose.z_m for o in self.outcomes)
         head = "worst pose (x mm, y mm, z mm)" if spatial else "worst pose (x mm, y mm, phi rad)"
+        if any(isinstance(o.worst_pose, dict) for o in self.outcomes):
+            head = "worst pose (joints, rad or m)"
         lines = [
             f"{self.source} on {self.config_name}: {sum(o.passed for o in self.outcomes)} of {len(self.outcomes)} "
             f"requirements pass ({self.sweeps} sweeps)",
@@ -801,8 +892,11 @@ class CheckReport:
         ]
         for o in self.outcomes:
             p = o.worst_pose
-            last = f"{p.z_m * 1e3:.1f}" if spatial and isinstance(p, TaskPose) else f"{p.phi_rad:.3f}" if p else ""
-            pose = "-" if p is None else f"({p.x_m * 1e3:.1f}, {p.y_m * 1e3:.1f}, {last})"
+            if isinstance(p, dict):
+                pose = pose_text(p)
+            else:
+                last = f"{p.z_m * 1e3:.1f}" if spatial and isinstance(p, TaskPose) else f"{p.phi_rad:.3f}" if p else ""
+                pose = "-" if p is None else f"({p.x_m * 1e3:.1f}, {p.y_m * 1e3:.1f}, {last})"
             lines.append(
                 f"{o.name:<{w}}  {pose:<34}  {o.worst_mode:>4}  {o.margin_hz:>10.3f}  {o.margin_pct:>9.2f}  "
                 f"{'pass' if o.passed else 'FAIL'}"
@@ -873,18 +967,19 @@ def effective_requirements(reqs: RequirementsFile, segments: int | None = None) 
 
 def prepare_sweeps(
     requirements: Sequence[Requirement],
-    config: Manipulator | Description,
+    config: Machine,
     cache: SweepCache,
     *,
     keep_errors: bool = False,
-) -> list[list[Pose] | list[TaskPose] | FpmSimError | None]:
+) -> list[list[Pose] | list[TaskPose] | list[JointPose] | FpmSimError | None]:
     """Resolve every requirement's poses, then run each shared sweep once, for the most modes it is asked for.
 
     Returns per requirement its poses (None for ``match_measurements``); a requirement whose poses cannot be
     resolved raises, or with ``keep_errors`` gets its :class:`FpmSimError` in its place (the others still run).
     """
-    resolved: list[list[Pose] | list[TaskPose] | FpmSimError | None] = []
-    by_spec: dict[PoseSpec, list[Pose] | list[TaskPose]] = {}  # requirements naming the same pose set resolve it once
+    resolved: list[list[Pose] | list[TaskPose] | list[JointPose] | FpmSimError | None] = []
+    # requirements naming the same pose set resolve it once
+    by_spec: dict[PoseSpec, list[Pose] | list[TaskPose] | list[JointPose]] = {}
     for r in requirements:
         if r.kind == "match_measurements":
             resolved.append(None)
@@ -899,7 +994,7 @@ def prepare_sweeps(
             if not keep_errors:
                 raise
             resolved.append(exc)
-    need: dict[tuple[Any, ...], tuple[list[Pose] | list[TaskPose], float | None, ModelOptions, int]] = {}
+    need: dict[tuple[Any, ...], tuple[list[Any], float | None, ModelOptions, int]] = {}
     for r, pts in zip(requirements, resolved):
         if not isinstance(pts, list):
             continue
@@ -915,7 +1010,7 @@ def prepare_sweeps(
 
 def check_requirements(
     reqs: RequirementsFile,
-    config: Manipulator | Description,
+    config: Machine,
     *,
     cache: SweepCache | None = None,
     segments: int | None = None,
@@ -952,7 +1047,7 @@ class ModeFrequencies:
     """
 
     mode: int
-    poses: list[Pose]
+    poses: list[Any]
     values_hz: np.ndarray
     payload_kg: float | None
     resolution: str

@@ -129,7 +129,7 @@ def _one_line(code: int, text: str, words: str) -> None:
         (["modes", "--x-mm", "10"], "--x-mm: an imported model has no task coordinates"),
         (["modes", "--poses", "{tmp}/joints.csv", "--q", "elbow=0"], "--q: one pose's option"),
         (["frf", "--q", "elbow=0.2"], "--damping-ratio: the model has no damping"),
-        (["check", "{tmp}/req.toml"], "'check' does not run on it"),
+        (["check", "{tmp}/req.toml"], "requirement 'f1'.poses: reachable workspace, 10 mm grid, phi 0 rad is a task-"),
         (["design", "--vary", "sections.tube.outer_diameter_m=0.1", "--out", "{tmp}/o"], "'design' does not run"),
         (["move", "--out", "{tmp}/m.csv"], "'move' does not run on it: a move is a task-space path"),
         (["reduce", "--modes", "3"], "'reduce' does not run on it"),

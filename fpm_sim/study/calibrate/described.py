@@ -20,6 +20,13 @@ Likelihood: the 3RRR's Gaussian with its relative model discrepancy
 machines whose task has no ``z``). A measured pose the machine at ``theta`` cannot reach, or a frequency it does not
 compute there, is ``log L = -inf``.
 
+An imported model (:mod:`fpm_sim.architecture.imported`) is calibrated the same way in joint space: priors on dotted
+paths of the imported TOML, identify's joint-space measured file
+(:func:`~fpm_sim.study.identify.described.read_joint_measured_csv`), its frequencies those of
+:func:`~fpm_sim.batch.joint_sweep.sweep_joints`. Its discrepancy is the relative one only (a Gaussian process over task
+poses has no meaning without task coordinates: ``[likelihood.length_scale_m]`` is refused); ``posterior.nc`` gives
+each observation's joint values as coordinates.
+
 One class: a described machine fixes its working mode per chain (``branch_deg`` in its file), so there are no
 elbow-branch classes to enumerate. The 3RRR's study statements, rig tests and latent-mode readout are its own and are
 refused here.
@@ -27,6 +34,7 @@ refused here.
 
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 from dataclasses import dataclass, field
@@ -34,12 +42,15 @@ from pathlib import Path
 
 import numpy as np
 
-from fpm_sim.architecture import Description, TaskPose, description_value, with_description_value
+from fpm_sim.architecture import Description, description_value, with_description_value
+from fpm_sim.architecture.imported import ImportedDescription
 from fpm_sim.config import ConfigError
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.study.calibrate.priors import Prior, PriorError, Priors, prior_names, read_priors, read_priors_text
 from fpm_sim.study.calibrate.problem import CalibrationError, FrequencyLikelihood
 from fpm_sim.study.identify.described import (
+    Machine,
+    MeasuredPose,
     TaskMeasurements,
     check_measured_poses,
     edited_description,
@@ -76,9 +87,10 @@ _TAIL = 1e-4
 
 @dataclass(frozen=True)
 class TaskObservation:
-    """One measured natural frequency of a described machine: the ``mode``-th lowest elastic mode at ``pose``."""
+    """One measured natural frequency of a described machine: the ``mode``-th lowest elastic mode at ``pose`` (task
+    coordinates, or an imported model's ``{joint: value}``)."""
 
-    pose: TaskPose
+    pose: MeasuredPose
     task: tuple[str, ...]
     mode: int
     freq_hz: float
@@ -88,17 +100,21 @@ class TaskObservation:
     label: str | None = None
 
     def describe(self) -> str:
+        if isinstance(self.pose, dict):
+            return f"{self.source} ({', '.join(f'{j}={v:g}' for j, v in self.pose.items())}) f{self.mode}"
+        pose = self.pose
         where = ", ".join(
-            f"{c}={self.pose.value(c):g}" if c == "phi" else f"{c}={self.pose.value(c) * 1e3:g}" for c in self.task
+            f"{c}={pose.value(c):g}" if c == "phi" else f"{c}={pose.value(c) * 1e3:g}" for c in self.task
         )
         return f"{self.source} ({where}) f{self.mode}"
 
 
-def _observations(desc: Description, data: TaskMeasurements) -> tuple[TaskObservation, ...]:
+def _observations(desc: Machine, data: TaskMeasurements) -> tuple[TaskObservation, ...]:
     """The measured frequencies in row-major order of ``data.freq_hz`` (pose, then mode)."""
     lines = data.lines or list(range(2, len(data.poses) + 2))
+    task = tuple(desc.task) if isinstance(desc, Description) else ()
     return tuple(
-        TaskObservation(p, desc.task, k + 1, float(data.freq_hz[i, k]), float(data.sigma_hz[i, k]), data.source, ln)
+        TaskObservation(p, task, k + 1, float(data.freq_hz[i, k]), float(data.sigma_hz[i, k]), data.source, ln)
         for i, (p, ln) in enumerate(zip(data.poses, lines))
         for k in range(data.n_modes)
         if math.isfinite(data.freq_hz[i, k])
@@ -113,7 +129,7 @@ def _support(prior: Prior) -> tuple[float, float]:
     return float(prior.transform(_TAIL)), float(prior.transform(1.0 - _TAIL))
 
 
-def check_prior_paths(desc: Description, priors: Priors) -> None:
+def check_prior_paths(desc: Machine, priors: Priors) -> None:
     """Every prior names a number of ``desc``'s file and draws only values the file accepts (module docstring)."""
     for p in priors.parameters:
         where = f'{priors.source} [parameters."{p.name}"]'
@@ -138,7 +154,7 @@ class DescribedCalibrationProblem(FrequencyLikelihood):
     Picklable (a description is plain data), so a ``spawn`` pool can be given one in its initializer. The free
     parameters (:attr:`groups`) are the priors' paths, in their order."""
 
-    base: Description
+    base: Machine
     priors: Priors
     data: TaskMeasurements
     segments: int = 4
@@ -154,7 +170,9 @@ class DescribedCalibrationProblem(FrequencyLikelihood):
             ("the elbow-branch classes (geometry.elbow_branch)", pr.sample_branches, ONE_CLASS),
             ("the study's statements ([statements.*])", pr.singular_at_phi0 or pr.measured_poses_clear, "remove them"),
             ("the latent-mode readout ([likelihood.mode_read])", pr.mode_read, COMPARED),
-            ("a correlation length over z ([likelihood.length_scale_m])", pr.length_scale and "z" in self.base.task, "")
+            ("a correlation length over z ([likelihood.length_scale_m])", pr.length_scale and "z" in self._task, ""),
+            ("a correlation length over task poses ([likelihood.length_scale_m])",
+             pr.length_scale and isinstance(self.base, ImportedDescription), "an imported model has no task poses"),
         ]  # fmt: skip
         for what, given, why in refused:
             if given:
@@ -170,6 +188,19 @@ class DescribedCalibrationProblem(FrequencyLikelihood):
         check_prior_paths(self.base, self.priors)
 
     @property
+    def _task(self) -> tuple[str, ...]:
+        return tuple(self.base.task) if isinstance(self.base, Description) else ()
+
+    @functools.cached_property
+    def features(self) -> np.ndarray:
+        """The observations' pose features for the Gaussian-process discrepancy; an imported model has none (its
+        correlation length is refused) and gives zeros, unused."""
+        if isinstance(self.base, ImportedDescription):
+            return np.zeros((len(self.observations), 3))
+        features: np.ndarray = super().features
+        return features
+
+    @property
     def options(self) -> ModelOptions:
         """The likelihood's model: ``segments`` per link, gravity off, inextensible (the pose loop's fast path)."""
         return ModelOptions(segments=self.segments, gravity=False, axial=False)
@@ -180,7 +211,7 @@ class DescribedCalibrationProblem(FrequencyLikelihood):
     def notes(self) -> dict[str, str]:
         return {"compared": COMPARED, "working_mode": ONE_CLASS}
 
-    def config(self, theta: np.ndarray) -> Description:
+    def config(self, theta: np.ndarray) -> Machine:
         """The description at ``theta``. Raises :class:`~fpm_sim.config.ConfigError` for an invalid file."""
         n = len(self.groups)
         return edited_description(self.base, dict(zip(self.groups, np.asarray(theta[:n], float))), CALIBRATED_SOURCE)
@@ -193,7 +224,7 @@ class DescribedCalibrationProblem(FrequencyLikelihood):
             return False
         return True
 
-    def predict(self, theta: np.ndarray, desc: Description | None = None) -> np.ndarray:
+    def predict(self, theta: np.ndarray, desc: Machine | None = None) -> np.ndarray:
         """The model's frequency (Hz) at every observation (NaN where the machine computes none)."""
         if desc is None:
             try:
@@ -222,7 +253,7 @@ class DescribedCalibrationProblem(FrequencyLikelihood):
 
 
 def described_priors(
-    desc: Description, source: str | Path | None, free: str | None = None, *, text: str | None = None
+    desc: Machine, source: str | Path | None, free: str | None = None, *, text: str | None = None
 ) -> Priors:
     """The priors of a described machine's calibration: the priors file ``source`` (or its ``text``), whose
     ``[parameters."PATH"]`` name dotted paths of ``desc``'s file, and the free paths ``free`` (``PATH[=lo:hi],...``;
@@ -259,7 +290,7 @@ def described_priors(
 
 
 def described_problem(
-    desc: Description,
+    desc: Machine,
     data: TaskMeasurements,
     *,
     priors: str | Path | None,
@@ -278,7 +309,7 @@ def described_problem(
     return problem
 
 
-def median_description(problem: DescribedCalibrationProblem, draws: np.ndarray, *, data_note: str) -> Description:
+def median_description(problem: DescribedCalibrationProblem, draws: np.ndarray, *, data_note: str) -> Machine:
     """The file at the posterior median of every free path, each one's provenance
     ``identified: posterior median +- sd (fpm-sim calibrate, DATA); PATH = ... +- ...``."""
     desc = problem.base

@@ -30,7 +30,8 @@ from typing import Any
 
 import numpy as np
 
-from fpm_sim.architecture import Description, description_toml
+from fpm_sim.architecture import Description, TaskPose, description_toml
+from fpm_sim.architecture.imported import ImportedDescription
 from fpm_sim.config import Manipulator, config_to_toml
 from fpm_sim.outputs import atomic_file
 from fpm_sim.study.calibrate.described import DescribedCalibrationProblem, median_description
@@ -52,8 +53,18 @@ def _import_arviz() -> Any:
 
 
 def _obs_coords(cal: Calibration) -> dict[str, Any]:
-    """The data's coordinates: each observation's pose (``z_mm`` too for a described machine that has it) and label."""
+    """The data's coordinates: each observation's pose (``z_mm`` too for a described machine that has it; an imported
+    model's joint values, NaN where a pose names no value for a joint) and label."""
     p = cal.problem
+    if isinstance(p, DescribedCalibrationProblem) and isinstance(p.base, ImportedDescription):
+        qs = [o.pose if isinstance(o.pose, dict) else {} for o in p.observations]
+        joints = list(dict.fromkeys(j for q in qs for j in q))
+        return {
+            "obs": np.arange(p.n_data),
+            **{j: ("obs", np.array([q.get(j, math.nan) for q in qs])) for j in joints},
+            "label": ("obs", np.array(p.labels, dtype=str)),
+            "mode": ("obs", np.array([o.mode for o in p.observations], dtype=np.int64)),
+        }
     xs = [o.pose.x_m * 1e3 for o in p.observations] + [math.nan] * len(p.rig_tests)
     ys = [o.pose.y_m * 1e3 for o in p.observations] + [math.nan] * len(p.rig_tests)
     ph = [o.pose.phi_rad for o in p.observations] + [math.nan] * len(p.rig_tests)
@@ -66,8 +77,8 @@ def _obs_coords(cal: Calibration) -> dict[str, Any]:
     }
     if isinstance(p, DescribedCalibrationProblem):
         out["mode"] = ("obs", np.array([o.mode for o in p.observations], dtype=np.int64))
-        if "z" in p.base.task:
-            out["z_mm"] = ("obs", np.array([o.pose.z_m * 1e3 for o in p.observations]))
+        if isinstance(p.base, Description) and "z" in p.base.task:
+            out["z_mm"] = ("obs", np.array([o.pose.z_m * 1e3 for o in p.observations if isinstance(o.pose, TaskPose)]))
     return out
 
 
@@ -199,7 +210,9 @@ def median_config(cal: Calibration, *, data_note: str) -> Manipulator:
     return cfg.replace(provenance=prov)
 
 
-def write_config(cal: Calibration, path: str | Path, *, data_note: str, command: str) -> Manipulator | Description:
+def write_config(
+    cal: Calibration, path: str | Path, *, data_note: str, command: str
+) -> Manipulator | Description | ImportedDescription:
     """``config.toml``: :func:`median_config`, atomically; for a described machine its file at the posterior median
     (:func:`~fpm_sim.study.calibrate.described.median_description`)."""
     hdr = (

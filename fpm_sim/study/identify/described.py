@@ -9,6 +9,12 @@ positive value). The fit is bounded least squares from the file's values (SciPy'
 described architecture's own pose loop; the uncertainty is the Gauss-Newton covariance ``(J'J)^-1`` at the optimum.
 The 3RRR's global searches, elbow-branch classes, rig tests, workspace prior and cross-validation are its own
 (:mod:`fpm_sim.study.identify.engine`).
+
+An imported model (:mod:`fpm_sim.architecture.imported`) is identified the same way, posed in joint space: its
+measured file has one column per joint (rad for a hinge, m for a slide; every column other than ``fK_hz`` and
+``sigma_hz`` must name a hinge or slide of its model, :func:`read_joint_measured_csv`), its paths are into the imported
+TOML (``sections.tube.outer_diameter_m``, ``materials.aluminium.density_kg_m3``), and its frequencies are
+:func:`~fpm_sim.batch.joint_sweep.sweep_joints`'s (gravity off, inextensible links, its locked joints locked).
 """
 
 from __future__ import annotations
@@ -22,6 +28,8 @@ from typing import Any
 import numpy as np
 
 from fpm_sim.architecture import Description, TaskPose, description_value, with_description_value
+from fpm_sim.architecture.imported import ImportedDescription
+from fpm_sim.batch.joint_sweep import sweep_joints
 from fpm_sim.batch.task_sweep import sweep_task_many
 from fpm_sim.errors import FpmSimError
 from fpm_sim.model.options import ModelOptions
@@ -34,10 +42,16 @@ __all__ = [
     "edited_description",
     "identify_description",
     "parse_free_paths",
+    "pose_columns",
+    "read_joint_measured_csv",
     "read_task_measured_csv",
     "task_frequencies",
 ]
 
+Machine = Description | ImportedDescription
+"""What is identified: a described architecture, or an imported model (module docstring)."""
+MeasuredPose = TaskPose | dict[str, float]
+"""A measured pose: task coordinates, or an imported model's ``{joint: value}`` (rad or m)."""
 UNREACHED_RESIDUAL = 1e3
 """The residual of a measured frequency the model cannot compute (its pose unreachable or singular there)."""
 
@@ -47,7 +61,8 @@ class TaskMeasurements:
     """Measured frequencies at task poses: ``freq_hz`` and ``sigma_hz`` are ``(pose, mode)``, NaN where not measured."""
 
     source: str
-    poses: list[TaskPose]
+    poses: Sequence[MeasuredPose]
+    """Task poses, or an imported model's joint-space poses."""
     freq_hz: np.ndarray
     sigma_hz: np.ndarray
     lines: list[int] = field(default_factory=list)
@@ -85,21 +100,85 @@ def read_task_measured_csv(
         if any(math.isnan(v) for v in vals.values()):
             raise DataError("every task coordinate must be given", file=p, row=line)
         poses.append(TaskPose(*(vals.get(c, 0.0) * (1.0 if c == "phi" else 1e-3) for c in ("x", "y", "z", "phi"))))
-        for k in modes:
-            f = read_cell(row.get(f"f{k}_hz"), p, line, f"f{k}_hz")
-            if not (math.isnan(f) or f > 0):
-                raise DataError("must be > 0", parameter=f"f{k}_hz", value=f, file=p, row=line)
-            freq[i, k - 1] = f
-        s = read_cell(row.get("sigma_hz"), p, line, "sigma_hz")
-        if not (math.isnan(s) or s > 0):
-            raise DataError("must be > 0", parameter="sigma_hz", value=s, file=p, row=line)
-        sigma[i] = s if not math.isnan(s) else freq[i] * sigma_pct / 100.0
+        _read_frequencies(row, p, line, modes, freq[i], sigma[i], sigma_pct)
     if not np.isfinite(freq).any():
         raise DataError("no measured frequency", file=p, hint="fill f1_hz, f2_hz, ... on some rows")
     return TaskMeasurements(p.name, poses, freq, sigma, [line for line, _ in rows])
 
 
-def parse_free_paths(text: str, desc: Description) -> dict[str, tuple[float, float]]:
+def pose_columns(pose: MeasuredPose, task: Sequence[str]) -> dict[str, float]:
+    """A measured pose as its file's columns: ``x_mm``, ..., ``phi_rad`` in ``task``'s coordinates, or a joint-space
+    pose's joint values (rad or m)."""
+    if isinstance(pose, dict):
+        return dict(pose)
+    return {("phi_rad" if c == "phi" else f"{c}_mm"): pose.value(c) * (1 if c == "phi" else 1e3) for c in task}
+
+
+def _pose_text(p: MeasuredPose, task: Sequence[str]) -> str:
+    """``(x=120 mm, phi=0.1)``, or a joint-space pose's ``(shoulder=0.3, elbow=-1.1)``."""
+    if isinstance(p, dict):
+        return "(" + ", ".join(f"{j}={v:g}" for j, v in p.items()) + ")"
+    return "(" + ", ".join(f"{c}={p.value(c):g}" if c == "phi" else f"{c}={p.value(c) * 1e3:g} mm" for c in task) + ")"
+
+
+def _task_of(desc: Machine) -> tuple[str, ...]:
+    return tuple(desc.task) if isinstance(desc, Description) else ()
+
+
+def read_joint_measured_csv(
+    path: str | Path, desc: ImportedDescription, *, sigma_pct: float = DEFAULT_SIGMA_PCT
+) -> TaskMeasurements:
+    """The measured frequencies of ``path`` at an imported model's joint-space poses (module docstring): one column
+    per joint, ``f1_hz, f2_hz, ...`` and an optional ``sigma_hz``; a column naming no joint is refused by name."""
+    from fpm_sim.model.imported import posable_joints
+
+    p = Path(path)
+    rows = read_csv_rows(p)
+    header = list(rows[0][1])
+    joints = posable_joints(desc)
+    modes = sorted(int(h[1:-3]) for h in header if h.startswith("f") and h.endswith("_hz") and h[1:-3].isdigit())
+    cols = [h for h in header if h not in {f"f{k}_hz" for k in modes} | {"sigma_hz"}]
+    unknown = [c for c in cols if c not in joints]
+    if unknown or not cols or not modes:
+        raise DataError(
+            f"column(s) {', '.join(unknown)} name no hinge or slide joint of {desc.model_path.name}"
+            if unknown
+            else f"missing column(s) {'f1_hz' if not modes else 'of joint values'}",
+            file=p,
+            hint=f"{desc.name}'s measured file has one column per joint (among {', '.join(joints)}), f1_hz, f2_hz, "
+            "... [, sigma_hz]",
+        )
+    if not sigma_pct > 0:
+        raise DataError("must be > 0", parameter="sigma_pct", value=sigma_pct, file=p)
+    n = max(modes)
+    poses, freq, sigma = [], np.full((len(rows), n), np.nan), np.full((len(rows), n), np.nan)
+    for i, (line, row) in enumerate(rows):
+        q = {c: read_cell(row.get(c), p, line, c) for c in cols}
+        if any(math.isnan(v) for v in q.values()):
+            raise DataError("every joint column must be given", file=p, row=line)
+        poses.append(q)
+        _read_frequencies(row, p, line, modes, freq[i], sigma[i], sigma_pct)
+    if not np.isfinite(freq).any():
+        raise DataError("no measured frequency", file=p, hint="fill f1_hz, f2_hz, ... on some rows")
+    return TaskMeasurements(p.name, poses, freq, sigma, [line for line, _ in rows])
+
+
+def _read_frequencies(
+    row: Mapping[str, Any], p: Path, line: int, modes: list[int], freq: np.ndarray, sigma: np.ndarray, pct: float
+) -> None:
+    """A row's ``fK_hz`` (> 0 or blank) into ``freq`` and its ``sigma_hz`` (else ``pct`` % of each) into ``sigma``."""
+    for k in modes:
+        f = read_cell(row.get(f"f{k}_hz"), p, line, f"f{k}_hz")
+        if not (math.isnan(f) or f > 0):
+            raise DataError("must be > 0", parameter=f"f{k}_hz", value=f, file=p, row=line)
+        freq[k - 1] = f
+    s = read_cell(row.get("sigma_hz"), p, line, "sigma_hz")
+    if not (math.isnan(s) or s > 0):
+        raise DataError("must be > 0", parameter="sigma_hz", value=s, file=p, row=line)
+    sigma[:] = s if not math.isnan(s) else freq * pct / 100.0
+
+
+def parse_free_paths(text: str, desc: Machine) -> dict[str, tuple[float, float]]:
     """``PATH[=lo:hi],...`` as ``{path: (lo, hi)}``: each path read in ``desc``'s file, its value inside its bounds
     (default ``value / 4 .. 4 value`` for a positive value; any other needs bounds)."""
     out: dict[str, tuple[float, float]] = {}
@@ -150,7 +229,7 @@ class DescribedIdentification:
     cost: float
     nfev: int
     message: str
-    fitted: Description = field(repr=False)
+    fitted: Machine = field(repr=False)
     diagnosis: dict[str, Any] = field(default_factory=dict)
     """Whether the fit found the machine (:mod:`fpm_sim.study.identify.diagnosis`): ``summary`` (the one-line
     verdict), ``noise_floor``, ``determination``, and ``poses_without_frequency`` (measured poses where the fitted
@@ -167,10 +246,7 @@ class DescribedIdentification:
                 m = self.model_hz[i, k]
                 out.append(
                     {
-                        **{
-                            ("phi_rad" if c == "phi" else f"{c}_mm"): p.value(c) * (1 if c == "phi" else 1e3)
-                            for c in self.fitted.task
-                        },
+                        **pose_columns(p, _task_of(self.fitted)),
                         "mode": k + 1,
                         "measured_hz": float(f),
                         "model_hz": None if math.isnan(m) else float(m),
@@ -237,22 +313,33 @@ class DescribedIdentification:
         return fig
 
 
-def edited_description(desc: Description, values: Mapping[str, float], source: str) -> Description:
+def edited_description(desc: Machine, values: Mapping[str, float], source: str) -> Machine:
     """``desc`` with each dotted path of ``values`` set (:func:`~fpm_sim.architecture.edit.with_description_value`)."""
     for path, v in values.items():
         desc = with_description_value(desc, path, float(v), source=source)
     return desc
 
 
-def task_frequencies(desc: Description, data: TaskMeasurements, options: ModelOptions) -> np.ndarray:
-    """``(pose, mode)`` the lowest elastic frequencies (Hz, actuators locked) at the measured poses; NaN where none."""
-    (sw,) = sweep_task_many([desc], data.poses, options=options, n_modes=data.n_modes)
+def task_frequencies(desc: Machine, data: TaskMeasurements, options: ModelOptions) -> np.ndarray:
+    """``(pose, mode)`` the lowest elastic frequencies (Hz, actuators locked) at the measured poses; NaN where none
+    (an imported model that cannot be built at a pose, e.g. a density that leaves an inertial below its beam's)."""
+    if isinstance(desc, ImportedDescription):
+        joint_poses = [p for p in data.poses if isinstance(p, dict)]
+        try:
+            return sweep_joints(desc, joint_poses, options=options, n_modes=data.n_modes).freq_hz
+        except FpmSimError:
+            return np.full(data.freq_hz.shape, np.nan)
+    task_poses = [p for p in data.poses if isinstance(p, TaskPose)]
+    (sw,) = sweep_task_many([desc], task_poses, options=options, n_modes=data.n_modes)
     return sw.freq_hz
 
 
-def check_measured_poses(desc: Description, data: TaskMeasurements, options: ModelOptions) -> None:
+def check_measured_poses(desc: Machine, data: TaskMeasurements, options: ModelOptions) -> None:
     """Every measured frequency is computed by the file's machine (its pose reachable and not singular there, the
-    mode among those computed): else the row is named."""
+    mode among those computed): else the row is named. An imported model that cannot be built at a measured pose
+    raises naming the pose."""
+    if isinstance(desc, ImportedDescription):
+        sweep_joints(desc, [p for p in data.poses if isinstance(p, dict)], options=options, n_modes=data.n_modes)
     model = task_frequencies(desc, data, options)
     for i, line in enumerate(data.lines or range(2, len(data.poses) + 2)):
         bad = np.isfinite(data.freq_hz[i]) & ~np.isfinite(model[i])
@@ -268,7 +355,7 @@ def check_measured_poses(desc: Description, data: TaskMeasurements, options: Mod
 
 
 def identify_description(
-    desc: Description,
+    desc: Machine,
     data: TaskMeasurements,
     free: Mapping[str, tuple[float, float]],
     *,
@@ -326,7 +413,7 @@ def identify_description(
         nfev=int(fit.nfev),
         message=str(fit.message),
         fitted=fitted,
-        diagnosis=_diagnosis(fit.fun, fit.jac / scale[None, :], hi - lo, paths, data, model_hz, fitted.task),
+        diagnosis=_diagnosis(fit.fun, fit.jac / scale[None, :], hi - lo, paths, data, model_hz, _task_of(fitted)),
     )
 
 
@@ -345,7 +432,7 @@ def _diagnosis(
 
     floor = noise_floor(residuals, len(paths))
     lost = [
-        "(" + ", ".join(f"{c}={p.value(c):g}" if c == "phi" else f"{c}={p.value(c) * 1e3:g} mm" for c in task) + ")"
+        _pose_text(p, task)
         for i, p in enumerate(data.poses)
         if (np.isfinite(data.freq_hz[i]) & ~np.isfinite(model_hz[i])).any()
     ]
