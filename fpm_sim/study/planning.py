@@ -570,7 +570,10 @@ def requirement_target(posterior: Posterior, path: str | Path, name: str | None 
             f"{path}: requirement {req.name!r} is on mode {req.mode}", parameter="target", hint="modes 1..3"
         )
     median = posterior.median_config()
-    poses: Sequence[AnyPose] = req.poses.resolve(median, f"requirement {req.name!r}")
+    resolved = req.poses.resolve(median, f"requirement {req.name!r}")
+    if any(isinstance(p, dict) for p in resolved):
+        raise PlanError(f"{path}: requirement {req.name!r} poses the machine by joint values", parameter="target")
+    poses: Sequence[AnyPose] = [p for p in resolved if not isinstance(p, dict)]
     if isinstance(median, Description):  # a grid's unreachable points are dropped (the 3RRR's resolve drops them)
         poses = [p for p, ok in zip(poses, reachable(median, poses)) if ok]
         if not poses:

@@ -409,6 +409,7 @@ class Posterior:
             desc = edited_description(base, dict(zip(self.names, np.asarray(x, float))), f"{DRAW_SOURCE}, {label}")
         except (ConfigError, ValueError) as exc:
             raise self._error(f"{label} is not a valid description ({exc})") from None
+        assert isinstance(desc, Description)  # an imported base is refused when the file is read
         return dataclasses.replace(desc, name=f"{base.name} [posterior {label}]")
 
     def _apply(self, x: np.ndarray, base: Manipulator, label: str) -> Manipulator:
@@ -1325,6 +1326,15 @@ def _posterior_attributes(post: Any, p: Path) -> tuple[Manipulator | Description
     base: Manipulator | Description
     try:
         data = tomllib.loads(str(post.attrs[BASE_CONFIG_ATTR]))
+        if data.get("kind") == "imported":
+            raise PosteriorError(
+                "an imported model's posterior: predictions with bands and test planning run on the 3RRR's and the "
+                "described architectures' posteriors so far",
+                parameter=BASE_CONFIG_ATTR,
+                file=p,
+                hint="predict with the posterior median (OUT/description.toml of the calibration) in 'modes' or "
+                "'sweep'",
+            )
         if isinstance(data.get("chains"), list):
             base = parse_description(data, source=f"posterior: {p.name}")
         else:
