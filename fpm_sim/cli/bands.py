@@ -28,7 +28,14 @@ if TYPE_CHECKING:
     from fpm_sim.model.options import ModelOptions
     from fpm_sim.study.posterior import Posterior
 
-__all__ = ["DEFAULT_DRAWS", "add_posterior_args", "band_options", "load_posterior", "posterior_payload"]
+__all__ = [
+    "DEFAULT_DRAWS",
+    "add_posterior_args",
+    "band_options",
+    "bands_hint",
+    "load_posterior",
+    "posterior_payload",
+]
 
 DEFAULT_DRAWS = 100
 """Posterior draws used by default: the 5 % and 95 % quantiles of 100 draws move by about
@@ -51,6 +58,24 @@ def add_posterior_args(p: argparse.ArgumentParser, *, what: str = "each frequenc
         type=count_arg("--draws", high=MAX_DRAWS),
         default=DEFAULT_DRAWS,
         help=f"posterior draws to use: a seeded random subset (default {DEFAULT_DRAWS}; all when fewer)",
+    )
+
+
+def bands_hint(args: argparse.Namespace, command: str) -> str | None:
+    """On the embedded default without ``--posterior``: the line saying that bands exist (the shipped posterior's
+    path and the option), else ``None``."""
+    if getattr(args, "posterior", None) is not None or getattr(args, "config", None) is not None:
+        return None
+    if getattr(args, "thickness_mm", None) is not None:
+        return None
+    from fpm_sim.study.posterior import default_posterior_path
+
+    path = default_posterior_path()
+    if path is None:
+        return None
+    return (
+        f"  one description's frequencies; bands exist: 'fpm-sim {command} --posterior {path}' gives the median and "
+        "the 5-95 % band over the shipped posterior's draws (docs/identification.md)"
     )
 
 

@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any, NoReturn
 from fpm_sim import __version__
 
 try:  # Ctrl-C while the modules load (a second or so): one line and 130, as at any later moment
-    from fpm_sim.cli.bands import add_posterior_args
+    from fpm_sim.cli.bands import add_posterior_args, bands_hint
     from fpm_sim.cli.common import (
         OPTION_NAMES,
         CliError,
@@ -197,6 +197,10 @@ def cmd_modes(args: argparse.Namespace) -> int:
         + _n_modes_note(result, args.n_modes)
         + note
     )
+    hint = bands_hint(args, "modes")
+    if hint:
+        text += "\n" + hint
+        payload["bands_available"] = hint.strip()
     emit(args, payload, text)
     return 0
 

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from fpm_sim.cli.bands import add_posterior_args, sweep_bands
+from fpm_sim.cli.bands import add_posterior_args, bands_hint, sweep_bands
 from fpm_sim.cli.common import (
     CliError,
     add_config_args,
@@ -176,6 +176,10 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         + ", ".join(str(p) for p in paths)
     )
     payload = {"grid": args.grid, "counts": counts, "rows": sw.rows(), "files": [str(p) for p in paths]}
+    hint = bands_hint(args, "sweep")
+    if hint:
+        text += "\n" + hint
+        payload["bands_available"] = hint.strip()
     emit(args, with_resolution(payload, opts), text)
     return 0
 

@@ -164,3 +164,17 @@ def test_the_reports_pointer_names_the_file_the_draws_the_band_files_and_the_cov
         "posterior.nc, 2 of 6 draws, free groups section-height,hardware; the bands of f1 at the measured and "
         "withheld poses are in bands.nc, bands.csv, bands.png; 50 % of the 2 measured f1 inside the 90 % band"
     )
+
+
+def test_the_embedded_default_s_frequencies_say_that_bands_exist(capsys):
+    """Issue 32, item 2: a user running modes on the embedded default learns that the shipped posterior gives bands
+    (the line names the option and the file); on a description of their own there is no such posterior."""
+    from fpm_sim.cli.main import main
+    from fpm_sim.study.posterior import default_posterior_path
+
+    assert main(["modes", "--fidelity", "fast", "--n-modes", "2"]) == 0
+    out = capsys.readouterr().out
+    assert f"'fpm-sim modes --posterior {default_posterior_path()}'" in out
+    five_bar = Path(__file__).resolve().parents[2] / "examples" / "architectures" / "five_bar.toml"
+    assert main(["modes", "--fidelity", "fast", "--n-modes", "2", "--config", str(five_bar)]) == 0
+    assert "bands exist" not in capsys.readouterr().out
