@@ -1,0 +1,68 @@
+"""Why independent calibration runs disagree (issue 31; docs/identification.md, "Why independent runs still
+disagree"): the study's calibration problem on the in-plane surrogate, one elbow-branch class, several seeds.
+
+    python studies/calibration_runs_surrogate.py --branch -1 -1 -1 --live-points 100 --runs 3
+
+Prints each run's ln Z, the between-run check and, per run, the best draw's log-likelihood split into the data's
+and the study statements' terms. The surrogate (``model="inplane"``) is for checks of the sampler, never for a
+reported result (fpm_sim.study.calibrate.problem).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import re
+import time
+import warnings
+
+import numpy as np
+
+from fpm_sim.cli.common import load_manipulator
+from fpm_sim.cli.identify import read_data_args
+from fpm_sim.cli.main import build_parser
+from fpm_sim.study.calibrate import CalibrationProblem, SamplerOptions, read_priors, run_calibration
+from fpm_sim.study.identify import parameter_set
+
+PRIORS = "fpm_sim/data/study_priors.toml"
+
+
+def problem(branch: tuple[int, int, int]) -> CalibrationProblem:
+    """The study's calibration (its data, priors and statements) on the surrogate, the elbow branches fixed."""
+    args = build_parser().parse_args(
+        ["calibrate", "--measured", "fpm_sim/data/measured_table4_train.csv,reading=x+", "--priors", PRIORS,
+         "--out", "unused", "--free", "geometry,hardware,section-height"]
+    )  # fmt: skip
+    start = load_manipulator(args)
+    start = dataclasses.replace(start, geometry=dataclasses.replace(start.geometry, elbow_branch=branch))
+    groups, datasets, _ = read_data_args(args)
+    obs = tuple(o for ds in datasets for o in ds.observations)
+    names = parameter_set(start, groups).names
+    text = re.sub(r'\[parameters\."geometry\.elbow_branch"\][^\[]*', "", open(PRIORS).read())  # one class
+    return CalibrationProblem(start, tuple(groups), read_priors("one_class.toml", names, text=text), obs, (),
+                              model="inplane")  # fmt: skip
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--branch", type=int, nargs=3, default=[-1, -1, -1])
+    p.add_argument("--live-points", type=int, default=100)
+    p.add_argument("--runs", type=int, default=3)
+    p.add_argument("--sample", default="rwalk")
+    a = p.parse_args()
+    warnings.simplefilter("ignore")
+    prob = problem(tuple(a.branch))
+    t = time.time()
+    for seed in range(a.runs):
+        cal = run_calibration(
+            prob, SamplerOptions(live_points=a.live_points, sample=a.sample, runs=1, seed=seed), progress=True
+        )
+        ll = np.array([prob.log_likelihood(th) for th in cal.draws[:400]])
+        best = cal.draws[int(np.argmax(ll))]
+        st = prob.statements_log_likelihood(prob.config(best))
+        print(f"seed {seed}: best draw log L {ll.max():.2f} (statements {st:.2f}, data {ll.max() - st:.2f})")
+    print(f"{time.time() - t:.0f} s")
+
+
+if __name__ == "__main__":
+    main()
