@@ -423,6 +423,7 @@ class PlanResult:
             "spread_now": self.before.spread,
             "spread_after": self.after,
             "discrepancy_floor": self.discrepancy_floor,
+            "screening_now": None if self.screening is None else float(self.screening[-1]),
             "plan": self.rows(),
             "singles": singles,
             "sigma_rel": self.sigma_rel,
