@@ -1,21 +1,22 @@
 """Closed-form inverse kinematics of common planar chain patterns: the general solver's fast path.
 
-The general inverse kinematics (:mod:`fpm_sim.architecture.kinematics`) solves every closure by Newton's method.
-Where a chain is one of the patterns below *and the end effector's pose is all given* (so the chain's attachment
-point is known), its joint coordinates follow in closed form, and the general solver takes them instead of
-iterating. Each pattern gives every assembly (two: the working mode picks one); the caller keeps the one inside
-every working-mode interval, and then **checks** the whole assembly with the general closure residual: where the
-pattern's assumptions fail for any reason (an axis off the plane, an attachment point out of the plane, round-off
-at the workspace's edge), the check fails and the general Newton runs as before. So these forms never change a
-result; they only skip iterations.
+The general inverse kinematics (:mod:`fpm_sim.architecture.kinematics`) solves every closure by Newton's method. Where a
+chain is one of the patterns below *and its attachment point is known from the task coordinates* (the end effector's
+pose all given, or a planar end effector's free ``phi`` turning no attachment point), its joint coordinates follow in
+closed form, and the general solver takes them instead of iterating. Each pattern gives every assembly (two: the working
+mode picks one); the caller keeps the one inside every working-mode interval, and then **checks** the whole assembly
+with the general closure residual: where the pattern's assumptions fail for any reason (an axis off the plane, an
+attachment point out of the plane, round-off at the workspace's edge), the check fails and the general Newton runs as
+before. So these forms never change a result; they only skip iterations.
 
 Patterns (a root chain, from its base frame ``(p0, R0)``; ``u = R0 x``, ``w`` the first revolute's world axis,
 ``v = w x u``):
 
 * **planar dyad** ``revolute - link L1 - revolute - link L2 - end joint`` with both revolute axes equal (unit, and
-  perpendicular to the frame's x axis): the 3RRR's chains (the five-bar's too, but its free ``phi`` leaves it to
-  Newton). The end joint's centre is ``p0 + L1 e(q1) + L2 e(q1 + q2)`` with ``e(a) = cos a u + sin a v``:
-  circle-circle intersection, ``cos q2 = (r^2 - L1^2 - L2^2) / (2 L1 L2)``, ``q2 = +-acos``.
+  perpendicular to the frame's x axis): the 3RRR's chains, the five-bar's and the serial 2R arm's (their free ``phi``
+  then read by the caller from the chain the tool is fixed on). The end joint's centre is
+  ``p0 + L1 e(q1) + L2 e(q1 + q2)`` with ``e(a) = cos a u + sin a v``: circle-circle intersection,
+  ``cos q2 = (r^2 - L1^2 - L2^2) / (2 L1 L2)``, ``q2 = +-acos``.
 * **prismatic-revolute** ``prismatic - revolute - link L - end joint`` (revolute axis unit, perpendicular to the
   frame's x axis): the 3PRR's chains. The end joint's centre is ``p0 + q1 s + L e(q2)`` with ``s = R0 axis``:
   line-circle intersection, ``|d - q1 s| = L``, two roots of a quadratic.

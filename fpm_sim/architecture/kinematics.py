@@ -12,11 +12,13 @@ spherical nothing more. Rotation rows are scaled by the characteristic length (:
 **Inverse kinematics** solves the closures for the unknowns at the task coordinates by Gauss-Newton with
 minimum-norm steps (a rod between two spherical joints keeps its spin at zero), from the working mode's start
 (each branch interval's middle), then from seeded random starts; the first solution whose coordinates lie in every
-working-mode interval is taken. A pose no start reaches is refused (:class:`UnreachableTaskPoseError`). Where the
-end effector's pose is all given and every chain has a closed form (:mod:`fpm_sim.architecture.closed_forms`: the
-3RRR's and the 3PRR's chains), the closed forms' assembly is taken instead when it passes the same closure tolerance
-and working-mode test; Newton decides everything else. What a description needs at every pose (layouts, lengths,
-attachment points, the closed forms) is worked out once per description (``_plan``).
+working-mode interval is taken. A pose no start reaches is refused (:class:`UnreachableTaskPoseError`). Where every
+chain's attachment point follows from the task coordinates and every chain has a closed form
+(:mod:`fpm_sim.architecture.closed_forms`: the 3RRR's, the 3PRR's, the five-bar's and the serial arm's chains; a free
+planar ``phi`` read from the chain the tool is fixed on), the closed forms' assembly is taken instead when it passes
+the same closure tolerance, working-mode and upright tests; Newton decides everything else. What a description needs
+at every pose (layouts, lengths, attachment points, the closed forms) is worked out once per description
+(``_plan``).
 
 **Mobility and singularity** come from the closure's Jacobian in consistent units (rotation columns times the
 characteristic length ``ell``): with the actuated joints locked, the free end effector and the passive joints must
@@ -275,6 +277,7 @@ class _Plan:
     reach: list[tuple[int, ChainDesc, np.ndarray, float]]
     parts: list[tuple[Description, list[int]]] | None  # None: one solve of the whole
     closed: _ChainForms | None  # None: no closed form of the whole
+    phi_from: str | None  # the chain whose end frame gives the free phi (with ``closed``: :func:`_phi_chain`)
     rods: bool  # a chain of one spherical joint and one link (aimed at its attachment point before Newton)
     span_m: float
     ends: _Ends
@@ -318,6 +321,7 @@ def _make_plan(desc: Description) -> _Plan:
         closure_reach(desc),
         parts,
         _closed_forms(desc, lay),
+        _phi_chain(desc, lay),
         any(_is_rod(c) for c in desc.chains),
         sum(lk.length_m for c in desc.chains for lk in c.links),
         _ends(desc),
@@ -331,14 +335,15 @@ _ChainForms = list[tuple[slice, ChainSolver, tuple[JointDesc, ...], str]]
 
 
 def _closed_forms(desc: Description, lay: _Layout) -> _ChainForms | None:
-    """The closed forms (:mod:`fpm_sim.architecture.closed_forms`) of ``desc``'s chains, when the end effector's
-    pose is all given (each chain's attachment point follows from the task coordinates) and every chain has one;
-    else ``None``.
+    """The closed forms (:mod:`fpm_sim.architecture.closed_forms`) of ``desc``'s chains, when each chain's
+    attachment point follows from the task coordinates and every chain has one; else ``None``.
 
-    A free end-effector coordinate is left to Newton even where it would follow from a closed form (a five-bar's or
-    a serial arm's ``phi`` from the chain its tool is fixed on): Newton may settle on the fixed joint's spurious
-    root half a turn away (its closure rows vanish there too), and the closed form must not change a result."""
-    if lay.ee_free:
+    The attachment points follow when the end effector's pose is all given, or when its only free coordinate is a
+    planar machine's ``phi`` that turns no attachment point (each on the end effector's z axis) and that one chain
+    fixed on the end effector gives (:func:`_phi_chain`: the five-bar's and the serial arm's tool). That ``phi`` is
+    then read from the chain's end frame (:func:`_closed_form_assembly`): the tool upright on its link, never the
+    fixed joint's spurious root half a turn away on which Newton may settle (its closure rows vanish there too)."""
+    if lay.ee_free and _phi_chain(desc, lay) is None:
         return None
     out = []
     for c in desc.chains:
@@ -348,6 +353,20 @@ def _closed_forms(desc: Description, lay: _Layout) -> _ChainForms | None:
             return None
         out.append((slice(slices[0].start, slices[-1].stop), solver, c.moving_joints, str(end.at)))
     return out
+
+
+def _phi_chain(desc: Description, lay: _Layout) -> str | None:
+    """The chain whose end frame gives a planar end effector's free ``phi`` (:func:`_closed_forms`): the only chain
+    fixed on the end effector, when ``phi`` is the only free coordinate and no attachment point of a closed chain
+    lies off the end effector's z axis (``phi`` then moves none); else ``None``."""
+    if not desc.planar or lay.ee_free != ["phi"]:
+        return None
+    ends = [(c.name, c.end_joint) for c in desc.chains if c.end_joint is not None]
+    fixed = [name for name, e in ends if e.type == "fixed"]
+    attach = desc.end_effector.attachments_m
+    if len(fixed) != 1 or any(math.hypot(*attach[str(e.at)][:2]) > 0.0 for _, e in ends):
+        return None
+    return fixed[0]
 
 
 def _is_rod(chain: ChainDesc) -> bool:
@@ -770,11 +789,13 @@ def _general_unknowns(desc: Description, plan: _Plan, pose: TaskPose, start: np.
 
 def _closed_form_assembly(desc: Description, plan: _Plan, pose: TaskPose) -> TaskAssembly | None:
     """The assembly from the chains' closed forms (:func:`_closed_forms`), or ``None`` (no closed form, no assembly
-    or two inside the working-mode intervals, or a closure residual above :data:`CLOSURE_TOL_M`: Newton decides)."""
+    or two inside the working-mode intervals, or a closure residual above :data:`CLOSURE_TOL_M` or a tool not
+    upright: Newton decides). A free ``phi`` is the in-plane angle of the end frame of the chain fixed on the end
+    effector (``plan.phi_from``): their relative rotation the identity."""
     if plan.closed is None:
         return None
     lay = plan.lay
-    pe, re = _ee_frame(desc, pose, [], np.zeros(0))
+    pe, re = _ee_frame(desc, pose, lay.ee_free, np.zeros(len(lay.ee_free)))  # phi turns no attachment point
     z = np.zeros(lay.size)
     for sl, solver, joints, at in plan.closed:
         target = pe + re @ plan.attach[at]
@@ -784,8 +805,13 @@ def _closed_form_assembly(desc: Description, plan: _Plan, pose: TaskPose) -> Tas
         z[sl] = fits[0]
     z = _wrapped(lay, z)
     frames = _frames(desc, lay, z)
+    if plan.phi_from is not None:
+        r_end = frames[plan.phi_from].rotations[-1]
+        z[lay.ee_slice] = math.atan2(float(r_end[1, 0]), float(r_end[0, 0]))
     r = _residual(desc, lay, pose, z, plan.ell, frames)
     if r.size and not float(np.max(np.abs(r))) < CLOSURE_TOL_M:
+        return None
+    if plan.phi_from is not None and not _upright(desc, lay, pose, z, frames):
         return None
     return _assembly(desc, lay, pose, z, plan.ell, frames=frames, r=r)
 
@@ -809,15 +835,17 @@ def _solve(desc: Description, lay: _Layout, pose: TaskPose, start: np.ndarray | 
     )
 
 
-def _upright(desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray) -> bool:
+def _upright(
+    desc: Description, lay: _Layout, pose: TaskPose, z: np.ndarray, frames: dict[str, ChainFrames] | None = None
+) -> bool:
     """Every chain fixed to the end effector turned less than 90 deg against it. The closure's rotation rows (the
     skew part of the relative rotation) vanish at a half turn too, which is not an assembly: a tool turned by pi
-    against the link it is fixed on."""
+    against the link it is fixed on. ``frames``: :func:`_frames` at ``z``, when already built."""
     ends = _plan(desc).ends
     if not ends.fixed.size:
         return True
     _, re = _ee_frame(desc, pose, lay.ee_free, z[lay.ee_slice])
-    _, r = _end_frames(ends, _frames(desc, lay, z))
+    _, r = _end_frames(ends, _frames(desc, lay, z) if frames is None else frames)
     rel = re.T @ r[ends.fixed]
     return bool(np.all(np.trace(rel, axis1=-2, axis2=-1) > 1.0))
 

@@ -55,9 +55,18 @@ def _assert_same(fast: kin.TaskAssembly, slow: kin.TaskAssembly, desc: Descripti
     assert abs(fast.singularity_type2 - slow.singularity_type2) < atol
 
 
-@pytest.mark.parametrize("name", ["three_rrr", "three_prr", "3RRR"])
+def _assert_upright(asm: kin.TaskAssembly, desc: Description) -> None:
+    """Each chain fixed on the end effector: the relative rotation is the identity (to the closure tolerance over
+    the characteristic length, ~1e-10 rad; 1e-9 leaves margin), not a half turn (whose closure rows vanish too)."""
+    fixed = [c.name for c in desc.chains if c.end_joint is not None and c.end_joint.type == "fixed"]
+    for c in fixed:
+        np.testing.assert_allclose(asm.ee_rotation.T @ asm.chains[c].rotations[-1], np.eye(3), atol=1e-9)
+
+
+@pytest.mark.parametrize("name", ["three_rrr", "three_prr", "3RRR", "five_bar", "serial_arm"])
 def test_the_closed_form_serves_and_equals_newton_at_the_check_poses_and_along_a_row(name, monkeypatch):
-    """Every check pose and a warm-started row: no Newton step, and Newton's own answer to 1e-9."""
+    """Every check pose and a warm-started row: no Newton step, and Newton's own answer to 1e-9 (the five-bar's and
+    the serial arm's free phi among the coordinates), the tool upright on its link."""
     desc = _machine(name)
     poses = [TaskPose(p.get("x", 0.0), p.get("y", 0.0), 0.0, p.get("phi", 0.0)) for p in desc.check_poses]
     start = None
@@ -67,14 +76,32 @@ def test_the_closed_form_serves_and_equals_newton_at_the_check_poses_and_along_a
             fast = solve_task_pose(desc, pose, start=start)
         slow = _newton(desc, pose, start)
         _assert_same(fast, slow, desc)
+        _assert_upright(fast, desc)
         start = task_unknowns(desc, fast)
 
 
-@pytest.mark.parametrize("name", ["five_bar", "delta", "serial_arm"])
-def test_machines_without_a_closed_form_keep_newton(name):
-    """A free end-effector coordinate (the five-bar's and the serial arm's phi, the Delta's rotation) or a chain of
-    no pattern (the Delta's rods): Newton, as before."""
-    assert kin._plan(_machine(name)).closed is None
+def test_machines_without_a_closed_form_keep_newton():
+    """The Delta: a free rotation of a spatial end effector and chains of no pattern (its rods). Newton, as before."""
+    assert kin._plan(_machine("delta")).closed is None
+
+
+def test_a_free_phi_that_turns_an_attachment_point_keeps_newton():
+    """The five-bar's tool point moved 10 mm off the end effector's origin: the right chain's attachment point then
+    turns with the unknown phi, so no chain's target is known before phi: no closed form, Newton answers upright."""
+    desc = _machine("five_bar")
+    moved = dataclasses.replace(
+        desc, end_effector=dataclasses.replace(desc.end_effector, attachments_m={"p": (0.01, 0.0, 0.0)})
+    )
+    assert kin._plan(moved).closed is None
+    _assert_upright(solve_task_pose(moved, TaskPose(0.0, 0.25)), moved)
+
+
+@pytest.mark.parametrize(("name", "beyond"), [("five_bar", TaskPose(0.0, 0.5)), ("serial_arm", TaskPose(1.0, 0.0))])
+def test_a_pose_beyond_the_reach_of_a_fixed_tool_machine_is_refused(name, beyond):
+    """The five-bar's left chain spans 400 mm and (0, 500) mm is 506 mm from its base; the serial arm spans 900 mm:
+    no circle intersection, Newton's reach check refuses the pose by name, as before."""
+    with pytest.raises(UnreachableTaskPoseError, match="cannot reach"):
+        solve_task_pose(_machine(name), beyond)
 
 
 def test_near_the_3prr_s_workspace_edge_and_beyond_it():
@@ -123,7 +150,10 @@ def test_near_the_3rrr_s_reach_and_beyond_it():
         solve_task_pose(desc, TaskPose(edge + 1e-4, 0.0))
 
 
-def test_a_wrong_closed_form_is_caught_by_the_closure_check(monkeypatch):
+@pytest.mark.parametrize(
+    ("name", "pose"), [("three_rrr", TaskPose(0.01, -0.02, 0.0, 0.05)), ("five_bar", TaskPose(0.0, 0.25))]
+)
+def test_a_wrong_closed_form_is_caught_by_the_closure_check(name, pose, monkeypatch):
     """Closed forms that are off by 1e-6 rad fail the closure check (1e-11 m): Newton answers, unchanged."""
     from fpm_sim.architecture import closed_forms
 
@@ -132,8 +162,7 @@ def test_a_wrong_closed_form_is_caught_by_the_closure_check(monkeypatch):
         return None if solver is None else (lambda target: [q + 1e-6 for q in solver(target)])
 
     monkeypatch.setattr(kin, "chain_solver", off)
-    desc = dataclasses.replace(_machine("three_rrr"))  # a new description: a new plan with the wrong forms
-    pose = TaskPose(0.01, -0.02, 0.0, 0.05)
+    desc = dataclasses.replace(_machine(name))  # a new description: a new plan with the wrong forms
     assert kin._plan(desc).closed is not None
     _assert_same(solve_task_pose(desc, pose), _newton(desc, pose), desc)
 
@@ -141,14 +170,11 @@ def test_a_wrong_closed_form_is_caught_by_the_closure_check(monkeypatch):
 @pytest.mark.parametrize("name", ["five_bar", "serial_arm"])
 def test_a_tool_fixed_on_a_link_is_assembled_upright_not_half_turned(name):
     """A chain fixed to the end effector closes with the tool along its link, not turned by pi against it: the
-    closure's rotation rows vanish at a half turn too, and the solver must not take that root (it did, at all six
-    five-bar check poses and one of the serial arm's). Checked on the assembly's own frames: the relative rotation
-    of each fixed end is the identity to the closure tolerance."""
-    desc = load_description(EXAMPLES / f"{name}.toml")
-    fixed = [c.name for c in desc.chains if c.end_joint is not None and c.end_joint.type == "fixed"]
-    assert fixed
+    closure's rotation rows vanish at a half turn too, and Newton must not take that root (it did, at all six
+    five-bar check poses and one of the serial arm's). The closed form reads phi from the link (upright by
+    construction), so Newton is checked on its own (``_newton``), and the served assembly as well."""
+    desc = _machine(name)
     for p in desc.check_poses:
-        asm = solve_task_pose(desc, TaskPose(p.get("x", 0.0), p.get("y", 0.0), p.get("z", 0.0), p.get("phi", 0.0)))
-        for c in fixed:
-            rel = asm.ee_rotation.T @ asm.chains[c].rotations[-1]
-            np.testing.assert_allclose(rel, np.eye(3), atol=1e-9)
+        pose = TaskPose(p.get("x", 0.0), p.get("y", 0.0), p.get("z", 0.0), p.get("phi", 0.0))
+        _assert_upright(_newton(desc, pose), desc)
+        _assert_upright(solve_task_pose(desc, pose), desc)
