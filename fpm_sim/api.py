@@ -1459,7 +1459,10 @@ def plan_tests(
         own (:class:`fpm_sim.architecture.TaskPose` values for a described machine's posterior); ``None``:
         ``"study"`` for the 3RRR, ``"grid"`` for a described machine.
     quantities
-        What each candidate pose measures: any of ``"f1"``, ``"f1+f2"``, ``"f1..f3"``.
+        What each candidate pose measures: any of ``"f1"``, ``"f1+f2"``, ``"f1..f3"`` (labelled modes), or
+        ``"read:LINK@POS:AXIS"``: the first clear peak of a hammer test at that accelerometer point and axis, its
+        mode unlabelled (e.g. ``"read:distal_0@0.5:z"``; the 3RRR's readout model,
+        :func:`fpm_sim.study.planning.read_point`).
     target
         Where predictions matter: a :class:`fpm_sim.study.planning.Target` (e.g. a requirement's, with its level),
         poses (f1's band there), or ``None``: f1 over the workspace every 50 mm (a described machine: over the

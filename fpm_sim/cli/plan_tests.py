@@ -28,20 +28,30 @@ from fpm_sim.cli.common import (
 __all__ = ["cmd_plan_tests", "register"]
 
 
-def _quantities(text: str) -> list[str]:
-    from fpm_sim.study.plan import QUANTITIES
+def _quantities(text: str, posterior: Any) -> list[str]:
+    from fpm_sim.study.plan import QUANTITIES, PlanError
+    from fpm_sim.study.planning import read_point, refuse_reads
 
     qs = [q.strip() for q in text.split(",") if q.strip()]
-    bad = [q for q in qs if q not in QUANTITIES]
+    bad = [q for q in qs if q not in QUANTITIES and not q.startswith("read:")]
     if bad or not qs:
-        raise CliError(f"--quantities: unknown {', '.join(map(repr, bad)) or 'empty list'}; use {','.join(QUANTITIES)}")
+        raise CliError(
+            f"--quantities: unknown {', '.join(map(repr, bad)) or 'empty list'}; use {','.join(QUANTITIES)} or "
+            "read:LINK@POS:AXIS (e.g. read:distal_0@0.5:z)"
+        )
+    try:
+        for q in qs:
+            read_point(q)
+        refuse_reads(posterior, qs)
+    except PlanError as err:
+        raise CliError(err.render(parameter="--quantities")) from None
     return qs
 
 
 def _candidates(args: argparse.Namespace, posterior: Any) -> list[Any]:
     from fpm_sim.study.planning import grid_candidates, pose_file_candidates, study_candidates
 
-    qs = _quantities(args.quantities)
+    qs = _quantities(args.quantities, posterior)
     which = args.candidates or ("grid" if posterior.described else "study")
     if which == "study":
         if posterior.described:
@@ -147,7 +157,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--quantities",
         default="f1,f1+f2,f1..f3",
-        help="what each candidate measures, comma-separated from f1, f1+f2, f1..f3 (default: all three)",
+        help="what each candidate measures, comma-separated from f1, f1+f2, f1..f3 (labelled modes) and "
+        "read:LINK@POS:AXIS (the first clear peak of a hammer test at that accelerometer point and axis, its mode "
+        "unlabelled, e.g. read:distal_0@0.5:z; the 3RRR's) (default: f1,f1+f2,f1..f3)",
     )
     p.add_argument(
         "--sigma-pct",

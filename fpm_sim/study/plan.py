@@ -7,6 +7,12 @@ candidate pose and every target pose. A candidate measurement (a pose and the mo
 measurement's sd (:meth:`fpm_sim.study.calibrate.CalibrationProblem.noise_sd`); a draw that cannot reach the
 pose has likelihood 0 there.
 
+A candidate may instead *read* a mode it does not label (the readout model, :mod:`fpm_sim.study.readout`): the
+first clear peak of a hammer test at one accelerometer point and axis is mode ``k`` with probability
+``p_{s,k}`` under draw ``s`` (:attr:`Ensemble.cand_read_weight`), so its one measured value has the mixture
+likelihood ``sum_k p_{s,k} N(y; f_{s,k} (1 + shift_s), sigma^2 + (d_s f_{s,k})^2)``, and an outcome picks the
+draw, then the mode with ``p_{s,k}``, then the noise.
+
 The value of a set of measurements is the expected spread of the target after them (Lindley's expected
 utility of an experiment, estimated by Monte Carlo over the posterior predictive):
 
@@ -30,7 +36,8 @@ Where re-weighting collapses (an outcome's effective sample size below ``ess_min
 select fewer draws than can carry a band), that outcome's update falls back to the Bayes-linear update of the
 draws' ensemble (the ensemble Kalman update: the target's mean and variance after a linear-Gaussian update by
 the measurements' covariance with it, the band then the Gaussian's), and the plan counts and states every such
-outcome. Re-sampling with new model solves per outcome would be exact and costs a pose loop per outcome.
+outcome. Re-sampling with new model solves per outcome would be exact and costs a pose loop per outcome. A read
+enters that update as one value with its mixture's mean and variance under each draw.
 
 A set of ``k`` measurements is chosen greedily: at each step the candidate that lowers the set's expected target
 spread most is added (the greedy choice is within ``1 - 1/e`` of the best set for submodular gains, and is the
@@ -100,6 +107,10 @@ class Ensemble:
         ``(S, T)`` each draw's target frequency, and the discrepancy's shift and relative sd there.
     f_min_hz
         ``(T,)`` the requirement's level at each target pose (the ``requirement`` target), else ``None``.
+    cand_read_weight
+        ``(S, C, J)`` for a candidate that reads the first clear peak (one value, its mode unlabelled): the
+        probability that the peak is each used slot's mode under each draw (summing to 1 over the used slots);
+        NaN for a candidate that labels its modes. ``None``: no candidate reads.
     """
 
     cand_hz: np.ndarray
@@ -111,6 +122,7 @@ class Ensemble:
     target_shift: np.ndarray
     target_disc: np.ndarray
     f_min_hz: np.ndarray | None = None
+    cand_read_weight: np.ndarray | None = None
     _sorted: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -128,6 +140,10 @@ class Ensemble:
     @property
     def n_candidates(self) -> int:
         return int(self.cand_hz.shape[1])
+
+    def is_read(self, c: int) -> bool:
+        """Whether candidate ``c`` reads the first clear peak (:attr:`cand_read_weight`)."""
+        return self.cand_read_weight is not None and bool(np.isfinite(self.cand_read_weight[:, c]).any())
 
     def means(self) -> np.ndarray:
         """``(S, C, J)`` the measured frequencies' means under each draw."""
@@ -213,6 +229,8 @@ class Outcomes:
     """``(M,)`` the draw of each outcome."""
     z: np.ndarray
     """``(M, C, J)`` standard-normal numbers, one per outcome, candidate and slot."""
+    pick: np.ndarray | None = None
+    """``(M, C)`` uniform numbers that pick the mode a read candidate's peak is (``None``: no candidate reads)."""
 
     @classmethod
     def make(cls, ens: Ensemble, n: int, seed: int) -> Outcomes:
@@ -221,7 +239,8 @@ class Outcomes:
         rng = np.random.default_rng(seed)
         draw = rng.integers(0, ens.n_draws, size=n)
         z = rng.standard_normal((n, *ens.cand_hz.shape[1:]))
-        return cls(draw, z)
+        pick = None if ens.cand_read_weight is None else rng.random((n, ens.n_candidates))  # after z: same z
+        return cls(draw, z, pick)
 
 
 @dataclass(frozen=True)
@@ -242,6 +261,8 @@ class Score:
 def _log_terms(ens: Ensemble, c: int, out: Outcomes, mu: np.ndarray, sd: np.ndarray) -> np.ndarray:
     """``(M, S)`` the log-likelihood of every draw for candidate ``c``'s simulated outcomes (``-inf`` for a draw
     that cannot reach the pose, or whose outcome draw cannot: such outcomes get no weight at all)."""
+    if ens.is_read(c):
+        return _read_log_terms(ens, c, out, mu, sd)
     used = ens.cand_used[c]
     m_s, sd_s = mu[:, c, used], sd[:, c, used]  # (S, j)
     y = m_s[out.draw] + sd_s[out.draw] * out.z[:, c, used]  # (M, j)
@@ -250,6 +271,56 @@ def _log_terms(ens: Ensemble, c: int, out: Outcomes, mu: np.ndarray, sd: np.ndar
     ll = np.where(np.isfinite(ll), ll, -np.inf).sum(axis=2)
     out_ll: np.ndarray = np.where(np.isfinite(y).all(axis=1)[:, None], ll, np.nan)  # unreachable outcome: NaN row
     return out_ll
+
+
+def _read_values(ens: Ensemble, c: int, out: Outcomes, mu: np.ndarray, sd: np.ndarray) -> np.ndarray:
+    """``(M,)`` read candidate ``c``'s simulated values: the outcome's draw, then the mode its peak is (by the
+    draw's read probabilities and the outcome's uniform number), then the noise (that slot's normal number)."""
+    assert ens.cand_read_weight is not None
+    assert out.pick is not None
+    used = np.flatnonzero(ens.cand_used[c])
+    p = np.nan_to_num(ens.cand_read_weight[out.draw][:, c, used])  # (M, j)
+    k = np.minimum((np.cumsum(p, axis=1) < out.pick[:, c, None]).sum(axis=1), len(used) - 1)
+    slot = used[k]
+    rows = np.arange(len(out.draw))
+    y: np.ndarray = mu[out.draw, c, slot] + sd[out.draw, c, slot] * out.z[rows, c, slot]
+    return y
+
+
+def _read_log_terms(ens: Ensemble, c: int, out: Outcomes, mu: np.ndarray, sd: np.ndarray) -> np.ndarray:
+    """:func:`_log_terms` of a read candidate: ``log sum_k p_{s,k} N(y; mu_{s,k}, sd_{s,k})`` (the same
+    normalisation as a labelled slot's, so a read certain of one mode scores exactly as that mode labelled)."""
+    assert ens.cand_read_weight is not None
+    used = ens.cand_used[c]
+    y = _read_values(ens, c, out, mu, sd)  # (M,)
+    m_s, sd_s = mu[:, c, used], sd[:, c, used]  # (S, j)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = (y[:, None, None] - m_s[None]) / sd_s[None]
+        lp = np.log(ens.cand_read_weight[:, c, used])[None] - 0.5 * r**2 - np.log(sd_s[None])  # (M, S, j)
+    lp = np.where(np.isfinite(lp), lp, -np.inf)
+    top = lp.max(axis=2)
+    safe = np.where(np.isfinite(top), top, 0.0)
+    ll = np.where(np.isfinite(top), safe + np.log(np.exp(lp - safe[:, :, None]).sum(axis=2)), -np.inf)
+    out_ll: np.ndarray = np.where(np.isfinite(y)[:, None], ll, np.nan)
+    return out_ll
+
+
+def _columns(
+    ens: Ensemble, c: int, out: Outcomes, mu: np.ndarray, sd: np.ndarray
+) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Candidate ``c``'s measured values for the Bayes-linear update: per value its draws' means ``(S,)`` and
+    sds ``(S,)`` and the outcomes' simulated values ``(M,)``. A read is one value, its moments the mixture's
+    (mean ``sum_k p_k mu_k``, variance ``sum_k p_k (sd_k^2 + (mu_k - mean)^2)``: a read certain of one mode is
+    exactly that mode's value)."""
+    if not ens.is_read(c):
+        return [(mu[:, c, j], sd[:, c, j], mu[out.draw, c, j] + sd[out.draw, c, j] * out.z[:, c, j])
+                for j in np.flatnonzero(ens.cand_used[c])]  # fmt: skip
+    assert ens.cand_read_weight is not None
+    used = ens.cand_used[c]
+    p, m, s = ens.cand_read_weight[:, c, used], mu[:, c, used], sd[:, c, used]
+    mean = (p * m).sum(axis=1)
+    var = (p * (s**2 + (m - mean[:, None]) ** 2)).sum(axis=1)
+    return [(mean, np.sqrt(var), _read_values(ens, c, out, mu, sd))]
 
 
 def score_set(
@@ -296,9 +367,9 @@ def _bayes_linear(
     collapsed outcome is scored on the same footing as a re-weighted one; a requirement target takes the
     Gaussian's pass probability."""
     mu, sd = ens.means(), ens.sds()
-    cols = [(c, j) for c in members for j in np.flatnonzero(ens.cand_used[c])]
-    y_s = np.stack([mu[:, c, j] for c, j in cols], axis=1)  # (S, n)
-    noise = np.stack([sd[:, c, j] for c, j in cols], axis=1)
+    cols = [col for c in members for col in _columns(ens, c, out, mu, sd)]
+    y_s = np.stack([col[0] for col in cols], axis=1)  # (S, n)
+    noise = np.stack([col[1] for col in cols], axis=1)
     ok_y = np.isfinite(y_s).all(axis=1)
     g = ens.target_hz * (1.0 + ens.target_shift)  # (S, T) the draws' target means
     valid = ok_y[:, None] & np.isfinite(g)  # (S, T)
@@ -315,7 +386,7 @@ def _bayes_linear(
     gain = np.linalg.solve(cy, cgy.T)  # (n, T)
     var = np.maximum(var_now - np.einsum("tn,nt->t", cgy, gain), 0.0)
     idx = np.flatnonzero(keep)[bad]
-    y_obs = np.array([[mu[out.draw[i], c, j] + sd[out.draw[i], c, j] * out.z[i, c, j] for c, j in cols] for i in idx])
+    y_obs = np.stack([col[2][idx] for col in cols], axis=1)  # (B, n) the collapsed outcomes' simulated values
     mean = g_mean[None] + (y_obs - y_mean[None]) @ gain  # (B, T)
     if mode == "requirement":
         assert ens.f_min_hz is not None

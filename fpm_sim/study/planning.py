@@ -2,10 +2,12 @@
 the plan as a result (:func:`plan_tests`; the method is :mod:`fpm_sim.study.plan`'s).
 
 Candidates are the pairs (pose, quantity) of the given poses and quantities (:data:`~fpm_sim.study.plan.QUANTITIES`:
-``f1``, ``f1+f2``, ``f1..f3``, the modes an experimental modal analysis labels at the pose). The target is
-frequency ``mode`` at the target poses: its 90 % band (default), or, with a level ``f_min_hz``, whether it is
-at least that level (a requirement). The draws' frequencies at every candidate and target pose come from one
-call of the pose loop (:func:`fpm_sim.study.posterior.predict_bands`), at the likelihood's resolution.
+``f1``, ``f1+f2``, ``f1..f3``, the modes an experimental modal analysis labels at the pose; or
+``read:LINK@POS:AXIS``, the first clear peak of a hammer test at that accelerometer point, its mode unlabelled:
+:func:`read_point`). The target is frequency ``mode`` at the target poses: its 90 % band (default), or, with a
+level ``f_min_hz``, whether it is at least that level (a requirement). The draws' frequencies at every candidate
+and target pose come from one call of the pose loop (:func:`fpm_sim.study.posterior.predict_bands`), at the
+likelihood's resolution.
 
 A described machine's posterior (:mod:`fpm_sim.study.calibrate.described`) plans in its own task coordinates: its
 candidates are its task grid or poses of your own (:class:`~fpm_sim.architecture.TaskPose`), its default target f1
@@ -16,6 +18,7 @@ study's 25 cells are the 3RRR's and are refused for it.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import math
 import time
 import warnings
@@ -28,12 +31,13 @@ import numpy as np
 
 from fpm_sim.architecture import Description, TaskPose
 from fpm_sim.batch.engine import EngineOptions
-from fpm_sim.batch.pose_loop import STATUS_NEAR, STATUS_OK, pose_assembly, read_poses_csv
+from fpm_sim.batch.pose_loop import STATUS_NEAR, STATUS_OK, fast_options, pose_assembly, read_poses_csv
 from fpm_sim.batch.task_sweep import read_task_poses_csv, task_grid, task_statuses
 from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimWarning
 from fpm_sim.kinematics import SINGULAR_TOL, Pose, assemble_many
 from fpm_sim.model.options import ModelOptions
+from fpm_sim.response import AXES, LinkPoint
 from fpm_sim.study.plan import (
     BAND_Z,
     QUANTITIES,
@@ -46,6 +50,7 @@ from fpm_sim.study.plan import (
     jsonable_score,
 )
 from fpm_sim.study.posterior import AnyPose, Posterior, pose_columns, pose_text, predict_bands
+from fpm_sim.study.readout import ModeRead, read_probabilities, sensor_residues
 from fpm_sim.study.sweep import dense_grid
 
 __all__ = [
@@ -56,6 +61,7 @@ __all__ = [
     "plan_tests",
     "pose_file_candidates",
     "reachable",
+    "read_point",
     "workspace_target",
 ]
 
@@ -64,18 +70,84 @@ DEFAULT_DRAWS = 200
 weight (effective sample size), enough for a band's 5 % and 95 % points; fewer collapse sooner."""
 
 
+READ_PREFIX = "read:"
+"""A read quantity's prefix: ``read:LINK@POS:AXIS`` (:func:`read_point`)."""
+
+READ_MODES = ModeRead().modes
+"""The modes a read's first clear peak can be (the readout model's default: the lowest three)."""
+
+READ_LINKS = (*(f"{kind}_{i}" for kind in ("proximal", "distal") for i in range(3)), "platform")
+"""The 3RRR's links a read's accelerometer can sit on (the readout model is the 3RRR's)."""
+
+
+def read_point(quantity: str) -> LinkPoint | None:
+    """The accelerometer point and axis of a read quantity ``read:LINK@POS:AXIS`` (``POS``: the fraction of the
+    link's length from its start, 0..1; ``AXIS``: ``normal``, ``along``, ``z``, ``x`` or ``y``), e.g.
+    ``read:distal_0@0.5:z``; ``None`` for a labelled quantity (a key of :data:`~fpm_sim.study.plan.QUANTITIES`).
+    A bad read or an unknown quantity raises :class:`~fpm_sim.study.plan.PlanError` naming it."""
+    if quantity in QUANTITIES:
+        return None
+    use = f"use {', '.join(QUANTITIES)} or read:LINK@POS:AXIS (e.g. read:distal_0@0.5:z)"
+    if not quantity.startswith(READ_PREFIX):
+        raise PlanError(f"unknown quantity {quantity!r}", parameter="quantities", hint=use)
+    where, _, axis = quantity[len(READ_PREFIX) :].rpartition(":")
+    link, at, pos = where.partition("@")
+    if not (where and at and link and pos):
+        raise PlanError(f"quantity {quantity!r} is not read:LINK@POS:AXIS", parameter="quantities", hint=use)
+    try:
+        fraction = float(pos)
+    except ValueError:
+        fraction = math.nan
+    if not 0.0 <= fraction <= 1.0:
+        raise PlanError(
+            f"quantity {quantity!r}: the position {pos!r} is not a fraction of the link's length in [0, 1]",
+            parameter="quantities",
+        )
+    if link not in READ_LINKS:
+        raise PlanError(
+            f"quantity {quantity!r}: unknown link {link!r} (the readout model is the 3RRR's)",
+            parameter="quantities",
+            hint=f"use one of {', '.join(READ_LINKS)}",
+        )
+    if axis not in AXES or (link == "platform" and axis in ("normal", "along")):
+        ok = ("x", "y", "z") if link == "platform" else AXES
+        raise PlanError(
+            f"quantity {quantity!r}: unknown axis {axis!r}", parameter="quantities", hint=f"use {', '.join(ok)}"
+        )
+    return LinkPoint(link, fraction, axis)
+
+
+def refuse_reads(posterior: Posterior, quantities: Sequence[str]) -> None:
+    """Refuse read quantities on a described machine's posterior, naming them (the readout model,
+    :func:`~fpm_sim.study.readout.sensor_residues`, is the 3RRR's)."""
+    reads = [q for q in quantities if q.startswith(READ_PREFIX)]
+    if reads and posterior.described:
+        raise PlanError(
+            f"{', '.join(map(repr, reads))}: the readout model (which mode a hammer test's first clear peak is) is "
+            f"the 3RRR's; {posterior.base.name!r} is a described machine",
+            parameter="quantities",
+            hint=f"use {', '.join(QUANTITIES)}",
+        )
+
+
 @dataclass(frozen=True)
 class Candidate:
     """One candidate measurement: a pose (the 3RRR's, or a described machine's task pose) and the modes read there."""
 
     pose: AnyPose
     quantity: str
-    """A key of :data:`~fpm_sim.study.plan.QUANTITIES`."""
+    """A key of :data:`~fpm_sim.study.plan.QUANTITIES`, or a read ``read:LINK@POS:AXIS`` (:func:`read_point`)."""
     label: str = ""
 
     @property
     def modes(self) -> tuple[int, ...]:
-        return QUANTITIES[self.quantity]
+        """The modes measured (labelled), or those a read's peak can be (the lowest :data:`READ_MODES`)."""
+        return QUANTITIES.get(self.quantity) or tuple(range(1, READ_MODES + 1))
+
+    @property
+    def point(self) -> LinkPoint | None:
+        """A read's accelerometer point and axis; ``None`` for a labelled quantity."""
+        return read_point(self.quantity)
 
     def name(self, task: tuple[str, ...] | None = None) -> str:
         """``QUANTITY at POSE`` (``task``: a described machine's task coordinates)."""
@@ -107,10 +179,9 @@ class Target:
 def candidates_of(
     poses: Sequence[AnyPose], quantities: Sequence[str], labels: Sequence[str] | None = None
 ) -> list[Candidate]:
-    """Every (pose, quantity) pair, refusing an unknown quantity by name."""
+    """Every (pose, quantity) pair, refusing an unknown quantity or a bad read by name (:func:`read_point`)."""
     for q in quantities:
-        if q not in QUANTITIES:
-            raise PlanError(f"unknown quantity {q!r}", parameter="quantities", hint=f"use {', '.join(QUANTITIES)}")
+        read_point(q)
     if not quantities:
         raise PlanError("no quantity to measure", parameter="quantities", hint=f"use {', '.join(QUANTITIES)}")
     if labels is not None and len(labels) != len(poses):
@@ -225,6 +296,7 @@ def plan_tests(
         raise PlanError(f"must be 1..{len(candidates)} (the number of candidates)", parameter="k", value=k)
     if not 1 <= target.mode <= 3:
         raise PlanError("must be 1..3", parameter="target.mode", value=target.mode)
+    refuse_reads(posterior, list(dict.fromkeys(c.quantity for c in candidates)))
     sig = _sigma_rel(posterior, sigma_rel)
     if posterior.length_scale_m is not None:
         warnings.warn(
@@ -279,8 +351,36 @@ def _ensemble(
         target_shift=shift[:, ti],
         target_disc=disc[:, ti],
         f_min_hz=None if target.f_min_hz is None else np.full(len(ti), target.f_min_hz),
+        cand_read_weight=_read_weights(posterior, candidates, bands.draw_index, used.shape[1], options),
     )
     return ens, len(bands.draw_index)
+
+
+def _read_weights(
+    posterior: Posterior, candidates: Sequence[Candidate], index: np.ndarray, n_slots: int, options: ModelOptions | None
+) -> np.ndarray | None:
+    """``(S, C, J)`` each read candidate's probability that its first clear peak is each mode under each draw
+    (:func:`~fpm_sim.study.readout.read_probabilities` of one
+    :func:`~fpm_sim.study.readout.sensor_residues` call per draw over the read candidates' poses and points; the
+    posterior's readout settings where it has them); NaN for labelled candidates; ``None`` when none reads.
+    The modes' frequencies are the pose loop's, as for the labelled candidates."""
+    reads = [i for i, c in enumerate(candidates) if c.point is not None]
+    if not reads:
+        return None
+    read = dataclasses.replace(posterior.mode_read or ModeRead(), modes=READ_MODES)
+    poses = list(dict.fromkeys(p for i in reads if isinstance(p := candidates[i].pose, Pose)))
+    points = list(dict.fromkeys(pt for i in reads if (pt := candidates[i].point) is not None))
+    pi = [poses.index(candidates[i].pose) for i in reads]  # type: ignore[arg-type]  # 3RRR poses (refuse_reads)
+    qi = [points.index(candidates[i].point) for i in reads]  # type: ignore[arg-type]  # reads have a point
+    opts = options or (fast_options(segments=posterior.segments) if posterior.segments else fast_options())
+    out = np.full((len(index), len(candidates), n_slots), np.nan)
+    for row, i in enumerate(index):
+        cfg = posterior.config(int(i))
+        assert isinstance(cfg, Manipulator)  # refused for a described machine (refuse_reads)
+        _, res = sensor_residues(cfg, poses, n_modes=max(read.reference_modes, READ_MODES), points=points, options=opts)
+        probs = read_probabilities(res, read)  # (poses, points, modes)
+        out[row, reads, :READ_MODES] = probs[pi, qi]
+    return out
 
 
 @dataclass
@@ -324,7 +424,8 @@ class PlanResult:
     def summary(self) -> str:
         """The one line a person reads first."""
         chosen = [self.candidates[p.candidate] for p in self.steps]
-        qs = sorted({c.quantity for c in chosen}, key=list(QUANTITIES).index)
+        order = list(QUANTITIES)
+        qs = sorted({c.quantity for c in chosen}, key=lambda q: (order.index(q) if q in order else len(order), q))
         what = " / ".join(qs)
         n = len(chosen)
         where = f"at these {n} poses" if n > 1 else "at this pose"
@@ -337,6 +438,9 @@ class PlanResult:
             f"measuring {what} {where} is expected to lower the pass/fail uncertainty of f{self.target.mode} >= "
             f"{self.target.f_min_hz:g} Hz from {self._fmt(self.before.spread)} to {self._fmt(self.after)} (entropy)"
         )
+
+    def _reads(self) -> bool:
+        return any(c.quantity.startswith(READ_PREFIX) for c in self.candidates)
 
     def ranking(self) -> list[int]:
         """Candidates by their single measurement's expected spread, best first (NaN last)."""
@@ -382,17 +486,19 @@ class PlanResult:
                 f"  the model discrepancy at its posterior median alone gives {self._fmt(self.discrepancy_floor)}: "
                 "new data narrow the rest, and the discrepancy only by pinning its size"
             )
-        lines.append(f"  {'rank':>4}  {'pose':<34} {'quantity':<8} {'after':>12} {'gain':>10} {'ESS':>7}")
+        wq = max([8] + [len(self.candidates[p.candidate].quantity) for p in self.steps])
+        lines.append(f"  {'rank':>4}  {'pose':<34} {'quantity':<{wq}} {'after':>12} {'gain':>10} {'ESS':>7}")
         for r, step in zip(self.rows(), self.steps):
             pose = r["label"] or pose_text(self.candidates[step.candidate].pose, self.task)
             lines.append(
-                f"  {r['rank']:>4}  {pose:<34} {r['quantity']:<8} {self._fmt(r['spread_after']):>12} "
+                f"  {r['rank']:>4}  {pose:<34} {r['quantity']:<{wq}} {self._fmt(r['spread_after']):>12} "
                 f"{self._fmt(r['gain']).replace('+-', ''):>10} {r['ess_median']:>7.0f}"
             )
         if self.collapsed:
+            reads = " (a read's value by its mixture's mean and variance)" if self._reads() else ""
             lines.append(
                 f"  note: {self.collapsed} simulated outcomes re-weighted to an effective sample size below "
-                f"{self.ess_min:g}; their update is the Bayes-linear one (module fpm_sim.study.plan)"
+                f"{self.ess_min:g}; their update is the Bayes-linear one{reads} (module fpm_sim.study.plan)"
             )
         return "\n".join(lines)
 
@@ -522,6 +628,7 @@ def study_candidates(quantities: Sequence[str], posterior: Posterior | None = No
 def grid_candidates(posterior: Posterior, quantities: Sequence[str], *, step_mm: float) -> list[Candidate]:
     """The posterior median description's reachable, non-singular workspace on a ``step_mm`` grid (phi 0; a
     described machine: its task grid, :func:`workspace_target`)."""
+    refuse_reads(posterior, quantities)
     return candidates_of(list(workspace_target(posterior, step_mm=step_mm).poses), quantities)
 
 
@@ -532,6 +639,7 @@ def pose_file_candidates(
     for a described one (:func:`~fpm_sim.batch.task_sweep.read_task_poses_csv`). A pose the posterior median's
     machine does not reach away from singularities is refused, naming its row (no draw's measurement there could be
     simulated reliably)."""
+    refuse_reads(posterior, quantities)
     cfg = posterior.median_config()
     lines: list[int] = []
     poses: list[AnyPose] = (

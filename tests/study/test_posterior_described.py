@@ -9,6 +9,7 @@ their masses'). Bad input is one error line naming the option (or the file's row
 from __future__ import annotations
 
 import json
+import re
 import warnings
 
 import numpy as np
@@ -190,6 +191,21 @@ def test_plan_tests_bad_input_on_a_described_posterior(posterior_file, tmp_path,
     assert len(err) == 1, err
     assert err[0].startswith("error:")
     assert needle in err[0], err
+    assert not out.exists()
+
+
+def test_a_read_is_refused_on_a_described_posterior_by_name(posterior, posterior_file, tmp_path, capsys):
+    """The readout model (sensor_residues) is the 3RRR's: a read quantity is refused, named, before any solve."""
+    read = "read:distal_0@0.5:z"
+    with pytest.raises(PlanError, match=re.escape(f"'{read}': the readout model")) as exc:
+        fs.plan_tests(posterior, candidates=POSES, quantities=["f1", read], sigma_rel=0.02, k=1)
+    assert exc.value.parameter == "quantities"
+    out = tmp_path / "plan"
+    argv = ["plan-tests", "--posterior", str(posterior_file), *SMALL, "--quantities", f"f1,{read}", "--out", str(out)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert err[0].startswith(f"error: --quantities: '{read}': the readout model"), err
     assert not out.exists()
 
 
