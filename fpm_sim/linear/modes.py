@@ -221,6 +221,10 @@ class ModalResult:
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
         ax.set_zlabel("z (m)")
+        from matplotlib.ticker import MaxNLocator
+
+        for axis in (ax.xaxis, ax.yaxis, ax.zaxis):  # a few ticks each: a 2 m arm's labels otherwise run together
+            axis.set_major_locator(MaxNLocator(nbins=5))
         points = np.concatenate(list(pos.values()))
         span = max(float(np.ptp(points, axis=0).max()), 1e-3)  # a planar machine's: its x-y extent
         mid = 0.5 * (points.min(axis=0) + points.max(axis=0))
