@@ -1494,21 +1494,8 @@ def plan_tests(
         if isinstance(posterior, study_posterior.Posterior)
         else study_posterior.Posterior.from_netcdf(posterior)
     )
-    candidates = candidates if candidates is not None else "grid" if post.described else "study"
-    if candidates == "study":
-        cands = planning.study_candidates(quantities, post)
-    elif candidates == "grid":
-        cands = planning.grid_candidates(post, quantities, step_mm=50.0)
-    elif isinstance(candidates, str):
-        raise planning.PlanError(f"unknown {candidates!r}", parameter="candidates", hint="'study', 'grid' or poses")
-    else:
-        cands = planning.candidates_of(list(candidates), quantities)
-    if target is None:
-        tgt = planning.workspace_target(post)
-    elif isinstance(target, planning.Target):
-        tgt = target
-    else:
-        tgt = planning.Target(tuple(target), 1, None, "f1 at the given poses")
+    cands = planning.candidates_from(post, candidates, quantities)
+    tgt = planning.target_from(post, target)
     opts = _options(options) or ModelOptions(segments=post.segments, axial=False, gravity=False)
     return planning.plan_tests(
         post, cands, tgt, k=k, sigma_rel=sigma_rel, n_draws=draws, outcomes=outcomes, seed=seed, options=opts,

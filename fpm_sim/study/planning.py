@@ -691,3 +691,32 @@ def requirement_target(posterior: Posterior, path: str | Path, name: str | None 
                 parameter="target",
             )
     return Target(tuple(poses), req.mode, req.at_least_hz, req.describe())
+
+
+def candidates_from(
+    posterior: Posterior,
+    candidates: str | Sequence[AnyPose] | None,
+    quantities: Sequence[str],
+    *,
+    step_mm: float = 50.0,
+) -> list[Candidate]:
+    """The candidates the facade names: ``"study"`` (the study's 25 cells), ``"grid"`` (the workspace every
+    ``step_mm``), poses, or ``None`` (``"study"`` for the 3RRR, ``"grid"`` for a described machine)."""
+    which = candidates if candidates is not None else "grid" if posterior.described else "study"
+    if which == "study":
+        return study_candidates(quantities, posterior)
+    if which == "grid":
+        return grid_candidates(posterior, quantities, step_mm=step_mm)
+    if isinstance(which, str):
+        raise PlanError(f"unknown {which!r}", parameter="candidates", hint="'study', 'grid' or poses")
+    return candidates_of(list(which), quantities)
+
+
+def target_from(posterior: Posterior, target: Target | Sequence[AnyPose] | None) -> Target:
+    """The target the facade names: a :class:`Target`, poses (f1's band there), or ``None`` (f1 over the
+    workspace, :func:`workspace_target`)."""
+    if target is None:
+        return workspace_target(posterior)
+    if isinstance(target, Target):
+        return target
+    return Target(tuple(target), 1, None, "f1 at the given poses")
