@@ -556,11 +556,13 @@ class PlanResult:
         xs = np.array([p.x_m * 1e3 for p in best])
         ys = np.array([p.y_m * 1e3 for p in best])
         gain = np.array(list(best.values())) * (100.0 if self.target.kind == "band" else 1.0)
-        size = 160 if len(best) <= 60 else max(4.0, 9000.0 / len(best))
-        sc = ax.scatter(xs, ys, c=gain, s=size, cmap="viridis", edgecolors="k", linewidths=0.4 if size > 40 else 0)
-        unit = "points of the 90 % half-width, %" if self.target.kind == "band" else "bits of entropy"
-        if scr is not None:
-            unit += "; screening by the band's moments"
+        dense = len(best) > 60  # a dense grid: squares that tile it, no edges
+        size = max(6.0, 30000.0 / len(best)) if dense else 160.0
+        sc = ax.scatter(
+            xs, ys, c=gain, s=size, cmap="viridis", marker="s" if dense else "o", edgecolors="k",
+            linewidths=0 if dense else 0.4,
+        )  # fmt: skip
+        unit = "points of the band's half-width, %" if self.target.kind == "band" else "bits of entropy"
         fig.colorbar(sc, ax=ax, label=f"expected gain ({unit})", shrink=0.85)
         tx = [p.x_m * 1e3 for p in self.target.poses]
         ty = [p.y_m * 1e3 for p in self.target.poses]
@@ -580,7 +582,8 @@ class PlanResult:
         ax.set_ylabel("y (mm)")
         ax.set_aspect("equal", adjustable="datalim")
         ax.set_title(
-            f"Where to measure next: the expected gain of one measurement\nat each candidate pose; the chosen "
+            f"Where to measure next: the expected gain of one measurement\nat each candidate pose"
+            f"{' (screened by the band' + chr(39) + 's moments)' if scr is not None else ''}; the chosen "
             f"{len(self.steps)} numbered in red",
             fontsize=10,
         )
