@@ -14,11 +14,11 @@ import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import IO
+from typing import IO, Any
 
 from fpm_sim.errors import FpmSimError
 
-__all__ = ["OutputError", "atomic_dir", "atomic_file", "open_for_writing", "prove_creatable"]
+__all__ = ["OutputError", "atomic_dir", "atomic_file", "open_for_writing", "prove_creatable", "write_csv_rows"]
 
 
 class OutputError(FpmSimError):
@@ -172,3 +172,17 @@ def open_for_writing(
         ) from e
     with handle:
         yield handle
+
+
+def write_csv_rows(path: str | Path, rows: list[dict[str, Any]]) -> None:
+    """Write ``rows`` (at least one) as CSV, the header from the first row's keys, values as :mod:`csv` writes them.
+
+    For a file inside a folder that :func:`atomic_dir` is writing: the file itself is not atomic.
+    """
+    import csv
+
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+

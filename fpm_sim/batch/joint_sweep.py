@@ -25,6 +25,7 @@ from fpm_sim.architecture.imported import ImportedDescription
 from fpm_sim.errors import FpmSimError
 from fpm_sim.figures import write_table_and_figure
 from fpm_sim.model.options import ModelOptions
+from fpm_sim.outputs import write_csv_rows
 
 __all__ = ["JointSweep", "check_joint_poses", "modes_at_joint_poses", "read_joint_poses_csv", "sweep_joints"]
 
@@ -138,13 +139,7 @@ class JointSweep:
         return out
 
     def write_csv(self, path: Path) -> None:
-        import csv
-
-        rows = self.rows()
-        with open(path, "w", newline="") as fh:
-            w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-            w.writeheader()
-            w.writerows(rows)
+        write_csv_rows(path, self.rows())
 
     def to_dict(self) -> dict[str, Any]:
         rows = [{k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in r.items()} for r in self.rows()]

@@ -35,6 +35,7 @@ from fpm_sim.figures import write_table_and_figure
 from fpm_sim.kinematics import NEAR_SINGULAR_WARN, SINGULAR_TOL
 from fpm_sim.linear.threads import blas_threads
 from fpm_sim.model.options import ModelOptions
+from fpm_sim.outputs import write_csv_rows
 
 __all__ = ["TaskSweep", "read_task_poses_csv", "sweep_task", "sweep_task_many", "task_grid", "task_statuses"]
 
@@ -221,13 +222,7 @@ class TaskSweep:
         return {s: self.status.count(s) for s in sorted(set(self.status))}
 
     def write_csv(self, path: Path) -> None:
-        import csv
-
-        rows = self.rows()
-        with open(path, "w", newline="") as fh:
-            w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-            w.writeheader()
-            w.writerows(rows)
+        write_csv_rows(path, self.rows())
 
     def to_dict(self) -> dict[str, Any]:
         rows = [{k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in r.items()} for r in self.rows()]

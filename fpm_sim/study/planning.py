@@ -17,7 +17,6 @@ study's 25 cells are the 3RRR's and are refused for it.
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import math
 import time
@@ -37,6 +36,7 @@ from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimWarning
 from fpm_sim.kinematics import SINGULAR_TOL, Pose, assemble_many
 from fpm_sim.model.options import ModelOptions
+from fpm_sim.outputs import write_csv_rows
 from fpm_sim.response import AXES, LinkPoint
 from fpm_sim.study.plan import (
     BAND_Z,
@@ -595,21 +595,14 @@ class PlanResult:
         ``gain_map.png`` into ``out_dir`` (which must exist)."""
         out = Path(out_dir)
         paths = [out / "plan.csv", out / "candidates.csv", out / "gain_map.png"]
-        _write_csv(paths[0], self.rows())
-        _write_csv(paths[1], self.to_dict()["singles"])
+        write_csv_rows(paths[0], self.rows())
+        write_csv_rows(paths[1], self.to_dict()["singles"])
         fig = self.plot()
         fig.savefig(paths[2], dpi=130, bbox_inches="tight")
         import matplotlib.pyplot as plt
 
         plt.close(fig)
         return paths
-
-
-def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
-    with path.open("w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
 
 
 def study_candidates(quantities: Sequence[str], posterior: Posterior | None = None) -> list[Candidate]:
