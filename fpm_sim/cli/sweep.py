@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from fpm_sim.cli.bands import add_posterior_args, bands_hint, sweep_bands
 from fpm_sim.cli.common import (
@@ -27,6 +27,7 @@ from fpm_sim.cli.reproduce import add_study_args, default_out, study_manipulator
 if TYPE_CHECKING:
     from fpm_sim.architecture import Description
     from fpm_sim.architecture.imported import ImportedDescription
+    from fpm_sim.model.options import ModelOptions
 
 __all__ = ["cmd_sweep", "register"]
 
@@ -34,11 +35,25 @@ _STUDY_ONLY = {"reading": "x+", "thickness_mm": None, "posterior": None}
 """Options of the study's own sweep (their defaults): on a described architecture they are refused by name."""
 
 
+def _write_and_emit(args: argparse.Namespace, sw: Any, out: Path, opts: ModelOptions) -> int:
+    """Write a described or imported machine's sweep (``sw.write``) into ``out`` atomically, then print its table
+    (or JSON) with the resolution and the files written."""
+    from fpm_sim.outputs import atomic_dir
+
+    with atomic_dir(out, overwrite=args.overwrite) as tmp:
+        names = [p.name for p in sw.write(tmp)]
+    finish_store(out)
+    paths = [Path(out) / n for n in names]
+    text = sw.table() + "\n" + resolution_line(sw.options or opts) + "\n  wrote " + ", ".join(str(p) for p in paths)
+    payload = {**sw.to_dict(), "files": [str(p) for p in paths]}
+    emit(args, with_resolution(payload, sw.options or opts), text)
+    return 0
+
+
 def _sweep_described(args: argparse.Namespace, desc: Description) -> int:
     """``fpm-sim sweep --config machine.toml``: the general pose loop (:mod:`fpm_sim.batch.task_sweep`)."""
     from fpm_sim.batch.task_sweep import read_task_poses_csv, sweep_task, task_grid
     from fpm_sim.model.options import warn_if_coarse
-    from fpm_sim.outputs import atomic_dir
 
     for key, default in _STUDY_ONLY.items():
         if getattr(args, key, default) != default:
@@ -59,14 +74,7 @@ def _sweep_described(args: argparse.Namespace, desc: Description) -> int:
     sw = sweep_task(
         desc, poses, options=opts, workers=args.workers, grid=grid, step_mm=args.step_mm, backend=args.backend
     )
-    with atomic_dir(out, overwrite=args.overwrite) as tmp:
-        names = [p.name for p in sw.write(tmp)]
-    finish_store(out)
-    paths = [Path(out) / n for n in names]
-    text = sw.table() + "\n" + resolution_line(sw.options or opts) + "\n  wrote " + ", ".join(str(p) for p in paths)
-    payload = {**sw.to_dict(), "files": [str(p) for p in paths]}
-    emit(args, with_resolution(payload, sw.options or opts), text)
-    return 0
+    return _write_and_emit(args, sw, out, opts)
 
 
 def _sweep_imported(args: argparse.Namespace, desc: ImportedDescription) -> int:
@@ -74,7 +82,6 @@ def _sweep_imported(args: argparse.Namespace, desc: ImportedDescription) -> int:
     (:func:`fpm_sim.batch.joint_sweep.sweep_joints`)."""
     from fpm_sim.batch.joint_sweep import read_joint_poses_csv, sweep_joints
     from fpm_sim.model.options import warn_if_coarse
-    from fpm_sim.outputs import atomic_dir
 
     for key, default in {**_STUDY_ONLY, "grid": "dense", "step_mm": 10.0, "backend": "cpu"}.items():
         if getattr(args, key, default) != default:
@@ -92,14 +99,7 @@ def _sweep_imported(args: argparse.Namespace, desc: ImportedDescription) -> int:
     check_output_dir(out, "--out", overwrite=args.overwrite)
     warn_if_coarse(opts)
     sw = sweep_joints(desc, poses, options=opts)
-    with atomic_dir(out, overwrite=args.overwrite) as tmp:
-        names = [p.name for p in sw.write(tmp)]
-    finish_store(out)
-    paths = [Path(out) / n for n in names]
-    text = sw.table() + "\n" + resolution_line(sw.options or opts) + "\n  wrote " + ", ".join(str(p) for p in paths)
-    payload = {**sw.to_dict(), "files": [str(p) for p in paths]}
-    emit(args, with_resolution(payload, sw.options or opts), text)
-    return 0
+    return _write_and_emit(args, sw, out, opts)
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
