@@ -563,26 +563,20 @@ class SweepCache:
         who = ("described", id(config)) if isinstance(config, Description | ImportedDescription) else config
         key = (who, _pose_key(poses), payload_kg, options)
         hit = self._store.get(key)
+        if hit is not None and hit.frequencies_hz.shape[1] >= n_modes:
+            return hit
         if isinstance(config, ImportedDescription):
-            if hit is None or hit.frequencies_hz.shape[1] < n_modes:
-                joint_poses = [p for p in poses if isinstance(p, dict)]
-                hit = sweep_joints(config, joint_poses, options=options, n_modes=n_modes)
-                self._store[key] = hit
-                self.computed += 1
-            return hit
-        if isinstance(config, Description):
-            if hit is None or hit.frequencies_hz.shape[1] < n_modes:
-                task_poses = [p for p in poses if isinstance(p, TaskPose)]
-                hit = sweep_task(config, task_poses, options=options, n_modes=n_modes)
-                self._store[key] = hit
-                self.computed += 1
-            return hit
-        if hit is None or hit.frequencies_hz.shape[1] < n_modes:
+            joint_poses = [p for p in poses if isinstance(p, dict)]
+            hit = sweep_joints(config, joint_poses, options=options, n_modes=n_modes)
+        elif isinstance(config, Description):
+            task_poses = [p for p in poses if isinstance(p, TaskPose)]
+            hit = sweep_task(config, task_poses, options=options, n_modes=n_modes)
+        else:
             cfg = config if payload_kg is None else with_payload(config, payload_kg)
             pts = [p for p in poses if isinstance(p, Pose)]
             hit = pose_frequencies(cfg, pts, n_modes=n_modes, options=options, desc="requirements")
-            self._store[key] = hit
-            self.computed += 1
+        self._store[key] = hit
+        self.computed += 1
         return hit
 
 
