@@ -7,20 +7,9 @@ import warnings
 import pytest
 
 from fpm_sim.cli.main import main
+from tests.helpers.priors import height_and_discrepancy_priors
 
-PRIORS = """
-[parameters."section.height_m"]
-dist = "loguniform"
-lower = 0.005
-upper = 0.03
-reason = "assumed: bar stock"
-
-[likelihood.discrepancy_rel]
-dist = "loguniform"
-lower = 0.005
-upper = 0.5
-reason = "assumed: model error"
-"""
+PRIORS = height_and_discrepancy_priors()
 MEASURED = "x_mm,y_mm,phi_rad,f1_hz\n0,-50,0,54\n50,50,0,49\n-50,50,0,36\n"
 
 

@@ -29,23 +29,11 @@ from fpm_sim.study.calibrate import CalibrationProblem, SamplerOptions, read_pri
 from fpm_sim.study.calibrate.described import DescribedCalibrationProblem, described_priors, described_problem
 from fpm_sim.study.identify import Observation, parameter_set
 from fpm_sim.study.identify.described import read_task_measured_csv
+from tests.helpers.priors import height_and_discrepancy_priors
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples" / "architectures"
 FIVE_BAR = EXAMPLES / "five_bar.toml"
 MASS = "lumps.end_effector.mass_kg"
-PRIORS = """
-[parameters."PATH"]
-dist = "loguniform"
-lower = 0.005
-upper = 0.03
-reason = "assumed: bar stock"
-
-[likelihood.discrepancy_rel]
-dist = "loguniform"
-lower = 0.005
-upper = 0.5
-reason = "assumed: model error"
-"""
 POSES_3RRR = ((0.0, 0.0, 0.0), (50.0, -50.0, 0.1), (-40.0, 80.0, -0.2))
 MEASURED_3RRR = ((50.0, 80.0), (49.0, 79.0), (48.0, 78.0))
 
@@ -60,7 +48,7 @@ def test_the_3rrr_as_a_description_has_the_3rrr_s_likelihood(tmp_path):
     rows = "".join(f"{x},{y},{p},{a},{b}\n" for (x, y, p), (a, b) in zip(POSES_3RRR, MEASURED_3RRR))
     (tmp_path / "m.csv").write_text("x_mm,y_mm,phi_rad,f1_hz,f2_hz\n" + rows)
     data = read_task_measured_csv(tmp_path / "m.csv", desc, sigma_pct=2.0)
-    text = PRIORS.replace("PATH", "sections.links.height_m")
+    text = height_and_discrepancy_priors("sections.links.height_m")
     described = DescribedCalibrationProblem(desc, described_priors(desc, "p.toml", text=text), data, segments=2)
     manip = default_config()
     obs = tuple(
@@ -70,9 +58,8 @@ def test_the_3rrr_as_a_description_has_the_3rrr_s_likelihood(tmp_path):
     )
     names = parameter_set(manip, ["section-height"]).names
     assert names == ["section.height_m"]
-    study = CalibrationProblem(
-        manip, ("section-height",), read_priors("p.toml", names, text=PRIORS.replace("PATH", names[0])), obs, segments=2
-    )
+    priors = read_priors("p.toml", names, text=height_and_discrepancy_priors(names[0]))
+    study = CalibrationProblem(manip, ("section-height",), priors, obs, segments=2)
     np.testing.assert_array_equal(described.measured, study.measured)
     np.testing.assert_array_equal(described.sigma, study.sigma)
     with warnings.catch_warnings():

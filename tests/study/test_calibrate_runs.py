@@ -11,6 +11,7 @@ from fpm_sim.study.calibrate import SamplerOptions
 from fpm_sim.study.calibrate.problem import FrequencyLikelihood
 from fpm_sim.study.calibrate.runs import ClassResult, allocate, between_run_check, combine_classes, evidence_weights
 from fpm_sim.study.calibrate.sampler import _init_worker, sample_classes
+from tests.helpers.priors import height_and_discrepancy_priors
 
 HALF = 10.0
 """The continuous prior: uniform on [-HALF, HALF]^2 (density 1 / (2 HALF)^2)."""
@@ -124,19 +125,7 @@ def test_the_check_passes_for_agreeing_runs_and_names_a_disagreeing_parameter():
     assert bad.to_dict()["bad_parameters"] == ["b"]
 
 
-PRIORS = """
-[parameters."section.height_m"]
-dist = "loguniform"
-lower = 0.005
-upper = 0.03
-reason = "assumed: bar stock"
-
-[likelihood.discrepancy_rel]
-dist = "loguniform"
-lower = 0.005
-upper = 0.5
-reason = "assumed: model error"
-"""
+PRIORS = height_and_discrepancy_priors()
 
 
 def _cheap_frequencies(config, observations, *, options=None, workers=1):

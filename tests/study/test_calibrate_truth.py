@@ -24,24 +24,8 @@ from fpm_sim.batch.pose_loop import fast_options
 from fpm_sim.kinematics import Pose
 from fpm_sim.study.calibrate import CalibrationProblem, SamplerOptions, read_priors, run_calibration
 from fpm_sim.study.identify import Observation, parameter_set, predict_observations
+from tests.helpers.priors import HARDWARE_PRIORS
 
-HARDWARE_PRIORS = """
-[parameters."hardware.platform.mass_kg"]
-dist = "loguniform"
-lower = 0.5
-upper = 5.0
-reason = "assumed: test"
-[parameters."hardware.elbow_joint.mass_kg"]
-dist = "loguniform"
-lower = 0.05
-upper = 1.0
-reason = "assumed: test"
-[parameters."hardware.platform_joint.mass_kg"]
-dist = "loguniform"
-lower = 0.05
-upper = 1.0
-reason = "assumed: test"
-"""
 SBC_POSES = [(0, -50, 0), (50, 50, 0), (-50, 50, 0), (100, -100, 0), (-100, -100, 0), (50, -100, 0)]
 SIGMA_HZ = 1.0  # fixed, known noise sd: the data-generating process is exactly the likelihood's
 

@@ -27,31 +27,9 @@ from fpm_sim.study.calibrate import CalibrationProblem, SamplerOptions, read_pri
 from fpm_sim.study.identify import Observation, parameter_set
 from fpm_sim.study.plan import Ensemble, describe_candidates, greedy_plan
 from fpm_sim.study.poses import study_poses
+from tests.helpers.priors import HARDWARE_PRIORS
 
-
-def _plan3(*args, **kwargs):
-    """``greedy_plan``'s before, singles and steps."""
-    g = greedy_plan(*args, **kwargs)
-    return g.before, g.singles, g.steps
-
-
-PRIORS = """
-[parameters."hardware.platform.mass_kg"]
-dist = "loguniform"
-lower = 0.5
-upper = 5.0
-reason = "assumed: test"
-[parameters."hardware.elbow_joint.mass_kg"]
-dist = "loguniform"
-lower = 0.05
-upper = 1.0
-reason = "assumed: test"
-[parameters."hardware.platform_joint.mass_kg"]
-dist = "loguniform"
-lower = 0.05
-upper = 1.0
-reason = "assumed: test"
-[parameters."section.height_m"]
+PRIORS = HARDWARE_PRIORS + """[parameters."section.height_m"]
 dist = "loguniform"
 lower = 0.004
 upper = 0.03
@@ -117,7 +95,7 @@ def _one_truth(default_manip, truth_seed: int, realizations: int, random_sets: i
         cand_f[:, :, None], describe_candidates([(1,)] * len(cands)), np.zeros((s, len(cands))),
         np.zeros((s, len(cands))), NOISE, target_f, np.zeros_like(target_f), np.zeros_like(target_f),
     )  # fmt: skip
-    _, _, steps = _plan3(ens, K, outcomes=256, seed=truth_seed)
+    steps = greedy_plan(ens, K, outcomes=256, seed=truth_seed).steps
     q05, q50, q95 = np.nanquantile(cand_f, (0.05, 0.5, 0.95), axis=0)
     sets = {
         "plan": [c.candidate for c in steps],
