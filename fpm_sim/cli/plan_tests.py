@@ -66,21 +66,14 @@ def _candidates(args: argparse.Namespace, posterior: Any) -> list[Any]:
 
 
 def _target(args: argparse.Namespace, posterior: Any) -> Any:
-    from fpm_sim.batch.pose_loop import read_poses_csv
-    from fpm_sim.batch.task_sweep import read_task_poses_csv
-    from fpm_sim.study.planning import Target, requirement_target, workspace_target
+    from fpm_sim.study.planning import Target, read_pose_file, requirement_target, workspace_target
 
     if args.target == "workspace":
         return workspace_target(posterior, step_mm=args.target_step_mm, mode=args.target_mode)
     path = Path(args.target)
     if path.suffix == ".toml":
         return requirement_target(posterior, path, args.requirement)
-    base = posterior.base
-    poses = (
-        read_task_poses_csv(path, base, parameter="--target")
-        if posterior.described
-        else read_poses_csv(path, parameter="--target")
-    )
+    poses = read_pose_file(posterior, path, parameter="--target")
     return Target(tuple(poses), args.target_mode, None, f"f{args.target_mode} at the poses of {path.name}")
 
 

@@ -628,6 +628,17 @@ def grid_candidates(posterior: Posterior, quantities: Sequence[str], *, step_mm:
     return candidates_of(list(workspace_target(posterior, step_mm=step_mm).poses), quantities)
 
 
+def read_pose_file(
+    posterior: Posterior, path: str | Path, *, parameter: str, lines: list[int] | None = None
+) -> list[AnyPose]:
+    """The poses of a CSV file in the posterior's machine's coordinates: ``x_mm,y_mm,phi_rad`` for the 3RRR, its
+    task coordinates for a described one (:func:`~fpm_sim.batch.task_sweep.read_task_poses_csv`); ``lines``
+    receives each pose's row in the file."""
+    if isinstance(posterior.base, Description):
+        return list(read_task_poses_csv(path, posterior.base, parameter=parameter, lines=lines))
+    return list(read_poses_csv(path, parameter=parameter, lines=lines))
+
+
 def pose_file_candidates(
     posterior: Posterior, path: str | Path, quantities: Sequence[str], *, parameter: str = "candidates"
 ) -> list[Candidate]:
@@ -638,11 +649,7 @@ def pose_file_candidates(
     refuse_reads(posterior, quantities)
     cfg = posterior.median_config()
     lines: list[int] = []
-    poses: list[AnyPose] = (
-        list(read_task_poses_csv(path, cfg, parameter=parameter, lines=lines))
-        if isinstance(cfg, Description)
-        else list(read_poses_csv(path, parameter=parameter, lines=lines))
-    )
+    poses = read_pose_file(posterior, path, parameter=parameter, lines=lines)
     task = cfg.task if isinstance(cfg, Description) else None
     ok = reachable(cfg, poses)
     for i, pose in enumerate(poses):
