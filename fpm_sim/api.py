@@ -243,7 +243,10 @@ def modes(
     pose
         End-effector pose: a :class:`fpm_sim.kinematics.Pose` (m, m, rad; ``None``: ``(0, 0, 0)``) for the 3RRR,
         a :class:`fpm_sim.architecture.TaskPose` in the architecture's task coordinates for a described one
-        (``None``: its first check pose). An imported model is posed by ``q`` instead.
+        (``None``: its first check pose). An imported model is posed by ``q``, or by a
+        :class:`~fpm_sim.architecture.TaskPose` of its end-effector site where its description names one
+        (``[end_effector]``; :class:`~fpm_sim.model.imported_pose.ImportedKinematics`, ``q`` then the joints kept
+        fixed).
     q
         An imported model's joint values, ``{joint name: value}`` in SI: rad for a hinge, m for a slide (MuJoCo's
         joint coordinates; joints not named stay at the model's reference). Only for an imported model. A list of
@@ -268,7 +271,12 @@ def modes(
         from fpm_sim.model.imported import build_imported
 
         if pose is not None:
-            raise TypeError("an imported model is posed by its joint values: fs.modes(desc, q={'joint': value})")
+            from fpm_sim.architecture import TaskPose
+            from fpm_sim.model.imported_pose import ImportedKinematics
+
+            if not isinstance(pose, TaskPose) or isinstance(q, Sequence):
+                raise TypeError("an imported model's task pose is an fs.TaskPose, with q a mapping of fixed joints")
+            q = ImportedKinematics(config).solve(pose, fixed=q)
         if isinstance(q, Sequence):
             from fpm_sim.batch.joint_sweep import modes_at_joint_poses
 
@@ -327,11 +335,20 @@ def rig_modes(
 
 def _sweep_joints(config: ImportedDescription, poses: Sequence[Any] | None, options: ModelOptions | None) -> JointSweep:
     """:func:`sweep` of an imported model: its poses are ``{joint: value}`` mappings."""
+    from fpm_sim.architecture import TaskPose
     from fpm_sim.batch.joint_sweep import sweep_joints
 
     joint_poses = [p for p in poses or [] if isinstance(p, dict)]
+    task_poses = [p for p in poses or [] if isinstance(p, TaskPose)]
+    if task_poses and len(task_poses) == len(poses or []):  # task space: solved with continuation
+        from fpm_sim.model.imported_pose import joint_poses_of
+
+        joint_poses = joint_poses_of(config, task_poses)
     if not joint_poses or len(joint_poses) != len(poses or []):
-        raise TypeError("an imported model is swept over joint-space poses: fs.sweep(desc, poses=[{'joint': 0.1}])")
+        raise TypeError(
+            "an imported model is swept over joint-space poses, fs.sweep(desc, poses=[{'joint': 0.1}]), or over "
+            "task poses of its end effector, fs.sweep(desc, poses=[fs.TaskPose(...)])"
+        )
     return sweep_joints(config, joint_poses, options=_options(options, stacklevel=4))
 
 
@@ -1498,6 +1515,14 @@ def plan_tests(
     tgt = planning.target_from(post, target)
     opts = _options(options) or ModelOptions(segments=post.segments, axial=False, gravity=False)
     return planning.plan_tests(
-        post, cands, tgt, k=k, sigma_rel=sigma_rel, n_draws=draws, outcomes=outcomes, seed=seed, options=opts,
+        post,
+        cands,
+        tgt,
+        k=k,
+        sigma_rel=sigma_rel,
+        n_draws=draws,
+        outcomes=outcomes,
+        seed=seed,
+        options=opts,
         engine=EngineOptions(workers=workers),
     )

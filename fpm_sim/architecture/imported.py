@@ -17,6 +17,11 @@ The file's form (``docs/import.md``)::
     # optional: start_m / end_m ([x, y, z] in the body's frame), end_site (a site's name), z_axis (the section's
     # height_m direction, in the body's frame), replace_geoms (the geoms the beam replaces)
 
+    [end_effector]                   # optional: pose the model in task space (fpm_sim.model.imported_pose)
+    site = "tool"                    # a site of the model
+    coordinates = ["x", "y", "phi"]  # its task coordinates: x, y, z (the site's position in the world, m) and phi
+                                     # (its x axis' heading about the world z axis, rad)
+
 The beam runs by default from the body's own joint to its child body's joint (or to ``end_site``). Errors name the
 path in the file, as the architecture reader's.
 """
@@ -35,9 +40,30 @@ from fpm_sim.architecture.reader import ValueReader, read_material, read_section
 from fpm_sim.config import Material
 from fpm_sim.config.schema import read_toml_file
 
-__all__ = ["FlexibleBody", "ImportedDescription", "is_imported_file", "load_imported", "parse_imported"]
+__all__ = [
+    "TASK_COORDINATES",
+    "EndEffector",
+    "FlexibleBody",
+    "ImportedDescription",
+    "is_imported_file",
+    "load_imported",
+    "parse_imported",
+]
 
-_TOP = {"kind", "name", "model", "default_source", "materials", "sections", "flexible", "locked_joints", "damping"}
+_TOP = {
+    "kind",
+    "name",
+    "model",
+    "default_source",
+    "materials",
+    "sections",
+    "flexible",
+    "locked_joints",
+    "damping",
+    "end_effector",
+}
+TASK_COORDINATES = ("x", "y", "z", "phi")
+"""The task coordinates an imported model's end-effector site may be posed by, in this order."""
 _FLEX = {"body", "section", "material", "start_m", "end_m", "end_site", "z_axis", "replace_geoms"}
 
 
@@ -56,6 +82,15 @@ class FlexibleBody:
 
 
 @dataclass(frozen=True)
+class EndEffector:
+    """The site an imported model is posed by in task space, and which of its coordinates the pose sets."""
+
+    site: str
+    coordinates: tuple[str, ...]
+    """A subset of :data:`TASK_COORDINATES`, in that order."""
+
+
+@dataclass(frozen=True)
 class ImportedDescription:
     """A MuJoCo model and the bodies of it made flexible (:func:`fpm_sim.model.imported.build_imported`)."""
 
@@ -67,6 +102,12 @@ class ImportedDescription:
     provenance: dict[str, str] = field(default_factory=dict)
     data: dict[str, Any] = field(default_factory=dict)
     source: str = "user"
+    end_effector: EndEffector | None = None
+
+    @property
+    def task(self) -> tuple[str, ...]:
+        """The task coordinates the model is posed by (empty without an ``[end_effector]``: joint space only)."""
+        return self.end_effector.coordinates if self.end_effector else ()
 
     def to_dict(self) -> dict[str, Any]:
         """The description as read (JSON-ready)."""
@@ -107,6 +148,27 @@ def _flexible(r: ValueReader, t: Any, path: str, libs: dict[str, dict[str, Any]]
     )
 
 
+def _end_effector(t: Any) -> EndEffector:
+    table_keys(t, "end_effector", {"site", "coordinates"})
+    site = t.get("site")
+    if not isinstance(site, str) or not site:
+        raise_at("end_effector.site", "must name a site of the model", site)
+    coords = t.get("coordinates")
+    if (
+        not isinstance(coords, list)
+        or not coords
+        or any(c not in TASK_COORDINATES for c in coords)
+        or len(set(coords)) != len(coords)
+    ):
+        raise_at(
+            "end_effector.coordinates",
+            f"must be a list of distinct task coordinates out of {', '.join(TASK_COORDINATES)}",
+            coords,
+            hint='e.g. coordinates = ["x", "y", "phi"] for a planar machine',
+        )
+    return EndEffector(site, tuple(c for c in TASK_COORDINATES if c in coords))
+
+
 def parse_imported(data: dict[str, Any], *, base_dir: Path, source: str = "user") -> ImportedDescription:
     """A validated :class:`ImportedDescription` from parsed TOML; ``model`` is resolved against ``base_dir``."""
     table_keys(data, "<top>", _TOP)
@@ -140,6 +202,7 @@ def parse_imported(data: dict[str, Any], *, base_dir: Path, source: str = "user"
         provenance=r.provenance,
         data=copy.deepcopy(data),
         source=source,
+        end_effector=_end_effector(data["end_effector"]) if "end_effector" in data else None,
     )
 
 

@@ -1,6 +1,6 @@
 """First natural frequencies of an imported model (:mod:`fpm_sim.architecture.imported`) over joint-space poses.
 
-An imported model has no task coordinates: it is posed by its joints' values (MuJoCo's joint coordinates, rad for a
+An imported model is posed by its joints' values (MuJoCo's joint coordinates, rad for a
 hinge, m for a slide), one ``{joint: value}`` mapping per pose; joints a pose does not name stay at the model's
 reference. At each pose the model is built posed (:func:`fpm_sim.model.imported.build_imported`) and its modes
 solved (:func:`fpm_sim.linear.analysis.analyse`). The policy is the described architectures' pose loop's
@@ -8,7 +8,10 @@ solved (:func:`fpm_sim.linear.analysis.analyse`). The policy is the described ar
 
 A CSV of poses (``fpm-sim sweep --poses``, ``fpm-sim modes --poses``) has one column per joint name, in radians
 (hinges) or metres (slides); a column that names no hinge or slide of the model, or a cell that is not a finite
-number, is refused naming the column and the row.
+number, is refused naming the column and the row. A model whose description names an end-effector site
+(``[end_effector]``) may be posed in task space instead: a CSV whose columns are its task coordinates (``x_mm``,
+``y_mm``, ``z_mm``, ``phi_rad``, as a described architecture's) is solved to joint values row by row
+(:func:`fpm_sim.model.imported_pose.joint_poses_of`).
 """
 
 from __future__ import annotations
@@ -83,13 +86,24 @@ def read_joint_poses_csv(
     with open(p, newline="", encoding="utf-8-sig") as fh:
         reader = csv.DictReader(fh)
         columns = [(h or "").strip() for h in reader.fieldnames or []]
+        task_columns = {"phi_rad" if c == "phi" else f"{c}_mm" for c in desc.task}
+        if desc.task and set(columns) == task_columns:  # task-space poses (module docstring)
+            from fpm_sim.batch.task_sweep import read_task_poses_csv
+            from fpm_sim.model.imported_pose import joint_poses_of
+
+            return joint_poses_of(desc, read_task_poses_csv(p, desc, parameter=parameter))
         unknown = [c for c in columns if c not in joints]
         if unknown or not columns:
             raise JointPosesError(
                 f"{p}: column(s) {', '.join(unknown) or '(none)'} name no hinge or slide joint of "
                 f"{desc.model_path.name}",
                 parameter=parameter,
-                hint=f"one column per joint, among: {', '.join(joints)}",
+                hint=f"one column per joint, among: {', '.join(joints)}"
+                + (
+                    f"; or task poses, one column per task coordinate: {', '.join(sorted(task_columns))}"
+                    if desc.task
+                    else ""
+                ),
             )
         for r in reader:
             r = {(k or "").strip(): v for k, v in r.items()}

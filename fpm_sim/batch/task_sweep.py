@@ -27,6 +27,7 @@ import mujoco
 import numpy as np
 
 from fpm_sim.architecture import Description, TaskPose
+from fpm_sim.architecture.imported import ImportedDescription
 from fpm_sim.architecture.kinematics import UnreachableTaskPoseError, closure_reach, solve_task_pose, task_unknowns
 from fpm_sim.batch.engine import spawn_pool
 from fpm_sim.batch.task_pose_model import TaskPoseModel
@@ -74,7 +75,11 @@ def task_grid(
 
 
 def read_task_poses_csv(
-    path: str | Path, desc: Description, *, parameter: str = "poses", lines: list[int] | None = None
+    path: str | Path,
+    desc: Description | ImportedDescription,
+    *,
+    parameter: str = "poses",
+    lines: list[int] | None = None,
 ) -> list[TaskPose]:
     """Task poses from a CSV with one column per task coordinate of ``desc`` (``x_mm``, ``y_mm``, ``z_mm``,
     ``phi_rad``; other columns ignored); errors name ``parameter``, the file and the row. ``lines``: if given, each

@@ -27,6 +27,7 @@ from fpm_sim.outputs import prove_creatable
 
 if TYPE_CHECKING:
     from fpm_sim.architecture import Description, TaskPose
+    from fpm_sim.architecture.imported import ImportedDescription
     from fpm_sim.config import Manipulator
     from fpm_sim.kinematics import Pose
     from fpm_sim.model.options import ModelOptions
@@ -55,6 +56,7 @@ __all__ = [
     "engine_options",
     "error_line",
     "finish_store",
+    "imported_pose_of",
     "is_described",
     "is_imported",
     "joint_values",
@@ -425,16 +427,19 @@ def load_machine(args: argparse.Namespace, command: str) -> Manipulator | Descri
 
 
 IMPORTED_COMMANDS = ("modes", "sweep", "frf", "export-mjcf", "check", "identify", "calibrate")
-"""The commands that run on an imported model (``kind = "imported"``), posed by joint values (``--q``, ``--poses``)."""
+"""The commands that run on an imported model (``kind = "imported"``), posed by joint values (``--q``, ``--poses``) or,
+where its description names an ``[end_effector]``, by task poses (``--x-mm`` ..., a poses CSV of task columns)."""
 
 _WHY_NOT_IMPORTED = {
     "design": "its --vary paths edit a described architecture's chains; an imported model's sections are edited in "
     "its own file (run sweep --poses on each edited copy)",
     "reduce": "its reduced models are the described architectures' (task poses, motors as inputs)",
     "impact": "its hammer points and poses are a described architecture's",
-    "atlas": "its atlas is over task poses and an imported model has no task coordinates",
+    "atlas": "its atlas spans a described architecture's reach, which an imported model does not state (sweep "
+    "--poses over a CSV of task poses instead, where the model names an [end_effector])",
     "rollout": "it drives motors that an imported model's actuated joints, locked by the import, no longer have",
-    "move": "a move is a task-space path and an imported model has no task coordinates",
+    "move": "a move drives the motors along a task-space path, and the import locks an imported model's actuated "
+    "joints (not built for imported models yet)",
 }
 
 
@@ -494,9 +499,8 @@ def build_machine(args: argparse.Namespace, machine: Manipulator | Description, 
     if isinstance(machine, ImportedDescription):
         from fpm_sim.model.imported import build_imported
 
-        refuse_task_pose(args)
-        q = joint_values(getattr(args, "q", None) or [])
-        return build_imported(machine, q, opts), ", ".join(f"{k} = {v:g}" for k, v in q.items()) or "as the model"
+        q, label = imported_pose_of(args, machine)
+        return build_imported(machine, q, opts), label
     if isinstance(machine, Description):
         from fpm_sim.model.general import build_general
 
@@ -518,16 +522,55 @@ def add_joint_args(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _task_options(args: argparse.Namespace) -> dict[str, float]:
+    """The task-pose options given (``x``, ``y``, ``z`` in mm, ``phi`` in rad); sweep's ``--phi-rad`` default 0
+    counts as not given."""
+    given = {c: getattr(args, f"{c}_mm" if c != "phi" else "phi_rad", None) for c in ("x", "y", "z", "phi")}
+    return {c: float(v) for c, v in given.items() if v is not None and not (c == "phi" and v == 0.0)}
+
+
 def refuse_task_pose(args: argparse.Namespace) -> None:
-    """An imported model is posed by joint values: a task-pose option is refused by name."""
-    for flag in ("x_mm", "y_mm", "z_mm", "phi_rad"):
-        value = getattr(args, flag, None)
-        if value is not None and not (flag == "phi_rad" and value == 0.0):  # sweep's --phi-rad defaults to 0
-            option = "--" + flag.replace("_", "-")
-            raise CliError(
-                f"{option}: an imported model has no task coordinates (no end-effector kinematics); pose it by its "
-                "joints' values: --q NAME=VALUE or --poses FILE.csv (one column per joint)"
-            )
+    """A task-pose option where the poses are given otherwise (``--poses``), or the model has no end effector:
+    refused by name."""
+    for c in _task_options(args):
+        option = "--" + ("phi-rad" if c == "phi" else f"{c}-mm")
+        raise CliError(
+            f"{option}: a single task pose does not combine with --poses; give the poses in the file (joint "
+            "columns, or task columns x_mm, y_mm, z_mm, phi_rad where the model names an [end_effector])"
+        )
+
+
+def imported_pose_of(args: argparse.Namespace, desc: ImportedDescription) -> tuple[dict[str, float], str]:
+    """An imported model's joint values and the pose's label: ``--q`` values, and a task pose (``--x-mm`` ...)
+    solved by :class:`~fpm_sim.model.imported_pose.ImportedKinematics` where the description names an
+    ``[end_effector]`` (its coordinates not given keep the model's reference value; ``--q`` joints stay fixed)."""
+    q = joint_values(getattr(args, "q", None) or [])
+    given = _task_options(args)
+    if not given:
+        return q, ", ".join(f"{k} = {v:g}" for k, v in q.items()) or "as the model"
+    option = "--" + ("phi-rad" if next(iter(given)) == "phi" else f"{next(iter(given))}-mm")
+    if desc.end_effector is None:
+        raise CliError(
+            f"{option}: {desc.name} names no end effector, so it has no task coordinates; pose it by its joints' "
+            'values (--q NAME=VALUE), or name its site in the description: [end_effector] site = "tool", '
+            'coordinates = ["x", "y", "phi"] (docs/import.md)'
+        )
+    for c, v in given.items():
+        flag = "--" + ("phi-rad" if c == "phi" else f"{c}-mm")
+        if c not in desc.task:
+            raise CliError(f"{flag}: {desc.name}'s task coordinates are {', '.join(desc.task)}; drop {flag}")
+        if not math.isfinite(v):
+            raise CliError(f"{flag}: must be a finite number, got {v}")
+    from dataclasses import replace
+
+    from fpm_sim.model.imported_pose import ImportedKinematics
+
+    kin = ImportedKinematics(desc)
+    pose = replace(
+        kin.reference_pose(),
+        **{("phi_rad" if c == "phi" else f"{c}_m"): (v if c == "phi" else v * 1e-3) for c, v in given.items()},
+    )
+    return kin.solve(pose, fixed=q), pose.label(desc.task)
 
 
 def joint_values(items: list[str]) -> dict[str, float]:

@@ -87,6 +87,7 @@ def description_text(args: argparse.Namespace, out: Path) -> str:
     lines += [f"{k} = {_value(v, src)}" for k, v in MATERIAL_PRESETS[args.material].items()]
     lines += ["", "[sections.link]", f'shape = "{section.pop("shape")}"']
     lines += [f"{k} = {_value(v, f'fpm-sim import --section {args.section}')}" for k, v in section.items()]
+    lines += _end_effector_lines(args)
     from fpm_sim.model.imported import end_sites
 
     ends = end_sites(model, flexible)
@@ -97,6 +98,24 @@ def description_text(args: argparse.Namespace, out: Path) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _end_effector_lines(args: argparse.Namespace) -> list[str]:
+    """The ``[end_effector]`` table of ``--end-site`` and ``--task`` (none without them)."""
+    from fpm_sim.architecture.imported import TASK_COORDINATES
+
+    if args.end_site is None and args.task is None:
+        return []
+    if args.end_site is None or args.task is None:
+        given, missing = ("--end-site", "--task") if args.task is None else ("--task", "--end-site")
+        raise CliError(f"{given}: give --end-site SITE and --task COORDINATES together (missing {missing})")
+    task = _names(args.task, "--task")
+    if not task or any(c not in TASK_COORDINATES for c in task) or len(set(task)) != len(task):
+        raise CliError(
+            f"--task {args.task}: distinct task coordinates out of {','.join(TASK_COORDINATES)} (e.g. x,y,phi)"
+        )
+    coordinates = ", ".join(_quote(c) for c in TASK_COORDINATES if c in task)
+    return ["", "[end_effector]", f"site = {_quote(args.end_site)}", f"coordinates = [{coordinates}]"]
+
+
 def _quote(s: str) -> str:
     return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
 
@@ -104,7 +123,12 @@ def _quote(s: str) -> str:
 def _named_error(exc: Exception, args: argparse.Namespace) -> CliError | None:
     """A model-import error on a table the flags wrote, as one line naming the flag."""
     parameter = str(getattr(exc, "parameter", "") or "")
-    option = {"flexible": "--flexible", "locked_joints": "--lock", "model": "MODEL"}.get(parameter.split("[")[0])
+    option = {
+        "flexible": "--flexible",
+        "locked_joints": "--lock",
+        "model": "MODEL",
+        "end_effector.site": "--end-site",
+    }.get(parameter.split("[")[0])
     if option is None:
         return None
     hint = getattr(exc, "hint", None)
@@ -122,6 +146,10 @@ def cmd_import(args: argparse.Namespace) -> int:
     try:
         desc = parse_imported(tomllib.loads(text), base_dir=args.out.resolve().parent, source=str(args.out))
         report = import_report(desc)
+        if desc.end_effector is not None:
+            from fpm_sim.model.imported_pose import ImportedKinematics
+
+            ImportedKinematics(desc)  # the site exists
     except FpmSimError as exc:
         named = _named_error(exc, args)
         if named is None:
@@ -140,7 +168,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="write an imported description: a MuJoCo model (MJCF or URDF) with bodies made flexible links",
         description="Writes a description (kind = 'imported', docs/import.md) naming MODEL, with one [[flexible]] "
         "table per body of --flexible at --section and --material, every value with its provenance; prints what "
-        "the import keeps and replaces. Every other command then takes it with --config.",
+        "the import keeps and replaces. Every other command then takes it with --config. With --end-site and --task "
+        "the model is also posed in task space (--x-mm, --y-mm, --z-mm, --phi-rad, or a poses CSV of them).",
     )
     p.add_argument("model", type=Path, metavar="MODEL", help="the MuJoCo model: MJCF (.xml) or URDF (.urdf)")
     p.add_argument("--flexible", required=True, metavar="BODY,...", help="the bodies made flexible links")
@@ -152,6 +181,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--material", required=True, metavar="NAME", help="the links' material: steel or aluminium")
     p.add_argument("--lock", metavar="JOINT,...", help="joints locked besides the actuated ones")
+    p.add_argument(
+        "--end-site",
+        metavar="SITE",
+        help="the end effector's site: the model is then posed in task space too (--x-mm ...; with --task)",
+    )
+    p.add_argument(
+        "--task",
+        metavar="COORDS",
+        help="the end-effector site's task coordinates, out of x,y,z,phi (world position, heading about z; "
+        "e.g. x,y,phi)",
+    )
     p.add_argument("--out", type=Path, required=True, help="the description file to write (.toml)")
     add_overwrite_arg(p)
     add_output_args(p)

@@ -5,8 +5,11 @@ What the builder does (``docs/import.md``):
 - the model is read with :meth:`mujoco.MjSpec.from_file` (MJCF, or URDF as MuJoCo compiles it); a free joint is
   refused (fpm-sim analyses a machine on its base);
 - the pose ``q = {joint: value}`` (MuJoCo's joint coordinates: rad for hinges, m for slides) is set, the kinematics
-  run, and each posed body placed at its posed frame with its joint's ``ref`` at the value, so that ``qpos0`` is the
-  posed machine at rest (what the linear analysis assumes);
+  run, and each posed body placed at its posed frame, its joint's coordinate shifted so that zero is the posed
+  frame (``ref`` 0; ``springref`` and ``range`` shifted alike, so springs and limits keep their places): ``qpos0``
+  is the posed machine at rest, what the linear analysis assumes. (A nonzero ``ref`` gives the same constrained
+  eigen-solve, but the finite-difference step map of an undamped model then shows spurious growth of ~1e-6 at
+  kHz: measured on the five-bar re-posed from its export);
 - actuated joints (those an ``<actuator>`` drives) and ``locked_joints`` are locked: removed, the body rigid on its
   parent, as :func:`fpm_sim.model.general.build_general` locks motors for modal analysis;
 - each flexible body keeps its joint, and a chain of segments (:func:`fpm_sim.model.links.add_link`) hangs on it
@@ -46,6 +49,7 @@ __all__ = [
     "build_imported",
     "end_sites",
     "import_report",
+    "load_spec",
     "posable_joints",
 ]
 
@@ -135,7 +139,8 @@ def _drop_textures(spec: mujoco.MjSpec) -> None:
         material.textures = [""] * len(material.textures)
 
 
-def _load_spec(desc: ImportedDescription) -> mujoco.MjSpec:
+def load_spec(desc: ImportedDescription) -> mujoco.MjSpec:
+    """The model file of ``desc`` as a spec, textures and missing meshes dropped, its flexible bodies checked."""
     try:
         spec = mujoco.MjSpec.from_file(str(desc.model_path))
         spec.compiler.fusestatic = False  # a URDF's default: a body left without joints by locking keeps its name
@@ -195,7 +200,7 @@ def _loop_residuals(model: mujoco.MjModel, data: mujoco.MjData, q: dict[str, flo
 
 def posable_joints(desc: ImportedDescription) -> list[str]:
     """The names of the hinge and slide joints of ``desc``'s model (those a joint-space pose may set)."""
-    model = _load_spec(desc).compile()
+    model = load_spec(desc).compile()
     kinds = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
     return [
         mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j)
@@ -234,10 +239,14 @@ def _pose(spec: mujoco.MjSpec, q: dict[str, float]) -> None:
         body.pos = (rp.T @ (pb - pp)).tolist()
         body.quat = _quat(rp.T @ rb).tolist()
         body.alt.type = mujoco.mjtOrientation.mjORIENTATION_QUAT
-    for name, value in q.items():
+    for name, value in q.items():  # the joint's coordinate shifted by -value: zero is now the posed frame
         j = spec.joint(name)
         hinge = j.type == mujoco.mjtJoint.mjJNT_HINGE
-        j.ref = math.degrees(value) if hinge and spec.compiler.degree else value
+        shift = (math.degrees(value) if hinge and spec.compiler.degree else value) - j.ref
+        j.ref = 0.0
+        j.springref -= shift
+        if j.range[0] < j.range[1]:  # a stated range (an unset one, [0, 0], stays unset: not a limit)
+            j.range = [j.range[0] - shift, j.range[1] - shift]
 
 
 @dataclass
@@ -661,7 +670,7 @@ def _assemble(
             hint="use 'segments' or 'rigid'",
         )
     report = ImportReport()
-    spec = _load_spec(desc)
+    spec = load_spec(desc)
     _pose(spec, q)
     beams = _beams(spec, desc)  # before locking: a locked joint still marks a beam's end
     _lock(spec, desc, report)

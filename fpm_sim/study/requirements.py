@@ -23,10 +23,12 @@ workspace), ``{ grid = "paper", reading = "x+" }`` (the study's 25 poses), ``{ f
 (columns ``x_mm,y_mm,phi_rad``, relative to the requirements file), ``{ list = [[x_mm, y_mm, phi_rad], ...] }``.
 A pose named explicitly (file or list) that is unreachable or singular is an error, not a skipped point.
 
-An imported model (:mod:`fpm_sim.architecture.imported`) has no task coordinates: its pose sets are in joint space,
+An imported model (:mod:`fpm_sim.architecture.imported`) is posed in joint space: its pose sets are
 ``{ joints_file = "q.csv" }`` (one column per joint, rad for a hinge, m for a slide, as
 :func:`~fpm_sim.batch.joint_sweep.read_joint_poses_csv` reads it) or ``{ joints = [{ shoulder = 0.3, elbow = -1.1 },
-...] }``; a task-space pose set on it (and a joint-space one on any other machine) is refused naming the requirement.
+...] }``; where its description names an ``[end_effector]``, also ``{ file = "poses.csv" }`` with its task
+coordinates' columns (solved to joint values, :mod:`fpm_sim.model.imported_pose`). Any other task-space pose set on
+it (and a joint-space one on any other machine) is refused naming the requirement.
 Its frequencies are :func:`~fpm_sim.batch.joint_sweep.sweep_joints`'s (gravity off, inextensible links).
 
 Sweeps are shared: :class:`SweepCache` keys the pose loop's results on the description, the poses, the
@@ -222,11 +224,14 @@ class PoseSpec:
                 f"{where}.poses: {self.describe()} are an imported model's joint values; {config.name!r} is posed by "
                 "its task coordinates: give a task-space pose set (docs/testing.md)"
             )
+        if self.kind == "file" and config.end_effector is not None:  # task poses of its end-effector site
+            return read_joint_poses_csv(self.file or "", config, parameter=f"{where}.poses.file")
         if self.kind not in JOINT_KINDS:
             raise RequirementError(
                 f"{where}.poses: {self.describe()} is a task-space pose set and {config.name!r} is an imported model "
                 'posed by its joints: give poses = { joints_file = "q.csv" } (one column per joint) or '
-                "{ joints = [{ NAME = VALUE, ... }, ...] } (rad for a hinge, m for a slide)"
+                "{ joints = [{ NAME = VALUE, ... }, ...] } (rad for a hinge, m for a slide); or name its "
+                '[end_effector] and give poses = { file = "poses.csv" } (columns: its task coordinates)'
             )
         if self.kind == "joints_file":
             return read_joint_poses_csv(self.file or "", config, parameter=f"{where}.poses.joints_file")
