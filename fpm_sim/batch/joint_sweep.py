@@ -221,15 +221,32 @@ def sweep_joints(
     *,
     options: ModelOptions | None = None,
     n_modes: int = 3,
-    method: str = "transition_fd",
+    method: str = "constrained",
 ) -> JointSweep:
-    """The first ``n_modes`` frequencies (Hz) of ``desc`` at every joint-space pose (module docstring)."""
+    """The first ``n_modes`` frequencies (Hz) of ``desc`` at every joint-space pose (module docstring).
+
+    ``method``: ``"constrained"`` (the pose loop's: one compiled model posed at every pose,
+    :class:`~fpm_sim.batch.imported_pose_model.ImportedPoseModel`, the exact constrained eigen-solve) or any
+    method of :func:`fpm_sim.linear.analysis.analyse` on a model built at each pose (``"transition_fd"``: ~100x the
+    time)."""
     checked = check_joint_poses(desc, poses)
     opts = replace(options or ModelOptions(), gravity=False, axial=False)
-    results = modes_at_joint_poses(desc, checked, options=opts, n_modes=n_modes, method=method)
     freq = np.full((len(checked), n_modes), np.nan)
-    for k, result in enumerate(results):
-        f = np.asarray(result.frequencies_hz, float)[:n_modes]
-        freq[k, : f.size] = f
+    if method == "constrained":
+        from fpm_sim.batch.imported_pose_model import ImportedPoseModel
+        from fpm_sim.linear.threads import blas_threads
+
+        loop = ImportedPoseModel(desc, opts)
+        with blas_threads():  # one BLAS thread around the dense solves, as the described pose loop
+            for k, q in enumerate(checked):
+                try:
+                    freq[k] = loop.solve(q, n_modes)[0]
+                except FpmSimError as e:
+                    e.message = f"pose {k + 1} ({', '.join(f'{j} = {v:g}' for j, v in q.items())}): {e.message}"
+                    raise
+    else:
+        for k, result in enumerate(modes_at_joint_poses(desc, checked, options=opts, n_modes=n_modes, method=method)):
+            f = np.asarray(result.frequencies_hz, float)[:n_modes]
+            freq[k, : f.size] = f
     joints = tuple(dict.fromkeys(j for q in checked for j in q))
     return JointSweep(name=desc.name, joints=joints, poses=checked, freq_hz=freq, options=opts)

@@ -50,6 +50,7 @@ __all__ = [
     "end_sites",
     "import_report",
     "load_spec",
+    "locked_joint_names",
     "posable_joints",
 ]
 
@@ -481,13 +482,19 @@ def _explicit_mass(spec: mujoco.MjSpec, beams: list[_Beam], opts: ModelOptions, 
     spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
 
 
-def _lock(spec: mujoco.MjSpec, desc: ImportedDescription, report: ImportReport) -> None:
-    """Remove the actuated joints and ``locked_joints`` (the body then rigid on its parent)."""
+def locked_joint_names(spec: mujoco.MjSpec, desc: ImportedDescription) -> list[str]:
+    """The joints modal analysis locks: the actuated ones (an ``<actuator>`` drives them) and ``locked_joints``."""
     actuated = [a.target for a in spec.actuators if a.trntype == mujoco.mjtTrn.mjTRN_JOINT]
     for k, name in enumerate(desc.locked_joints):
         if spec.joint(name) is None:
             raise _fail(f"no joint {name!r} in the model", f"locked_joints[{k}]", name)
-    locked = set(actuated) | set(desc.locked_joints)
+    return [n for n in dict.fromkeys([*actuated, *desc.locked_joints]) if spec.joint(n) is not None]
+
+
+def _lock(spec: mujoco.MjSpec, desc: ImportedDescription, report: ImportReport) -> None:
+    """Remove the actuated joints and ``locked_joints`` (the body then rigid on its parent)."""
+    actuated = [a.target for a in spec.actuators if a.trntype == mujoco.mjtTrn.mjTRN_JOINT]
+    locked = set(locked_joint_names(spec, desc))
     for a in list(spec.actuators):  # a locked joint drives nothing
         if a.trntype == mujoco.mjtTrn.mjTRN_JOINT and a.target in locked:
             spec.delete(a)
@@ -660,7 +667,7 @@ def import_report(desc: ImportedDescription, options: ModelOptions | None = None
 
 
 def _assemble(
-    desc: ImportedDescription, q: dict[str, float], opts: ModelOptions
+    desc: ImportedDescription, q: dict[str, float], opts: ModelOptions, *, lock: bool = True
 ) -> tuple[mujoco.MjSpec, ImportReport, dict[str, list[str]], dict[str, str]]:
     if opts.link_model not in ("segments", "rigid"):
         raise _fail(
@@ -673,7 +680,10 @@ def _assemble(
     spec = load_spec(desc)
     _pose(spec, q)
     beams = _beams(spec, desc)  # before locking: a locked joint still marks a beam's end
-    _lock(spec, desc, report)
+    if lock:
+        _lock(spec, desc, report)
+    else:  # kept as joints, named: a pose loop locks them by constraint rows (fpm_sim.batch.imported_pose_model)
+        report.locked = locked_joint_names(spec, desc)
     for beam in beams:
         b = beam.flex.body
         report.replaced[b], report.kept[b] = beam.replaced, beam.kept
@@ -690,9 +700,17 @@ def _assemble(
 
 
 def build_imported(
-    desc: ImportedDescription, q: dict[str, float] | None = None, options: ModelOptions | None = None
+    desc: ImportedDescription,
+    q: dict[str, float] | None = None,
+    options: ModelOptions | None = None,
+    *,
+    keep_locked: bool = False,
 ) -> BuiltModel:
     """The flexible model of ``desc`` posed at the joint values ``q`` (module docstring).
+
+    ``keep_locked``: the joints modal analysis locks (:func:`locked_joint_names`) stay joints, of kind ``"locked"``,
+    for a caller that locks them itself (the pose loop, :class:`fpm_sim.batch.imported_pose_model.ImportedPoseModel`,
+    by constraint rows, so that one compiled model takes every pose).
 
     Raises
     ------
@@ -701,7 +719,9 @@ def build_imported(
         whose stated mass is less than its beam's, a link model other than ``segments`` or ``rigid``.
     """
     opts = options or ModelOptions()
-    spec, report, links, kinds = _assemble(desc, dict(q or {}), opts)
+    spec, report, links, kinds = _assemble(desc, dict(q or {}), opts, lock=not keep_locked)
+    if keep_locked:
+        kinds = {**kinds, **dict.fromkeys(report.locked, "locked")}
     model = compile_model(spec, timestep_s=opts.timestep_s)
     dof_kinds = ["passive"] * model.nv
     for j in range(model.njnt):
