@@ -124,6 +124,12 @@ def _write_and_report(args: argparse.Namespace, result: Any, n_poses: int, grid:
         f"{result.elapsed_s:.1f} s\n\n{result.table()}\n\n  wrote " + ", ".join(str(p) for p in paths)
     )
     payload = {"summary": result.summary(), "files": [str(p) for p in paths], "elapsed_s": result.elapsed_s}
+    from fpm_sim.cli.bands import bands_hint
+
+    hint = bands_hint(args, "design")
+    if hint:  # the embedded default's study without --posterior: say the bands exist
+        text += "\n" + hint
+        payload["bands_available"] = hint.strip()
     emit(args, with_resolution(payload, opts), text)
     return 0
 

@@ -178,3 +178,13 @@ def test_the_embedded_default_s_frequencies_say_that_bands_exist(capsys):
     five_bar = Path(__file__).resolve().parents[2] / "examples" / "architectures" / "five_bar.toml"
     assert main(["modes", "--fidelity", "fast", "--n-modes", "2", "--config", str(five_bar)]) == 0
     assert "bands exist" not in capsys.readouterr().out
+
+
+def test_the_embedded_default_s_design_study_says_that_bands_exist(tmp_path, capsys):
+    """Issue 32, item 2: ``design`` on the embedded default names the posterior that gives each design's band."""
+    from fpm_sim.cli.main import main
+    from fpm_sim.study.posterior import default_posterior_path
+
+    argv = ["design", "--vary", "section.thickness_m=0.02,0.03", "--grid", "paper", "--segments", "2"]
+    assert main([*argv, "--n-modes", "2", "--out", str(tmp_path / "d")]) == 0
+    assert f"'fpm-sim design --posterior {default_posterior_path()}'" in capsys.readouterr().out
