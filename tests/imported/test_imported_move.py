@@ -143,3 +143,27 @@ def test_fpm_sim_move_runs_on_an_imported_model_or_refuses_in_one_line(
     assert err[0].startswith("error: servo_joints: "), err
     assert "servo_joints = [...]" in err[0]
     assert sorted(p.name for p in (tmp_path / "l").iterdir()) == before
+
+
+def test_import_writes_the_servo_joints(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``fpm-sim import --servo JOINTS`` writes ``servo_joints`` (read back as given: the motors a move drives); a
+    joint the model lacks, or one also given to ``--lock``, is one error line naming ``--servo``, nothing written."""
+    imported_copy(load_description(FIVE_BAR), tmp_path)
+    base = ["import", str(tmp_path / "m.xml"), "--flexible", "left_proximal_b0", "--section", "rect:6x25mm"]
+    base += ["--material", "steel", "--end-site", "end_effector_site", "--task", "x,y"]
+    out = tmp_path / "new.toml"
+    assert main([*base, "--servo", "left_motor,right_motor", "--out", str(out)]) == 0
+    capsys.readouterr()
+    imp = load_imported(out)
+    assert imp.servo_joints == ("left_motor", "right_motor")
+    assert imp.locked_joints == ()
+    for extra, words in (
+        (["--servo", "left_motor,knee"], "--servo: no joint 'knee'"),
+        (["--servo", "left_motor", "--lock", "left_motor"], "--servo: a joint is both locked and a servo"),
+    ):
+        bad = tmp_path / "bad.toml"
+        assert main([*base, *extra, "--out", str(bad)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1, err
+        assert words in err, err
+        assert not bad.exists()
