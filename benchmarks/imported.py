@@ -7,7 +7,7 @@ same machine written natively.
   under 2 s); the floor beside it is MuJoCo reading and compiling the same file once
   (``track_import_over_compile``).
 - ``ImportedSweepPerPose``: the five-bar (``examples/architectures/five_bar.toml``) exported with rigid links and its
-  motors as joints and imported back with its four links flexible (``tests/helpers/imported_twin.py``), swept over
+  motors as joints and imported back with its four links flexible (``tests.helpers.imported_copy.py``), swept over
   ``N_POSES`` task poses along a line (the task-space solve with continuation, then
   :func:`fpm_sim.batch.joint_sweep.sweep_joints`: one compiled model posed at every pose) against the native
   five-bar's :func:`fpm_sim.batch.task_sweep.sweep_task` over the same poses, both at the pose loop's options
@@ -99,7 +99,7 @@ class ImportedSweepPerPose(OneBlasThread):
 
     def setup(self, machine: str) -> None:
         import fpm_sim as fs
-        from tests.helpers.imported_twin import imported_copy
+        from tests.helpers.imported_copy import imported_copy
 
         warm_imports()
         self.limit_blas()

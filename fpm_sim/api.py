@@ -774,7 +774,7 @@ def batched_rollouts(
 
 
 def move(
-    config: Manipulator | Description | None = None,
+    config: Manipulator | Description | ImportedDescription | None = None,
     pose: Pose | TaskPose | None = None,
     *,
     end: Pose | TaskPose | None = None,
@@ -794,8 +794,8 @@ def move(
 
     The full flexible model follows the commanded path; reported: tracking error, link deflection, residual
     vibration after the move (peak, settling time, dominant frequency against the modal f1 at the end pose),
-    motor torques (:mod:`fpm_sim.sim.trajectory`). Locked motors get the stated default servos; a described
-    architecture's actuated joints its ``[servos]`` gains (their stated defaults: :mod:`fpm_sim.sim.task`).
+    motor torques (:mod:`fpm_sim.sim.trajectory`). Servos: the 3RRR's stated defaults; a described architecture's or
+    imported model's ``[servos]`` (:mod:`fpm_sim.sim.task`, :mod:`fpm_sim.sim.imported_move`).
 
     Parameters
     ----------
@@ -803,8 +803,8 @@ def move(
         As :func:`modes`.
     pose, end
         Start and end pose (m, m, rad); ``None``: ``(0, 0, 0)`` and ``(30 mm, 0, 0)``. A described architecture:
-        :class:`fpm_sim.architecture.TaskPose` s; ``None``: its first check pose, and that pose 30 mm further along
-        x.
+        :class:`fpm_sim.architecture.TaskPose` s; ``None``: its first check pose (an imported model: its site's
+        reference pose), and that pose 30 mm further along x.
     move_s, profile
         Move time (s) and motion profile (``"trapezoidal"``, ``"s-curve"``, ``"minimum-jerk"``).
     path_csv
@@ -812,10 +812,9 @@ def move(
         ``x_mm, y_mm[, z_mm][, phi_rad]``) instead of a profile move (then no ``pose``/``end``).
     shaper
         Input shaper for the end pose's dominant in-plane mode: ``"none"``, ``"zv"`` or ``"zvd"``.
-    settle_s, settle_tol_m
-        Simulated time after the move (s) and settling tolerance on the in-plane residual (m; ``None``: 20 um).
-    output_step_s
-        Sample period (s).
+    settle_s, settle_tol_m, output_step_s
+        Simulated time after the move (s), settling tolerance on the in-plane residual (m; ``None``: 20 um), sample
+        period (s).
     options
         Model options; ``None``: the standard resolution, inextensible links.
     integrator, band_hz
@@ -824,6 +823,7 @@ def move(
         Show a progress bar.
     """
     from fpm_sim.architecture import Description, TaskPose
+    from fpm_sim.architecture.imported import ImportedDescription
     from fpm_sim.kinematics import Pose
     from fpm_sim.sim import trajectory as tj
 
@@ -844,7 +844,7 @@ def move(
         band_hz=band_hz,
         progress=progress,
     )
-    if isinstance(config, Description):
+    if isinstance(config, Description | ImportedDescription):
         return _task_move(config, pose, end, move_s, profile, path_csv, kw)
     if isinstance(pose, TaskPose) or isinstance(end, TaskPose):
         raise TypeError("the 3RRR takes fs.Pose s (x_m, y_m, phi_rad)")
@@ -856,7 +856,7 @@ def move(
 
 
 def _task_move(
-    desc: Description,
+    desc: Description | ImportedDescription,
     pose: Pose | TaskPose | None,
     end: Pose | TaskPose | None,
     move_s: float,
@@ -864,18 +864,35 @@ def _task_move(
     path_csv: str | Path | None,
     kw: dict[str, Any],
 ) -> MoveResult:
-    """:func:`move` on a described architecture (:func:`fpm_sim.sim.task.simulate_task_move`)."""
+    """:func:`move` on a described architecture or an imported model (:func:`fpm_sim.sim.task.simulate_task_move`)."""
     import dataclasses
 
-    from fpm_sim.sim.task import TaskPath, pose_vector, simulate_task_move
+    from fpm_sim.sim.task import TaskPath, mover_of, pose_vector, simulate_task_move
 
+    mover = mover_of(desc)  # an imported model without an end effector or motors: refused here
+    task = mover.task
     if path_csv is not None:
-        path = TaskPath.from_csv(path_csv, desc.task)
+        path = TaskPath.from_csv(path_csv, task)
     else:
-        start = _task_pose(desc, pose)
-        stop = _task_pose(desc, end) if end is not None else dataclasses.replace(start, x_m=start.x_m + 0.03)
-        path = TaskPath(desc.task, pose_vector(start, desc.task), pose_vector(stop, desc.task), move_s, kind=profile)
-    return simulate_task_move(desc, path, **kw)
+        start = _move_start(desc, mover, pose)
+        stop = _move_start(desc, mover, end) if end is not None else dataclasses.replace(start, x_m=start.x_m + 0.03)
+        path = TaskPath(task, pose_vector(start, task), pose_vector(stop, task), move_s, kind=profile)
+    return simulate_task_move(mover, path, **kw)
+
+
+def _move_start(desc: Description | ImportedDescription, mover: Any, pose: Pose | TaskPose | None) -> TaskPose:
+    """Return ``pose`` (a :class:`~fpm_sim.architecture.TaskPose`), a move's start or end.
+
+    ``None``: a described architecture's first check pose, an imported model's reference pose
+    (:meth:`fpm_sim.sim.imported_move.ImportedMover.reference_pose`).
+    """
+    from fpm_sim.architecture import Description, TaskPose
+
+    if isinstance(desc, Description):
+        return _task_pose(desc, pose)
+    if pose is not None and not isinstance(pose, TaskPose):
+        raise TypeError("an imported model takes a fs.TaskPose (x_m, y_m, z_m, phi_rad)")
+    return pose if pose is not None else mover.reference_pose()
 
 
 def impact(

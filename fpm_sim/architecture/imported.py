@@ -6,6 +6,11 @@ The file's form (``docs/import.md``)::
     name = "acrobot"
     model = "acrobot.xml"            # relative to this file, or absolute; .xml (MJCF) or .urdf
     locked_joints = ["shoulder"]     # locked besides the actuated ones (those an <actuator> drives)
+    servo_joints = ["left_motor"]    # motors without an <actuator>: locked for modal analysis like the actuated
+                                     # ones, position servos in a move (optional)
+
+    [servos]                         # optional: the motors' servo gains in a move, as a described architecture's
+    stiffness_nm_per_rad = 500.0     # (fpm_sim.architecture.description.ServoGains; defaults SERVO_SOURCE)
 
     [materials.aluminium]            # as a described architecture's (fpm_sim.architecture.reader)
     [sections.tube]
@@ -35,8 +40,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from fpm_sim.architecture.description import AnySection, raise_at
-from fpm_sim.architecture.reader import ValueReader, read_material, read_section, table_keys
+from fpm_sim.architecture.description import AnySection, ServoGains, raise_at
+from fpm_sim.architecture.reader import ValueReader, read_material, read_section, read_servos, table_keys
 from fpm_sim.config import Material
 from fpm_sim.config.schema import read_toml_file
 
@@ -59,6 +64,8 @@ _TOP = {
     "sections",
     "flexible",
     "locked_joints",
+    "servo_joints",
+    "servos",
     "damping",
     "end_effector",
 }
@@ -103,6 +110,11 @@ class ImportedDescription:
     data: dict[str, Any] = field(default_factory=dict)
     source: str = "user"
     end_effector: EndEffector | None = None
+    servo_joints: tuple[str, ...] = ()
+    """Motors the model drives without an ``<actuator>``: locked for modal analysis as the actuated joints are,
+    position servos in a move (:func:`fpm_sim.model.imported.build_imported` with ``motors="servo"``)."""
+    servos: ServoGains = field(default_factory=ServoGains)
+    """The motors' servo gains in a move (``[servos]``, as a described architecture's)."""
 
     @property
     def task(self) -> tuple[str, ...]:
@@ -193,11 +205,22 @@ def parse_imported(data: dict[str, Any], *, base_dir: Path, source: str = "user"
     if len(set(names)) != len(names):
         raise_at("flexible", "a body is named flexible twice", names)
     damping = table_keys(data.get("damping", {}), "damping", {"stiffness_proportional_s"})
+    locked = _strings(data.get("locked_joints", []), "locked_joints")
+    servo = _strings(data.get("servo_joints", []), "servo_joints")
+    if set(locked) & set(servo):
+        raise_at(
+            "servo_joints",
+            "a joint is both locked and a servo",
+            sorted(set(locked) & set(servo)),
+            hint="name each motor once: in servo_joints (locked for modal analysis, a servo in a move)",
+        )
     return ImportedDescription(
         name=str(data.get("name", path.stem)),
         model_path=path.resolve(),
         flexible=flexible,
-        locked_joints=_strings(data.get("locked_joints", []), "locked_joints"),
+        locked_joints=locked,
+        servo_joints=servo,
+        servos=read_servos(r, data.get("servos", {})),
         damping_beta_s=r.number(damping, "damping", "stiffness_proportional_s", 0.0),
         provenance=r.provenance,
         data=copy.deepcopy(data),

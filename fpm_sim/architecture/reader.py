@@ -479,3 +479,4 @@ ValueReader = _Values
 read_material = _material
 read_section = _section
 table_keys = _keys
+read_servos = _servos

@@ -80,6 +80,11 @@ def description_text(args: argparse.Namespace, out: Path) -> str:
         f"model = {_quote(rel)}",
         'default_source = "fpm-sim import"',
         f"locked_joints = [{', '.join(_quote(n) for n in _names(args.lock, '--lock'))}]",
+        *(
+            [f"servo_joints = [{', '.join(_quote(n) for n in _names(args.servo, '--servo'))}]  # servos in a move"]
+            if args.servo
+            else []
+        ),
         "",
         f"[materials.{args.material}]",
     ]
@@ -126,6 +131,7 @@ def _named_error(exc: Exception, args: argparse.Namespace) -> CliError | None:
     option = {
         "flexible": "--flexible",
         "locked_joints": "--lock",
+        "servo_joints": "--servo",
         "model": "MODEL",
         "end_effector.site": "--end-site",
     }.get(parameter.split("[")[0])
@@ -181,6 +187,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--material", required=True, metavar="NAME", help="the links' material: steel or aluminium")
     p.add_argument("--lock", metavar="JOINT,...", help="joints locked besides the actuated ones")
+    p.add_argument(
+        "--servo",
+        metavar="JOINT,...",
+        help="motors without an <actuator> (servo_joints): locked for modal analysis like the actuated joints, "
+        "position servos in a move",
+    )
     p.add_argument(
         "--end-site",
         metavar="SITE",

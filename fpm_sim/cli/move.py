@@ -52,16 +52,38 @@ def _check_numbers(args: argparse.Namespace) -> None:
         raise CliError(f"--to-phi-rad {args.to_phi_rad:g} is outside -pi..pi; give it in radians within -pi..pi")
 
 
+def _imported_start(args: argparse.Namespace, mover: Any) -> Any:
+    """An imported model's start pose: the end-effector site's pose at the model's reference, the pose options
+    given replacing its coordinates (those the model names; others refused by name)."""
+    from dataclasses import replace
+
+    desc = mover.desc
+    given = {"x": args.x_mm, "y": args.y_mm, "z": getattr(args, "z_mm", None), "phi": args.phi_rad}
+    for c, v in given.items():
+        flag = "--phi-rad" if c == "phi" else f"--{c}-mm"
+        if v is not None and c not in desc.task:
+            raise CliError(f"{flag}: {desc.name}'s task coordinates are {', '.join(desc.task)}; drop {flag}")
+        if v is not None and not math.isfinite(v):
+            raise CliError(f"{flag}: must be a finite number, got {v}")
+    si = {
+        ("phi_rad" if c == "phi" else f"{c}_m"): v * (1.0 if c == "phi" else 1e-3)
+        for c, v in given.items()
+        if v is not None
+    }
+    return replace(mover.reference_pose(), **si)
+
+
 def _path(args: argparse.Namespace, machine: Any) -> Any:
-    """The commanded path: the 3RRR's :class:`~fpm_sim.sim.trajectory.MovePath`, or a described architecture's
-    ``TaskPath`` (its task coordinates; an end coordinate not given is the start's, x 30 mm further when none is
-    given)."""
+    """The commanded path: the 3RRR's :class:`~fpm_sim.sim.trajectory.MovePath`, or a described architecture's or
+    an imported model's (its :class:`~fpm_sim.sim.imported_move.ImportedMover`) ``TaskPath`` (its task coordinates;
+    an end coordinate not given is the start's, x 30 mm further when none is given)."""
     from fpm_sim.architecture import Description
     from fpm_sim.kinematics import Pose
+    from fpm_sim.sim.imported_move import ImportedMover
     from fpm_sim.sim.task import TaskPath, pose_vector
     from fpm_sim.sim.trajectory import MovePath
 
-    if not isinstance(machine, Description):
+    if not isinstance(machine, Description | ImportedMover):
         if args.to_z_mm is not None:
             raise CliError("--to-z-mm: the 3RRR's task coordinates are x, y and phi; drop --to-z-mm")
         if args.path_csv is not None:
@@ -69,13 +91,14 @@ def _path(args: argparse.Namespace, machine: Any) -> Any:
         to = [v if v is not None else d for v, d in zip((args.to_x_mm, args.to_y_mm, args.to_phi_rad), (30.0, 0, 0))]
         return MovePath(pose_of(args), Pose.from_mm(*to), args.move_s, kind=args.profile)
     task = machine.task
+    name = machine.name if isinstance(machine, Description) else machine.desc.name
     for c, flag in _TO_FLAGS.items():
         if getattr(args, flag) is not None and c not in task:
             f = "--" + flag.replace("_", "-")
             raise CliError(
-                f"{f}: {machine.name} has no task coordinate {c} (its task coordinates are {', '.join(task)}); drop {f}"
+                f"{f}: {name} has no task coordinate {c} (its task coordinates are {', '.join(task)}); drop {f}"
             )
-    start = task_pose_of(args, machine)
+    start = task_pose_of(args, machine) if isinstance(machine, Description) else _imported_start(args, machine)
     if args.path_csv is not None:
         return TaskPath.from_csv(args.path_csv, task)
     given = {c: getattr(args, _TO_FLAGS[c]) for c in task}
@@ -90,9 +113,11 @@ def _path(args: argparse.Namespace, machine: Any) -> Any:
 
 
 def cmd_move(args: argparse.Namespace) -> int:
-    from fpm_sim.architecture import Description
+    from fpm_sim.architecture.imported import ImportedDescription
+    from fpm_sim.config import Manipulator
     from fpm_sim.model.options import warn_if_coarse
     from fpm_sim.outputs import atomic_file
+    from fpm_sim.sim.imported_move import ImportedMover
     from fpm_sim.sim.task import simulate_task_move
     from fpm_sim.sim.trajectory import simulate_move
 
@@ -100,11 +125,13 @@ def cmd_move(args: argparse.Namespace) -> int:
     check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
     _check_numbers(args)
     stepping = stepping_kwargs(args)
-    machine = load_machine(args, "move")
+    machine: Any = load_machine(args, "move")
+    if isinstance(machine, ImportedDescription):  # no end effector or no motors: refused here, in one line
+        machine = ImportedMover(machine)
     path = _path(args, machine)
     opts = model_options(args)
     warn_if_coarse(opts)
-    simulate: Any = simulate_task_move if isinstance(machine, Description) else simulate_move
+    simulate: Any = simulate_move if isinstance(machine, Manipulator) else simulate_task_move
     res = simulate(
         machine,
         path,
@@ -137,7 +164,10 @@ def register(sub: argparse._SubParsersAction) -> None:
             "The end effector follows a straight move from the pose (--x-mm, --y-mm, --phi-rad) to --to-x-mm, "
             "--to-y-mm, --to-phi-rad with a motion profile, or the path of --path-csv (t_s,x_mm,y_mm,phi_rad); the "
             "motors follow the rigid inverse kinematics through their position servos (the description's, else "
-            "500 N m/rad and 1 N m s/rad, assumed). Reported: tracking error, link deflection, residual vibration "
+            "500 N m/rad and 1 N m s/rad, assumed). An imported model moves its end-effector site (its "
+            "[end_effector]) by its motors (the joints an <actuator> drives, and servo_joints), from the site's "
+            "pose at the model's reference unless --x-mm... are given. Reported: tracking error, link deflection, "
+            "residual vibration "
             "after the move (peak, settling time, dominant frequency against the modal f1 at the end pose) and "
             "motor torques; --shaper zv|zvd shapes the profile for the end pose's dominant in-plane mode."
         ),

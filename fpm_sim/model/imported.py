@@ -10,8 +10,11 @@ What the builder does (``docs/import.md``):
   is the posed machine at rest, what the linear analysis assumes. (A nonzero ``ref`` gives the same constrained
   eigen-solve, but the finite-difference step map of an undamped model then shows spurious growth of ~1e-6 at
   kHz: measured on the five-bar re-posed from its export);
-- actuated joints (those an ``<actuator>`` drives) and ``locked_joints`` are locked: removed, the body rigid on its
-  parent, as :func:`fpm_sim.model.general.build_general` locks motors for modal analysis;
+- actuated joints (those an ``<actuator>`` drives), ``servo_joints`` and ``locked_joints`` are locked: removed, the
+  body rigid on its parent, as :func:`fpm_sim.model.general.build_general` locks motors for modal analysis; with
+  ``motors="servo"`` the motors (the actuated joints but for ``locked_joints``, and ``servo_joints``) stay as
+  position servos instead: the description's ``[servos]`` stiffness and damping about the posed coordinate, the
+  model's own actuators on them removed, as a described architecture's servos;
 - each flexible body keeps its joint, and a chain of segments (:func:`fpm_sim.model.links.add_link`) hangs on it
   along the beam; the body's child bodies hang on the chain's last piece at their own positions;
 - mass: every body's inertial is made explicit as the model states it. A flexible body's geoms that the beam
@@ -51,6 +54,7 @@ __all__ = [
     "import_report",
     "load_spec",
     "locked_joint_names",
+    "motor_joints",
     "posable_joints",
 ]
 
@@ -482,28 +486,81 @@ def _explicit_mass(spec: mujoco.MjSpec, beams: list[_Beam], opts: ModelOptions, 
     spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
 
 
-def locked_joint_names(spec: mujoco.MjSpec, desc: ImportedDescription) -> list[str]:
-    """The joints modal analysis locks: the actuated ones (an ``<actuator>`` drives them) and ``locked_joints``."""
+def _motors(spec: mujoco.MjSpec, desc: ImportedDescription) -> list[str]:
+    """The motors of ``desc``'s model in its joint order: the joints a joint ``<actuator>`` drives (but for
+    ``locked_joints``) and ``servo_joints`` (checked to exist)."""
+    for k, name in enumerate(desc.servo_joints):
+        if spec.joint(name) is None:
+            raise _fail(f"no joint {name!r} in the model", f"servo_joints[{k}]", name)
+    driven = {a.target for a in spec.actuators if a.trntype == mujoco.mjtTrn.mjTRN_JOINT} - set(desc.locked_joints)
+    driven |= set(desc.servo_joints)
+    return [j.name for j in spec.joints if j.name in driven]
+
+
+def motor_joints(desc: ImportedDescription) -> list[str]:
+    """The motors of ``desc``'s model (:func:`_motors`): what ``motors="servo"`` drives by position servos."""
+    return _motors(load_spec(desc), desc)
+
+
+def _servo(spec: mujoco.MjSpec, desc: ImportedDescription, motors: list[str]) -> None:
+    """Each motor a position servo: the description's gains as the joint's stiffness and damping about its posed
+    coordinate (``springref`` = ``ref``), the model's own actuators on it removed (they would double the servo)."""
+    if not motors:
+        raise _fail(
+            f"{desc.name} has no motors to drive: no <actuator> drives a joint and servo_joints is empty",
+            "servo_joints",
+            hint="name the joints the machine's motors turn in the description: servo_joints = [...]",
+        )
+    for a in list(spec.actuators):
+        if a.trntype == mujoco.mjtTrn.mjTRN_JOINT and a.target in motors:
+            spec.delete(a)
+    for name in motors:
+        j = spec.joint(name)
+        if j.type not in (mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtJoint.mjJNT_SLIDE):
+            raise _fail(
+                f"motor joint {name!r} is not a hinge or slide: a servo drives one coordinate",
+                "servo_joints",
+                name,
+                hint="build it with motors='locked' (modal analysis), or drive a hinge or slide",
+            )
+        k, c = desc.servos.gains("revolute" if j.type == mujoco.mjtJoint.mjJNT_HINGE else "prismatic")
+        j.stiffness, j.damping, j.springref = [k, 0.0, 0.0], [c, 0.0, 0.0], j.ref
+
+
+def _lock(spec: mujoco.MjSpec, desc: ImportedDescription, report: ImportReport, servo: bool = False) -> list[str]:
+    """Remove the actuated joints, ``servo_joints`` and ``locked_joints`` (the body then rigid on its parent); with
+    ``servo`` the first two stay as position servos (:func:`_servo`). Returns the servo joints."""
+    motors = _motors(spec, desc)
     actuated = [a.target for a in spec.actuators if a.trntype == mujoco.mjtTrn.mjTRN_JOINT]
     for k, name in enumerate(desc.locked_joints):
         if spec.joint(name) is None:
             raise _fail(f"no joint {name!r} in the model", f"locked_joints[{k}]", name)
-    return [n for n in dict.fromkeys([*actuated, *desc.locked_joints]) if spec.joint(n) is not None]
-
-
-def _lock(spec: mujoco.MjSpec, desc: ImportedDescription, report: ImportReport) -> None:
-    """Remove the actuated joints and ``locked_joints`` (the body then rigid on its parent)."""
-    actuated = [a.target for a in spec.actuators if a.trntype == mujoco.mjtTrn.mjTRN_JOINT]
-    locked = set(locked_joint_names(spec, desc))
+    if servo:
+        actuated = [a for a in actuated if a not in motors]
+        _servo(spec, desc, motors)
+    order = [*actuated, *desc.locked_joints, *([] if servo else desc.servo_joints)]
+    locked = set(order)
     for a in list(spec.actuators):  # a locked joint drives nothing
         if a.trntype == mujoco.mjtTrn.mjTRN_JOINT and a.target in locked:
             spec.delete(a)
     _drop_with_locked(spec, locked, report)
-    for name in dict.fromkeys([*actuated, *desc.locked_joints]):
+    for name in dict.fromkeys(order):
         joint = spec.joint(name)
         if joint is not None:
             spec.delete(joint)
             report.locked.append(name)
+    return motors if servo else []
+
+
+def locked_joint_names(spec: mujoco.MjSpec, desc: ImportedDescription) -> list[str]:
+    """The joints modal analysis locks (what :func:`_lock` removes without servos): the actuated ones (an
+    ``<actuator>`` drives them), ``locked_joints`` and ``servo_joints``, each checked to exist."""
+    for key, names in (("locked_joints", desc.locked_joints), ("servo_joints", desc.servo_joints)):
+        for k, name in enumerate(names):
+            if spec.joint(name) is None:
+                raise _fail(f"no joint {name!r} in the model", f"{key}[{k}]", name)
+    actuated = [a.target for a in spec.actuators if a.trntype == mujoco.mjtTrn.mjTRN_JOINT]
+    return [n for n in dict.fromkeys([*actuated, *desc.locked_joints, *desc.servo_joints]) if spec.joint(n) is not None]
 
 
 def _drop_with_locked(spec: mujoco.MjSpec, locked: set[str], report: ImportReport) -> None:
@@ -667,7 +724,12 @@ def import_report(desc: ImportedDescription, options: ModelOptions | None = None
 
 
 def _assemble(
-    desc: ImportedDescription, q: dict[str, float], opts: ModelOptions, *, lock: bool = True
+    desc: ImportedDescription,
+    q: dict[str, float],
+    opts: ModelOptions,
+    *,
+    servo: bool = False,
+    lock: bool = True,
 ) -> tuple[mujoco.MjSpec, ImportReport, dict[str, list[str]], dict[str, str]]:
     if opts.link_model not in ("segments", "rigid"):
         raise _fail(
@@ -681,9 +743,9 @@ def _assemble(
     _pose(spec, q)
     beams = _beams(spec, desc)  # before locking: a locked joint still marks a beam's end
     if lock:
-        _lock(spec, desc, report)
+        motors = _lock(spec, desc, report, servo)
     else:  # kept as joints, named: a pose loop locks them by constraint rows (fpm_sim.batch.imported_pose_model)
-        report.locked = locked_joint_names(spec, desc)
+        report.locked, motors = locked_joint_names(spec, desc), []
     for beam in beams:
         b = beam.flex.body
         report.replaced[b], report.kept[b] = beam.replaced, beam.kept
@@ -696,7 +758,7 @@ def _assemble(
     _fpm_options(spec, desc, opts)
     links, kinds, moves = _add_beams(spec, desc, beams, opts, tree)
     spec = mujoco.MjSpec.from_string(_rehang(full_precision_xml(spec), moves))
-    return spec, report, links, kinds
+    return spec, report, links, {**kinds, **dict.fromkeys(motors, "motor")}
 
 
 def build_imported(
@@ -704,22 +766,32 @@ def build_imported(
     q: dict[str, float] | None = None,
     options: ModelOptions | None = None,
     *,
+    motors: str = "locked",
     keep_locked: bool = False,
 ) -> BuiltModel:
     """The flexible model of ``desc`` posed at the joint values ``q`` (module docstring).
 
+    ``motors``: ``"locked"`` (the default: the motors removed, what modal analysis uses) or ``"servo"`` (the motors,
+    :func:`motor_joints`, kept as position servos of the description's ``[servos]`` gains about the posed coordinate,
+    dof kind ``motor``; what a move drives).
+
     ``keep_locked``: the joints modal analysis locks (:func:`locked_joint_names`) stay joints, of kind ``"locked"``,
     for a caller that locks them itself (the pose loop, :class:`fpm_sim.batch.imported_pose_model.ImportedPoseModel`,
-    by constraint rows, so that one compiled model takes every pose).
+    by constraint rows, so that one compiled model takes every pose); with ``motors="locked"`` only.
 
     Raises
     ------
     ModelImportError
         A body, joint or site the description names that the model lacks, a free joint, a zero-length beam, a body
-        whose stated mass is less than its beam's, a link model other than ``segments`` or ``rigid``.
+        whose stated mass is less than its beam's, a link model other than ``segments`` or ``rigid``; with
+        ``motors="servo"``, a model without motors or a motor that is not a hinge or slide.
     """
     opts = options or ModelOptions()
-    spec, report, links, kinds = _assemble(desc, dict(q or {}), opts, lock=not keep_locked)
+    if motors not in ("locked", "servo"):
+        raise _fail("unknown motor model", "motors", motors, hint="choose 'locked' or 'servo'")
+    if keep_locked and motors != "locked":
+        raise _fail("joints kept for locking by rows are modal analysis's: no servos", "motors", motors)
+    spec, report, links, kinds = _assemble(desc, dict(q or {}), opts, servo=motors == "servo", lock=not keep_locked)
     if keep_locked:
         kinds = {**kinds, **dict.fromkeys(report.locked, "locked")}
     model = compile_model(spec, timestep_s=opts.timestep_s)
@@ -742,6 +814,12 @@ def build_imported(
             "model": str(desc.model_path),
             "q": {k: float(v) for k, v in (q or {}).items()},
             "locked_joints": report.locked,
+            **(
+                {"motors": "servo", "servo_joints": [k for k, v in kinds.items() if v == "motor"]}
+                | {"servos": desc.servos.to_dict(desc.provenance)}
+                if motors == "servo"
+                else {}
+            ),
             "options": asdict(opts),
             "timestep_s": float(model.opt.timestep),
             "nv": int(model.nv),

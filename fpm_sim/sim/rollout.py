@@ -103,16 +103,18 @@ _BAD_STATE = (
 )
 
 
-def _divergence(model: mujoco.MjModel, data: mujoco.MjData, p0: np.ndarray, messages: list[str]) -> str | None:
-    """Why the run has diverged (module docstring; ``p0``: the end-effector site's position at the start), or
-    ``None``."""
+def _divergence(
+    model: mujoco.MjModel, data: mujoco.MjData, p0: np.ndarray, messages: list[str], site: str | None = None
+) -> str | None:
+    """Why the run has diverged (module docstring; ``p0``: the end-effector site's position at the start, ``site``
+    its name as :func:`end_effector_site_id`), or ``None``."""
     bad = [int(w) for w in _BAD_STATE if data.warning[int(w)].number > 0]
     if bad or messages:
         what = messages[0].strip() if messages else "bad state warning"
         return f"MuJoCo reported an unstable simulation ({what})"
     if not (np.all(np.isfinite(data.qpos)) and np.all(np.isfinite(data.qvel))):
         return "the state is no longer finite"
-    moved = float(np.linalg.norm(data.site_xpos[end_effector_site_id(model)] - p0))
+    moved = float(np.linalg.norm(data.site_xpos[end_effector_site_id(model, site)] - p0))
     if moved > model.stat.extent:
         return f"the end effector moved {moved:.3g} m, more than the model's size ({model.stat.extent:.3g} m)"
     return None
@@ -340,8 +342,14 @@ def _platform_phi(data: mujoco.MjData, body_id: int) -> float:
     return math.atan2(r[1, 0], r[0, 0])
 
 
-def end_effector_site_id(model: mujoco.MjModel) -> int:
-    """The end-effector site's id (:data:`EE_SITES`: the 3RRR's ``platform_center`` or ``end_effector_site``)."""
+def end_effector_site_id(model: mujoco.MjModel, site: str | None = None) -> int:
+    """The end-effector site's id: ``site`` (an imported model's named end effector) or the first of
+    :data:`EE_SITES` (the 3RRR's ``platform_center``, a described architecture's ``end_effector_site``)."""
+    if site is not None:
+        sid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, site)
+        if sid < 0:
+            raise RolloutError(f"the model has no end-effector site {site!r}")
+        return int(sid)
     for name in EE_SITES:
         sid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, name)
         if sid >= 0:
@@ -349,12 +357,19 @@ def end_effector_site_id(model: mujoco.MjModel) -> int:
     raise RolloutError(f"the model has no end-effector site ({' or '.join(EE_SITES)})")
 
 
-def end_effector_coordinates(model: mujoco.MjModel, data: mujoco.MjData, coordinates: Sequence[str]) -> np.ndarray:
-    """The end effector's ``coordinates`` (of ``x, y, z`` in m, ``phi`` about z in rad) after a forward pass."""
-    sid = end_effector_site_id(model)
+def end_effector_coordinates(
+    model: mujoco.MjModel, data: mujoco.MjData, coordinates: Sequence[str], site: str | None = None
+) -> np.ndarray:
+    """The end effector's ``coordinates`` (of ``x, y, z`` in m, ``phi`` about z in rad) after a forward pass. A named
+    ``site`` (an imported model's) gives ``phi`` as the heading of the site's own x axis
+    (:mod:`fpm_sim.model.imported_pose`), the others the heading of the site's body."""
+    sid = end_effector_site_id(model, site)
     p = data.site_xpos[sid]
     values = {"x": p[0], "y": p[1], "z": p[2]}
-    if "phi" in coordinates:
+    if "phi" in coordinates and site is not None:
+        x = data.site_xmat[sid].reshape(3, 3)[:, 0]
+        values["phi"] = math.atan2(x[1], x[0])
+    elif "phi" in coordinates:
         values["phi"] = _platform_phi(data, int(model.site_bodyid[sid]))
     return np.array([values[c] for c in coordinates])
 
@@ -385,6 +400,8 @@ class RolloutMachine:
     no_motor_hint: str
     """How to give the motors joints (the error when torques or references meet locked motors)."""
     parameters: dict[str, Any] = field(default_factory=dict)
+    ee_site: str | None = None
+    """The end-effector site's name where it is none of :data:`EE_SITES` (an imported model's)."""
 
 
 def machine_of_3rrr(built: BuiltModel, manip: Manipulator) -> RolloutMachine:
@@ -475,8 +492,8 @@ def rollout(
     data = mujoco.MjData(model)
     data.qpos[:] = q0
     mujoco.mj_forward(model, data)
-    p0 = data.site_xpos[end_effector_site_id(model)].copy()
-    ee0 = end_effector_coordinates(model, data, machine.coordinates)
+    p0 = data.site_xpos[end_effector_site_id(model, machine.ee_site)].copy()
+    ee0 = end_effector_coordinates(model, data, machine.coordinates, machine.ee_site)
     trace = _Trace(model, data, machine, bid, dict(zip(accel_sites, acc_ids)), np.arange(n_out + 1) * dt_out)
     wall = _run(trace, loads, n_sub, p0, progress=progress)
     t = trace.t_s
@@ -555,7 +572,7 @@ def _check_loads(model: mujoco.MjModel, machine: RolloutMachine, loads: _Loads) 
         raise RolloutError("motor torques or references need motor joints: " + machine.no_motor_hint)
     if loads.motor_reference is not None and machine.servo_stiffness is None:
         raise RolloutError("motor_reference drives a servo: " + machine.no_motor_hint)
-    sid = end_effector_site_id(model)
+    sid = end_effector_site_id(model, machine.ee_site)
     bid = int(model.site_bodyid[sid])
     if loads.ee_wrench is not None and not np.allclose(model.body_ipos[bid], model.site_pos[sid], atol=1e-12):
         raise RolloutError(
@@ -611,7 +628,7 @@ class _Trace:
         """The end-effector pose, motor angles, deflection from the rigid pose and site accelerations at sample
         ``k``."""
         model, data, mc = self.model, self.data, self.machine
-        self.ee[k] = end_effector_coordinates(model, data, mc.coordinates)
+        self.ee[k] = end_effector_coordinates(model, data, mc.coordinates, mc.ee_site)
         ma = mc.motor0 + (np.array([data.qpos[a] for a in self.qadr]) if self.qadr else 0.0)
         self.motors[k] = ma
         self.defl[k] = self.ee[k] - mc.rigid_pose(ma)
@@ -669,7 +686,7 @@ def _run(trace: _Trace, loads: _Loads, n_sub: int, p0: np.ndarray, *, progress: 
             if k == n_out:
                 break
             mujoco.mj_step(model, data, nstep=n_sub)
-            why = _divergence(model, data, p0, messages)
+            why = _divergence(model, data, p0, messages, trace.machine.ee_site)
             if why is not None:
                 if bar is not None:
                     bar.close()

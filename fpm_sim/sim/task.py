@@ -22,6 +22,13 @@ command). The servos track them as the 3RRR's do (:mod:`fpm_sim.sim.trajectory`)
 end effector's position after the move is compared with the modal f1 at the end pose (servos on) and its dominant
 mode (the largest share of the end effector's translational static compliance), which input shapers are designed
 for. The move's deflection uses ``J`` at the end pose about the joint targets: ``cmd + J (theta - theta_ref)``.
+
+The move reads the machine through a :class:`MoveMachine` (its pose solver, motors, model with servos and their
+gains), so that one implementation moves both a described architecture (:class:`DescribedMover`: the inverse
+kinematics above, :func:`fpm_sim.model.general.build_general` with ``motors="servo"``) and an imported model
+(:class:`fpm_sim.sim.imported_move.ImportedMover`: Gauss-Newton on the model's loop rows and end-effector site,
+:func:`fpm_sim.model.imported.build_imported` with ``motors="servo"``); ``J`` is the same central differences of
+either solver (:func:`motor_jacobian`).
 """
 
 from __future__ import annotations
@@ -30,6 +37,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, Protocol
 
 import mujoco
 import numpy as np
@@ -48,6 +56,9 @@ from fpm_sim.model.options import ModelOptions
 from fpm_sim.model.spec import BuiltModel
 from fpm_sim.sim.rollout import RolloutMachine, aligned_step
 from fpm_sim.sim.stepping import DEFAULT_INTEGRATOR
+
+if TYPE_CHECKING:
+    from fpm_sim.architecture.imported import ImportedDescription
 from fpm_sim.sim.trajectory import (
     DEFAULT_SETTLE_TOL_M,
     MoveError,
@@ -64,8 +75,12 @@ from fpm_sim.sim.trajectory import (
 
 __all__ = [
     "IK_POINTS",
+    "DescribedMover",
+    "MoveMachine",
     "TaskPath",
     "machine_of",
+    "motor_jacobian",
+    "mover_of",
     "pose_vector",
     "rigid_jacobian",
     "simulate_task_move",
@@ -91,52 +106,150 @@ def task_pose(values: np.ndarray, task: tuple[str, ...]) -> TaskPose:
     return TaskPose(v.get("x", 0.0), v.get("y", 0.0), v.get("z", 0.0), v.get("phi", 0.0))
 
 
-def rigid_jacobian(desc: Description, asm: TaskAssembly) -> np.ndarray:
-    """``d pose / d theta`` (task coordinates per actuated coordinate) of the rigid kinematics at ``asm``: the
-    inverse of the inverse kinematics' central differences (a pseudo-inverse when the counts differ)."""
-    x0 = pose_vector(asm.pose, desc.task)
-    start = task_unknowns(desc, asm)
+class MoveMachine(Protocol):
+    """What a move and a rollout read of a machine besides its MuJoCo model, whatever describes it: the pose solver,
+    the motors, the model with servos and their gains. A *state* is the solver's assembly at a pose (the described
+    architectures' :class:`~fpm_sim.architecture.kinematics.TaskAssembly`, an imported model's joint values), opaque
+    to the move. :class:`DescribedMover` and :class:`fpm_sim.sim.imported_move.ImportedMover`."""
+
+    @property
+    def task(self) -> tuple[str, ...]:
+        """The task coordinates."""
+
+    @property
+    def motor_names(self) -> tuple[str, ...]:
+        """The motors, in their order (their servo joints' names in the model)."""
+
+    @property
+    def ee_site(self) -> str | None:
+        """The end-effector site's name where it is none of :data:`fpm_sim.sim.rollout.EE_SITES`."""
+
+    @property
+    def no_motor_hint(self) -> str:
+        """How to give the motors joints (:attr:`fpm_sim.sim.rollout.RolloutMachine.no_motor_hint`)."""
+
+    def solve(self, pose: TaskPose, near: Any = None) -> Any:
+        """The state at ``pose``, solved from ``near`` (a state; ``None``: the machine's own start)."""
+
+    def pose_of(self, state: Any) -> TaskPose:
+        """The task pose of ``state``."""
+
+    def motors(self, state: Any) -> np.ndarray:
+        """The motors' coordinates at ``state`` (rad or m, as the model's servo joints count them)."""
+
+    def build(self, pose: TaskPose, state: Any, options: ModelOptions) -> BuiltModel:
+        """The flexible model with the motors as servos at ``pose`` (``state`` its state; ``None``: solved)."""
+
+    def gains(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each motor's servo stiffness and damping (N m/rad and N m s/rad, or N/m and N s/m)."""
+
+
+@dataclass(frozen=True)
+class DescribedMover:
+    """A described architecture as a :class:`MoveMachine`: its inverse kinematics
+    (:func:`~fpm_sim.architecture.solve_task_pose`), its actuated joints, :func:`build_general` with servos."""
+
+    desc: Description
+    ee_site: str | None = None
+    no_motor_hint: str = (
+        "give the actuated joints servos (motors='servo': fs.rollout(..., motors='servo'), "
+        "build_general(..., motors='servo')); locked ones have no joint"
+    )
+
+    @property
+    def task(self) -> tuple[str, ...]:
+        return self.desc.task
+
+    @property
+    def motor_names(self) -> tuple[str, ...]:
+        return tuple(f"{c}_{j}" for c, j in actuated_joint_names(self.desc))
+
+    def solve(self, pose: TaskPose, near: TaskAssembly | None = None) -> TaskAssembly:
+        return solve_task_pose(self.desc, pose, start=None if near is None else task_unknowns(self.desc, near))
+
+    def pose_of(self, state: TaskAssembly) -> TaskPose:
+        return state.pose
+
+    def motors(self, state: TaskAssembly) -> np.ndarray:
+        return actuated_coordinates(self.desc, state)
+
+    def build(self, pose: TaskPose, state: TaskAssembly | None, options: ModelOptions) -> BuiltModel:
+        return build_general(self.desc, pose, options, assembly=state, motors="servo")
+
+    def gains(self) -> tuple[np.ndarray, np.ndarray]:
+        types = [j.type for c in self.desc.chains for j in c.joints if j.actuated]
+        k, c = zip(*(self.desc.servos.gains(t) for t in types)) if types else ((), ())
+        return np.array(k, float), np.array(c, float)
+
+
+def mover_of(desc: Description | ImportedDescription | MoveMachine) -> MoveMachine:
+    """The :class:`MoveMachine` of a described architecture or of an imported model
+    (:class:`fpm_sim.sim.imported_move.ImportedMover`: it needs an ``[end_effector]`` and motors); a
+    :class:`MoveMachine` as it is."""
+    from fpm_sim.architecture.imported import ImportedDescription
+
+    if isinstance(desc, Description):
+        return DescribedMover(desc)
+    if isinstance(desc, ImportedDescription):
+        from fpm_sim.sim.imported_move import ImportedMover
+
+        return ImportedMover(desc)
+    return desc
+
+
+def motor_jacobian(mover: MoveMachine, state: Any) -> np.ndarray:
+    """``d pose / d theta`` (task coordinates per motor coordinate) of the rigid kinematics at ``state``: the
+    inverse of the pose solver's central differences (a pseudo-inverse when the counts differ), each solve started
+    from ``state``."""
+    x0 = pose_vector(mover.pose_of(state), mover.task)
     cols = []
-    for k in range(len(desc.task)):
+    for k in range(len(mover.task)):
         dx = np.zeros_like(x0)
         dx[k] = FD_STEP
-        hi = actuated_coordinates(desc, solve_task_pose(desc, task_pose(x0 + dx, desc.task), start=start))
-        lo = actuated_coordinates(desc, solve_task_pose(desc, task_pose(x0 - dx, desc.task), start=start))
+        hi = mover.motors(mover.solve(task_pose(x0 + dx, mover.task), near=state))
+        lo = mover.motors(mover.solve(task_pose(x0 - dx, mover.task), near=state))
         cols.append((hi - lo) / (2 * FD_STEP))
     out: np.ndarray = np.linalg.pinv(np.column_stack(cols))
     return out
 
 
-def machine_of(built: BuiltModel, desc: Description, asm: TaskAssembly) -> RolloutMachine:
-    """The :class:`RolloutMachine` of ``desc`` built as ``built`` (by :func:`build_general`) at ``asm``."""
+def rigid_jacobian(desc: Description, asm: TaskAssembly) -> np.ndarray:
+    """``d pose / d theta`` of a described architecture at ``asm`` (:func:`motor_jacobian`)."""
+    return motor_jacobian(DescribedMover(desc), asm)
+
+
+def machine_of(built: BuiltModel, desc: Description | MoveMachine, asm: Any) -> RolloutMachine:
+    """The :class:`RolloutMachine` of ``desc`` (a described architecture, or any :class:`MoveMachine`) built as
+    ``built`` at the state ``asm``: its motors are servos where ``built`` has their joints with
+    ``motors="servo"``."""
+    mover = mover_of(desc)
     model = built.model
-    names = tuple(f"{c}_{j}" for c, j in actuated_joint_names(desc))
+    names = mover.motor_names
     ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n) for n in names]
     dofs = [int(model.jnt_dofadr[i]) for i in ids] if all(i >= 0 for i in ids) else []
-    motor0 = actuated_coordinates(desc, asm)
-    x0 = pose_vector(asm.pose, desc.task)
+    motor0 = mover.motors(asm)
+    x0 = pose_vector(mover.pose_of(asm), mover.task)
     jac: list[np.ndarray] = []
 
     def rigid(ma: np.ndarray) -> np.ndarray:
         if not dofs:
             return x0
         if not jac:
-            jac.append(rigid_jacobian(desc, asm))
+            jac.append(motor_jacobian(mover, asm))
         out: np.ndarray = x0 + jac[0] @ (ma - motor0)
         return out
 
-    types = [j.type for c in desc.chains for j in c.joints if j.actuated]
     servo = dofs and built.parameters.get("motors") == "servo"
     return RolloutMachine(
-        coordinates=desc.task,
+        coordinates=mover.task,
         motor_names=names,
         motor_dofs=dofs,
         motor0=motor0,
-        servo_stiffness=np.array([desc.servos.gains(t)[0] for t in types]) if servo else None,
+        servo_stiffness=mover.gains()[0] if servo else None,
         rigid_pose=rigid,
-        no_motor_hint="give the actuated joints servos (motors='servo': fs.rollout(..., motors='servo'), "
-        "build_general(..., motors='servo')); locked ones have no joint",
+        no_motor_hint=mover.no_motor_hint,
         parameters={"motors": "servo" if servo else "locked", "actuated_joints": list(names)},
+        ee_site=mover.ee_site,
     )
 
 
@@ -173,10 +286,8 @@ class TaskPath:
         return path_poses(t_s, np.asarray(self.start, float), np.asarray(self.end, float), self)
 
 
-def _joint_targets(
-    desc: Description, path: TaskPath, start: TaskAssembly, t_s: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """The actuated coordinates along the commanded path at ``t_s`` and their rates (module docstring)."""
+def _joint_targets(mover: MoveMachine, path: TaskPath, start: Any, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The motor coordinates along the commanded path at ``t_s`` and their rates (module docstring)."""
     from scipy.interpolate import CubicSpline
 
     if path.samples is not None:
@@ -184,18 +295,17 @@ def _joint_targets(
     else:
         grid = np.linspace(0.0, path.duration_s, IK_POINTS)
     cmd = path.poses(grid)
-    guess, theta = task_unknowns(desc, start), []
+    guess, theta = start, []
     for k, x in enumerate(cmd):
         try:
-            asm = solve_task_pose(desc, task_pose(x, desc.task), start=guess)
+            guess = mover.solve(task_pose(x, mover.task), near=guess)
         except FpmSimError as e:
             raise MoveError(
                 f"the commanded path leaves the workspace at t = {grid[k]:.4g} s: {e}",
                 parameter="path",
                 hint="choose start and end poses whose straight path stays inside the workspace",
             ) from None
-        guess = task_unknowns(desc, asm)
-        theta.append(actuated_coordinates(desc, asm))
+        theta.append(mover.motors(guess))
     th = np.array(theta)
     th = th[0] + np.unwrap(th - th[0], axis=0)
     if path.samples is not None:
@@ -206,20 +316,20 @@ def _joint_targets(
     return ref, np.gradient(ref, step, axis=0)
 
 
-def _end_modes(desc: Description, end: TaskPose, opts: ModelOptions) -> tuple[float, float, float]:
+def _end_modes(mover: MoveMachine, end: TaskPose, opts: ModelOptions) -> tuple[float, float, float]:
     """Modal f1 at the end pose (servos on), the frequency and damping ratio of its dominant mode (the largest share
     of the end effector's translational static compliance: ``|C phi_r|^2 / omega_r^2``)."""
     from fpm_sim.rom.reduction import modal_system
     from fpm_sim.sim.rollout import end_effector_site_id
 
-    system = modal_system(build_general(desc, end, opts, motors="servo"))
+    system = modal_system(mover.build(end, None, opts))
     model = system.built.model
     data = mujoco.MjData(model)
     data.qpos[:] = system.qpos
     mujoco.mj_forward(model, data)
     jacp = np.zeros((3, model.nv))
-    mujoco.mj_jacSite(model, data, jacp, None, end_effector_site_id(model))
-    rows = jacp[[k for k, c in enumerate("xyz") if c in desc.task]]
+    mujoco.mj_jacSite(model, data, jacp, None, end_effector_site_id(model, mover.ee_site))
+    rows = jacp[[k for k, c in enumerate("xyz") if c in mover.task]]
     share = np.sum((rows @ system.phi) ** 2, axis=0) / system.omega_rad_s**2
     r = int(np.argmax(share))
     w = float(system.omega_rad_s[r])
@@ -227,7 +337,7 @@ def _end_modes(desc: Description, end: TaskPose, opts: ModelOptions) -> tuple[fl
 
 
 def simulate_task_move(
-    desc: Description,
+    desc: Description | ImportedDescription | MoveMachine,
     path: TaskPath,
     *,
     settle_s: float = 0.3,
@@ -240,28 +350,31 @@ def simulate_task_move(
     progress: bool = False,
 ) -> MoveResult:
     """Simulate the move ``path`` of ``desc`` on its full flexible model with servos (module docstring); the
-    options as :func:`fpm_sim.sim.trajectory.simulate_move`.
+    options as :func:`fpm_sim.sim.trajectory.simulate_move`. ``desc``: a described architecture, an imported model
+    (:class:`fpm_sim.sim.imported_move.ImportedMover`: its ``[end_effector]`` and motors), or a
+    :class:`MoveMachine`.
 
     Long because: the move's steps in order (the end pose's modes and shaper, the joint targets, the rollout, the
     torques and the residual vibration) and the result's fields.
     """
     check_move(path, shaper_kind, settle_s=settle_s, settle_tol_m=settle_tol_m, output_step_s=output_step_s)
     opts = options or ModelOptions(axial=False)
-    start, end = task_pose(path.start, desc.task), task_pose(path.end, desc.task)
-    f1_end, f_dom, z_dom = _end_modes(desc, end, opts)
+    mover = mover_of(desc)
+    task = mover.task
+    start, end = task_pose(path.start, task), task_pose(path.end, task)
+    f1_end, f_dom, z_dom = _end_modes(mover, end, opts)
     impulses = shaper(shaper_kind, f_dom, z_dom)
     if path.samples is None:
         path = dataclasses.replace(path, impulses=impulses)
-    asm0 = solve_task_pose(desc, start)
-    h_auto = opts.timestep_s or build_general(desc, start, opts, assembly=asm0, motors="servo").timestep_s
-    built = build_general(desc, start, aligned_step(opts, h_auto, output_step_s), assembly=asm0, motors="servo")
-    machine = machine_of(built, desc, asm0)
+    asm0 = mover.solve(start)
+    h_auto = opts.timestep_s or mover.build(start, asm0, opts).timestep_s
+    built = mover.build(start, asm0, aligned_step(opts, h_auto, output_step_s))
+    machine = machine_of(built, mover, asm0)
     n = round((path.duration_s + settle_s) / output_step_s)
     t = np.arange(n + 1) * output_step_s
     cmd = path.poses(t)
-    ref, dref = _joint_targets(desc, path, asm0, t)
-    types = [j.type for c in desc.chains for j in c.joints if j.actuated]
-    gains = tuple(np.array([desc.servos.gains(ty)[i] for ty in types]) for i in (0, 1))
+    ref, dref = _joint_targets(mover, path, asm0, t)
+    gains = mover.gains()
     res, torque, wall = track_servos(
         built,
         machine,
@@ -278,9 +391,9 @@ def simulate_task_move(
     )
     m = len(res.t_s)
     theta = res.motor_angles_rad
-    jac_end = rigid_jacobian(desc, solve_task_pose(desc, end))
+    jac_end = motor_jacobian(mover, mover.solve(end))
     deflection = res.ee_pose - (cmd[:m] + (theta - ref[:m]) @ jac_end.T)
-    tr = [i for i, x in enumerate(desc.task) if x != "phi"]
+    tr = [i for i, x in enumerate(task) if x != "phi"]
     err = res.ee_pose - cmd[:m]
     residual = residual_vibration(res.t_s, err[:, tr], path.duration_s, settle_tol_m, (f1_end, f_dom, z_dom))
     return MoveResult(
@@ -297,7 +410,7 @@ def simulate_task_move(
         impulses=impulses,
         stepping=res.stepping,
         wall_s=wall,
-        coordinates=desc.task,
+        coordinates=task,
         motor_names=machine.motor_names,
         parameters={
             **res.parameters,

@@ -20,7 +20,7 @@ from fpm_sim.model.imported import build_imported
 from fpm_sim.model.imported_pose import joint_poses_of
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.study.poses import parse_reading, study_poses
-from tests.helpers.imported_twin import check_pose, imported_copy
+from tests.helpers.imported_copy import check_pose, imported_copy
 
 ROOT = Path(__file__).resolve().parents[2]
 POLICY = ModelOptions(segments=3, gravity=False, axial=False)

@@ -134,7 +134,7 @@ def _one_line(code: int, text: str, words: str) -> None:
         (["frf", "--q", "elbow=0.2"], "--damping-ratio: the model has no damping"),
         (["check", "{tmp}/req.toml"], "requirement 'f1'.poses: reachable workspace, 10 mm grid, phi 0 rad is a task-"),
         (["design", "--vary", "sections.tube.outer_diameter_m=0.1", "--out", "{tmp}/o"], "'design' does not run"),
-        (["move", "--out", "{tmp}/m.csv"], "'move' does not run on it: a move drives the motors"),
+        (["move", "--out", "{tmp}/m.csv"], "end_effector: acrobot names no end effector: a move commands"),
         (["reduce", "--modes", "3"], "'reduce' does not run on it"),
         (["reproduce", "--out", "{tmp}/o"], "'reproduce' does not run on it"),
     ],

@@ -1,5 +1,5 @@
-"""A described machine as an imported one: exported with rigid links and its motors as joints, and an imported
-description of that MJCF with the links flexible again (tests/imported, benchmarks/imported.py)."""
+"""A described machine exported once with rigid links and its motors as joints, and an imported description of it
+(tests/imported: the round trip that task-space poses and moves of imported models are checked by)."""
 
 from __future__ import annotations
 
@@ -14,15 +14,17 @@ from fpm_sim.model.options import ModelOptions
 
 
 def check_pose(check: dict[str, float]) -> TaskPose:
-    """A description's check pose (``{coordinate: value}``, SI) as a :class:`TaskPose`."""
     return TaskPose(*(check.get(c, 0.0) for c in ("x", "y", "z", "phi")))
 
 
-def imported_copy(desc: Description, folder: Path, *, coordinates: tuple[str, ...] | None = None) -> Path:
+def imported_copy(
+    desc: Description, folder: Path, *, coordinates: tuple[str, ...] | None = None, servo: bool = False
+) -> Path:
     """``desc`` exported at its first check pose with rigid links and its motors as joints (servo springs, no
     actuator), and an imported description of it: each flexible link's body a beam of its length along x, its
-    section and material copied, the motors locked, the end effector's site posed by ``coordinates`` (default:
-    the description's task coordinates)."""
+    section and material copied, the motors locked (``locked_joints``; with ``servo``, ``servo_joints``: locked for
+    modal analysis, servos in a move, the description's ``[servos]`` copied), the end effector's site posed by
+    ``coordinates`` (default: the description's task coordinates)."""
     built = build_general(desc, check_pose(desc.check_poses[0]), ModelOptions(link_model="rigid"), motors="servo")
     (folder / "m.xml").write_text(built.to_xml())
     m, data = built.model, desc.data or {}
@@ -31,7 +33,7 @@ def imported_copy(desc: Description, folder: Path, *, coordinates: tuple[str, ..
         "kind": "imported",
         "name": f"{desc.name}_imported",
         "model": "m.xml",
-        "locked_joints": motors,
+        ("servo_joints" if servo else "locked_joints"): motors,
         "materials": data["materials"],
         "sections": data["sections"],
         "damping": {"stiffness_proportional_s": desc.damping_beta_s},
@@ -49,6 +51,8 @@ def imported_copy(desc: Description, folder: Path, *, coordinates: tuple[str, ..
             if isinstance(e, LinkDesc) and e.flexible
         ],
     }
+    if servo and "servos" in data:
+        head["servos"] = data["servos"]
     if coordinates == ():
         del head["end_effector"]
     (folder / "m.toml").write_text(_toml(head))
