@@ -28,7 +28,9 @@ gains), so that one implementation moves both a described architecture (:class:`
 kinematics above, :func:`fpm_sim.model.general.build_general` with ``motors="servo"``) and an imported model
 (:class:`fpm_sim.sim.imported_move.ImportedMover`: Gauss-Newton on the model's loop rows and end-effector site,
 :func:`fpm_sim.model.imported.build_imported` with ``motors="servo"``); ``J`` is the same central differences of
-either solver (:func:`motor_jacobian`).
+either solver (:func:`motor_jacobian`). A rollout reads the same adapter (:func:`rollout_machine`: the model at a
+state with its motors locked or as servos, and its :class:`~fpm_sim.sim.rollout.RolloutMachine`), so it runs on both
+too.
 """
 
 from __future__ import annotations

@@ -29,6 +29,7 @@ from fpm_sim.response import LinkPoint
 from fpm_sim.sim.impact import ImpactSetup
 from fpm_sim.sim.trajectory import MoveError
 from tests.helpers.imported_copy import check_pose, imported_copy
+from tests.imported.test_import import _acrobot_toml
 
 ROOT = Path(__file__).resolve().parents[2]
 FIVE_BAR = ROOT / "examples/architectures/five_bar.toml"
@@ -78,6 +79,28 @@ def test_the_imported_five_bar_makes_the_native_five_bar_rollouts(tmp_path: Path
     q = ImportedKinematics(imp).solve(POSE)
     by_q = fs.rollout(imp, q=q, **kw, motors="servo", motor_torque_nm=[0.5, -0.3])  # type: ignore[arg-type]
     np.testing.assert_allclose(by_q.ee_disp, back.ee_disp, rtol=1e-12, atol=1e-18)
+
+
+def test_an_end_effector_force_acts_at_the_site_off_its_body_centre_of_mass(tmp_path: Path) -> None:
+    """dm_control's acrobot, its end-effector site the lower arm's tip, 1 m from the body's centre of mass: a 1 N, 0.5
+    N force at the site for 30 ms, stepped by the explicit reference, is the reduced model's linear response to the same
+    force (the reduced model's wrench input is the site Jacobian's transpose: the force at the site exactly; every mode
+    to 5 kHz with the static correction, the same zero-order hold). Measured within 7.7e-4 of the peak tip
+    displacement (the explicit step's error on the upper modes, and the geometric nonlinearity of a 3e-5 m deflection
+    of a 2 m arm: ~1e-5); the bound, 5e-3, is far below what the force at the centre of mass alone would give
+    (measured 0.66 apart: the moment of the force about it is what turns the arm)."""
+    extra = '[end_effector]\nsite = "tip"\ncoordinates = ["x", "z"]\n[damping]\nstiffness_proportional_s = 1e-4\n'
+    desc = fs.load_imported(_acrobot_toml(tmp_path, extra))
+    opts = ModelOptions(segments=4, gravity=False, axial=False)
+    q = {"elbow": 0.3}
+    run = fs.rollout(desc, q=q, duration_s=0.03, options=opts, force_x_n=1.0, force_z_n=0.5, integrator="explicit")
+    rom = fs.reduce(desc, q=q, band_hz=5000.0, options=opts)
+    u = np.zeros((len(run.t_s), len(rom.input_names)))
+    u[:, rom.input_index("force_x")], u[:, rom.input_index("force_z")] = 1.0, 0.5
+    y = rom.simulate(run.t_s, u)
+    for k, out in enumerate(("disp_x", "disp_z")):
+        lin = y[:, rom.output_index(out)]
+        np.testing.assert_allclose(run.ee_disp[:, k], lin, rtol=0, atol=5e-3 * np.abs(lin).max())
 
 
 def test_the_imported_five_bar_reduces_to_the_native_reduced_model(tmp_path: Path) -> None:
