@@ -95,9 +95,28 @@ def _options(options: ModelOptions | None, *, stacklevel: int = 3) -> ModelOptio
 
 
 def _built(
-    config: Manipulator | Description | None, pose: Pose | TaskPose | None, options: ModelOptions | None
+    config: Manipulator | Description | ImportedDescription | None,
+    pose: Pose | TaskPose | None,
+    options: ModelOptions | None,
+    q: dict[str, float] | None = None,
 ) -> BuiltModel:
     from fpm_sim.architecture import Description, TaskPose
+    from fpm_sim.architecture.imported import ImportedDescription
+
+    if isinstance(config, ImportedDescription):
+        from fpm_sim.model.imported import build_imported
+
+        if pose is not None:
+            from fpm_sim.model.imported_pose import ImportedKinematics
+
+            if not isinstance(pose, TaskPose):
+                raise TypeError("an imported model's task pose is an fs.TaskPose, with q a mapping of fixed joints")
+            q = ImportedKinematics(config).solve(pose, fixed=q)
+        return build_imported(config, q, _options(options, stacklevel=4))
+    if q is not None:
+        from fpm_sim.errors import FpmSimError
+
+        raise FpmSimError("joint values are for an imported model", parameter="q", hint="give a pose instead")
 
     if isinstance(config, Description):  # a described architecture (fpm_sim.architecture)
         from fpm_sim.model.general import build_general
@@ -125,30 +144,39 @@ def _task_pose(desc: Description, pose: Pose | TaskPose | None) -> TaskPose:
 
 
 def _aligned(
-    config: Manipulator | Description | None,
+    config: Manipulator | Description | ImportedDescription | None,
     pose: Pose | TaskPose | None,
     options: ModelOptions | None,
     output_step_s: float,
     motors: str = "locked",
+    q: dict[str, float] | None = None,
 ) -> tuple[Manipulator | RolloutMachine, BuiltModel]:
     """Return the description and its model for a rollout (the timestep rounded down to divide the output step).
 
-    A described architecture's description is its :class:`RolloutMachine`, its actuated joints ``motors``.
+    A described architecture's or imported model's description is its :class:`RolloutMachine`
+    (:func:`fpm_sim.sim.task.rollout_machine`), its motors ``motors``; an imported model posed by ``pose`` and/or
+    ``q`` (:meth:`fpm_sim.sim.imported_move.ImportedMover.state_at`).
     """
     from fpm_sim.architecture import Description, TaskPose, solve_task_pose
+    from fpm_sim.architecture.imported import ImportedDescription
+    from fpm_sim.errors import FpmSimError
     from fpm_sim.model.options import ModelOptions
-    from fpm_sim.sim.rollout import RolloutError, aligned_options, aligned_step
+    from fpm_sim.sim.rollout import RolloutError, aligned_options
 
     opts = _options(options, stacklevel=4) or ModelOptions()
-    if isinstance(config, Description):
-        from fpm_sim.model.general import build_general
-        from fpm_sim.sim.task import machine_of
+    if q is not None and not isinstance(config, ImportedDescription):
+        raise FpmSimError("joint values are for an imported model", parameter="q", hint="give a pose instead")
+    if isinstance(config, Description | ImportedDescription):
+        from fpm_sim.sim.task import mover_of, rollout_machine
 
-        p = _task_pose(config, pose)
-        asm = solve_task_pose(config, p)
-        h = opts.timestep_s or build_general(config, p, opts, assembly=asm, motors=motors).timestep_s
-        built = build_general(config, p, aligned_step(opts, h, output_step_s), assembly=asm, motors=motors)
-        return machine_of(built, config, asm), built
+        mover: Any = mover_of(config, need_motors=motors == "servo")  # an imported model needs its [end_effector]
+        if isinstance(config, Description):
+            state = solve_task_pose(config, _task_pose(config, pose))
+        elif pose is not None and not isinstance(pose, TaskPose):
+            raise TypeError("an imported model's task pose is an fs.TaskPose, with q a mapping of fixed joints")
+        else:
+            state = mover.state_at(pose, q)
+        return rollout_machine(mover, state, opts, output_step_s, motors)
     from fpm_sim.model.manipulator import build_manipulator
 
     if motors != "locked":
@@ -512,9 +540,10 @@ def design(
 
 
 def reduce(
-    config: Manipulator | Description | None = None,
+    config: Manipulator | Description | ImportedDescription | None = None,
     pose: Pose | TaskPose | None = None,
     *,
+    q: dict[str, float] | None = None,
     n_modes: int | None = None,
     band_hz: float | None = None,
     error_bound: float | None = None,
@@ -527,7 +556,10 @@ def reduce(
     Parameters
     ----------
     config, pose
-        As :func:`modes` (the 3RRR or a described architecture).
+        As :func:`modes` (the 3RRR, a described architecture, or an imported model: its wrench inputs and
+        displacement outputs at its ``[end_effector]`` site, else at its last flexible body's beam end).
+    q
+        An imported model's joint values (as :func:`modes`; a single pose).
     n_modes, band_hz, error_bound
         Modes kept: a count, every mode up to ``band_hz`` (Hz), or the fewest with a relative static
         truncation error <= ``error_bound`` (exactly one of them; none: 6 modes).
@@ -535,7 +567,8 @@ def reduce(
         Feedthrough for the truncated modes.
     accel_fraction
         Accelerometer outputs at this fraction (0..1 from the link's start: the elbow) of each accelerometer link:
-        the 3RRR's distal links, a described machine's last flexible link of each chain.
+        the 3RRR's distal links, a described machine's last flexible link of each chain, an imported model's
+        flexible bodies' beams.
     options
         Model options (as :func:`modes`).
     """
@@ -544,7 +577,7 @@ def reduce(
     if n_modes is None and band_hz is None and error_bound is None:
         n_modes = 6
     return reduce_model(
-        _built(config, pose, options),
+        _built(config, pose, options, q),
         n_modes=n_modes,
         band_hz=band_hz,
         error_bound=error_bound,
@@ -620,9 +653,10 @@ def frf(
 
 
 def rollout(
-    config: Manipulator | Description | None = None,
+    config: Manipulator | Description | ImportedDescription | None = None,
     pose: Pose | TaskPose | None = None,
     *,
+    q: dict[str, float] | None = None,
     duration_s: float = 0.2,
     output_step_s: float = 1e-4,
     force_x_n: float = 0.0,
@@ -645,8 +679,9 @@ def rollout(
 
     Parameters
     ----------
-    config, pose
-        As :func:`modes` (a described architecture: its task coordinates are recorded, :mod:`fpm_sim.sim.task`).
+    config, pose, q
+        As :func:`modes` (a described architecture: its task coordinates are recorded, :mod:`fpm_sim.sim.task`; an
+        imported model: its ``[end_effector]`` site's, which it must name; no ``pose`` or ``q``: its reference).
     duration_s
         Simulated time (s).
     output_step_s
@@ -659,11 +694,12 @@ def rollout(
         Constant motor torques (N m, N on a prismatic joint), one per motor (the 3RRR: three, needs servo motors in
         ``config``; a described architecture: one per actuated joint, needs ``motors="servo"``); ``None``: none.
     motors
-        A described architecture's actuated joints: ``"locked"`` (default) or ``"servo"`` (its ``[servos]`` gains,
+        A described architecture's actuated joints or an imported model's motors (the joints an ``<actuator>``
+        drives, ``servo_joints``): ``"locked"`` (default) or ``"servo"`` (its ``[servos]`` gains,
         :class:`fpm_sim.architecture.description.ServoGains`); the 3RRR's come from ``config.motors``.
     accel_fraction
         Record accelerations at this fraction (0..1) of each distal link (the 3RRR); ``None``: none (a described
-        architecture records none).
+        architecture or an imported model records none).
     options
         Model options (as :func:`modes`).
     progress
@@ -677,7 +713,7 @@ def rollout(
     from fpm_sim.sim.rollout import RolloutMachine, constant
     from fpm_sim.sim.rollout import rollout as _rollout
 
-    machine, built = _aligned(config, pose, options, output_step_s, motors)
+    machine, built = _aligned(config, pose, options, output_step_s, motors, q)
     wrench = _task_load(
         machine, dict(force_x_n=force_x_n, force_y_n=force_y_n, force_z_n=force_z_n, moment_z_nm=moment_z_nm)
     )
@@ -896,9 +932,10 @@ def _move_start(desc: Description | ImportedDescription, mover: Any, pose: Pose 
 
 
 def impact(
-    config: Manipulator | Description | None = None,
+    config: Manipulator | Description | ImportedDescription | None = None,
     pose: Pose | TaskPose | None = None,
     *,
+    q: dict[str, float] | None = None,
     setup: ImpactSetup | None = None,
     options: ModelOptions | None = None,
     progress: bool = False,
@@ -910,11 +947,14 @@ def impact(
     Parameters
     ----------
     config, pose
-        As :func:`modes` (the 3RRR or a described architecture).
+        As :func:`modes` (the 3RRR, a described architecture or an imported model).
+    q
+        An imported model's joint values (as :func:`modes`; a single pose).
     setup
         Hammer, accelerometer, pulse, record, noise, ... (:class:`fpm_sim.sim.impact.ImpactSetup`; ``None``:
         the study's set-up with hammer and accelerometer at the model's test point: the study's on the 3RRR,
-        mid-span of the first chain's last flexible link along the link frame's z on a described machine).
+        mid-span of the first chain's last flexible link along the link frame's z on a described machine,
+        mid-span of the first flexible body's beam along its z on an imported model).
     options
         Model options (as :func:`modes`; the links must be flexible).
     progress
@@ -922,7 +962,7 @@ def impact(
     """
     from fpm_sim.sim.impact import virtual_impact_test
 
-    return virtual_impact_test(_built(config, pose, options), setup, progress=progress)
+    return virtual_impact_test(_built(config, pose, options, q), setup, progress=progress)
 
 
 def transient(

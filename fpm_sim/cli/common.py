@@ -66,6 +66,7 @@ __all__ = [
     "model_options",
     "pose_of",
     "read_input_file",
+    "refuse_joint_values",
     "refuse_task_pose",
     "task_pose_of",
     "with_resolution",
@@ -426,20 +427,29 @@ def load_machine(args: argparse.Namespace, command: str) -> Manipulator | Descri
     return load_manipulator(args)
 
 
-IMPORTED_COMMANDS = ("modes", "sweep", "frf", "export-mjcf", "check", "identify", "calibrate", "move")
+IMPORTED_COMMANDS = (
+    "modes",
+    "sweep",
+    "frf",
+    "export-mjcf",
+    "check",
+    "identify",
+    "calibrate",
+    "move",
+    "rollout",
+    "reduce",
+    "impact",
+)
 """The commands that run on an imported model (``kind = "imported"``), posed by joint values (``--q``, ``--poses``) or,
 where its description names an ``[end_effector]``, by task poses (``--x-mm`` ..., a poses CSV of task columns); ``move``
-needs that ``[end_effector]`` and motors (the joints an ``<actuator>`` drives, ``servo_joints``)."""
+needs that ``[end_effector]`` and motors (the joints an ``<actuator>`` drives, ``servo_joints``), ``rollout`` the
+``[end_effector]`` (and motors with ``--motors servo``)."""
 
 _WHY_NOT_IMPORTED = {
     "design": "its --vary paths edit a described architecture's chains; an imported model's sections are edited in "
     "its own file (run sweep --poses on each edited copy)",
-    "reduce": "its reduced models are the described architectures' (task poses, motors as inputs)",
-    "impact": "its hammer points and poses are a described architecture's",
     "atlas": "its atlas spans a described architecture's reach, which an imported model does not state (sweep "
     "--poses over a CSV of task poses instead, where the model names an [end_effector])",
-    "rollout": "it drives motors that an imported model's actuated joints, locked by the import, no longer have "
-    "(a move drives them: fpm-sim move)",
 }
 
 
@@ -496,6 +506,7 @@ def build_machine(args: argparse.Namespace, machine: Manipulator | Description, 
     from fpm_sim.architecture import Description
     from fpm_sim.architecture.imported import ImportedDescription
 
+    refuse_joint_values(args, machine)
     if isinstance(machine, ImportedDescription):
         from fpm_sim.model.imported import build_imported
 
@@ -510,6 +521,17 @@ def build_machine(args: argparse.Namespace, machine: Manipulator | Description, 
 
     pose = pose_of(args)
     return build_manipulator(machine, pose, opts), pose.label()
+
+
+def refuse_joint_values(args: argparse.Namespace, machine: Any) -> None:
+    """``--q`` on a machine that is not an imported model: refused by name (its poses are task poses)."""
+    from fpm_sim.architecture.imported import ImportedDescription
+
+    if getattr(args, "q", None) and not isinstance(machine, ImportedDescription):
+        raise CliError(
+            "--q: joint values pose an imported model (kind = 'imported'); pose this machine by its task coordinates "
+            "(--x-mm, --y-mm, ...)"
+        )
 
 
 def add_joint_args(p: argparse.ArgumentParser) -> None:

@@ -5,16 +5,19 @@ from __future__ import annotations
 import argparse
 import math
 from pathlib import Path
+from typing import Any
 
 from fpm_sim.cli.common import (
     CliError,
     add_config_args,
+    add_joint_args,
     add_output_args,
     add_pose_args,
     add_resolution_args,
     build_machine,
     check_output_file,
     emit,
+    is_imported,
     load_machine,
     model_options,
     resolution_line,
@@ -32,6 +35,20 @@ PULSE_MS = 1.0
 """Default half-sine pulse (ms): :data:`fpm_sim.sim.impact.PULSE_S` (checked by a test)."""
 PEAK_FORCE_N = 20.0
 """Default peak force (N): :data:`fpm_sim.sim.impact.PEAK_FORCE_N` (checked by a test)."""
+
+
+def _check_uff(args: argparse.Namespace, machine: Any) -> None:
+    """``--uff`` where its record cannot carry the pose: an imported model's (its joints), or one with z."""
+    if args.uff and is_imported(args):
+        raise CliError(
+            "--uff: the UFF record carries a task pose in x, y and phi, and an imported model is posed by its joints; "
+            "drop --uff (--csv writes the FRF)"
+        )
+    if args.uff and "z" in getattr(machine, "task", ()):
+        raise CliError(
+            f"--uff: the UFF record carries a pose in x, y and phi; {machine.name} sets z too; drop --uff (--csv "
+            "writes the FRF)"
+        )
 
 
 def cmd_impact(args: argparse.Namespace) -> int:
@@ -61,11 +78,7 @@ def cmd_impact(args: argparse.Namespace) -> int:
         raise CliError(f"--segments must be >= 2 for flexible links, got {segments}")
     warn_if_coarse(opts)
     machine = load_machine(args, "impact")
-    if args.uff and "z" in getattr(machine, "task", ()):
-        raise CliError(
-            f"--uff: the UFF record carries a pose in x, y and phi; {machine.name} sets z too; drop --uff (--csv "
-            "writes the FRF)"
-        )
+    _check_uff(args, machine)
     built, pose_label = build_machine(args, machine, opts)
     hit = point_of(args, "impact", default_point(built))
     acc = point_of(args, "accel", hit)
@@ -126,7 +139,8 @@ def register(sub: argparse._SubParsersAction) -> None:
             "impacts (exponential window, zero padding); the first frequency by peak picking, compared with the "
             "modal f1 of the same model. Default point (assumed for the study): mid-span of chain 0's distal link, "
             "axis z (out of plane), hammer along the accelerometer axis; on a described architecture mid-span of "
-            "the first chain's last flexible link, along the link frame's z."
+            "the first chain's last flexible link, along the link frame's z; on an imported model (posed by --q "
+            "and/or the pose options) mid-span of its first flexible body's beam, along its z."
         ),
     )
     add_point_args(p, "impact", "hammer", STUDY_POINT)
@@ -160,6 +174,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--plot", type=Path, help="H1 magnitude/phase/coherence plot (.png, .pdf, .svg)")
     add_pose_args(p)
+    add_joint_args(p)
     add_config_args(p)
     add_output_args(p)
     p.set_defaults(func=cmd_impact)

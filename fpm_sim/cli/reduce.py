@@ -8,6 +8,7 @@ from pathlib import Path
 from fpm_sim.cli.common import (
     CliError,
     add_config_args,
+    add_joint_args,
     add_model_args,
     add_output_args,
     add_pose_args,
@@ -16,6 +17,7 @@ from fpm_sim.cli.common import (
     count_arg,
     emit,
     is_described,
+    is_imported,
     load_machine,
     model_options,
     with_resolution,
@@ -33,9 +35,10 @@ def cmd_reduce(args: argparse.Namespace) -> int:
     check_output_file(args.out, "--out", (".mat", ".npz"))
     if args.accel_fraction is not None and not 0.0 <= args.accel_fraction <= 1.0:
         raise CliError(f"--accel-fraction must be in 0..1 (from the link's start), got {args.accel_fraction}")
-    if args.motors == "servo" and is_described(args):
+    if args.motors == "servo" and (is_described(args) or is_imported(args)):
         raise CliError(
-            "--motors servo: a described architecture's actuated joints are locked (no motor model yet); drop --motors"
+            "--motors servo: a described architecture's actuated joints and an imported model's motors are locked in "
+            "its reduced model (the motor-torque inputs are the 3RRR's motor hinges); drop --motors"
         )
     opts = model_options(args)
     warn_if_coarse(opts)
@@ -88,7 +91,9 @@ def register(sub: argparse._SubParsersAction) -> None:
             "force_x, force_y (N), moment_z (N m) at the end effector and motor_torque_i (N m, servo motors only); "
             "outputs disp_x, disp_y (m), rot_z (rad) and acc_<link> (m/s^2) on each accelerometer link (the 3RRR's "
             "distal links; a described architecture's last flexible link of each chain; a spatial one has all six "
-            "wrench and displacement components). Choose modes by --modes, --band-hz or --error-bound."
+            "wrench and displacement components). An imported model (kind = 'imported', posed by --q and/or the "
+            "pose options): all six at its [end_effector] site (else its last flexible body's beam end), an "
+            "accelerometer on each flexible body's beam. Choose modes by --modes, --band-hz or --error-bound."
         ),
     )
     g = p.add_mutually_exclusive_group(required=True)
@@ -110,6 +115,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     add_motor_args(p)
     add_pose_args(p)
+    add_joint_args(p)
     add_config_args(p)
     add_model_args(p)
     add_output_args(p)

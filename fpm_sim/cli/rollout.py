@@ -9,15 +9,18 @@ from typing import Any
 from fpm_sim.cli.common import (
     CliError,
     add_config_args,
+    add_joint_args,
     add_model_args,
     add_output_args,
     add_pose_args,
     check_output_file,
     emit,
+    imported_pose_of,
     load_machine,
     mm,
     model_options,
     pose_of,
+    refuse_joint_values,
     resolution_line,
     task_pose_of,
     with_resolution,
@@ -78,7 +81,8 @@ def add_motor_args(p: argparse.ArgumentParser) -> None:
         "--motors",
         choices=("config", "servo"),
         default="config",
-        help="motors as configured, or servo (a described architecture: locked, or servos of its [servos] gains)",
+        help="motors as configured, or servo (a described architecture or an imported model: locked, or servos of its "
+        "[servos] gains)",
     )
     g.add_argument("--servo-stiffness-nm-per-rad", type=float, help="servo stiffness (with --motors servo)")
     g.add_argument(
@@ -119,12 +123,11 @@ _LOAD_FLAGS = {"x": "--force-x-n", "y": "--force-y-n", "z": "--force-z-n", "phi"
 
 
 def _general_machine(args: argparse.Namespace, desc: Any, opts: Any) -> tuple[Any, Any, list[float]]:
-    """A described architecture's model (servos with ``--motors servo``), its rollout machine and its end-effector
-    load along its task coordinates; the options it lacks refused by name."""
-    from fpm_sim.architecture import solve_task_pose
-    from fpm_sim.model.general import build_general
-    from fpm_sim.sim.rollout import aligned_step
-    from fpm_sim.sim.task import machine_of
+    """A described architecture's or an imported model's model (servos with ``--motors servo``), its rollout machine
+    (:func:`fpm_sim.sim.task.rollout_machine`) and its end-effector load along its task coordinates; the options it
+    lacks refused by name (an imported model without an ``[end_effector]``, or without motors to servo, too)."""
+    from fpm_sim.architecture import Description, solve_task_pose
+    from fpm_sim.sim.task import mover_of, rollout_machine
 
     for flag, v in (
         ("--thickness-mm", args.thickness_mm),
@@ -134,33 +137,37 @@ def _general_machine(args: argparse.Namespace, desc: Any, opts: Any) -> tuple[An
     ):
         if v is not None:
             raise CliError(
-                f"{flag} is for the study's 3RRR; a described architecture sets its section in the file and its "
-                f"servo gains in [servos], and records no accelerations; drop {flag}"
+                f"{flag} is for the study's 3RRR; a described architecture or an imported model sets its section in "
+                f"its file and its servo gains in [servos], and records no accelerations; drop {flag}"
             )
+    mover: Any = mover_of(desc, need_motors=args.motors == "servo")
     given = {"x": args.force_x_n, "y": args.force_y_n, "z": args.force_z_n, "phi": args.moment_z_nm}
     for c, v in given.items():
-        if v != 0.0 and c not in desc.task:
+        if v != 0.0 and c not in mover.task:
             raise CliError(
                 f"{_LOAD_FLAGS[c]}: {desc.name} has no task coordinate {c} (its task coordinates are "
-                f"{', '.join(desc.task)}), so no load along it; drop {_LOAD_FLAGS[c]}"
+                f"{', '.join(mover.task)}), so no load along it; drop {_LOAD_FLAGS[c]}"
             )
-    pose = task_pose_of(args, desc)
+    if isinstance(desc, Description):
+        state = solve_task_pose(desc, task_pose_of(args, desc))
+    else:
+        state = mover.state_at(None, imported_pose_of(args, desc)[0])
     motors = "servo" if args.motors == "servo" else "locked"
-    asm = solve_task_pose(desc, pose)
-    h = opts.timestep_s or build_general(desc, pose, opts, assembly=asm, motors=motors).timestep_s
-    built = build_general(desc, pose, aligned_step(opts, h, args.output_step_s), assembly=asm, motors=motors)
-    return built, machine_of(built, desc, asm), [given[c] for c in desc.task]
+    mc, built = rollout_machine(mover, state, opts, args.output_step_s, motors)
+    return built, mc, [given[c] for c in mover.task]
 
 
 def _machine(args: argparse.Namespace, opts: Any) -> tuple[Any, Any, list[float], int]:
-    """The model, the machine (the 3RRR's description or a described architecture's rollout machine), the
-    end-effector load and the number of motors."""
+    """The model, the machine (the 3RRR's description, or a described architecture's or an imported model's rollout
+    machine), the end-effector load and the number of motors."""
     from fpm_sim.architecture import Description
+    from fpm_sim.architecture.imported import ImportedDescription
     from fpm_sim.model.manipulator import build_manipulator
     from fpm_sim.sim.rollout import aligned_options
 
     machine = load_machine(args, "rollout")
-    if isinstance(machine, Description):
+    refuse_joint_values(args, machine)
+    if isinstance(machine, Description | ImportedDescription):
         built, mc, wrench = _general_machine(args, machine, opts)
         return built, mc, wrench, len(mc.motor_names)
     if args.thickness_mm is not None:
@@ -246,7 +253,9 @@ def register(sub: argparse._SubParsersAction) -> None:
             "output step, at the default resolution (fidelity standard: 12 segments): MuJoCo's implicit discrete "
             "integrator at the step of the band (--band-hz, default 5 x f1; the numerical damping and period error in "
             "the band are printed); --integrator explicit: the explicit-spring reference (~1 us steps, ~50x slower). "
-            "Motor torques need --motors servo (locked motors have no joint). Writes a CSV/NPZ of end-effector "
+            "Motor torques need --motors servo (locked motors have no joint). An imported model (kind = 'imported') "
+            "needs its [end_effector] (the coordinates recorded and loaded), posed by --q and/or the pose options. "
+            "Writes a CSV/NPZ of end-effector "
             "pose, displacement, deflection (pose minus rigid-link "
             "kinematics), motor angles, loads and accelerations, and a plot."
         ),
@@ -265,7 +274,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         nargs="+",
         default=None,
         help="motor torques (N m; N on a prismatic joint), one per motor: the 3RRR's three, a described "
-        "architecture's actuated joints in the file's order (needs --motors servo)",
+        "architecture's actuated joints in the file's order, an imported model's motors in its joint order (needs "
+        "--motors servo)",
     )
     p.add_argument("--load-profile", choices=("constant", "step", "sine"), default="constant", help="load time profile")
     p.add_argument("--load-start-s", type=float, default=0.0, help="step time (s) for --load-profile step")
@@ -281,6 +291,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, help="time histories, .csv or .npz")
     p.add_argument("--plot", type=Path, help="plot file (.png, .pdf, .svg)")
     add_pose_args(p)
+    add_joint_args(p)
     add_config_args(p)
     add_model_args(p)
     add_stepping_args(p)

@@ -802,7 +802,9 @@ def build_imported(
         adr = int(model.jnt_dofadr[j])
         dof_kinds[adr : adr + width] = [kinds.get(name, "passive")] * width
     first = next(iter(links))
-    tip = links[list(links)[-1]][-1]  # the last flexible body's beam end: the FRF's and reductions' reference point
+    # the reductions' and the FRF's end effector: the description's [end_effector] site, else the last flexible
+    # body's beam end
+    tip = desc.end_effector.site if desc.end_effector is not None else links[list(links)[-1]][-1]
     return BuiltModel(
         model=model,
         spec=spec,

@@ -92,10 +92,35 @@ class ImportedKinematics:
 
     def reference_pose(self) -> TaskPose:
         """The end-effector site's task coordinates at the model's reference (``qpos0``; m, rad)."""
+        return self.pose_at({})[0]
+
+    def pose_at(self, q: Mapping[str, float]) -> tuple[TaskPose, dict[str, float]]:
+        """The end-effector site's task coordinates (m, rad) with the joints at ``q`` (those not given at the model's
+        reference), and every hinge and slide joint's value: forward kinematics, no loop solved (``q`` closes the
+        loops, as :func:`~fpm_sim.model.imported.build_imported` checks).
+
+        Raises
+        ------
+        ImportedPoseError
+            A joint ``q`` names that the model has no hinge or slide of.
+        """
+        self._check_names(q)
         self.data.qpos[:] = self.model.qpos0
+        for name, v in q.items():
+            self.data.qpos[self.joints[name]] = v
         mujoco.mj_kinematics(self.model, self.data)
         p, x = self.data.site_xpos[self.site], self.data.site_xmat[self.site].reshape(3, 3)[:, 0]
-        return TaskPose(float(p[0]), float(p[1]), float(p[2]), math.atan2(x[1], x[0]))
+        values = {n: float(self.data.qpos[a]) for n, a in self.joints.items()}
+        return TaskPose(float(p[0]), float(p[1]), float(p[2]), math.atan2(x[1], x[0])), values
+
+    def _check_names(self, q: Mapping[str, float]) -> None:
+        for name in q:
+            if name not in self.joints:
+                raise ImportedPoseError(
+                    f"no hinge or slide joint {name!r} in the model",
+                    parameter="q",
+                    hint=f"joints: {', '.join(self.joints)}",
+                )
 
     def _residual(self, pose: TaskPose) -> tuple[np.ndarray, np.ndarray]:
         """``r`` and ``dr/dv`` (rows: the equality rows, then the task coordinates; columns: the model's dofs) at
@@ -151,13 +176,7 @@ class ImportedKinematics:
             An unknown joint, a pose not reachable from the start's assembly branch, or a singular pose.
         """
         fixed = dict(fixed or {})
-        for name in (*fixed, *(start or {})):
-            if name not in self.joints:
-                raise ImportedPoseError(
-                    f"no hinge or slide joint {name!r} in the model",
-                    parameter="q",
-                    hint=f"joints: {', '.join(self.joints)}",
-                )
+        self._check_names({**fixed, **(start or {})})
         d = self.data
         d.qpos[:] = self.model.qpos0
         for name, v in {**(start or {}), **fixed}.items():

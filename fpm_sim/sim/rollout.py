@@ -9,7 +9,9 @@ Loads are evaluated once per output step and held constant over it (zero-order h
 
 - ``ee_wrench(t) -> (F_x, F_y, M_z)`` (N, N, N m): a wrench on the end effector at
   ``platform_center``, world axes, applied through ``xfrc_applied`` of the platform body, whose
-  centre of mass is that site (checked), so it follows the platform as it moves;
+  centre of mass is that site, so it follows the platform as it moves; where the site is off its body's centre of
+  mass (an imported model's end-effector site), the force's moment about the centre of mass is added, its arm taken
+  at each output step with the load (the force acts at the site to the motion within one output step);
 - ``motor_torque(t) -> (tau_0, tau_1, tau_2)`` (N m) on the motor hinges ``motor_i`` (needs
   ``motors.mode = "servo"`` or a compliant clamp; locked motors have no joint);
 - ``motor_reference(t) -> (theta_0, ...)`` (rad): servo drive. The servo hinge is a spring-damper of
@@ -573,14 +575,7 @@ def _check_loads(model: mujoco.MjModel, machine: RolloutMachine, loads: _Loads) 
     if loads.motor_reference is not None and machine.servo_stiffness is None:
         raise RolloutError("motor_reference drives a servo: " + machine.no_motor_hint)
     sid = end_effector_site_id(model, machine.ee_site)
-    bid = int(model.site_bodyid[sid])
-    if loads.ee_wrench is not None and not np.allclose(model.body_ipos[bid], model.site_pos[sid], atol=1e-12):
-        raise RolloutError(
-            "the end effector's centre of mass is not at its site; wrench application unsupported",
-            parameter="ee_wrench",
-            hint="place the end effector's lumps at its origin",
-        )
-    return bid
+    return int(model.site_bodyid[sid])
 
 
 def _site_ids(model: mujoco.MjModel, sites: Sequence[str]) -> list[int]:
@@ -621,6 +616,9 @@ class _Trace:
         self.acc = {s: np.zeros((n, 3)) for s in acc_ids}
         self.gravity = model.opt.gravity.copy()
         self.slots = [_WRENCH_SLOT[x] for x in machine.coordinates]
+        self.sid = end_effector_site_id(model, machine.ee_site)
+        # the site off its body's centre of mass (an imported model's): the force's moment about it is added
+        self.offset = not np.allclose(model.body_ipos[bid], model.site_pos[self.sid], atol=1e-12)
         self.qadr = [int(model.jnt_qposadr[model.dof_jntid[d]]) for d in machine.motor_dofs]
         self._res6 = np.zeros(6)
 
@@ -647,6 +645,10 @@ class _Trace:
             w = _load("ee_wrench", loads.ee_wrench(tk), tk, len(mc.coordinates))
             self.wrench[k] = w
             data.xfrc_applied[self.bid, self.slots] = w
+            if self.offset:  # the arm from the centre of mass to the site at t_k, held with the load
+                mujoco.mj_kinematics(self.model, data)
+                arm = data.site_xpos[self.sid] - data.xipos[self.bid]
+                data.xfrc_applied[self.bid, 3:] += np.cross(arm, data.xfrc_applied[self.bid, :3])
         m = len(mc.motor_names)
         tau = np.zeros(m)
         if loads.motor_torque is not None:

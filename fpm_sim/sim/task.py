@@ -28,7 +28,9 @@ gains), so that one implementation moves both a described architecture (:class:`
 kinematics above, :func:`fpm_sim.model.general.build_general` with ``motors="servo"``) and an imported model
 (:class:`fpm_sim.sim.imported_move.ImportedMover`: Gauss-Newton on the model's loop rows and end-effector site,
 :func:`fpm_sim.model.imported.build_imported` with ``motors="servo"``); ``J`` is the same central differences of
-either solver (:func:`motor_jacobian`).
+either solver (:func:`motor_jacobian`). A rollout reads the same adapter (:func:`rollout_machine`: the model at a
+state with its motors locked or as servos, and its :class:`~fpm_sim.sim.rollout.RolloutMachine`), so it runs on both
+too.
 """
 
 from __future__ import annotations
@@ -83,6 +85,7 @@ __all__ = [
     "mover_of",
     "pose_vector",
     "rigid_jacobian",
+    "rollout_machine",
     "simulate_task_move",
     "task_pose",
 ]
@@ -137,8 +140,9 @@ class MoveMachine(Protocol):
     def motors(self, state: Any) -> np.ndarray:
         """The motors' coordinates at ``state`` (rad or m, as the model's servo joints count them)."""
 
-    def build(self, pose: TaskPose, state: Any, options: ModelOptions) -> BuiltModel:
-        """The flexible model with the motors as servos at ``pose`` (``state`` its state; ``None``: solved)."""
+    def build(self, pose: TaskPose, state: Any, options: ModelOptions, motors: str = "servo") -> BuiltModel:
+        """The flexible model at ``pose`` (``state`` its state; ``None``: solved), its motors ``motors``: servos (a
+        move's), or ``"locked"`` (a rollout's default)."""
 
     def gains(self) -> tuple[np.ndarray, np.ndarray]:
         """Each motor's servo stiffness and damping (N m/rad and N m s/rad, or N/m and N s/m)."""
@@ -173,8 +177,10 @@ class DescribedMover:
     def motors(self, state: TaskAssembly) -> np.ndarray:
         return actuated_coordinates(self.desc, state)
 
-    def build(self, pose: TaskPose, state: TaskAssembly | None, options: ModelOptions) -> BuiltModel:
-        return build_general(self.desc, pose, options, assembly=state, motors="servo")
+    def build(
+        self, pose: TaskPose, state: TaskAssembly | None, options: ModelOptions, motors: str = "servo"
+    ) -> BuiltModel:
+        return build_general(self.desc, pose, options, assembly=state, motors=motors)
 
     def gains(self) -> tuple[np.ndarray, np.ndarray]:
         types = [j.type for c in self.desc.chains for j in c.joints if j.actuated]
@@ -182,10 +188,10 @@ class DescribedMover:
         return np.array(k, float), np.array(c, float)
 
 
-def mover_of(desc: Description | ImportedDescription | MoveMachine) -> MoveMachine:
+def mover_of(desc: Description | ImportedDescription | MoveMachine, *, need_motors: bool = True) -> MoveMachine:
     """The :class:`MoveMachine` of a described architecture or of an imported model
-    (:class:`fpm_sim.sim.imported_move.ImportedMover`: it needs an ``[end_effector]`` and motors); a
-    :class:`MoveMachine` as it is."""
+    (:class:`fpm_sim.sim.imported_move.ImportedMover`: it needs an ``[end_effector]``, and motors with
+    ``need_motors``); a :class:`MoveMachine` as it is."""
     from fpm_sim.architecture.imported import ImportedDescription
 
     if isinstance(desc, Description):
@@ -193,8 +199,20 @@ def mover_of(desc: Description | ImportedDescription | MoveMachine) -> MoveMachi
     if isinstance(desc, ImportedDescription):
         from fpm_sim.sim.imported_move import ImportedMover
 
-        return ImportedMover(desc)
+        return ImportedMover(desc, need_motors=need_motors)
     return desc
+
+
+def rollout_machine(
+    mover: MoveMachine, state: Any, options: ModelOptions, output_step_s: float, motors: str = "locked"
+) -> tuple[RolloutMachine, BuiltModel]:
+    """The model of ``mover`` at ``state`` for a rollout (:func:`fpm_sim.sim.rollout.rollout`), its motors
+    ``motors`` (``"locked"`` or ``"servo"``), the timestep (automatic unless ``options`` sets it) rounded down to
+    divide ``output_step_s``; and its :class:`RolloutMachine` (:func:`machine_of`)."""
+    pose = mover.pose_of(state)
+    h = options.timestep_s or mover.build(pose, state, options, motors).timestep_s
+    built = mover.build(pose, state, aligned_step(options, h, output_step_s), motors)
+    return machine_of(built, mover, state), built
 
 
 def motor_jacobian(mover: MoveMachine, state: Any) -> np.ndarray:

@@ -1,5 +1,5 @@
 """Imported models posed in joint space: CSV poses, ``modes --poses``, ``sweep``, ``frf``, ``export-mjcf``, and every
-other command refused in one line (issue 29)."""
+other command, or option, that has no meaning on one refused in one line (issue 29)."""
 
 from __future__ import annotations
 
@@ -135,7 +135,10 @@ def _one_line(code: int, text: str, words: str) -> None:
         (["check", "{tmp}/req.toml"], "requirement 'f1'.poses: reachable workspace, 10 mm grid, phi 0 rad is a task-"),
         (["design", "--vary", "sections.tube.outer_diameter_m=0.1", "--out", "{tmp}/o"], "'design' does not run"),
         (["move", "--out", "{tmp}/m.csv"], "end_effector: acrobot names no end effector: a move commands"),
-        (["reduce", "--modes", "3"], "'reduce' does not run on it"),
+        (["rollout", "--out", "{tmp}/r.csv"], "end_effector: acrobot names no end effector: a move commands"),
+        (["reduce", "--modes", "3", "--motors", "servo"], "--motors servo: a described architecture's actuated"),
+        (["impact", "--uff", "{tmp}/i.uff"], "--uff: the UFF record carries a task pose in x, y and phi, and an"),
+        (["atlas", "build", "--out", "{tmp}/a.npz"], "'atlas' does not run on it"),
         (["reproduce", "--out", "{tmp}/o"], "'reproduce' does not run on it"),
     ],
 )
