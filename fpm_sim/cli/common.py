@@ -426,18 +426,25 @@ def load_machine(args: argparse.Namespace, command: str) -> Manipulator | Descri
     return load_manipulator(args)
 
 
-IMPORTED_COMMANDS = ("modes", "sweep", "frf", "export-mjcf", "check", "identify", "calibrate", "move")
+IMPORTED_COMMANDS = (
+    "modes",
+    "sweep",
+    "frf",
+    "export-mjcf",
+    "check",
+    "identify",
+    "calibrate",
+    "move",
+    "design",
+    "atlas",
+)
 """The commands that run on an imported model (``kind = "imported"``), posed by joint values (``--q``, ``--poses``) or,
 where its description names an ``[end_effector]``, by task poses (``--x-mm`` ..., a poses CSV of task columns); ``move``
 needs that ``[end_effector]`` and motors (the joints an ``<actuator>`` drives, ``servo_joints``)."""
 
 _WHY_NOT_IMPORTED = {
-    "design": "its --vary paths edit a described architecture's chains; an imported model's sections are edited in "
-    "its own file (run sweep --poses on each edited copy)",
     "reduce": "its reduced models are the described architectures' (task poses, motors as inputs)",
     "impact": "its hammer points and poses are a described architecture's",
-    "atlas": "its atlas spans a described architecture's reach, which an imported model does not state (sweep "
-    "--poses over a CSV of task poses instead, where the model names an [end_effector])",
     "rollout": "it drives motors that an imported model's actuated joints, locked by the import, no longer have "
     "(a move drives them: fpm-sim move)",
 }
