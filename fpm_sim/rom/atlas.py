@@ -675,7 +675,9 @@ def _axis(values: Sequence[float], name: str) -> np.ndarray:
 
 Machine = Manipulator | Description | ImportedDescription
 """What an atlas is built on: the 3RRR, a described architecture, or an imported model that names an
-``[end_effector]`` (its grid in that site's task coordinates)."""
+``[end_effector]`` (its grid in that site's task coordinates, at the site's reference height unless given; each node's
+joint values solved from its parent's, :class:`~fpm_sim.model.imported_pose.ImportedKinematics`; its reduced models'
+wrench inputs and displacement outputs at that site)."""
 
 
 def build_atlas(
@@ -699,13 +701,9 @@ def build_atlas(
     manip
         The 3RRR (:class:`~fpm_sim.config.Manipulator`) or a described architecture
         (:class:`~fpm_sim.architecture.Description`: its grid in its task coordinates; ``phi_rad`` only where it
-        sets phi), or an imported model that names an ``[end_effector]``
-        (:class:`~fpm_sim.architecture.imported.ImportedDescription`: the grid in that site's task coordinates, each
-        node's joint values solved from its parent's, :class:`~fpm_sim.model.imported_pose.ImportedKinematics`; its
-        reduced model's wrench inputs and displacement outputs at that site).
+        sets phi), or an imported model (:data:`Machine`).
     z_m
-        A spatial architecture's height (m; default its first check pose's; an imported model's: its site's height at
-        the model's reference): the atlas is a horizontal slice.
+        A spatial machine's height (m; default its first check pose's, an imported model's reference): a slice.
     options
         Model options shared by every pose (default: the shared default resolution, inextensible links).
     n_modes
