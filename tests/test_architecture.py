@@ -32,7 +32,9 @@ def test_no_import_cycles_between_modules(graph: grimp.ImportGraph) -> None:
 
 def test_nothing_outside_cli_imports_cli(graph: grimp.ImportGraph) -> None:
     offenders = [
-        m for m in graph.find_downstream_modules("fpm_sim.cli", as_package=True) if not m.startswith("fpm_sim.cli")
+        m
+        for m in graph.find_downstream_modules("fpm_sim.cli", as_package=True)
+        if not m.startswith("fpm_sim.cli")
     ]
     assert not offenders
 
@@ -42,11 +44,8 @@ def _private_imports(path: Path) -> list[str]:
     out = []
     for node in ast.walk(tree):
         if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("fpm_sim"):
-            out += [
-                f"{path.name}: from {node.module} import {a.name}"
-                for a in node.names
-                if a.name.startswith("_") and not a.name.startswith("__")
-            ]
+            out += [f"{path.name}: from {node.module} import {a.name}" for a in node.names if a.name.startswith("_")
+                    and not a.name.startswith("__")]
     return out
 
 

@@ -66,7 +66,9 @@ def _flag_literals(path: Path) -> list[str]:
 def test_no_library_message_names_a_command_line_flag():
     # the command line and the pytest plugin (which declares pytest's own --fpm-* options) may name flags
     files = [
-        p for p in PACKAGE.rglob("*.py") if "cli" not in p.relative_to(PACKAGE).parts and p.name != "pytest_plugin.py"
+        p
+        for p in PACKAGE.rglob("*.py")
+        if "cli" not in p.relative_to(PACKAGE).parts and p.name != "pytest_plugin.py"
     ]
     assert len(files) > 50  # the scan sees the package
     hits = [h for p in files for h in _flag_literals(p)]

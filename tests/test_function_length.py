@@ -20,6 +20,7 @@ MAX_BODY_LINES = 80
 PACKAGE = Path(fpm_sim.__file__).parent
 
 
+
 def body_lines(node: ast.FunctionDef | ast.AsyncFunctionDef) -> int:
     """Lines from the ``def`` line (decorators excluded) to the function's last line, both included."""
     assert node.end_lineno is not None

@@ -294,13 +294,8 @@ def _check_report():
         {
             "settings": {"segments": SEG},
             "requirement": [
-                {
-                    "name": "f1 floor",
-                    "kind": "min_frequency",
-                    "at_least_hz": 1.0,
-                    "mode": 1,
-                    "poses": {"list": [[0, 0, 0.0], [50, -50, 0.0]]},
-                },
+                {"name": "f1 floor", "kind": "min_frequency", "at_least_hz": 1.0, "mode": 1,
+                 "poses": {"list": [[0, 0, 0.0], [50, -50, 0.0]]}},
             ],
         },
         Path("fpm-requirements.toml"),

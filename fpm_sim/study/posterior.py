@@ -479,10 +479,7 @@ class Posterior:
             assert isinstance(cfg, Manipulator)
             assert all(isinstance(p, Pose) for p in poses)
             f, res = sensor_residues(
-                cfg,
-                [p for p in poses if isinstance(p, Pose)],
-                n_modes=read.reference_modes,
-                points=read.points,
+                cfg, [p for p in poses if isinstance(p, Pose)], n_modes=read.reference_modes, points=read.points,
                 options=options,
             )
             probs = read_probabilities(np.transpose(res, (1, 0, 2)), read)  # (setups, poses, modes)

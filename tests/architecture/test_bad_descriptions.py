@@ -44,14 +44,12 @@ CASES = {
         "must be > 0",
     ),
     "mobility left with the actuators locked": (
-        FIVE_BAR.replace(
-            'axis = [0, 0, 1], actuated = true },\n  { link = "proximal", length_m = 0.180, section = '
-            '"bar", material = "steel" },\n  { joint = "elbow", type = "revolute", axis = [0, 0, 1], '
-            'lump = "elbow", branch_deg = [0, 180]',
-            'axis = [0, 0, 1] },\n  { link = "proximal", length_m = 0.180, section = "bar", material = '
-            '"steel" },\n  { joint = "elbow", type = "revolute", axis = [0, 0, 1], lump = "elbow", '
-            "branch_deg = [0, 180]",
-        ),
+        FIVE_BAR.replace('axis = [0, 0, 1], actuated = true },\n  { link = "proximal", length_m = 0.180, section = '
+                         '"bar", material = "steel" },\n  { joint = "elbow", type = "revolute", axis = [0, 0, 1], '
+                         'lump = "elbow", branch_deg = [0, 180]',
+                         'axis = [0, 0, 1] },\n  { link = "proximal", length_m = 0.180, section = "bar", material = '
+                         '"steel" },\n  { joint = "elbow", type = "revolute", axis = [0, 0, 1], lump = "elbow", '
+                         'branch_deg = [0, 180]'),
         "chains",
         "keeps 1 degree(s) of freedom",
     ),

@@ -142,7 +142,9 @@ def test_the_five_bar_is_mirror_symmetric_but_for_its_end_effector_s_turn():
     text = (EXAMPLES / "five_bar.toml").read_text()
     assert text.count("inertia_kg_m2 = [1e-4, 1e-4, 1e-4]") == 1
     no_turn = parse_description(
-        tomllib.loads(text.replace("inertia_kg_m2 = [1e-4, 1e-4, 1e-4]", "inertia_kg_m2 = [1e-4, 1e-4, 1e-12]"))
+        tomllib.loads(
+            text.replace("inertia_kg_m2 = [1e-4, 1e-4, 1e-4]", "inertia_kg_m2 = [1e-4, 1e-4, 1e-12]")
+        )
     )
     left, right = _freqs(no_turn, TaskPose(-0.06, 0.3)), _freqs(no_turn, TaskPose(0.06, 0.3))
     # what still turns with the end effector is the pin of link 2's hinge (1e-9 kg m^2, MIN_BODY_MASS_KG's lump):

@@ -53,11 +53,8 @@ CASES: list[tuple[str, list[str], str]] = [
     ("modes-config-negative-thickness", ["modes", "--config", "{tmp}/neg.toml"], "thickness"),
     ("modes-x-text", ["modes", "--x-mm", "abc"], "x-mm"),
     # flex links near the singularity: the equilibrium iteration diverged into NaN (was LAPACK's SVD traceback)
-    (
-        "modes-flex-near-singular",
-        ["modes", "--x-mm", "-100", "--y-mm", "50", "--link-model", "flex", "--fidelity", "fast", "--n-modes", "2"],
-        "equilibrium",
-    ),
+    ("modes-flex-near-singular", ["modes", "--x-mm", "-100", "--y-mm", "50", "--link-model", "flex", "--fidelity",
+                                  "fast", "--n-modes", "2"], "equilibrium"),
     # subsystem rigs
     ("rig-length-negative", ["rig", "cantilever", "--length-mm", "-1000", *S3], "length"),
     ("rig-thickness-zero", ["rig", "cantilever", "--thickness-mm", "0", *S3], "thickness"),

@@ -42,23 +42,8 @@ def test_defaults_agree_on_f1(capsys, tmp_path):
     (row,) = [r for r in d["rows"] if r["x_mm"] == 0 and r["y_mm"] == 0]
     f1["sweep"], res["sweep"] = row["f1_hz"], d["resolution"]
     atlas = tmp_path / "a.npz"
-    run_json(
-        capsys,
-        "atlas",
-        "build",
-        "--x-mm",
-        "-50",
-        "0",
-        "50",
-        "--y-mm",
-        "-50",
-        "0",
-        "50",
-        "--modes",
-        "2",
-        "--out",
-        str(atlas),
-    )
+    run_json(capsys, "atlas", "build", "--x-mm", "-50", "0", "50", "--y-mm", "-50", "0", "50", "--modes", "2",
+             "--out", str(atlas))
     d = run_json(capsys, "atlas", "query", str(atlas))
     f1["atlas query"], res["atlas query"] = d["frequencies_hz"][0], d["resolution"]
     values = np.array(list(f1.values()))

@@ -26,22 +26,8 @@ READING_LINE = {"x+": "row=x,phi=+0.2", "y-": "row=y,phi=-0.2"}
 
 
 def command(out: Path, reading: str, *extra: str) -> list[str]:
-    return [
-        sys.executable,
-        "-m",
-        "fpm_sim.cli.main",
-        "reproduce",
-        "--segments",
-        "3",
-        "--workers",
-        "1",
-        "--reading",
-        reading,
-        "--out",
-        str(out),
-        "--json",
-        *extra,
-    ]
+    return [sys.executable, "-m", "fpm_sim.cli.main", "reproduce", "--segments", "3", "--workers", "1",
+            "--reading", reading, "--out", str(out), "--json", *extra]
 
 
 def run_and_interrupt(argv: list[str], after_s: float) -> subprocess.CompletedProcess:

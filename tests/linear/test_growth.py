@@ -40,7 +40,9 @@ def _build(manip, **kw):
         return build_manipulator(manip, NEAR, ModelOptions(segments=3, **kw))
 
 
-def test_buckling_under_gravity_says_so_with_the_singularity_measure_and_f1_without_gravity(default_manip, monkeypatch):
+def test_buckling_under_gravity_says_so_with_the_singularity_measure_and_f1_without_gravity(
+    default_manip, monkeypatch
+):
     built = _build(default_manip)
     f1 = modes_constrained(built, n_modes=1).frequencies_hz[0]
     f1_free = modes_constrained(_build(default_manip, gravity=False), n_modes=1).frequencies_hz[0]

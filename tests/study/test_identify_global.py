@@ -82,7 +82,9 @@ def test_first_population_is_sobol_with_surrogate_seeds_per_branch(monkeypatch):
     monkeypatch.setattr(de, "surrogate_starts", lambda o, opts, br: calls.append(list(br)) or fake)
 
     d = len(free) + 1
-    plain = de.initial_population(obj, IdentifyOptions(segments=SEG, popsize=5, surrogate_seeds=0), free, branches)
+    plain = de.initial_population(
+        obj, IdentifyOptions(segments=SEG, popsize=5, surrogate_seeds=0), free, branches
+    )
     assert calls == []  # no surrogate run when no seed is asked for
     n = plain.shape[0]
     assert plain.shape == (n, d)
@@ -91,7 +93,9 @@ def test_first_population_is_sobol_with_surrogate_seeds_per_branch(monkeypatch):
     assert np.all((plain[:, :-1] >= 0) & (plain[:, :-1] <= 1))
     assert np.all((plain[:, -1] >= 0) & (plain[:, -1] <= len(branches) - 1))
 
-    seeded = de.initial_population(obj, IdentifyOptions(segments=SEG, popsize=5, surrogate_seeds=2), free, branches)
+    seeded = de.initial_population(
+        obj, IdentifyOptions(segments=SEG, popsize=5, surrogate_seeds=2), free, branches
+    )
     assert calls == [branches]  # every combination, not the surrogate-de's own six
     for k, b in enumerate(ranked):
         for row in (2 * k, 2 * k + 1):

@@ -191,6 +191,7 @@ def test_plan_tests_bad_input_is_one_error_line_and_nothing_written(tmp_path, ca
     assert not out.exists()
 
 
+
 def test_screening_many_candidates_keeps_the_choice_of_the_full_scoring():
     """40 candidate directions: screened by the band's moments (the 8 best scored with quantiles) the plan is the
     one the full quantile scoring of all 40 gives, and for this Gaussian machine the moments' estimate of every

@@ -29,9 +29,7 @@ from fpm_sim.study.plan import Ensemble, describe_candidates, greedy_plan
 from fpm_sim.study.poses import study_poses
 from tests.helpers.priors import HARDWARE_PRIORS
 
-PRIORS = (
-    HARDWARE_PRIORS
-    + """[parameters."section.height_m"]
+PRIORS = HARDWARE_PRIORS + """[parameters."section.height_m"]
 dist = "loguniform"
 lower = 0.004
 upper = 0.03
@@ -42,7 +40,6 @@ lower = 0.005
 upper = 0.03
 reason = "assumed: test"
 """
-)
 GROUPS = ("hardware", "section")
 NOISE = 0.015
 K = 3

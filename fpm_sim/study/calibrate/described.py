@@ -103,7 +103,9 @@ class TaskObservation:
         if isinstance(self.pose, dict):
             return f"{self.source} ({', '.join(f'{j}={v:g}' for j, v in self.pose.items())}) f{self.mode}"
         pose = self.pose
-        where = ", ".join(f"{c}={pose.value(c):g}" if c == "phi" else f"{c}={pose.value(c) * 1e3:g}" for c in self.task)
+        where = ", ".join(
+            f"{c}={pose.value(c):g}" if c == "phi" else f"{c}={pose.value(c) * 1e3:g}" for c in self.task
+        )
         return f"{self.source} ({where}) f{self.mode}"
 
 
