@@ -480,9 +480,9 @@ def sweep(
 
 
 def design(
-    config: Manipulator | Description | None = None,
+    config: Manipulator | Description | ImportedDescription | None = None,
     *,
-    poses: Sequence[Pose] | Sequence[TaskPose] | None = None,
+    poses: Sequence[Pose] | Sequence[TaskPose] | Sequence[dict[str, float]] | None = None,
     vary: dict[str, Sequence[float]] | None = None,
     designs: Sequence[dict[str, float]] | None = None,
     n_modes: int = 3,
@@ -497,11 +497,14 @@ def design(
     config
         The base description; ``None``: the embedded one. A described architecture
         (:class:`fpm_sim.architecture.Description`, read from its file) varies dotted paths into its file
-        (``sections.bar.height_m``, ``chains.left.proximal.length_m``: docs/architectures.md).
+        (``sections.bar.height_m``, ``chains.left.proximal.length_m``: docs/architectures.md). An imported model
+        (:class:`fpm_sim.architecture.imported.ImportedDescription`, ``fs.load_imported``) varies dotted paths into its
+        file too (``materials.steel.young_pa``; docs/import.md).
     poses
         The poses, the same for every design (e.g. ``fs.sweep``'s grids, or
         :func:`fpm_sim.study.sweep.dense_grid`); a described architecture's are
-        :class:`fpm_sim.architecture.TaskPose` values, ``None``: its check poses. The 3RRR needs them.
+        :class:`fpm_sim.architecture.TaskPose` values, ``None``: its check poses. The 3RRR needs them, and so does an
+        imported model: ``{joint: value}`` mappings, or task poses where it names an ``[end_effector]``.
     vary
         ``{dotted field: values}`` (SI units, as the field names say): the full factorial.
     designs
@@ -516,12 +519,29 @@ def design(
         Processes of a described architecture's pose loop (the 3RRR's runs on the Dask engine's default).
     """
     from fpm_sim.architecture import Description, TaskPose
+    from fpm_sim.architecture.imported import ImportedDescription
     from fpm_sim.batch.engine import EngineOptions
     from fpm_sim.designs import DesignError, design_study
 
+    if isinstance(config, ImportedDescription):
+        if poses is None:
+            raise DesignError(
+                "an imported model states no check poses",
+                parameter="poses",
+                hint="give {joint: value} poses, or fs.TaskPose values where it names an [end_effector]",
+            )
+        return design_study(
+            config,
+            poses=poses,
+            vary=vary,
+            designs=designs,
+            n_modes=n_modes,
+            f_min_hz=f_min_hz,
+            options=_options(options),
+        )
     if isinstance(config, Description):
         home = [TaskPose(*(p.get(c, 0.0) for c in ("x", "y", "z", "phi"))) for p in config.check_poses]
-        chosen: Sequence[Pose] | Sequence[TaskPose] = home if poses is None else poses
+        chosen: Sequence[Any] = home if poses is None else poses
         engine = EngineOptions(workers=workers)
     elif poses is None:
         raise DesignError("the 3RRR's design study needs poses", parameter="poses", hint="e.g. dense_grid(config)")
@@ -1081,7 +1101,7 @@ def readability(
 
 
 def atlas(
-    config: Manipulator | Description | None = None,
+    config: Manipulator | Description | ImportedDescription | None = None,
     *,
     x_m: Sequence[float],
     y_m: Sequence[float],
@@ -1102,7 +1122,10 @@ def atlas(
     ----------
     config
         Manipulator description; ``None``: the embedded one; or a described architecture
-        (:class:`fpm_sim.architecture.Description`: the grid in its task coordinates, queried at a ``fs.TaskPose``).
+        (:class:`fpm_sim.architecture.Description`: the grid in its task coordinates, queried at a ``fs.TaskPose``);
+        or an imported model that names an ``[end_effector]``
+        (:class:`fpm_sim.architecture.imported.ImportedDescription`: the grid in that site's task coordinates, at its
+        reference height).
     x_m, y_m, phi_rad
         The grid (m, m, rad); ``phi_rad`` only on a machine that sets phi.
     z_m
@@ -1115,10 +1138,11 @@ def atlas(
         Show a progress bar.
     """
     from fpm_sim.architecture import Description
+    from fpm_sim.architecture.imported import ImportedDescription
     from fpm_sim.rom.atlas import build_atlas
 
     return build_atlas(
-        config if isinstance(config, Description) else _config(config),
+        config if isinstance(config, (Description, ImportedDescription)) else _config(config),
         x_m=x_m,
         y_m=y_m,
         phi_rad=phi_rad,

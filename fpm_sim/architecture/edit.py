@@ -322,10 +322,11 @@ def settable_paths(desc: Description | ImportedDescription) -> list[str]:
     return out
 
 
-def machine_parameter(machine: Manipulator | Description, name: str) -> float:
-    """The value of a dotted name on either form: the 3RRR's (:func:`fpm_sim.config.parameter_value`,
-    ``section.thickness_m``) or a described architecture's (:func:`description_value`, ``sections.bar.height_m``)."""
-    if isinstance(machine, Description):
+def machine_parameter(machine: Manipulator | Description | ImportedDescription, name: str) -> float:
+    """The value of a dotted name on any form: the 3RRR's (:func:`fpm_sim.config.parameter_value`,
+    ``section.thickness_m``), a described architecture's or an imported model's (:func:`description_value`, a path
+    into its file: ``sections.bar.height_m``)."""
+    if isinstance(machine, (Description, ImportedDescription)):
         return description_value(machine, name)
     return parameter_value(machine, name)
 
@@ -334,9 +335,13 @@ def machine_parameter(machine: Manipulator | Description, name: str) -> float:
 def with_machine_parameter(machine: Manipulator, name: str, value: float) -> Manipulator: ...
 @overload
 def with_machine_parameter(machine: Description, name: str, value: float) -> Description: ...
-def with_machine_parameter(machine: Manipulator | Description, name: str, value: float) -> Manipulator | Description:
-    """``machine`` with the dotted name set: :func:`with_description_value` (a described architecture) or
-    :func:`fpm_sim.config.with_parameter` (the 3RRR)."""
-    if isinstance(machine, Description):
+@overload
+def with_machine_parameter(machine: ImportedDescription, name: str, value: float) -> ImportedDescription: ...
+def with_machine_parameter(
+    machine: Manipulator | Description | ImportedDescription, name: str, value: float
+) -> Manipulator | Description | ImportedDescription:
+    """``machine`` with the dotted name set: :func:`with_description_value` (a described architecture or an imported
+    model) or :func:`fpm_sim.config.with_parameter` (the 3RRR)."""
+    if isinstance(machine, (Description, ImportedDescription)):
         return with_description_value(machine, name, value)
     return with_parameter(machine, name, value)

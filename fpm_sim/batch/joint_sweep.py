@@ -24,13 +24,21 @@ from typing import Any
 
 import numpy as np
 
+from fpm_sim.architecture import TaskPose
 from fpm_sim.architecture.imported import ImportedDescription
 from fpm_sim.errors import FpmSimError
 from fpm_sim.figures import write_table_and_figure
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.outputs import write_csv_rows
 
-__all__ = ["JointSweep", "check_joint_poses", "modes_at_joint_poses", "read_joint_poses_csv", "sweep_joints"]
+__all__ = [
+    "JointSweep",
+    "check_joint_poses",
+    "modes_at_joint_poses",
+    "read_imported_poses_csv",
+    "read_joint_poses_csv",
+    "sweep_joints",
+]
 
 
 class JointPosesError(FpmSimError):
@@ -124,6 +132,25 @@ def read_joint_poses_csv(
     if not poses:
         raise JointPosesError(f"{p}: no rows after the header", parameter=parameter)
     return poses
+
+
+def read_imported_poses_csv(
+    path: str | Path, desc: ImportedDescription, *, parameter: str = "poses"
+) -> list[TaskPose] | list[dict[str, float]]:
+    """An imported model's poses from a CSV as they are written: task poses
+    (:func:`fpm_sim.batch.task_sweep.read_task_poses_csv`) where its columns are the task coordinates of the model's
+    ``[end_effector]``, else joint values (:func:`read_joint_poses_csv`, which names what is wrong)."""
+    import csv
+
+    from fpm_sim.batch.task_sweep import read_task_poses_csv
+
+    p = Path(path)
+    if desc.task and p.is_file():
+        with open(p, newline="", encoding="utf-8-sig") as fh:
+            columns = {h.strip() for h in next(csv.reader(fh), [])}
+        if columns == {"phi_rad" if c == "phi" else f"{c}_mm" for c in desc.task}:
+            return read_task_poses_csv(p, desc, parameter=parameter)
+    return read_joint_poses_csv(p, desc, parameter=parameter)
 
 
 @dataclass

@@ -37,7 +37,10 @@ def _grid(args: argparse.Namespace, machine: Any) -> tuple[list[float], list[flo
     """The grid (m, m, rad) of the options, or the default: the study's 5 x 5 paper grid at phi 0 for the 3RRR,
     the first check pose and +-20 mm for a described architecture (its phi where it sets one)."""
     from fpm_sim.architecture import Description
+    from fpm_sim.architecture.imported import ImportedDescription
 
+    if isinstance(machine, ImportedDescription):
+        return _imported_grid(args, machine)
     if isinstance(machine, Description):
         home = machine.check_poses[0] if machine.check_poses else {}
         h = DESCRIBED_HALF_WIDTH_MM
@@ -51,6 +54,26 @@ def _grid(args: argparse.Namespace, machine: Any) -> tuple[list[float], list[flo
     return [v * 1e-3 for v in x_mm], [v * 1e-3 for v in y_mm], args.phi_rad if args.phi_rad is not None else phis
 
 
+def _imported_grid(args: argparse.Namespace, desc: Any) -> tuple[list[float], list[float], list[float]]:
+    """An imported model's grid (m, m, rad): ``--x-mm`` and ``--y-mm`` as given (it states no reach or check pose to
+    centre a default on; refused naming them when absent), ``--phi-rad`` or, where its task coordinates hold phi, its
+    end-effector site's phi at the model's reference."""
+    if args.x_mm is None or args.y_mm is None:
+        missing = " and ".join(f for f, v in (("--x-mm", args.x_mm), ("--y-mm", args.y_mm)) if v is None)
+        raise CliError(
+            f"{missing}: an imported model states no reach or check pose to centre a default grid on; give the grid's "
+            "values in its end-effector site's x and y (mm), e.g. --x-mm -20 0 20 --y-mm 230 250 270"
+        )
+    phis = args.phi_rad
+    if phis is None:
+        phis = [0.0]
+        if "phi" in desc.task:
+            from fpm_sim.model.imported_pose import ImportedKinematics
+
+            phis = [ImportedKinematics(desc).reference_pose().phi_rad]
+    return [v * 1e-3 for v in args.x_mm], [v * 1e-3 for v in args.y_mm], phis
+
+
 def cmd_atlas_build(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -61,9 +84,9 @@ def cmd_atlas_build(args: argparse.Namespace) -> int:
     check_output_file(args.out, "--out", (".npz",))
     check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
     opts = model_options(args)
-    warn_if_coarse(opts)
     machine = load_machine(args, "atlas")
     x_m, y_m, phi_rad = _grid(args, machine)
+    warn_if_coarse(opts)
     atlas = build_atlas(
         machine,
         x_m=x_m,
@@ -203,9 +226,11 @@ def register(sub: argparse._SubParsersAction) -> None:
             "build: modal systems on an x/y/phi grid (default the study's 5 x 5 grid, phi 0), modes tracked from the "
             "central pose by MAC and aligned by Procrustes rotations, saved to .npz; on a described architecture "
             "(--config with [[chains]]) the grid is in its task coordinates (x, y; phi where it sets it; a spatial "
-            "one at one --z-mm). query: the interpolated reduced model at a pose (optionally compared with a direct "
-            "computation, --direct, which needs the atlas's --config; exported with --out); a described "
-            "architecture's coordinates not given take the atlas's central pose."
+            "one at one --z-mm); on an imported model that names an [end_effector] (kind = 'imported') the grid is in "
+            "that site's task coordinates and must be given (--x-mm and --y-mm: it states no reach), at its reference "
+            "height and phi unless --z-mm, --phi-rad. query: the interpolated reduced model at a pose (optionally "
+            "compared with a direct computation, --direct, which needs the atlas's --config; exported with --out); a "
+            "described architecture's coordinates not given take the atlas's central pose."
         ),
     )
     sp = p.add_subparsers(dest="atlas_command", required=True)
@@ -216,7 +241,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         nargs="+",
         default=None,
         help="grid x values (mm; default the study's -100..100 step 50 on the 3RRR, the first check pose +-20 mm on "
-        "a described architecture)",
+        "a described architecture; an imported model: required)",
     )
     b.add_argument("--y-mm", type=float, nargs="+", default=None, help="grid y values (mm; default as --x-mm)")
     b.add_argument(

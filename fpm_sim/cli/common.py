@@ -439,18 +439,15 @@ IMPORTED_COMMANDS = (
     "rollout",
     "reduce",
     "impact",
+    "design",
+    "atlas",
 )
 """The commands that run on an imported model (``kind = "imported"``), posed by joint values (``--q``, ``--poses``) or,
 where its description names an ``[end_effector]``, by task poses (``--x-mm`` ..., a poses CSV of task columns); ``move``
 needs that ``[end_effector]`` and motors (the joints an ``<actuator>`` drives, ``servo_joints``), ``rollout`` the
 ``[end_effector]`` (and motors with ``--motors servo``)."""
 
-_WHY_NOT_IMPORTED = {
-    "design": "its --vary paths edit a described architecture's chains; an imported model's sections are edited in "
-    "its own file (run sweep --poses on each edited copy)",
-    "atlas": "its atlas spans a described architecture's reach, which an imported model does not state (sweep "
-    "--poses over a CSV of task poses instead, where the model names an [end_effector])",
-}
+_WHY_NOT_IMPORTED: dict[str, str] = {}
 
 
 def _not_on_imported(command: str, path: Path) -> str:

@@ -21,6 +21,7 @@ from fpm_sim.cli.common import (
     finish_store,
     held_task_coordinates,
     is_described,
+    is_imported,
     load_manipulator,
     model_options,
     with_resolution,
@@ -29,6 +30,7 @@ from fpm_sim.cli.common import (
 
 if TYPE_CHECKING:
     from fpm_sim.architecture import Description
+    from fpm_sim.architecture.imported import ImportedDescription
 
 __all__ = ["cmd_design", "register"]
 
@@ -38,10 +40,24 @@ _STUDY_ONLY = {"posterior": None, "reading": "x+", "scheduler": None, "resume": 
 _WHY = {
     "posterior": "robust design over a calibration's draws is the 3RRR's (its calibration's parameters)",
     "reading": "it reads the study's table of 3RRR poses",
-    "scheduler": "a described architecture's designs run on --workers processes, not on the Dask engine",
-    "resume": "a described architecture's designs run on --workers processes, not on the Dask engine",
-    "chunk_poses": "a described architecture's designs run on --workers processes, not on the Dask engine",
+    "scheduler": "a described architecture's or an imported model's designs run on their own pose loop, not on the "
+    "Dask engine",
+    "resume": "a described architecture's or an imported model's designs run on their own pose loop, not on the Dask "
+    "engine",
+    "chunk_poses": "a described architecture's or an imported model's designs run on their own pose loop, not on the "
+    "Dask engine",
 }
+
+
+def _refuse_study_only(args: argparse.Namespace) -> None:
+    """Refuse, by name, the options of the 3RRR's design study (:data:`_STUDY_ONLY`) and ask for exactly one of
+    ``--vary`` and ``--designs``."""
+    for key, default in _STUDY_ONLY.items():
+        if getattr(args, key, default) != default:
+            flag = "--" + key.replace("_", "-")
+            raise CliError(f"{flag}: an option of the 3RRR's design study ({_WHY[key]}); drop {flag}")
+    if bool(args.vary) == bool(args.designs):
+        raise CliError("give --vary PATH=SPEC (one or more) or --designs FILE.csv, not both and not neither")
 
 
 def _poses(args: argparse.Namespace, config: Any) -> tuple[list[Any], str]:
@@ -87,12 +103,7 @@ def _design_described(args: argparse.Namespace, desc: Description) -> int:
     from fpm_sim.designs import design_study, parse_vary, read_designs_csv
     from fpm_sim.model.options import warn_if_coarse
 
-    for key, default in _STUDY_ONLY.items():
-        if getattr(args, key, default) != default:
-            flag = "--" + key.replace("_", "-")
-            raise CliError(f"{flag}: an option of the 3RRR's design study ({_WHY[key]}); drop {flag}")
-    if bool(args.vary) == bool(args.designs):
-        raise CliError("give --vary PATH=SPEC (one or more) or --designs FILE.csv, not both and not neither")
+    _refuse_study_only(args)
     vary = parse_vary(args.vary, desc) if args.vary else None
     designs = read_designs_csv(args.designs, desc) if args.designs else None
     poses, grid = _described_poses(args, desc)
@@ -109,6 +120,45 @@ def _design_described(args: argparse.Namespace, desc: Description) -> int:
         engine=EngineOptions(workers=workers_of(args)),
     )
     return _write_and_report(args, result, len(poses), grid, opts)
+
+
+def _design_imported(args: argparse.Namespace, desc: ImportedDescription) -> int:
+    """``fpm-sim design --config imported.toml --poses FILE.csv``: dotted paths into the imported description's file
+    (``materials.steel.young_pa``, ``sections.bar.height_m``) over its poses (joint columns, or task columns where it
+    names an ``[end_effector]``), each design on the imported pose loop (:mod:`fpm_sim.designs.imported`)."""
+    from fpm_sim.batch.engine import EngineOptions
+    from fpm_sim.batch.joint_sweep import read_imported_poses_csv
+    from fpm_sim.designs import design_study, parse_vary, read_designs_csv
+    from fpm_sim.model.options import warn_if_coarse
+
+    _refuse_study_only(args)
+    if args.grid is not None or args.z_mm is not None:
+        flag = "--grid" if args.grid is not None else "--z-mm"
+        raise CliError(
+            f"{flag}: an imported model states no reach or check poses to grid; give its poses as --poses FILE.csv "
+            "(one column per joint, or its task coordinates' columns where it names an [end_effector])"
+        )
+    if args.poses is None:
+        raise CliError(
+            "--poses: an imported model states no reach or check poses; give a CSV with one column per joint (rad or "
+            "m), or its task coordinates' columns (x_mm, y_mm, ...) where it names an [end_effector]"
+        )
+    vary = parse_vary(args.vary, desc) if args.vary else None
+    designs = read_designs_csv(args.designs, desc) if args.designs else None
+    poses = read_imported_poses_csv(args.poses, desc)
+    opts = model_options(args, gravity=False)
+    warn_if_coarse(opts)
+    result = design_study(
+        desc,
+        poses=poses,
+        vary=vary,
+        designs=designs,
+        n_modes=args.n_modes,
+        f_min_hz=args.f_min_hz,
+        options=opts,
+        engine=EngineOptions(workers=1),
+    )
+    return _write_and_report(args, result, len(poses), "poses", opts)
 
 
 def _write_and_report(args: argparse.Namespace, result: Any, n_poses: int, grid: str, opts: Any) -> int:
@@ -146,6 +196,10 @@ def cmd_design(args: argparse.Namespace) -> int:
         from fpm_sim.architecture import load_description
 
         return _design_described(args, load_description(args.config))
+    if is_imported(args):
+        from fpm_sim.architecture.imported import load_imported
+
+        return _design_imported(args, load_imported(args.config))
     # --posterior: designs over its draws (fpm_sim.cli.bands)
     posterior = load_posterior(args, study_only="robust design over a calibration's draws")
     config = posterior.median_config() if posterior is not None else load_manipulator(args)
@@ -181,7 +235,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "min and mean f1 over the computed poses, share of the reachable workspace above --f-min-hz, masses) "
         "and figures, atomically. On a described architecture (--config machine.toml with [[chains]]) the fields are "
         "dotted paths into its file (sections.bar.height_m, chains.left.proximal.length_m; docs/architectures.md) "
-        "and the poses its check poses, --grid dense or --poses in its task coordinates.",
+        "and the poses its check poses, --grid dense or --poses in its task coordinates. On an imported model "
+        "(kind = 'imported') the fields are dotted paths into its file (materials.steel.young_pa; docs/import.md) "
+        "and the poses --poses: joint columns, or its task coordinates' where it names an [end_effector].",
     )
     p.add_argument(
         "--vary",
@@ -214,8 +270,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--poses",
         type=Path,
-        help="CSV of poses (columns x_mm,y_mm,phi_rad; a described architecture: its task coordinates' columns) "
-        "instead of --grid",
+        help="CSV of poses (columns x_mm,y_mm,phi_rad; a described architecture: its task coordinates' columns; an "
+        "imported model: one column per joint, or its task coordinates') instead of --grid",
     )
     p.add_argument("--n-modes", type=count_arg("--n-modes"), default=3, help="frequencies per pose (default 3)")
     p.add_argument("--f-min-hz", type=float, default=None, help="summary: share of the workspace with f1 >= this")

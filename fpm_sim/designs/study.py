@@ -26,6 +26,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from fpm_sim.architecture import Description, TaskPose, machine_parameter, with_machine_parameter
+from fpm_sim.architecture.imported import ImportedDescription
 from fpm_sim.batch.engine import EngineOptions
 from fpm_sim.batch.pose_loop import (
     STATUS_UNREACHABLE,
@@ -36,6 +37,12 @@ from fpm_sim.batch.pose_loop import (
 )
 from fpm_sim.config import Manipulator
 from fpm_sim.designs.described import description_link_mass_kg, description_moving_mass_kg, solve_descriptions
+from fpm_sim.designs.imported import (
+    imported_joint_poses,
+    imported_link_mass_kg,
+    imported_moving_mass_kg,
+    solve_imported,
+)
 from fpm_sim.errors import FpmSimError, FpmSimWarning, read_text_input
 from fpm_sim.figures import wrap_title
 from fpm_sim.kinematics import Pose
@@ -61,7 +68,7 @@ COMPUTED = ("ok", "near_singular")
 """Statuses whose frequencies are computed."""
 
 
-M = TypeVar("M", Manipulator, Description)
+M = TypeVar("M", Manipulator, Description, ImportedDescription)
 P = TypeVar("P", Pose, TaskPose)
 
 
@@ -99,8 +106,12 @@ def parse_spec(spec: str, *, name: str = "SPEC", parameter: str | None = None) -
     return values
 
 
-Machine = Manipulator | Description
-"""What a design study varies: the 3RRR's description or a described architecture."""
+Machine = Manipulator | Description | ImportedDescription
+"""What a design study varies: the 3RRR's description, a described architecture or an imported model."""
+FILE_FORMS = (Description, ImportedDescription)
+"""The forms whose fields are dotted paths into their own file (:mod:`fpm_sim.architecture.edit`)."""
+JointPose = Mapping[str, float]
+"""An imported model's pose by joint values (``{joint: rad or m}``)."""
 
 
 def _check_field(config: Machine, name: str, parameter: str = "vary") -> None:
@@ -112,6 +123,8 @@ def _check_field(config: Machine, name: str, parameter: str = "vary") -> None:
         where = (
             "fields are dotted paths into the description's file (docs/architectures.md, Dotted paths)"
             if isinstance(config, Description)
+            else "fields are dotted paths into the imported description's file (docs/import.md)"
+            if isinstance(config, ImportedDescription)
             else "fields are dotted paths of the description (see `fpm-sim config`)"
         )
         raise DesignError(
@@ -134,9 +147,9 @@ def parse_vary(items: Sequence[str], config: Machine) -> dict[str, list[float]]:
         if name in out:
             raise DesignError(f"{name} given twice", parameter="vary", hint="give all its values in one SPEC")
         out[name] = parse_spec(spec, name=name, parameter="vary")
-        if isinstance(config, Description):  # each value read into the file now (cheap), before any warning or work
+        if isinstance(config, FILE_FORMS):  # each value read into the file now (cheap), before any warning or work
             for v in out[name]:
-                apply_design(config, {name: v})
+                apply_design(config, {name: v})  # type: ignore[type-var]
     return out
 
 
@@ -179,8 +192,8 @@ def read_designs_csv(path: str | Path, config: Machine) -> list[dict[str, float]
         if not all(math.isfinite(v) for v in values):
             raise DesignError(f"{p}: row {line}: cells must be finite", parameter="designs", value=r)
         designs.append(dict(zip(header, values)))
-        if isinstance(config, Description):  # each row read into the file now (cheap), before any work
-            apply_design(config, designs[-1])
+        if isinstance(config, FILE_FORMS):  # each row read into the file now (cheap), before any work
+            apply_design(config, designs[-1])  # type: ignore[type-var]
     return designs
 
 
@@ -191,7 +204,7 @@ def apply_design(config: M, values: Mapping[str, float]) -> M:
         try:
             out = with_machine_parameter(out, name, float(v))
         except FpmSimError as exc:
-            if isinstance(config, Description):  # the file's own error, naming the path
+            if isinstance(config, FILE_FORMS):  # the file's own error, naming the path
                 raise DesignError(exc.message, parameter=name, value=v, hint=exc.hint) from None
             raise DesignError(f"design {dict(values)}: {name} = {v} is not valid ({exc})") from None
         except ValueError as exc:
@@ -202,9 +215,11 @@ def apply_design(config: M, values: Mapping[str, float]) -> M:
 
 def link_mass_kg(config: Machine) -> float:
     """Mass of the six links (kg): section area x density x link lengths (a described architecture: of all its
-    links)."""
+    links; an imported model: of its flexible links' beams, :func:`fpm_sim.designs.imported.imported_link_mass_kg`)."""
     if isinstance(config, Description):
         return description_link_mass_kg(config)
+    if isinstance(config, ImportedDescription):
+        return imported_link_mass_kg(config)
     g = config.geometry
     p, d = g.proximal_length_m, g.distal_length_m
     if isinstance(p, (tuple, list)) or isinstance(d, (tuple, list)):
@@ -217,9 +232,12 @@ def link_mass_kg(config: Machine) -> float:
 def moving_mass_kg(config: Machine) -> float:
     """Everything that moves with the platform or the links (kg): links, joint hardware, platform, payload
     (the motor flanges turn in place and are left out; a described architecture: its lumps but those on the
-    ground, :func:`fpm_sim.designs.described.description_moving_mass_kg`)."""
+    ground, :func:`fpm_sim.designs.described.description_moving_mass_kg`; an imported model: its bodies that a joint
+    separates from the world, :func:`fpm_sim.designs.imported.imported_moving_mass_kg`)."""
     if isinstance(config, Description):
         return description_moving_mass_kg(config)
+    if isinstance(config, ImportedDescription):
+        return imported_moving_mass_kg(config)
     hw = config.hardware
     return (
         link_mass_kg(config)
@@ -249,7 +267,8 @@ class DesignResult:
     levels
         ``{field: values}`` of a factorial study (in order), else each field's distinct values.
     poses
-        The poses (shared by all designs): the 3RRR's, or a described architecture's task poses.
+        The poses (shared by all designs): the 3RRR's, a described architecture's task poses, or an imported model's
+        task poses or joint values (``{joint: rad or m}``, where it was posed in joint space).
     frequencies_hz
         ``(n_designs, n_poses, n_modes)``; NaN where not computed.
     in_plane
@@ -273,7 +292,7 @@ class DesignResult:
     designs: list[dict[str, float]]
     factorial: bool
     levels: dict[str, list[float]]
-    poses: Sequence[Pose | TaskPose]
+    poses: Sequence[Pose | TaskPose | JointPose]
     frequencies_hz: np.ndarray
     in_plane: np.ndarray
     singularity: np.ndarray
@@ -290,8 +309,27 @@ class DesignResult:
 
     @property
     def spatial(self) -> bool:
-        """The poses have a z coordinate (a spatial described architecture)."""
-        return isinstance(self.config, Description) and "z" in self.config.task
+        """The poses have a z coordinate (a spatial described architecture, an imported model posed in x, y, z)."""
+        return isinstance(self.config, FILE_FORMS) and "z" in self.config.task
+
+    @property
+    def joint_space(self) -> bool:
+        """The poses are an imported model's joint values (no task coordinates: no maps, no weakest x, y)."""
+        return bool(self.poses) and isinstance(self.poses[0], Mapping)
+
+    def pose_columns(self) -> dict[str, list[float]]:
+        """The poses' columns: ``x_mm``, ``y_mm`` (``z_mm`` where spatial), ``phi_rad``; or, posed in joint space, one
+        column per joint named (rad or m; NaN where a pose names none)."""
+        if self.joint_space:
+            joints = dict.fromkeys(j for p in self.poses for j in p)  # type: ignore[union-attr]
+            return {j: [float(p.get(j, math.nan)) for p in self.poses] for j in joints}  # type: ignore[union-attr]
+        poses: list[Any] = list(self.poses)
+        return {
+            "x_mm": [round(p.x_m * 1e3, 6) for p in poses],
+            "y_mm": [round(p.y_m * 1e3, 6) for p in poses],
+            **({"z_mm": [round(getattr(p, "z_m", 0.0) * 1e3, 6) for p in poses]} if self.spatial else {}),
+            "phi_rad": [p.phi_rad for p in poses],
+        }
 
     def pose_frequencies(self, design: int) -> PoseFrequencies:
         """Design ``design``'s result as the pose loop returns it."""
@@ -319,6 +357,7 @@ class DesignResult:
             if self.f_min_hz is not None and reachable.any():
                 share = float(np.sum(f1 >= self.f_min_hz) / reachable.sum())
             worst = int(np.flatnonzero(computed)[np.argmin(f1)]) if f1.size else None
+            where = self._weakest(worst)
             row: dict[str, Any] = dict(values)
             row.update(
                 {
@@ -328,14 +367,21 @@ class DesignResult:
                     "share_above_f_min": share,
                     "computed_poses": int(computed.sum()),
                     "reachable_poses": int(reachable.sum()),
-                    "weakest_x_mm": round(self.poses[worst].x_m * 1e3, 6) if worst is not None else math.nan,
-                    "weakest_y_mm": round(self.poses[worst].y_m * 1e3, 6) if worst is not None else math.nan,
+                    **where,
                     "link_mass_kg": float(self.link_mass_kg[d]),
                     "moving_mass_kg": float(self.moving_mass_kg[d]),
                 }
             )
             rows.append(row)
         return rows
+
+    def _weakest(self, worst: int | None) -> dict[str, float]:
+        """The summary's weakest pose: ``weakest_x_mm``, ``weakest_y_mm`` (NaN when none is computed); joint poses:
+        ``weakest_pose`` (its row, 1-based)."""
+        if self.joint_space:
+            return {"weakest_pose": math.nan if worst is None else worst + 1}
+        cols = self.pose_columns()
+        return {f"weakest_{c}": math.nan if worst is None else cols[c][worst] for c in ("x_mm", "y_mm")}
 
     def table(self) -> str:
         """The summary as a text table."""
@@ -367,12 +413,23 @@ class DesignResult:
             "factorial": self.factorial,
             "f_min_hz": self.f_min_hz,
             "n_modes": self.n_modes,
-            "poses_mm_rad": [[p.x_m * 1e3, p.y_m * 1e3, p.phi_rad] for p in self.poses],
-            **({"poses_z_mm": [p.z_m * 1e3 for p in self.poses if isinstance(p, TaskPose)]} if self.spatial else {}),
+            **self._poses_dict(),
             "summary": self.summary(),
             "frequencies_hz": np.where(np.isfinite(self.frequencies_hz), self.frequencies_hz, np.array(None)).tolist(),
             "status": self.status.tolist(),
             "elapsed_s": self.elapsed_s,
+        }
+
+    def _poses_dict(self) -> dict[str, Any]:
+        """:meth:`to_dict`'s poses: ``poses_mm_rad`` (x, y, phi; ``poses_z_mm`` where spatial), or ``poses_joints``
+        (the joint values, posed in joint space)."""
+        if self.joint_space:
+            joint_poses: list[Any] = list(self.poses)
+            return {"poses_joints": [dict(p) for p in joint_poses]}
+        poses: list[Any] = list(self.poses)
+        return {
+            "poses_mm_rad": [[p.x_m * 1e3, p.y_m * 1e3, p.phi_rad] for p in poses],
+            **({"poses_z_mm": [p.z_m * 1e3 for p in poses if isinstance(p, TaskPose)]} if self.spatial else {}),
         }
 
     # ------------------------------------------------------------------------------------------- dataset
@@ -389,16 +446,22 @@ class DesignResult:
         ``in_plane_mode1``, ``singularity``, ``link_mass_kg``, ``moving_mass_kg``."""
         from fpm_sim.results import frequencies_dataset
 
+        if self.joint_space:  # no task coordinates: NaN, the joint values as coordinates of their own
+            nan = [math.nan] * len(self.poses)
+            where, extra = {"x_mm": nan, "y_mm": nan, "phi_rad": nan}, self.pose_columns()
+        else:
+            poses: list[Any] = list(self.poses)
+            where = {"x_mm": [p.x_m * 1e3 for p in poses], "y_mm": [p.y_m * 1e3 for p in poses]}
+            where["phi_rad"] = [p.phi_rad for p in poses]
+            extra = {"z_mm": [getattr(p, "z_m", 0.0) * 1e3 for p in poses]} if self.spatial else {}
         ds = frequencies_dataset(
             self.frequencies_hz,
-            x_mm=[p.x_m * 1e3 for p in self.poses],
-            y_mm=[p.y_m * 1e3 for p in self.poses],
-            phi_rad=[p.phi_rad for p in self.poses],
+            **where,
             status=self.status,
             leading={"design": np.arange(len(self.designs))},
             coords={
                 **{f: ("design", np.array([d[f] for d in self.designs])) for f in self.fields},
-                **({"z_mm": ("pose", [getattr(p, "z_m", 0.0) * 1e3 for p in self.poses])} if self.spatial else {}),
+                **{c: ("pose", v) for c, v in extra.items()},
             },
             data_vars={
                 "in_plane_mode1": (("design", "pose"), self.in_plane),
@@ -427,18 +490,16 @@ class DesignResult:
     # ------------------------------------------------------------------------------------------- output
 
     def tidy_rows(self) -> list[dict[str, Any]]:
-        """One row per design and pose: the varied fields, ``x_mm, y_mm, phi_rad, status, singularity,
-        f1_hz, ..., in_plane_mode1``."""
+        """One row per design and pose: the varied fields, ``x_mm, y_mm, phi_rad`` (posed in joint space: the joint
+        values), ``status, singularity, f1_hz, ..., in_plane_mode1``."""
         rows = []
+        cols = self.pose_columns()
         for d, values in enumerate(self.designs):
-            for i, p in enumerate(self.poses):
+            for i in range(len(self.poses)):
                 row: dict[str, Any] = dict(values)
                 row.update(
                     {
-                        "x_mm": round(p.x_m * 1e3, 6),
-                        "y_mm": round(p.y_m * 1e3, 6),
-                        **({"z_mm": round(getattr(p, "z_m", 0.0) * 1e3, 6)} if self.spatial else {}),
-                        "phi_rad": p.phi_rad,
+                        **{c: v[i] for c, v in cols.items()},
                         "status": str(self.status[d, i]),
                         "singularity": float(self.singularity[d, i]),
                     }
@@ -516,15 +577,15 @@ class DesignResult:
         import matplotlib.pyplot as plt
 
         n = min(len(self.designs), max_designs)
-        if n == 0:
+        if n == 0 or self.joint_space:  # joint values have no map (design.csv holds them)
             return None
         cols = min(n, 4)
         rows_n = math.ceil(n / cols)
         fig, axes = plt.subplots(
             rows_n, cols, figsize=(3.2 * cols, 3.0 * rows_n), squeeze=False, constrained_layout=True
         )
-        x = np.array([p.x_m * 1e3 for p in self.poses])
-        y = np.array([p.y_m * 1e3 for p in self.poses])
+        where = self.pose_columns()
+        x, y = np.array(where["x_mm"]), np.array(where["y_mm"])
         f1 = self.frequencies_hz[:n, :, 0]
         vmin, vmax = (np.nanmin(f1), np.nanmax(f1)) if np.isfinite(f1).any() else (0.0, 1.0)
         sc = None
@@ -643,15 +704,25 @@ def check_request(
 def _solve(
     config: Machine,
     configs: list[Any],
-    poses: Sequence[Pose] | Sequence[TaskPose],
+    poses: Sequence[Pose] | Sequence[TaskPose] | Sequence[JointPose],
     *,
     n_modes: int,
     options: ModelOptions,
     engine: EngineOptions,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``(frequencies, in-plane share of mode 1, singularity, status)`` over designs x poses: the 3RRR's pose loop on
-    the engine, or a described architecture's (:func:`fpm_sim.designs.described.solve_descriptions`, on
-    ``engine.workers`` processes)."""
+    the engine, a described architecture's (:func:`fpm_sim.designs.described.solve_descriptions`, on
+    ``engine.workers`` processes) or an imported model's (:func:`fpm_sim.designs.imported.solve_imported`, its task
+    poses solved to joint values once)."""
+    if isinstance(config, ImportedDescription):
+        if not (all(isinstance(p, TaskPose) for p in poses) or all(isinstance(p, Mapping) for p in poses)):
+            raise DesignError(
+                f"{config.name} takes poses as fpm_sim.architecture.TaskPose (where it names an [end_effector]) or "
+                "as {joint: value} mappings, all of one kind",
+                parameter="poses",
+            )
+        joint_poses = imported_joint_poses(config, poses)  # type: ignore[arg-type]
+        return solve_imported(configs, joint_poses, n_modes=n_modes, options=options)
     wanted = TaskPose if isinstance(config, Description) else Pose
     wrong = next((p for p in poses if not isinstance(p, wanted)), None)
     if wrong is not None:
@@ -692,7 +763,7 @@ def _designs_of(
 def design_study(
     config: Machine,
     *,
-    poses: Sequence[Pose] | Sequence[TaskPose],
+    poses: Sequence[Pose] | Sequence[TaskPose] | Sequence[JointPose],
     vary: Mapping[str, Sequence[float]] | None = None,
     designs: Sequence[Mapping[str, float]] | None = None,
     n_modes: int = 3,
@@ -705,16 +776,19 @@ def design_study(
     Parameters
     ----------
     config
-        The base description: the 3RRR's (:class:`fpm_sim.config.Manipulator`) or a described architecture
-        (:class:`fpm_sim.architecture.Description`, read from its file).
+        The base description: the 3RRR's (:class:`fpm_sim.config.Manipulator`), a described architecture
+        (:class:`fpm_sim.architecture.Description`, read from its file) or an imported model
+        (:class:`fpm_sim.architecture.imported.ImportedDescription`, read from its file).
     poses
         The poses (the same for every design; e.g. :func:`fpm_sim.study.sweep.dense_grid` or
         :func:`fpm_sim.batch.pose_loop.read_poses_csv`; a described architecture: task poses, e.g. its check poses,
         :func:`fpm_sim.batch.task_sweep.task_grid` or :func:`fpm_sim.batch.task_sweep.read_task_poses_csv`). A design
-        that moves the workspace marks the poses it cannot reach.
+        that moves the workspace marks the poses it cannot reach. An imported model: task poses where it names an
+        ``[end_effector]``, or ``{joint: value}`` poses (:func:`fpm_sim.batch.joint_sweep.read_joint_poses_csv`),
+        the same joint values for every design (:mod:`fpm_sim.designs.imported`).
     vary
-        ``{dotted field: values}``: the full factorial (SI units, as the field names say; a described architecture:
-        dotted paths into its file, ``sections.bar.height_m``).
+        ``{dotted field: values}``: the full factorial (SI units, as the field names say; a described architecture or
+        an imported model: dotted paths into its file, ``sections.bar.height_m``).
     designs
         Instead of ``vary``: a list of ``{field: value}`` designs (e.g. :func:`read_designs_csv`).
     n_modes

@@ -57,7 +57,7 @@ import math
 import warnings
 from collections import deque
 from collections.abc import Iterable, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -68,6 +68,7 @@ import scipy.optimize
 from tqdm import tqdm
 
 from fpm_sim.architecture import Description, TaskPose
+from fpm_sim.architecture.imported import ImportedDescription
 from fpm_sim.config import Manipulator
 from fpm_sim.config.checks import check_count
 from fpm_sim.errors import FpmSimError, FpmSimWarning
@@ -672,8 +673,15 @@ def _axis(values: Sequence[float], name: str) -> np.ndarray:
     return a
 
 
+Machine = Manipulator | Description | ImportedDescription
+"""What an atlas is built on: the 3RRR, a described architecture, or an imported model that names an
+``[end_effector]`` (its grid in that site's task coordinates, at the site's reference height unless given; each node's
+joint values solved from its parent's, :class:`~fpm_sim.model.imported_pose.ImportedKinematics`; its reduced models'
+wrench inputs and displacement outputs at that site)."""
+
+
 def build_atlas(
-    manip: Manipulator | Description,
+    manip: Machine,
     *,
     x_m: Sequence[float],
     y_m: Sequence[float],
@@ -693,9 +701,9 @@ def build_atlas(
     manip
         The 3RRR (:class:`~fpm_sim.config.Manipulator`) or a described architecture
         (:class:`~fpm_sim.architecture.Description`: its grid in its task coordinates; ``phi_rad`` only where it
-        sets phi).
+        sets phi), or an imported model (:data:`Machine`).
     z_m
-        A spatial architecture's height (m; default its first check pose's): the atlas is a horizontal slice.
+        A spatial machine's height (m; default its first check pose's, an imported model's reference): a slice.
     options
         Model options shared by every pose (default: the shared default resolution, inextensible links).
     n_modes
@@ -720,8 +728,9 @@ def build_atlas(
     aligned: dict[int, np.ndarray] = {}
     names: dict[str, list[str]] = {}
     it = tqdm(order, desc="atlas poses", unit="pose", leave=False) if progress else order
+    node_at = _node_builder(manip, opts)
     for f in it:
-        built = model_at(manip, flat_poses[f], opts)
+        built = node_at(f, parent[f], flat_poses[f])
         system = modal_system(built, accel_fraction=accel_fraction)
         al = _align(system, aligned[parent[f]] if parent[f] >= 0 else None, n_modes, n_extra)
         aligned[f] = al.basis
@@ -765,9 +774,49 @@ def _align(system: ModalSystem, parent_basis: np.ndarray | None, n_modes: int, n
     return align_modes(parent_basis, system.phi, n_candidates=n_modes + n_extra)
 
 
-def model_at(manip: Manipulator | Description, pose: Pose | TaskPose, options: ModelOptions) -> BuiltModel:
-    """The model of the 3RRR (:func:`~fpm_sim.model.manipulator.build_manipulator`) or of a described architecture
-    (:func:`~fpm_sim.model.general.build_general`) at ``pose``."""
+def _node_builder(manip: Machine, options: ModelOptions) -> Any:
+    """``(node, parent, pose) -> BuiltModel``: :func:`model_at`; on an imported model each node's joint values solved
+    from its parent's (continuation along the tracking's tree: the grid stays on one assembly branch), a node the
+    model cannot reach refused by its pose."""
+    if not isinstance(manip, ImportedDescription):
+        return lambda f, parent, pose: model_at(manip, pose, options)
+    from fpm_sim.model.imported_pose import ImportedKinematics
+
+    kin = ImportedKinematics(manip)
+    joints: dict[int, dict[str, float]] = {}
+
+    def at(f: int, parent: int, pose: TaskPose) -> BuiltModel:
+        try:
+            joints[f] = kin.solve(pose, start=joints.get(parent))
+        except FpmSimError as e:
+            raise AtlasError(
+                f"grid node {pose.label(manip.task)}: {e.message}", parameter=e.parameter, hint=e.hint
+            ) from None
+        return _imported_at(manip, joints[f], options)
+
+    return at
+
+
+def _imported_at(desc: ImportedDescription, q: dict[str, float], options: ModelOptions) -> BuiltModel:
+    """An imported model built at the joint values ``q``, its reduced model's reference point (wrench inputs,
+    displacement outputs) its ``[end_effector]`` site."""
+    from fpm_sim.model.imported import build_imported
+
+    built = build_imported(desc, q, options)
+    return replace(built, end_effector_site=desc.end_effector.site) if desc.end_effector else built
+
+
+def model_at(manip: Machine, pose: Pose | TaskPose, options: ModelOptions) -> BuiltModel:
+    """The model of the 3RRR (:func:`~fpm_sim.model.manipulator.build_manipulator`), of a described architecture
+    (:func:`~fpm_sim.model.general.build_general`) or of an imported model (its joint values solved from its
+    reference, :func:`fpm_sim.model.imported.build_imported`) at ``pose``."""
+    if isinstance(manip, ImportedDescription):
+        if not isinstance(pose, TaskPose):
+            raise AtlasError(f"{manip.name} takes a fs.TaskPose")
+        from fpm_sim.model.imported_pose import ImportedKinematics
+
+        _imported_task(manip)
+        return _imported_at(manip, ImportedKinematics(manip).solve(pose), options)
     if isinstance(manip, Description):
         if not isinstance(pose, TaskPose):
             raise AtlasError(f"{manip.name} takes a fs.TaskPose")
@@ -777,10 +826,23 @@ def model_at(manip: Manipulator | Description, pose: Pose | TaskPose, options: M
     return build_manipulator(manip, pose, options)
 
 
-def _held(manip: Manipulator | Description, phi: np.ndarray, z_m: float | None) -> dict[str, Any] | None:
-    """What a described architecture's grid holds (its task coordinates and height ``z_m``, m); ``None`` for the
-    3RRR. A grid coordinate the architecture lacks is refused by name."""
-    if not isinstance(manip, Description):
+def _imported_task(desc: ImportedDescription) -> tuple[str, ...]:
+    """An imported model's task coordinates, refused where it names no ``[end_effector]``."""
+    if not desc.task or "x" not in desc.task or "y" not in desc.task:
+        raise AtlasError(
+            f"{desc.name} names no end effector with task coordinates x and y (its task coordinates: "
+            f"{', '.join(desc.task) or 'none'}): the atlas's grid is in x and y",
+            parameter="end_effector",
+            hint='name its site in the description: [end_effector] site = "tool", coordinates = ["x", "y"] '
+            "(docs/import.md)",
+        )
+    return desc.task
+
+
+def _held(manip: Machine, phi: np.ndarray, z_m: float | None) -> dict[str, Any] | None:
+    """What a described architecture's or an imported model's grid holds (its task coordinates and height ``z_m``,
+    m); ``None`` for the 3RRR. A grid coordinate the machine lacks is refused by name."""
+    if not isinstance(manip, (Description, ImportedDescription)):
         if z_m is not None:
             raise AtlasError("the 3RRR's task coordinates are x, y and phi", parameter="z_m", value=z_m, hint="drop it")
         return None
@@ -798,7 +860,13 @@ def _held(manip: Manipulator | Description, phi: np.ndarray, z_m: float | None) 
             value=z_m,
             hint="drop it",
         )
-    home = manip.check_poses[0] if manip.check_poses else {}
+    if isinstance(manip, ImportedDescription):
+        from fpm_sim.model.imported_pose import ImportedKinematics
+
+        _imported_task(manip)
+        home = {"z": ImportedKinematics(manip).reference_pose().z_m} if z_m is None else {}
+    else:
+        home = manip.check_poses[0] if manip.check_poses else {}
     z = float(z_m) if z_m is not None else float(home.get("z", 0.0))
     if not math.isfinite(z):
         raise AtlasError("must be a finite height", parameter="z_m", value=z_m)

@@ -1,5 +1,6 @@
 """Imported models posed in joint space: CSV poses, ``modes --poses``, ``sweep``, ``frf``, ``export-mjcf``, and every
-other command, or option, that has no meaning on one refused in one line (issue 29)."""
+other command, or option, that has no meaning on one refused in one line (issue 29); what ``design`` and ``atlas`` need
+of an imported model refused in one line too."""
 
 from __future__ import annotations
 
@@ -133,12 +134,24 @@ def _one_line(code: int, text: str, words: str) -> None:
         (["modes", "--poses", "{tmp}/joints.csv", "--q", "elbow=0"], "--q: one pose's option"),
         (["frf", "--q", "elbow=0.2"], "--damping-ratio: the model has no damping"),
         (["check", "{tmp}/req.toml"], "requirement 'f1'.poses: reachable workspace, 10 mm grid, phi 0 rad is a task-"),
-        (["design", "--vary", "sections.tube.outer_diameter_m=0.1", "--out", "{tmp}/o"], "'design' does not run"),
+        (["design", "--vary", "sections.tube.outer_diameter_m=0.1", "--out", "{tmp}/o"], "--poses: an imported model"),
+        (
+            ["design", "--vary", "sections.tube.outer_diameter_m=0.1", "--grid", "dense", "--out", "{tmp}/o"],
+            "--grid: an imported model states no reach",
+        ),
+        (
+            ["design", "--vary", "sections.tube.wall_m=0.1", "--poses", "{tmp}/joints.csv", "--out", "{tmp}/o"],
+            "field 'sections.tube.wall_m'",
+        ),
+        (["atlas", "build", "--out", "{tmp}/a.npz"], "--x-mm and --y-mm: an imported model states no reach"),
+        (
+            ["atlas", "build", "--x-mm", "0", "--y-mm", "0", "--out", "{tmp}/a.npz"],
+            "end_effector: acrobot names no end effector with task coordinates x and y",
+        ),
         (["move", "--out", "{tmp}/m.csv"], "end_effector: acrobot names no end effector: a move commands"),
         (["rollout", "--out", "{tmp}/r.csv"], "end_effector: acrobot names no end effector: a move commands"),
         (["reduce", "--modes", "3", "--motors", "servo"], "--motors servo: a described architecture's actuated"),
         (["impact", "--uff", "{tmp}/i.uff"], "--uff: the UFF record carries a task pose in x, y and phi, and an"),
-        (["atlas", "build", "--out", "{tmp}/a.npz"], "'atlas' does not run on it"),
         (["reproduce", "--out", "{tmp}/o"], "'reproduce' does not run on it"),
     ],
 )
