@@ -121,6 +121,16 @@ def _end_effector_lines(args: argparse.Namespace) -> list[str]:
     return ["", "[end_effector]", f"site = {_quote(args.end_site)}", f"coordinates = [{coordinates}]"]
 
 
+def _with_mechanisms_locked(text: str, locked: list[str], mechanisms: list[str]) -> str:
+    """``text`` with its ``locked_joints`` line replaced by ``locked``, a comment naming the ``mechanisms``."""
+    line = next(ln for ln in text.splitlines() if ln.startswith("locked_joints = "))
+    new = (
+        f"locked_joints = [{', '.join(_quote(n) for n in locked)}]  # {', '.join(mechanisms)}: locked by the import "
+        "(passive, nothing holds them: a mechanism)"
+    )
+    return text.replace(line, new, 1)
+
+
 def _quote(s: str) -> str:
     return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
 
@@ -144,13 +154,17 @@ def _named_error(exc: Exception, args: argparse.Namespace) -> CliError | None:
 def cmd_import(args: argparse.Namespace) -> int:
     from fpm_sim.architecture.imported import parse_imported
     from fpm_sim.errors import FpmSimError
-    from fpm_sim.model.imported import import_report
+    from fpm_sim.model.imported import import_report, mechanism_joints
     from fpm_sim.outputs import atomic_file
 
     check_output_file(args.out, "--out", (".toml",), overwrite=args.overwrite)
     text = description_text(args, args.out)
     try:
         desc = parse_imported(tomllib.loads(text), base_dir=args.out.resolve().parent, source=str(args.out))
+        mechanisms = mechanism_joints(desc)
+        if mechanisms:  # passive joints nothing holds: locked, and said so in the file and the output
+            text = _with_mechanisms_locked(text, [*desc.locked_joints, *mechanisms], mechanisms)
+            desc = parse_imported(tomllib.loads(text), base_dir=args.out.resolve().parent, source=str(args.out))
         report = import_report(desc)
         if desc.end_effector is not None:
             from fpm_sim.model.imported_pose import ImportedKinematics
@@ -163,8 +177,14 @@ def cmd_import(args: argparse.Namespace) -> int:
         raise named from exc
     with atomic_file(args.out) as tmp:
         tmp.write_text(text)
-    payload = {"out": str(args.out), "description": desc.to_dict(), "report": report.__dict__}
-    emit(args, payload, f"{report.table()}\nwrote {args.out}")
+    payload = {"out": str(args.out), "description": desc.to_dict(), "report": report.__dict__, "mechanisms": mechanisms}
+    said = (
+        f"locked as mechanisms: {', '.join(mechanisms)} (passive joints that nothing holds: free, they would make the "
+        "machine a mechanism; take them out of locked_joints to analyse them free)\n"
+        if mechanisms
+        else ""
+    )
+    emit(args, payload, f"{report.table()}\n{said}wrote {args.out}")
     return 0
 
 

@@ -54,6 +54,7 @@ __all__ = [
     "import_report",
     "load_spec",
     "locked_joint_names",
+    "mechanism_joints",
     "motor_joints",
     "posable_joints",
 ]
@@ -716,6 +717,63 @@ def end_sites(model_path: str | Path, bodies: list[str]) -> dict[str, str]:
         far = max(sites, key=lambda s: float(np.linalg.norm(data.site_xpos[s] - start)))
         out[name] = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_SITE, far) or ""
     return {k: v for k, v in out.items() if v}
+
+
+def mechanism_joints(desc: ImportedDescription) -> list[str]:
+    """The joints to lock besides the description's so that the rigid machine, its locked joints locked, has no free
+    motion left (a mechanism: a passive joint on an open chain, or one a loop leaves free), as ``fpm-sim import``
+    writes them into ``locked_joints``.
+
+    At the model's reference pose, with the locked joints' tendons dropped as the builder drops them
+    (:func:`_drop_with_locked`), the loop closures' Jacobian (MuJoCo's equality rows, each scaled to unit size) over
+    the dofs of the joints not yet locked has a null space of the mechanism's free motions (rank at 1e-9 of its
+    largest singular value); the joints owning the dofs that column-pivoted QR of that basis picks first are locked,
+    one per free motion. Locking them may drop a tendon that held another joint, so it is repeated until no free
+    motion is left.
+    """
+    spec = load_spec(desc)
+    locked = set(locked_joint_names(spec, desc))
+    out: list[str] = []
+    while True:
+        new = _free_motion_joints(desc, locked | set(out))
+        if not new:
+            return out
+        out += [n for n in new if n not in out]
+
+
+def _free_motion_joints(desc: ImportedDescription, locked: set[str]) -> list[str]:
+    """One pass of :func:`mechanism_joints`: the joints to lock for the free motions left with ``locked`` locked."""
+    import scipy.linalg
+
+    spec = load_spec(desc)
+    _drop_with_locked(spec, locked, ImportReport())
+    model = spec.compile()
+    model.opt.jacobian = mujoco.mjtJacobian.mjJAC_DENSE
+    model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
+    model.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
+    data = mujoco.MjData(model)
+    mujoco.mj_fwdPosition(model, data)
+    owner: list[str] = []
+    cols: list[int] = []
+    for j in range(model.njnt):
+        name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j) or f"(joint {j})"
+        width = {int(mujoco.mjtJoint.mjJNT_BALL): 3, int(mujoco.mjtJoint.mjJNT_FREE): 6}.get(int(model.jnt_type[j]), 1)
+        if name not in locked:
+            cols += range(int(model.jnt_dofadr[j]), int(model.jnt_dofadr[j]) + width)
+            owner += [name] * width
+    if not cols:
+        return []
+    eq = np.asarray(data.efc_type[: data.nefc]) == mujoco.mjtConstraint.mjCNSTR_EQUALITY
+    jac = np.asarray(data.efc_J[: data.nefc * model.nv]).reshape(data.nefc, model.nv)[eq][:, cols]
+    norms = np.linalg.norm(jac, axis=1)
+    jac = jac[norms > 0] / norms[norms > 0, None]
+    _, sv, vt = np.linalg.svd(jac) if jac.size else (None, np.zeros(0), np.eye(len(cols)))
+    rank = int(np.sum(sv > 1e-9 * (sv[0] if sv.size else 1.0)))
+    free = vt[rank:].T  # (dofs, free motions)
+    if free.shape[1] == 0:
+        return []
+    pivots = scipy.linalg.qr(free.T, pivoting=True)[2]
+    return list(dict.fromkeys(owner[k] for k in pivots[: free.shape[1]]))
 
 
 def import_report(desc: ImportedDescription, options: ModelOptions | None = None) -> ImportReport:
