@@ -99,14 +99,20 @@ def _described_poses(args: argparse.Namespace, desc: Description) -> tuple[list[
 def _design_described(args: argparse.Namespace, desc: Description) -> int:
     """``fpm-sim design --config machine.toml``: dotted paths into its file (``sections.bar.height_m``) over its task
     poses, on its own pose loop (:func:`fpm_sim.designs.design_study` dispatches)."""
+    _refuse_study_only(args)
+    poses, grid = _described_poses(args, desc)
+    return _study_and_report(args, desc, poses, grid, workers_of(args))
+
+
+def _study_and_report(args: argparse.Namespace, desc: Any, poses: list[Any], grid: str, workers: int) -> int:
+    """The design study of ``--vary`` or ``--designs`` on ``desc`` (a described or imported machine) at ``poses``,
+    written and reported (:func:`_write_and_report`)."""
     from fpm_sim.batch.engine import EngineOptions
     from fpm_sim.designs import design_study, parse_vary, read_designs_csv
     from fpm_sim.model.options import warn_if_coarse
 
-    _refuse_study_only(args)
     vary = parse_vary(args.vary, desc) if args.vary else None
     designs = read_designs_csv(args.designs, desc) if args.designs else None
-    poses, grid = _described_poses(args, desc)
     opts = model_options(args, gravity=False)
     warn_if_coarse(opts)
     result = design_study(
@@ -117,7 +123,7 @@ def _design_described(args: argparse.Namespace, desc: Description) -> int:
         n_modes=args.n_modes,
         f_min_hz=args.f_min_hz,
         options=opts,
-        engine=EngineOptions(workers=workers_of(args)),
+        engine=EngineOptions(workers=workers),
     )
     return _write_and_report(args, result, len(poses), grid, opts)
 
@@ -126,10 +132,7 @@ def _design_imported(args: argparse.Namespace, desc: ImportedDescription) -> int
     """``fpm-sim design --config imported.toml --poses FILE.csv``: dotted paths into the imported description's file
     (``materials.steel.young_pa``, ``sections.bar.height_m``) over its poses (joint columns, or task columns where it
     names an ``[end_effector]``), each design on the imported pose loop (:mod:`fpm_sim.designs.imported`)."""
-    from fpm_sim.batch.engine import EngineOptions
     from fpm_sim.batch.joint_sweep import read_imported_poses_csv
-    from fpm_sim.designs import design_study, parse_vary, read_designs_csv
-    from fpm_sim.model.options import warn_if_coarse
 
     _refuse_study_only(args)
     if args.grid is not None or args.z_mm is not None:
@@ -143,22 +146,7 @@ def _design_imported(args: argparse.Namespace, desc: ImportedDescription) -> int
             "--poses: an imported model states no reach or check poses; give a CSV with one column per joint (rad or "
             "m), or its task coordinates' columns (x_mm, y_mm, ...) where it names an [end_effector]"
         )
-    vary = parse_vary(args.vary, desc) if args.vary else None
-    designs = read_designs_csv(args.designs, desc) if args.designs else None
-    poses = read_imported_poses_csv(args.poses, desc)
-    opts = model_options(args, gravity=False)
-    warn_if_coarse(opts)
-    result = design_study(
-        desc,
-        poses=poses,
-        vary=vary,
-        designs=designs,
-        n_modes=args.n_modes,
-        f_min_hz=args.f_min_hz,
-        options=opts,
-        engine=EngineOptions(workers=1),
-    )
-    return _write_and_report(args, result, len(poses), "poses", opts)
+    return _study_and_report(args, desc, read_imported_poses_csv(args.poses, desc), "poses", 1)
 
 
 def _write_and_report(args: argparse.Namespace, result: Any, n_poses: int, grid: str, opts: Any) -> int:
