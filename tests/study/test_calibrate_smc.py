@@ -1,0 +1,128 @@
+"""The tempered SMC of the calibration (:mod:`fpm_sim.study.calibrate.smc`) on problems whose evidence and mode
+weights are known in closed form."""
+
+import math
+
+import numpy as np
+import pytest
+
+from fpm_sim.study.calibrate import SamplerOptions
+from fpm_sim.study.calibrate.sampler import _init_worker, sample_classes
+from fpm_sim.study.calibrate.smc import SmcSettings, two_stage
+from tests.study.test_calibrate_runs import AMPLITUDE, HALF, Toy
+
+D = 4
+CENTRES = (np.full(D, 0.3), np.full(D, 0.7))
+SD = 0.01
+WEIGHTS = (0.3, 0.7)
+"""A mixture of two narrow (sd 0.01), well-separated Gaussian modes with these weights in the unit cube: every
+mode lies 30 sd inside it, so Z = 0.3 + 0.7 = 1 (ln Z = 0) and the posterior puts 0.3 on the first mode."""
+SUPPORT = 0.9
+"""The cheap stage's support: u_0 < 0.9 (prior mass 0.9), holding both modes."""
+
+
+def _modes(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(log L, in the first mode)`` at the rows of ``u``."""
+    norm = D * math.log(SD * math.sqrt(2 * math.pi))
+    a, b = (math.log(w) - 0.5 * np.sum((u - c) ** 2, axis=1) / SD**2 - norm for w, c in zip(WEIGHTS, CENTRES))
+    return np.logaddexp(a, b), a > b
+
+
+def _cheap(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return np.zeros(len(u)), np.where(u[:, 0] < SUPPORT, 0.0, -np.inf)
+
+
+def _full(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    _, c = _cheap(u)
+    return c, np.where(np.isfinite(c), _modes(u)[0], -np.inf)
+
+
+@pytest.fixture(scope="module")
+def mixture_runs():
+    one, two = SmcSettings(particles=500), SmcSettings(particles=1600)
+    return [two_stage(_cheap, _full, D, one, two, np.random.default_rng(seed)) for seed in range(6)]
+
+
+def test_two_stage_smc_finds_both_modes_with_their_weights_and_the_evidence(mixture_runs):
+    for run in mixture_runs:
+        # ln Z = 0: within 4 of the run's stated errors (a stated error that is honest makes a 4-sigma miss
+        # a 1-in-15 000 event), and the stated error is that of a few hundred particles, not zero or huge
+        assert abs(run.log_evidence) < 4 * run.log_evidence_err, (run.log_evidence, run.log_evidence_err)
+        assert 0.03 < run.log_evidence_err < 0.5
+        # both modes held, the first with weight 0.3: the modes' shares are carried by the resampled importance
+        # weights, whose drift over ~12 steps makes the share's sd about 0.05 at 1600 particles (measured over 12
+        # seeds: 0.094 at 400); 0.15 is 3 of those
+        share = float(np.mean(_modes(run.u)[1]))
+        assert abs(share - WEIGHTS[0]) < 0.15, share
+    # the stated errors against the runs' own spread (each run independent): the spread of six values over the
+    # stated error is within the chi-square's 0.1 % .. 99.9 % points for 5 degrees of freedom (0.21 .. 2.3)
+    z = np.array([r.log_evidence for r in mixture_runs])
+    s = np.sqrt(np.mean([r.log_evidence_err**2 for r in mixture_runs]))
+    assert 0.21 < np.std(z, ddof=1) / s < 2.3, (z, s)
+    # no bias: the mean of six runs within 3 of its standard error (mode-jumping moves with copies of the moved
+    # particle in the population put it 0.2 above, 3-4 standard errors)
+    assert abs(np.mean(z)) < 3 * s / math.sqrt(len(z)), z
+
+
+def test_the_calibrations_smc_weights_the_classes_by_their_evidences():
+    toy = Toy()
+    _init_worker(toy)
+    opts = SamplerOptions(sampler="smc", particles=200, cheap_particles=200, runs=3, seed=1, draws=2000,
+                          probe_draws=200)  # fmt: skip
+    comb, check, summaries, _ = sample_classes(toy, opts, None, checkpoint=None, resume=False, print_func=None)
+    z = np.array(AMPLITUDE[:2]) / (2 * HALF) ** 2
+    assert summaries[2].skipped
+    for k in (0, 1):
+        # ln Z_k exact within 4 of the merged runs' stated error
+        assert abs(summaries[k].log_evidence - math.log(z[k])) < 4 * summaries[k].log_evidence_err + 1e-9
+    assert comb.weights == pytest.approx(z / z.sum(), abs=0.08)
+    assert check is not None
+    assert check.passed, check.failures
+    # the draws of class 1 centre on its mode (sd 1 per coordinate, 1000+ draws: the mean within 0.2)
+    one = comb.draws[comb.klass == 1]
+    assert np.mean(one, axis=0) == pytest.approx([4.0, 2.0], abs=0.2)
+
+
+def _study_surrogate(branch: tuple[int, int, int]):
+    """The study's calibration problem (its data, priors and statements) on the in-plane surrogate, one elbow-branch
+    class (as ``studies/calibration_runs_surrogate.py`` builds it)."""
+    import dataclasses
+    import re
+    from importlib.resources import files
+
+    from fpm_sim.cli.common import load_manipulator
+    from fpm_sim.cli.identify import read_data_args
+    from fpm_sim.cli.main import build_parser
+    from fpm_sim.study.calibrate import CalibrationProblem, read_priors
+    from fpm_sim.study.identify import parameter_set
+
+    data = files("fpm_sim.data")
+    args = build_parser().parse_args(
+        ["calibrate", "--measured", f"{data.joinpath('measured_table4_train.csv')},reading=x+", "--priors",
+         str(data.joinpath("study_priors.toml")), "--out", "unused", "--free", "geometry,hardware,section-height"]
+    )  # fmt: skip
+    start = load_manipulator(args)
+    start = dataclasses.replace(start, geometry=dataclasses.replace(start.geometry, elbow_branch=branch))
+    groups, datasets, _ = read_data_args(args)
+    obs = tuple(o for ds in datasets for o in ds.observations)
+    names = parameter_set(start, groups).names
+    text = re.sub(r'\[parameters\."geometry\.elbow_branch"\][^\[]*', "", data.joinpath("study_priors.toml").read_text())
+    priors = read_priors("one_class.toml", names, text=text)
+    return CalibrationProblem(start, tuple(groups), priors, obs, (), model="inplane")
+
+
+@pytest.mark.slow  # ~5-8 min on the shared 2-core machine (three runs of ~60 000 surrogate calls)
+def test_three_seeds_of_the_study_calibration_agree_on_the_surrogate():
+    """Issue 31: on the study's problem (the in-plane surrogate, class (-1, -1, -1)) nested sampling's runs found
+    the statements' region 12-13 nats up in 2 of 3 runs at 100 live points and 0 of 3 at 250
+    (docs/identification.md); the two-stage SMC's three runs must pass the between-run check."""
+    from fpm_sim.study.calibrate import run_calibration
+
+    problem = _study_surrogate((-1, -1, -1))
+    opts = SamplerOptions(sampler="smc", particles=200, cheap_particles=500, runs=3, seed=0)
+    cal = run_calibration(problem, opts, progress=False)
+    assert cal.runs_check is not None
+    assert cal.runs_check.passed, cal.runs_check.table()
+    # every run in the statements' region (the plateau outside it, which the runs that missed it reported, is at
+    # ln Z -87.2 .. -88.3)
+    assert np.all(cal.runs_check.log_evidence > -82.0), cal.runs_check.log_evidence
