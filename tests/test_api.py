@@ -328,7 +328,7 @@ def test_calibrate_is_the_library_calibration():
         measured=[str(data / "measured_table4_train.csv")],
         reading="x+",
         segments=2,
-        sampler=SamplerOptions(sampler="dynesty", live_points=14, max_calls=40, walks=2, draws=5, runs=1),
+        sampler=SamplerOptions(live_points=14, max_calls=40, walks=2, draws=5, runs=1),
     )
     assert isinstance(cal, Calibration)
     assert cal.problem.names[:2] == ["geometry.base_radius_m", "geometry.platform_radius_m"]

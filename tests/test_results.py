@@ -275,8 +275,7 @@ def _calibration():
     f_hz = prob.predict(np.array([1.5, 0.305, 0.305]))  # a synthetic truth's frequencies as the data
     obs = tuple(dataclasses.replace(o, freq_hz=float(f)) for o, f in zip(obs, f_hz))
     prob = dataclasses.replace(prob, observations=obs)
-    opts = SamplerOptions(sampler="dynesty", live_points=8, dlogz=10.0, sample="unif", draws=20)
-    return run_calibration(prob, opts, progress=False)
+    return run_calibration(prob, SamplerOptions(live_points=8, dlogz=10.0, sample="unif", draws=20), progress=False)
 
 
 @_quiet

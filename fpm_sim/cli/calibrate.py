@@ -229,11 +229,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--sampler",
-        default="smc",
-        choices=("smc", "dynesty"),
-        help="smc (default): two-stage tempered sequential Monte Carlo, first the prior times the study's statements "
-        "(cheap: --cheap-particles), then the data (--particles); its runs agree (docs/identification.md). dynesty: "
-        "nested sampling (--live-points, --dlogz, --sample, --walks, --max-calls)",
+        default="dynesty",
+        choices=("dynesty", "smc"),
+        help="dynesty (default): nested sampling (--live-points, --dlogz, --sample, --walks, --max-calls). smc: "
+        "two-stage tempered sequential Monte Carlo, first the prior times the study's statements (cheap: "
+        "--cheap-particles), then the data (--particles); every run reaches the statements' region, but its runs "
+        "still disagree on the study (docs/identification.md)",
     )
     p.add_argument(
         "--particles", type=int, default=400, help="smc: particles of the data stage of each run (default 400)"

@@ -23,7 +23,7 @@ def files(tmp_path):
 def _argv(d, *extra):
     return [
         "calibrate", "--measured", str(d / "m.csv"), "--priors", str(d / "p.toml"), "--free", "section-height",
-        "--segments", "3", "--sampler", "dynesty", "--live-points", "6", "--dlogz", "10", "--sample", "unif", "--quiet",
+        "--segments", "3", "--live-points", "6", "--dlogz", "10", "--sample", "unif", "--quiet",
         "--out", str(d / "out"), *extra,
     ]  # fmt: skip
 
@@ -89,7 +89,7 @@ def test_resume_without_a_checkpoint_and_no_data_exit_2(files, capsys):
 @pytest.mark.parametrize(
     ("option", "value", "line"),
     [
-        ("--sampler", "dynesty", "--live-points", "1", "error: --live-points: must be >= 2, got 1"),
+        ("--live-points", "1", "error: --live-points: must be >= 2, got 1"),
         ("--dlogz", "0", "error: --dlogz: must be > 0, got 0.0"),
         ("--walks", "1", "error: --walks: must be >= 2, got 1"),
         ("--draws", "0", "error: --draws: must be >= 1, got 0"),

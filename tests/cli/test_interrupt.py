@@ -151,8 +151,8 @@ def test_ctrl_c_during_calibrate_is_one_line_and_130_and_stops_the_workers(tmp_p
     out = tmp_path / "cal"
     argv = [sys.executable, "-m", "fpm_sim.cli.main", "calibrate", "--measured",
             f"{data.joinpath('measured_table4_train.csv')},reading=x+", "--priors",
-            str(data.joinpath("study_priors.toml")), "--sampler", "dynesty", "--live-points", "25", "--walks", "3",
-            "--dlogz", "2", "--runs", "2", "--workers", "2", "--out", str(out)]  # fmt: skip
+            str(data.joinpath("study_priors.toml")), "--live-points", "25", "--walks", "3", "--dlogz", "2",
+            "--runs", "2", "--workers", "2", "--out", str(out)]  # fmt: skip
     proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
         for line in proc.stderr:  # a run has finished: the workers are busy with the next ones

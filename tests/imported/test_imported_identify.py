@@ -103,7 +103,7 @@ def test_calibrate_puts_the_lower_link_height_inside_the_90_interval(tmp_path: P
     desc = fs.load_imported(toml)
     data = read_joint_measured_csv(_measured(tmp_path, toml), desc, sigma_pct=0.5)
     problem = described_problem(desc, data, priors=None, free=f"{PATH}=0.05:0.12", segments=SEG)
-    opts = SamplerOptions(sampler="dynesty", live_points=8, sample="unif", runs=1, draws=200, probe_draws=10)
+    opts = SamplerOptions(live_points=8, sample="unif", runs=1, draws=200, probe_draws=10)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         cal = run_calibration(problem, opts, progress=False)

@@ -109,7 +109,7 @@ def test_a_synthetic_five_bar_puts_the_truth_inside_the_90_interval(tmp_path):
     desc = load_description(FIVE_BAR)
     data = read_task_measured_csv(_synthetic(tmp_path), desc, sigma_pct=1.0)
     problem = described_problem(desc, data, priors=None, free=f"{MASS}=0.05:1.0", segments=2)
-    opts = SamplerOptions(sampler="dynesty", live_points=20, sample="unif", runs=1, draws=300, probe_draws=20)
+    opts = SamplerOptions(live_points=20, sample="unif", runs=1, draws=300, probe_draws=20)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         cal = run_calibration(problem, opts, progress=False)
@@ -129,8 +129,8 @@ def _files(tmp_path: Path, priors: str, measured: str) -> list[str]:
     (tmp_path / "m.csv").write_text(measured)
     return [
         "calibrate", "--config", str(FIVE_BAR), "--measured", str(tmp_path / "m.csv"), "--priors",
-        str(tmp_path / "p.toml"), "--segments", "1", "--sampler", "dynesty", "--live-points", "4", "--max-calls", "8",
-        "--runs", "1", "--sample", "unif", "--draws", "20", "--quiet", "--out", str(tmp_path / "out"),
+        str(tmp_path / "p.toml"), "--segments", "1", "--live-points", "4", "--max-calls", "8", "--runs", "1",
+        "--sample", "unif", "--draws", "20", "--quiet", "--out", str(tmp_path / "out"),
     ]  # fmt: skip
 
 
@@ -213,9 +213,7 @@ def test_the_facade_takes_a_description_and_refuses_the_3rrr_s_options(tmp_path)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         cal = fs.calibrate(
-            desc,
-            sampler=SamplerOptions(sampler="dynesty", live_points=4, max_calls=8, runs=1, sample="unif", draws=10),
-            **kw,
+            desc, sampler=SamplerOptions(live_points=4, max_calls=8, runs=1, sample="unif", draws=10), **kw
         )
     assert cal.names == [MASS]
     assert math.isfinite(cal.log_evidence)

@@ -50,9 +50,7 @@ class Toy(FrequencyLikelihood):
 def toy_result():
     toy = Toy()
     _init_worker(toy)
-    opts = SamplerOptions(
-        sampler="dynesty", live_points=80, dlogz=0.1, sample="unif", runs=3, seed=4, draws=2000, probe_draws=200
-    )
+    opts = SamplerOptions(live_points=80, dlogz=0.1, sample="unif", runs=3, seed=4, draws=2000, probe_draws=200)
     return sample_classes(toy, opts, None, checkpoint=None, resume=False, print_func=None)
 
 
@@ -147,8 +145,7 @@ def cli_files(tmp_path, monkeypatch):
 def _argv(d, *extra):
     return [
         "calibrate", "--measured", str(d / "m.csv"), "--priors", str(d / "p.toml"), "--free", "section-height",
-        "--sampler", "dynesty", "--live-points", "30", "--sample", "unif", "--workers", "1", "--runs", "3",
-        "--seed", "5", "--quiet",
+        "--live-points", "30", "--sample", "unif", "--workers", "1", "--runs", "3", "--seed", "5", "--quiet",
         "--out", str(d / "out"), *extra,
     ]  # fmt: skip
 
@@ -224,8 +221,8 @@ def test_two_seeds_of_a_small_study_calibration_pass_the_check(tmp_path, capsys)
     (tmp_path / "p.toml").write_text(keep)
     measured = files("fpm_sim.data").joinpath("measured_table4_train.csv")
     argv = ["calibrate", "--measured", f"{measured},reading=x+", "--priors", str(tmp_path / "p.toml"),
-            "--free", "section-height", "--segments", "2", "--sampler", "dynesty", "--live-points", "30",
-            "--sample", "unif", "--runs", "2", "--workers", "2", "--seed", "0", "--quiet", "--json",
+            "--free", "section-height", "--segments", "2", "--live-points", "30", "--sample", "unif",
+            "--runs", "2", "--workers", "2", "--seed", "0", "--quiet", "--json",
             "--out", str(tmp_path / "out")]  # fmt: skip
     assert main(argv) == 0
     check = json.loads(capsys.readouterr().out)["result"]["runs_check"]

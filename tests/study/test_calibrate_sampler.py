@@ -34,9 +34,7 @@ def test_a_stopped_run_resumes_from_its_checkpoint(default_manip, tmp_path):
     pr = read_priors("p.toml", names, text=text)
     prob = CalibrationProblem(base, ("hardware",), pr, obs, model="inplane")
     ck = tmp_path / "ck.dynesty"
-    opts = SamplerOptions(
-        sampler="dynesty", live_points=20, dlogz=0.5, sample="unif", checkpoint_every_s=0.0, max_calls=150
-    )
+    opts = SamplerOptions(live_points=20, dlogz=0.5, sample="unif", checkpoint_every_s=0.0, max_calls=150)
     first = run_calibration(prob, opts, checkpoint=ck, progress=False)
     assert not first.converged
     # one checkpoint per run (the branches are fixed here: one class, seeds 0, 1, 2), none finished
@@ -69,7 +67,7 @@ def test_runs_on_workers_give_the_serial_posterior(default_manip):
     prob = CalibrationProblem(
         default_manip, ("hardware",), read_priors("p.toml", names, text=text), obs, model="inplane"
     )
-    opts = SamplerOptions(sampler="dynesty", live_points=15, dlogz=1.0, sample="unif", runs=2, draws=50)
+    opts = SamplerOptions(live_points=15, dlogz=1.0, sample="unif", runs=2, draws=50)
     serial = run_calibration(prob, opts, progress=False)
     parallel = run_calibration(prob, dataclasses.replace(opts, workers=2), progress=False)
     assert np.array_equal(serial.draws, parallel.draws)

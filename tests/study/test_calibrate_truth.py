@@ -65,7 +65,7 @@ def test_simulation_based_calibration_of_the_sampler(default_manip, size):
         cal = run_calibration(
             prob,
             # one run per replica, as timed (each replica's draws are one run's: what SBC checks)
-            SamplerOptions(sampler="dynesty", live_points=30, dlogz=0.5, seed=r, sample="unif", draws=n_draws, runs=1),
+            SamplerOptions(live_points=30, dlogz=0.5, seed=r, sample="unif", draws=n_draws, runs=1),
             progress=False,
         )
         ranks[r] = np.sum(cal.draws[:, : len(names)] < truth[None, :], axis=0)
@@ -189,7 +189,7 @@ def test_blind_truth_inside_the_marginals_and_bands_cover_other_poses(default_ma
         dummy, observations=obs, rig_tests=rigs, priors=dataclasses.replace(priors, rig_sigma_pct=1.5)
     )
     # one run, as timed (the between-run check on hidden truths is issue 31's part 2)
-    opts = SamplerOptions(sampler="dynesty", live_points=60, dlogz=0.5, seed=3, workers=2, walks=20, runs=1)
+    opts = SamplerOptions(live_points=60, dlogz=0.5, seed=3, workers=2, walks=20, runs=1)
     cal = run_calibration(prob, opts, progress=False)
     # each parameter's truth inside its 95 % marginal: a per-parameter bound, the same at any number of parameters
     # (a calibrated posterior passes all k of them with probability >= 1 - 0.05 k: 0.6 for the full case's 8, 0.8

@@ -43,7 +43,7 @@ reason = "assumed: test"
 GROUPS = ("hardware", "section")
 NOISE = 0.015
 K = 3
-SAMPLER = SamplerOptions(sampler="dynesty", live_points=80, dlogz=0.1, sample="unif", draws=400, runs=1)
+SAMPLER = SamplerOptions(live_points=80, dlogz=0.1, sample="unif", draws=400, runs=1)
 TARGET_MM = [(x, y) for x in (50, 75, 100) for y in (-100, -50, 0, 50, 100)]
 """Where the predictions matter: one side of the cell (the design decision is about x >= 50 mm)."""
 

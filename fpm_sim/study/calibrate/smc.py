@@ -164,13 +164,15 @@ def _eve_variance(eve: np.ndarray, logw: np.ndarray, steps: int) -> float:
 
 
 def temper(
-    u: np.ndarray, la: np.ndarray, lb: np.ndarray, evaluate: Evaluate, s: SmcSettings, rng: np.random.Generator
-) -> SmcRun:
-    """From equal-weight particles of ``pi L_a`` (``u`` with their ``log L_a``, ``log L_b``) to ``pi L_a L_b``
-    (module docstring). The returned evidence is ``Z_b = E_{pi L_a}[L_b]``, with the stated variance of its log."""
+    u: np.ndarray, la: np.ndarray, lb: np.ndarray, evaluate: Evaluate, s: SmcSettings, rng: np.random.Generator,
+    *, beta: float = 0.0,
+) -> SmcRun:  # fmt: skip
+    """From equal-weight particles of ``pi L_a L_b^beta`` (``u`` with their ``log L_a``, ``log L_b``) to
+    ``pi L_a L_b`` (module docstring). The returned evidence is ``Z_b = E_{pi L_a L_b^beta}[L_b^(1 - beta)]``, with
+    the stated variance of its log."""
     n = len(u)
-    log_z, var, calls, beta, scale = 0.0, 0.0, 0, 0.0, 1.0
-    betas: list[float] = [0.0]
+    log_z, var, calls, scale = 0.0, 0.0, 0, 1.0
+    betas: list[float] = [beta]
     rates: list[float] = []
     eve = np.arange(n)
     while beta < 1.0:
@@ -219,15 +221,32 @@ def two_stage(
         return SmcRun(np.empty((0, d)), np.empty(0), np.empty(0), -math.inf, 0.0, stage1.particles)
     u, _, lc, log_mass, var_mass, calls = start
     one = temper(u, np.zeros(len(u)), lc, cheap, stage1, rng)
-    pick = rng.choice(len(one.u), size=stage2.particles, replace=stage2.particles > len(one.u))
-    u2 = one.u[pick]
-    la, lb = full(u2)
-    two = temper(u2, la, lb, full, stage2, rng)
+    u2, la, lb, beta, log_z2, var2 = _first_data_step(one.u, full, stage2, rng)
+    u2, la, lb, _, moved, _ = _move(u2, la, lb, beta, full, stage2, rng, 1.0)
+    two = temper(u2, la, lb, full, stage2, rng, beta=beta)
     return SmcRun(
-        two.u, two.log_a, two.log_b, log_mass + one.log_evidence + two.log_evidence,
-        var_mass + one.log_evidence_var + two.log_evidence_var, calls + one.n_calls + len(u2) + two.n_calls,
-        one.betas + [1.0 + b for b in two.betas], one.acceptance + two.acceptance,
+        two.u, two.log_a, two.log_b, log_mass + one.log_evidence + log_z2 + two.log_evidence,
+        var_mass + one.log_evidence_var + var2 + two.log_evidence_var,
+        calls + one.n_calls + len(one.u) + moved + two.n_calls, one.betas + [1.0 + b for b in two.betas],
+        one.acceptance + two.acceptance,
     )  # fmt: skip
+
+
+def _first_data_step(
+    u: np.ndarray, full: Evaluate, s: SmcSettings, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float, float]:
+    """The data's first tempering step on every particle of the cheap stage (a region the cheap terms give few
+    particles but the data favour keeps them for this step), resampled to ``s.particles``: ``(u, log L_a, log L_b,
+    beta, ln Z increment, its variance)`` (the importance-sampling variance ``1 / ESS - 1 / n``)."""
+    n = len(u)
+    la, lb = full(u)
+    beta = _next_beta(0.0, lb, s.ess_fraction * min(n, s.particles))
+    with np.errstate(invalid="ignore"):
+        logw = np.where(np.isfinite(lb), beta * lb, -np.inf)
+    if not np.any(np.isfinite(logw)):
+        return u[: s.particles], la[: s.particles], lb[: s.particles], 1.0, -math.inf, 0.0
+    idx = rng.choice(n, size=s.particles, p=np.exp(logw - logsumexp(logw)))
+    return u[idx], la[idx], lb[idx], beta, float(logsumexp(logw)) - math.log(n), 1.0 / _ess(logw) - 1.0 / n
 
 
 def merge_smc(runs: list[dict[str, Any]]) -> dict[str, Any]:
@@ -244,7 +263,9 @@ def merge_smc(runs: list[dict[str, Any]]) -> dict[str, Any]:
                        int(sum(np.sum(r["ncall"]) for r in runs)), int(sum(r["niter"] for r in runs)))  # fmt: skip
 
 
-def smc_results(samples: np.ndarray, logl: np.ndarray, log_z: float, err: float, calls: int, niter: int) -> dict[str, Any]:
+def smc_results(
+    samples: np.ndarray, logl: np.ndarray, log_z: float, err: float, calls: int, niter: int
+) -> dict[str, Any]:
     """What a calibration run reports, in dynesty ``Results``' keys: equal weights ``ln(1 / n) + ln Z``."""
     n = len(samples)
     return {
