@@ -163,3 +163,17 @@ def test_the_cli_runs_the_smc_sampler_and_refuses_nested_sampling_options(cli_fi
     # too few particles: exit 2 naming the option
     assert main([*_argv(cli_files), "--sampler", "smc", "--particles", "3", "--overwrite"]) == 2
     assert capsys.readouterr().err.startswith("error: --particles: must be >= 10, got 3")
+
+
+def test_resuming_a_nested_sampling_calibration_with_the_smc_sampler_is_refused(cli_files, capsys):
+    from fpm_sim.cli.main import main
+
+    assert main(_argv(cli_files)) == 0  # nested sampling: its finished runs' .done files are dynesty's results
+    (cli_files / "out" / "calibration.pkl").unlink()  # resume from the runs, not from the finished calibration
+    capsys.readouterr()
+    assert main([*_argv(cli_files), "--resume", "--sampler", "smc"]) == 2
+    err = capsys.readouterr().err
+    # one line naming the run's file and what to do
+    assert err.startswith("error: "), err
+    assert err.count("\n") == 1, err
+    assert "checkpoint.dynesty.seed5.done: resume: the finished run there was sampled by dynesty, not smc" in err

@@ -529,7 +529,9 @@ def _run_class(
         kw.update(checkpoint_file=str(checkpoint), checkpoint_every=opts.checkpoint_every_s)
     if resume and done is not None and done.exists():
         with done.open("rb") as fh:
-            return pickle.load(fh)
+            saved = pickle.load(fh)
+        _same_sampler(saved, "dynesty", done)
+        return saved
     if resume and checkpoint is not None and checkpoint.exists():
         sampler = dynesty.NestedSampler.restore(str(checkpoint), pool=pool)
         # a run interrupted mid-way continues (resume=True); one that ended on max_calls has its final live
@@ -587,8 +589,9 @@ def _run_smc(
     done = None if checkpoint is None else Path(f"{checkpoint}.done")
     if resume and done is not None and done.exists():
         with done.open("rb") as fh:
-            out: dict[str, Any] = pickle.load(fh)
-            return out
+            out = pickle.load(fh)
+        _same_sampler(out, "smc", done)
+        return dict(out)
     one, two = opts.smc_settings()
     d = _PROBLEM.ndim - (klass is not None)
     run = two_stage(
@@ -602,6 +605,18 @@ def _run_smc(
         with done.open("wb") as fh:
             pickle.dump(out, fh, protocol=4)
     return out
+
+
+def _same_sampler(saved: Any, sampler: str, path: Path) -> None:
+    """Refuse to resume from a finished run of the other sampler (an SMC run's results are a plain ``dict``)."""
+    if isinstance(saved, dict) != (sampler == "smc"):
+        other = "dynesty" if sampler == "smc" else "smc"
+        raise CalibrationError(
+            f"the finished run there was sampled by {other}, not {sampler}",
+            parameter="resume",
+            file=path,
+            hint=f"resume with the sampler {other}, or start a fresh run (resume off)",
+        )
 
 
 def _check_resume(problem: FrequencyLikelihood, checkpoint: Path | None, resume: bool) -> None:
