@@ -70,8 +70,9 @@ def _sampler_line(cal: Calibration) -> str:
     if getattr(o, "sampler", "dynesty") == "smc":
         head = (
             f"- two-stage tempered SMC ({o.cheap_particles} particles for the prior times the statements, then "
-            f"{o.particles} for the data, effective sample size kept at {o.ess_fraction:g} per step, {o.moves:g} "
-            f"accepted moves per particle per step; {runs}): {cal.n_iterations} tempering steps, "
+            f"{o.particles} for the data, effective sample size kept at {o.ess_fraction:g} per step, "
+            f"{getattr(o, 'cheap_moves', o.moves):g} / {o.moves:g} accepted moves per particle per step; {runs}): "
+            f"{cal.n_iterations} tempering steps, "
             f"{cal.n_calls} likelihood calls, {cal.seconds:.0f} s"
         )
         err = "the error is the SMC's estimate from the particles' genealogy (Lee & Whiteley 2018)"
