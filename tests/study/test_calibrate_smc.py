@@ -111,13 +111,15 @@ def _study_surrogate(branch: tuple[int, int, int]):
     return CalibrationProblem(start, tuple(groups), priors, obs, (), model="inplane")
 
 
-@pytest.mark.slow  # ~7 min on the shared 2-core machine (three runs of ~85 000 surrogate calls)
+@pytest.mark.slow
+@pytest.mark.very_slow  # 710 s on the shared 2-core machine (three runs of ~229 000 calls, 210 000 of them stage 1's)
 def test_three_seeds_of_the_study_calibration_on_the_surrogate():
     """Issue 31: on the study's problem (the in-plane surrogate, class (-1, -1, -1)) nested sampling's runs found
     the statements' region, 12-13 nats up, in 2 of 3 runs at 100 live points and 0 of 3 at 250
-    (docs/identification.md). Every run of the two-stage SMC must reach it; the between-run check is the target,
-    and it still fails (the runs end in different parts of the region): reported as an expected failure until it
-    passes."""
+    (docs/identification.md). Every run of the two-stage SMC must reach it; the between-run check is the target:
+    its ln Z criterion passes, its quantiles' does not yet (the runs hold the region's parts in different
+    shares), reported as an expected failure until it passes. Run by hand: python -m pytest -m very_slow -rx
+    tests/study/test_calibrate_smc.py"""
     from fpm_sim.study.calibrate import run_calibration
 
     problem = _study_surrogate((-1, -1, -1))
