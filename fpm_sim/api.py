@@ -1312,8 +1312,9 @@ def calibrate(
     segments
         Resolution (spring locations per link) of the likelihood's model.
     sampler
-        Live points, stopping, workers, seed, independent runs per elbow-branch class and the between-run
-        check's tolerances (:class:`fpm_sim.study.calibrate.SamplerOptions`; the check is
+        The sampler (nested sampling, or the two-stage tempered SMC of :mod:`fpm_sim.study.calibrate.smc`), its
+        live points or particles, stopping, workers, seed, independent runs per elbow-branch class and the
+        between-run check's tolerances (:class:`fpm_sim.study.calibrate.SamplerOptions`; the check is
         ``result.runs_check``).
     progress
         Show dynesty's progress line.

@@ -58,6 +58,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         max_calls=args.max_calls,
         draws=args.draws,
         runs=args.runs,
+        sampler=args.sampler,
+        particles=args.particles,
+        cheap_particles=args.cheap_particles,
     )
     opts.check()
     out.mkdir(parents=True, exist_ok=True)
@@ -157,6 +160,8 @@ def _saved_calibration(run_file: Path, problem: Any) -> Any:
         raise CliError(f"--resume: {run_file} belongs to another problem; run without --resume (and --overwrite)")
     if math.isnan(cal.start_log_likelihood):  # saved before the start check existed
         cal.start_log_likelihood = problem.start_log_likelihood()
+    if "sampler" not in vars(cal.options):  # saved before the sampler could be chosen: nested sampling
+        cal.options = dataclasses.replace(cal.options, sampler="dynesty")
     if "classes" not in vars(cal):  # saved before the classes were enumerated: one run, the class sampled
         cal.classes = []
         cal.options = dataclasses.replace(cal.options, runs=1)
@@ -174,8 +179,13 @@ def _warn_if_runs_disagree(cal: object) -> None:
     warnings.warn(
         f"the {len(check.seeds)} independent runs DISAGREE: this posterior depends on the run ("
         + "; ".join(check.failures)
-        + f"). Parameters whose quantiles disagree: {names}. Use more live points (--live-points) or more runs "
-        "(--runs) before trusting it",
+        + f"). Parameters whose quantiles disagree: {names}. Use "
+        + (
+            "more particles (--particles, --cheap-particles)"
+            if getattr(getattr(cal, "options", None), "sampler", "dynesty") == "smc"
+            else "more live points (--live-points)"
+        )
+        + " or more runs (--runs) before trusting it",
         FpmSimWarning,
         stacklevel=1,
     )
@@ -217,7 +227,27 @@ def register(sub: argparse._SubParsersAction) -> None:
         "architecture or an imported model dotted paths into its file, PATH (its prior in --priors) or PATH=lo:hi "
         "(uniform between them; default: every path --priors names)",
     )
-    p.add_argument("--live-points", type=int, default=250, help="nested sampling live points of each run (default 250)")
+    p.add_argument(
+        "--sampler",
+        default="dynesty",
+        choices=("dynesty", "smc"),
+        help="dynesty (default): nested sampling (--live-points, --dlogz, --sample, --walks, --max-calls). smc: "
+        "two-stage tempered sequential Monte Carlo, first the prior times the study's statements (cheap: "
+        "--cheap-particles), then the data (--particles); every run reaches the statements' region, but its runs "
+        "still disagree on the study (docs/identification.md)",
+    )
+    p.add_argument(
+        "--particles", type=int, default=400, help="smc: particles of the data stage of each run (default 400)"
+    )
+    p.add_argument(
+        "--cheap-particles",
+        type=int,
+        default=2000,
+        help="smc: particles of the first stage (the prior times the statements; default 2000)",
+    )
+    p.add_argument(
+        "--live-points", type=int, default=250, help="dynesty: nested sampling live points of each run (default 250)"
+    )
     p.add_argument(
         "--dlogz", type=float, default=0.5, help="stop when the remaining evidence is below this (default 0.5)"
     )

@@ -154,6 +154,12 @@ class FrequencyLikelihood:
     def log_likelihood(self, theta: np.ndarray) -> float:
         raise NotImplementedError
 
+    def cheap_log_likelihood(self, theta: np.ndarray) -> float:
+        """The part of :meth:`log_likelihood` that needs no frequency (``-inf`` where it is impossible, and the
+        study's statements where enabled): what a two-stage sampler tempers in first
+        (:mod:`fpm_sim.study.calibrate.smc`). Here: the support only."""
+        return 0.0 if self.possible(theta) else -math.inf
+
     def start_values(self) -> np.ndarray:
         """The free parameters' values in the base description."""
         raise NotImplementedError
@@ -392,6 +398,19 @@ class CalibrationProblem(FrequencyLikelihood):
             m = assemble_many(g, p[:, 0], p[:, 1], p[:, 2]).singularity
             total += float(np.sum(log_sigmoid_soft((m - b.min_measure) / b.width, b.eps)))
         return total
+
+    def cheap_log_likelihood(self, theta: np.ndarray) -> float:
+        """``-inf`` for an impossible description (invalid, or a measured pose unreachable), else the enabled
+        statements' terms (closed-form kinematics, about a millisecond)."""
+        try:
+            cfg = self.config(theta)
+        except (ConfigError, ValueError):
+            return -math.inf
+        if self.observations:
+            xyz = self._pose_array
+            if not assemble_many(cfg.geometry, xyz[:, 0], xyz[:, 1], xyz[:, 2]).reachable.all():
+                return -math.inf
+        return self.statements_log_likelihood(cfg)
 
     def log_likelihood(self, theta: np.ndarray) -> float:
         """``log L(theta)`` (module docstring); ``-inf`` for an impossible description."""

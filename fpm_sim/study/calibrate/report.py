@@ -63,6 +63,33 @@ def _prior_of(cal: Calibration, name: str) -> str:
     return ""
 
 
+def _sampler_line(cal: Calibration) -> str:
+    """The diagnostics' lines on the sampler: its settings, cost, and the evidence with what its error covers."""
+    o = cal.options
+    runs = f"{getattr(o, 'runs', 1)} run(s) per class, first seed {o.seed}"
+    if getattr(o, "sampler", "dynesty") == "smc":
+        head = (
+            f"- two-stage tempered SMC ({o.cheap_particles} particles for the prior times the statements, then "
+            f"{o.particles} for the data, effective sample size kept at {o.ess_fraction:g} per step, "
+            f"{getattr(o, 'cheap_moves', o.moves):g} / {o.moves:g} accepted moves per particle per step; {runs}): "
+            f"{cal.n_iterations} tempering steps, "
+            f"{cal.n_calls} likelihood calls, {cal.seconds:.0f} s"
+        )
+        err = "the error is the SMC's estimate from the particles' genealogy (Lee & Whiteley 2018)"
+    else:
+        head = (
+            f"- nested sampling (dynesty, {o.live_points} live points per run, {runs}, stop at dlogz {o.dlogz:g}, "
+            f"proposal {o.sample}" + (f" with {o.walks} steps per walk" if o.walks else "") + f"): "
+            f"{cal.n_iterations} iterations, {cal.n_calls} likelihood calls, {cal.seconds:.0f} s"
+            + ("" if cal.converged else " -- stopped on the likelihood-call limit (max_calls): NOT converged")
+        )
+        err = "the error is nested sampling's statistical one"
+    return (
+        head + f"\n- log-evidence ln Z = {cal.log_evidence:.3f} +- {cal.log_evidence_err:.3f} ({err}; a mode no "
+        "particle or live point entered is not in it)"
+    )
+
+
 def render_report(cal: Calibration, *, command: str, data_note: str) -> str:
     """The text of ``report.md``."""
     p = cal.problem
@@ -78,19 +105,12 @@ def render_report(cal: Calibration, *, command: str, data_note: str) -> str:
         "",
         "## Diagnostics",
         "",
-        f"- nested sampling (dynesty, {cal.options.live_points} live points per run, "
-        f"{getattr(cal.options, 'runs', 1)} run(s) per class, stop at dlogz {cal.options.dlogz:g}, "
-        f"proposal {cal.options.sample}"
-        + (f" with {cal.options.walks} steps per walk" if cal.options.walks else "")
-        + f", first seed {cal.options.seed}): {cal.n_iterations} iterations, "
-        f"{cal.n_calls} likelihood calls, {cal.seconds:.0f} s"
-        + ("" if cal.converged else " -- stopped on the likelihood-call limit (max_calls): NOT converged"),
-        f"- log-evidence ln Z = {cal.log_evidence:.3f} +- {cal.log_evidence_err:.3f} (the error is nested "
-        "sampling's statistical one; a mode the live points never entered is not in it)",
+        _sampler_line(cal),
         f"- best log-likelihood among the draws {np.max(cal.log_likelihood):.2f}; at the start description "
         f"(discrepancy at its best) {cal.start_log_likelihood:.2f}"
         + (
-            " -- **the sampler missed the start's region: this posterior is incomplete; rerun with more live points**"
+            " -- **the sampler missed the start's region: this posterior is incomplete; rerun with more particles "
+            "(live points)**"
             if cal.missed_start
             else ""
         ),

@@ -25,10 +25,12 @@ from fpm_sim.figures import bands_against_measured
 from fpm_sim.study.calibrate.priors import BRANCH_PARAMETER
 from fpm_sim.study.calibrate.problem import CalibrationError, CalibrationProblem, FrequencyLikelihood
 from fpm_sim.study.calibrate.runs import ClassResult, Combined, RunsCheck, between_run_check, combine_classes
+from fpm_sim.study.calibrate.smc import SmcSettings, merge_smc, smc_results, two_stage
 from fpm_sim.study.loo import LeaveOneOut, leave_one_out, loo_from_components
 from fpm_sim.study.readout import draws_components, responsibilities
 
 __all__ = [
+    "SAMPLERS",
     "Calibration",
     "ClassSummary",
     "SamplerOptions",
@@ -37,6 +39,9 @@ __all__ = [
     "run_calibration",
     "sample_classes",
 ]
+
+SAMPLERS = ("dynesty", "smc")
+"""The calibration's samplers (:attr:`SamplerOptions.sampler`)."""
 
 _PROBLEM: FrequencyLikelihood | None = None
 """The problem of this worker process (set by :func:`_init_worker`)."""
@@ -90,7 +95,8 @@ def _worker_run(
     klass, seed, opts, checkpoint, resume = job
     t0 = time.time()
     ck = None if checkpoint is None else Path(checkpoint)
-    res = _run_class(klass, seed, opts, checkpoint=ck, resume=resume, pool=pool)
+    run = _run_smc if opts.sampler == "smc" else _run_class
+    res = run(klass, seed, opts, checkpoint=ck, resume=resume, pool=pool)
     return klass, seed, res, time.time() - t0
 
 
@@ -128,6 +134,22 @@ class SamplerOptions:
     """The between-run check: a class some run weights above this must be in the merged posterior."""
     probe_draws: int = 400
     """Prior draws per class to find whether it reaches the measured poses at all (none: the class is skipped)."""
+    sampler: str = "dynesty"
+    """``"dynesty"``: nested sampling (``live_points``, ``dlogz``, ``sample``, ``walks``, ``max_calls``);
+    ``"smc"``: two-stage tempered sequential Monte Carlo (:mod:`fpm_sim.study.calibrate.smc`; ``particles``,
+    ``cheap_particles``): on the study's problem every run reaches the statements' region, but the runs still
+    disagree (docs/identification.md, "Why independent runs still disagree"), so it is not the default."""
+    particles: int = 400
+    """SMC: particles of the data stage (each tempering step costs ``moves / acceptance`` sweeps of them)."""
+    cheap_particles: int = 2000
+    """SMC: particles of the first stage (prior times the cheap terms: the support and the study's statements)."""
+    ess_fraction: float = 0.5
+    """SMC: each tempering step keeps this fraction of the particles as effective sample size."""
+    moves: float = 3.0
+    """SMC: accepted Metropolis moves per particle (on average) after each tempering step of the data stage."""
+    cheap_moves: float = 10.0
+    """SMC: the same in the first stage (cheap calls; its thin region needs the moves to be represented alike by
+    independent runs: at 3 its particles' shares of the region's parts differed between runs by 0.1-0.13)."""
 
     def check(self) -> None:
         if self.runs < 1:
@@ -142,6 +164,10 @@ class SamplerOptions:
             raise CalibrationError("must be >= 2", parameter="walks", value=self.walks)
         if self.draws < 1:
             raise CalibrationError("must be >= 1", parameter="draws", value=self.draws)
+        if self.sampler not in SAMPLERS:
+            raise CalibrationError(f"must be one of {', '.join(SAMPLERS)}", parameter="sampler", value=self.sampler)
+        if self.sampler == "smc":
+            self._check_smc()
         if self.max_calls is not None and self.max_calls < self.live_points:
             raise CalibrationError(
                 f"must be >= the number of live points ({self.live_points})",
@@ -149,6 +175,26 @@ class SamplerOptions:
                 value=self.max_calls,
                 hint="allow more likelihood calls or use fewer live points",
             )
+
+    def _check_smc(self) -> None:
+        for name in ("particles", "cheap_particles"):
+            if getattr(self, name) < 10:
+                raise CalibrationError("must be >= 10", parameter=name, value=getattr(self, name))
+        if not 0 < self.ess_fraction < 1:
+            raise CalibrationError("must be between 0 and 1", parameter="ess_fraction", value=self.ess_fraction)
+        for name in ("moves", "cheap_moves"):
+            if not getattr(self, name) > 0:
+                raise CalibrationError("must be > 0", parameter=name, value=getattr(self, name))
+        if self.max_calls is not None:
+            raise CalibrationError(
+                "is nested sampling's (dynesty's) limit", parameter="max_calls", value=self.max_calls,
+                hint="leave it unset with the smc sampler, or use the dynesty sampler",
+            )  # fmt: skip
+
+    def smc_settings(self) -> tuple[SmcSettings, SmcSettings]:
+        """The two stages' :class:`~fpm_sim.study.calibrate.smc.SmcSettings`."""
+        one = SmcSettings(self.cheap_particles, self.ess_fraction, self.cheap_moves, max_sweeps=200)
+        return one, SmcSettings(self.particles, self.ess_fraction, self.moves)
 
 
 @dataclass(frozen=True)
@@ -384,7 +430,18 @@ class Calibration:
             "data": data,
             "options": {
                 k: getattr(self.options, k)
-                for k in ("live_points", "dlogz", "seed", "sample", "walks", "max_calls", "runs")
+                for k in (
+                    "sampler",
+                    "particles",
+                    "cheap_particles",
+                    "live_points",
+                    "dlogz",
+                    "seed",
+                    "sample",
+                    "walks",
+                    "max_calls",
+                    "runs",
+                )
             },
             "classes": [c.to_dict() for c in self.classes],
             **self.problem.notes(),
@@ -476,7 +533,9 @@ def _run_class(
         kw.update(checkpoint_file=str(checkpoint), checkpoint_every=opts.checkpoint_every_s)
     if resume and done is not None and done.exists():
         with done.open("rb") as fh:
-            return pickle.load(fh)
+            saved = pickle.load(fh)
+        _same_sampler(saved, "dynesty", done)
+        return saved
     if resume and checkpoint is not None and checkpoint.exists():
         sampler = dynesty.NestedSampler.restore(str(checkpoint), pool=pool)
         # a run interrupted mid-way continues (resume=True); one that ended on max_calls has its final live
@@ -500,6 +559,68 @@ def _run_class(
         with done.open("wb") as fh:
             pickle.dump(res, fh, protocol=4)
     return res
+
+
+def _smc_cheap(u: np.ndarray, klass: int | None) -> tuple[np.ndarray, np.ndarray]:
+    """SMC's first stage at unit-cube rows ``u``: ``(0, log L_cheap)``."""
+    assert _PROBLEM is not None, "the pool was started without _init_worker"
+    p = _PROBLEM
+    cheap = [p.cheap_log_likelihood(_with_class(_class_prior_transform(x, klass), klass)) for x in u]
+    return np.zeros(len(u)), np.asarray(cheap, float)
+
+
+def _smc_full(u: np.ndarray, klass: int | None, pool: Any) -> tuple[np.ndarray, np.ndarray]:
+    """SMC's second stage at unit-cube rows ``u``: ``(log L_cheap, log L - log L_cheap)``, the (expensive) full
+    likelihood evaluated only where the cheap part is finite (on ``pool``'s workers when given)."""
+    thetas = [_with_class(_class_prior_transform(x, klass), klass) for x in u]
+    _, cheap = _smc_cheap(u, klass)
+    todo = [t for t, c in zip(thetas, cheap) if np.isfinite(c)]
+    ll = _worker_log_likelihood
+    full = pool.map(ll, todo) if pool is not None else [ll(t) for t in todo]
+    data = np.full(len(u), -math.inf)
+    data[np.isfinite(cheap)] = np.asarray(full, float) - cheap[np.isfinite(cheap)]
+    return cheap, np.where(np.isfinite(data), data, -math.inf)
+
+
+def _run_smc(
+    klass: int | None, seed: int, opts: SamplerOptions, *, checkpoint: Path | None, resume: bool, pool: Any = None
+) -> dict[str, Any]:
+    """Two-stage tempered SMC (:func:`~fpm_sim.study.calibrate.smc.two_stage`) on class ``klass``: a finished run's
+    saved results (``.done``), else a fresh run (an unfinished SMC run is not continued: it restarts)."""
+    import pickle
+
+    assert _PROBLEM is not None, "the pool was started without _init_worker"
+    done = None if checkpoint is None else Path(f"{checkpoint}.done")
+    if resume and done is not None and done.exists():
+        with done.open("rb") as fh:
+            out = pickle.load(fh)
+        _same_sampler(out, "smc", done)
+        return dict(out)
+    one, two = opts.smc_settings()
+    d = _PROBLEM.ndim - (klass is not None)
+    run = two_stage(
+        functools.partial(_smc_cheap, klass=klass), functools.partial(_smc_full, klass=klass, pool=pool), d, one,
+        two, np.random.default_rng(seed),
+    )  # fmt: skip
+    theta = np.array([_class_prior_transform(x, klass) for x in run.u]).reshape(len(run.u), d)
+    out = smc_results(theta, run.log_a + run.log_b, run.log_evidence, run.log_evidence_err, run.n_calls,
+                      len(run.betas))  # fmt: skip
+    if done is not None:
+        with done.open("wb") as fh:
+            pickle.dump(out, fh, protocol=4)
+    return out
+
+
+def _same_sampler(saved: Any, sampler: str, path: Path) -> None:
+    """Refuse to resume from a finished run of the other sampler (an SMC run's results are a plain ``dict``)."""
+    if isinstance(saved, dict) != (sampler == "smc"):
+        other = "dynesty" if sampler == "smc" else "smc"
+        raise CalibrationError(
+            f"the finished run there was sampled by {other}, not {sampler}",
+            parameter="resume",
+            file=path,
+            hint=f"resume with the sampler {other}, or start a fresh run (resume off)",
+        )
 
 
 def _check_resume(problem: FrequencyLikelihood, checkpoint: Path | None, resume: bool) -> None:
@@ -562,10 +683,15 @@ def _sample_jobs(
     return out
 
 
-def _merge(results: list[Any]) -> Any:
+def _merge(results: list[Any], sampler: str) -> Any:
+    """One class's runs as one (dynesty's ``merge_runs``; SMC: :func:`~fpm_sim.study.calibrate.smc.merge_smc`)."""
+    if len(results) == 1:
+        return results[0]
+    if sampler == "smc":
+        return merge_smc(results)
     from dynesty.utils import merge_runs
 
-    return results[0] if len(results) == 1 else merge_runs(results, print_progress=False)
+    return merge_runs(results, print_progress=False)
 
 
 def sample_classes(
@@ -594,7 +720,7 @@ def sample_classes(
     jobs = [(k, s, opts, c, resume) for (k, s), c in zip(((k, s) for k in live for s in seeds), ck)]
     prefix = (lambda k: f"class {problem.class_label(k)}, ") if classes != (None,) else (lambda k: "")
     done = _sample_jobs(jobs, pool, print_func, prefix)
-    merged = [ClassResult.of_results(k, _merge([done[(k, s)][0] for s in seeds])) for k in live]
+    merged = [ClassResult.of_results(k, _merge([done[(k, s)][0] for s in seeds], opts.sampler)) for k in live]
     rng = np.random.default_rng(opts.seed + 1)
     comb = combine_classes(merged, len(classes), opts.draws, rng)
     names = [n for n in problem.names if n != BRANCH_PARAMETER]

@@ -1,0 +1,279 @@
+"""Adaptive tempered sequential Monte Carlo (Del Moral, Doucet & Jasra 2006) on the unit cube, and the calibration's
+two-stage use of it.
+
+A target ``pi(u) L_a(u) L_b(u)^beta`` over the unit cube (the prior is uniform there: a calibration problem's prior
+transform maps it to the parameters) is reached from ``pi(u) L_a(u)`` by raising ``beta`` from 0 to 1 in steps
+chosen so that the incremental weights ``L_b^{d beta}`` keep an effective sample size of ``ess_fraction`` of the
+particles (Jasra et al. 2011); after each step the particles are resampled (systematic) and moved by Metropolis
+steps that leave the current tempered target invariant. The moves are differential-evolution proposals (ter Braak
+2006): ``u' = u + gamma (u_a - u_b)`` with ``a, b`` two other particles of the population frozen at the start of the
+sweep (symmetric, so the Metropolis ratio is the targets'), folded back into the cube (a symmetric reflection);
+``gamma = 2.38 / sqrt(2 d)`` scaled to keep the acceptance near a quarter. Sweeps continue until each particle
+has had ``moves`` accepted moves on average (at most ``max_sweeps``). The modes' weights are carried by the
+importance weights of the tempering, not by moves between modes: ter Braak's mode-jumping ``gamma = 1`` moves,
+with the population just resampled (copies of the moved particle among ``a, b``), biased ln Z upwards by about
+0.015 per tempering step on a two-mode mixture (measured; ``tests/study/test_calibrate_smc.py``), so they are not
+used.
+
+The evidence is the product of the mean incremental weights, ``Z_b = prod_t mean_i L_b(u_i)^{d beta_t}``
+(unbiased for a fixed schedule); its stated error is Lee & Whiteley's (2018) estimate of ``var(Z_hat) / Z^2`` from
+the particles' genealogy (each particle's ancestor at the start, multinomial resampling), which counts the
+correlation the resampling and the moves leave, unlike a sum of the steps' importance-sampling variances
+(measured against the spread of independent runs in the tests and in docs/identification.md).
+
+The calibration (:func:`two_stage`) runs it twice per elbow-branch class: stage 1 from the prior to the prior times
+the cheap part of the likelihood (the support, and the study's statements: closed-form kinematics, many particles),
+stage 2 from there to the posterior on the data's likelihood (expensive, fewer particles subsampled from stage
+1's). ``Z = Z_1 Z_2``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.special import logsumexp
+
+__all__ = ["SmcRun", "SmcSettings", "merge_smc", "smc_results", "temper", "two_stage"]
+
+Evaluate = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+"""``U (n, d) -> (log L_a, log L_b)`` at the rows of ``U`` (``-inf`` outside the support)."""
+
+
+@dataclass(frozen=True)
+class SmcSettings:
+    """One tempering's settings (module docstring)."""
+
+    particles: int = 1000
+    ess_fraction: float = 0.5
+    moves: float = 3.0
+    """Accepted Metropolis moves per particle (on average) after each tempering step."""
+    max_sweeps: int = 40
+    min_sweeps: int = 2
+
+
+@dataclass
+class SmcRun:
+    """The particles at ``beta = 1`` (equal weights) and the run's evidence, as a calibration run reports it."""
+
+    u: np.ndarray
+    """``(n, d)`` unit-cube positions."""
+    log_a: np.ndarray
+    log_b: np.ndarray
+    log_evidence: float
+    log_evidence_var: float
+    n_calls: int
+    betas: list[float] = field(default_factory=list)
+    acceptance: list[float] = field(default_factory=list)
+
+    @property
+    def log_evidence_err(self) -> float:
+        return math.sqrt(max(self.log_evidence_var, 0.0))
+
+
+def _fold(u: np.ndarray) -> np.ndarray:
+    """Reflect into [0, 1] (a symmetric map of a symmetric proposal)."""
+    v = np.mod(u, 2.0)
+    out: np.ndarray = np.where(v > 1.0, 2.0 - v, v)
+    return out
+
+
+def _ess(logw: np.ndarray) -> float:
+    if not np.any(np.isfinite(logw)):
+        return 0.0
+    w = np.exp(logw - np.max(logw))
+    return float(w.sum() ** 2 / np.sum(w**2))
+
+
+def _next_beta(beta: float, log_b: np.ndarray, target: float) -> float:
+    """The largest step ``beta -> beta'`` (bisection, <= 1) whose incremental weights keep ``ESS >= target``."""
+    if _ess((1.0 - beta) * log_b) >= target:
+        return 1.0
+    lo, hi = 0.0, 1.0 - beta
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if _ess(mid * log_b) >= target:
+            lo = mid
+        else:
+            hi = mid
+    return beta + max(lo, 1e-12)
+
+
+def _systematic(logw: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    w = np.exp(logw - np.max(logw))
+    c = np.cumsum(w / w.sum())
+    c[-1] = 1.0
+    idx: np.ndarray = np.searchsorted(c, (rng.random() + np.arange(n)) / n)
+    return idx
+
+
+def _sweep(
+    u: np.ndarray, la: np.ndarray, lb: np.ndarray, beta: float, gamma: float, evaluate: Evaluate,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """One differential-evolution Metropolis sweep of every particle (the population frozen at its start)."""
+    n, d = u.shape
+    a = rng.integers(0, n - 1, n)
+    a = a + (a >= np.arange(n))  # a != i
+    b = rng.integers(0, n - 2, n)
+    lo, hi = np.minimum(a, np.arange(n)), np.maximum(a, np.arange(n))
+    b = b + (b >= lo)
+    b = b + (b >= hi)  # b != i, b != a
+    jitter = 1e-6 * rng.standard_normal((n, d))
+    prop = _fold(u + gamma * (u[a] - u[b]) + jitter)
+    pa, pb = evaluate(prop)
+    with np.errstate(invalid="ignore"):
+        cur = la + beta * lb if beta > 0 else la
+        new = pa + beta * pb if beta > 0 else pa
+        log_r = np.where(np.isfinite(new), new - cur, -np.inf)
+    acc = np.log(rng.random(n)) < log_r
+    u, la, lb = u.copy(), la.copy(), lb.copy()
+    u[acc], la[acc], lb[acc] = prop[acc], pa[acc], pb[acc]
+    return u, la, lb, acc
+
+
+def _move(
+    u: np.ndarray, la: np.ndarray, lb: np.ndarray, beta: float, evaluate: Evaluate, s: SmcSettings,
+    rng: np.random.Generator, scale: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, int, float]:  # fmt: skip
+    """Sweeps until ``s.moves`` accepted moves per particle: ``(u, la, lb, scale, calls, acceptance)``."""
+    n, d = u.shape
+    base = 2.38 / math.sqrt(2 * d)
+    accepted, calls, sweeps = 0.0, 0, 0
+    while sweeps < s.max_sweeps and (sweeps < s.min_sweeps or accepted < s.moves):
+        u, la, lb, acc = _sweep(u, la, lb, beta, base * scale, evaluate, rng)
+        calls += n
+        sweeps += 1
+        rate = float(np.mean(acc))
+        accepted += rate
+        scale *= math.exp(rate - 0.25)  # keep the acceptance near a quarter
+    return u, la, lb, scale, calls, accepted / max(sweeps, 1)
+
+
+def _eve_variance(eve: np.ndarray, logw: np.ndarray, steps: int) -> float:
+    """Lee & Whiteley's (2018) estimate of ``var(Z_hat) / Z^2`` from the Eve indices (each particle's ancestor at
+    the start) before the last weighting, the last incremental weights and the number of weightings."""
+    n = len(eve)
+    w = np.exp(logw - np.max(logw))
+    w /= w.sum()
+    same = float(np.sum(np.bincount(eve, weights=w, minlength=n) ** 2))
+    return max(0.0, 1.0 - (n / (n - 1.0)) ** steps * (1.0 - same))
+
+
+def temper(
+    u: np.ndarray, la: np.ndarray, lb: np.ndarray, evaluate: Evaluate, s: SmcSettings, rng: np.random.Generator,
+    *, beta: float = 0.0,
+) -> SmcRun:  # fmt: skip
+    """From equal-weight particles of ``pi L_a L_b^beta`` (``u`` with their ``log L_a``, ``log L_b``) to
+    ``pi L_a L_b`` (module docstring). The returned evidence is ``Z_b = E_{pi L_a L_b^beta}[L_b^(1 - beta)]``, with
+    the stated variance of its log."""
+    n = len(u)
+    log_z, var, calls, scale = 0.0, 0.0, 0, 1.0
+    betas: list[float] = [beta]
+    rates: list[float] = []
+    eve = np.arange(n)
+    while beta < 1.0:
+        nxt = _next_beta(beta, lb, s.ess_fraction * n)
+        with np.errstate(invalid="ignore"):
+            logw = np.where(np.isfinite(lb), (nxt - beta) * lb, -np.inf)
+        if not np.any(np.isfinite(logw)):
+            return SmcRun(u, la, lb, -math.inf, 0.0, calls, betas, rates)
+        log_z += float(logsumexp(logw)) - math.log(n)
+        var = _eve_variance(eve, logw, len(betas))
+        idx = rng.choice(n, size=n, p=np.exp(logw - logsumexp(logw)))  # multinomial, as the error estimate assumes
+        u, la, lb, beta, eve = u[idx], la[idx], lb[idx], nxt, eve[idx]
+        u, la, lb, scale, c, rate = _move(u, la, lb, beta, evaluate, s, rng, scale)
+        calls += c
+        betas.append(beta)
+        rates.append(rate)
+    return SmcRun(u, la, lb, log_z, var, calls, betas, rates)
+
+
+def _from_prior(
+    evaluate: Evaluate, d: int, s: SmcSettings, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float, int] | None:
+    """Equal-weight draws of ``pi`` restricted to ``L_a > 0`` (``L_a``'s support), with the log of its prior mass and
+    that estimate's variance; ``None`` when no draw is in the support."""
+    n = s.particles
+    u = rng.random((n, d))
+    la, lb = evaluate(u)
+    ok = np.isfinite(la) & np.isfinite(lb)
+    m = int(ok.sum())
+    if m == 0:
+        return None
+    idx = _systematic(np.where(ok, 0.0, -np.inf), n, rng)
+    frac = m / n
+    return u[idx], la[idx], lb[idx], math.log(frac), (1.0 - frac) / (n * frac), n
+
+
+def two_stage(
+    cheap: Evaluate, full: Evaluate, d: int, stage1: SmcSettings, stage2: SmcSettings, rng: np.random.Generator
+) -> SmcRun:
+    """The posterior ``pi L_cheap L_data`` by two temperings (module docstring). ``cheap(U)`` returns ``(0,
+    log L_cheap)``, ``full(U)`` returns ``(log L_cheap, log L_data)`` (``log L_data`` evaluated only where
+    ``log L_cheap`` is finite). The result's ``log_a``/``log_b`` are ``log L_cheap``/``log L_data`` of its particles,
+    its evidence ``ln Z = ln Z_support + ln Z_1 + ln Z_2``."""
+    start = _from_prior(cheap, d, stage1, rng)
+    if start is None:
+        return SmcRun(np.empty((0, d)), np.empty(0), np.empty(0), -math.inf, 0.0, stage1.particles)
+    u, _, lc, log_mass, var_mass, calls = start
+    one = temper(u, np.zeros(len(u)), lc, cheap, stage1, rng)
+    u2, la, lb, beta, log_z2, var2 = _first_data_step(one.u, full, stage2, rng)
+    u2, la, lb, _, moved, _ = _move(u2, la, lb, beta, full, stage2, rng, 1.0)
+    two = temper(u2, la, lb, full, stage2, rng, beta=beta)
+    return SmcRun(
+        two.u, two.log_a, two.log_b, log_mass + one.log_evidence + log_z2 + two.log_evidence,
+        var_mass + one.log_evidence_var + var2 + two.log_evidence_var,
+        calls + one.n_calls + len(one.u) + moved + two.n_calls, one.betas + [1.0 + b for b in two.betas],
+        one.acceptance + two.acceptance,
+    )  # fmt: skip
+
+
+def _first_data_step(
+    u: np.ndarray, full: Evaluate, s: SmcSettings, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float, float]:
+    """The data's first tempering step on every particle of the cheap stage (a region the cheap terms give few
+    particles but the data favour keeps them for this step), resampled to ``s.particles``: ``(u, log L_a, log L_b,
+    beta, ln Z increment, its variance)`` (the importance-sampling variance ``1 / ESS - 1 / n``)."""
+    n = len(u)
+    la, lb = full(u)
+    beta = _next_beta(0.0, lb, s.ess_fraction * min(n, s.particles))
+    with np.errstate(invalid="ignore"):
+        logw = np.where(np.isfinite(lb), beta * lb, -np.inf)
+    if not np.any(np.isfinite(logw)):
+        return u[: s.particles], la[: s.particles], lb[: s.particles], 1.0, -math.inf, 0.0
+    idx = rng.choice(n, size=s.particles, p=np.exp(logw - logsumexp(logw)))
+    return u[idx], la[idx], lb[idx], beta, float(logsumexp(logw)) - math.log(n), 1.0 / _ess(logw) - 1.0 / n
+
+
+def merge_smc(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Independent runs of one class as one: ``Z`` their mean (each unbiased), the particles pooled, equal weights;
+    the stated error ``sqrt(sum_r (Z_r / sum Z)^2 s_r^2)``."""
+    lz = np.array([float(r["logz"][-1]) for r in runs])
+    ls = np.array([float(r["logzerr"][-1]) for r in runs])
+    finite = np.isfinite(lz)
+    log_z = float(logsumexp(lz[finite]) - math.log(len(runs))) if finite.any() else -math.inf
+    w = np.exp(lz[finite] - np.max(lz[finite])) if finite.any() else np.zeros(0)
+    err = float(np.sqrt(np.sum((w / w.sum()) ** 2 * ls[finite] ** 2))) if finite.any() else 0.0
+    samples = np.concatenate([r["samples"] for r in runs])
+    return smc_results(samples, np.concatenate([r["logl"] for r in runs]), log_z, err,
+                       int(sum(np.sum(r["ncall"]) for r in runs)), int(sum(r["niter"] for r in runs)))  # fmt: skip
+
+
+def smc_results(
+    samples: np.ndarray, logl: np.ndarray, log_z: float, err: float, calls: int, niter: int
+) -> dict[str, Any]:
+    """What a calibration run reports, in dynesty ``Results``' keys: equal weights ``ln(1 / n) + ln Z``."""
+    n = len(samples)
+    return {
+        "samples": samples,
+        "logl": logl,
+        "logwt": np.full(n, (log_z - math.log(n)) if n else -math.inf),
+        "logz": np.array([log_z]),
+        "logzerr": np.array([err]),
+        "ncall": np.array([calls]),
+        "niter": niter,
+    }

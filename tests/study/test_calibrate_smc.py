@@ -1,0 +1,181 @@
+"""The tempered SMC of the calibration (:mod:`fpm_sim.study.calibrate.smc`) on problems whose evidence and mode
+weights are known in closed form."""
+
+import math
+
+import numpy as np
+import pytest
+
+from fpm_sim.study.calibrate import SamplerOptions
+from fpm_sim.study.calibrate.sampler import _init_worker, sample_classes
+from fpm_sim.study.calibrate.smc import SmcSettings, two_stage
+from tests.study.test_calibrate_runs import AMPLITUDE, HALF, PRIORS, Toy, _argv, _cheap_frequencies
+
+D = 4
+CENTRES = (np.full(D, 0.3), np.full(D, 0.7))
+SD = 0.01
+WEIGHTS = (0.3, 0.7)
+"""A mixture of two narrow (sd 0.01), well-separated Gaussian modes with these weights in the unit cube: every
+mode lies 30 sd inside it, so Z = 0.3 + 0.7 = 1 (ln Z = 0) and the posterior puts 0.3 on the first mode."""
+SUPPORT = 0.9
+"""The cheap stage's support: u_0 < 0.9 (prior mass 0.9), holding both modes."""
+
+
+def _modes(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(log L, in the first mode)`` at the rows of ``u``."""
+    norm = D * math.log(SD * math.sqrt(2 * math.pi))
+    a, b = (math.log(w) - 0.5 * np.sum((u - c) ** 2, axis=1) / SD**2 - norm for w, c in zip(WEIGHTS, CENTRES))
+    return np.logaddexp(a, b), a > b
+
+
+def _cheap(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return np.zeros(len(u)), np.where(u[:, 0] < SUPPORT, 0.0, -np.inf)
+
+
+def _full(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    _, c = _cheap(u)
+    return c, np.where(np.isfinite(c), _modes(u)[0], -np.inf)
+
+
+@pytest.fixture(scope="module")
+def mixture_runs():
+    one, two = SmcSettings(particles=500), SmcSettings(particles=1600)
+    return [two_stage(_cheap, _full, D, one, two, np.random.default_rng(seed)) for seed in range(6)]
+
+
+def test_two_stage_smc_finds_both_modes_with_their_weights_and_the_evidence(mixture_runs):
+    for run in mixture_runs:
+        # ln Z = 0: within 4 of the run's stated errors (a stated error that is honest makes a 4-sigma miss
+        # a 1-in-15 000 event), and the stated error is that of a few hundred particles, not zero or huge
+        assert abs(run.log_evidence) < 4 * run.log_evidence_err, (run.log_evidence, run.log_evidence_err)
+        assert 0.03 < run.log_evidence_err < 0.5
+        # both modes held, the first with weight 0.3: the modes' shares are carried by the resampled importance
+        # weights, whose drift over ~12 steps makes the share's sd about 0.05 at 1600 particles (measured over 12
+        # seeds: 0.094 at 400); 0.15 is 3 of those
+        share = float(np.mean(_modes(run.u)[1]))
+        assert abs(share - WEIGHTS[0]) < 0.15, share
+    # the stated errors against the runs' own spread (each run independent): the spread of six values over the
+    # stated error is within the chi-square's 0.1 % .. 99.9 % points for 5 degrees of freedom (0.21 .. 2.3)
+    z = np.array([r.log_evidence for r in mixture_runs])
+    s = np.sqrt(np.mean([r.log_evidence_err**2 for r in mixture_runs]))
+    assert 0.21 < np.std(z, ddof=1) / s < 2.3, (z, s)
+    # no bias: the mean of six runs within 3 of its standard error (mode-jumping moves with copies of the moved
+    # particle in the population put it 0.2 above, 3-4 standard errors)
+    assert abs(np.mean(z)) < 3 * s / math.sqrt(len(z)), z
+
+
+def test_the_calibrations_smc_weights_the_classes_by_their_evidences():
+    toy = Toy()
+    _init_worker(toy)
+    opts = SamplerOptions(sampler="smc", particles=200, cheap_particles=200, runs=3, seed=1, draws=2000,
+                          probe_draws=200)  # fmt: skip
+    comb, check, summaries, _ = sample_classes(toy, opts, None, checkpoint=None, resume=False, print_func=None)
+    z = np.array(AMPLITUDE[:2]) / (2 * HALF) ** 2
+    assert summaries[2].skipped
+    for k in (0, 1):
+        # ln Z_k exact within 4 of the merged runs' stated error
+        assert abs(summaries[k].log_evidence - math.log(z[k])) < 4 * summaries[k].log_evidence_err + 1e-9
+    assert comb.weights == pytest.approx(z / z.sum(), abs=0.08)
+    assert check is not None
+    assert check.passed, check.failures
+    # the draws of class 1 centre on its mode (sd 1 per coordinate, 1000+ draws: the mean within 0.2)
+    one = comb.draws[comb.klass == 1]
+    assert np.mean(one, axis=0) == pytest.approx([4.0, 2.0], abs=0.2)
+
+
+def _study_surrogate(branch: tuple[int, int, int]):
+    """The study's calibration problem (its data, priors and statements) on the in-plane surrogate, one elbow-branch
+    class (as ``studies/calibration_runs_surrogate.py`` builds it)."""
+    import dataclasses
+    import re
+    from importlib.resources import files
+
+    from fpm_sim.cli.common import load_manipulator
+    from fpm_sim.cli.identify import read_data_args
+    from fpm_sim.cli.main import build_parser
+    from fpm_sim.study.calibrate import CalibrationProblem, read_priors
+    from fpm_sim.study.identify import parameter_set
+
+    data = files("fpm_sim.data")
+    args = build_parser().parse_args(
+        ["calibrate", "--measured", f"{data.joinpath('measured_table4_train.csv')},reading=x+", "--priors",
+         str(data.joinpath("study_priors.toml")), "--out", "unused", "--free", "geometry,hardware,section-height"]
+    )  # fmt: skip
+    start = load_manipulator(args)
+    start = dataclasses.replace(start, geometry=dataclasses.replace(start.geometry, elbow_branch=branch))
+    groups, datasets, _ = read_data_args(args)
+    obs = tuple(o for ds in datasets for o in ds.observations)
+    names = parameter_set(start, groups).names
+    text = re.sub(r'\[parameters\."geometry\.elbow_branch"\][^\[]*', "", data.joinpath("study_priors.toml").read_text())
+    priors = read_priors("one_class.toml", names, text=text)
+    return CalibrationProblem(start, tuple(groups), priors, obs, (), model="inplane")
+
+
+@pytest.mark.slow
+@pytest.mark.very_slow  # 710 s on the shared 2-core machine (three runs of ~229 000 calls, 210 000 of them stage 1's)
+def test_three_seeds_of_the_study_calibration_on_the_surrogate():
+    """Issue 31: on the study's problem (the in-plane surrogate, class (-1, -1, -1)) nested sampling's runs found
+    the statements' region, 12-13 nats up, in 2 of 3 runs at 100 live points and 0 of 3 at 250
+    (docs/identification.md). Every run of the two-stage SMC must reach it; the between-run check is the target:
+    its ln Z criterion passes, its quantiles' does not yet (the runs hold the region's parts in different
+    shares), reported as an expected failure until it passes. Run by hand: python -m pytest -m very_slow -rx
+    tests/study/test_calibrate_smc.py"""
+    from fpm_sim.study.calibrate import run_calibration
+
+    problem = _study_surrogate((-1, -1, -1))
+    opts = SamplerOptions(sampler="smc", particles=200, cheap_particles=1000, runs=3, seed=0)
+    cal = run_calibration(problem, opts, progress=False)
+    check = cal.runs_check
+    assert check is not None
+    # every run in the statements' region: the plateau outside it, where nested sampling's runs that missed the
+    # region ended, is at ln Z -87.2 .. -88.3
+    assert np.all(check.log_evidence > -82.0), check.log_evidence
+    if not check.passed:
+        pytest.xfail("issue 31: the SMC runs reach the statements' region but disagree inside it:\n" + check.table())
+
+
+@pytest.fixture
+def cli_files(tmp_path, monkeypatch):
+    """test_calibrate_runs.py's CLI problem (a stand-in for the segment model, the height free)."""
+    monkeypatch.setattr("fpm_sim.study.calibrate.problem.predict_observations", _cheap_frequencies)
+    (tmp_path / "p.toml").write_text(PRIORS)
+    (tmp_path / "m.csv").write_text("x_mm,y_mm,phi_rad,f1_hz\n0,-50,0,54\n50,50,0,56\n-50,50,0,53\n")
+    return tmp_path
+
+
+def test_the_cli_runs_the_smc_sampler_and_refuses_nested_sampling_options(cli_files, capsys):
+    import json
+
+    from fpm_sim.cli.main import main
+
+    argv = [*_argv(cli_files), "--sampler", "smc", "--particles", "60", "--cheap-particles", "60", "--json"]
+    assert main(argv) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["result"]["options"]["sampler"] == "smc"
+    assert doc["result"]["runs_check"]["seeds"] == [5, 6, 7]
+    assert "two-stage tempered SMC (60 particles" in (cli_files / "out" / "report.md").read_text()
+    # a finished calibration's outputs are rewritten on --resume without sampling (the runs' .done files kept)
+    assert list((cli_files / "out").glob("checkpoint.dynesty.seed5.done"))
+    assert main([*argv, "--resume"]) == 0
+    capsys.readouterr()
+    # nested sampling's call limit has no meaning here: exit 2 naming it, nothing written
+    bad = [*_argv(cli_files), "--sampler", "smc", "--max-calls", "100", "--overwrite"]
+    assert main(bad) == 2
+    assert capsys.readouterr().err.startswith("error: --max-calls: is nested sampling's (dynesty's) limit")
+    # too few particles: exit 2 naming the option
+    assert main([*_argv(cli_files), "--sampler", "smc", "--particles", "3", "--overwrite"]) == 2
+    assert capsys.readouterr().err.startswith("error: --particles: must be >= 10, got 3")
+
+
+def test_resuming_a_nested_sampling_calibration_with_the_smc_sampler_is_refused(cli_files, capsys):
+    from fpm_sim.cli.main import main
+
+    assert main(_argv(cli_files)) == 0  # nested sampling: its finished runs' .done files are dynesty's results
+    (cli_files / "out" / "calibration.pkl").unlink()  # resume from the runs, not from the finished calibration
+    capsys.readouterr()
+    assert main([*_argv(cli_files), "--resume", "--sampler", "smc"]) == 2
+    err = capsys.readouterr().err
+    # one line naming the run's file and what to do
+    assert err.startswith("error: "), err
+    assert err.count("\n") == 1, err
+    assert "checkpoint.dynesty.seed5.done: resume: the finished run there was sampled by dynesty, not smc" in err
