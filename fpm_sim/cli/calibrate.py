@@ -227,6 +227,37 @@ def register(sub: argparse._SubParsersAction) -> None:
         "architecture or an imported model dotted paths into its file, PATH (its prior in --priors) or PATH=lo:hi "
         "(uniform between them; default: every path --priors names)",
     )
+    _add_sampler_args(p)
+    p.add_argument("--draws", type=int, default=1000, help="equal-weight draws written to posterior.nc (default 1000)")
+    p.add_argument("--thin", type=int, default=0, help="also write posterior_thin.nc with this many draws (0: no)")
+    p.add_argument("--segments", type=int, default=4, help="spring locations per link of the model (default 4)")
+    likelihood_workers = WORKERS_HELP.replace("for the pose loop", "evaluating the likelihood")
+    p.add_argument("--workers", type=int, default=None, help=likelihood_workers)
+    p.add_argument("--seed", type=int, default=0, help="seed of the first run; run r has seed + r (default 0)")
+    p.add_argument(
+        "--runs",
+        type=int,
+        default=3,
+        help="independent runs per elbow-branch class (seeds SEED, SEED+1, ...), merged and checked against each "
+        "other: ln Z within 3 sigma, each parameter's 5/50/95 %% quantiles within 0.5 posterior sd (or "
+        "3 sigma of their Monte Carlo error where larger), every class a "
+        "run weights above 1 %% present in the merged posterior (default 3; 1: no check)",
+    )
+    p.add_argument(
+        "--resume",
+        action=argparse.BooleanOptionalAction,
+        default=False,
+        help="continue from OUT/checkpoint.dynesty (or rewrite the outputs of a finished run)",
+    )
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    add_overwrite_arg(p)
+    p.add_argument("--quiet", action=argparse.BooleanOptionalAction, default=False, help="no progress line")
+    add_output_args(p)
+    p.set_defaults(func=cmd_calibrate)
+
+
+def _add_sampler_args(p: argparse.ArgumentParser) -> None:
+    """The sampler and its settings (nested sampling's and the SMC's)."""
     p.add_argument(
         "--sampler",
         default="dynesty",
@@ -263,29 +294,3 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--max-calls", type=int, default=None, help="stop each run after this many likelihood calls (not converged)"
     )
-    p.add_argument("--draws", type=int, default=1000, help="equal-weight draws written to posterior.nc (default 1000)")
-    p.add_argument("--thin", type=int, default=0, help="also write posterior_thin.nc with this many draws (0: no)")
-    p.add_argument("--segments", type=int, default=4, help="spring locations per link of the model (default 4)")
-    likelihood_workers = WORKERS_HELP.replace("for the pose loop", "evaluating the likelihood")
-    p.add_argument("--workers", type=int, default=None, help=likelihood_workers)
-    p.add_argument("--seed", type=int, default=0, help="seed of the first run; run r has seed + r (default 0)")
-    p.add_argument(
-        "--runs",
-        type=int,
-        default=3,
-        help="independent runs per elbow-branch class (seeds SEED, SEED+1, ...), merged and checked against each "
-        "other: ln Z within 3 sigma, each parameter's 5/50/95 %% quantiles within 0.5 posterior sd (or "
-        "3 sigma of their Monte Carlo error where larger), every class a "
-        "run weights above 1 %% present in the merged posterior (default 3; 1: no check)",
-    )
-    p.add_argument(
-        "--resume",
-        action=argparse.BooleanOptionalAction,
-        default=False,
-        help="continue from OUT/checkpoint.dynesty (or rewrite the outputs of a finished run)",
-    )
-    p.add_argument("--out", type=Path, required=True, help="output folder")
-    add_overwrite_arg(p)
-    p.add_argument("--quiet", action=argparse.BooleanOptionalAction, default=False, help="no progress line")
-    add_output_args(p)
-    p.set_defaults(func=cmd_calibrate)
