@@ -543,17 +543,19 @@ def add_joint_args(p: argparse.ArgumentParser) -> None:
     )
 
 
-def _task_options(args: argparse.Namespace) -> dict[str, float]:
-    """The task-pose options given (``x``, ``y``, ``z`` in mm, ``phi`` in rad); sweep's ``--phi-rad`` default 0
-    counts as not given."""
+def _task_options(args: argparse.Namespace, *, phi_default_zero: bool = False) -> dict[str, float]:
+    """The task-pose options given (``x``, ``y``, ``z`` in mm, ``phi`` in rad). ``phi_default_zero``: the command's
+    ``--phi-rad`` defaults to 0 (``sweep``, ``design``: their dense grid's), so 0 counts as not given."""
     given = {c: getattr(args, f"{c}_mm" if c != "phi" else "phi_rad", None) for c in ("x", "y", "z", "phi")}
-    return {c: float(v) for c, v in given.items() if v is not None and not (c == "phi" and v == 0.0)}
+    return {
+        c: float(v) for c, v in given.items() if v is not None and not (phi_default_zero and c == "phi" and v == 0.0)
+    }
 
 
 def refuse_task_pose(args: argparse.Namespace) -> None:
     """A task-pose option where the poses are given otherwise (``--poses``), or the model has no end effector:
     refused by name."""
-    for c in _task_options(args):
+    for c in _task_options(args, phi_default_zero=True):
         option = "--" + ("phi-rad" if c == "phi" else f"{c}-mm")
         raise CliError(
             f"{option}: a single task pose does not combine with --poses; give the poses in the file (joint "

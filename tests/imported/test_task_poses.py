@@ -205,3 +205,16 @@ def test_reposed_undamped_model_linearises_by_transition_fd(tmp_path: Path) -> N
     j = built.model.joint("left_elbow")
     np.testing.assert_allclose(j.range, [-2 - q["left_elbow"], 2 - q["left_elbow"]], rtol=1e-12)
     np.testing.assert_allclose(built.model.qpos_spring[j.qposadr[0]], 0.1 - q["left_elbow"], rtol=1e-12)
+
+
+def test_an_explicit_zero_phi_is_a_pose_not_the_reference(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--phi-rad 0`` on a model posed in x, y and phi is phi = 0, not the model's reference heading: the 3RRR
+    exported turned (phi 0.2 at its first pose here) and asked for phi = 0 at the centre gives the native (0, 0, 0)."""
+    desc = load_description(ROOT / "examples/architectures/three_rrr.toml")
+    turned = dataclasses.replace(desc, check_poses=({"x": 0.0, "y": 0.0, "phi": 0.2},))
+    toml = imported_copy(turned, tmp_path)
+    common = ["--segments", "3", "--method", "constrained", "--no-gravity", "--n-modes", "3", "--json"]
+    assert main(["modes", "--config", str(toml), "--x-mm", "0", "--y-mm", "0", "--phi-rad", "0", *common]) == 0
+    cli = [m["frequency_hz"] for m in json.loads(capsys.readouterr().out)["modes"]]
+    native = analyse(build_general(desc, TaskPose(), ModelOptions(segments=3, gravity=False)), "constrained", 3)
+    np.testing.assert_allclose(cli, native.frequencies_hz, rtol=1e-8)
