@@ -99,6 +99,9 @@ class ImportReport:
 
 
 def _fail(message: str, parameter: str, value: Any = None, hint: str | None = None) -> ModelImportError:
+    """The import's error naming ``parameter``; ``value`` (when not ``None``) is the offending value."""
+    if value is None:
+        return ModelImportError(message, parameter=parameter, hint=hint)
     return ModelImportError(message, parameter=parameter, value=value, hint=hint)
 
 
@@ -200,7 +203,8 @@ def _loop_residuals(model: mujoco.MjModel, data: mujoco.MjData, q: dict[str, flo
             raise _fail(
                 f"the loop closure {name} does not close at {given}: residual {res:.3g} (m or rad) > {LOOP_TOL:g}",
                 "q",
-                hint="give every joint of the loop values that close it (the passive joints too)",
+                hint="give every joint of the loop values that close it (the passive joints too), or pose the model "
+                "in task space where its description names an [end_effector]",
             )
 
 
