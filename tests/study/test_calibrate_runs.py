@@ -9,7 +9,14 @@ import pytest
 
 from fpm_sim.study.calibrate import SamplerOptions
 from fpm_sim.study.calibrate.problem import FrequencyLikelihood
-from fpm_sim.study.calibrate.runs import ClassResult, allocate, between_run_check, combine_classes, evidence_weights
+from fpm_sim.study.calibrate.runs import (
+    ClassResult,
+    allocate,
+    between_run_check,
+    combine_classes,
+    combine_parts,
+    evidence_weights,
+)
 from fpm_sim.study.calibrate.sampler import _init_worker, sample_classes
 from tests.helpers.priors import height_and_discrepancy_priors
 
@@ -91,6 +98,28 @@ def test_weights_and_their_errors_are_the_first_order_propagation():
     assert np.allclose(sd, 0.5 * math.sqrt(0.25 * 0.01 + 0.25 * 0.04))
     assert allocate(np.array([0.2, 0.3, 0.5]), 7).tolist() == [1, 2, 4]
     assert allocate(np.array([1 / 3] * 3), 10).sum() == 10
+
+
+def test_parts_of_equal_prior_mass_combine_into_their_class():
+    # two parts (prior mass 1/2 each) with evidences 0.1 and 0.3 of their own priors: the class's Z = (0.1 + 0.3)
+    # / 2, the parts weighted 1/4 and 3/4, the error sqrt((1/4)^2 0.2^2 + (3/4)^2 0.1^2); a nil part adds nothing
+    def run(z, err, x):
+        return {"samples": np.full((4, 1), x), "logwt": np.full(4, math.log(z / 4)), "logl": np.zeros(4),
+                "logz": np.array([math.log(z)]), "logzerr": np.array([err]), "ncall": np.array([10]),
+                "niter": 2}  # fmt: skip
+
+    out = combine_parts([run(0.1, 0.2, -1.0), run(0.3, 0.1, 1.0)])
+    assert float(out["logz"][-1]) == pytest.approx(math.log(0.2))
+    assert float(out["logzerr"][-1]) == pytest.approx(math.sqrt((0.25 * 0.2) ** 2 + (0.75 * 0.1) ** 2))
+    w = np.exp(out["logwt"])
+    assert float(w.sum()) == pytest.approx(0.2)
+    assert float(w[out["samples"][:, 0] < 0].sum() / w.sum()) == pytest.approx(0.25)
+    assert out["ncall"].tolist() == [20]
+    nil = {"samples": np.empty((0, 1)), "logwt": np.empty(0), "logl": np.empty(0), "logz": np.array([-math.inf]),
+           "logzerr": np.array([0.0]), "ncall": np.array([5]), "niter": 1}  # fmt: skip
+    out = combine_parts([run(0.3, 0.1, 1.0), nil])
+    assert float(out["logz"][-1]) == pytest.approx(math.log(0.15))
+    assert float(out["logzerr"][-1]) == pytest.approx(0.1)
 
 
 def _equal_run(klass, draws, log_z, err):

@@ -67,6 +67,9 @@ def _sampler_line(cal: Calibration) -> str:
     """The diagnostics' lines on the sampler: its settings, cost, and the evidence with what its error covers."""
     o = cal.options
     runs = f"{getattr(o, 'runs', 1)} run(s) per class, first seed {o.seed}"
+    split = getattr(o, "split", None)
+    if split is not None:
+        runs += f"; each class's prior of {split[0]} cut into {split[1]} parts of equal prior mass, sampled apart"
     if getattr(o, "sampler", "dynesty") == "smc":
         head = (
             f"- two-stage tempered SMC ({o.cheap_particles} particles for the prior times the statements, then "

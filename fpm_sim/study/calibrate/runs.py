@@ -39,6 +39,7 @@ __all__ = [
     "allocate",
     "between_run_check",
     "combine_classes",
+    "combine_parts",
     "evidence_weights",
     "quantile_mc_sd",
 ]
@@ -153,6 +154,40 @@ def combine_classes(results: Sequence[ClassResult], n_classes: int, n: int, rng:
         weights_sd=w_sd,
         ess_kish=_ess_kish(pooled),
     )
+
+
+def combine_parts(results: Sequence[Any]) -> Any:
+    """One class's runs on ``n`` parts of its prior of equal prior mass ``1 / n`` (a split coordinate's intervals;
+    each run's evidence ``Z_p`` is that of its part's prior, normalised) as the class's run: ``Z = sum_p Z_p / n``,
+    its error ``sqrt(sum_p w_p^2 s_p^2)`` (``w_p = Z_p / sum Z``, the parts independent), the weighted samples
+    pooled with ``ln w - ln n`` (each run's weights sum to its ``Z_p``: dynesty's and
+    :func:`~fpm_sim.study.calibrate.smc.smc_results`'), so that part ``p`` carries ``w_p`` of the posterior. A part
+    whose evidence is nil (``-inf``) carries nothing. Returns the keys :meth:`ClassResult.of_results` reads (and the
+    calls and iterations summed); one result is returned as it is."""
+    if len(results) == 1:
+        return results[0]
+    from scipy.special import logsumexp
+
+    n = len(results)
+    lz = np.array([float(r["logz"][-1]) for r in results])
+    ls = np.array([float(r["logzerr"][-1]) for r in results])
+    ok = np.isfinite(lz)
+    if not ok.any():
+        log_z, err = -math.inf, 0.0
+    else:
+        w = np.exp(lz[ok] - np.max(lz[ok]))
+        w /= w.sum()
+        log_z = float(logsumexp(lz[ok])) - math.log(n)
+        err = float(np.sqrt(np.sum(w**2 * np.where(np.isfinite(ls[ok]), ls[ok], 0.0) ** 2)))
+    return {
+        "samples": np.concatenate([np.asarray(r["samples"], float) for r in results]),
+        "logwt": np.concatenate([np.asarray(r["logwt"], float) - math.log(n) for r in results]),
+        "logl": np.concatenate([np.asarray(r["logl"], float) for r in results]),
+        "logz": np.array([log_z]),
+        "logzerr": np.array([err]),
+        "ncall": np.array([int(sum(np.sum(r["ncall"]) for r in results))]),
+        "niter": int(sum(int(r["niter"]) for r in results)),
+    }
 
 
 def _ess_kish(logwt: np.ndarray) -> float:

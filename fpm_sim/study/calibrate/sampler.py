@@ -24,7 +24,14 @@ from fpm_sim.batch.engine import spawn_pool
 from fpm_sim.figures import bands_against_measured
 from fpm_sim.study.calibrate.priors import BRANCH_PARAMETER
 from fpm_sim.study.calibrate.problem import CalibrationError, CalibrationProblem, FrequencyLikelihood
-from fpm_sim.study.calibrate.runs import ClassResult, Combined, RunsCheck, between_run_check, combine_classes
+from fpm_sim.study.calibrate.runs import (
+    ClassResult,
+    Combined,
+    RunsCheck,
+    between_run_check,
+    combine_classes,
+    combine_parts,
+)
 from fpm_sim.study.calibrate.smc import SmcSettings, merge_smc, smc_results, two_stage
 from fpm_sim.study.loo import LeaveOneOut, leave_one_out, loo_from_components
 from fpm_sim.study.readout import draws_components, responsibilities
@@ -78,8 +85,24 @@ def _class_log_likelihood(theta: np.ndarray, klass: int | None) -> float:
     return _PROBLEM.log_likelihood(_with_class(theta, klass))
 
 
-def _class_prior_transform(u: np.ndarray, klass: int | None) -> np.ndarray:
+Part = tuple[int, int, int] | None
+"""One part of a split prior (:attr:`SamplerOptions.split`): ``(coordinate, parts, part)``, the coordinate's unit-cube
+interval ``[part / parts, (part + 1) / parts)`` (prior mass ``1 / parts``); ``None``: the whole prior."""
+
+
+def _in_part(u: np.ndarray, part: Part) -> np.ndarray:
+    """The unit-cube point ``u`` of the part's own cube mapped into the whole prior's cube."""
+    if part is None:
+        return np.asarray(u, float)
+    i, n, p = part
+    out = np.array(u, float)
+    out[i] = (p + out[i]) / n
+    return out
+
+
+def _class_prior_transform(u: np.ndarray, klass: int | None, part: Part = None) -> np.ndarray:
     assert _PROBLEM is not None, "the pool was started without _init_worker"
+    u = _in_part(u, part)
     if klass is None:
         return _PROBLEM.prior_transform(u)
     full = _PROBLEM.prior_transform(np.append(np.asarray(u, float), (klass + 0.5) / len(_PROBLEM.branch_classes)))
@@ -87,17 +110,19 @@ def _class_prior_transform(u: np.ndarray, klass: int | None) -> np.ndarray:
     return out
 
 
-def _worker_run(
-    job: tuple[int | None, int, SamplerOptions, str | None, bool], pool: Any = None
-) -> tuple[int | None, int, Any, float]:
-    """One (class, seed) run in this process (its likelihood calls on ``pool`` when given):
-    ``(class, seed, Results, seconds)``."""
-    klass, seed, opts, checkpoint, resume = job
+Job = tuple[int | None, Part, int, "SamplerOptions", str | None, bool]
+"""One run: ``(class, part, seed, options, checkpoint, resume)``."""
+
+
+def _worker_run(job: Job, pool: Any = None) -> tuple[int | None, Part, int, Any, float]:
+    """One (class, part, seed) run in this process (its likelihood calls on ``pool`` when given):
+    ``(class, part, seed, Results, seconds)``."""
+    klass, part, seed, opts, checkpoint, resume = job
     t0 = time.time()
     ck = None if checkpoint is None else Path(checkpoint)
     run = _run_smc if opts.sampler == "smc" else _run_class
-    res = run(klass, seed, opts, checkpoint=ck, resume=resume, pool=pool)
-    return klass, seed, res, time.time() - t0
+    res = run(klass, seed, opts, checkpoint=ck, resume=resume, pool=pool, part=part)
+    return klass, part, seed, res, time.time() - t0
 
 
 def problem_digest(problem: FrequencyLikelihood) -> str:
@@ -150,6 +175,13 @@ class SamplerOptions:
     cheap_moves: float = 10.0
     """SMC: the same in the first stage (cheap calls; its thin region needs the moves to be represented alike by
     independent runs: at 3 its particles' shares of the region's parts differed between runs by 0.1-0.13)."""
+    split: tuple[str, int] | None = None
+    """``(name, n)``: the prior of parameter ``name`` cut into ``n`` parts of equal prior mass (its unit-cube
+    coordinate's ``n`` equal intervals: for a uniform prior, equal sub-ranges; ``("...rotation_deg", 2)`` on a
+    range symmetric about 0: its sign), each part sampled as a class of its own (every run, every elbow-branch
+    class), the parts combined by their evidences, each with prior weight ``1 / n``: a posterior whose separate
+    parts independent runs would hold in different shares gets each part's share from its evidence
+    (:func:`~fpm_sim.study.calibrate.runs.combine_parts`). ``None``: no split."""
 
     def check(self) -> None:
         if self.runs < 1:
@@ -168,6 +200,11 @@ class SamplerOptions:
             raise CalibrationError(f"must be one of {', '.join(SAMPLERS)}", parameter="sampler", value=self.sampler)
         if self.sampler == "smc":
             self._check_smc()
+        if self.split is not None and (len(self.split) != 2 or not isinstance(self.split[1], int) or self.split[1] < 2):
+            raise CalibrationError(
+                "must be (parameter name, number of parts >= 2)", parameter="split", value=self.split,
+                hint="give the parameter whose prior is cut and into how many equal prior-mass parts, or no split",
+            )  # fmt: skip
         if self.max_calls is not None and self.max_calls < self.live_points:
             raise CalibrationError(
                 f"must be >= the number of live points ({self.live_points})",
@@ -506,9 +543,10 @@ def _pool(problem: FrequencyLikelihood, workers: int) -> Any:
     return spawn_pool(workers, _init_worker, (problem,))
 
 
-def _job_file(checkpoint: Path, klass: int | None, seed: int) -> Path:
-    """The checkpoint file of one (class, seed) run, beside ``checkpoint``."""
+def _job_file(checkpoint: Path, klass: int | None, seed: int, part: Part = None) -> Path:
+    """The checkpoint file of one (class, part, seed) run, beside ``checkpoint``."""
     tag = f"seed{seed}" if klass is None else f"class{klass}.seed{seed}"
+    tag = tag if part is None else f"part{part[2]}of{part[1]}.{tag}"
     return Path(f"{checkpoint}.{tag}")
 
 
@@ -517,8 +555,9 @@ def _digest_file(checkpoint: Path) -> Path:
 
 
 def _run_class(
-    klass: int | None, seed: int, opts: SamplerOptions, *, checkpoint: Path | None, resume: bool, pool: Any = None
-) -> Any:
+    klass: int | None, seed: int, opts: SamplerOptions, *, checkpoint: Path | None, resume: bool, pool: Any = None,
+    part: Part = None,
+) -> Any:  # fmt: skip
     """dynesty's static sampler on class ``klass``'s continuous posterior to ``opts.dlogz`` (the likelihood
     calls here, or on ``pool``'s workers): a finished run's saved results (``.done``), or restored from its
     checkpoint, or fresh. Returns dynesty's ``Results``."""
@@ -544,7 +583,7 @@ def _run_class(
     else:
         sampler = dynesty.NestedSampler(
             functools.partial(_class_log_likelihood, klass=klass),
-            functools.partial(_class_prior_transform, klass=klass),
+            functools.partial(_class_prior_transform, klass=klass, part=part),
             _PROBLEM.ndim - (klass is not None),
             nlive=opts.live_points,
             sample=opts.sample,
@@ -561,19 +600,19 @@ def _run_class(
     return res
 
 
-def _smc_cheap(u: np.ndarray, klass: int | None) -> tuple[np.ndarray, np.ndarray]:
+def _smc_cheap(u: np.ndarray, klass: int | None, part: Part = None) -> tuple[np.ndarray, np.ndarray]:
     """SMC's first stage at unit-cube rows ``u``: ``(0, log L_cheap)``."""
     assert _PROBLEM is not None, "the pool was started without _init_worker"
     p = _PROBLEM
-    cheap = [p.cheap_log_likelihood(_with_class(_class_prior_transform(x, klass), klass)) for x in u]
+    cheap = [p.cheap_log_likelihood(_with_class(_class_prior_transform(x, klass, part), klass)) for x in u]
     return np.zeros(len(u)), np.asarray(cheap, float)
 
 
-def _smc_full(u: np.ndarray, klass: int | None, pool: Any) -> tuple[np.ndarray, np.ndarray]:
+def _smc_full(u: np.ndarray, klass: int | None, pool: Any, part: Part = None) -> tuple[np.ndarray, np.ndarray]:
     """SMC's second stage at unit-cube rows ``u``: ``(log L_cheap, log L - log L_cheap)``, the (expensive) full
     likelihood evaluated only where the cheap part is finite (on ``pool``'s workers when given)."""
-    thetas = [_with_class(_class_prior_transform(x, klass), klass) for x in u]
-    _, cheap = _smc_cheap(u, klass)
+    thetas = [_with_class(_class_prior_transform(x, klass, part), klass) for x in u]
+    _, cheap = _smc_cheap(u, klass, part)
     todo = [t for t, c in zip(thetas, cheap) if np.isfinite(c)]
     ll = _worker_log_likelihood
     full = pool.map(ll, todo) if pool is not None else [ll(t) for t in todo]
@@ -583,8 +622,9 @@ def _smc_full(u: np.ndarray, klass: int | None, pool: Any) -> tuple[np.ndarray, 
 
 
 def _run_smc(
-    klass: int | None, seed: int, opts: SamplerOptions, *, checkpoint: Path | None, resume: bool, pool: Any = None
-) -> dict[str, Any]:
+    klass: int | None, seed: int, opts: SamplerOptions, *, checkpoint: Path | None, resume: bool, pool: Any = None,
+    part: Part = None,
+) -> dict[str, Any]:  # fmt: skip
     """Two-stage tempered SMC (:func:`~fpm_sim.study.calibrate.smc.two_stage`) on class ``klass``: a finished run's
     saved results (``.done``), else a fresh run (an unfinished SMC run is not continued: it restarts)."""
     import pickle
@@ -599,10 +639,10 @@ def _run_smc(
     one, two = opts.smc_settings()
     d = _PROBLEM.ndim - (klass is not None)
     run = two_stage(
-        functools.partial(_smc_cheap, klass=klass), functools.partial(_smc_full, klass=klass, pool=pool), d, one,
-        two, np.random.default_rng(seed),
+        functools.partial(_smc_cheap, klass=klass, part=part), functools.partial(_smc_full, klass=klass, pool=pool,
+        part=part), d, one, two, np.random.default_rng(seed),
     )  # fmt: skip
-    theta = np.array([_class_prior_transform(x, klass) for x in run.u]).reshape(len(run.u), d)
+    theta = np.array([_class_prior_transform(x, klass, part) for x in run.u]).reshape(len(run.u), d)
     out = smc_results(theta, run.log_a + run.log_b, run.log_evidence, run.log_evidence_err, run.n_calls,
                       len(run.betas))  # fmt: skip
     if done is not None:
@@ -660,23 +700,25 @@ def class_prior_mass(problem: FrequencyLikelihood, klass: int | None, n: int, se
 
 
 def _sample_jobs(
-    jobs: list[tuple[int | None, int, SamplerOptions, str | None, bool]],
+    jobs: list[Job],
     pool: Any,
     print_func: Callable[..., None] | None,
     label: Callable[[int | None], str],
-) -> dict[tuple[int | None, int], tuple[Any, float]]:
-    """Every (class, seed) run, ``{(class, seed): (Results, s)}``: one run per worker of the pool, or, with fewer
-    runs than workers (fixed branches), one run after another here with their likelihood calls on the pool."""
+) -> dict[tuple[int | None, Part, int], tuple[Any, float]]:
+    """Every (class, part, seed) run, ``{(class, part, seed): (Results, s)}``: one run per worker of the pool, or,
+    with fewer runs than workers (fixed branches), one run after another here with their likelihood calls on the
+    pool."""
     out = {}
-    if pool is not None and len(jobs) >= jobs[0][2].workers:
+    if pool is not None and len(jobs) >= jobs[0][3].workers:
         it = pool.imap_unordered(_worker_run, jobs)
     else:
         it = (_worker_run(j, pool) for j in jobs)
-    for klass, seed, res, sec in it:
-        out[(klass, seed)] = (res, sec)
+    for klass, part, seed, res, sec in it:
+        out[(klass, part, seed)] = (res, sec)
         if print_func is not None:
+            where = "" if part is None else f"part {part[2] + 1}/{part[1]}, "
             print_func(
-                f"  {label(klass)}seed {seed}: ln Z = {float(res['logz'][-1]):.2f} +- "
+                f"  {label(klass)}{where}seed {seed}: ln Z = {float(res['logz'][-1]):.2f} +- "
                 f"{float(res['logzerr'][-1]):.2f}, {int(np.sum(res['ncall']))} calls, {sec:.0f} s "
                 f"({len(out)}/{len(jobs)} runs)"
             )
@@ -715,30 +757,52 @@ def sample_classes(
             parameter="priors",
             hint="widen the geometry priors or check the measured poses",
         )
+    parts = _parts(problem, opts)
     _check_resume(problem, checkpoint, resume)
-    ck = [None if checkpoint is None else str(_job_file(checkpoint, k, s)) for k in live for s in seeds]
-    jobs = [(k, s, opts, c, resume) for (k, s), c in zip(((k, s) for k in live for s in seeds), ck)]
+    keys = [(k, p, s) for k in live for p in parts for s in seeds]
+    jobs: list[Job] = [
+        (k, p, s, opts, None if checkpoint is None else str(_job_file(checkpoint, k, s, p)), resume) for k, p, s in keys
+    ]
     prefix = (lambda k: f"class {problem.class_label(k)}, ") if classes != (None,) else (lambda k: "")
     done = _sample_jobs(jobs, pool, print_func, prefix)
-    merged = [ClassResult.of_results(k, _merge([done[(k, s)][0] for s in seeds], opts.sampler)) for k in live]
+    run_of = {(k, s): combine_parts([done[(k, p, s)][0] for p in parts]) for k in live for s in seeds}
+    merged = [
+        ClassResult.of_results(k, combine_parts([_merge([done[(k, p, s)][0] for s in seeds], opts.sampler)
+                                                 for p in parts]))
+        for k in live
+    ]  # fmt: skip
     rng = np.random.default_rng(opts.seed + 1)
     comb = combine_classes(merged, len(classes), opts.draws, rng)
     names = [n for n in problem.names if n != BRANCH_PARAMETER]
     check = None
     if opts.runs > 1:
-        per_run = [[ClassResult.of_results(k, done[(k, s)][0]) for k in live] for s in seeds]
+        per_run = [[ClassResult.of_results(k, run_of[(k, s)]) for k in live] for s in seeds]
         check = between_run_check(
             per_run, comb, seeds, names, n_classes=len(classes), n_draws=opts.draws, rng=rng,
             class_label=problem.class_label, nsigma=opts.nsigma, quantile_tol=opts.quantile_tol,
             class_threshold=opts.class_threshold,
         )  # fmt: skip
-    summaries = _summaries(problem, classes, mass, live, comb, merged, done, seeds, opts.probe_draws)
+    summaries = _summaries(problem, classes, mass, live, comb, merged, run_of, seeds, opts.probe_draws)
     stats = {
         "n_calls": int(sum(np.sum(r["ncall"]) for r, _ in done.values())),
         "n_iterations": int(sum(int(r["niter"]) for r, _ in done.values())),
         "converged": opts.max_calls is None or all(np.sum(r["ncall"]) < opts.max_calls for r, _ in done.values()),
     }
     return comb, check, summaries, stats
+
+
+def _parts(problem: FrequencyLikelihood, opts: SamplerOptions) -> list[Part]:
+    """The parts of the prior each class is sampled in (:attr:`SamplerOptions.split`; ``[None]``: the whole)."""
+    if opts.split is None:
+        return [None]
+    name, n = opts.split
+    names = [m for m in problem.names if m != BRANCH_PARAMETER]
+    if name not in names:
+        raise CalibrationError(
+            "is not a free continuous parameter of the problem", parameter="split", value=name,
+            hint=f"split one of: {', '.join(names)}",
+        )  # fmt: skip
+    return [(names.index(name), n, p) for p in range(n)]
 
 
 def _summaries(
@@ -748,7 +812,7 @@ def _summaries(
     live: list[int | None],
     comb: Combined,
     merged: list[ClassResult],
-    done: dict[tuple[int | None, int], tuple[Any, float]],
+    run_of: dict[tuple[int | None, int], Any],
     seeds: list[int],
     probe: int,
 ) -> list[ClassSummary]:
@@ -762,7 +826,7 @@ def _summaries(
             ClassSummary(
                 k, problem.class_label(k), mass[k], probe, merged[j].log_evidence, merged[j].log_evidence_err,
                 float(comb.weights[j]), float(comb.weights_sd[j]),
-                [float(done[(k, s)][0]["logz"][-1]) for s in seeds], False,
+                [float(run_of[(k, s)]["logz"][-1]) for s in seeds], False,
             )
         )  # fmt: skip
     return out
