@@ -26,11 +26,10 @@ import numpy as np
 
 from fpm_sim.architecture.imported import ImportedDescription
 from fpm_sim.batch.pose_loop import IN_PLANE_DOF_KINDS, PlaneSplit, structural_length_m
-from fpm_sim.errors import FpmSimError
 from fpm_sim.linear.equilibrium import equality_jacobian
 from fpm_sim.linear.matrices import mass_matrix
 from fpm_sim.linear.nullspace import unit_scales
-from fpm_sim.model.imported import LOOP_TOL, build_imported
+from fpm_sim.model.imported import build_imported, check_loops_closed
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.model.passive import dof_stiffness
 
@@ -75,18 +74,7 @@ class ImportedPoseModel:
         for name, value in q.items():
             d.qpos[self.joints[name]] = value
         mujoco.mj_fwdPosition(self.model, d)
-        eq = np.asarray(d.efc_type[: d.nefc]) == mujoco.mjtConstraint.mjCNSTR_EQUALITY
-        if eq.any() and np.max(np.abs(d.efc_pos[: d.nefc][eq])) > LOOP_TOL:
-            worst = int(np.flatnonzero(eq)[np.argmax(np.abs(d.efc_pos[: d.nefc][eq]))])
-            e = int(d.efc_id[worst])
-            name = mujoco.mj_id2name(self.model, mujoco.mjtObj.mjOBJ_EQUALITY, e) or f"(equality {e})"
-            raise FpmSimError(
-                f"the loop closure {name} does not close at {', '.join(f'{k} = {v:g}' for k, v in q.items())}: "
-                f"residual {abs(float(d.efc_pos[worst])):.3g} (m or rad) > {LOOP_TOL:g}",
-                parameter="q",
-                hint="give every joint of the loop values that close it (the passive joints too), or pose the "
-                "model in task space",
-            )
+        check_loops_closed(self.model, d, q)
 
     def solve(self, q: Mapping[str, float], n_modes: int) -> tuple[np.ndarray, bool]:
         """``(frequencies_hz, deficient)``: the lowest ``n_modes`` frequencies at ``q`` (NaN-padded), and whether

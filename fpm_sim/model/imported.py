@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 import warnings
 import xml.etree.ElementTree as ET
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -50,6 +51,8 @@ __all__ = [
     "MissingMeshWarning",
     "ModelImportError",
     "build_imported",
+    "check_loops_closed",
+    "constrained_model",
     "end_sites",
     "import_report",
     "load_spec",
@@ -191,6 +194,12 @@ def _loop_residuals(model: mujoco.MjModel, data: mujoco.MjData, q: dict[str, flo
         return
     model.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
     mujoco.mj_forward(model, data)
+    check_loops_closed(model, data, q)
+
+
+def check_loops_closed(model: mujoco.MjModel, data: mujoco.MjData, q: Mapping[str, float]) -> None:
+    """After the position stage (constraints on): refuse the joint values ``q`` when an active ``<equality
+    connect|weld>`` does not close there, by the equality's name (its residual above :data:`LOOP_TOL`)."""
     worst: dict[int, float] = {}
     for r in range(data.nefc):
         if int(data.efc_type[r]) == int(mujoco.mjtConstraint.mjCNSTR_EQUALITY):
@@ -206,6 +215,16 @@ def _loop_residuals(model: mujoco.MjModel, data: mujoco.MjData, q: dict[str, flo
                 hint="give every joint of the loop values that close it (the passive joints too), or pose the model "
                 "in task space where its description names an [end_effector]",
             )
+
+
+def constrained_model(spec: mujoco.MjSpec) -> tuple[mujoco.MjModel, mujoco.MjData]:
+    """``spec`` compiled as the rigid machine whose loop closures the pose solvers read: constraints on, contacts
+    off, a dense constraint Jacobian (``efc_J`` as ``(nefc, nv)``)."""
+    model = spec.compile()
+    model.opt.jacobian = mujoco.mjtJacobian.mjJAC_DENSE
+    model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
+    model.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
+    return model, mujoco.MjData(model)
 
 
 def posable_joints(desc: ImportedDescription) -> list[str]:
@@ -533,28 +552,21 @@ def _servo(spec: mujoco.MjSpec, desc: ImportedDescription, motors: list[str]) ->
 
 
 def _lock(spec: mujoco.MjSpec, desc: ImportedDescription, report: ImportReport, servo: bool = False) -> list[str]:
-    """Remove the actuated joints, ``servo_joints`` and ``locked_joints`` (the body then rigid on its parent); with
-    ``servo`` the first two stay as position servos (:func:`_servo`). Returns the servo joints."""
-    motors = _motors(spec, desc)
-    actuated = [a.target for a in spec.actuators if a.trntype == mujoco.mjtTrn.mjTRN_JOINT]
-    for k, name in enumerate(desc.locked_joints):
-        if spec.joint(name) is None:
-            raise _fail(f"no joint {name!r} in the model", f"locked_joints[{k}]", name)
+    """Remove the joints modal analysis locks (:func:`locked_joint_names`; the body then rigid on its parent); with
+    ``servo`` the motors (:func:`_motors`) stay as position servos (:func:`_servo`). Returns the servo joints."""
+    motors = _motors(spec, desc) if servo else []
+    order = [n for n in locked_joint_names(spec, desc) if n not in motors]
     if servo:
-        actuated = [a for a in actuated if a not in motors]
         _servo(spec, desc, motors)
-    order = [*actuated, *desc.locked_joints, *([] if servo else desc.servo_joints)]
     locked = set(order)
     for a in list(spec.actuators):  # a locked joint drives nothing
         if a.trntype == mujoco.mjtTrn.mjTRN_JOINT and a.target in locked:
             spec.delete(a)
     _drop_with_locked(spec, locked, report)
-    for name in dict.fromkeys(order):
-        joint = spec.joint(name)
-        if joint is not None:
-            spec.delete(joint)
-            report.locked.append(name)
-    return motors if servo else []
+    for name in order:
+        spec.delete(spec.joint(name))
+        report.locked.append(name)
+    return motors
 
 
 def locked_joint_names(spec: mujoco.MjSpec, desc: ImportedDescription) -> list[str]:
@@ -751,11 +763,7 @@ def _free_motion_joints(desc: ImportedDescription, locked: set[str]) -> list[str
 
     spec = load_spec(desc)
     _drop_with_locked(spec, locked, ImportReport())
-    model = spec.compile()
-    model.opt.jacobian = mujoco.mjtJacobian.mjJAC_DENSE
-    model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
-    model.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
-    data = mujoco.MjData(model)
+    model, data = constrained_model(spec)
     mujoco.mj_fwdPosition(model, data)
     owner: list[str] = []
     cols: list[int] = []

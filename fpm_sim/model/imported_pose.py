@@ -31,7 +31,7 @@ import numpy as np
 from fpm_sim.architecture.imported import ImportedDescription
 from fpm_sim.architecture.kinematics import TaskPose
 from fpm_sim.errors import FpmSimError
-from fpm_sim.model.imported import LOOP_TOL, load_spec
+from fpm_sim.model.imported import LOOP_TOL, constrained_model, load_spec
 
 __all__ = ["ImportedKinematics", "ImportedPoseError", "joint_poses_of", "solve_imported_pose"]
 
@@ -65,11 +65,8 @@ class ImportedKinematics:
                 'coordinates = ["x", "y", "phi"]; or pose the model by its joint values',
             )
         self.desc = desc
-        model = load_spec(desc).compile()
-        model.opt.jacobian = mujoco.mjtJacobian.mjJAC_DENSE
-        model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
-        model.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
-        self.model, self.data = model, mujoco.MjData(model)
+        model, self.data = constrained_model(load_spec(desc))
+        self.model = model
         self.site = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, desc.end_effector.site)
         if self.site < 0:
             names = ", ".join(
