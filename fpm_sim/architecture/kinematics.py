@@ -33,7 +33,7 @@ import dataclasses
 import itertools
 import math
 import weakref
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -84,6 +84,11 @@ class TaskPose:
     @classmethod
     def from_mm(cls, x_mm: float = 0.0, y_mm: float = 0.0, z_mm: float = 0.0, phi_rad: float = 0.0) -> TaskPose:
         return cls(x_mm * 1e-3, y_mm * 1e-3, z_mm * 1e-3, phi_rad)
+
+    @classmethod
+    def from_coordinates(cls, values: Mapping[str, float]) -> TaskPose:
+        """The pose of ``{coordinate: value}`` (SI: m, rad; a description's check pose), those not given 0."""
+        return cls(*(float(values.get(c, 0.0)) for c in ("x", "y", "z", "phi")))
 
     def value(self, coordinate: str) -> float:
         return float({"x": self.x_m, "y": self.y_m, "z": self.z_m, "phi": self.phi_rad}[coordinate])

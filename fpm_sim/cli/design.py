@@ -93,7 +93,7 @@ def _described_poses(args: argparse.Namespace, desc: Description) -> tuple[list[
         return poses, "dense"
     if not desc.check_poses:
         raise CliError(f"--config {args.config}: {desc.name} has no check_poses; give --grid dense or --poses")
-    return [TaskPose(*(p.get(c, 0.0) for c in ("x", "y", "z", "phi"))) for p in desc.check_poses], "check poses"
+    return [TaskPose.from_coordinates(p) for p in desc.check_poses], "check poses"
 
 
 def _design_described(args: argparse.Namespace, desc: Description) -> int:

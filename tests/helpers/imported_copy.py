@@ -13,10 +13,6 @@ from fpm_sim.model.general import build_general
 from fpm_sim.model.options import ModelOptions
 
 
-def check_pose(check: dict[str, float]) -> TaskPose:
-    return TaskPose(*(check.get(c, 0.0) for c in ("x", "y", "z", "phi")))
-
-
 def imported_copy(
     desc: Description, folder: Path, *, coordinates: tuple[str, ...] | None = None, servo: bool = False
 ) -> Path:
@@ -25,7 +21,9 @@ def imported_copy(
     section and material copied, the motors locked (``locked_joints``; with ``servo``, ``servo_joints``: locked for
     modal analysis, servos in a move, the description's ``[servos]`` copied), the end effector's site posed by
     ``coordinates`` (default: the description's task coordinates)."""
-    built = build_general(desc, check_pose(desc.check_poses[0]), ModelOptions(link_model="rigid"), motors="servo")
+    built = build_general(
+        desc, TaskPose.from_coordinates(desc.check_poses[0]), ModelOptions(link_model="rigid"), motors="servo"
+    )
     (folder / "m.xml").write_text(built.to_xml())
     m, data = built.model, desc.data or {}
     motors = [m.joint(j).name for j in range(m.njnt) if built.dof_kinds[m.jnt_dofadr[j]] == "motor"]

@@ -26,7 +26,7 @@ from fpm_sim.model.imported_pose import joint_poses_of
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.rom.atlas import build_atlas, load_atlas, model_at
 from fpm_sim.rom.reduction import modal_system
-from tests.helpers.imported_copy import check_pose, imported_copy
+from tests.helpers.imported_copy import imported_copy
 
 ROOT = Path(__file__).resolve().parents[2]
 FIVE_BAR = ROOT / "examples/architectures/five_bar.toml"
@@ -58,7 +58,7 @@ def test_design_on_the_imported_five_bar_is_the_native_one(five_bar: tuple[fs.De
     joint-space poses the task poses solve to give the same study."""
     desc, toml = five_bar
     imp = load_imported(toml)
-    poses = [check_pose(p) for p in desc.check_poses[:3]]
+    poses = [TaskPose.from_coordinates(p) for p in desc.check_poses[:3]]
     native = design_study(desc, poses=poses, vary=VARY, n_modes=4, options=OPTS)
     back = design_study(imp, poses=poses, vary=VARY, n_modes=4, options=OPTS)
     np.testing.assert_allclose(back.frequencies_hz, native.frequencies_hz, rtol=RTOL)
@@ -107,7 +107,9 @@ def test_a_section_heavier_than_the_body_is_refused_by_the_body(five_bar: tuple[
     _, toml = five_bar
     imp = load_imported(toml)
     with pytest.raises(FpmSimError, match=r"body 'left_proximal_b0' states 0\.21195 kg, less than its beam's"):
-        design_study(imp, poses=[check_pose({"y": 0.25})], vary={"sections.bar.height_m": [0.009]}, options=OPTS)
+        design_study(
+            imp, poses=[TaskPose.from_coordinates({"y": 0.25})], vary={"sections.bar.height_m": [0.009]}, options=OPTS
+        )
 
 
 def test_atlas_on_the_imported_five_bar_is_the_native_one(

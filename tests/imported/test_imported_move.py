@@ -28,7 +28,7 @@ from fpm_sim.model.imported import ModelImportError, build_imported
 from fpm_sim.model.imported_pose import ImportedKinematics
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.sim.trajectory import MoveError
-from tests.helpers.imported_copy import check_pose, imported_copy
+from tests.helpers.imported_copy import imported_copy
 
 ROOT = Path(__file__).resolve().parents[2]
 FIVE_BAR = ROOT / "examples/architectures/five_bar.toml"
@@ -54,7 +54,7 @@ def test_the_imported_five_bar_makes_the_native_five_bar_move(tmp_path: Path) ->
     assert back.motor_names == native.motor_names == ("left_motor", "right_motor")
     np.testing.assert_array_equal(back.command, native.command)
     # the imported joints count from the export pose (their ref 0 there: fpm_sim.model.imported)
-    export = actuated_coordinates(desc, solve_task_pose(desc, check_pose(desc.check_poses[0])))
+    export = actuated_coordinates(desc, solve_task_pose(desc, TaskPose.from_coordinates(desc.check_poses[0])))
     np.testing.assert_allclose(back.motor_ref_rad, native.motor_ref_rad - export, rtol=0, atol=1e-9)
     np.testing.assert_allclose(back.motor_angles_rad, native.motor_angles_rad - export, rtol=0, atol=1e-9)
     motion = np.abs(native.ee_pose - native.ee_pose[0]).max()
@@ -78,7 +78,7 @@ def test_servo_motors_of_an_imported_model_are_the_described_servos(tmp_path: Pa
     desc = parse_description(raw)
     imp = load_imported(imported_copy(desc, tmp_path, servo=True))
     assert imp.servos.gains("revolute") == (800.0, 1.0)
-    pose = check_pose(desc.check_poses[3])
+    pose = TaskPose.from_coordinates(desc.check_poses[3])
     q = ImportedKinematics(imp).solve(pose)
     servo = build_imported(imp, q, ModelOptions(segments=3), motors="servo")
     assert servo.dof_kinds.count("motor") == 2

@@ -20,7 +20,7 @@ from fpm_sim.model.imported import build_imported
 from fpm_sim.model.imported_pose import joint_poses_of
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.study.poses import parse_reading, study_poses
-from tests.helpers.imported_copy import check_pose, imported_copy
+from tests.helpers.imported_copy import imported_copy
 
 ROOT = Path(__file__).resolve().parents[2]
 POLICY = ModelOptions(segments=3, gravity=False, axial=False)
@@ -46,7 +46,7 @@ def test_posed_model_is_the_model_built_at_the_pose(tmp_path: Path) -> None:
     desc = load_description(ROOT / "examples/architectures/five_bar.toml")
     imp = load_imported(imported_copy(desc, tmp_path))
     loop = ImportedPoseModel(imp, POLICY)
-    qs = joint_poses_of(imp, [check_pose(c) for c in desc.check_poses])
+    qs = joint_poses_of(imp, [TaskPose.from_coordinates(c) for c in desc.check_poses])
     for q in qs:
         built = analyse(build_imported(imp, q, POLICY), "constrained", 4).frequencies_hz
         np.testing.assert_allclose(loop.solve(q, 4)[0], built, rtol=1e-9)
@@ -56,7 +56,7 @@ def test_a_pose_whose_loop_does_not_close_is_refused_by_the_equality(tmp_path: P
     """Joint values that leave the five-bar's weld open: refused naming the equality, the pose and the fix."""
     desc = load_description(ROOT / "examples/architectures/five_bar.toml")
     imp = load_imported(imported_copy(desc, tmp_path))
-    q = joint_poses_of(imp, [check_pose(desc.check_poses[1])])[0]
+    q = joint_poses_of(imp, [TaskPose.from_coordinates(desc.check_poses[1])])[0]
     q["left_elbow"] += 0.05
     with pytest.raises(FpmSimError, match=r"pose 1 \(.*\): the loop closure loop_right_tool does not close") as e:
         sweep_joints(imp, [q], options=POLICY)

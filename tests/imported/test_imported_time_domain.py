@@ -28,7 +28,7 @@ from fpm_sim.model.options import ModelOptions
 from fpm_sim.response import LinkPoint
 from fpm_sim.sim.impact import ImpactSetup
 from fpm_sim.sim.trajectory import MoveError
-from tests.helpers.imported_copy import check_pose, imported_copy
+from tests.helpers.imported_copy import imported_copy
 from tests.imported.test_import import _acrobot_toml
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -55,7 +55,7 @@ def test_the_imported_five_bar_makes_the_native_five_bar_rollouts(tmp_path: Path
     values instead of the task pose, the imported rollout is the same one (the same model: rtol 1e-12)."""
     desc = load_description(FIVE_BAR)
     imp = load_imported(imported_copy(desc, tmp_path, servo=True))
-    export = actuated_coordinates(desc, solve_task_pose(desc, check_pose(desc.check_poses[0])))
+    export = actuated_coordinates(desc, solve_task_pose(desc, TaskPose.from_coordinates(desc.check_poses[0])))
     kw = dict(duration_s=0.01, output_step_s=2e-4, options=COARSE)
     for extra in (dict(force_x_n=30.0, force_y_n=-20.0), dict(motors="servo", motor_torque_nm=[0.5, -0.3])):
         native = fs.rollout(desc, POSE, **kw, **extra)  # type: ignore[arg-type]

@@ -25,7 +25,7 @@ from fpm_sim.model.imported import build_imported
 from fpm_sim.model.imported_pose import ImportedKinematics, ImportedPoseError, joint_poses_of
 from fpm_sim.model.options import ModelOptions
 from fpm_sim.study.poses import parse_reading, study_poses
-from tests.helpers.imported_copy import check_pose, imported_copy
+from tests.helpers.imported_copy import imported_copy
 
 ROOT = Path(__file__).resolve().parents[2]
 OPTS = ModelOptions(segments=3)
@@ -60,7 +60,7 @@ def test_five_bar_exported_once_takes_its_check_poses(tmp_path: Path) -> None:
     """The five-bar (its tool fixed on one dyad, welded to the other) at its six check poses: within 1e-6."""
     desc = load_description(ROOT / "examples/architectures/five_bar.toml")
     toml = imported_copy(desc, tmp_path)
-    assert _worst(desc, toml, [check_pose(c) for c in desc.check_poses]) < 1e-6
+    assert _worst(desc, toml, [TaskPose.from_coordinates(c) for c in desc.check_poses]) < 1e-6
 
 
 def test_solved_pose_puts_the_site_there_and_closes_the_loops(tmp_path: Path) -> None:
@@ -72,7 +72,7 @@ def test_solved_pose_puts_the_site_there_and_closes_the_loops(tmp_path: Path) ->
     desc = load_description(ROOT / "examples/architectures/five_bar.toml")
     imp = load_imported(imported_copy(desc, tmp_path))
     kin = ImportedKinematics(imp)
-    poses = [check_pose(c) for c in desc.check_poses]
+    poses = [TaskPose.from_coordinates(c) for c in desc.check_poses]
     swept = joint_poses_of(imp, poses)
     for pose, q in zip(poses, swept, strict=True):
         alone = kin.solve(pose)
@@ -114,7 +114,7 @@ def test_cli_modes_and_sweep_in_task_space(tmp_path: Path, capsys: pytest.Captur
     with task columns is each pose's modes; a model without an end effector refuses ``--x-mm`` in one line."""
     desc = load_description(ROOT / "examples/architectures/five_bar.toml")
     toml = imported_copy(desc, tmp_path)
-    pose = check_pose(desc.check_poses[2])
+    pose = TaskPose.from_coordinates(desc.check_poses[2])
     argv = ["modes", "--config", str(toml), "--x-mm", repr(pose.x_m * 1e3), "--y-mm", repr(pose.y_m * 1e3)]
     assert main([*argv, "--segments", "3", "--method", "constrained", "--no-gravity", "--json"]) == 0
     cli = [m["frequency_hz"] for m in json.loads(capsys.readouterr().out)["modes"][:4]]
@@ -123,7 +123,9 @@ def test_cli_modes_and_sweep_in_task_space(tmp_path: Path, capsys: pytest.Captur
     np.testing.assert_allclose(cli, api.frequencies_hz, rtol=1e-12)
     csv = tmp_path / "task.csv"
     csv.write_text("x_mm,y_mm\n" + "".join(f"{c['x'] * 1e3!r},{c['y'] * 1e3!r}\n" for c in desc.check_poses[:3]))
-    sweep = fs.sweep(imp, poses=[check_pose(c) for c in desc.check_poses[:3]], options=ModelOptions(segments=3))
+    sweep = fs.sweep(
+        imp, poses=[TaskPose.from_coordinates(c) for c in desc.check_poses[:3]], options=ModelOptions(segments=3)
+    )
     out = tmp_path / "sw"
     assert main(["sweep", "--config", str(toml), "--poses", str(csv), "--segments", "3", "--out", str(out)]) == 0
     capsys.readouterr()
@@ -144,7 +146,7 @@ def test_check_over_a_task_pose_file(tmp_path: Path, capsys: pytest.CaptureFixtu
     over those task poses (the same solve and model: rtol 1e-12)."""
     desc = load_description(ROOT / "examples/architectures/five_bar.toml")
     toml = imported_copy(desc, tmp_path)
-    poses = [check_pose(c) for c in desc.check_poses[:3]]
+    poses = [TaskPose.from_coordinates(c) for c in desc.check_poses[:3]]
     (tmp_path / "poses.csv").write_text("x_mm,y_mm\n" + "".join(f"{p.x_m * 1e3!r},{p.y_m * 1e3!r}\n" for p in poses))
     req = tmp_path / "req.toml"
     req.write_text(
@@ -195,7 +197,7 @@ def test_reposed_undamped_model_linearises_by_transition_fd(tmp_path: Path) -> N
     text = (tmp_path / "m.xml").read_text().replace('name="left_elbow"', limited)
     (tmp_path / "m.xml").write_text(text)
     imp = load_imported(toml)
-    pose = check_pose(desc.check_poses[3])
+    pose = TaskPose.from_coordinates(desc.check_poses[3])
     q = ImportedKinematics(imp).solve(pose)
     opts = ModelOptions(segments=3, gravity=False)
     built = build_imported(imp, q, opts)
