@@ -124,7 +124,7 @@ def _built(
         if pose is not None and not isinstance(pose, TaskPose):
             raise TypeError("a described architecture takes a fs.TaskPose (x_m, y_m, z_m, phi_rad)")
         home = config.check_poses[0] if config.check_poses else {}
-        task_pose = pose if pose is not None else TaskPose(*(home.get(c, 0.0) for c in ("x", "y", "z", "phi")))
+        task_pose = pose if pose is not None else TaskPose.from_coordinates(home)
         return build_general(config, task_pose, _options(options, stacklevel=4))
     from fpm_sim.model.manipulator import build_manipulator
 
@@ -140,7 +140,7 @@ def _task_pose(desc: Description, pose: Pose | TaskPose | None) -> TaskPose:
     if pose is not None and not isinstance(pose, TaskPose):
         raise TypeError("a described architecture takes a fs.TaskPose (x_m, y_m, z_m, phi_rad)")
     home = desc.check_poses[0] if desc.check_poses else {}
-    return pose if pose is not None else TaskPose(*(home.get(c, 0.0) for c in ("x", "y", "z", "phi")))
+    return pose if pose is not None else TaskPose.from_coordinates(home)
 
 
 def _aligned(
@@ -523,32 +523,25 @@ def design(
     from fpm_sim.batch.engine import EngineOptions
     from fpm_sim.designs import DesignError, design_study
 
-    if isinstance(config, ImportedDescription):
-        if poses is None:
-            raise DesignError(
-                "an imported model states no check poses",
-                parameter="poses",
-                hint="give {joint: value} poses, or fs.TaskPose values where it names an [end_effector]",
-            )
-        return design_study(
-            config,
-            poses=poses,
-            vary=vary,
-            designs=designs,
-            n_modes=n_modes,
-            f_min_hz=f_min_hz,
-            options=_options(options),
-        )
+    machine: Any = config
+    engine = None
     if isinstance(config, Description):
-        home = [TaskPose(*(p.get(c, 0.0) for c in ("x", "y", "z", "phi"))) for p in config.check_poses]
+        home = [TaskPose.from_coordinates(p) for p in config.check_poses]
         chosen: Sequence[Any] = home if poses is None else poses
         engine = EngineOptions(workers=workers)
+    elif poses is None and isinstance(config, ImportedDescription):
+        raise DesignError(
+            "an imported model states no check poses",
+            parameter="poses",
+            hint="give {joint: value} poses, or fs.TaskPose values where it names an [end_effector]",
+        )
     elif poses is None:
         raise DesignError("the 3RRR's design study needs poses", parameter="poses", hint="e.g. dense_grid(config)")
     else:
-        chosen, engine = poses, None
+        chosen = poses
+        machine = config if isinstance(config, ImportedDescription) else _config(config)
     return design_study(
-        _config(config) if not isinstance(config, Description) else config,
+        machine,
         poses=chosen,
         vary=vary,
         designs=designs,
