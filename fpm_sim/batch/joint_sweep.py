@@ -78,15 +78,49 @@ def check_joint_poses(
     return out
 
 
+def _task_columns(desc: ImportedDescription) -> set[str]:
+    """The CSV columns of ``desc``'s task coordinates (``x_mm`` ... ``phi_rad``; none without an end effector)."""
+    return {"phi_rad" if c == "phi" else f"{c}_mm" for c in desc.task}
+
+
 def read_joint_poses_csv(
     path: str | Path, desc: ImportedDescription, *, parameter: str = "poses"
 ) -> list[dict[str, float]]:
-    """Joint-space poses from a CSV with one column per joint name (module docstring)."""
+    """Joint-space poses from a CSV (module docstring): one column per joint name, or the task coordinates' columns
+    (:func:`read_imported_poses_csv`) solved to joint values (:func:`fpm_sim.model.imported_pose.joint_poses_of`)."""
+    poses = read_imported_poses_csv(path, desc, parameter=parameter)
+    if poses and isinstance(poses[0], TaskPose):
+        from fpm_sim.model.imported_pose import joint_poses_of
+
+        return joint_poses_of(desc, [p for p in poses if isinstance(p, TaskPose)])
+    return [p for p in poses if isinstance(p, dict)]
+
+
+def read_imported_poses_csv(
+    path: str | Path, desc: ImportedDescription, *, parameter: str = "poses"
+) -> list[TaskPose] | list[dict[str, float]]:
+    """An imported model's poses from a CSV as they are written: task poses
+    (:func:`fpm_sim.batch.task_sweep.read_task_poses_csv`) where its columns are the task coordinates of the model's
+    ``[end_effector]``, else joint values (:func:`_read_joint_columns`, which names what is wrong)."""
+    import csv
+
+    from fpm_sim.batch.task_sweep import read_task_poses_csv
+
+    p = Path(path)
+    if desc.task and p.is_file():
+        with open(p, newline="", encoding="utf-8-sig") as fh:
+            columns = {h.strip() for h in next(csv.reader(fh), [])}
+        if columns == _task_columns(desc):
+            return read_task_poses_csv(p, desc, parameter=parameter)
+    return _read_joint_columns(p, desc, parameter=parameter)
+
+
+def _read_joint_columns(p: Path, desc: ImportedDescription, *, parameter: str) -> list[dict[str, float]]:
+    """The rows of a CSV with one column per joint name (rad or m), each cell checked (module docstring)."""
     import csv
 
     from fpm_sim.model.imported import posable_joints
 
-    p = Path(path)
     if not p.is_file():
         raise JointPosesError(f"{p}: no such file", parameter=parameter)
     joints = posable_joints(desc)
@@ -94,24 +128,14 @@ def read_joint_poses_csv(
     with open(p, newline="", encoding="utf-8-sig") as fh:
         reader = csv.DictReader(fh)
         columns = [(h or "").strip() for h in reader.fieldnames or []]
-        task_columns = {"phi_rad" if c == "phi" else f"{c}_mm" for c in desc.task}
-        if desc.task and set(columns) == task_columns:  # task-space poses (module docstring)
-            from fpm_sim.batch.task_sweep import read_task_poses_csv
-            from fpm_sim.model.imported_pose import joint_poses_of
-
-            return joint_poses_of(desc, read_task_poses_csv(p, desc, parameter=parameter))
         unknown = [c for c in columns if c not in joints]
         if unknown or not columns:
+            task = f"; or task poses, one column per task coordinate: {', '.join(sorted(_task_columns(desc)))}"
             raise JointPosesError(
                 f"{p}: column(s) {', '.join(unknown) or '(none)'} name no hinge or slide joint of "
                 f"{desc.model_path.name}",
                 parameter=parameter,
-                hint=f"one column per joint, among: {', '.join(joints)}"
-                + (
-                    f"; or task poses, one column per task coordinate: {', '.join(sorted(task_columns))}"
-                    if desc.task
-                    else ""
-                ),
+                hint=f"one column per joint, among: {', '.join(joints)}" + (task if desc.task else ""),
             )
         for r in reader:
             r = {(k or "").strip(): v for k, v in r.items()}
@@ -132,25 +156,6 @@ def read_joint_poses_csv(
     if not poses:
         raise JointPosesError(f"{p}: no rows after the header", parameter=parameter)
     return poses
-
-
-def read_imported_poses_csv(
-    path: str | Path, desc: ImportedDescription, *, parameter: str = "poses"
-) -> list[TaskPose] | list[dict[str, float]]:
-    """An imported model's poses from a CSV as they are written: task poses
-    (:func:`fpm_sim.batch.task_sweep.read_task_poses_csv`) where its columns are the task coordinates of the model's
-    ``[end_effector]``, else joint values (:func:`read_joint_poses_csv`, which names what is wrong)."""
-    import csv
-
-    from fpm_sim.batch.task_sweep import read_task_poses_csv
-
-    p = Path(path)
-    if desc.task and p.is_file():
-        with open(p, newline="", encoding="utf-8-sig") as fh:
-            columns = {h.strip() for h in next(csv.reader(fh), [])}
-        if columns == {"phi_rad" if c == "phi" else f"{c}_mm" for c in desc.task}:
-            return read_task_poses_csv(p, desc, parameter=parameter)
-    return read_joint_poses_csv(p, desc, parameter=parameter)
 
 
 @dataclass
@@ -219,6 +224,11 @@ class JointSweep:
         return paths
 
 
+def _at_pose(k: int, q: Mapping[str, float], message: str) -> str:
+    """An error's message prefixed by the pose it happened at: its number (1-based) and joint values."""
+    return f"pose {k + 1} ({', '.join(f'{j} = {v:g}' for j, v in q.items())}): {message}"
+
+
 def modes_at_joint_poses(
     desc: ImportedDescription,
     poses: Sequence[Mapping[str, float]],
@@ -237,7 +247,7 @@ def modes_at_joint_poses(
         try:
             out.append(analyse(build_imported(desc, q, options), method, n_modes))
         except FpmSimError as e:
-            e.message = f"pose {k + 1} ({', '.join(f'{j} = {v:g}' for j, v in q.items())}): {e.message}"
+            e.message = _at_pose(k, q, e.message)
             raise
     return out
 
@@ -269,7 +279,7 @@ def sweep_joints(
                 try:
                     freq[k] = loop.solve(q, n_modes)[0]
                 except FpmSimError as e:
-                    e.message = f"pose {k + 1} ({', '.join(f'{j} = {v:g}' for j, v in q.items())}): {e.message}"
+                    e.message = _at_pose(k, q, e.message)
                     raise
     else:
         for k, result in enumerate(modes_at_joint_poses(desc, checked, options=opts, n_modes=n_modes, method=method)):
