@@ -51,6 +51,7 @@ try:  # Ctrl-C while the modules load (a second or so): one line and 130, as at 
     )
     from fpm_sim.errors import FpmSimError, FpmSimWarning
 except KeyboardInterrupt:
+    sys.unraisablehook = lambda unraisable: None  # see _after_interrupt
     sys.stderr.write("interrupted (Ctrl-C)\n")
     raise SystemExit(130) from None
 
@@ -508,6 +509,18 @@ def _cli_warnings() -> Iterator[None]:
         yield
 
 
+def _after_interrupt() -> None:
+    """After Ctrl-C: keep the "interrupted" line the only one, for the rest of the process.
+
+    An interrupt can land inside a library object's ``__init__`` (h5netcdf's ``File`` while the posterior
+    opens, for one); its ``__del__`` then fails on the half-built object when the interrupted frames are
+    freed, and Python prints that as "Exception ignored in ... Traceback". Nothing is lost by silencing
+    it: the command is abandoning its work, and outputs are written atomically. The hook stays replaced
+    for the rest of the process (the CLI exits next; an in-process caller of :func:`main` gets the same).
+    """
+    sys.unraisablehook = lambda unraisable: None
+
+
 def _quiet_stdout() -> None:
     """After a closed pipe: point stdout at /dev/null so that the interpreter's final flush stays quiet."""
     try:
@@ -533,6 +546,7 @@ def main(argv: list[str] | None = None) -> int:
             print(error_line(exc, command, options), file=sys.stderr)
             return 2
         except KeyboardInterrupt:
+            _after_interrupt()
             print("interrupted (Ctrl-C); unfinished outputs were not written", file=sys.stderr)
             return 130
         except BrokenPipeError:  # e.g. `fpm-sim config | head`: the reader has what it wanted
