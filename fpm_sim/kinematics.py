@@ -38,12 +38,15 @@ __all__ = [
     "SINGULAR_TOL",
     "Assemblies",
     "Assembly",
+    "BatchAssemblies",
+    "GeometryArrays",
     "NearSingularityWarning",
     "Pose",
     "PoseValueError",
     "SingularPoseError",
     "SingularityMeasure",
     "UnreachablePoseError",
+    "assemble_batch",
     "assemble_many",
     "base_points",
     "checked_pose_mm",
@@ -278,53 +281,144 @@ def _unit(d: np.ndarray) -> np.ndarray:
     return unit
 
 
+@dataclass(frozen=True)
+class GeometryArrays:
+    """What the in-plane kinematics needs of ``G`` geometries, as arrays over a leading geometry axis: the many
+    descriptions of a sampler's particles at once (:func:`assemble_batch`), or one (:meth:`of`).
+
+    Attributes
+    ----------
+    base_points
+        ``(G, 3, 2)`` motor points A_i (m).
+    platform_local
+        ``(G, 3, 2)`` platform joints in the platform frame (m).
+    proximal_m, distal_m
+        ``(G, 3)`` link lengths per chain (m).
+    elbow_branch
+        ``(G, 3)`` each chain's elbow solution (+1 or -1).
+    char_length_m
+        ``(G,)`` the singularity measure's characteristic length ``max(r_p, L2 / 4)`` (m).
+    """
+
+    base_points: np.ndarray
+    platform_local: np.ndarray
+    proximal_m: np.ndarray
+    distal_m: np.ndarray
+    elbow_branch: np.ndarray
+    char_length_m: np.ndarray
+
+    @classmethod
+    def of(cls, g: Geometry) -> GeometryArrays:
+        """One geometry (``G = 1``)."""
+        ang = np.asarray(g.platform_angles_rad)
+        local = np.asarray(g.platform_radius_per_chain)[:, None] * np.stack([np.cos(ang), np.sin(ang)], axis=1)
+        return cls(
+            base_points=base_points(g)[None],
+            platform_local=local[None],
+            proximal_m=np.asarray(g.proximal_length_per_chain, float)[None],
+            distal_m=np.asarray(g.distal_length_per_chain, float)[None],
+            elbow_branch=np.asarray(g.elbow_branch, float)[None],
+            char_length_m=np.array([_char_length(g)]),
+        )
+
+    @classmethod
+    def from_polar(
+        cls, *, base_radius_m: np.ndarray, base_angles_rad: np.ndarray, platform_radius_m: np.ndarray,
+        platform_angles_rad: np.ndarray, proximal_m: np.ndarray, distal_m: np.ndarray, elbow_branch: np.ndarray,
+    ) -> GeometryArrays:  # fmt: skip
+        """From ``(G, 3)`` per-chain radii, angles (rad), lengths (m) and branches, as :class:`Geometry` has them."""
+        def points(radius: np.ndarray, angles: np.ndarray) -> np.ndarray:
+            out: np.ndarray = radius[..., None] * np.stack([np.cos(angles), np.sin(angles)], axis=-1)
+            return out
+
+        char = np.maximum(np.max(platform_radius_m, axis=1), np.mean(distal_m, axis=1) / 4.0)
+        return cls(points(base_radius_m, base_angles_rad), points(platform_radius_m, platform_angles_rad),
+                   proximal_m, distal_m, np.broadcast_to(np.asarray(elbow_branch, float), proximal_m.shape),
+                   char)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class BatchAssemblies:
+    """:func:`assemble_batch`'s result: arrays over ``(G, P)``, geometries by poses (fields as :class:`Assemblies`
+    has them; ``c - p`` is ``r``)."""
+
+    b: np.ndarray
+    c: np.ndarray
+    r: np.ndarray
+    motor_angles_rad: np.ndarray
+    distance_m: np.ndarray
+    reachable: np.ndarray
+    serial: np.ndarray
+    parallel: np.ndarray
+    det_jx: np.ndarray
+
+    @property
+    def singularity(self) -> np.ndarray:
+        """``(G, P)`` ``min(serial, parallel)`` (NaN where unreachable)."""
+        measure: np.ndarray = np.minimum(self.serial, self.parallel)
+        return measure
+
+
+def assemble_batch(ga: GeometryArrays, x_m: ArrayLike, y_m: ArrayLike, phi_rad: ArrayLike) -> BatchAssemblies:
+    """Inverse kinematics and singularity measures of ``G`` geometries at ``P`` poses at once (vectorised over both;
+    no checks, no warnings): the formulas of :func:`assemble_many`, which calls this with ``G = 1``."""
+    x, y, phi = np.broadcast_arrays(*(np.atleast_1d(np.asarray(v, float)).ravel() for v in (x_m, y_m, phi_rad)))
+    a = ga.base_points[:, None]  # (G, 1, 3, 2)
+    local = ga.platform_local[:, None]
+    cos_p, sin_p = np.cos(phi)[:, None], np.sin(phi)[:, None]  # (P, 1)
+    p = np.stack([x, y], axis=1)[:, None, :]  # (P, 1, 2)
+    c = p + np.stack([local[..., 0] * cos_p - local[..., 1] * sin_p, local[..., 0] * sin_p + local[..., 1] * cos_p],
+                     axis=-1)  # fmt: skip
+    r = c - p
+    l1 = ga.proximal_m[:, None, :]  # (G, 1, 3): per chain
+    l2 = ga.distal_m[:, None, :]
+    d = c - a
+    dist = np.hypot(d[..., 0], d[..., 1])
+    chain_ok = (abs(l1 - l2) <= dist) & (dist <= l1 + l2)
+    reachable = chain_ok.all(axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cos_alpha = np.clip((l1**2 + dist**2 - l2**2) / (2.0 * l1 * dist), -1.0, 1.0)
+    q = np.arctan2(d[..., 1], d[..., 0]) + ga.elbow_branch[:, None, :] * np.arccos(cos_alpha)
+    q = np.where(chain_ok, q, np.nan)
+    b = a + l1[..., None] * np.stack([np.cos(q), np.sin(q)], axis=-1)
+    w = (b - a) / l1[..., None]
+    u = _unit(c - b)
+    serial = np.min(np.abs(_cross2(w, u)), axis=-1)
+    jxn = np.concatenate([u, (_cross2(r, u) / ga.char_length_m[:, None, None])[..., None]], axis=-1)
+    jxn = np.where(reachable[..., None, None], jxn, 0.0)
+    sv = np.linalg.svd(jxn, compute_uv=False)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        parallel = sv[..., -1] / sv[..., 0]
+    nan = np.full(reachable.shape, np.nan)
+    return BatchAssemblies(
+        b=b, c=c, r=r, motor_angles_rad=q, distance_m=dist, reachable=reachable,
+        serial=np.where(reachable, serial, nan), parallel=np.where(reachable, parallel, nan),
+        det_jx=np.where(reachable, np.linalg.det(jxn), nan),
+    )  # fmt: skip
+
+
 def assemble_many(g: Geometry, x_m: ArrayLike, y_m: ArrayLike, phi_rad: ArrayLike) -> Assemblies:
     """Inverse kinematics and singularity measures of many poses at once (vectorised; no checks, no warnings).
 
     The same formulas as :func:`inverse_kinematics` (which calls this for one pose), for arrays of positions
     (m) and rotations (rad) broadcast to one shape ``(n,)``.
     """
+    ga = GeometryArrays.of(g)
+    many = assemble_batch(ga, x_m, y_m, phi_rad)
     x, y, phi = np.broadcast_arrays(*(np.atleast_1d(np.asarray(v, float)).ravel() for v in (x_m, y_m, phi_rad)))
-    a = base_points(g)
-    ang = np.asarray(g.platform_angles_rad)
-    local = np.asarray(g.platform_radius_per_chain)[:, None] * np.stack([np.cos(ang), np.sin(ang)], axis=1)  # (3, 2)
-    cos_p, sin_p = np.cos(phi)[:, None], np.sin(phi)[:, None]
-    p = np.stack([x, y], axis=1)[:, None, :]
-    c = p + np.stack([local[:, 0] * cos_p - local[:, 1] * sin_p, local[:, 0] * sin_p + local[:, 1] * cos_p], axis=2)
-    r = c - p
-    l1 = np.asarray(g.proximal_length_per_chain)[None, :]  # (1, 3): per chain
-    l2 = np.asarray(g.distal_length_per_chain)[None, :]
-    d = c - a[None]
-    dist = np.hypot(d[..., 0], d[..., 1])
-    chain_ok = (abs(l1 - l2) <= dist) & (dist <= l1 + l2)
-    reachable = chain_ok.all(axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cos_alpha = np.clip((l1**2 + dist**2 - l2**2) / (2.0 * l1 * dist), -1.0, 1.0)
-    q = np.arctan2(d[..., 1], d[..., 0]) + np.asarray(g.elbow_branch, float)[None, :] * np.arccos(cos_alpha)
-    q = np.where(chain_ok, q, np.nan)
-    b = a[None] + l1[..., None] * np.stack([np.cos(q), np.sin(q)], axis=2)
-    w = (b - a[None]) / l1[..., None]
-    u = _unit(c - b)
-    serial = np.min(np.abs(_cross2(w, u)), axis=1)
-    jxn = np.concatenate([u, (_cross2(r, u) / _char_length(g))[..., None]], axis=2)
-    jxn = np.where(reachable[:, None, None], jxn, 0.0)
-    sv = np.linalg.svd(jxn, compute_uv=False)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        parallel = sv[:, -1] / sv[:, 0]
-    nan = np.full(x.shape, np.nan)
     return Assemblies(
         x_m=x,
         y_m=y,
         phi_rad=phi,
-        a=a,
-        b=b,
-        c=c,
-        motor_angles_rad=q,
-        distance_m=dist,
-        reachable=reachable,
-        serial=np.where(reachable, serial, nan),
-        parallel=np.where(reachable, parallel, nan),
-        det_jx=np.where(reachable, np.linalg.det(jxn), nan),
+        a=ga.base_points[0],
+        b=many.b[0],
+        c=many.c[0],
+        motor_angles_rad=many.motor_angles_rad[0],
+        distance_m=many.distance_m[0],
+        reachable=many.reachable[0],
+        serial=many.serial[0],
+        parallel=many.parallel[0],
+        det_jx=many.det_jx[0],
     )
 
 

@@ -12,36 +12,18 @@ reported result (fpm_sim.study.calibrate.problem).
 from __future__ import annotations
 
 import argparse
-import dataclasses
-import re
 import time
 import warnings
 
 import numpy as np
 
-from fpm_sim.cli.common import load_manipulator
-from fpm_sim.cli.identify import read_data_args
-from fpm_sim.cli.main import build_parser
-from fpm_sim.study.calibrate import CalibrationProblem, SamplerOptions, read_priors, run_calibration
-from fpm_sim.study.identify import parameter_set
-
-PRIORS = "fpm_sim/data/study_priors.toml"
+from fpm_sim.study.calibrate import CalibrationProblem, SamplerOptions, run_calibration
+from fpm_sim.study.calibrate.problem import study_problem
 
 
 def problem(branch: tuple[int, int, int]) -> CalibrationProblem:
     """The study's calibration (its data, priors and statements) on the surrogate, the elbow branches fixed."""
-    args = build_parser().parse_args(
-        ["calibrate", "--measured", "fpm_sim/data/measured_table4_train.csv,reading=x+", "--priors", PRIORS,
-         "--out", "unused", "--free", "geometry,hardware,section-height"]
-    )  # fmt: skip
-    start = load_manipulator(args)
-    start = dataclasses.replace(start, geometry=dataclasses.replace(start.geometry, elbow_branch=branch))
-    groups, datasets, _ = read_data_args(args)
-    obs = tuple(o for ds in datasets for o in ds.observations)
-    names = parameter_set(start, groups).names
-    text = re.sub(r'\[parameters\."geometry\.elbow_branch"\][^\[]*', "", open(PRIORS).read())  # one class
-    return CalibrationProblem(start, tuple(groups), read_priors("one_class.toml", names, text=text), obs, (),
-                              model="inplane")  # fmt: skip
+    return study_problem(model="inplane", branch=branch)
 
 
 def main() -> None:

@@ -24,16 +24,69 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
 from fpm_sim.config import Manipulator
-from fpm_sim.kinematics import Pose, assemble_many
+from fpm_sim.kinematics import GeometryArrays, Pose, assemble_batch
 
-__all__ = ["CANTILEVER_TIP_MASS_FRACTION", "inplane_first_frequencies"]
+__all__ = ["CANTILEVER_TIP_MASS_FRACTION", "InplaneArrays", "inplane_batch", "inplane_first_frequencies"]
 
 CANTILEVER_TIP_MASS_FRACTION = 33.0 / 140.0
 """Rayleigh's effective tip mass of a cantilever with the static deflection shape."""
+
+
+@dataclass(frozen=True)
+class InplaneArrays:
+    """What the surrogate needs of ``G`` descriptions besides their kinematics, as ``(G, 3)`` per-chain and
+    ``(G,)`` arrays (SI units): a sampler's particles at once (:func:`inplane_batch`), or one (:meth:`of`)."""
+
+    geometry: GeometryArrays
+    cantilever_n_per_m: np.ndarray
+    """``(G, 3)`` each proximal link's tip stiffness across it, ``3 E I_in / L1^3``."""
+    elbow_kg: np.ndarray
+    """``(G, 3)`` elbow hardware plus the cantilever's effective tip mass."""
+    distal_kg: np.ndarray
+    """``(G, 3)`` each distal link's mass."""
+    platform_joint_kg: np.ndarray
+    platform_kg: np.ndarray
+    """``(G,)`` platform plus payload."""
+    platform_izz_kg_m2: np.ndarray
+
+    @classmethod
+    def build(
+        cls, geometry: GeometryArrays, *, young_pa: np.ndarray, density_kg_m3: np.ndarray, area_m2: np.ndarray,
+        i_inplane_m4: np.ndarray, elbow_joint_kg: np.ndarray, platform_joint_kg: np.ndarray,
+        platform_kg: np.ndarray, platform_izz_kg_m2: np.ndarray,
+    ) -> InplaneArrays:  # fmt: skip
+        """From ``(G,)`` material, section and hardware values (module docstring's formulas)."""
+        l1, l2 = geometry.proximal_m, geometry.distal_m
+        lin_mass = (density_kg_m3 * area_m2)[:, None]
+        return cls(
+            geometry=geometry,
+            cantilever_n_per_m=3.0 * young_pa[:, None] * i_inplane_m4[:, None] / l1**3,
+            elbow_kg=CANTILEVER_TIP_MASS_FRACTION * lin_mass * l1 + elbow_joint_kg[:, None],
+            distal_kg=lin_mass * l2,
+            platform_joint_kg=platform_joint_kg,
+            platform_kg=platform_kg,
+            platform_izz_kg_m2=platform_izz_kg_m2,
+        )
+
+    @classmethod
+    def of(cls, config: Manipulator) -> InplaneArrays:
+        """One description (``G = 1``)."""
+        sec, mat, hw = config.section, config.material, config.hardware
+
+        def one(v: float) -> np.ndarray:
+            return np.array([v], float)
+
+        return cls.build(
+            GeometryArrays.of(config.geometry), young_pa=one(mat.young_pa), density_kg_m3=one(mat.density_kg_m3),
+            area_m2=one(sec.area_m2), i_inplane_m4=one(sec.i_inplane_m4), elbow_joint_kg=one(hw.elbow_joint.mass_kg),
+            platform_joint_kg=one(hw.platform_joint.mass_kg), platform_kg=one(hw.platform.mass_kg + hw.payload.mass_kg),
+            platform_izz_kg_m2=one(hw.platform.inertia_kg_m2[2] + hw.payload.inertia_kg_m2[2]),
+        )  # fmt: skip
 
 
 def inplane_first_frequencies(config: Manipulator, poses: Sequence[Pose]) -> np.ndarray:
@@ -42,28 +95,38 @@ def inplane_first_frequencies(config: Manipulator, poses: Sequence[Pose]) -> np.
     Vectorised over the poses (about a microsecond per pose), so that geometry searches can afford
     thousands of evaluations.
     """
-    g = config.geometry
-    sec, mat, hw = config.section, config.material, config.hardware
-    l1 = np.asarray(g.proximal_length_per_chain)[None, :]  # (1, 3): per chain
-    l2 = np.asarray(g.distal_length_per_chain)[None, :]
-    k_c = 3.0 * mat.young_pa * sec.i_inplane_m4 / l1**3
-    lin_mass = mat.density_kg_m3 * sec.area_m2
-    m_elbow = (CANTILEVER_TIP_MASS_FRACTION * lin_mass * l1 + hw.elbow_joint.mass_kg)[0]  # (3,)
-    m_dist = (lin_mass * l2)[0]  # (3,)
-    m_pin = hw.platform_joint.mass_kg
-    m_plat = hw.platform.mass_kg + hw.payload.mass_kg
-    i_plat = hw.platform.inertia_kg_m2[2] + hw.payload.inertia_kg_m2[2]
-    n = len(poses)
-    if n == 0:
+    if len(poses) == 0:
         return np.zeros(0)
     xyphi = np.array([[p.x_m, p.y_m, p.phi_rad] for p in poses])
-    many = assemble_many(g, xyphi[:, 0], xyphi[:, 1], xyphi[:, 2])  # the one vectorised inverse kinematics
-    reach = many.reachable
-    c = np.where(reach[:, None, None], many.c, 0.0)  # unreachable poses: finite placeholders, masked below
-    b = np.where(reach[:, None, None], many.b, 1.0)
-    a = many.a
-    r = c - xyphi[:, None, :2]
-    w = (b - a[None]) / l1[..., None]  # (n, 3, 2)
+    out: np.ndarray = inplane_batch(InplaneArrays.of(config), xyphi)[0]
+    return out
+
+
+def inplane_batch(arrays: InplaneArrays, xyphi: np.ndarray) -> np.ndarray:
+    """``(G, P)`` first in-plane frequencies (Hz) of ``G`` descriptions at ``P`` poses (``xyphi``: ``(P, 3)``, m
+    and rad); NaN where unreachable or (serially) singular. :func:`inplane_first_frequencies` is ``G = 1``."""
+    ga = arrays.geometry
+    n_g, n_p = len(ga.proximal_m), len(xyphi)
+    many = assemble_batch(ga, xyphi[:, 0], xyphi[:, 1], xyphi[:, 2])
+
+    def rows(v: np.ndarray) -> np.ndarray:  # (G, ...) per description -> (G * P, ...) per (description, pose)
+        out: np.ndarray = np.repeat(v, n_p, axis=0)
+        return out
+
+    def flat(v: np.ndarray) -> np.ndarray:  # (G, P, ...) -> (G * P, ...)
+        return v.reshape((n_g * n_p, *v.shape[2:]))
+
+    reach = flat(many.reachable)
+    l1, l2 = rows(ga.proximal_m), rows(ga.distal_m)
+    k_c, m_elbow, m_dist = rows(arrays.cantilever_n_per_m), rows(arrays.elbow_kg), rows(arrays.distal_kg)
+    m_pin, m_plat = rows(arrays.platform_joint_kg), rows(arrays.platform_kg)
+    i_plat = rows(arrays.platform_izz_kg_m2)
+    n = n_g * n_p
+    c = np.where(reach[:, None, None], flat(many.c), 0.0)  # unreachable poses: finite placeholders, masked below
+    b = np.where(reach[:, None, None], flat(many.b), 1.0)
+    a = rows(ga.base_points)
+    r = c - np.tile(xyphi[:, :2], (n_g, 1))[:, None, :]
+    w = (b - a) / l1[..., None]  # (n, 3, 2)
     u = (c - b) / l2[..., None]
     cross = w[..., 0] * u[..., 1] - w[..., 1] * u[..., 0]
     ok = reach & np.all(np.abs(cross) > 1e-9, axis=1)
@@ -79,16 +142,16 @@ def inplane_first_frequencies(config: Manipulator, poses: Sequence[Pose]) -> np.
     nrm = np.stack([-w[..., 1], w[..., 0]], axis=2)
     tb = nrm[..., :, None] * (jx / cross[..., None])[..., None, :]  # (n, 3, 2, 3)
     cc = np.einsum("nijk,nijl->nkl", tc, tc)
-    cc_d = np.einsum("nijk,nijl,i->nkl", tc, tc, m_dist / 6.0)
-    bb_e = np.einsum("nijk,nijl,i->nkl", tb, tb, m_elbow)
-    bb_d = np.einsum("nijk,nijl,i->nkl", tb, tb, m_dist / 6.0)
-    bc_d = np.einsum("nijk,nijl,i->nkl", tb, tc, m_dist / 6.0)
+    cc_d = np.einsum("nijk,nijl,ni->nkl", tc, tc, m_dist / 6.0)
+    bb_e = np.einsum("nijk,nijl,ni->nkl", tb, tb, m_elbow)
+    bb_d = np.einsum("nijk,nijl,ni->nkl", tb, tb, m_dist / 6.0)
+    bc_d = np.einsum("nijk,nijl,ni->nkl", tb, tc, m_dist / 6.0)
     mass = np.zeros((n, 3, 3))
     mass[:, 0, 0] = mass[:, 1, 1] = m_plat
     mass[:, 2, 2] = i_plat
-    mass += m_pin * cc + bb_e + bb_d + 0.5 * (bc_d + np.swapaxes(bc_d, 1, 2)) + cc_d
+    mass += m_pin[:, None, None] * cc + bb_e + bb_d + 0.5 * (bc_d + np.swapaxes(bc_d, 1, 2)) + cc_d
     out = np.full(n, np.nan)
     if np.any(ok):
         w2 = np.linalg.eigvals(np.linalg.solve(mass[ok], stiff[ok])).real.min(axis=1)
         out[ok] = np.sqrt(np.maximum(w2, 0.0)) / (2.0 * math.pi)
-    return out
+    return out.reshape(n_g, n_p)

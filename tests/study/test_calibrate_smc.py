@@ -137,33 +137,13 @@ def test_a_split_of_an_unknown_parameter_or_into_one_part_is_refused():
 def _study_surrogate(branch: tuple[int, int, int]):
     """The study's calibration problem (its data, priors and statements) on the in-plane surrogate, one elbow-branch
     class (as ``studies/calibration_runs_surrogate.py`` builds it)."""
-    import dataclasses
-    import re
-    from importlib.resources import files
+    from fpm_sim.study.calibrate.problem import study_problem
 
-    from fpm_sim.cli.common import load_manipulator
-    from fpm_sim.cli.identify import read_data_args
-    from fpm_sim.cli.main import build_parser
-    from fpm_sim.study.calibrate import CalibrationProblem, read_priors
-    from fpm_sim.study.identify import parameter_set
-
-    data = files("fpm_sim.data")
-    args = build_parser().parse_args(
-        ["calibrate", "--measured", f"{data.joinpath('measured_table4_train.csv')},reading=x+", "--priors",
-         str(data.joinpath("study_priors.toml")), "--out", "unused", "--free", "geometry,hardware,section-height"]
-    )  # fmt: skip
-    start = load_manipulator(args)
-    start = dataclasses.replace(start, geometry=dataclasses.replace(start.geometry, elbow_branch=branch))
-    groups, datasets, _ = read_data_args(args)
-    obs = tuple(o for ds in datasets for o in ds.observations)
-    names = parameter_set(start, groups).names
-    text = re.sub(r'\[parameters\."geometry\.elbow_branch"\][^\[]*', "", data.joinpath("study_priors.toml").read_text())
-    priors = read_priors("one_class.toml", names, text=text)
-    return CalibrationProblem(start, tuple(groups), priors, obs, (), model="inplane")
+    return study_problem(model="inplane", branch=branch)
 
 
 @pytest.mark.slow
-@pytest.mark.very_slow  # 710 s on the shared 2-core machine (three runs of ~229 000 calls, 210 000 of them stage 1's)
+@pytest.mark.very_slow  # ~45 s on the shared 2-core machine (three runs of ~229 000 calls, vectorised; 710 s one at a time)
 def test_three_seeds_of_the_study_calibration_on_the_surrogate():
     """Issue 31: on the study's problem (the in-plane surrogate, class (-1, -1, -1)) nested sampling's runs found
     the statements' region, 12-13 nats up, in 2 of 3 runs at 100 live points and 0 of 3 at 250

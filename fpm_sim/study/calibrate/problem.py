@@ -35,8 +35,9 @@ import numpy as np
 from fpm_sim.batch.pose_loop import fast_options
 from fpm_sim.config import ConfigError, Manipulator
 from fpm_sim.errors import FpmSimError
-from fpm_sim.kinematics import assemble_many
+from fpm_sim.kinematics import GeometryArrays, assemble_many
 from fpm_sim.study.calibrate.priors import Priors
+from fpm_sim.study.calibrate.vectorised import independent_log_likelihood, statements_batch
 from fpm_sim.study.discrepancy import covariance, gaussian_log_likelihood, pose_features
 from fpm_sim.study.identify.data import Observation
 from fpm_sim.study.identify.parameters import ParameterSet, parameter_set
@@ -46,9 +47,19 @@ from fpm_sim.study.readout import mixture_log_likelihood, read_probabilities, se
 from fpm_sim.study.rigs import subsystem_frequencies
 from fpm_sim.study.tables import SubsystemTest
 
-__all__ = ["MODELS", "CalibrationError", "CalibrationProblem", "FrequencyLikelihood", "log_sigmoid_soft"]
+__all__ = [
+    "MODELS",
+    "STUDY_GROUPS",
+    "CalibrationError",
+    "CalibrationProblem",
+    "FrequencyLikelihood",
+    "log_sigmoid_soft",
+    "study_problem",
+]
 
 MODELS = ("segments", "inplane")
+STUDY_GROUPS = ("geometry", "hardware", "section-height")
+"""The free groups of the study's calibration (docs/identification.md, "Bayesian updating")."""
 
 
 class CalibrationError(FpmSimError):
@@ -66,8 +77,7 @@ def log_sigmoid_soft(z: np.ndarray, eps: float) -> np.ndarray:
 
 def _independent_log_likelihood(residual: np.ndarray, sd: np.ndarray) -> float:
     """``sum_i log N(residual_i | 0, sd_i^2)``."""
-    r = residual / sd
-    return float(-0.5 * np.sum(r**2) - np.sum(np.log(sd)) - 0.5 * r.size * math.log(2 * math.pi))
+    return float(independent_log_likelihood(residual, sd))
 
 
 class FrequencyLikelihood:
@@ -319,7 +329,7 @@ class CalibrationProblem(FrequencyLikelihood):
         return [float(ELBOW_BRANCHES.index(self.base.geometry.elbow_branch))]
 
     @functools.cached_property
-    def _pose_array(self) -> np.ndarray:
+    def measured_pose_array(self) -> np.ndarray:
         """``(n, 3)`` the distinct measured poses (x_m, y_m, phi_rad)."""
         return np.array(sorted({(o.pose.x_m, o.pose.y_m, o.pose.phi_rad) for o in self.observations}))
 
@@ -337,7 +347,7 @@ class CalibrationProblem(FrequencyLikelihood):
             return False
         if not self.observations:
             return True
-        xyz = self._pose_array
+        xyz = self.measured_pose_array
         return bool(assemble_many(cfg.geometry, xyz[:, 0], xyz[:, 1], xyz[:, 2]).reachable.all())
 
     def split(self, theta: np.ndarray) -> tuple[np.ndarray, float, tuple[int, int, int]]:
@@ -382,22 +392,8 @@ class CalibrationProblem(FrequencyLikelihood):
 
     def statements_log_likelihood(self, cfg: Manipulator) -> float:
         """The enabled study statements' soft terms (:mod:`.priors`) under ``cfg``."""
-        total = 0.0
-        a = self.priors.singular_at_phi0
-        g = cfg.geometry
-        if a is not None:
-            xy = np.asarray(a.poses_mm, float) * 1e-3
-            at0 = assemble_many(g, xy[:, 0], xy[:, 1], 0.0)
-            turned = assemble_many(g, xy[:, 0], xy[:, 1], a.turn_rad)
-            z = np.minimum((a.near - at0.parallel) / a.width, (turned.singularity - a.near) / a.width)
-            # the product of two sigmoids, bounded by the smaller: the min keeps one soft threshold per pose
-            total += float(np.sum(log_sigmoid_soft(z, a.eps)))
-        b = self.priors.measured_poses_clear
-        if b is not None and self.observations:
-            p = self._pose_array
-            m = assemble_many(g, p[:, 0], p[:, 1], p[:, 2]).singularity
-            total += float(np.sum(log_sigmoid_soft((m - b.min_measure) / b.width, b.eps)))
-        return total
+        poses = self.measured_pose_array if self.observations else None
+        return float(statements_batch(self.priors, GeometryArrays.of(cfg.geometry), poses)[0])
 
     def cheap_log_likelihood(self, theta: np.ndarray) -> float:
         """``-inf`` for an impossible description (invalid, or a measured pose unreachable), else the enabled
@@ -407,7 +403,7 @@ class CalibrationProblem(FrequencyLikelihood):
         except (ConfigError, ValueError):
             return -math.inf
         if self.observations:
-            xyz = self._pose_array
+            xyz = self.measured_pose_array
             if not assemble_many(cfg.geometry, xyz[:, 0], xyz[:, 1], xyz[:, 2]).reachable.all():
                 return -math.inf
         return self.statements_log_likelihood(cfg)
@@ -419,7 +415,7 @@ class CalibrationProblem(FrequencyLikelihood):
         except (ConfigError, ValueError):
             return -math.inf
         if self.observations:  # an unreachable measured pose: -inf before any model is built (cheap)
-            xyz = self._pose_array
+            xyz = self.measured_pose_array
             if not assemble_many(cfg.geometry, xyz[:, 0], xyz[:, 1], xyz[:, 2]).reachable.all():
                 return -math.inf
         _, d, _ = self.split(theta)
@@ -457,3 +453,28 @@ class CalibrationProblem(FrequencyLikelihood):
                 return -math.inf
             ll += _independent_log_likelihood(f_rig - self._measured[n:], self._sigma[n:])
         return ll + self.statements_log_likelihood(cfg)
+
+
+def study_problem(*, model: str = "segments", branch: tuple[int, int, int] | None = None) -> CalibrationProblem:
+    """The study's calibration as docs/identification.md runs it: the embedded default, the study's measured first
+    frequencies (``measured_table4_train.csv``, reading x+), the free groups :data:`STUDY_GROUPS` and the shipped
+    priors and statements (``study_priors.toml``). ``branch``: the elbow branches fixed to one class (their prior
+    left out) instead of sampled; ``model``: :attr:`CalibrationProblem.model`."""
+    import re
+    from importlib.resources import files
+
+    from fpm_sim.config import default_config
+    from fpm_sim.study.calibrate.priors import read_priors
+    from fpm_sim.study.identify.data import read_measured_csv
+    from fpm_sim.study.poses import parse_reading
+
+    data = files("fpm_sim.data")
+    start = default_config()
+    text = data.joinpath("study_priors.toml").read_text()
+    if branch is not None:
+        start = start.replace(geometry=dataclasses.replace(start.geometry, elbow_branch=branch))
+        text = re.sub(r'\[parameters\."geometry\.elbow_branch"\][^\[]*', "", text)
+    measured = read_measured_csv(str(data.joinpath("measured_table4_train.csv")), reading=parse_reading("x+"))
+    names = parameter_set(start, list(STUDY_GROUPS)).names
+    priors = read_priors("study_priors.toml", names, text=text)
+    return CalibrationProblem(start, STUDY_GROUPS, priors, tuple(measured.observations), (), model=model)

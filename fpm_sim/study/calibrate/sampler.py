@@ -33,6 +33,12 @@ from fpm_sim.study.calibrate.runs import (
     combine_parts,
 )
 from fpm_sim.study.calibrate.smc import SmcSettings, merge_smc, smc_results, two_stage
+from fpm_sim.study.calibrate.vectorised import (
+    cheap_log_likelihood_batch,
+    inplane_log_likelihood_batch,
+    prior_transform_batch,
+    supports,
+)
 from fpm_sim.study.loo import LeaveOneOut, leave_one_out, loo_from_components
 from fpm_sim.study.readout import draws_components, responsibilities
 
@@ -600,24 +606,45 @@ def _run_class(
     return res
 
 
+def _class_thetas(u: np.ndarray, klass: int | None, part: Part = None) -> np.ndarray:
+    """The problem's coordinates (the class's last) at unit-cube rows ``u`` of class ``klass``'s part: row ``i`` is
+    ``_with_class(_class_prior_transform(u[i], klass, part), klass)``, vectorised."""
+    assert _PROBLEM is not None, "the pool was started without _init_worker"
+    u = np.array(u, float)
+    if part is not None:
+        i, n, p = part
+        u[:, i] = (p + u[:, i]) / n
+    if klass is not None:
+        u = np.column_stack([u, np.full(len(u), (klass + 0.5) / len(_PROBLEM.branch_classes))])
+    return prior_transform_batch(_PROBLEM, u)
+
+
 def _smc_cheap(u: np.ndarray, klass: int | None, part: Part = None) -> tuple[np.ndarray, np.ndarray]:
-    """SMC's first stage at unit-cube rows ``u``: ``(0, log L_cheap)``."""
+    """SMC's first stage at unit-cube rows ``u``: ``(0, log L_cheap)`` (vectorised over the rows where the problem
+    has it, :mod:`~fpm_sim.study.calibrate.vectorised`)."""
     assert _PROBLEM is not None, "the pool was started without _init_worker"
     p = _PROBLEM
+    if supports(p):
+        return np.zeros(len(u)), cheap_log_likelihood_batch(p, _class_thetas(u, klass, part))  # type: ignore[arg-type]
     cheap = [p.cheap_log_likelihood(_with_class(_class_prior_transform(x, klass, part), klass)) for x in u]
     return np.zeros(len(u)), np.asarray(cheap, float)
 
 
 def _smc_full(u: np.ndarray, klass: int | None, pool: Any, part: Part = None) -> tuple[np.ndarray, np.ndarray]:
     """SMC's second stage at unit-cube rows ``u``: ``(log L_cheap, log L - log L_cheap)``, the (expensive) full
-    likelihood evaluated only where the cheap part is finite (on ``pool``'s workers when given)."""
-    thetas = [_with_class(_class_prior_transform(x, klass, part), klass) for x in u]
+    likelihood evaluated only where the cheap part is finite (on ``pool``'s workers when given; vectorised on the
+    in-plane surrogate)."""
+    assert _PROBLEM is not None, "the pool was started without _init_worker"
     _, cheap = _smc_cheap(u, klass, part)
-    todo = [t for t, c in zip(thetas, cheap) if np.isfinite(c)]
-    ll = _worker_log_likelihood
-    full = pool.map(ll, todo) if pool is not None else [ll(t) for t in todo]
+    ok = np.isfinite(cheap)
+    if supports(_PROBLEM) and getattr(_PROBLEM, "model", None) == "inplane":
+        full = inplane_log_likelihood_batch(_PROBLEM, _class_thetas(u[ok], klass, part))  # type: ignore[arg-type]
+    else:
+        todo = [_with_class(_class_prior_transform(x, klass, part), klass) for x in u[ok]]
+        ll = _worker_log_likelihood
+        full = np.asarray(pool.map(ll, todo) if pool is not None else [ll(t) for t in todo], float)
     data = np.full(len(u), -math.inf)
-    data[np.isfinite(cheap)] = np.asarray(full, float) - cheap[np.isfinite(cheap)]
+    data[ok] = full - cheap[ok]
     return cheap, np.where(np.isfinite(data), data, -math.inf)
 
 

@@ -1,0 +1,195 @@
+"""The study calibration's cheap likelihoods for many particles at once: the support and the study's statements
+(closed-form kinematics), and the in-plane surrogate's data likelihood, vectorised over descriptions.
+
+A sampler's particles are thousands of descriptions; building each as a :class:`~fpm_sim.config.Manipulator` and
+assembling it costs about a millisecond in Python. Here the free parameters of every particle become arrays at once
+(:func:`~fpm_sim.study.identify.parameters.apply_parameters_batch`), the kinematics runs over (description, pose)
+(:func:`~fpm_sim.kinematics.assemble_batch`) and the surrogate over the same
+(:func:`~fpm_sim.study.inplane_surrogate.inplane_batch`): microseconds per particle. Row ``i`` of every function
+equals what :class:`~fpm_sim.study.calibrate.problem.CalibrationProblem` gives for ``thetas[i]`` one at a time
+(``tests/study/test_calibrate_vectorised.py``: to round-off, ``-inf`` where it is ``-inf``).
+
+Only the 3RRR's problem (:func:`supports`): a described architecture has no closed-form kinematics here.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from fpm_sim.kinematics import GeometryArrays, assemble_batch
+from fpm_sim.study.calibrate.priors import Priors
+from fpm_sim.study.identify.parameters import apply_parameters_batch
+from fpm_sim.study.identify.problem import ELBOW_BRANCHES
+from fpm_sim.study.inplane_surrogate import InplaneArrays, inplane_batch
+
+if TYPE_CHECKING:
+    from fpm_sim.study.calibrate.problem import CalibrationProblem, FrequencyLikelihood
+
+__all__ = [
+    "cheap_log_likelihood_batch",
+    "inplane_arrays",
+    "inplane_log_likelihood_batch",
+    "prior_transform_batch",
+    "statements_batch",
+    "supports",
+]
+
+
+def supports(problem: FrequencyLikelihood) -> bool:
+    """Whether ``problem`` has the vectorised likelihoods: the 3RRR's problem with first in-plane frequencies only,
+    independent errors (no correlation length), no latent mode read and no rig tests."""
+    from fpm_sim.study.calibrate.problem import CalibrationProblem
+
+    return (
+        isinstance(problem, CalibrationProblem)
+        and not problem.rig_tests
+        and bool(problem.observations)
+        and problem.priors.length_scale is None
+        and problem.priors.mode_read is None
+        and all(o.mode == 1 and o.label != "out_of_plane" for o in problem.observations)
+    )
+
+
+def prior_transform_batch(problem: FrequencyLikelihood, u: np.ndarray) -> np.ndarray:
+    """:meth:`~fpm_sim.study.calibrate.problem.FrequencyLikelihood.prior_transform` of every row of ``u``."""
+    u = np.atleast_2d(np.asarray(u, float))
+    theta = np.empty((len(u), problem.ndim))
+    k = 0
+    for p in (*problem.priors.parameters, *problem.priors.hyperpriors):
+        theta[:, k] = p.transform(u[:, k])
+        k += 1
+    if problem.priors.sample_branches:
+        theta[:, k] = np.minimum((u[:, k] * len(ELBOW_BRANCHES)).astype(int), len(ELBOW_BRANCHES) - 1)
+    return theta
+
+
+def _branches(problem: CalibrationProblem, thetas: np.ndarray) -> np.ndarray:
+    """``(n, 3)`` each row's elbow branches (the base's when they are not sampled)."""
+    if not problem.priors.sample_branches:
+        return np.broadcast_to(np.asarray(problem.base.geometry.elbow_branch, float), (len(thetas), 3))
+    k = problem.ndim - 1
+    return np.asarray(ELBOW_BRANCHES, float)[np.rint(thetas[:, k]).astype(int)]
+
+
+def inplane_arrays(problem: CalibrationProblem, thetas: np.ndarray) -> tuple[InplaneArrays, np.ndarray]:
+    """The descriptions at the rows of ``thetas`` as the surrogate's arrays, and ``(n,)`` which rows are valid
+    descriptions (positive lengths and masses, the platform inside the base circle: what
+    :func:`~fpm_sim.config.validate` refuses of the fields a free parameter edits)."""
+    base = problem.base
+    n_free = len(problem.priors.parameters)
+    f = apply_parameters_batch(base, problem.parameters.parameters, thetas[:, :n_free])
+    n = len(thetas)
+    g, sec, mat, hw = base.geometry, base.section, base.material, base.hardware
+
+    def get(path: str, default: object) -> np.ndarray:
+        if path in f:
+            return f[path]
+        row = np.asarray(default, float)
+        return np.repeat(row[None], n, axis=0)
+
+    def lump(name: str) -> np.ndarray:
+        m = getattr(hw, name)
+        return get(f"hardware.{name}", (m.mass_kg, *m.inertia_kg_m2))
+
+    br = get("geometry.base_radius_m", g.base_radius_per_chain)
+    pr = get("geometry.platform_radius_m", g.platform_radius_per_chain)
+    l1 = get("geometry.proximal_length_m", g.proximal_length_per_chain)
+    l2 = get("geometry.distal_length_m", g.distal_length_per_chain)
+    thickness, height = get("section.thickness_m", sec.thickness_m), get("section.height_m", sec.height_m)
+    plat, payload = lump("platform"), lump("payload")
+    elbow, pin = lump("elbow_joint"), lump("platform_joint")
+    ga = GeometryArrays.from_polar(
+        base_radius_m=br, base_angles_rad=get("geometry.base_angles_rad", g.base_angles_rad), platform_radius_m=pr,
+        platform_angles_rad=get("geometry.platform_angles_rad", g.platform_angles_rad), proximal_m=l1, distal_m=l2,
+        elbow_branch=_branches(problem, thetas),
+    )  # fmt: skip
+    arrays = InplaneArrays.build(
+        ga, young_pa=get("material.young_pa", mat.young_pa),
+        density_kg_m3=get("material.density_kg_m3", mat.density_kg_m3), area_m2=thickness * height,
+        i_inplane_m4=height * thickness**3 / 12.0, elbow_joint_kg=elbow[:, 0], platform_joint_kg=pin[:, 0],
+        platform_kg=plat[:, 0] + payload[:, 0], platform_izz_kg_m2=plat[:, 3] + payload[:, 3],
+    )  # fmt: skip
+    with np.errstate(invalid="ignore"):
+        valid = (
+            np.all((br > 0) & (l1 > 0) & (l2 > 0) & (pr >= 0) & np.isfinite(br + l1 + l2 + pr), axis=1)
+            & (np.max(pr, axis=1) < np.min(br, axis=1))
+            & (thickness > 0) & (height > 0)
+            & np.all(np.stack([plat, payload, elbow, pin])[..., 0] >= 0, axis=0)
+            & (plat[:, 0] + payload[:, 0] > 0)
+        )  # fmt: skip
+    return arrays, valid
+
+
+def statements_batch(priors: Priors, ga: GeometryArrays, measured_xyphi: np.ndarray | None) -> np.ndarray:
+    """``(G,)`` the enabled study statements' soft terms (:mod:`~fpm_sim.study.calibrate.priors`) of ``G``
+    geometries; ``measured_xyphi``: ``(P, 3)`` the distinct measured poses (m, rad), ``None`` without data.
+    :meth:`~fpm_sim.study.calibrate.problem.CalibrationProblem.statements_log_likelihood` is ``G = 1``."""
+    from fpm_sim.study.calibrate.problem import log_sigmoid_soft
+
+    total = np.zeros(len(ga.proximal_m))
+    a = priors.singular_at_phi0
+    if a is not None:
+        xy = np.asarray(a.poses_mm, float) * 1e-3
+        at0 = assemble_batch(ga, xy[:, 0], xy[:, 1], 0.0)
+        turned = assemble_batch(ga, xy[:, 0], xy[:, 1], a.turn_rad)
+        z = np.minimum((a.near - at0.parallel) / a.width, (turned.singularity - a.near) / a.width)
+        # the product of two sigmoids, bounded by the smaller: the min keeps one soft threshold per pose
+        total += np.sum(log_sigmoid_soft(z, a.eps), axis=1)
+    b = priors.measured_poses_clear
+    if b is not None and measured_xyphi is not None:
+        p = measured_xyphi
+        m = assemble_batch(ga, p[:, 0], p[:, 1], p[:, 2]).singularity
+        total += np.sum(log_sigmoid_soft((m - b.min_measure) / b.width, b.eps), axis=1)
+    return total
+
+
+def _support_and_statements(problem: CalibrationProblem, thetas: np.ndarray) -> tuple[InplaneArrays, np.ndarray]:
+    """The surrogate's arrays, and ``(n,)`` the cheap log-likelihood (``-inf`` off the support)."""
+    arrays, valid = inplane_arrays(problem, thetas)
+    xyz = problem.measured_pose_array
+    reach = assemble_batch(arrays.geometry, xyz[:, 0], xyz[:, 1], xyz[:, 2]).reachable.all(axis=1)
+    out = np.full(len(thetas), -math.inf)
+    ok = valid & reach
+    out[ok] = statements_batch(problem.priors, _rows(arrays.geometry, ok), xyz)
+    return arrays, out
+
+
+def _rows(ga: GeometryArrays, keep: np.ndarray) -> GeometryArrays:
+    return GeometryArrays(*(getattr(ga, f)[keep] for f in ga.__dataclass_fields__))
+
+
+def cheap_log_likelihood_batch(problem: CalibrationProblem, thetas: np.ndarray) -> np.ndarray:
+    """``(n,)`` :meth:`~fpm_sim.study.calibrate.problem.CalibrationProblem.cheap_log_likelihood` of every row."""
+    return _support_and_statements(problem, np.atleast_2d(thetas))[1]
+
+
+def inplane_log_likelihood_batch(problem: CalibrationProblem, thetas: np.ndarray) -> np.ndarray:
+    """``(n,)`` the full log-likelihood (data and statements) with the in-plane surrogate as the model: what
+    :meth:`~fpm_sim.study.calibrate.problem.CalibrationProblem.log_likelihood` gives with ``model = "inplane"``."""
+    thetas = np.atleast_2d(thetas)
+    arrays, cheap = _support_and_statements(problem, thetas)
+    ok = np.isfinite(cheap)
+    out = np.full(len(thetas), -math.inf)
+    if not ok.any():
+        return out
+    fields = list(arrays.__dataclass_fields__)[1:]  # after the geometry
+    sub = InplaneArrays(_rows(arrays.geometry, ok), *(getattr(arrays, k)[ok] for k in fields))
+    poses = np.array([[o.pose.x_m, o.pose.y_m, o.pose.phi_rad] for o in problem.observations])
+    freq = inplane_batch(sub, poses)  # (m, n_obs)
+    pr = problem.priors
+    d = thetas[ok, len(pr.parameters)] if pr.discrepancy is not None else np.full(ok.sum(), pr.discrepancy_fixed)
+    sd = np.sqrt(problem.sigma[None] ** 2 + (d[:, None] * freq) ** 2)  # as noise_sd (no rig tests)
+    data = independent_log_likelihood(freq - problem.measured[None], sd)
+    out[ok] = np.where(np.all(np.isfinite(freq), axis=1), data + cheap[ok], -math.inf)
+    return out
+
+
+def independent_log_likelihood(residual: np.ndarray, sd: np.ndarray) -> np.ndarray:
+    """``sum_i log N(residual_i | 0, sd_i^2)`` over the last axis."""
+    r = residual / sd
+    out: np.ndarray = -0.5 * np.sum(r**2, axis=-1) - np.sum(np.log(sd), axis=-1)
+    out -= 0.5 * r.shape[-1] * math.log(2 * math.pi)
+    return out

@@ -1,0 +1,139 @@
+"""Where the calibration's best region hides, and which searches reach it (issue 31; docs/identification.md,
+"Why independent runs still disagree", "The needle"). The study's calibration problem on the in-plane surrogate,
+elbow branches (-1, -1, -1), as in ``calibration_runs_surrogate.py``:
+
+    python studies/calibration_needle.py stage1 --seed 2 --particles 1000     # writes out/needle/stage1_seed2.npz
+    python studies/calibration_needle.py stage2 --stage1 out/needle/stage1_seed2.npz --particles 200 --seed 0
+    python studies/calibration_needle.py powell --stage1 out/needle/stage1_seed2.npz --starts 12
+    python studies/calibration_needle.py de --seed 0 --generations 400 --popsize 15
+
+``stage1``: the SMC's first stage (prior -> prior x the study's statements), its share of particles at the compact
+geometry (base radius < 0.16 m) and their best data log-likelihood against the rest's. ``stage2``: the data stage
+from a saved stage-1 population. ``powell``: local searches of the full log-likelihood from stage-1 particles at
+the compact geometry and elsewhere. ``de``: a global search (scipy's differential evolution) of it. The surrogate
+(``model="inplane"``) is for checks of the sampler, never for a reported result.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+from calibration_runs_surrogate import problem
+from scipy.optimize import differential_evolution, minimize
+
+from fpm_sim.study.calibrate.smc import SmcSettings, _first_data_step, _from_prior, _move, temper
+
+COMPACT_M = 0.16
+"""Base radius below which a geometry counts as the compact region (the runs that found it: ~0.115 m)."""
+
+PROB = problem((-1, -1, -1))
+BASE = PROB.names.index("geometry.base_radius_m")
+
+
+def cheap(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return np.zeros(len(u)), np.array([PROB.cheap_log_likelihood(PROB.prior_transform(x)) for x in u])
+
+
+def full(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    th = [PROB.prior_transform(x) for x in u]
+    c = np.array([PROB.cheap_log_likelihood(t) for t in th])
+    f = np.array([PROB.log_likelihood(t) if np.isfinite(ci) else -np.inf for t, ci in zip(th, c)])
+    with np.errstate(invalid="ignore"):
+        return c, np.where(np.isfinite(f), f - c, -np.inf)
+
+
+def stage1(a: argparse.Namespace) -> None:
+    rng = np.random.default_rng(a.seed)
+    s1 = SmcSettings(particles=a.particles, moves=10.0)
+    start = _from_prior(cheap, PROB.ndim, s1, rng)
+    assert start is not None
+    u, _, lc, log_mass, _, _ = start
+    one = temper(u, np.zeros(len(u)), lc, cheap, s1, rng)
+    th = np.array([PROB.prior_transform(x) for x in one.u])
+    ll = np.array([PROB.log_likelihood(x) for x in th])
+    st = np.array([PROB.statements_log_likelihood(PROB.config(x)) for x in th])
+    small = th[:, BASE] < COMPACT_M
+    best_small = f"{(ll - st)[small].max():.1f}" if small.any() else "none"
+    print(f"stage 1, seed {a.seed}: ln Z {one.log_evidence + log_mass:.2f}; compact share {small.mean():.3f} "
+          f"({small.sum()} particles); best data log L at the compact geometry {best_small}, elsewhere "
+          f"{(ll - st)[~small].max():.1f}")  # fmt: skip
+    out = Path(a.out) / f"stage1_seed{a.seed}.npz"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    np.savez(out, u=one.u, th=th, ll=ll)
+
+
+def stage2(a: argparse.Namespace) -> None:
+    z = np.load(a.stage1)
+    rng = np.random.default_rng(a.seed)
+    s2 = SmcSettings(particles=a.particles, moves=a.moves)
+    u, la, lb, beta, lz, var = _first_data_step(z["u"], full, s2, rng)
+    u, la, lb, _, _, _ = _move(u, la, lb, beta, full, s2, rng, 1.0)
+    two = temper(u, la, lb, full, s2, rng, beta=beta)
+    th = np.array([PROB.prior_transform(x) for x in two.u])
+    print(f"stage 2 from {a.stage1}, {a.particles} particles, {a.moves:g} moves, seed {a.seed}: ln Z_2 "
+          f"{lz + two.log_evidence:.2f} +- {math.sqrt(var + two.log_evidence_var):.2f}; compact share "
+          f"{(th[:, BASE] < COMPACT_M).mean():.2f}; best log L {(two.log_a + two.log_b).max():.2f}")  # fmt: skip
+
+
+def neg_log_l(x: np.ndarray) -> float:
+    if np.any(x < 0) or np.any(x > 1):
+        return 1e4
+    v = PROB.log_likelihood(PROB.prior_transform(x))
+    return -v if np.isfinite(v) else 1e4
+
+
+def powell(a: argparse.Namespace) -> None:
+    z = np.load(a.stage1)
+    small = np.flatnonzero(z["th"][:, BASE] < COMPACT_M)
+    _, first = np.unique(z["u"], axis=0, return_index=True)
+    others = np.random.default_rng(0).choice(np.setdiff1d(first, small), a.starts, replace=False)
+    for tag, idx in (("compact", small[: a.starts]), ("elsewhere", others)):
+        for i in idx:
+            r = minimize(neg_log_l, z["u"][i], method="Powell", options={"maxfev": 4000, "xtol": 1e-4, "ftol": 1e-6})
+            end = PROB.prior_transform(r.x)[BASE]
+            print(f"{tag}: log L {z['ll'][i]:.1f} -> {-r.fun:.2f}, base radius {z['th'][i, BASE]:.3f} -> {end:.3f} m")
+
+
+def de(a: argparse.Namespace) -> None:
+    t = time.perf_counter()
+    r = differential_evolution(neg_log_l, [(0.0, 1.0)] * PROB.ndim, seed=a.seed, maxiter=a.generations,
+                               popsize=a.popsize, tol=1e-8, polish=False, init="sobol")  # fmt: skip
+    print(f"differential evolution, seed {a.seed}: best log L {-r.fun:.2f}, base radius "
+          f"{PROB.prior_transform(r.x)[BASE]:.3f} m, {r.nfev} calls, {time.perf_counter() - t:.0f} s")  # fmt: skip
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = p.add_subparsers(required=True)
+    s = sub.add_parser("stage1")
+    s.add_argument("--seed", type=int, default=2)
+    s.add_argument("--particles", type=int, default=1000)
+    s.add_argument("--out", default="out/needle")
+    s.set_defaults(func=stage1)
+    s = sub.add_parser("stage2")
+    s.add_argument("--stage1", required=True)
+    s.add_argument("--particles", type=int, default=200)
+    s.add_argument("--moves", type=float, default=3.0)
+    s.add_argument("--seed", type=int, default=0)
+    s.set_defaults(func=stage2)
+    s = sub.add_parser("powell")
+    s.add_argument("--stage1", required=True)
+    s.add_argument("--starts", type=int, default=12)
+    s.set_defaults(func=powell)
+    s = sub.add_parser("de")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--generations", type=int, default=400)
+    s.add_argument("--popsize", type=int, default=15)
+    s.set_defaults(func=de)
+    warnings.simplefilter("ignore")
+    a = p.parse_args()
+    a.func(a)
+
+
+if __name__ == "__main__":
+    main()
