@@ -215,36 +215,31 @@ def singularity_measure(g: Geometry, asm: Assembly) -> SingularityMeasure:
 
 
 @dataclass(frozen=True)
-class Assemblies:
-    """Many poses assembled at once: arrays over a leading pose axis (see :func:`assemble_many`).
+class BatchAssemblies:
+    """:func:`assemble_batch`'s result: arrays over a leading ``(G, P)``, geometries by poses.
 
     Attributes
     ----------
-    x_m, y_m, phi_rad
-        ``(n,)`` the poses.
-    a
-        ``(3, 2)`` motor points (m).
     b, c
-        ``(n, 3, 2)`` elbow and platform-joint points (m); ``b`` is NaN for a chain that cannot reach.
+        ``(G, P, 3, 2)`` elbow and platform-joint points (m); ``b`` is NaN for a chain that cannot reach.
+    r
+        ``(G, P, 3, 2)`` the platform joints from the platform's centre, ``c - p`` (m).
     motor_angles_rad
-        ``(n, 3)``; NaN for a chain that cannot reach.
+        ``(G, P, 3)``; NaN for a chain that cannot reach.
     distance_m
-        ``(n, 3)`` motor-to-platform-joint distance of each chain.
+        ``(G, P, 3)`` motor-to-platform-joint distance of each chain.
     reachable
-        ``(n,)`` every chain spans its distance.
+        ``(G, P)`` every chain spans its distance.
     serial, parallel
-        ``(n,)`` the two singularity measures (module docstring); NaN where unreachable.
+        ``(G, P)`` the two singularity measures (module docstring); NaN where unreachable.
     det_jx
-        ``(n,)`` ``det(Jx)`` with the rotation column over the characteristic length (its sign flips across
+        ``(G, P)`` ``det(Jx)`` with the rotation column over the characteristic length (its sign flips across
         a parallel singularity); NaN where unreachable.
     """
 
-    x_m: np.ndarray
-    y_m: np.ndarray
-    phi_rad: np.ndarray
-    a: np.ndarray
     b: np.ndarray
     c: np.ndarray
+    r: np.ndarray
     motor_angles_rad: np.ndarray
     distance_m: np.ndarray
     reachable: np.ndarray
@@ -254,9 +249,28 @@ class Assemblies:
 
     @property
     def singularity(self) -> np.ndarray:
-        """``(n,)`` singularity measure ``min(serial, parallel)`` (NaN where unreachable)."""
+        """Singularity measure ``min(serial, parallel)`` (NaN where unreachable)."""
         measure: np.ndarray = np.minimum(self.serial, self.parallel)
         return measure
+
+
+@dataclass(frozen=True)
+class Assemblies(BatchAssemblies):
+    """Many poses of one geometry assembled at once (see :func:`assemble_many`): the fields of
+    :class:`BatchAssemblies` without the geometry axis (``b``: ``(n, 3, 2)``, ``reachable``: ``(n,)``, ...), and:
+
+    Attributes
+    ----------
+    x_m, y_m, phi_rad
+        ``(n,)`` the poses.
+    a
+        ``(3, 2)`` motor points (m).
+    """
+
+    x_m: np.ndarray
+    y_m: np.ndarray
+    phi_rad: np.ndarray
+    a: np.ndarray
 
     def assembly(self, k: int, pose: Pose | None = None) -> Assembly:
         """Pose ``k`` as an :class:`Assembly` (it must be reachable); ``pose`` is recorded in it if given."""
@@ -337,28 +351,6 @@ class GeometryArrays:
                    char)  # fmt: skip
 
 
-@dataclass(frozen=True)
-class BatchAssemblies:
-    """:func:`assemble_batch`'s result: arrays over ``(G, P)``, geometries by poses (fields as :class:`Assemblies`
-    has them; ``c - p`` is ``r``)."""
-
-    b: np.ndarray
-    c: np.ndarray
-    r: np.ndarray
-    motor_angles_rad: np.ndarray
-    distance_m: np.ndarray
-    reachable: np.ndarray
-    serial: np.ndarray
-    parallel: np.ndarray
-    det_jx: np.ndarray
-
-    @property
-    def singularity(self) -> np.ndarray:
-        """``(G, P)`` ``min(serial, parallel)`` (NaN where unreachable)."""
-        measure: np.ndarray = np.minimum(self.serial, self.parallel)
-        return measure
-
-
 def assemble_batch(ga: GeometryArrays, x_m: ArrayLike, y_m: ArrayLike, phi_rad: ArrayLike) -> BatchAssemblies:
     """Inverse kinematics and singularity measures of ``G`` geometries at ``P`` poses at once (vectorised over both;
     no checks, no warnings): the formulas of :func:`assemble_many`, which calls this with ``G = 1``."""
@@ -413,6 +405,7 @@ def assemble_many(g: Geometry, x_m: ArrayLike, y_m: ArrayLike, phi_rad: ArrayLik
         a=ga.base_points[0],
         b=many.b[0],
         c=many.c[0],
+        r=many.r[0],
         motor_angles_rad=many.motor_angles_rad[0],
         distance_m=many.distance_m[0],
         reachable=many.reachable[0],

@@ -28,7 +28,7 @@ import dataclasses
 import functools
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -37,7 +37,7 @@ from fpm_sim.config import ConfigError, Manipulator
 from fpm_sim.errors import FpmSimError
 from fpm_sim.kinematics import GeometryArrays, assemble_many
 from fpm_sim.study.calibrate.priors import Priors
-from fpm_sim.study.calibrate.vectorised import independent_log_likelihood, statements_batch
+from fpm_sim.study.calibrate.terms import independent_log_likelihood, log_sigmoid_soft, statements_batch
 from fpm_sim.study.discrepancy import covariance, gaussian_log_likelihood, pose_features
 from fpm_sim.study.identify.data import Observation
 from fpm_sim.study.identify.parameters import ParameterSet, parameter_set
@@ -66,15 +66,6 @@ class CalibrationError(FpmSimError):
     """The calibration cannot run as asked (no data, a checkpoint that does not match, ...)."""
 
 
-def log_sigmoid_soft(z: np.ndarray, eps: float) -> np.ndarray:
-    """``log(eps + (1 - eps) sigmoid(z))`` elementwise (NaN counts as ``sigmoid = 0``)."""
-    z = np.where(np.isfinite(z), z, -np.inf)
-    with np.errstate(over="ignore"):
-        s = 1.0 / (1.0 + np.exp(-z))
-    out: np.ndarray = np.log(eps + (1.0 - eps) * s)
-    return out
-
-
 def _independent_log_likelihood(residual: np.ndarray, sd: np.ndarray) -> float:
     """``sum_i log N(residual_i | 0, sd_i^2)``."""
     return float(independent_log_likelihood(residual, sd))
@@ -94,6 +85,9 @@ class FrequencyLikelihood:
     groups: tuple[str, ...]
     """What is free, as the report names it (the 3RRR's groups, a described machine's dotted paths)."""
     segments: int
+    closed_form_kinematics: ClassVar[bool] = False
+    """Whether the problem is the 3RRR's, whose cheap likelihoods :mod:`~fpm_sim.study.calibrate.vectorised` gives
+    for many particles at once."""
 
     @functools.cached_property
     def _measured(self) -> np.ndarray:
@@ -268,6 +262,7 @@ class CalibrationProblem(FrequencyLikelihood):
     rig_tests: tuple[SubsystemTest, ...] = ()
     segments: int = 4
     subsystem_segments: int = 8
+    closed_form_kinematics: ClassVar[bool] = True
     model: str = "segments"
     """``"segments"``: the segment model (:func:`predict_observations`); ``"inplane"``: the analytic in-plane
     surrogate (:mod:`fpm_sim.study.inplane_surrogate`; first frequencies only, no rig tests): thousands of times

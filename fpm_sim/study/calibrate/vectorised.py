@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from fpm_sim.kinematics import GeometryArrays, assemble_batch
-from fpm_sim.study.calibrate.priors import Priors
+from fpm_sim.study.calibrate.terms import independent_log_likelihood, statements_batch
 from fpm_sim.study.identify.parameters import apply_parameters_batch
 from fpm_sim.study.identify.problem import ELBOW_BRANCHES
 from fpm_sim.study.inplane_surrogate import InplaneArrays, inplane_batch
@@ -33,7 +33,6 @@ __all__ = [
     "inplane_arrays",
     "inplane_log_likelihood_batch",
     "prior_transform_batch",
-    "statements_batch",
     "supports",
 ]
 
@@ -41,10 +40,8 @@ __all__ = [
 def supports(problem: FrequencyLikelihood) -> bool:
     """Whether ``problem`` has the vectorised likelihoods: the 3RRR's problem with first in-plane frequencies only,
     independent errors (no correlation length), no latent mode read and no rig tests."""
-    from fpm_sim.study.calibrate.problem import CalibrationProblem
-
     return (
-        isinstance(problem, CalibrationProblem)
+        getattr(problem, "closed_form_kinematics", False)
         and not problem.rig_tests
         and bool(problem.observations)
         and problem.priors.length_scale is None
@@ -123,29 +120,6 @@ def inplane_arrays(problem: CalibrationProblem, thetas: np.ndarray) -> tuple[Inp
     return arrays, valid
 
 
-def statements_batch(priors: Priors, ga: GeometryArrays, measured_xyphi: np.ndarray | None) -> np.ndarray:
-    """``(G,)`` the enabled study statements' soft terms (:mod:`~fpm_sim.study.calibrate.priors`) of ``G``
-    geometries; ``measured_xyphi``: ``(P, 3)`` the distinct measured poses (m, rad), ``None`` without data.
-    :meth:`~fpm_sim.study.calibrate.problem.CalibrationProblem.statements_log_likelihood` is ``G = 1``."""
-    from fpm_sim.study.calibrate.problem import log_sigmoid_soft
-
-    total = np.zeros(len(ga.proximal_m))
-    a = priors.singular_at_phi0
-    if a is not None:
-        xy = np.asarray(a.poses_mm, float) * 1e-3
-        at0 = assemble_batch(ga, xy[:, 0], xy[:, 1], 0.0)
-        turned = assemble_batch(ga, xy[:, 0], xy[:, 1], a.turn_rad)
-        z = np.minimum((a.near - at0.parallel) / a.width, (turned.singularity - a.near) / a.width)
-        # the product of two sigmoids, bounded by the smaller: the min keeps one soft threshold per pose
-        total += np.sum(log_sigmoid_soft(z, a.eps), axis=1)
-    b = priors.measured_poses_clear
-    if b is not None and measured_xyphi is not None:
-        p = measured_xyphi
-        m = assemble_batch(ga, p[:, 0], p[:, 1], p[:, 2]).singularity
-        total += np.sum(log_sigmoid_soft((m - b.min_measure) / b.width, b.eps), axis=1)
-    return total
-
-
 def _support_and_statements(problem: CalibrationProblem, thetas: np.ndarray) -> tuple[InplaneArrays, np.ndarray]:
     """The surrogate's arrays, and ``(n,)`` the cheap log-likelihood (``-inf`` off the support)."""
     arrays, valid = inplane_arrays(problem, thetas)
@@ -184,12 +158,4 @@ def inplane_log_likelihood_batch(problem: CalibrationProblem, thetas: np.ndarray
     sd = np.sqrt(problem.sigma[None] ** 2 + (d[:, None] * freq) ** 2)  # as noise_sd (no rig tests)
     data = independent_log_likelihood(freq - problem.measured[None], sd)
     out[ok] = np.where(np.all(np.isfinite(freq), axis=1), data + cheap[ok], -math.inf)
-    return out
-
-
-def independent_log_likelihood(residual: np.ndarray, sd: np.ndarray) -> np.ndarray:
-    """``sum_i log N(residual_i | 0, sd_i^2)`` over the last axis."""
-    r = residual / sd
-    out: np.ndarray = -0.5 * np.sum(r**2, axis=-1) - np.sum(np.log(sd), axis=-1)
-    out -= 0.5 * r.shape[-1] * math.log(2 * math.pi)
     return out

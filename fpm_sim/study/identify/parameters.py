@@ -237,7 +237,7 @@ def apply_parameters_batch(config: Manipulator, specs: Sequence[ParameterSpec], 
     A per-chain field comes as ``(n, 3)`` (per-chain lengths and angles), a lumped mass as ``(n, 4)`` (its mass,
     then its inertia's diagonal), any other field as ``(n,)``. Row ``i`` holds what :func:`apply_parameters` sets
     from ``x[i]`` (the same formulas, in the same order; tested), not validated. For the vectorised likelihoods of
-    a sampler's particles (:meth:`~fpm_sim.study.calibrate.problem.CalibrationProblem.inplane_arrays`).
+    a sampler's particles (:func:`~fpm_sim.study.calibrate.vectorised.inplane_arrays`).
     """
     import numpy as np
 
