@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 from scipy.special import logsumexp
 
-__all__ = ["SmcRun", "SmcSettings", "merge_smc", "smc_results", "temper", "two_stage"]
+__all__ = ["ModeProposal", "SmcRun", "SmcSettings", "merge_smc", "smc_results", "temper", "two_stage"]
 
 Evaluate = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 """``U (n, d) -> (log L_a, log L_b)`` at the rows of ``U`` (``-inf`` outside the support)."""
@@ -72,6 +72,36 @@ class SmcRun:
     @property
     def log_evidence_err(self) -> float:
         return math.sqrt(max(self.log_evidence_var, 0.0))
+
+
+@dataclass(frozen=True)
+class ModeProposal:
+    """Gaussians around the modes a search found, on the unit cube, equally weighted: the part of the data stage's
+    starting population that is drawn near them (:func:`two_stage`, ``modes``)."""
+
+    means: np.ndarray
+    """``(k, d)`` the modes."""
+    covs: np.ndarray
+    """``(k, d, d)`` each Gaussian's covariance."""
+
+    def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """``(n, d)`` draws (the mixture's; those outside the cube are kept: the stage's density is 0 there)."""
+        k = rng.integers(0, len(self.means), n)
+        chol = np.linalg.cholesky(self.covs)
+        z = rng.standard_normal((n, self.means.shape[1]))
+        out: np.ndarray = self.means[k] + np.einsum("nij,nj->ni", chol[k], z)
+        return out
+
+    def log_density(self, u: np.ndarray) -> np.ndarray:
+        """``(n,)`` the mixture's log-density at the rows of ``u``."""
+        d = self.means.shape[1]
+        chol = np.linalg.cholesky(self.covs)
+        diff = u[:, None, :] - self.means[None]  # (n, k, d)
+        z = np.linalg.solve(chol[None], diff[..., None])[..., 0]
+        log_det = 2.0 * np.sum(np.log(np.diagonal(chol, axis1=1, axis2=2)), axis=1)
+        comp = -0.5 * np.sum(z**2, axis=-1) - 0.5 * log_det[None] - 0.5 * d * math.log(2.0 * math.pi)
+        out: np.ndarray = logsumexp(comp, axis=1) - math.log(len(self.means))
+        return out
 
 
 def _fold(u: np.ndarray) -> np.ndarray:
@@ -210,26 +240,70 @@ def _from_prior(
 
 
 def two_stage(
-    cheap: Evaluate, full: Evaluate, d: int, stage1: SmcSettings, stage2: SmcSettings, rng: np.random.Generator
-) -> SmcRun:
+    cheap: Evaluate, full: Evaluate, d: int, stage1: SmcSettings, stage2: SmcSettings, rng: np.random.Generator,
+    *, modes: ModeProposal | None = None, mode_particles: int = 0,
+) -> SmcRun:  # fmt: skip
     """The posterior ``pi L_cheap L_data`` by two temperings (module docstring). ``cheap(U)`` returns ``(0,
     log L_cheap)``, ``full(U)`` returns ``(log L_cheap, log L_data)`` (``log L_data`` evaluated only where
     ``log L_cheap`` is finite). The result's ``log_a``/``log_b`` are ``log L_cheap``/``log L_data`` of its particles,
-    its evidence ``ln Z = ln Z_support + ln Z_1 + ln Z_2``."""
+    its evidence ``ln Z = ln Z_support + ln Z_1 + ln Z_2``.
+
+    ``modes``: the data stage starts instead from a defensive mixture (Hesterberg 1995) ``r`` of stage 1's target
+    ``p_1 = L_cheap / Z_1`` (its particles; ``Z_1`` as stage 1 estimated it) and ``mode_particles`` draws around the
+    modes a search found, and tempers from ``r`` to the posterior along ``r^(1 - beta) (p_1 L_data)^beta``
+    (:func:`_from_mixture`): a region the data favour but stage 1 holds too few particles of keeps its particles
+    through the tempering, and ``Z_2 = E_r[p_1 L_data / r]`` is ``E_{p_1}[L_data]`` (up to the error of ``Z_1``'s
+    estimate)."""
     start = _from_prior(cheap, d, stage1, rng)
     if start is None:
         return SmcRun(np.empty((0, d)), np.empty(0), np.empty(0), -math.inf, 0.0, stage1.particles)
     u, _, lc, log_mass, var_mass, calls = start
     one = temper(u, np.zeros(len(u)), lc, cheap, stage1, rng)
-    u2, la, lb, beta, log_z2, var2 = _first_data_step(one.u, full, stage2, rng)
-    u2, la, lb, _, moved, _ = _move(u2, la, lb, beta, full, stage2, rng, 1.0)
-    two = temper(u2, la, lb, full, stage2, rng, beta=beta)
+    if modes is not None and mode_particles > 0:
+        two = _from_mixture(one, full, modes, mode_particles, log_mass + one.log_evidence, stage2, rng)
+        moved = 0
+    else:
+        u2, la, lb, beta, log_z2, var2 = _first_data_step(one.u, full, stage2, rng)
+        u2, la, lb, _, moved, _ = _move(u2, la, lb, beta, full, stage2, rng, 1.0)
+        two = temper(u2, la, lb, full, stage2, rng, beta=beta)
+        two.log_evidence += log_z2
+        two.log_evidence_var += var2
+        moved += len(one.u)
     return SmcRun(
-        two.u, two.log_a, two.log_b, log_mass + one.log_evidence + log_z2 + two.log_evidence,
-        var_mass + one.log_evidence_var + var2 + two.log_evidence_var,
-        calls + one.n_calls + len(one.u) + moved + two.n_calls, one.betas + [1.0 + b for b in two.betas],
+        two.u, two.log_a, two.log_b, log_mass + one.log_evidence + two.log_evidence,
+        var_mass + one.log_evidence_var + two.log_evidence_var,
+        calls + one.n_calls + moved + two.n_calls, one.betas + [1.0 + b for b in two.betas],
         one.acceptance + two.acceptance,
     )  # fmt: skip
+
+
+def _from_mixture(
+    one: SmcRun, full: Evaluate, modes: ModeProposal, m: int, log_z1: float, s: SmcSettings,
+    rng: np.random.Generator,
+) -> SmcRun:  # fmt: skip
+    """The data stage from the defensive mixture ``r`` (:func:`two_stage`): ``s.particles`` of the pooled draws
+    (stage 1's particles and ``m`` of ``modes``, draws of ``r``), tempered on ``L_a = r``, ``L_b = p_1 L_data / r``;
+    the result's ``log_a``/``log_b`` are ``log L_cheap``/``log L_data``, its evidence ``ln Z_2``."""
+    n1 = len(one.u)
+
+    def bridged(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        inside = np.all((u >= 0.0) & (u <= 1.0), axis=1)
+        lc, ld = np.full(len(u), -math.inf), np.full(len(u), -math.inf)
+        if inside.any():
+            lc[inside], ld[inside] = full(u[inside])
+        log_p1 = lc - log_z1  # the prior is uniform on the cube
+        with np.errstate(divide="ignore", invalid="ignore"):
+            log_r = np.logaddexp(math.log(n1) + log_p1, math.log(m) + modes.log_density(u)) - math.log(n1 + m)
+            log_b = np.where(np.isfinite(log_p1) & np.isfinite(ld), log_p1 + ld - log_r, -math.inf)
+        return log_r, log_b
+
+    pool = np.concatenate([one.u, modes.sample(m, rng)])
+    u = pool[rng.choice(len(pool), size=min(s.particles, len(pool)), replace=False)]  # draws of r, equal weights
+    la, lb = bridged(u)
+    run = temper(u, la, lb, bridged, s, rng)
+    lc, ld = full(run.u)
+    return SmcRun(run.u, lc, ld, run.log_evidence, run.log_evidence_var, run.n_calls + 2 * len(u), run.betas,
+                  run.acceptance)  # fmt: skip
 
 
 def _first_data_step(
