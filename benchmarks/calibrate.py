@@ -34,9 +34,9 @@ class CheapLikelihood(OneBlasThread):
         self.u = np.random.default_rng(0).random((N_PARTICLES, self.problem.ndim))
 
     def vectorised(self) -> np.ndarray:
-        from fpm_sim.study.calibrate.vectorised import cheap_log_likelihood_batch, prior_transform_batch
+        from fpm_sim.study.calibrate.vectorised import cheap_log_likelihood_batch
 
-        return cheap_log_likelihood_batch(self.problem, prior_transform_batch(self.problem, self.u))
+        return cheap_log_likelihood_batch(self.problem, self.problem.prior_transform(self.u))
 
     def one_at_a_time(self) -> np.ndarray:
         p = self.problem

@@ -23,6 +23,7 @@ Poses whose measure is below :data:`SINGULAR_TOL` are refused (:class:`SingularP
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from dataclasses import dataclass
@@ -324,16 +325,16 @@ class GeometryArrays:
     @classmethod
     def of(cls, g: Geometry) -> GeometryArrays:
         """One geometry (``G = 1``)."""
-        ang = np.asarray(g.platform_angles_rad)
-        local = np.asarray(g.platform_radius_per_chain)[:, None] * np.stack([np.cos(ang), np.sin(ang)], axis=1)
-        return cls(
-            base_points=base_points(g)[None],
-            platform_local=local[None],
-            proximal_m=np.asarray(g.proximal_length_per_chain, float)[None],
-            distal_m=np.asarray(g.distal_length_per_chain, float)[None],
-            elbow_branch=np.asarray(g.elbow_branch, float)[None],
-            char_length_m=np.array([_char_length(g)]),
-        )
+
+        def one(v: tuple[float, ...]) -> np.ndarray:
+            return np.asarray(v, float)[None]
+
+        return cls.from_polar(
+            base_radius_m=one(g.base_radius_per_chain), base_angles_rad=one(g.base_angles_rad),
+            platform_radius_m=one(g.platform_radius_per_chain), platform_angles_rad=one(g.platform_angles_rad),
+            proximal_m=one(g.proximal_length_per_chain), distal_m=one(g.distal_length_per_chain),
+            elbow_branch=one(g.elbow_branch),
+        )  # fmt: skip
 
     @classmethod
     def from_polar(
@@ -345,10 +346,14 @@ class GeometryArrays:
             out: np.ndarray = radius[..., None] * np.stack([np.cos(angles), np.sin(angles)], axis=-1)
             return out
 
-        char = np.maximum(np.max(platform_radius_m, axis=1), np.mean(distal_m, axis=1) / 4.0)
+        char = np.maximum(np.max(platform_radius_m, axis=1), np.mean(distal_m, axis=1) / 4.0)  # as _char_length
         return cls(points(base_radius_m, base_angles_rad), points(platform_radius_m, platform_angles_rad),
                    proximal_m, distal_m, np.broadcast_to(np.asarray(elbow_branch, float), proximal_m.shape),
                    char)  # fmt: skip
+
+    def rows(self, keep: np.ndarray) -> GeometryArrays:
+        """The geometries ``keep`` selects (a boolean mask or indices over ``G``)."""
+        return GeometryArrays(*(getattr(self, f.name)[keep] for f in dataclasses.fields(self)))
 
 
 def assemble_batch(ga: GeometryArrays, x_m: ArrayLike, y_m: ArrayLike, phi_rad: ArrayLike) -> BatchAssemblies:

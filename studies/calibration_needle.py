@@ -28,7 +28,7 @@ from scipy.optimize import differential_evolution, minimize
 
 from fpm_sim.study.calibrate.problem import study_problem
 from fpm_sim.study.calibrate.smc import SmcSettings, _first_data_step, _from_prior, _move, temper
-from fpm_sim.study.calibrate.vectorised import inplane_log_likelihood_batch, prior_transform_batch
+from fpm_sim.study.calibrate.vectorised import inplane_log_likelihood_batch
 
 COMPACT_M = 0.16
 """Base radius below which a geometry counts as the compact region (the runs that found it: ~0.115 m)."""
@@ -103,7 +103,7 @@ def powell(a: argparse.Namespace) -> None:
 
 def neg_log_l_columns(x: np.ndarray) -> np.ndarray:
     """``-log L`` of the columns of ``x`` (``(d, S)``, scipy's vectorised form), vectorised over them."""
-    v = inplane_log_likelihood_batch(PROB, prior_transform_batch(PROB, np.clip(x.T, 0.0, 1.0)))
+    v = inplane_log_likelihood_batch(PROB, PROB.prior_transform(np.clip(x.T, 0.0, 1.0)))
     out: np.ndarray = np.where(np.isfinite(v), -v, 1e4)
     return out
 

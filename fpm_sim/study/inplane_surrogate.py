@@ -22,6 +22,7 @@ to screen geometries quickly, never as a reported result.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -72,6 +73,11 @@ class InplaneArrays:
             platform_kg=platform_kg,
             platform_izz_kg_m2=platform_izz_kg_m2,
         )
+
+    def rows(self, keep: np.ndarray) -> InplaneArrays:
+        """The descriptions ``keep`` selects (a boolean mask or indices over ``G``)."""
+        fields = {f.name: getattr(self, f.name)[keep] for f in dataclasses.fields(self) if f.name != "geometry"}
+        return InplaneArrays(geometry=self.geometry.rows(keep), **fields)
 
     @classmethod
     def of(cls, config: Manipulator) -> InplaneArrays:

@@ -143,7 +143,7 @@ def _study_surrogate(branch: tuple[int, int, int]):
 
 
 @pytest.mark.slow
-@pytest.mark.very_slow  # 45 s on the shared 2 cores (three runs of ~229 000 calls vectorised; 710 s one at a time)
+@pytest.mark.very_slow  # 31 s on the shared 2 cores (three runs of ~229 000 calls vectorised; 710 s one at a time)
 def test_three_seeds_of_the_study_calibration_on_the_surrogate():
     """Issue 31: on the study's problem (the in-plane surrogate, class (-1, -1, -1)) nested sampling's runs found
     the statements' region, 12-13 nats up, in 2 of 3 runs at 100 live points and 0 of 3 at 250

@@ -13,7 +13,6 @@ from fpm_sim.study.calibrate.problem import study_problem
 from fpm_sim.study.calibrate.vectorised import (
     cheap_log_likelihood_batch,
     inplane_log_likelihood_batch,
-    prior_transform_batch,
     supports,
 )
 from fpm_sim.study.identify import parameter_set
@@ -54,7 +53,7 @@ def test_the_cheap_and_surrogate_likelihoods_are_the_problems_row_by_row():
     prob = study_problem(model="inplane")
     assert supports(prob)
     u = np.random.default_rng(1).random((600, prob.ndim))
-    thetas = prior_transform_batch(prob, u)
+    thetas = prob.prior_transform(u)
     np.testing.assert_array_equal(thetas, np.array([prob.prior_transform(r) for r in u]))
     cheap = cheap_log_likelihood_batch(prob, thetas)
     full = inplane_log_likelihood_batch(prob, thetas)
@@ -72,7 +71,7 @@ def test_the_segment_model_has_no_vectorised_likelihood_but_its_cheap_part():
     prob = study_problem(model="segments")
     assert supports(prob)  # the surrogate stands in for it as an intermediate target, never as its result
     u = np.random.default_rng(2).random((50, prob.ndim))
-    thetas = prior_transform_batch(prob, u)
+    thetas = prob.prior_transform(u)
     one = np.array([prob.cheap_log_likelihood(t) for t in thetas])
     batch = cheap_log_likelihood_batch(prob, thetas)
     np.testing.assert_array_equal(np.isfinite(batch), np.isfinite(one))

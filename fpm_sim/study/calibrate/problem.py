@@ -35,7 +35,7 @@ import numpy as np
 from fpm_sim.batch.pose_loop import fast_options
 from fpm_sim.config import ConfigError, Manipulator
 from fpm_sim.errors import FpmSimError
-from fpm_sim.kinematics import GeometryArrays, assemble_many
+from fpm_sim.kinematics import GeometryArrays, assemble_batch, assemble_many
 from fpm_sim.study.calibrate.priors import Priors
 from fpm_sim.study.calibrate.terms import independent_log_likelihood, log_sigmoid_soft, statements_batch
 from fpm_sim.study.discrepancy import covariance, gaussian_log_likelihood, pose_features
@@ -174,19 +174,18 @@ class FrequencyLikelihood:
 
     # -- the unit cube -> parameters
     def prior_transform(self, u: np.ndarray) -> np.ndarray:
-        """Unit-cube point -> ``theta`` (each prior's inverse CDF; the branch class ``floor(8 u)``)."""
+        """Unit-cube point -> ``theta`` (each prior's inverse CDF; the branch class ``floor(8 u)``); rows ``(n, ndim)``
+        -> ``(n, ndim)``, vectorised (a sampler's particles)."""
         u = np.asarray(u, float)
-        theta = np.empty(self.ndim)
+        rows = np.atleast_2d(u)
+        theta = np.empty((len(rows), self.ndim))
         k = 0
-        for p in self.priors.parameters:
-            theta[k] = p.transform(u[k])
-            k += 1
-        for h in self.priors.hyperpriors:
-            theta[k] = h.transform(u[k])
+        for p in (*self.priors.parameters, *self.priors.hyperpriors):
+            theta[:, k] = p.transform(rows[:, k])
             k += 1
         if self.priors.sample_branches:
-            theta[k] = float(min(int(u[k] * len(ELBOW_BRANCHES)), len(ELBOW_BRANCHES) - 1))
-        return theta
+            theta[:, k] = np.minimum((rows[:, k] * len(ELBOW_BRANCHES)).astype(int), len(ELBOW_BRANCHES) - 1)
+        return theta if u.ndim == 2 else theta[0]
 
     def discrepancy(self, theta: np.ndarray) -> float:
         """The relative model discrepancy at ``theta`` (sampled, or the priors' fixed value)."""
@@ -387,8 +386,12 @@ class CalibrationProblem(FrequencyLikelihood):
 
     def statements_log_likelihood(self, cfg: Manipulator) -> float:
         """The enabled study statements' soft terms (:mod:`.priors`) under ``cfg``."""
-        poses = self.measured_pose_array if self.observations else None
-        return float(statements_batch(self.priors, GeometryArrays.of(cfg.geometry), poses)[0])
+        ga = GeometryArrays.of(cfg.geometry)
+        measure = None
+        if self.observations:
+            p = self.measured_pose_array
+            measure = assemble_batch(ga, p[:, 0], p[:, 1], p[:, 2]).singularity
+        return float(statements_batch(self.priors, ga, measure)[0])
 
     def cheap_log_likelihood(self, theta: np.ndarray) -> float:
         """``-inf`` for an impossible description (invalid, or a measured pose unreachable), else the enabled

@@ -36,7 +36,6 @@ from fpm_sim.study.calibrate.smc import ModeProposal, SmcSettings, merge_smc, sm
 from fpm_sim.study.calibrate.vectorised import (
     cheap_log_likelihood_batch,
     inplane_log_likelihood_batch,
-    prior_transform_batch,
     supports,
 )
 from fpm_sim.study.loo import LeaveOneOut, leave_one_out, loo_from_components
@@ -97,12 +96,12 @@ interval ``[part / parts, (part + 1) / parts)`` (prior mass ``1 / parts``); ``No
 
 
 def _in_part(u: np.ndarray, part: Part) -> np.ndarray:
-    """The unit-cube point ``u`` of the part's own cube mapped into the whole prior's cube."""
+    """The unit-cube point ``u`` (or rows of points) of the part's own cube mapped into the whole prior's cube."""
     if part is None:
         return np.asarray(u, float)
     i, n, p = part
     out = np.array(u, float)
-    out[i] = (p + out[i]) / n
+    out[..., i] = (p + out[..., i]) / n
     return out
 
 
@@ -619,13 +618,10 @@ def _class_thetas(u: np.ndarray, klass: int | None, part: Part = None) -> np.nda
     """The problem's coordinates (the class's last) at unit-cube rows ``u`` of class ``klass``'s part: row ``i`` is
     ``_with_class(_class_prior_transform(u[i], klass, part), klass)``, vectorised."""
     assert _PROBLEM is not None, "the pool was started without _init_worker"
-    u = np.array(u, float)
-    if part is not None:
-        i, n, p = part
-        u[:, i] = (p + u[:, i]) / n
+    u = np.atleast_2d(_in_part(u, part))
     if klass is not None:
         u = np.column_stack([u, np.full(len(u), (klass + 0.5) / len(_PROBLEM.branch_classes))])
-    return prior_transform_batch(_PROBLEM, u)
+    return _PROBLEM.prior_transform(u)
 
 
 def _smc_cheap(u: np.ndarray, klass: int | None, part: Part = None) -> tuple[np.ndarray, np.ndarray]:

@@ -29,6 +29,7 @@ stage 2 from there to the posterior on the data's likelihood (expensive, fewer p
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -84,10 +85,16 @@ class ModeProposal:
     covs: np.ndarray
     """``(k, d, d)`` each Gaussian's covariance."""
 
+    @functools.cached_property
+    def _chol(self) -> np.ndarray:
+        """The covariances' Cholesky factors (once: :meth:`log_density` runs at every move of the data stage)."""
+        out: np.ndarray = np.linalg.cholesky(self.covs)
+        return out
+
     def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
         """``(n, d)`` draws (the mixture's; those outside the cube are kept: the stage's density is 0 there)."""
         k = rng.integers(0, len(self.means), n)
-        chol = np.linalg.cholesky(self.covs)
+        chol = self._chol
         z = rng.standard_normal((n, self.means.shape[1]))
         out: np.ndarray = self.means[k] + np.einsum("nij,nj->ni", chol[k], z)
         return out
@@ -95,7 +102,7 @@ class ModeProposal:
     def log_density(self, u: np.ndarray) -> np.ndarray:
         """``(n,)`` the mixture's log-density at the rows of ``u``."""
         d = self.means.shape[1]
-        chol = np.linalg.cholesky(self.covs)
+        chol = self._chol
         diff = u[:, None, :] - self.means[None]  # (n, k, d)
         z = np.linalg.solve(chol[None], diff[..., None])[..., 0]
         log_det = 2.0 * np.sum(np.log(np.diagonal(chol, axis1=1, axis2=2)), axis=1)

@@ -23,9 +23,10 @@ def log_sigmoid_soft(z: np.ndarray, eps: float) -> np.ndarray:
     return out
 
 
-def statements_batch(priors: Priors, ga: GeometryArrays, measured_xyphi: np.ndarray | None) -> np.ndarray:
+def statements_batch(priors: Priors, ga: GeometryArrays, measured_measure: np.ndarray | None) -> np.ndarray:
     """``(G,)`` the enabled study statements' soft terms (:mod:`~fpm_sim.study.calibrate.priors`) of ``G``
-    geometries; ``measured_xyphi``: ``(P, 3)`` the distinct measured poses (m, rad), ``None`` without data.
+    geometries; ``measured_measure``: ``(G, P)`` their singularity measures at the distinct measured poses (the
+    caller has them from its reachability check), ``None`` without data.
     :meth:`~fpm_sim.study.calibrate.problem.CalibrationProblem.statements_log_likelihood` is ``G = 1``."""
     total = np.zeros(len(ga.proximal_m))
     a = priors.singular_at_phi0
@@ -37,9 +38,8 @@ def statements_batch(priors: Priors, ga: GeometryArrays, measured_xyphi: np.ndar
         # the product of two sigmoids, bounded by the smaller: the min keeps one soft threshold per pose
         total += np.sum(log_sigmoid_soft(z, a.eps), axis=1)
     b = priors.measured_poses_clear
-    if b is not None and measured_xyphi is not None:
-        p = measured_xyphi
-        m = assemble_batch(ga, p[:, 0], p[:, 1], p[:, 2]).singularity
+    if b is not None and measured_measure is not None:
+        m = measured_measure
         total += np.sum(log_sigmoid_soft((m - b.min_measure) / b.width, b.eps), axis=1)
     return total
 

@@ -32,7 +32,6 @@ __all__ = [
     "cheap_log_likelihood_batch",
     "inplane_arrays",
     "inplane_log_likelihood_batch",
-    "prior_transform_batch",
     "supports",
 ]
 
@@ -48,19 +47,6 @@ def supports(problem: FrequencyLikelihood) -> bool:
         and problem.priors.mode_read is None
         and all(o.mode == 1 and o.label != "out_of_plane" for o in problem.observations)
     )
-
-
-def prior_transform_batch(problem: FrequencyLikelihood, u: np.ndarray) -> np.ndarray:
-    """:meth:`~fpm_sim.study.calibrate.problem.FrequencyLikelihood.prior_transform` of every row of ``u``."""
-    u = np.atleast_2d(np.asarray(u, float))
-    theta = np.empty((len(u), problem.ndim))
-    k = 0
-    for p in (*problem.priors.parameters, *problem.priors.hyperpriors):
-        theta[:, k] = p.transform(u[:, k])
-        k += 1
-    if problem.priors.sample_branches:
-        theta[:, k] = np.minimum((u[:, k] * len(ELBOW_BRANCHES)).astype(int), len(ELBOW_BRANCHES) - 1)
-    return theta
 
 
 def _branches(problem: CalibrationProblem, thetas: np.ndarray) -> np.ndarray:
@@ -124,15 +110,11 @@ def _support_and_statements(problem: CalibrationProblem, thetas: np.ndarray) -> 
     """The surrogate's arrays, and ``(n,)`` the cheap log-likelihood (``-inf`` off the support)."""
     arrays, valid = inplane_arrays(problem, thetas)
     xyz = problem.measured_pose_array
-    reach = assemble_batch(arrays.geometry, xyz[:, 0], xyz[:, 1], xyz[:, 2]).reachable.all(axis=1)
+    measured = assemble_batch(arrays.geometry, xyz[:, 0], xyz[:, 1], xyz[:, 2])  # the reach and statement (b)
     out = np.full(len(thetas), -math.inf)
-    ok = valid & reach
-    out[ok] = statements_batch(problem.priors, _rows(arrays.geometry, ok), xyz)
+    ok = valid & measured.reachable.all(axis=1)
+    out[ok] = statements_batch(problem.priors, arrays.geometry.rows(ok), measured.singularity[ok])
     return arrays, out
-
-
-def _rows(ga: GeometryArrays, keep: np.ndarray) -> GeometryArrays:
-    return GeometryArrays(*(getattr(ga, f)[keep] for f in ga.__dataclass_fields__))
 
 
 def cheap_log_likelihood_batch(problem: CalibrationProblem, thetas: np.ndarray) -> np.ndarray:
@@ -149,8 +131,7 @@ def inplane_log_likelihood_batch(problem: CalibrationProblem, thetas: np.ndarray
     out = np.full(len(thetas), -math.inf)
     if not ok.any():
         return out
-    fields = list(arrays.__dataclass_fields__)[1:]  # after the geometry
-    sub = InplaneArrays(_rows(arrays.geometry, ok), *(getattr(arrays, k)[ok] for k in fields))
+    sub = arrays.rows(ok)
     poses = np.array([[o.pose.x_m, o.pose.y_m, o.pose.phi_rad] for o in problem.observations])
     freq = inplane_batch(sub, poses)  # (m, n_obs)
     pr = problem.priors
