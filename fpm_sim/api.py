@@ -1290,7 +1290,8 @@ def calibrate(
         dotted paths into its file (:mod:`fpm_sim.study.calibrate.described`: one measured file in its task
         coordinates, each ``fK_hz`` compared with its K-th lowest elastic mode, one class); an imported model
         (:class:`~fpm_sim.architecture.imported.ImportedDescription`) likewise, its measured file in joint space (one
-        column per joint, :func:`~fpm_sim.study.identify.described.read_joint_measured_csv`).
+        column per joint) or in its ``[end_effector]``'s task coordinates, solved to joint values once
+        (:func:`~fpm_sim.study.identify.described.read_joint_measured_csv`).
     priors
         The priors TOML file (one distribution and reason per free parameter; e.g.
         ``fpm_sim/data/study_priors.toml``); required on the 3RRR. On a described architecture its

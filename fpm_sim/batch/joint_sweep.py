@@ -38,6 +38,7 @@ __all__ = [
     "read_imported_poses_csv",
     "read_joint_poses_csv",
     "sweep_joints",
+    "task_columns",
 ]
 
 
@@ -78,7 +79,7 @@ def check_joint_poses(
     return out
 
 
-def _task_columns(desc: ImportedDescription) -> set[str]:
+def task_columns(desc: ImportedDescription) -> set[str]:
     """The CSV columns of ``desc``'s task coordinates (``x_mm`` ... ``phi_rad``; none without an end effector)."""
     return {"phi_rad" if c == "phi" else f"{c}_mm" for c in desc.task}
 
@@ -110,7 +111,7 @@ def read_imported_poses_csv(
     if desc.task and p.is_file():
         with open(p, newline="", encoding="utf-8-sig") as fh:
             columns = {h.strip() for h in next(csv.reader(fh), [])}
-        if columns == _task_columns(desc):
+        if columns == task_columns(desc):
             return read_task_poses_csv(p, desc, parameter=parameter)
     return _read_joint_columns(p, desc, parameter=parameter)
 
@@ -130,7 +131,7 @@ def _read_joint_columns(p: Path, desc: ImportedDescription, *, parameter: str) -
         columns = [(h or "").strip() for h in reader.fieldnames or []]
         unknown = [c for c in columns if c not in joints]
         if unknown or not columns:
-            task = f"; or task poses, one column per task coordinate: {', '.join(sorted(_task_columns(desc)))}"
+            task = f"; or task poses, one column per task coordinate: {', '.join(sorted(task_columns(desc)))}"
             raise JointPosesError(
                 f"{p}: column(s) {', '.join(unknown) or '(none)'} name no hinge or slide joint of "
                 f"{desc.model_path.name}",

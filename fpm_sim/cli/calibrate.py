@@ -209,7 +209,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "task coordinates (x_mm, y_mm, z_mm, phi_rad as it has them; f1_hz, f2_hz, ...; sigma_hz), each fK_hz "
         "compared with its K-th lowest elastic mode (actuators locked), one class (its working modes are fixed); "
         "writes OUT/description.toml (the posterior median) in place of config.toml (docs/architectures.md). On an "
-        "imported model (kind = 'imported'): the same, its measured file with one column per joint (docs/import.md).",
+        "imported model (kind = 'imported'): the same, its measured file with one column per joint or per task "
+        "coordinate of its [end_effector] (docs/import.md).",
     )
     add_data_args(p)
     p.add_argument(

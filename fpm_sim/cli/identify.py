@@ -60,7 +60,8 @@ def add_data_args(p: argparse.ArgumentParser) -> None:
         metavar="FILE[,sigma_pct=P][,reading=R]",
         help="measured frequencies (repeatable); sigma_pct: relative std of its values where no sigma_hz column "
         "(default --sigma-pct); reading: for row_mm,col_mm files. A described architecture takes one file in its "
-        "task coordinates, an imported model one with a column per joint (docs/import.md)",
+        "task coordinates, an imported model one with a column per joint, or in its [end_effector]'s task "
+        "coordinates (docs/import.md)",
     )
     p.add_argument("--subsystems", type=Path, help="rig tests CSV (rig,setting,experimental_hz), frees the rig group")
     p.add_argument("--reading", default=None, help="how to read row_mm,col_mm files: x+, x-, y+ or y-")
@@ -110,13 +111,13 @@ _STUDY_ONLY = {
 
 def read_described_measured(args: argparse.Namespace, desc: Any) -> Any:
     """``--measured FILE[,sigma_pct=P]`` of a described architecture: one file in its task coordinates
-    (:func:`fpm_sim.study.identify.described.read_task_measured_csv`); of an imported model, one column per joint
-    (:func:`fpm_sim.study.identify.described.read_joint_measured_csv`)."""
+    (:func:`fpm_sim.study.identify.described.read_task_measured_csv`); of an imported model, one column per joint or
+    per task coordinate of its ``[end_effector]`` (:func:`fpm_sim.study.identify.described.read_joint_measured_csv`)."""
     from fpm_sim.architecture.imported import ImportedDescription
     from fpm_sim.study.identify.described import read_joint_measured_csv, read_task_measured_csv
 
     imported = isinstance(desc, ImportedDescription)
-    columns = "one column per joint" if imported else "its task coordinates' columns"
+    columns = "one column per joint (or task coordinate)" if imported else "its task coordinates' columns"
     if len(args.measured or []) != 1:
         raise CliError(f"--measured: give one measured file ({columns}, f1_hz, ...)")
     path, file_opts = parse_measured_arg(args.measured[0])

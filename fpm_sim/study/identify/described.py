@@ -12,13 +12,15 @@ The 3RRR's global searches, elbow-branch classes, rig tests, workspace prior and
 
 An imported model (:mod:`fpm_sim.architecture.imported`) is identified the same way, posed in joint space: its
 measured file has one column per joint (rad for a hinge, m for a slide; every column other than ``fK_hz`` and
-``sigma_hz`` must name a hinge or slide of its model, :func:`read_joint_measured_csv`), its paths are into the imported
+``sigma_hz`` must name a hinge or slide of its model, :func:`read_joint_measured_csv`; or, where it names an
+``[end_effector]``, one column per task coordinate, solved to joint values once), its paths are into the imported
 TOML (``sections.tube.outer_diameter_m``, ``materials.aluminium.density_kg_m3``), and its frequencies are
 :func:`~fpm_sim.batch.joint_sweep.sweep_joints`'s (gravity off, inextensible links, its locked joints locked).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -29,7 +31,7 @@ import numpy as np
 
 from fpm_sim.architecture import Description, TaskPose, description_value, with_description_value
 from fpm_sim.architecture.imported import ImportedDescription
-from fpm_sim.batch.joint_sweep import sweep_joints
+from fpm_sim.batch.joint_sweep import sweep_joints, task_columns
 from fpm_sim.batch.task_sweep import sweep_task_many
 from fpm_sim.errors import FpmSimError
 from fpm_sim.model.options import ModelOptions
@@ -74,7 +76,7 @@ class TaskMeasurements:
 
 
 def read_task_measured_csv(
-    path: str | Path, desc: Description, *, sigma_pct: float = DEFAULT_SIGMA_PCT
+    path: str | Path, desc: Machine, *, sigma_pct: float = DEFAULT_SIGMA_PCT
 ) -> TaskMeasurements:
     """The measured frequencies of ``path`` (module docstring) at poses in ``desc``'s task coordinates."""
     p = Path(path)
@@ -129,7 +131,13 @@ def read_joint_measured_csv(
     path: str | Path, desc: ImportedDescription, *, sigma_pct: float = DEFAULT_SIGMA_PCT
 ) -> TaskMeasurements:
     """The measured frequencies of ``path`` at an imported model's joint-space poses (module docstring): one column
-    per joint, ``f1_hz, f2_hz, ...`` and an optional ``sigma_hz``; a column naming no joint is refused by name."""
+    per joint, ``f1_hz, f2_hz, ...`` and an optional ``sigma_hz``; a column naming no joint is refused by name.
+
+    Where ``desc`` names an ``[end_effector]`` and the file's pose columns are its task coordinates (``x_mm``,
+    ``y_mm``, ``phi_rad``, ...), the poses are read as task poses (:func:`read_task_measured_csv`) and solved to
+    joint values once (:func:`fpm_sim.model.imported_pose.joint_poses_of`, each solve started from the row before):
+    the imported file's numbers are the beams', not the joints', so every parameter value takes the same joint
+    values."""
     from fpm_sim.model.imported import posable_joints
 
     p = Path(path)
@@ -138,15 +146,18 @@ def read_joint_measured_csv(
     joints = posable_joints(desc)
     modes = sorted(int(h[1:-3]) for h in header if h.startswith("f") and h.endswith("_hz") and h[1:-3].isdigit())
     cols = [h for h in header if h not in {f"f{k}_hz" for k in modes} | {"sigma_hz"}]
+    if desc.task and modes and set(cols) == task_columns(desc):
+        return _solved_to_joints(read_task_measured_csv(p, desc, sigma_pct=sigma_pct), desc, p)
     unknown = [c for c in cols if c not in joints]
     if unknown or not cols or not modes:
+        task = f"; or one column per task coordinate ({', '.join(sorted(task_columns(desc)))})" if desc.task else ""
         raise DataError(
             f"column(s) {', '.join(unknown)} name no hinge or slide joint of {desc.model_path.name}"
             if unknown
             else f"missing column(s) {'f1_hz' if not modes else 'of joint values'}",
             file=p,
-            hint=f"{desc.name}'s measured file has one column per joint (among {', '.join(joints)}), f1_hz, f2_hz, "
-            "... [, sigma_hz]",
+            hint=f"{desc.name}'s measured file has one column per joint (among {', '.join(joints)}){task}, f1_hz, "
+            "f2_hz, ... [, sigma_hz]",
         )
     if not sigma_pct > 0:
         raise DataError("must be > 0", parameter="sigma_pct", value=sigma_pct, file=p)
@@ -161,6 +172,23 @@ def read_joint_measured_csv(
     if not np.isfinite(freq).any():
         raise DataError("no measured frequency", file=p, hint="fill f1_hz, f2_hz, ... on some rows")
     return TaskMeasurements(p.name, poses, freq, sigma, [line for line, _ in rows])
+
+
+def _solved_to_joints(data: TaskMeasurements, desc: ImportedDescription, p: Path) -> TaskMeasurements:
+    """``data``'s task poses as ``desc``'s joint values, each solve started from the row before (as
+    :func:`~fpm_sim.model.imported_pose.joint_poses_of`); a pose the model cannot take is a :class:`DataError` naming
+    the file's line."""
+    from fpm_sim.model.imported_pose import ImportedKinematics, ImportedPoseError
+
+    kin = ImportedKinematics(desc)
+    poses: list[dict[str, float]] = []
+    for pose, line in zip(data.poses, data.lines, strict=True):
+        assert isinstance(pose, TaskPose), "read_task_measured_csv reads task poses"
+        try:
+            poses.append(kin.solve(pose, start=poses[-1] if poses else None))
+        except ImportedPoseError as e:
+            raise DataError(e.message, file=p, row=line, hint=e.hint) from e
+    return dataclasses.replace(data, poses=poses)
 
 
 def _read_frequencies(
