@@ -43,17 +43,19 @@ __all__ = [
 
 
 class JointPosesError(FpmSimError):
-    """Joint-space poses (``poses``) that name no joint of the model, or values that are not finite numbers."""
+    """Joint-space poses (``poses``) that name no joint of the model, or values that are not finite numbers or lie
+    outside a joint's stated range."""
 
 
 def check_joint_poses(
     desc: ImportedDescription, poses: Sequence[Mapping[str, float]], *, parameter: str = "poses"
 ) -> list[dict[str, float]]:
     """``poses`` as plain ``{joint: float}`` dicts, each joint a hinge or slide of ``desc``'s model and each value
-    finite; errors name ``parameter``, the pose (1-based) and the joint."""
-    from fpm_sim.model.imported import posable_joints
+    finite and inside the joint's stated range; errors name ``parameter``, the pose (1-based) and the joint."""
+    from fpm_sim.model.imported import joint_ranges, load_spec, posable_joints, range_problem
 
     joints = posable_joints(desc)
+    ranges = joint_ranges(load_spec(desc).compile())
     if not poses:
         raise JointPosesError("no poses given", parameter=parameter, hint="give at least one {joint: value} pose")
     out = []
@@ -74,6 +76,12 @@ def check_joint_poses(
                 v = math.nan
             if not math.isfinite(v):
                 raise JointPosesError(f"pose {k + 1}: joint {name!r} must be a finite number", parameter=parameter)
+            if problem := range_problem(ranges, str(name), v):
+                raise JointPosesError(
+                    f"pose {k + 1}: {problem}",
+                    parameter=parameter,
+                    hint="pose it inside the range, or widen the range in the model file",
+                )
             row[str(name)] = v
         out.append(row)
     return out

@@ -238,6 +238,35 @@ def posable_joints(desc: ImportedDescription) -> list[str]:
     ]
 
 
+def joint_ranges(model: mujoco.MjModel) -> dict[str, tuple[float, float, str]]:
+    """The stated ranges of the model's limited hinge and slide joints, ``{name: (lo, hi, unit)}`` (``"rad"`` or
+    ``"m"``, as MuJoCo compiled them): a joint-space pose outside one is not a pose the machine takes
+    (:func:`range_problem`)."""
+    units = {int(mujoco.mjtJoint.mjJNT_HINGE): "rad", int(mujoco.mjtJoint.mjJNT_SLIDE): "m"}
+    return {
+        name: (float(model.jnt_range[j, 0]), float(model.jnt_range[j, 1]), units[int(model.jnt_type[j])])
+        for j in range(model.njnt)
+        if int(model.jnt_type[j]) in units
+        and model.jnt_limited[j]
+        and (name := mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j))
+    }
+
+
+def range_problem(ranges: Mapping[str, tuple[float, float, str]], name: str, value: float) -> str | None:
+    """What is wrong with joint ``name`` at ``value`` given ``ranges`` (:func:`joint_ranges`): ``None`` inside its
+    range (or unlimited), else a sentence naming the value and the range (a hinge's in degrees too). A value within
+    1e-9 (relative to the range's size, at least 1e-9 absolute) of a limit counts as inside: a solved pose at a
+    limit lands there to round-off."""
+    if name not in ranges:
+        return None
+    lo, hi, unit = ranges[name]
+    tol = 1e-9 * max(1.0, hi - lo)
+    if lo - tol <= value <= hi + tol:
+        return None
+    deg = f" ({math.degrees(lo):.6g} to {math.degrees(hi):.6g} deg)" if unit == "rad" else ""
+    return f"joint {name!r} = {value:.6g} {unit} is outside its range [{lo:.6g}, {hi:.6g}] {unit}{deg}"
+
+
 def _pose(spec: mujoco.MjSpec, q: dict[str, float]) -> None:
     """Set the joint values ``q`` into the bodies' frames (module docstring); a loop that does not close there is
     refused by the equality's name (:func:`_loop_residuals`)."""
@@ -256,6 +285,8 @@ def _pose(spec: mujoco.MjSpec, q: dict[str, float]) -> None:
             raise _fail(f"joint {name!r} is not a hinge or slide: pose it in the model file", "q", name)
         if not math.isfinite(value):
             raise _fail(f"joint {name!r}: value must be finite", "q", value)
+        if problem := range_problem(joint_ranges(model), name, value):
+            raise _fail(problem, "q", hint="pose it inside the range, or widen the range in the model file")
         data.qpos[model.jnt_qposadr[jid]] = value
     _loop_residuals(model, data, q)
     mujoco.mj_kinematics(model, data)

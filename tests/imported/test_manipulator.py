@@ -106,3 +106,24 @@ def test_manipulator_arm_is_a_cantilever_carrying_its_hand(tmp_path: Path, capsy
     assert np.all(errors[0] > 0.0), errors[0]
     assert np.all(errors[0] < [1e-3, 1e-3, 4e-3, 4e-3]), errors[0]
     assert np.all((errors[1] > 0.0) & (errors[1] < errors[0])), errors
+
+
+def test_a_pose_outside_a_joints_stated_range_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The model's joint ranges are kept (issue 29, item 2): the shoulder's is -160..160 deg, so 3.5 rad (200.5
+    deg) is not a pose of this arm. ``modes --q`` and ``sweep --poses`` refuse it in one line naming the joint, its
+    value and range; 2.7 rad (154.7 deg), inside, runs."""
+    out = tmp_path / "manipulator.toml"
+    argv = ["import", str(_model()), "--flexible", "upper_arm,middle_arm,lower_arm", "--section", "tube:30x2mm"]
+    assert _cli([*argv, "--material", "aluminium", "--lock", LOCK, "--out", str(out)], capsys)[0] == 0
+    cfg = ["--config", str(out)]
+    code, text = _cli(["modes", *cfg, "--q", "arm_shoulder=3.5", "--n-modes", "2"], capsys)
+    assert code == 2, text
+    assert text.count("\n") == 1, text
+    assert "joint 'arm_shoulder' = 3.5 rad is outside its range [-2.79253, 2.79253] rad (-160 to 160 deg)" in text
+    assert _cli(["modes", *cfg, "--q", "arm_shoulder=2.7", "--n-modes", "2"], capsys)[0] == 0
+    poses = tmp_path / "q.csv"
+    poses.write_text("arm_shoulder\n0.5\n3.5\n")
+    code, text = _cli(["sweep", *cfg, "--poses", str(poses), "--out", str(tmp_path / "sw")], capsys)
+    assert code == 2, text
+    assert "pose 2: joint 'arm_shoulder' = 3.5 rad is outside its range" in text, text
+    assert not (tmp_path / "sw").exists()
