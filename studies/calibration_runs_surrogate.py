@@ -3,6 +3,11 @@ disagree"): the study's calibration problem on the in-plane surrogate, one elbow
 
     python studies/calibration_runs_surrogate.py --branch -1 -1 -1 --live-points 100 --runs 3
     python studies/calibration_runs_surrogate.py --branch -1 -1 -1 --sampler smc --particles 200 --cheap-particles 1000
+    python studies/calibration_runs_surrogate.py --sampler smc --together --mode-starts 12 --workers 2 --seed 0 \
+        --particles 1000 --cheap-particles 2000
+
+``--together``: one calibration of ``--runs`` runs (seeds ``--seed``, ``--seed + 1``, ...; a mode search pooled over
+them, ``--mode-starts``) and its between-run check, instead of one calibration per seed.
 
 Prints each run's ln Z, the between-run check and, per run, the best draw's log-likelihood split into the data's
 and the study statements' terms. The surrogate (``model="inplane"``) is for checks of the sampler, never for a
@@ -35,10 +40,20 @@ def main() -> None:
     p.add_argument("--sampler", default="dynesty", choices=("dynesty", "smc"))
     p.add_argument("--particles", type=int, default=200)
     p.add_argument("--cheap-particles", type=int, default=1000)
+    p.add_argument("--mode-starts", type=int, default=0)
+    p.add_argument("--workers", type=int, default=1)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--together", action="store_true")
+    p.add_argument("--ess-fraction", type=float, default=0.5)
+    p.add_argument("--moves", type=float, default=3.0)
     a = p.parse_args()
     warnings.simplefilter("ignore")
     prob = problem(tuple(a.branch))
     t = time.time()
+    if a.together:
+        together(prob, a)
+        print(f"{time.time() - t:.0f} s")
+        return
     for seed in range(a.runs):
         opts = SamplerOptions(
             sampler=a.sampler, live_points=a.live_points, sample=a.sample, particles=a.particles,
@@ -50,6 +65,23 @@ def main() -> None:
         st = prob.statements_log_likelihood(prob.config(best))
         print(f"seed {seed}: best draw log L {ll.max():.2f} (statements {st:.2f}, data {ll.max() - st:.2f})")
     print(f"{time.time() - t:.0f} s")
+
+
+def together(prob: CalibrationProblem, a: argparse.Namespace) -> None:
+    """One calibration of ``a.runs`` runs and its between-run check, with each run's best draw and base radius."""
+    opts = SamplerOptions(
+        sampler="smc", particles=a.particles, cheap_particles=a.cheap_particles, runs=a.runs, seed=a.seed,
+        mode_starts=a.mode_starts, workers=a.workers, ess_fraction=a.ess_fraction, moves=a.moves,
+    )  # fmt: skip
+    cal = run_calibration(prob, opts, progress=True, print_func=print)
+    check = cal.runs_check
+    assert check is not None
+    base = prob.names.index("geometry.base_radius_m")
+    for i, s in enumerate(check.seeds):
+        print(f"seed {s}: ln Z {check.log_evidence[i]:.2f} +- {check.log_evidence_err[i]:.2f}, base radius 5/50/95 % "
+              + " / ".join(f"{q:.3f}" for q in check.quantiles[i, base]))  # fmt: skip
+    print(f"merged: base radius below 0.16 m in {np.mean(cal.draws[:, base] < 0.16):.0%} of the draws")
+    print("check passed" if check.passed else f"check failed: {'; '.join(check.failures)}")
 
 
 if __name__ == "__main__":

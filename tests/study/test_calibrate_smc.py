@@ -166,6 +166,35 @@ def test_three_seeds_of_the_study_calibration_on_the_surrogate():
         pytest.xfail("issue 31: the SMC runs reach the statements' region but disagree inside it:\n" + check.table())
 
 
+@pytest.mark.slow
+@pytest.mark.very_slow  # ~6 min with two workers (12 searches of ~50 s, three runs of ~40 s), ~12 min on one
+def test_a_pooled_mode_search_puts_every_run_in_the_compact_region():
+    """Issue 31, "The needle": with ``mode_starts = 12`` (differential evolution to convergence, particles spread
+    over each optimum, kernels pooled over the runs) every run of the study's problem (surrogate, class (-1, -1, -1))
+    holds the compact region (base radius < 0.16 m), which plain runs reach by chance, and ln Z agrees between the
+    runs (measured -72.11 +- 0.32, -72.24 +- 0.49, -72.74 +- 0.29 at seed 0; plain runs -74.4 to -76.1). This holds
+    where the search finds the region: seed 0's does in 2 of its 12 starts, seed 20's in none (docs/identification.md,
+    "The needle": 4 of 36 starts), so the test pins seed 0 and guards the sampling after a successful search, not
+    the search's reach. The quantiles' criterion does not pass yet (the plateau's share differs between runs): an
+    expected failure.
+    Run by hand: python -m pytest -m very_slow -rx tests/study/test_calibrate_smc.py"""
+    from fpm_sim.study.calibrate import run_calibration
+
+    problem = _study_surrogate((-1, -1, -1))
+    opts = SamplerOptions(sampler="smc", particles=1000, cheap_particles=2000, runs=3, seed=0, mode_starts=12,
+                          workers=2)  # fmt: skip
+    cal = run_calibration(problem, opts, progress=False)
+    check = cal.runs_check
+    assert check is not None
+    base = problem.names.index("geometry.base_radius_m")
+    # every run's median in the compact region: its particles reached it (plain runs: no particle below 0.16 m)
+    assert np.all(check.quantiles[:, base, 1] < 0.16), check.quantiles[:, base]
+    # ln Z within the check's own criterion (3 sigma of the pair's combined error)
+    assert not [f for f in check.failures if "ln Z" in f], check.failures
+    if not check.passed:
+        pytest.xfail("issue 31: the runs hold the compact region but the plateau's share differs:\n" + check.table())
+
+
 @pytest.fixture
 def cli_files(tmp_path, monkeypatch):
     """test_calibrate_runs.py's CLI problem (a stand-in for the segment model, the height free)."""
@@ -250,3 +279,43 @@ def test_a_mode_found_by_a_search_enters_the_data_stage_with_its_mass_counted():
         assert abs(run.log_evidence - log_z) < 3 * run.log_evidence_err + 0.05, (seed, run.log_evidence, log_z)
         plain = two_stage(cheap, full, 4, s1, s2, np.random.default_rng(seed))
         assert plain.log_evidence < log_z - 1.5  # the broad mode only: ln(0.091) against ln(0.991)
+
+
+def test_particles_spread_over_a_found_mode_cover_it_and_carry_its_mass():
+    """A search's optimum at the needle (one point, as a converged search leaves it): ``spread_over_mode``'s moves at
+    the posterior spread 256 particles over the needle with its width (sd 0.002 per coordinate; a factor of 1.6
+    either side: 20 moves from copies jittered by 0.05 of its width, 256 draws; measured 0.0018-0.0022); kernels
+    around them (``ModeProposal.around``) then give every seed the needle's share and ln Z, as the test above's
+    hand-made one."""
+    from fpm_sim.study.calibrate.smc import ModeProposal, SmcSettings, spread_over_mode, two_stage
+
+    cheap, full, log_z = _needle_evaluators()
+    s1, s2 = SmcSettings(particles=400, moves=3.0), SmcSettings(particles=400, moves=3.0)
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        u, log_l = spread_over_mode(np.full(4, 0.7501), full, 256, SmcSettings(moves=20.0, max_sweeps=200), rng)
+        assert np.all(np.abs(u - 0.75) < 0.02), seed
+        assert np.all((0.002 / 1.6 < u.std(axis=0)) & (u.std(axis=0) < 1.6 * 0.002)), (seed, u.std(axis=0))
+        assert np.all(np.isfinite(log_l))
+        modes = ModeProposal.around([u[:64]])
+        run = two_stage(cheap, full, 4, s1, s2, rng, modes=modes, mode_particles=400)
+        share = np.mean(np.all(np.abs(run.u - 0.75) < 0.02, axis=1))
+        assert abs(share - 0.9 / math.exp(log_z)) < 0.1, (seed, share)  # ~4 sd of a 400-particle share
+        assert abs(run.log_evidence - log_z) < 3 * run.log_evidence_err + 0.05, (seed, run.log_evidence, log_z)
+
+
+def test_mode_proposal_density_is_the_mixture_of_its_gaussians():
+    """``ModeProposal.log_density`` (blocks of rows, whitened once) against scipy's densities summed, at points near
+    and far from the kernels, with a block smaller than the rows: equal to round-off (1e-10 relative on densities of
+    sums of a few terms)."""
+    from scipy.stats import multivariate_normal
+
+    from fpm_sim.study.calibrate.smc import ModeProposal
+
+    rng = np.random.default_rng(3)
+    pops = [0.5 + 0.05 * rng.standard_normal((7, 3)), 0.2 + 0.01 * rng.standard_normal((5, 3))]
+    modes = ModeProposal.around(pops)
+    u = rng.random((11, 3))
+    ref = np.log(np.mean([multivariate_normal(m, c).pdf(u) for m, c in zip(modes.means, modes.covs)], axis=0))
+    np.testing.assert_allclose(modes.log_density(u, block=4), ref, rtol=1e-10)
+    assert modes.sample(5, rng).shape == (5, 3)

@@ -32,7 +32,14 @@ from fpm_sim.study.calibrate.runs import (
     combine_classes,
     combine_parts,
 )
-from fpm_sim.study.calibrate.smc import ModeProposal, SmcSettings, merge_smc, smc_results, two_stage
+from fpm_sim.study.calibrate.smc import (
+    ModeProposal,
+    SmcSettings,
+    merge_smc,
+    smc_results,
+    spread_over_mode,
+    two_stage,
+)
 from fpm_sim.study.calibrate.vectorised import (
     cheap_log_likelihood_batch,
     inplane_log_likelihood_batch,
@@ -115,18 +122,21 @@ def _class_prior_transform(u: np.ndarray, klass: int | None, part: Part = None) 
     return out
 
 
-Job = tuple[int | None, Part, int, "SamplerOptions", str | None, bool]
-"""One run: ``(class, part, seed, options, checkpoint, resume)``."""
+Job = tuple[int | None, Part, int, "SamplerOptions", str | None, bool, "ModeProposal | None"]
+"""One run: ``(class, part, seed, options, checkpoint, resume, modes)`` (``modes``: the SMC's pooled mode search,
+:func:`search_modes`)."""
 
 
 def _worker_run(job: Job, pool: Any = None) -> tuple[int | None, Part, int, Any, float]:
     """One (class, part, seed) run in this process (its likelihood calls on ``pool`` when given):
     ``(class, part, seed, Results, seconds)``."""
-    klass, part, seed, opts, checkpoint, resume = job
+    klass, part, seed, opts, checkpoint, resume, modes = job
     t0 = time.time()
     ck = None if checkpoint is None else Path(checkpoint)
-    run = _run_smc if opts.sampler == "smc" else _run_class
-    res = run(klass, seed, opts, checkpoint=ck, resume=resume, pool=pool, part=part)
+    if opts.sampler == "smc":
+        res = _run_smc(klass, seed, opts, checkpoint=ck, resume=resume, pool=pool, part=part, modes=modes)
+    else:
+        res = _run_class(klass, seed, opts, checkpoint=ck, resume=resume, pool=pool, part=part)
     return klass, part, seed, res, time.time() - t0
 
 
@@ -182,11 +192,11 @@ class SamplerOptions:
     independent runs: at 3 its particles' shares of the region's parts differed between runs by 0.1-0.13)."""
     mode_starts: int = 0
     """SMC: starts of a differential-evolution search for the posterior's modes on the in-plane surrogate before the
-    data stage (vectorised; the 3RRR's problem only); the data stage then starts from a defensive mixture of the
-    first stage's particles and as many draws around the modes found, their mass counted
-    (:func:`~fpm_sim.study.calibrate.smc.two_stage`). 0: no search (the default). Exact on problems with known
-    evidences; on the study's problem a run keeps the region its search found, but one start in three finds it, and
-    the runs do not yet pass the between-run check (docs/identification.md, "The needle")."""
+    data stages (vectorised; the 3RRR's problem only; :func:`search_modes`), once per class and pooled: every run of
+    the class starts its data stage from a defensive mixture of its first stage's particles and as many draws around
+    every mode any start found, their mass counted (:func:`~fpm_sim.study.calibrate.smc.two_stage`). 0: no search
+    (the default). Exact on problems with known evidences; measured on the study's problem in docs/identification.md,
+    "The needle"."""
     split: tuple[str, int] | None = None
     """``(name, n)``: the prior of parameter ``name`` cut into ``n`` parts of equal prior mass (its unit-cube
     coordinate's ``n`` equal intervals: for a uniform prior, equal sub-ranges; ``("...rotation_deg", 2)`` on a
@@ -653,51 +663,76 @@ def _smc_full(u: np.ndarray, klass: int | None, pool: Any, part: Part = None) ->
     return cheap, np.where(np.isfinite(data), data, -math.inf)
 
 
-MODE_SEARCH: dict[str, Any] = {"popsize": 30, "maxiter": 1000, "tol": 0.01}
-"""The mode search's differential evolution (scipy): ``popsize`` per coordinate, at most ``maxiter`` generations,
-stopped at a relative spread ``tol`` of the population's values: before it collapses to a point, so that its members
-still lie along the mode's ridge (at ``tol = 1e-10`` every member sat at one point and the kernels missed the ridge:
-docs/identification.md, "The needle")."""
+MODE_SEARCH: dict[str, Any] = {"popsize": 30, "maxiter": 1000, "tol": 1e-4}
+"""The mode search's differential evolution (scipy, ``best1bin``): ``popsize`` per coordinate, at most ``maxiter``
+generations, stopped when its population's values agree to a relative ``tol``: converged, not merely gathered (at
+``tol = 0.01`` every start of two runs stopped after 40-450 generations on the plateau, log L -78 or -56, and none
+reached the compact region: docs/identification.md, "The needle")."""
+MODE_SPREAD = SmcSettings(particles=256, moves=20.0, max_sweeps=200)
+"""The particles spread over each mode found and their Metropolis moves
+(:func:`~fpm_sim.study.calibrate.smc.spread_over_mode`): 256 particles, 20 accepted moves each."""
+MODE_KERNELS = 64
+"""Kernels kept per start (of its spread particles): the data stage evaluates the mixture's density at every move."""
+MODE_WINDOW = 15.0
+"""A start whose best log L is more than this below the best start's adds no kernels: its mode holds under e^-15 of
+the best one's peak density (the statements' particles, the mixture's other part, still cover the whole prior)."""
 
 
-def _search_modes(klass: int | None, part: Part, d: int, starts: int, seed: int) -> ModeProposal:
-    """The final populations of ``starts`` differential-evolution searches of the in-plane surrogate's log-likelihood
-    on class ``klass``'s part (unit-cube coordinates) as a kernel density: a Gaussian at each member, of the
-    population's covariance times Silverman's factor squared, floored at 0.005 per coordinate. A population that
-    found a mode lies along its ridge, so its kernels follow the ridge where one Gaussian at the best point would not
-    (measured: docs/identification.md, "The needle"); the weights count the mass either way."""
+def _search_start(job: tuple[int | None, Part, int, int]) -> tuple[float, np.ndarray]:
+    """One start of the mode search (in a worker): differential evolution of the in-plane surrogate's log-likelihood
+    on class ``klass``'s part (unit cube; seed ``seed``) to convergence, then particles spread over the mode it found.
+    Returns ``(best log L, spread particles (MODE_KERNELS, d))``."""
     from scipy.optimize import differential_evolution
 
+    klass, part, d, seed = job
     p = _PROBLEM
     assert p is not None, "the pool was started without _init_worker"
     assert supports(p), "checked by run_calibration"
 
+    def log_l(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        v = inplane_log_likelihood_batch(p, _class_thetas(np.clip(u, 0.0, 1.0), klass, part))  # type: ignore[arg-type]
+        return np.zeros(len(u)), v
+
     def neg_log_l(x: np.ndarray) -> np.ndarray:  # (d, S) -> (S,)
-        v = inplane_log_likelihood_batch(p, _class_thetas(np.clip(x.T, 0.0, 1.0), klass, part))  # type: ignore[arg-type]
+        v = log_l(x.T)[1]
         out: np.ndarray = np.where(np.isfinite(v), -v, 1e4)
         return out
 
-    means: list[np.ndarray] = []
-    covs: list[np.ndarray] = []
-    for k in range(starts):
-        r = differential_evolution(
-            neg_log_l, [(0.0, 1.0)] * d, seed=1000 * seed + k, vectorized=True, updating="deferred", polish=False,
-            init="sobol", **MODE_SEARCH,
-        )  # fmt: skip
-        pop = np.asarray(r.population)
-        h2 = len(pop) ** (-2.0 / (d + 4))  # Silverman's rule, squared
-        cov = h2 * np.cov(pop.T) + 0.005**2 * np.eye(d)
-        means.extend(pop)
-        covs.extend([cov] * len(pop))
-    return ModeProposal(np.array(means), np.array(covs))
+    r = differential_evolution(
+        neg_log_l, [(0.0, 1.0)] * d, seed=seed, vectorized=True, updating="deferred", polish=False, init="sobol",
+        **MODE_SEARCH,
+    )  # fmt: skip
+    rng = np.random.default_rng(seed)
+    u, _ = spread_over_mode(np.asarray(r.x), log_l, MODE_SPREAD.particles, MODE_SPREAD, rng)
+    return -float(r.fun), u[rng.choice(len(u), MODE_KERNELS, replace=False)]
+
+
+def search_modes(
+    klass: int | None, part: Part, d: int, starts: int, seed: int, *, pool: Any = None,
+    print_func: Callable[..., None] | None = None, label: str = "",
+) -> ModeProposal:  # fmt: skip
+    """``starts`` searches (:func:`_search_start`, seeds ``1000 seed + k``; on ``pool``'s workers when given) as one
+    kernel density (:meth:`~fpm_sim.study.calibrate.smc.ModeProposal.around` each start's spread particles); starts
+    more than :data:`MODE_WINDOW` below the best are left out. Each start's best log L is printed (``print_func``):
+    whether a run's search reached a mode is then on record. Every run of the class uses it (the search is pooled: a
+    mode any start found is in every run's proposal)."""
+    jobs = [(klass, part, d, 1000 * seed + k) for k in range(starts)]
+    found = list(pool.map(_search_start, jobs)) if pool is not None else [_search_start(j) for j in jobs]
+    top = max(f[0] for f in found)
+    for k, (best, _) in enumerate(found):
+        if print_func is not None:
+            out = "" if best >= top - MODE_WINDOW else " (left out)"
+            print_func(f"  {label}mode search start {k + 1}/{starts}: best log L {best:.2f}{out}")
+    return ModeProposal.around([pop for best, pop in found if best >= top - MODE_WINDOW])
 
 
 def _run_smc(
     klass: int | None, seed: int, opts: SamplerOptions, *, checkpoint: Path | None, resume: bool, pool: Any = None,
-    part: Part = None,
+    part: Part = None, modes: ModeProposal | None = None,
 ) -> dict[str, Any]:  # fmt: skip
-    """Two-stage tempered SMC (:func:`~fpm_sim.study.calibrate.smc.two_stage`) on class ``klass``: a finished run's
-    saved results (``.done``), else a fresh run (an unfinished SMC run is not continued: it restarts)."""
+    """Two-stage tempered SMC (:func:`~fpm_sim.study.calibrate.smc.two_stage`) on class ``klass``, its data stage
+    from a defensive mixture with ``modes`` where given: a finished run's saved results (``.done``), else a fresh run
+    (an unfinished SMC run is not continued: it restarts)."""
     import pickle
 
     assert _PROBLEM is not None, "the pool was started without _init_worker"
@@ -709,7 +744,6 @@ def _run_smc(
         return dict(out)
     one, two = opts.smc_settings()
     d = _PROBLEM.ndim - (klass is not None)
-    modes = _search_modes(klass, part, d, opts.mode_starts, seed) if opts.mode_starts else None
     run = two_stage(
         functools.partial(_smc_cheap, klass=klass, part=part), functools.partial(_smc_full, klass=klass, pool=pool,
         part=part), d, one, two, np.random.default_rng(seed), modes=modes, mode_particles=opts.cheap_particles,
@@ -832,10 +866,16 @@ def sample_classes(
     parts = _parts(problem, opts)
     _check_resume(problem, checkpoint, resume)
     keys = [(k, p, s) for k in live for p in parts for s in seeds]
-    jobs: list[Job] = [
-        (k, p, s, opts, None if checkpoint is None else str(_job_file(checkpoint, k, s, p)), resume) for k, p, s in keys
-    ]
     prefix = (lambda k: f"class {problem.class_label(k)}, ") if classes != (None,) else (lambda k: "")
+    modes = {
+        (k, p): search_modes(k, p, problem.ndim - (k is not None), opts.mode_starts, opts.seed, pool=pool,
+                             print_func=print_func, label=prefix(k))
+        for k in live for p in parts if opts.sampler == "smc" and opts.mode_starts
+    }  # fmt: skip
+    jobs: list[Job] = [
+        (k, p, s, opts, None if checkpoint is None else str(_job_file(checkpoint, k, s, p)), resume, modes.get((k, p)))
+        for k, p, s in keys
+    ]
     done = _sample_jobs(jobs, pool, print_func, prefix)
     run_of = {(k, s): combine_parts([done[(k, p, s)][0] for p in parts]) for k in live for s in seeds}
     merged = [
@@ -955,7 +995,8 @@ def run_calibration(
     rng = np.random.default_rng(opts.seed + 2)
     f_noisy = np.stack([problem.simulate_measurement(f, t, rng) for f, t in zip(f_pred, draws)])
     if print_func is not None:
-        print_func(f"nested sampling: {stats['n_calls']} calls, log Z = {comb.log_evidence:.2f} +- "
+        what = "SMC" if opts.sampler == "smc" else "nested sampling"
+        print_func(f"{what}: {stats['n_calls']} calls, log Z = {comb.log_evidence:.2f} +- "
                    f"{comb.log_evidence_err:.2f}")  # fmt: skip
     return Calibration(
         problem=problem,
