@@ -319,3 +319,25 @@ def test_mode_proposal_density_is_the_mixture_of_its_gaussians():
     ref = np.log(np.mean([multivariate_normal(m, c).pdf(u) for m, c in zip(modes.means, modes.covs)], axis=0))
     np.testing.assert_allclose(modes.log_density(u, block=4), ref, rtol=1e-10)
     assert modes.sample(5, rng).shape == (5, 3)
+
+
+def test_a_resumed_calibration_whose_runs_are_done_does_not_search_again(tmp_path, monkeypatch):
+    """``mode_starts`` with ``resume``: where every run of a class saved its results, the mode search (a minute a
+    start on the study) is not run again, and the resumed calibration gives the saved runs' ln Z exactly. The search
+    is shrunk here (2 members a coordinate, 3 generations, 16 particles spread): what is tested is that it is
+    skipped, not what it finds."""
+    from fpm_sim.study.calibrate import run_calibration, sampler
+
+    monkeypatch.setattr(sampler, "MODE_SEARCH", {"popsize": 2, "maxiter": 3, "tol": 1e-4})
+    monkeypatch.setattr(sampler, "MODE_SPREAD", SmcSettings(particles=16, moves=1.0, max_sweeps=4))
+    monkeypatch.setattr(sampler, "MODE_KERNELS", 8)
+    problem = _study_surrogate((-1, -1, -1))
+    opts = SamplerOptions(sampler="smc", particles=40, cheap_particles=80, runs=1, seed=0, mode_starts=1, draws=50)
+    first = run_calibration(problem, opts, checkpoint=tmp_path / "ck", progress=False)
+
+    def no_search(*args, **kwargs):
+        raise AssertionError("the mode search ran again")
+
+    monkeypatch.setattr(sampler, "search_modes", no_search)
+    again = run_calibration(problem, opts, checkpoint=tmp_path / "ck", resume=True, progress=False)
+    assert again.log_evidence == first.log_evidence

@@ -867,10 +867,15 @@ def sample_classes(
     _check_resume(problem, checkpoint, resume)
     keys = [(k, p, s) for k in live for p in parts for s in seeds]
     prefix = (lambda k: f"class {problem.class_label(k)}, ") if classes != (None,) else (lambda k: "")
+    def finished(k: int | None, p: Part) -> bool:  # every run of (k, p) resumes from its saved results
+        return resume and checkpoint is not None and all(
+            Path(f"{_job_file(checkpoint, k, s, p)}.done").exists() for s in seeds
+        )
+
     modes = {
         (k, p): search_modes(k, p, problem.ndim - (k is not None), opts.mode_starts, opts.seed, pool=pool,
                              print_func=print_func, label=prefix(k))
-        for k in live for p in parts if opts.sampler == "smc" and opts.mode_starts
+        for k in live for p in parts if opts.sampler == "smc" and opts.mode_starts and not finished(k, p)
     }  # fmt: skip
     jobs: list[Job] = [
         (k, p, s, opts, None if checkpoint is None else str(_job_file(checkpoint, k, s, p)), resume, modes.get((k, p)))
