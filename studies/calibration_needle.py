@@ -7,13 +7,14 @@ elbow branches (-1, -1, -1) (:func:`fpm_sim.study.calibrate.problem.study_proble
     python studies/calibration_needle.py powell --stage1 out/needle/stage1_seed2.npz --starts 12
     python studies/calibration_needle.py de --seed 0 --generations 400 --popsize 15 --one-at-a-time
     python studies/calibration_needle.py de --seed 0 --generations 1000 --popsize 30   # vectorised, deferred updating
+    python studies/calibration_needle.py search --seed 70000 --starts 5 --parts 5 --part 0   # the sampler's search
 
 ``stage1``: the SMC's first stage (prior -> prior x the study's statements), its share of particles at the compact
 geometry (base radius < 0.16 m) and their best data log-likelihood against the rest's. ``stage2``: the data stage
-from a saved stage-1 population. ``powell``: local searches of the full log-likelihood from stage-1 particles at
-the compact geometry and elsewhere. ``de``: a global search (scipy's differential evolution) of it. The surrogate
-(``model="inplane"``) is for checks of the sampler, never for a reported result.
-"""
+from a saved stage-1 population. ``powell``: local searches of the full log-likelihood from stage-1 particles at the
+compact geometry and elsewhere. ``de``: a global search (scipy's differential evolution) of it. ``search``: the
+sampler's own mode search, on the whole prior or on one part of the base radius's. The surrogate
+(``model="inplane"``) is for checks of the sampler, never for a reported result."""
 
 from __future__ import annotations
 
@@ -122,6 +123,22 @@ def de(a: argparse.Namespace) -> None:
           f"a generation each), {time.perf_counter() - t:.0f} s")  # fmt: skip
 
 
+def search(a: argparse.Namespace) -> None:
+    """The sampler's own mode search (``sampler._search_start``: differential evolution to convergence, then
+    particles spread over its optimum), ``--starts`` starts from seed ``--seed``, on the whole prior or on part
+    ``--part`` of ``--parts`` equal prior-mass parts of the base radius (``SamplerOptions.split``)."""
+    from fpm_sim.study.calibrate import sampler
+
+    sampler._init_worker(PROB)
+    part = None if a.parts is None else (BASE, a.parts, a.part)
+    for k in range(a.starts):
+        t = time.perf_counter()
+        best, pop = sampler._search_start((None, part, PROB.ndim, a.seed + k))
+        radius = np.median(sampler._class_thetas(pop, None, part)[:, BASE])
+        print(f"seed {a.seed + k}: best log L {best:.2f}, spread particles' median base radius {radius:.3f} m, "
+              f"{time.perf_counter() - t:.0f} s", flush=True)  # fmt: skip
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = p.add_subparsers(required=True)
@@ -130,6 +147,12 @@ def main() -> None:
     s.add_argument("--particles", type=int, default=1000)
     s.add_argument("--out", default="out/needle")
     s.set_defaults(func=stage1)
+    s = sub.add_parser("search")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--starts", type=int, default=5)
+    s.add_argument("--parts", type=int, default=None)
+    s.add_argument("--part", type=int, default=0)
+    s.set_defaults(func=search)
     s = sub.add_parser("stage2")
     s.add_argument("--stage1", required=True)
     s.add_argument("--particles", type=int, default=200)

@@ -7,7 +7,8 @@ disagree"): the study's calibration problem on the in-plane surrogate, one elbow
         --particles 1000 --cheap-particles 2000
 
 ``--together``: one calibration of ``--runs`` runs (seeds ``--seed``, ``--seed + 1``, ...; a mode search pooled over
-them, ``--mode-starts``) and its between-run check, instead of one calibration per seed.
+them, ``--mode-starts`` per part; ``--split geometry.base_radius_m 5``) and its between-run check, instead of one
+calibration per seed.
 
 Prints each run's ln Z, the between-run check and, per run, the best draw's log-likelihood split into the data's
 and the study statements' terms. The surrogate (``model="inplane"``) is for checks of the sampler, never for a
@@ -46,6 +47,7 @@ def main() -> None:
     p.add_argument("--together", action="store_true")
     p.add_argument("--ess-fraction", type=float, default=0.5)
     p.add_argument("--moves", type=float, default=3.0)
+    p.add_argument("--split", nargs=2, metavar=("NAME", "N"), help="SamplerOptions.split: NAME's prior in N parts")
     a = p.parse_args()
     warnings.simplefilter("ignore")
     prob = problem(tuple(a.branch))
@@ -72,6 +74,7 @@ def together(prob: CalibrationProblem, a: argparse.Namespace) -> None:
     opts = SamplerOptions(
         sampler="smc", particles=a.particles, cheap_particles=a.cheap_particles, runs=a.runs, seed=a.seed,
         mode_starts=a.mode_starts, workers=a.workers, ess_fraction=a.ess_fraction, moves=a.moves,
+        split=None if a.split is None else (a.split[0], int(a.split[1])),
     )  # fmt: skip
     cal = run_calibration(prob, opts, progress=True, print_func=print)
     check = cal.runs_check

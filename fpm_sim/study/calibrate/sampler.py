@@ -822,13 +822,18 @@ def _sample_jobs(
     for klass, part, seed, res, sec in it:
         out[(klass, part, seed)] = (res, sec)
         if print_func is not None:
-            where = "" if part is None else f"part {part[2] + 1}/{part[1]}, "
+            where = _part_label(part)
             print_func(
                 f"  {label(klass)}{where}seed {seed}: ln Z = {float(res['logz'][-1]):.2f} +- "
                 f"{float(res['logzerr'][-1]):.2f}, {int(np.sum(res['ncall']))} calls, {sec:.0f} s "
                 f"({len(out)}/{len(jobs)} runs)"
             )
     return out
+
+
+def _part_label(part: Part) -> str:
+    """``"part 2/5, "`` (the prior's part a run samples, :attr:`SamplerOptions.split`), or ``""`` for the whole."""
+    return "" if part is None else f"part {part[2] + 1}/{part[1]}, "
 
 
 def _merge(results: list[Any], sampler: str) -> Any:
@@ -867,14 +872,17 @@ def sample_classes(
     _check_resume(problem, checkpoint, resume)
     keys = [(k, p, s) for k in live for p in parts for s in seeds]
     prefix = (lambda k: f"class {problem.class_label(k)}, ") if classes != (None,) else (lambda k: "")
+
     def finished(k: int | None, p: Part) -> bool:  # every run of (k, p) resumes from its saved results
-        return resume and checkpoint is not None and all(
-            Path(f"{_job_file(checkpoint, k, s, p)}.done").exists() for s in seeds
+        return (
+            resume
+            and checkpoint is not None
+            and all(Path(f"{_job_file(checkpoint, k, s, p)}.done").exists() for s in seeds)
         )
 
     modes = {
         (k, p): search_modes(k, p, problem.ndim - (k is not None), opts.mode_starts, opts.seed, pool=pool,
-                             print_func=print_func, label=prefix(k))
+                             print_func=print_func, label=prefix(k) + _part_label(p))
         for k in live for p in parts if opts.sampler == "smc" and opts.mode_starts and not finished(k, p)
     }  # fmt: skip
     jobs: list[Job] = [
