@@ -52,9 +52,8 @@ def check_joint_poses(
 ) -> list[dict[str, float]]:
     """``poses`` as plain ``{joint: float}`` dicts, each joint a hinge or slide of ``desc``'s model and each value
     finite and inside the joint's stated range; errors name ``parameter``, the pose (1-based) and the joint."""
-    from fpm_sim.model.imported import joint_ranges, load_spec, posable_joints, range_problem
+    from fpm_sim.model.imported import joint_ranges, load_spec, range_problem
 
-    joints = posable_joints(desc)
     ranges = joint_ranges(load_spec(desc).compile())
     if not poses:
         raise JointPosesError("no poses given", parameter=parameter, hint="give at least one {joint: value} pose")
@@ -64,11 +63,11 @@ def check_joint_poses(
             raise JointPosesError(f"pose {k + 1} is not a {{joint: value}} mapping", parameter=parameter, value=pose)
         row = {}
         for name, value in pose.items():
-            if name not in joints:
+            if name not in ranges:
                 raise JointPosesError(
                     f"pose {k + 1}: no hinge or slide joint {name!r} in {desc.model_path.name}",
                     parameter=parameter,
-                    hint=f"its joints: {', '.join(joints)}",
+                    hint=f"its joints: {', '.join(ranges)}",
                 )
             try:
                 v = float(value)

@@ -229,39 +229,31 @@ def constrained_model(spec: mujoco.MjSpec) -> tuple[mujoco.MjModel, mujoco.MjDat
 
 def posable_joints(desc: ImportedDescription) -> list[str]:
     """The names of the hinge and slide joints of ``desc``'s model (those a joint-space pose may set)."""
-    model = load_spec(desc).compile()
-    kinds = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
-    return [
-        mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j)
-        for j in range(model.njnt)
-        if int(model.jnt_type[j]) in kinds and mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j)
-    ]
+    return list(joint_ranges(load_spec(desc).compile()))
 
 
 def joint_ranges(model: mujoco.MjModel) -> dict[str, tuple[float, float, str]]:
-    """The stated ranges of the model's limited hinge and slide joints, ``{name: (lo, hi, unit)}`` (``"rad"`` or
-    ``"m"``, as MuJoCo compiled them): a joint-space pose outside one is not a pose the machine takes
-    (:func:`range_problem`)."""
+    """Every named hinge and slide joint of ``model`` (those a joint-space pose may set, in the model's order) with
+    its range, ``{name: (lo, hi, unit)}`` (``"rad"`` or ``"m"``, as MuJoCo compiled them; ``(-inf, inf)`` where the
+    joint is not limited): a joint-space pose outside one is not a pose the machine takes (:func:`range_problem`)."""
     units = {int(mujoco.mjtJoint.mjJNT_HINGE): "rad", int(mujoco.mjtJoint.mjJNT_SLIDE): "m"}
-    return {
-        name: (float(model.jnt_range[j, 0]), float(model.jnt_range[j, 1]), units[int(model.jnt_type[j])])
-        for j in range(model.njnt)
-        if int(model.jnt_type[j]) in units
-        and model.jnt_limited[j]
-        and (name := mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j))
-    }
+    out = {}
+    for j in range(model.njnt):
+        name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j)
+        if int(model.jnt_type[j]) in units and name:
+            lo, hi = (float(v) for v in model.jnt_range[j]) if model.jnt_limited[j] else (-math.inf, math.inf)
+            out[name] = (lo, hi, units[int(model.jnt_type[j])])
+    return out
 
 
 def range_problem(ranges: Mapping[str, tuple[float, float, str]], name: str, value: float) -> str | None:
-    """What is wrong with joint ``name`` at ``value`` given ``ranges`` (:func:`joint_ranges`): ``None`` inside its
-    range (or unlimited), else a sentence naming the value and the range (a hinge's in degrees too). A value within
-    1e-9 (relative to the range's size, at least 1e-9 absolute) of a limit counts as inside: a solved pose at a
-    limit lands there to round-off."""
-    if name not in ranges:
-        return None
+    """What is wrong with joint ``name`` (a key of ``ranges``, :func:`joint_ranges`) at ``value``: ``None`` inside
+    its range, else a sentence naming the value and the range (a hinge's in degrees too). A value within 1e-9
+    (relative to the range's size, at least 1e-9 absolute) of a limit counts as inside: a solved pose at a limit
+    lands there to round-off."""
     lo, hi, unit = ranges[name]
     tol = 1e-9 * max(1.0, hi - lo)
-    if lo - tol <= value <= hi + tol:
+    if lo - tol <= value <= hi + tol:  # always for an unlimited joint: (-inf, inf), tol inf
         return None
     deg = f" ({math.degrees(lo):.6g} to {math.degrees(hi):.6g} deg)" if unit == "rad" else ""
     return f"joint {name!r} = {value:.6g} {unit} is outside its range [{lo:.6g}, {hi:.6g}] {unit}{deg}"
@@ -276,16 +268,17 @@ def _pose(spec: mujoco.MjSpec, q: dict[str, float]) -> None:
     if not q:
         _loop_residuals(model, data, q)
         return
+    ranges = joint_ranges(model)
     for name, value in q.items():
         jid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)
         if jid < 0:
             names = ", ".join(j.name for j in spec.joints if j.name)
             raise _fail(f"no joint {name!r} in the model", "q", name, hint=f"joints: {names}")
-        if int(model.jnt_type[jid]) not in (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE)):
+        if name not in ranges:
             raise _fail(f"joint {name!r} is not a hinge or slide: pose it in the model file", "q", name)
         if not math.isfinite(value):
             raise _fail(f"joint {name!r}: value must be finite", "q", value)
-        if problem := range_problem(joint_ranges(model), name, value):
+        if problem := range_problem(ranges, name, value):
             raise _fail(problem, "q", hint="pose it inside the range, or widen the range in the model file")
         data.qpos[model.jnt_qposadr[jid]] = value
     _loop_residuals(model, data, q)

@@ -232,17 +232,21 @@ class ImportedKinematics:
             )
 
 
-def joint_poses_of(desc: ImportedDescription, poses: Sequence[TaskPose]) -> list[dict[str, float]]:
+def joint_poses_of(
+    desc: ImportedDescription, poses: Sequence[TaskPose], *, labels: Sequence[str] | None = None
+) -> list[dict[str, float]]:
     """Every pose of ``poses`` as joint values (:meth:`ImportedKinematics.solve`), each solve started from the one
     before (continuation: the sweep stays on one assembly branch; the first starts from the model's reference).
-    An :class:`ImportedPoseError` names the pose's row (1-based)."""
+    An :class:`ImportedPoseError` names the pose by its label in ``labels`` (e.g. its file and row), else by its
+    row (``pose 3``, 1-based)."""
     kin = ImportedKinematics(desc)
     out: list[dict[str, float]] = []
     for k, pose in enumerate(poses):
         try:
             out.append(kin.solve(pose, start=out[-1] if out else None))
         except ImportedPoseError as e:
-            raise ImportedPoseError(f"pose {k + 1}: {e.message}", parameter=e.parameter, hint=e.hint) from e
+            where = f"pose {k + 1}" if labels is None else labels[k]
+            raise ImportedPoseError(f"{where}: {e.message}", parameter=e.parameter, hint=e.hint) from e
     return out
 
 

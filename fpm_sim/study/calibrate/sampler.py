@@ -719,8 +719,8 @@ def search_modes(
     jobs = [(klass, part, d, 1000 * seed + k) for k in range(starts)]
     found = list(pool.map(_search_start, jobs)) if pool is not None else [_search_start(j) for j in jobs]
     top = max(f[0] for f in found)
-    for k, (best, _) in enumerate(found):
-        if print_func is not None:
+    if print_func is not None:
+        for k, (best, _) in enumerate(found):
             out = "" if best >= top - MODE_WINDOW else " (left out)"
             print_func(f"  {label}mode search start {k + 1}/{starts}: best log L {best:.2f}{out}")
     return ModeProposal.around([pop for best, pop in found if best >= top - MODE_WINDOW])

@@ -147,7 +147,15 @@ def read_joint_measured_csv(
     modes = sorted(int(h[1:-3]) for h in header if h.startswith("f") and h.endswith("_hz") and h[1:-3].isdigit())
     cols = [h for h in header if h not in {f"f{k}_hz" for k in modes} | {"sigma_hz"}]
     if desc.task and modes and set(cols) == task_columns(desc):
-        return _solved_to_joints(read_task_measured_csv(p, desc, sigma_pct=sigma_pct), desc, p)
+        from fpm_sim.model.imported_pose import ImportedPoseError, joint_poses_of
+
+        data = read_task_measured_csv(p, desc, sigma_pct=sigma_pct)
+        task_poses = [q for q in data.poses if isinstance(q, TaskPose)]
+        try:
+            poses = joint_poses_of(desc, task_poses, labels=[f"{p}: row {n}" for n in data.lines])
+        except ImportedPoseError as e:  # a data error: its label names the file and the row
+            raise DataError(e.message, hint=e.hint) from e
+        return dataclasses.replace(data, poses=poses)
     unknown = [c for c in cols if c not in joints]
     if unknown or not cols or not modes:
         task = f"; or one column per task coordinate ({', '.join(sorted(task_columns(desc)))})" if desc.task else ""
@@ -172,23 +180,6 @@ def read_joint_measured_csv(
     if not np.isfinite(freq).any():
         raise DataError("no measured frequency", file=p, hint="fill f1_hz, f2_hz, ... on some rows")
     return TaskMeasurements(p.name, poses, freq, sigma, [line for line, _ in rows])
-
-
-def _solved_to_joints(data: TaskMeasurements, desc: ImportedDescription, p: Path) -> TaskMeasurements:
-    """``data``'s task poses as ``desc``'s joint values, each solve started from the row before (as
-    :func:`~fpm_sim.model.imported_pose.joint_poses_of`); a pose the model cannot take is a :class:`DataError` naming
-    the file's line."""
-    from fpm_sim.model.imported_pose import ImportedKinematics, ImportedPoseError
-
-    kin = ImportedKinematics(desc)
-    poses: list[dict[str, float]] = []
-    for pose, line in zip(data.poses, data.lines, strict=True):
-        assert isinstance(pose, TaskPose), "read_task_measured_csv reads task poses"
-        try:
-            poses.append(kin.solve(pose, start=poses[-1] if poses else None))
-        except ImportedPoseError as e:
-            raise DataError(e.message, file=p, row=line, hint=e.hint) from e
-    return dataclasses.replace(data, poses=poses)
 
 
 def _read_frequencies(
