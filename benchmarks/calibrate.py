@@ -57,3 +57,55 @@ class CheapLikelihood(OneBlasThread):
         t = time.process_time()
         self.vectorised()
         return slow / (time.process_time() - t)
+
+
+N_TRAIN = 300
+N_EXACT = 60
+
+
+class EmulatedLikelihood(OneBlasThread):
+    """The data stage's likelihood per particle: the emulator of the segment model
+    (:mod:`fpm_sim.study.calibrate.emulator`, fitted to ``N_TRAIN`` segment-model runs at prior draws that reach the
+    measured poses; elbow branches (-1, -1, -1)) vectorised over 4000 particles, against the segment model one at a
+    time over ``N_EXACT``: ``track_segments_over_emulated`` is the ratio of their CPU seconds per particle."""
+
+    timeout = 600
+
+    def setup(self) -> None:
+        from fpm_sim.study.calibrate.emulator import train_emulator
+        from fpm_sim.study.calibrate.problem import study_problem
+        from fpm_sim.study.calibrate.vectorised import inplane_frequencies_batch
+
+        warm_imports()
+        self.limit_blas()
+        p = self.problem = study_problem(branch=(-1, -1, -1))
+        rng = np.random.default_rng(0)
+        u = rng.random((20 * N_TRAIN, p.ndim))
+        theta = p.prior_transform(u)
+        f_sur, cheap = inplane_frequencies_batch(p, theta)
+        ok = np.flatnonzero(np.isfinite(cheap))[:N_TRAIN]
+        self.u, self.theta = u[ok], theta[ok]
+        f_seg = np.array([p.predict(t) for t in self.theta])
+        self.emulator = train_emulator(self.u, f_seg, f_sur[ok], n_free=len(p.priors.parameters), rng=rng)
+        self.particles = np.repeat(self.u, 4000 // len(self.u) + 1, axis=0)[:4000]
+
+    def emulated(self) -> np.ndarray:
+        from fpm_sim.study.calibrate.vectorised import inplane_log_likelihood_batch
+
+        th = self.problem.prior_transform(self.particles)
+        scale = self.emulator.log_scale(self.particles)
+        return inplane_log_likelihood_batch(self.problem, th, log_scale=scale, model_error_rel=0.05)
+
+    def track_emulated_us_per_particle(self) -> float:
+        t = time.process_time()
+        self.emulated()
+        return (time.process_time() - t) / len(self.particles) * 1e6
+
+    def track_segments_over_emulated(self) -> float:
+        t = time.process_time()
+        for x in self.theta[:N_EXACT]:
+            self.problem.log_likelihood(x)
+        exact = (time.process_time() - t) / N_EXACT
+        t = time.process_time()
+        self.emulated()
+        return exact / ((time.process_time() - t) / len(self.particles))

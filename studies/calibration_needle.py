@@ -8,12 +8,14 @@ elbow branches (-1, -1, -1) (:func:`fpm_sim.study.calibrate.problem.study_proble
     python studies/calibration_needle.py de --seed 0 --generations 400 --popsize 15 --one-at-a-time
     python studies/calibration_needle.py de --seed 0 --generations 1000 --popsize 30   # vectorised, deferred updating
     python studies/calibration_needle.py search --seed 70000 --starts 5 --parts 5 --part 0   # the sampler's search
+    python studies/calibration_needle.py gap --seed 0 --draws 400     # the surrogate's posterior on the segment model
 
 ``stage1``: the SMC's first stage (prior -> prior x the study's statements), its share of particles at the compact
 geometry (base radius < 0.16 m) and their best data log-likelihood against the rest's. ``stage2``: the data stage
 from a saved stage-1 population. ``powell``: local searches of the full log-likelihood from stage-1 particles at the
 compact geometry and elsewhere. ``de``: a global search (scipy's differential evolution) of it. ``search``: the
-sampler's own mode search, on the whole prior or on one part of the base radius's. The surrogate
+sampler's own mode search, on the whole prior or on one part of the base radius's. ``gap``: the surrogate's
+posterior (one SMC run with a 12-start mode search) importance-weighted to the segment model. The surrogate
 (``model="inplane"``) is for checks of the sampler, never for a reported result."""
 
 from __future__ import annotations
@@ -139,6 +141,39 @@ def search(a: argparse.Namespace) -> None:
               f"{time.perf_counter() - t:.0f} s", flush=True)  # fmt: skip
 
 
+def _segment_log_likelihood(theta: np.ndarray) -> float:
+    return SEGMENTS.log_likelihood(theta)
+
+
+SEGMENTS = study_problem(model="segments", branch=(-1, -1, -1))
+
+
+def gap(a: argparse.Namespace) -> None:
+    """The surrogate's posterior (one run, 1000 + 2000 particles, a 12-start mode search, seed ``--seed``) at
+    ``--draws`` of its draws on the segment model: ``log L_segments - log L_surrogate`` in the compact region and
+    elsewhere, and the draws' importance weights to the segment model (effective sample size, Pareto k)."""
+    import multiprocessing
+
+    from fpm_sim.study.calibrate import SamplerOptions, run_calibration
+    from fpm_sim.study.calibrate.emulator import importance_diagnostics
+
+    opts = SamplerOptions(sampler="smc", particles=1000, cheap_particles=2000, runs=1, seed=a.seed, mode_starts=12,
+                          workers=2)  # fmt: skip
+    draws = run_calibration(PROB, opts, progress=False).draws
+    d = draws[np.random.default_rng(1).choice(len(draws), min(a.draws, len(draws)), replace=False)]
+    with multiprocessing.get_context("spawn").Pool(2) as pool:
+        segments = np.array(pool.map(_segment_log_likelihood, list(d), chunksize=8))
+    log_w = segments - inplane_log_likelihood_batch(PROB, d)
+    compact = d[:, BASE] < COMPACT_M
+    for name, rows in (("compact", compact), ("elsewhere", ~compact)):
+        if rows.any():
+            q = np.percentile(log_w[rows], [5, 50, 95])
+            print(f"{name}: {rows.mean():.1%} of the draws, log L_segments - log L_surrogate 5/50/95 %: "
+                  + " / ".join(f"{v:.1f}" for v in q))  # fmt: skip
+    ess, k = importance_diagnostics(log_w)
+    print(f"weights to the segment model: ESS {ess:.1f} of {len(d)}, Pareto k {k:.2f}")
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = p.add_subparsers(required=True)
@@ -153,6 +188,10 @@ def main() -> None:
     s.add_argument("--parts", type=int, default=None)
     s.add_argument("--part", type=int, default=0)
     s.set_defaults(func=search)
+    s = sub.add_parser("gap")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--draws", type=int, default=400)
+    s.set_defaults(func=gap)
     s = sub.add_parser("stage2")
     s.add_argument("--stage1", required=True)
     s.add_argument("--particles", type=int, default=200)

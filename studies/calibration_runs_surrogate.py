@@ -27,9 +27,10 @@ from fpm_sim.study.calibrate import CalibrationProblem, SamplerOptions, run_cali
 from fpm_sim.study.calibrate.problem import study_problem
 
 
-def problem(branch: tuple[int, int, int]) -> CalibrationProblem:
-    """The study's calibration (its data, priors and statements) on the surrogate, the elbow branches fixed."""
-    return study_problem(model="inplane", branch=branch)
+def problem(branch: tuple[int, int, int], model: str = "inplane") -> CalibrationProblem:
+    """The study's calibration (its data, priors and statements) on the surrogate (or ``model``), the elbow branches
+    fixed."""
+    return study_problem(model=model, branch=branch)
 
 
 def main() -> None:
@@ -48,9 +49,11 @@ def main() -> None:
     p.add_argument("--ess-fraction", type=float, default=0.5)
     p.add_argument("--moves", type=float, default=3.0)
     p.add_argument("--split", nargs=2, metavar=("NAME", "N"), help="SamplerOptions.split: NAME's prior in N parts")
+    p.add_argument("--model", default="inplane", choices=("inplane", "segments"), help="segments: the reported model")
+    p.add_argument("--emulator", type=int, default=0, help="SamplerOptions.emulator (with --model segments)")
     a = p.parse_args()
     warnings.simplefilter("ignore")
-    prob = problem(tuple(a.branch))
+    prob = problem(tuple(a.branch), a.model)
     t = time.time()
     if a.together:
         together(prob, a)
@@ -73,7 +76,7 @@ def together(prob: CalibrationProblem, a: argparse.Namespace) -> None:
     """One calibration of ``a.runs`` runs and its between-run check, with each run's best draw and base radius."""
     opts = SamplerOptions(
         sampler="smc", particles=a.particles, cheap_particles=a.cheap_particles, runs=a.runs, seed=a.seed,
-        mode_starts=a.mode_starts, workers=a.workers, ess_fraction=a.ess_fraction, moves=a.moves,
+        mode_starts=a.mode_starts, workers=a.workers, ess_fraction=a.ess_fraction, moves=a.moves, emulator=a.emulator,
         split=None if a.split is None else (a.split[0], int(a.split[1])),
     )  # fmt: skip
     cal = run_calibration(prob, opts, progress=True, print_func=print)

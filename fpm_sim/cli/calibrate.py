@@ -61,6 +61,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         sampler=args.sampler,
         particles=args.particles,
         cheap_particles=args.cheap_particles,
+        emulator=args.emulator,
     )
     opts.check()
     out.mkdir(parents=True, exist_ok=True)
@@ -276,6 +277,15 @@ def _add_sampler_args(p: argparse.ArgumentParser) -> None:
         type=int,
         default=2000,
         help="smc: particles of the first stage (the prior times the statements; default 2000)",
+    )
+    p.add_argument(
+        "--emulator",
+        type=int,
+        default=0,
+        help="smc: the data stage on an emulator of the segment model trained on this many segment-model runs (1500 "
+        'measured), then importance-weighted to the segment model, exact (docs/identification.md, "An emulator of '
+        "the segment model\"); each run prints its weights' effective sample size and Pareto k. 0 (default): the "
+        "segment model throughout",
     )
     p.add_argument(
         "--live-points", type=int, default=250, help="dynesty: nested sampling live points of each run (default 250)"

@@ -226,6 +226,16 @@ def test_the_cli_runs_the_smc_sampler_and_refuses_nested_sampling_options(cli_fi
     # too few particles: exit 2 naming the option
     assert main([*_argv(cli_files), "--sampler", "smc", "--particles", "3", "--overwrite"]) == 2
     assert capsys.readouterr().err.startswith("error: --particles: must be >= 10, got 3")
+    # the emulator is the SMC's: exit 2 naming it
+    assert main([*_argv(cli_files), "--emulator", "100", "--overwrite"]) == 2
+    assert capsys.readouterr().err.startswith("error: --emulator: is the smc sampler's")
+    assert main([*_argv(cli_files), "--sampler", "smc", "--emulator", "10", "--overwrite"]) == 2
+    assert capsys.readouterr().err.startswith("error: --emulator: must be 0 (off) or >= 50")
+    # on a problem whose model is not the segment model (here the surrogate itself) it is refused before sampling
+    from fpm_sim.study.calibrate import run_calibration
+
+    with pytest.raises(CalibrationError, match="the emulator corrects the 3RRR's vectorised in-plane surrogate"):
+        run_calibration(_study_surrogate((-1, -1, -1)), SamplerOptions(sampler="smc", emulator=100))
 
 
 def test_resuming_a_nested_sampling_calibration_with_the_smc_sampler_is_refused(cli_files, capsys):
@@ -341,3 +351,73 @@ def test_a_resumed_calibration_whose_runs_are_done_does_not_search_again(tmp_pat
     monkeypatch.setattr(sampler, "search_modes", no_search)
     again = run_calibration(problem, opts, checkpoint=tmp_path / "ck", resume=True, progress=False)
     assert again.log_evidence == first.log_evidence
+
+
+EMULATOR_SHIFT = 0.5 * SD
+EMULATOR_SD = 1.5 * SD
+EMULATOR_WEIGHTS = (1.0, 1.0)
+"""An emulator of the mixture that is wrong in every way a fitted emulator can be: its modes shifted by half their
+sd, 1.5 times as wide, weighted 1 : 1 instead of 0.3 : 0.7, and its evidence 2 instead of 1."""
+
+
+def _emulated(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    c = _cheap(u)[1]
+    norm = D * math.log(EMULATOR_SD * math.sqrt(2 * math.pi))
+    a, b = (
+        math.log(w) - 0.5 * np.sum((u - m - EMULATOR_SHIFT) ** 2, axis=1) / EMULATOR_SD**2 - norm
+        for w, m in zip(EMULATOR_WEIGHTS, CENTRES)
+    )
+    return c, np.where(np.isfinite(c), np.logaddexp(a, b), -np.inf)
+
+
+def test_a_data_stage_on_a_wrong_emulator_weighted_to_the_exact_likelihood_gives_the_exact_posterior():
+    from fpm_sim.study.calibrate.emulator import importance_diagnostics
+    from fpm_sim.study.calibrate.smc import emulated_two_stage
+
+    trained_on: list[int] = []
+
+    def train(u: np.ndarray):
+        trained_on.append(len(u))
+        return _emulated
+
+    one, two = SmcSettings(particles=500), SmcSettings(particles=1600)
+    for seed in range(4):
+        run = emulated_two_stage(_cheap, train, _full, D, one, two, np.random.default_rng(seed))
+        assert run.log_weights is not None
+        w = np.exp(run.log_weights)
+        # the importance weights make it exact: ln Z = 0 (the emulator's own is ln 2 = 0.69) within 4 of the stated
+        # error (which counts the weights' importance-sampling variance), and the first mode's weighted share 0.3
+        # (the emulator's: 0.5) within 0.15, as the plain two-stage SMC's test allows
+        assert abs(run.log_evidence) < 4 * run.log_evidence_err, (run.log_evidence, run.log_evidence_err)
+        assert run.log_evidence_err < 0.5
+        assert abs(float(np.sum(w * _modes(run.u)[1])) - WEIGHTS[0]) < 0.15
+        unweighted = float(np.mean(_modes(run.u)[1]))
+        assert abs(unweighted - EMULATOR_WEIGHTS[0] / sum(EMULATOR_WEIGHTS)) < 0.15, unweighted  # what it corrects
+        ess, k = importance_diagnostics(np.log(w))
+        # the weights are usable: a 1.5x wider proposal of 4 dimensions keeps a fair share of effective draws
+        assert 0.05 * len(w) < ess < len(w)
+        assert k < 0.7
+        assert math.isclose(float(np.sum(w)), 1.0)
+        assert np.array_equal(run.log_b, _full(run.u)[1])  # the exact likelihood is reported, not the emulator's
+    assert trained_on == [one.particles] * 4  # trained on stage 1's particles
+
+
+@pytest.mark.slow  # ~15 s: some 300 segment-model runs
+def test_an_emulated_calibration_of_the_study_reports_the_segment_models_posterior():
+    """``SamplerOptions.emulator`` on the study's problem (segment model, one class): every draw's reported
+    log-likelihood is the segment model's (not the emulator's), and the run's line states the emulator's error and
+    its weights' effective sample size and Pareto k."""
+    from fpm_sim.study.calibrate import run_calibration
+    from fpm_sim.study.calibrate.problem import study_problem
+
+    problem = study_problem(branch=(-1, -1, -1))
+    lines: list[str] = []
+    opts = SamplerOptions(sampler="smc", particles=100, cheap_particles=300, emulator=100, runs=1, draws=200)
+    cal = run_calibration(problem, opts, print_func=lines.append)
+    assert np.isfinite(cal.log_evidence)
+    for i in range(0, 200, 40):
+        assert cal.log_likelihood[i] == pytest.approx(problem.log_likelihood(cal.draws[i]), rel=1e-9, abs=1e-9)
+    (line,) = [x for x in lines if "seed 0:" in x]
+    import re
+
+    assert re.search(r"emulator [0-9.]+ % rms on \d+ runs, weights ESS \d+/100, Pareto k -?[0-9.]+", line), line

@@ -79,6 +79,14 @@ def _sampler_line(cal: Calibration) -> str:
             f"{cal.n_calls} likelihood calls, {cal.seconds:.0f} s"
         )
         err = "the error is the SMC's estimate from the particles' genealogy (Lee & Whiteley 2018)"
+        if getattr(o, "emulator", 0):
+            head += (
+                f"; the data stage on an emulator of the segment model fitted to {o.emulator} segment-model runs (and "
+                f"refitted at its particles), each run importance-weighted to the segment model (each run's weights' "
+                f"effective sample size and Pareto k are in the run lines of the command's output; "
+                f'docs/identification.md, "An emulator of the segment model")'
+            )
+            err += " plus the importance weights' variance"
     else:
         head = (
             f"- nested sampling (dynesty, {o.live_points} live points per run, {runs}, stop at dlogz {o.dlogz:g}, "

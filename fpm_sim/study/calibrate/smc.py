@@ -39,7 +39,8 @@ import numpy as np
 from scipy.special import logsumexp
 
 __all__ = [
-    "ModeProposal", "SmcRun", "SmcSettings", "merge_smc", "smc_results", "spread_over_mode", "temper", "two_stage",
+    "ModeProposal", "SmcRun", "SmcSettings", "emulated_two_stage", "merge_smc", "smc_results", "spread_over_mode",
+    "temper", "two_stage",
 ]  # fmt: skip
 
 Evaluate = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
@@ -71,6 +72,8 @@ class SmcRun:
     n_calls: int
     betas: list[float] = field(default_factory=list)
     acceptance: list[float] = field(default_factory=list)
+    log_weights: np.ndarray | None = None
+    """``(n,)`` the particles' normalised log importance weights (:func:`emulated_two_stage`); ``None``: equal."""
 
     @property
     def log_evidence_err(self) -> float:
@@ -288,6 +291,19 @@ def _from_prior(
     return u[idx], la[idx], lb[idx], math.log(frac), (1.0 - frac) / (n * frac), n
 
 
+def _stage_one(
+    cheap: Evaluate, d: int, s: SmcSettings, rng: np.random.Generator
+) -> tuple[SmcRun, float, float, int] | SmcRun:
+    """Stage 1, from the prior to the prior times the cheap terms: ``(its run, the log of the support's prior mass,
+    that estimate's variance, the calls for the support)``, or an empty run with ``ln Z = -inf`` when no prior draw
+    is in the support."""
+    start = _from_prior(cheap, d, s, rng)
+    if start is None:
+        return SmcRun(np.empty((0, d)), np.empty(0), np.empty(0), -math.inf, 0.0, s.particles)
+    u, _, lc, log_mass, var_mass, calls = start
+    return temper(u, np.zeros(len(u)), lc, cheap, s, rng), log_mass, var_mass, calls
+
+
 def two_stage(
     cheap: Evaluate, full: Evaluate, d: int, stage1: SmcSettings, stage2: SmcSettings, rng: np.random.Generator,
     *, modes: ModeProposal | None = None, mode_particles: int = 0,
@@ -303,26 +319,73 @@ def two_stage(
     (:func:`_from_mixture`): a region the data favour but stage 1 holds too few particles of keeps its particles
     through the tempering, and ``Z_2 = E_r[p_1 L_data / r]`` is ``E_{p_1}[L_data]`` (up to the error of ``Z_1``'s
     estimate)."""
-    start = _from_prior(cheap, d, stage1, rng)
-    if start is None:
-        return SmcRun(np.empty((0, d)), np.empty(0), np.empty(0), -math.inf, 0.0, stage1.particles)
-    u, _, lc, log_mass, var_mass, calls = start
-    one = temper(u, np.zeros(len(u)), lc, cheap, stage1, rng)
+    first = _stage_one(cheap, d, stage1, rng)
+    if isinstance(first, SmcRun):
+        return first
+    one, log_mass, var_mass, calls = first
     if modes is not None and mode_particles > 0:
         two = _from_mixture(one, full, modes, mode_particles, log_mass + one.log_evidence, stage2, rng)
-        moved = 0
     else:
-        u2, la, lb, beta, log_z2, var2 = _first_data_step(one.u, full, stage2, rng)
-        u2, la, lb, _, moved, _ = _move(u2, la, lb, beta, full, stage2, rng, 1.0)
-        two = temper(u2, la, lb, full, stage2, rng, beta=beta)
-        two.log_evidence += log_z2
-        two.log_evidence_var += var2
-        moved += len(one.u)
+        two = _data_stage(one, full, stage2, rng)
     return SmcRun(
         two.u, two.log_a, two.log_b, log_mass + one.log_evidence + two.log_evidence,
         var_mass + one.log_evidence_var + two.log_evidence_var,
-        calls + one.n_calls + moved + two.n_calls, one.betas + [1.0 + b for b in two.betas],
+        calls + one.n_calls + two.n_calls, one.betas + [1.0 + b for b in two.betas],
         one.acceptance + two.acceptance,
+    )  # fmt: skip
+
+
+def _data_stage(one: SmcRun, full: Evaluate, s: SmcSettings, rng: np.random.Generator) -> SmcRun:
+    """The data stage from stage 1's particles ``one`` (:func:`_first_data_step` on all of them, then tempering to
+    ``beta = 1``): its particles, ``ln Z_2`` with its variance, and its calls (stage 1's particles' included)."""
+    u2, la, lb, beta, log_z2, var2 = _first_data_step(one.u, full, s, rng)
+    u2, la, lb, _, moved, _ = _move(u2, la, lb, beta, full, s, rng, 1.0)
+    two = temper(u2, la, lb, full, s, rng, beta=beta)
+    two.log_evidence += log_z2
+    two.log_evidence_var += var2
+    two.n_calls += moved + len(one.u)
+    return two
+
+
+def emulated_two_stage(
+    cheap: Evaluate, train: Callable[[np.ndarray], Evaluate], exact: Evaluate, d: int, stage1: SmcSettings,
+    stage2: SmcSettings, rng: np.random.Generator, *, refine: Callable[[np.ndarray], Evaluate] | None = None,
+) -> SmcRun:  # fmt: skip
+    """:func:`two_stage` with the data stage on an emulator, then importance-weighted to the exact likelihood
+    (:mod:`~fpm_sim.study.calibrate.emulator`). ``train(U)`` is given stage 1's particles and returns the emulator's
+    :data:`Evaluate` (``U -> (log L_cheap, emulated log L_data)``); ``exact(U)`` returns ``(log L_cheap, log L_data)``.
+    The data stage's particles ``u_i`` (of the emulated posterior ``q``) get the weights ``w_i = L_data(u_i) /
+    L_emulated(u_i)``, so that ``Z = Z_q mean(w)``, exact for any emulator. The stated variance of ``ln Z`` adds the
+    weights' importance-sampling variance ``1 / ESS - 1 / n`` to the emulated stages'. The result carries the
+    normalised log weights; its ``log_b`` is the exact ``log L_data``.
+
+    ``refine(U)``: given the data stage's particles (at which ``exact`` has just been evaluated), the emulator refitted
+    with them; the data stage then runs again on it, from stage 1's particles, and only that second stage is weighted
+    and reported (the weights stay exact: its particles are new draws given the refitted emulator). An emulator
+    trained on the prior side of the posterior alone is least accurate where the posterior is; refitted there, its
+    weights vary less."""
+    first = _stage_one(cheap, d, stage1, rng)
+    if isinstance(first, SmcRun):
+        return first
+    one, log_mass, var_mass, calls = first
+    two = _data_stage(one, train(one.u), stage2, rng)
+    la, lb = exact(two.u)
+    if refine is not None:  # a second data stage on the emulator refitted with the exact model at the first's particles
+        first_calls = two.n_calls + len(two.u)
+        two = _data_stage(one, refine(two.u), stage2, rng)
+        two.n_calls += first_calls
+        la, lb = exact(two.u)
+    with np.errstate(invalid="ignore"):
+        log_w = np.where(np.isfinite(lb) & np.isfinite(two.log_b), lb - two.log_b, -math.inf)
+    n = len(log_w)
+    if not np.any(np.isfinite(log_w)):
+        return SmcRun(two.u, la, lb, -math.inf, 0.0, calls + one.n_calls + two.n_calls + n)
+    log_mean = float(logsumexp(log_w)) - math.log(n)
+    return SmcRun(
+        two.u, la, lb, log_mass + one.log_evidence + two.log_evidence + log_mean,
+        var_mass + one.log_evidence_var + two.log_evidence_var + max(1.0 / _ess(log_w) - 1.0 / n, 0.0),
+        calls + one.n_calls + two.n_calls + n, one.betas + [1.0 + b for b in two.betas],
+        one.acceptance + two.acceptance, log_weights=log_w - float(logsumexp(log_w)),
     )  # fmt: skip
 
 
@@ -373,8 +436,9 @@ def _first_data_step(
 
 
 def merge_smc(runs: list[dict[str, Any]]) -> dict[str, Any]:
-    """Independent runs of one class as one: ``Z`` their mean (each unbiased), the particles pooled, equal weights;
-    the stated error ``sqrt(sum_r (Z_r / sum Z)^2 s_r^2)``."""
+    """Independent runs of one class as one: ``Z`` their mean (each unbiased), the particles pooled, each run's
+    weights (equal, or its importance weights) scaled to ``1 / runs`` of the whole; the stated error
+    ``sqrt(sum_r (Z_r / sum Z)^2 s_r^2)``."""
     lz = np.array([float(r["logz"][-1]) for r in runs])
     ls = np.array([float(r["logzerr"][-1]) for r in runs])
     finite = np.isfinite(lz)
@@ -382,19 +446,30 @@ def merge_smc(runs: list[dict[str, Any]]) -> dict[str, Any]:
     w = np.exp(lz[finite] - np.max(lz[finite])) if finite.any() else np.zeros(0)
     err = float(np.sqrt(np.sum((w / w.sum()) ** 2 * ls[finite] ** 2))) if finite.any() else 0.0
     samples = np.concatenate([r["samples"] for r in runs])
+    own = [np.asarray(r["logwt"], float) - z if np.isfinite(z) else np.full(len(r["logwt"]), -math.inf)
+           for r, z in zip(runs, lz)]  # fmt: skip
+    pooled = np.concatenate(own)
+    log_w = pooled - float(logsumexp(pooled)) if np.any(np.isfinite(pooled)) else None
     return smc_results(samples, np.concatenate([r["logl"] for r in runs]), log_z, err,
-                       int(sum(np.sum(r["ncall"]) for r in runs)), int(sum(r["niter"] for r in runs)))  # fmt: skip
+                       int(sum(np.sum(r["ncall"]) for r in runs)), int(sum(r["niter"] for r in runs)),
+                       log_weights=log_w)  # fmt: skip
 
 
 def smc_results(
-    samples: np.ndarray, logl: np.ndarray, log_z: float, err: float, calls: int, niter: int
-) -> dict[str, Any]:
-    """What a calibration run reports, in dynesty ``Results``' keys: equal weights ``ln(1 / n) + ln Z``."""
+    samples: np.ndarray, logl: np.ndarray, log_z: float, err: float, calls: int, niter: int, *,
+    log_weights: np.ndarray | None = None,
+) -> dict[str, Any]:  # fmt: skip
+    """What a calibration run reports, in dynesty ``Results``' keys: weights ``ln(1 / n) + ln Z``, or ``ln Z`` plus
+    the normalised ``log_weights`` where given (importance weights: :func:`emulated_two_stage`)."""
     n = len(samples)
+    if log_weights is None:
+        logwt = np.full(n, (log_z - math.log(n)) if n else -math.inf)
+    else:
+        logwt = np.asarray(log_weights, float) + log_z
     return {
         "samples": samples,
         "logl": logl,
-        "logwt": np.full(n, (log_z - math.log(n)) if n else -math.inf),
+        "logwt": logwt,
         "logz": np.array([log_z]),
         "logzerr": np.array([err]),
         "ncall": np.array([calls]),

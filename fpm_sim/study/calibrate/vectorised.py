@@ -30,7 +30,9 @@ if TYPE_CHECKING:
 
 __all__ = [
     "cheap_log_likelihood_batch",
+    "frequencies_log_likelihood_batch",
     "inplane_arrays",
+    "inplane_frequencies_batch",
     "inplane_log_likelihood_batch",
     "supports",
 ]
@@ -122,21 +124,53 @@ def cheap_log_likelihood_batch(problem: CalibrationProblem, thetas: np.ndarray) 
     return _support_and_statements(problem, np.atleast_2d(thetas))[1]
 
 
-def inplane_log_likelihood_batch(problem: CalibrationProblem, thetas: np.ndarray) -> np.ndarray:
-    """``(n,)`` the full log-likelihood (data and statements) with the in-plane surrogate as the model: what
-    :meth:`~fpm_sim.study.calibrate.problem.CalibrationProblem.log_likelihood` gives with ``model = "inplane"``."""
+def inplane_frequencies_batch(problem: CalibrationProblem, thetas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``((n, n_obs), (n,))``: the in-plane surrogate's first frequencies (Hz) at the observations of every row
+    (NaN off the support), and the cheap log-likelihood (``-inf`` off the support)."""
     thetas = np.atleast_2d(thetas)
     arrays, cheap = _support_and_statements(problem, thetas)
+    ok = np.isfinite(cheap)
+    freq = np.full((len(thetas), len(problem.observations)), np.nan)
+    if ok.any():
+        poses = np.array([[o.pose.x_m, o.pose.y_m, o.pose.phi_rad] for o in problem.observations])
+        freq[ok] = inplane_batch(arrays.rows(ok), poses)
+    return freq, cheap
+
+
+def inplane_log_likelihood_batch(
+    problem: CalibrationProblem, thetas: np.ndarray, *, log_scale: np.ndarray | None = None,
+    model_error_rel: float = 0.0,
+) -> np.ndarray:  # fmt: skip
+    """``(n,)`` the full log-likelihood (data and statements) with the in-plane surrogate as the model: what
+    :meth:`~fpm_sim.study.calibrate.problem.CalibrationProblem.log_likelihood` gives with ``model = "inplane"``.
+
+    ``log_scale``: ``(n, n_obs)`` the surrogate's frequencies multiplied by ``exp(log_scale)`` (an emulator's
+    correction, :mod:`~fpm_sim.study.calibrate.emulator`); ``model_error_rel``: that model's own relative error,
+    added to every datum's variance as ``(model_error_rel f)^2``."""
+    thetas = np.atleast_2d(thetas)
+    freq, cheap = inplane_frequencies_batch(problem, thetas)
+    if log_scale is not None:
+        freq = freq * np.exp(log_scale)
+    return frequencies_log_likelihood_batch(problem, thetas, freq, cheap, model_error_rel=model_error_rel)
+
+
+def frequencies_log_likelihood_batch(
+    problem: CalibrationProblem, thetas: np.ndarray, freq: np.ndarray, cheap: np.ndarray, *,
+    model_error_rel: float = 0.0,
+) -> np.ndarray:  # fmt: skip
+    """``(n,)`` the full log-likelihood at the rows of ``thetas`` given the model's frequencies there (``freq``,
+    ``(n, n_obs)`` Hz: any model's, the segment model's included) and the cheap log-likelihood ``cheap`` (``-inf``
+    off the support): what :meth:`~fpm_sim.study.calibrate.problem.CalibrationProblem.log_likelihood` gives with
+    that model; ``model_error_rel`` as in :func:`inplane_log_likelihood_batch`."""
     ok = np.isfinite(cheap)
     out = np.full(len(thetas), -math.inf)
     if not ok.any():
         return out
-    sub = arrays.rows(ok)
-    poses = np.array([[o.pose.x_m, o.pose.y_m, o.pose.phi_rad] for o in problem.observations])
-    freq = inplane_batch(sub, poses)  # (m, n_obs)
+    f = freq[ok]
     pr = problem.priors
     d = thetas[ok, len(pr.parameters)] if pr.discrepancy is not None else np.full(ok.sum(), pr.discrepancy_fixed)
-    sd = np.sqrt(problem.sigma[None] ** 2 + (d[:, None] * freq) ** 2)  # as noise_sd (no rig tests)
-    data = independent_log_likelihood(freq - problem.measured[None], sd)
-    out[ok] = np.where(np.all(np.isfinite(freq), axis=1), data + cheap[ok], -math.inf)
+    sd = np.sqrt(problem.sigma[None] ** 2 + ((d[:, None] ** 2 + model_error_rel**2) * f**2))  # as noise_sd
+    with np.errstate(invalid="ignore"):
+        data = independent_log_likelihood(f - problem.measured[None], sd)
+    out[ok] = np.where(np.all(np.isfinite(f), axis=1), data + cheap[ok], -math.inf)
     return out
