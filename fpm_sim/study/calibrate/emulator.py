@@ -72,12 +72,6 @@ class Emulator:
         out: np.ndarray = self.fit(np.atleast_2d(u)[:, : self.n_free])
         return out
 
-    def line(self) -> str:
-        return (
-            f"emulator: {self.n_train} segment-model runs, held-out error {100 * self.held_out_rms:.1f} % rms "
-            f"({100 * self.held_out_max:.0f} % at most)"
-        )
-
 
 def train_emulator(
     u: np.ndarray, f_segments: np.ndarray, f_surrogate: np.ndarray, *, n_free: int, rng: np.random.Generator

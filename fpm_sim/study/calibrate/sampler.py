@@ -22,7 +22,7 @@ import numpy as np
 
 from fpm_sim.batch.engine import spawn_pool
 from fpm_sim.figures import bands_against_measured
-from fpm_sim.study.calibrate.emulator import importance_diagnostics, train_emulator
+from fpm_sim.study.calibrate.emulator import Emulator, importance_diagnostics, train_emulator
 from fpm_sim.study.calibrate.priors import BRANCH_PARAMETER
 from fpm_sim.study.calibrate.problem import CalibrationError, CalibrationProblem, FrequencyLikelihood
 from fpm_sim.study.calibrate.runs import (
@@ -47,6 +47,7 @@ from fpm_sim.study.calibrate.vectorised import (
     frequencies_log_likelihood_batch,
     inplane_frequencies_batch,
     inplane_log_likelihood_batch,
+    inplane_split_log_likelihood_batch,
     supports,
 )
 from fpm_sim.study.loo import LeaveOneOut, leave_one_out, loo_from_components
@@ -674,14 +675,13 @@ def _smc_full(u: np.ndarray, klass: int | None, pool: Any, part: Part = None) ->
     likelihood evaluated only where the cheap part is finite (on ``pool``'s workers when given; vectorised on the
     in-plane surrogate)."""
     assert _PROBLEM is not None, "the pool was started without _init_worker"
+    if supports(_PROBLEM) and getattr(_PROBLEM, "model", None) == "inplane":
+        return inplane_split_log_likelihood_batch(_PROBLEM, _class_thetas(u, klass, part))  # type: ignore[arg-type]
     _, cheap = _smc_cheap(u, klass, part)
     ok = np.isfinite(cheap)
-    if supports(_PROBLEM) and getattr(_PROBLEM, "model", None) == "inplane":
-        full = inplane_log_likelihood_batch(_PROBLEM, _class_thetas(u[ok], klass, part))  # type: ignore[arg-type]
-    else:
-        todo = [_with_class(_class_prior_transform(x, klass, part), klass) for x in u[ok]]
-        ll = _worker_log_likelihood
-        full = np.asarray(pool.map(ll, todo) if pool is not None else [ll(t) for t in todo], float)
+    todo = [_with_class(_class_prior_transform(x, klass, part), klass) for x in u[ok]]
+    ll = _worker_log_likelihood
+    full = np.asarray(pool.map(ll, todo) if pool is not None else [ll(t) for t in todo], float)
     data = np.full(len(u), -math.inf)
     data[ok] = full - cheap[ok]
     return cheap, np.where(np.isfinite(data), data, -math.inf)
@@ -690,16 +690,15 @@ def _smc_full(u: np.ndarray, klass: int | None, pool: Any, part: Part = None) ->
 class _SegmentEmulator:
     """The emulator of one run (:mod:`~fpm_sim.study.calibrate.emulator`) on class ``klass``'s part: every
     segment-model run it makes (on ``pool``'s workers when given) is kept as training data, so that the data stage's
-    exact weights (:meth:`exact`) also refit it (:meth:`refine`). Its last fit's size and held-out error go into
-    ``out``."""
+    exact weights (:meth:`exact`) also refit it (:meth:`refine`). :attr:`fitted` is its last fit."""
 
-    def __init__(self, *, klass: int | None, part: Part, n: int, pool: Any, rng: np.random.Generator,
-                 out: dict[str, float]) -> None:  # fmt: skip
+    def __init__(self, *, klass: int | None, part: Part, n: int, pool: Any, rng: np.random.Generator) -> None:
         assert _PROBLEM is not None, "the pool was started without _init_worker"
         self.problem: Any = _PROBLEM
-        self.klass, self.part, self.n, self.pool, self.rng, self.out = klass, part, n, pool, rng, out
+        self.klass, self.part, self.n, self.pool, self.rng = klass, part, n, pool, rng
         self.u: list[np.ndarray] = []
         self.f: list[np.ndarray] = []
+        self.fitted: Emulator | None = None
 
     def _segments(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The class's parameters at the rows of ``u`` and the segment model's frequencies there (each distinct row
@@ -718,15 +717,13 @@ class _SegmentEmulator:
         u, keep = np.unique(u, axis=0, return_index=True)
         p, klass, part = self.problem, self.klass, self.part
         f_sur, _ = inplane_frequencies_batch(p, _class_thetas(u, klass, part))
-        emu = train_emulator(u, f_seg[keep], f_sur, n_free=len(p.priors.parameters), rng=self.rng)
-        self.out.update(n_train=emu.n_train, held_out_rms=emu.held_out_rms, held_out_max=emu.held_out_max)
+        emu = self.fitted = train_emulator(u, f_seg[keep], f_sur, n_free=len(p.priors.parameters), rng=self.rng)
 
         def evaluate(uq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             th = _class_thetas(uq, klass, part)
-            cheap = cheap_log_likelihood_batch(p, th)
-            ll = inplane_log_likelihood_batch(p, th, log_scale=emu.log_scale(uq), model_error_rel=emu.model_error_rel)
-            with np.errstate(invalid="ignore"):
-                return cheap, np.where(np.isfinite(ll), ll - cheap, -math.inf)
+            return inplane_split_log_likelihood_batch(
+                p, th, log_scale=emu.log_scale(uq), model_error_rel=emu.model_error_rel
+            )
 
         return evaluate
 
@@ -831,20 +828,22 @@ def _run_smc(
     one, two = opts.smc_settings()
     d = _PROBLEM.ndim - (klass is not None)
     cheap = functools.partial(_smc_cheap, klass=klass, part=part)
-    full = functools.partial(_smc_full, klass=klass, pool=pool, part=part)
     rng = np.random.default_rng(seed)
-    emulated: dict[str, float] = {}
+    emu = None
     if opts.emulator:
-        emu = _SegmentEmulator(klass=klass, part=part, n=opts.emulator, pool=pool, rng=rng, out=emulated)
+        emu = _SegmentEmulator(klass=klass, part=part, n=opts.emulator, pool=pool, rng=rng)
         run = emulated_two_stage(cheap, emu.train, emu.exact, d, one, two, rng, refine=emu.refine)
     else:
+        full = functools.partial(_smc_full, klass=klass, pool=pool, part=part)
         run = two_stage(cheap, full, d, one, two, rng, modes=modes, mode_particles=opts.cheap_particles)
     theta = np.array([_class_prior_transform(x, klass, part) for x in run.u]).reshape(len(run.u), d)
     out = smc_results(theta, run.log_a + run.log_b, run.log_evidence, run.log_evidence_err, run.n_calls,
                       len(run.betas), log_weights=run.log_weights)  # fmt: skip
-    if run.log_weights is not None:
+    if emu is not None and emu.fitted is not None and run.log_weights is not None:
         ess, k = importance_diagnostics(run.log_weights)
-        out["emulator"] = {**emulated, "ess": ess, "pareto_k": k, "particles": len(run.u)}
+        e = emu.fitted
+        out["emulator"] = {"n_train": e.n_train, "held_out_rms": e.held_out_rms, "held_out_max": e.held_out_max,
+                           "ess": ess, "pareto_k": k, "particles": len(run.u)}  # fmt: skip
     if done is not None:
         with done.open("wb") as fh:
             pickle.dump(out, fh, protocol=4)

@@ -34,6 +34,7 @@ __all__ = [
     "inplane_arrays",
     "inplane_frequencies_batch",
     "inplane_log_likelihood_batch",
+    "inplane_split_log_likelihood_batch",
     "supports",
 ]
 
@@ -147,11 +148,30 @@ def inplane_log_likelihood_batch(
     ``log_scale``: ``(n, n_obs)`` the surrogate's frequencies multiplied by ``exp(log_scale)`` (an emulator's
     correction, :mod:`~fpm_sim.study.calibrate.emulator`); ``model_error_rel``: that model's own relative error,
     added to every datum's variance as ``(model_error_rel f)^2``."""
-    thetas = np.atleast_2d(thetas)
+    return _inplane_full(problem, np.atleast_2d(thetas), log_scale, model_error_rel)[0]
+
+
+def _inplane_full(
+    problem: CalibrationProblem, thetas: np.ndarray, log_scale: np.ndarray | None, model_error_rel: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(log L, log L_cheap)`` of :func:`inplane_log_likelihood_batch` at the rows of ``thetas``."""
     freq, cheap = inplane_frequencies_batch(problem, thetas)
     if log_scale is not None:
         freq = freq * np.exp(log_scale)
-    return frequencies_log_likelihood_batch(problem, thetas, freq, cheap, model_error_rel=model_error_rel)
+    return frequencies_log_likelihood_batch(problem, thetas, freq, cheap, model_error_rel=model_error_rel), cheap
+
+
+def inplane_split_log_likelihood_batch(
+    problem: CalibrationProblem, thetas: np.ndarray, *, log_scale: np.ndarray | None = None,
+    model_error_rel: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """``((n,), (n,))``: the cheap log-likelihood and the rest of :func:`inplane_log_likelihood_batch`'s (``log L -
+    log L_cheap``; both ``-inf`` off the support), the support and the statements computed once: an SMC data stage's
+    evaluation (:data:`~fpm_sim.study.calibrate.smc.Evaluate`). ``log_scale``, ``model_error_rel`` as there."""
+    full, cheap = _inplane_full(problem, np.atleast_2d(thetas), log_scale, model_error_rel)
+    with np.errstate(invalid="ignore"):
+        data = np.where(np.isfinite(full), full - cheap, -math.inf)
+    return cheap, data
 
 
 def frequencies_log_likelihood_batch(

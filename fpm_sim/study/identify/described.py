@@ -151,6 +151,7 @@ def read_joint_measured_csv(
 
         data = read_task_measured_csv(p, desc, sigma_pct=sigma_pct)
         task_poses = [q for q in data.poses if isinstance(q, TaskPose)]
+        assert len(task_poses) == len(data.poses), "read_task_measured_csv reads task poses only"  # labels align
         try:
             poses = joint_poses_of(desc, task_poses, labels=[f"{p}: row {n}" for n in data.lines])
         except ImportedPoseError as e:  # a data error: its label names the file and the row
