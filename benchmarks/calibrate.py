@@ -90,11 +90,14 @@ class EmulatedLikelihood(OneBlasThread):
         self.particles = np.repeat(self.u, 4000 // len(self.u) + 1, axis=0)[:4000]
 
     def emulated(self) -> np.ndarray:
-        from fpm_sim.study.calibrate.vectorised import inplane_log_likelihood_batch
+        from fpm_sim.study.calibrate.vectorised import frequencies_log_likelihood_batch, inplane_frequencies_batch
 
         th = self.problem.prior_transform(self.particles)
-        scale = self.emulator.log_scale(self.particles)
-        return inplane_log_likelihood_batch(self.problem, th, log_scale=scale, model_error_rel=0.05)
+        f, cheap = inplane_frequencies_batch(self.problem, th)
+        emu = self.emulator
+        return frequencies_log_likelihood_batch(
+            self.problem, th, emu.frequencies(self.particles, f), cheap, model_error_rel=emu.model_error_rel
+        )
 
     def track_emulated_us_per_particle(self) -> float:
         t = time.process_time()

@@ -282,8 +282,9 @@ def _add_sampler_args(p: argparse.ArgumentParser) -> None:
         "--emulator",
         type=int,
         default=0,
-        help="smc: the data stage on an emulator of the segment model trained on this many segment-model runs (1500 "
-        'measured), then importance-weighted to the segment model, exact (docs/identification.md, "An emulator of '
+        help="smc: the data stage on an emulator of the segment model trained on this many segment-model runs at "
+        "the first stage's particles and as many at the data stage's (500 measured), then importance-weighted to "
+        'the segment model, exact (docs/identification.md, "An emulator of '
         "the segment model\"); each run prints its weights' effective sample size and Pareto k. 0 (default): the "
         "segment model throughout",
     )

@@ -9,17 +9,26 @@ to -0.20 over three such populations), with a spread of 0.17-0.21 in the log (wi
 surrogate's own posterior the segment model's log-likelihood is 14 nats lower at the median
 (docs/identification.md, "An emulator of the segment model"). So the surrogate alone gives another posterior.
 
-The emulator corrects it multiplicatively (Kennedy & O'Hagan's 2000 autoregressive form, on a log scale):
+The emulator corrects it multiplicatively (Kennedy & O'Hagan's 2000 autoregressive form, on a log scale), with
+the surrogate's own frequencies among the correction's inputs (the nonlinear autoregressive form of Perdikaris et al.
+2017):
 
-    f_emulated(theta)_j = f_surrogate(theta)_j * exp(g_j(u)),
+    f_emulated(theta)_j = f_surrogate(theta)_j * exp(g_j(u, s z(theta))),
 
-``g`` a thin-plate-spline radial-basis fit (:class:`scipy.interpolate.RBFInterpolator`, smoothing 0.01, a linear
-tail) of ``log(f_segments / f_surrogate)`` at each measured pose ``j`` over the free parameters' unit-cube
-coordinates ``u`` (the discrepancy's left out: it does not change a frequency), trained on segment-model runs at the
-first stage's particles, which cover where the posterior can be. A fifth of them is held out, and the held-out rms of
-the log ratio is added to the emulated likelihood as a relative model error (``s^2 = sigma^2 + (d f)^2 + (e f)^2``):
-the emulator's error is never silent, and it widens the emulated posterior, which keeps it a proposal that covers
-the segment model's.
+``z`` the surrogate's log frequencies at the measured poses, standardised on the training runs, ``s`` a feature
+scale, and ``g`` a thin-plate-spline radial-basis fit (:class:`scipy.interpolate.RBFInterpolator`, smoothing 0.01, a
+linear tail) of ``log(f_segments / f_surrogate)`` at each measured pose ``j`` over the free parameters' unit-cube
+coordinates ``u`` (the discrepancy's left out: it does not change a frequency) and ``s z``. The surrogate's
+frequencies tell the fit where the two models' lowest modes part: where the posterior lies, the segment model's first
+mode is a nearly pose-independent one (about 50 Hz at every pose) while the surrogate's follows the platform's
+in-plane stiffness (55-156 Hz), and the log ratio there spans 0.03-0.29 per pose; a fit on ``u`` alone misses it by
+0.055-0.099 rms at the posterior's particles, one with ``s z`` by 0.018-0.036 (three runs of the dominant class,
+:data:`EMULATOR_FEATURE_SCALES`). ``s`` is chosen per fit from :data:`EMULATOR_FEATURE_SCALES` by the held-out
+error. It is trained on segment-model runs at the first stage's particles (the prior times the study's statements:
+where the posterior can be), then refitted with runs at the data stage's particles. A fifth of the runs is held out,
+and each pose's held-out rms of the log ratio is added to the emulated likelihood as that pose's relative model error
+(``s_j^2 = sigma_j^2 + (d f_j)^2 + (e_j f_j)^2``): the emulator's error is never silent, and it widens the emulated
+posterior where the emulator is least sure, which keeps it a proposal that covers the segment model's.
 
 The emulated posterior is then made the segment model's by importance weights (multifidelity importance sampling,
 Peherstorfer, Willcox & Gunzburger 2016): each particle of the emulated data stage is weighted by
@@ -37,12 +46,21 @@ import numpy as np
 
 from fpm_sim.study.calibrate.problem import CalibrationError
 
-__all__ = ["EMULATOR_ERROR_FACTOR", "EMULATOR_HELD_OUT", "Emulator", "importance_diagnostics", "train_emulator"]
+__all__ = [
+    "EMULATOR_ERROR_FACTOR", "EMULATOR_FEATURE_SCALES", "EMULATOR_HELD_OUT", "Emulator", "importance_diagnostics",
+    "train_emulator",
+]  # fmt: skip
 
 EMULATOR_ERROR_FACTOR = 1.0
 """The emulated likelihood's relative model error, in held-out rms errors of the emulator."""
 EMULATOR_HELD_OUT = 0.2
 """The fraction of the training runs held out to measure the emulator's error."""
+EMULATOR_FEATURE_SCALES = (0.1, 0.3)
+"""The candidate scales ``s`` of the surrogate's standardised log frequencies among the fit's inputs (the unit-cube
+coordinates span 1): at the dominant class's posterior particles, fitted on stage 1's runs and the first data stage's,
+rms 0.023/0.046/0.031 at 0.1, 0.018/0.036/0.024 at 0.3, 0.019/0.046/0.025 at 1, and 0.055/0.099/0.083 without
+(three runs; fitted on stage 1's runs alone, 0.14/0.08/0.14 at 0.1 and 0.18/0.12/0.15 at 0.3): the held-out error
+picks one per fit."""
 EMULATOR_SMOOTHING = 0.01
 """The radial-basis fit's smoothing: the segment model's log ratio is smooth in the parameters except where the
 lowest mode changes family; an exact interpolant rings there (held-out rms 0.056 at smoothing 1e-3, 0.055 at 0.01,
@@ -54,54 +72,104 @@ class Emulator:
     """The fitted correction ``g`` (module docstring) and its measured error."""
 
     fit: Any
-    """The :class:`scipy.interpolate.RBFInterpolator` of ``(n, n_free) -> (n, n_obs)`` log ratios."""
+    """The :class:`scipy.interpolate.RBFInterpolator` of ``(n, n_free + n_obs) -> (n, n_obs)`` log ratios."""
     n_free: int
     """The unit-cube coordinates it reads (the free parameters', the discrepancy's excluded)."""
+    feature_scale: float
+    """``s``: the weight of the surrogate's standardised log frequencies among the inputs."""
+    log_f_mean: np.ndarray
+    """``(n_obs,)`` the training runs' mean of the surrogate's log frequencies (the standardisation's)."""
+    log_f_sd: np.ndarray
+    """``(n_obs,)`` and their sd."""
     n_train: int
-    held_out_rms: float
-    """The held-out rms of ``log(f_segments / f_emulated)``: the relative error added to the emulated likelihood."""
+    held_out_rms_per_obs: np.ndarray
+    """``(n_obs,)`` each pose's held-out rms of ``log(f_segments / f_emulated)``: its relative error."""
     held_out_max: float
 
     @property
-    def model_error_rel(self) -> float:
-        """The relative error the emulated likelihood adds (:data:`EMULATOR_ERROR_FACTOR` held-out rms errors)."""
-        return EMULATOR_ERROR_FACTOR * self.held_out_rms
+    def held_out_rms(self) -> float:
+        """The held-out rms over every pose."""
+        return float(np.sqrt(np.mean(self.held_out_rms_per_obs**2)))
 
-    def log_scale(self, u: np.ndarray) -> np.ndarray:
-        """``(n, n_obs)`` the correction ``g(u)`` at unit-cube rows ``u`` (its first :attr:`n_free` columns read)."""
-        out: np.ndarray = self.fit(np.atleast_2d(u)[:, : self.n_free])
+    @property
+    def model_error_rel(self) -> np.ndarray:
+        """``(n_obs,)`` the relative error the emulated likelihood adds at each pose (:data:`EMULATOR_ERROR_FACTOR`
+        held-out rms errors of that pose)."""
+        out: np.ndarray = EMULATOR_ERROR_FACTOR * self.held_out_rms_per_obs
         return out
+
+    def frequencies(self, u: np.ndarray, f_surrogate: np.ndarray) -> np.ndarray:
+        """``(n, n_obs)`` the emulated frequencies (Hz) at unit-cube rows ``u`` (their first :attr:`n_free` columns
+        read) given the surrogate's there (``(n, n_obs)``, Hz); NaN where the surrogate's is not finite and
+        positive."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            log_f = np.log(np.asarray(f_surrogate, float))
+        ok = np.all(np.isfinite(log_f), axis=1)
+        out = np.full(log_f.shape, np.nan)
+        if ok.any():
+            x = _features(np.atleast_2d(u)[ok, : self.n_free], log_f[ok], self)
+            out[ok] = np.exp(log_f[ok] + self.fit(x))
+        return out
+
+
+def _features(u: np.ndarray, log_f: np.ndarray, scaling: Any) -> np.ndarray:
+    """The fit's inputs: ``u`` beside ``s z`` (module docstring); ``scaling`` holds ``feature_scale``,
+    ``log_f_mean`` and ``log_f_sd``."""
+    z = (log_f - scaling.log_f_mean) / scaling.log_f_sd
+    out: np.ndarray = np.hstack([u, scaling.feature_scale * z])
+    return out
+
+
+@dataclass(frozen=True)
+class _Scaling:
+    feature_scale: float
+    log_f_mean: np.ndarray
+    log_f_sd: np.ndarray
 
 
 def train_emulator(
     u: np.ndarray, f_segments: np.ndarray, f_surrogate: np.ndarray, *, n_free: int, rng: np.random.Generator
 ) -> Emulator:
     """The emulator fitted to the log ratios at unit-cube rows ``u`` (``(n, >= n_free)``; ``f_*``: ``(n, n_obs)``
-    in Hz, rows with a non-finite or non-positive frequency left out): its error measured on
-    :data:`EMULATOR_HELD_OUT` of the rows held out, then refitted on all of them."""
+    in Hz, rows with a non-finite or non-positive frequency left out): the feature scale of
+    :data:`EMULATOR_FEATURE_SCALES` with the least held-out error (:data:`EMULATOR_HELD_OUT` of the rows held out),
+    each pose's error measured there, then refitted on all of them."""
     from scipy.interpolate import RBFInterpolator
 
     with np.errstate(divide="ignore", invalid="ignore"):
-        y = np.log(f_segments / f_surrogate)
-    ok = np.all(np.isfinite(y), axis=1)
-    x, y = np.asarray(u, float)[ok, :n_free], y[ok]
+        log_sur = np.log(np.asarray(f_surrogate, float))
+        y = np.log(np.asarray(f_segments, float)) - log_sur
+    ok = np.all(np.isfinite(y) & np.isfinite(log_sur), axis=1)
+    x, y, log_sur = np.asarray(u, float)[ok, :n_free], y[ok], log_sur[ok]
     n = len(x)
     n_out = round(EMULATOR_HELD_OUT * n)
-    if n - n_out < 2 * (n_free + 1) or n_out < 1:
+    if n - n_out < 2 * (n_free + y.shape[1] + 1) or n_out < 1:
         raise CalibrationError(
             f"too few usable segment-model runs to fit the emulator: {n} of {len(u)}", parameter="emulator",
             value=len(u), hint="train it on more segment-model runs, or leave it 0",
         )  # fmt: skip
     order = rng.permutation(n)
     fit_on, held = order[n_out:], order[:n_out]
+    sd = np.std(log_sur, axis=0)
+    mean, sd = np.mean(log_sur, axis=0), np.where(sd > 0, sd, 1.0)
 
-    def fitted(rows: np.ndarray) -> Any:
-        return RBFInterpolator(x[rows], y[rows], kernel="thin_plate_spline", smoothing=EMULATOR_SMOOTHING, degree=1)
+    def fitted(rows: np.ndarray, scaling: _Scaling) -> Any:
+        return RBFInterpolator(
+            _features(x[rows], log_sur[rows], scaling), y[rows], kernel="thin_plate_spline",
+            smoothing=EMULATOR_SMOOTHING, degree=1,
+        )  # fmt: skip
 
-    res = y[held] - fitted(fit_on)(x[held])
+    best: tuple[float, _Scaling, np.ndarray] | None = None
+    for scale in EMULATOR_FEATURE_SCALES:
+        sc = _Scaling(scale, mean, sd)
+        res = y[held] - fitted(fit_on, sc)(_features(x[held], log_sur[held], sc))
+        if best is None or np.mean(res**2) < best[0]:
+            best = (float(np.mean(res**2)), sc, res)
+    assert best is not None
+    _, sc, res = best
     return Emulator(
-        fit=fitted(np.arange(n)), n_free=n_free, n_train=n, held_out_rms=float(np.sqrt(np.mean(res**2))),
-        held_out_max=float(np.max(np.abs(res))),
+        fit=fitted(np.arange(n), sc), n_free=n_free, feature_scale=sc.feature_scale, log_f_mean=mean, log_f_sd=sd,
+        n_train=n, held_out_rms_per_obs=np.sqrt(np.mean(res**2, axis=0)), held_out_max=float(np.max(np.abs(res))),
     )  # fmt: skip
 
 

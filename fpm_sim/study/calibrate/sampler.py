@@ -44,10 +44,10 @@ from fpm_sim.study.calibrate.smc import (
 )
 from fpm_sim.study.calibrate.vectorised import (
     cheap_log_likelihood_batch,
-    frequencies_log_likelihood_batch,
     inplane_frequencies_batch,
     inplane_log_likelihood_batch,
     inplane_split_log_likelihood_batch,
+    split_log_likelihood_batch,
     supports,
 )
 from fpm_sim.study.loo import LeaveOneOut, leave_one_out, loo_from_components
@@ -208,9 +208,9 @@ class SamplerOptions:
     """SMC: the data stage on an emulator of the segment model trained on this many segment-model runs at the first
     stage's particles, then importance-weighted to the segment model (exact;
     :mod:`~fpm_sim.study.calibrate.emulator`). The data stage runs twice, the second time on the emulator refitted
-    with the segment model at the first's particles: about ``emulator`` + 2 ``particles`` segment-model calls a run
-    instead of ~20 000. 0: the segment model throughout (the default). The 3RRR's problem on the segment model
-    only."""
+    with as many segment-model runs more at the first's particles: about 2 ``emulator`` + ``particles``
+    segment-model calls a run instead of ~20 000. 0: the segment model throughout (the default). The 3RRR's problem
+    on the segment model only."""
     split: tuple[str, int] | None = None
     """``(name, n)``: the prior of parameter ``name`` cut into ``n`` parts of equal prior mass (its unit-cube
     coordinate's ``n`` equal intervals: for a uniform prior, equal sub-ranges; ``("...rotation_deg", 2)`` on a
@@ -269,7 +269,7 @@ class SamplerOptions:
         if self.emulator and self.emulator < 50:
             raise CalibrationError(
                 "must be 0 (off) or >= 50 segment-model runs", parameter="emulator", value=self.emulator,
-                hint="the emulator's fit needs many more runs than its 10 coordinates; 1500 is measured",
+                hint="the emulator's fit needs many more runs than its inputs; 500 is measured",
             )  # fmt: skip
         if self.max_calls is not None:
             raise CalibrationError(
@@ -688,9 +688,10 @@ def _smc_full(u: np.ndarray, klass: int | None, pool: Any, part: Part = None) ->
 
 
 class _SegmentEmulator:
-    """The emulator of one run (:mod:`~fpm_sim.study.calibrate.emulator`) on class ``klass``'s part: every
-    segment-model run it makes (on ``pool``'s workers when given) is kept as training data, so that the data stage's
-    exact weights (:meth:`exact`) also refit it (:meth:`refine`). :attr:`fitted` is its last fit."""
+    """The emulator of one run (:mod:`~fpm_sim.study.calibrate.emulator`) on class ``klass``'s part: ``n``
+    segment-model runs (on ``pool``'s workers when given) at stage 1's particles train it (:meth:`train`), ``n`` more
+    at the first data stage's refit it with every earlier one (:meth:`refine`), and the weights' runs (:meth:`exact`)
+    are kept too. :attr:`fitted` is its last fit."""
 
     def __init__(self, *, klass: int | None, part: Part, n: int, pool: Any, rng: np.random.Generator) -> None:
         assert _PROBLEM is not None, "the pool was started without _init_worker"
@@ -721,29 +722,27 @@ class _SegmentEmulator:
 
         def evaluate(uq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             th = _class_thetas(uq, klass, part)
-            return inplane_split_log_likelihood_batch(
-                p, th, log_scale=emu.log_scale(uq), model_error_rel=emu.model_error_rel
-            )
+            f, cheap = inplane_frequencies_batch(p, th)
+            return split_log_likelihood_batch(p, th, emu.frequencies(uq, f), cheap, model_error_rel=emu.model_error_rel)
 
         return evaluate
 
     def train(self, u: np.ndarray) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]:
-        """Fitted to the segment model at ``n`` of stage 1's distinct particles ``u``."""
+        """Fitted to the segment model at ``n`` of the distinct rows of ``u`` (stage 1's particles) and at every earlier
+        run."""
         uniq = np.unique(u, axis=0)
         self._segments(uniq[self.rng.choice(len(uniq), min(self.n, len(uniq)), replace=False)])
         return self._fit()
 
     def refine(self, u: np.ndarray) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]:
-        """Refitted with every segment-model run so far (``u``: the rows :meth:`exact` has just run)."""
-        return self._fit()
+        """Refitted with every segment-model run so far and new ones at ``n`` of the data stage's distinct particles
+        ``u``."""
+        return self.train(u)
 
     def exact(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(log L_cheap, log L_data)`` on the segment model at the rows of ``u`` (as :func:`_smc_full`)."""
         theta, f = self._segments(u)
-        cheap = cheap_log_likelihood_batch(self.problem, theta)
-        ll = frequencies_log_likelihood_batch(self.problem, theta, f, cheap)
-        with np.errstate(invalid="ignore"):
-            return cheap, np.where(np.isfinite(ll), ll - cheap, -math.inf)
+        return split_log_likelihood_batch(self.problem, theta, f, cheap_log_likelihood_batch(self.problem, theta))
 
 
 MODE_SEARCH: dict[str, Any] = {"popsize": 30, "maxiter": 1000, "tol": 1e-4}

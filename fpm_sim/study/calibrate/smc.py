@@ -359,22 +359,21 @@ def emulated_two_stage(
     weights' importance-sampling variance ``1 / ESS - 1 / n`` to the emulated stages'. The result carries the
     normalised log weights; its ``log_b`` is the exact ``log L_data``.
 
-    ``refine(U)``: given the data stage's particles (at which ``exact`` has just been evaluated), the emulator refitted
-    with them; the data stage then runs again on it, from stage 1's particles, and only that second stage is weighted
-    and reported (the weights stay exact: its particles are new draws given the refitted emulator). An emulator
-    trained on the prior side of the posterior alone is least accurate where the posterior is; refitted there, its
-    weights vary less."""
+    ``refine(U)``: given the data stage's particles, the emulator refitted with the exact model run at (some of) them;
+    the data stage then runs again on it, from stage 1's particles, and only that second stage is weighted and
+    reported (the weights stay exact: its particles are new draws given the refitted emulator). An emulator trained on
+    the prior side of the posterior alone is least accurate where the posterior is; refitted there, its weights vary
+    less."""
     first = _stage_one(cheap, d, stage1, rng)
     if isinstance(first, SmcRun):
         return first
     one, log_mass, var_mass, calls = first
     two = _data_stage(one, train(one.u), stage2, rng)
-    la, lb = exact(two.u)
     if refine is not None:  # a second data stage on the emulator refitted with the exact model at the first's particles
-        first_calls = two.n_calls + len(two.u)
+        first_calls = two.n_calls
         two = _data_stage(one, refine(two.u), stage2, rng)
         two.n_calls += first_calls
-        la, lb = exact(two.u)
+    la, lb = exact(two.u)
     with np.errstate(invalid="ignore"):
         log_w = np.where(np.isfinite(lb) & np.isfinite(two.log_b), lb - two.log_b, -math.inf)
     n = len(log_w)

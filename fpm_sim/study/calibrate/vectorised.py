@@ -35,6 +35,7 @@ __all__ = [
     "inplane_frequencies_batch",
     "inplane_log_likelihood_batch",
     "inplane_split_log_likelihood_batch",
+    "split_log_likelihood_batch",
     "supports",
 ]
 
@@ -138,50 +139,45 @@ def inplane_frequencies_batch(problem: CalibrationProblem, thetas: np.ndarray) -
     return freq, cheap
 
 
-def inplane_log_likelihood_batch(
-    problem: CalibrationProblem, thetas: np.ndarray, *, log_scale: np.ndarray | None = None,
-    model_error_rel: float = 0.0,
-) -> np.ndarray:  # fmt: skip
+def inplane_log_likelihood_batch(problem: CalibrationProblem, thetas: np.ndarray) -> np.ndarray:
     """``(n,)`` the full log-likelihood (data and statements) with the in-plane surrogate as the model: what
-    :meth:`~fpm_sim.study.calibrate.problem.CalibrationProblem.log_likelihood` gives with ``model = "inplane"``.
-
-    ``log_scale``: ``(n, n_obs)`` the surrogate's frequencies multiplied by ``exp(log_scale)`` (an emulator's
-    correction, :mod:`~fpm_sim.study.calibrate.emulator`); ``model_error_rel``: that model's own relative error,
-    added to every datum's variance as ``(model_error_rel f)^2``."""
-    return _inplane_full(problem, np.atleast_2d(thetas), log_scale, model_error_rel)[0]
-
-
-def _inplane_full(
-    problem: CalibrationProblem, thetas: np.ndarray, log_scale: np.ndarray | None, model_error_rel: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """``(log L, log L_cheap)`` of :func:`inplane_log_likelihood_batch` at the rows of ``thetas``."""
+    :meth:`~fpm_sim.study.calibrate.problem.CalibrationProblem.log_likelihood` gives with ``model = "inplane"``."""
+    thetas = np.atleast_2d(thetas)
     freq, cheap = inplane_frequencies_batch(problem, thetas)
-    if log_scale is not None:
-        freq = freq * np.exp(log_scale)
-    return frequencies_log_likelihood_batch(problem, thetas, freq, cheap, model_error_rel=model_error_rel), cheap
+    return frequencies_log_likelihood_batch(problem, thetas, freq, cheap)
 
 
 def inplane_split_log_likelihood_batch(
-    problem: CalibrationProblem, thetas: np.ndarray, *, log_scale: np.ndarray | None = None,
-    model_error_rel: float = 0.0,
-) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    problem: CalibrationProblem, thetas: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """``((n,), (n,))``: the cheap log-likelihood and the rest of :func:`inplane_log_likelihood_batch`'s (``log L -
     log L_cheap``; both ``-inf`` off the support), the support and the statements computed once: an SMC data stage's
-    evaluation (:data:`~fpm_sim.study.calibrate.smc.Evaluate`). ``log_scale``, ``model_error_rel`` as there."""
-    full, cheap = _inplane_full(problem, np.atleast_2d(thetas), log_scale, model_error_rel)
+    evaluation (:data:`~fpm_sim.study.calibrate.smc.Evaluate`)."""
+    freq, cheap = inplane_frequencies_batch(problem, np.atleast_2d(thetas))
+    return split_log_likelihood_batch(problem, np.atleast_2d(thetas), freq, cheap)
+
+
+def split_log_likelihood_batch(
+    problem: CalibrationProblem, thetas: np.ndarray, freq: np.ndarray, cheap: np.ndarray, *,
+    model_error_rel: float | np.ndarray = 0.0,
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """``(cheap, log L - cheap)`` (``-inf`` where ``log L`` is) of :func:`frequencies_log_likelihood_batch`: an SMC
+    data stage's evaluation (:data:`~fpm_sim.study.calibrate.smc.Evaluate`) from any model's frequencies."""
+    full = frequencies_log_likelihood_batch(problem, thetas, freq, cheap, model_error_rel=model_error_rel)
     with np.errstate(invalid="ignore"):
-        data = np.where(np.isfinite(full), full - cheap, -math.inf)
-    return cheap, data
+        return cheap, np.where(np.isfinite(full), full - cheap, -math.inf)
 
 
 def frequencies_log_likelihood_batch(
     problem: CalibrationProblem, thetas: np.ndarray, freq: np.ndarray, cheap: np.ndarray, *,
-    model_error_rel: float = 0.0,
+    model_error_rel: float | np.ndarray = 0.0,
 ) -> np.ndarray:  # fmt: skip
     """``(n,)`` the full log-likelihood at the rows of ``thetas`` given the model's frequencies there (``freq``,
     ``(n, n_obs)`` Hz: any model's, the segment model's included) and the cheap log-likelihood ``cheap`` (``-inf``
     off the support): what :meth:`~fpm_sim.study.calibrate.problem.CalibrationProblem.log_likelihood` gives with
-    that model; ``model_error_rel`` as in :func:`inplane_log_likelihood_batch`."""
+    that model. ``model_error_rel``: the model's own relative error (a float, or ``(n_obs,)`` one per datum; an
+    emulator's, :mod:`~fpm_sim.study.calibrate.emulator`), added to each datum's variance as ``(model_error_rel
+    f)^2``."""
     ok = np.isfinite(cheap)
     out = np.full(len(thetas), -math.inf)
     if not ok.any():
@@ -189,7 +185,8 @@ def frequencies_log_likelihood_batch(
     f = freq[ok]
     pr = problem.priors
     d = thetas[ok, len(pr.parameters)] if pr.discrepancy is not None else np.full(ok.sum(), pr.discrepancy_fixed)
-    sd = np.sqrt(problem.sigma[None] ** 2 + ((d[:, None] ** 2 + model_error_rel**2) * f**2))  # as noise_sd
+    rel2 = d[:, None] ** 2 + np.asarray(model_error_rel, float) ** 2
+    sd = np.sqrt(problem.sigma[None] ** 2 + rel2 * f**2)  # as noise_sd
     with np.errstate(invalid="ignore"):
         data = independent_log_likelihood(f - problem.measured[None], sd)
     out[ok] = np.where(np.all(np.isfinite(f), axis=1), data + cheap[ok], -math.inf)

@@ -1,0 +1,55 @@
+"""The emulator of the segment model (:mod:`fpm_sim.study.calibrate.emulator`) on a synthetic pair of models whose
+high-fidelity one switches mode families where the low-fidelity one does not: its stated per-pose error must be the
+error it makes on fresh draws, and it must refuse too few runs."""
+
+import numpy as np
+import pytest
+
+from fpm_sim.study.calibrate.emulator import train_emulator
+from fpm_sim.study.calibrate.problem import CalibrationError
+
+N_FREE, N_OBS = 3, 4
+
+
+def _models(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(f_high, f_low)`` (Hz): the low-fidelity model's frequency rises with ``u0`` (and ``u1`` more at higher
+    poses); the high-fidelity one is 20 % below it until another family (60-80 Hz, set by ``u2``) becomes the lowest,
+    joined smoothly (a soft minimum over ~2 Hz), as the segment model's out-of-plane-like first mode takes over."""
+    j = np.arange(N_OBS)[None, :]
+    low = 60.0 * (1.0 + u[:, [0]] + 0.5 * j * u[:, [1]] / N_OBS)
+    other = 60.0 + 20.0 * u[:, [2]]
+    high = -2.0 * np.logaddexp(-0.8 * low / 2.0, -other / 2.0)
+    return high, low
+
+
+def test_the_emulators_stated_error_per_pose_is_its_error_on_fresh_draws():
+    rng = np.random.default_rng(0)
+    u = rng.random((600, N_FREE))
+    emu = train_emulator(u, *_models(u), n_free=N_FREE, rng=rng)
+    fresh = rng.random((4000, N_FREE))
+    high, low = _models(fresh)
+    err = np.log(emu.frequencies(fresh, low) / high)
+    rms = np.sqrt(np.mean(err**2, axis=0))
+    # the held-out estimate is a sample of 120 runs' errors (its relative sd ~ 1 / sqrt(2 x 120) = 6 % for Gaussian
+    # errors, more for the heavier tails at the families' junction): within a factor of 2 of the fresh error
+    assert np.all(rms < 2.0 * emu.held_out_rms_per_obs), (rms, emu.held_out_rms_per_obs)
+    assert np.all(rms > 0.5 * emu.held_out_rms_per_obs), (rms, emu.held_out_rms_per_obs)
+    assert np.array_equal(emu.model_error_rel, emu.held_out_rms_per_obs)  # EMULATOR_ERROR_FACTOR = 1
+    # it learned the junction: its error is a small part of the log ratio's own spread
+    spread = np.std(np.log(high / low), axis=0)
+    assert np.all(rms < 0.25 * spread), (rms, spread)
+    assert emu.held_out_max >= float(np.max(emu.held_out_rms_per_obs))
+
+
+def test_the_emulator_is_nan_where_the_surrogate_fails_and_refuses_too_few_runs():
+    rng = np.random.default_rng(1)
+    u = rng.random((200, N_FREE))
+    high, low = _models(u)
+    emu = train_emulator(u, high, low, n_free=N_FREE, rng=rng)
+    bad = low[:3].copy()
+    bad[1, 2] = np.nan
+    out = emu.frequencies(u[:3], bad)
+    assert np.all(np.isnan(out[1]))
+    assert np.all(np.isfinite(out[[0, 2]]))
+    with pytest.raises(CalibrationError, match="too few usable segment-model runs"):
+        train_emulator(u[:12], high[:12], low[:12], n_free=N_FREE, rng=rng)
