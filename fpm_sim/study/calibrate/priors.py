@@ -11,7 +11,8 @@ File layout (every table's ``reason`` is required, in the provenance style ``"st
 
     [parameters."geometry.elbow_branch"]
     dist = "branches"           # uniform over the 8 elbow-branch combinations; or "fixed" (the base's)
-    reason = "..."
+    relabel = "cyclic"          # optional: classes that relabelling the chains maps onto each other are sampled
+    reason = "..."              # once, weighted by their number (needs both rotations over a whole turn)
 
     [likelihood.discrepancy_rel]  # relative model-discrepancy sd; a distribution, or `value = 0.05` (fixed)
     dist = "loguniform"
@@ -182,6 +183,20 @@ class Priors:
     mode_read: ModeRead | None = None
     """The latent-mode model of the measured first frequencies (:mod:`fpm_sim.study.readout`); ``None``: each
     measured f1 is mode 1."""
+    branch_relabel: bool = False
+    """``relabel = "cyclic"``: relabelling the chains ``i -> i + 1`` turns both joint layouts by 120 deg and shifts
+    the elbow-branch pattern cyclically, so with both rotations over a whole turn the classes of one cyclic orbit hold
+    the same machines; one class of each orbit is sampled, weighted by the orbit's size
+    (:func:`~fpm_sim.study.identify.problem.cyclic_branch_orbits`)."""
+
+    @property
+    def periodic(self) -> tuple[int, ...]:
+        """The parameters (indices into :attr:`parameters`) that are angles with a uniform prior over a whole turn
+        (``*_deg``, ``upper - lower = 360``): their two bounds are one angle, and a sampler wraps them."""
+        return tuple(
+            i for i, p in enumerate(self.parameters)
+            if p.name.endswith("_deg") and p.dist == "uniform" and math.isclose(p.p("upper") - p.p("lower"), 360.0)
+        )  # fmt: skip
 
     @property
     def hyperpriors(self) -> tuple[Prior, ...]:
@@ -289,7 +304,7 @@ def read_priors(source: str | Path, free: Sequence[str], *, text: str | None = N
         )
     ptab = doc.get("parameters", {})
     params = _parameter_priors(ptab, list(free), where)
-    sample_branches, branch_reason = _branches(ptab, where)
+    sample_branches, branch_reason, relabel = _branches(ptab, where)
     lik = doc.get("likelihood", {})
     unknown = set(lik) - {"discrepancy_rel", "rig_sigma_pct", "length_scale_m", "mode_read"}
     if unknown:
@@ -309,7 +324,31 @@ def read_priors(source: str | Path, free: Sequence[str], *, text: str | None = N
             f"{where} [likelihood]: mode_read and length_scale_m cannot be combined (a mixture per pose is not "
             "jointly Gaussian); choose one"
         )
-    return Priors(params, sample_branches, branch_reason, disc, disc_fixed, rig_sigma, a, b, where, text, length, read)
+    out = Priors(
+        params, sample_branches, branch_reason, disc, disc_fixed, rig_sigma, a, b, where, text, length, read,
+        branch_relabel=relabel,
+    )  # fmt: skip
+    _check_relabel(out, where)
+    return out
+
+
+RELABEL_ROTATIONS = ("geometry.base_rotation_deg", "geometry.platform_rotation_deg")
+"""The rotations a cyclic relabelling of the chains turns by 120 deg: both must span a whole turn."""
+
+
+def _check_relabel(pr: Priors, where: str) -> None:
+    """``relabel = "cyclic"`` needs both rotations free with uniform priors over a whole turn."""
+    if not pr.branch_relabel:
+        return
+    whole = {pr.parameters[i].name for i in pr.periodic}
+    missing = [n for n in RELABEL_ROTATIONS if n not in whole]
+    if missing:
+        raise PriorError(
+            f'{where} [parameters."{BRANCH_PARAMETER}"].relabel: "cyclic" samples one class of each cyclic orbit, '
+            f"which holds every machine only when {' and '.join(RELABEL_ROTATIONS)} are free with uniform priors "
+            f"over a whole turn (upper - lower = 360); {', '.join(missing)} is not: give it lower = -180, "
+            "upper = 180, or remove relabel"
+        )
 
 
 def _document(where: str, text: str) -> dict[str, Any]:
@@ -357,16 +396,20 @@ def _parameter_priors(ptab: Mapping[str, Any], names: list[str], where: str) -> 
     return tuple(_prior(n, ptab[n], f'{where} [parameters."{n}"]') for n in names)
 
 
-def _branches(ptab: Mapping[str, Any], where: str) -> tuple[bool, str]:
-    """Whether the elbow branches are sampled, and why."""
+def _branches(ptab: Mapping[str, Any], where: str) -> tuple[bool, str, bool]:
+    """Whether the elbow branches are sampled, why, and whether one class of each cyclic orbit stands for it."""
     if BRANCH_PARAMETER not in ptab:
-        return False, "fixed: the base description's elbow branches"
+        return False, "fixed: the base description's elbow branches", False
     t = ptab[BRANCH_PARAMETER]
     w = f'{where} [parameters."{BRANCH_PARAMETER}"]'
     d = t.get("dist") if isinstance(t, Mapping) else None
     if d not in ("branches", "fixed"):
         raise PriorError(f'{w}.dist: {d!r}; use "branches" (uniform over the 8 combinations) or "fixed"')
-    return d == "branches", _reason(t, w)
+    assert isinstance(t, Mapping)
+    relabel = t.get("relabel", "none")
+    if relabel not in ("cyclic", "none") or (relabel == "cyclic" and d != "branches"):
+        raise PriorError(f'{w}.relabel: {relabel!r}; use "cyclic" (with dist = "branches") or leave it out')
+    return d == "branches", _reason(t, w), relabel == "cyclic"
 
 
 def _discrepancy(lik: Mapping[str, Any], where: str) -> tuple[Prior | None, float]:

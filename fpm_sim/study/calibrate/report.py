@@ -184,10 +184,21 @@ def _class_lines(cal: Calibration) -> list[str]:
         for c, m in sorted(share.items(), key=lambda t: -t[1]):
             lines.append(f"- {ELBOW_BRANCHES[c]}: {100.0 * m / len(cal.draws):.1f} % of the draws")
         return lines
+    orbits = any(" x" in c.label for c in cal.classes)
     lines = [
         "",
         "Elbow-branch classes (prior: uniform over the 8; each class's continuous posterior sampled on its own, "
         "the classes weighted by their evidences, `w_k = Z_k / sum Z`):",
+        *(
+            [
+                "",
+                "A class marked x3 stands for the three that a cyclic relabelling of the chains maps onto each other: "
+                "with both rotations over a whole turn they hold the same machines, so one is sampled and its evidence "
+                'counted three times (priors: `relabel = "cyclic"`; docs/identification.md).',
+            ]
+            if orbits
+            else []
+        ),
         "",
         "| class | reachable prior draws | ln Z (runs merged) | ln Z per run | weight | draws |",
         "|---|---|---|---|---|---|",

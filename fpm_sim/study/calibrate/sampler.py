@@ -50,6 +50,7 @@ from fpm_sim.study.calibrate.vectorised import (
     split_log_likelihood_batch,
     supports,
 )
+from fpm_sim.study.identify.problem import cyclic_branch_orbits
 from fpm_sim.study.loo import LeaveOneOut, leave_one_out, loo_from_components
 from fpm_sim.study.readout import draws_components, responsibilities
 
@@ -62,6 +63,7 @@ __all__ = [
     "problem_digest",
     "run_calibration",
     "sample_classes",
+    "sampled_classes",
 ]
 
 SAMPLERS = ("dynesty", "smc")
@@ -640,6 +642,7 @@ def _run_class(
             rstate=np.random.default_rng(seed),
             pool=pool,
             queue_size=opts.workers if pool is not None else None,
+            periodic=list(_periodic(part)) or None,
         )
         sampler.run_nested(**kw)
     res = sampler.results
@@ -647,6 +650,14 @@ def _run_class(
         with done.open("wb") as fh:
             pickle.dump(res, fh, protocol=4)
     return res
+
+
+def _periodic(part: Part) -> tuple[int, ...]:
+    """The unit-cube coordinates a sampler wraps around (the priors' whole-turn angles,
+    :attr:`~fpm_sim.study.calibrate.priors.Priors.periodic`; a split coordinate's part is an interval, not wrapped)."""
+    assert _PROBLEM is not None, "the pool was started without _init_worker"
+    per = tuple(getattr(getattr(_PROBLEM, "priors", None), "periodic", ()))
+    return tuple(i for i in per if part is None or i != part[0])
 
 
 def _class_thetas(u: np.ndarray, klass: int | None, part: Part = None) -> np.ndarray:
@@ -824,7 +835,8 @@ def _run_smc(
             out = pickle.load(fh)
         _same_sampler(out, "smc", done)
         return dict(out)
-    one, two = opts.smc_settings()
+    per = _periodic(part)
+    one, two = (dataclasses.replace(x, periodic=per) for x in opts.smc_settings())
     d = _PROBLEM.ndim - (klass is not None)
     cheap = functools.partial(_smc_cheap, klass=klass, part=part)
     rng = np.random.default_rng(seed)
@@ -964,9 +976,10 @@ def sample_classes(
     """Sample every elbow-branch class ``opts.runs`` times, merge each class's runs, combine the classes by
     their evidences (:mod:`fpm_sim.study.calibrate.runs`) and check the runs against each other."""
     classes = problem.branch_classes
+    size = sampled_classes(problem)
     seeds = [opts.seed + r for r in range(opts.runs)]
-    mass = {k: class_prior_mass(problem, k, opts.probe_draws, opts.seed) for k in classes}
-    live = [k for k in classes if mass[k] > 0]
+    mass = {k: class_prior_mass(problem, k, opts.probe_draws, opts.seed) for k in size}
+    live = [k for k in size if mass[k] > 0]
     if not live:
         raise CalibrationError(
             f"no prior draw (of {opts.probe_draws} per class) reaches every measured pose: the likelihood is nil",
@@ -976,7 +989,8 @@ def sample_classes(
     parts = _parts(problem, opts)
     _check_resume(problem, checkpoint, resume)
     keys = [(k, p, s) for k in live for p in parts for s in seeds]
-    prefix = (lambda k: f"class {problem.class_label(k)}, ") if classes != (None,) else (lambda k: "")
+    label = functools.partial(_class_label, problem, size)
+    prefix = (lambda k: f"class {label(k)}, ") if classes != (None,) else (lambda k: "")
 
     def finished(k: int | None, p: Part) -> bool:  # every run of (k, p) resumes from its saved results
         return (
@@ -997,8 +1011,8 @@ def sample_classes(
     done = _sample_jobs(jobs, pool, print_func, prefix)
     run_of = {(k, s): combine_parts([done[(k, p, s)][0] for p in parts]) for k in live for s in seeds}
     merged = [
-        ClassResult.of_results(k, combine_parts([_merge([done[(k, p, s)][0] for s in seeds], opts.sampler)
-                                                 for p in parts]))
+        _class_result(k, combine_parts([_merge([done[(k, p, s)][0] for s in seeds], opts.sampler) for p in parts]),
+                      size[k])
         for k in live
     ]  # fmt: skip
     rng = np.random.default_rng(opts.seed + 1)
@@ -1006,19 +1020,45 @@ def sample_classes(
     names = [n for n in problem.names if n != BRANCH_PARAMETER]
     check = None
     if opts.runs > 1:
-        per_run = [[ClassResult.of_results(k, run_of[(k, s)]) for k in live] for s in seeds]
+        per_run = [[_class_result(k, run_of[(k, s)], size[k]) for k in live] for s in seeds]
         check = between_run_check(
             per_run, comb, seeds, names, n_classes=len(classes), n_draws=opts.draws, rng=rng,
-            class_label=problem.class_label, nsigma=opts.nsigma, quantile_tol=opts.quantile_tol,
+            class_label=label, nsigma=opts.nsigma, quantile_tol=opts.quantile_tol,
             class_threshold=opts.class_threshold,
         )  # fmt: skip
-    summaries = _summaries(problem, classes, mass, live, comb, merged, run_of, seeds, opts.probe_draws)
+    summaries = _summaries(problem, size, mass, live, comb, merged, run_of, seeds, opts.probe_draws)
     stats = {
         "n_calls": int(sum(np.sum(r["ncall"]) for r, _ in done.values())),
         "n_iterations": int(sum(int(r["niter"]) for r, _ in done.values())),
         "converged": opts.max_calls is None or all(np.sum(r["ncall"]) < opts.max_calls for r, _ in done.values()),
     }
     return comb, check, summaries, stats
+
+
+def sampled_classes(problem: FrequencyLikelihood) -> dict[int | None, int]:
+    """The elbow-branch classes sampled, each with the number of classes it stands for: every class once, or with
+    the priors' ``relabel = "cyclic"`` one class of each cyclic orbit with the orbit's size
+    (:func:`~fpm_sim.study.identify.problem.cyclic_branch_orbits`; its evidence counts that many times under the
+    uniform prior over the 8)."""
+    classes = problem.branch_classes
+    if classes == (None,) or not getattr(getattr(problem, "priors", None), "branch_relabel", False):
+        return dict.fromkeys(classes, 1)
+    return {k: m for k, m in cyclic_branch_orbits().items()}  # a comprehension widens the key type
+
+
+def _class_label(problem: FrequencyLikelihood, size: dict[int | None, int], klass: int | None) -> str:
+    """A class's name, ``" x3"`` added where it stands for its orbit's three classes."""
+    m = size.get(klass, 1)
+    return problem.class_label(klass) + (f" x{m}" if m > 1 else "")
+
+
+def _class_result(klass: int | None, res: Any, size: int) -> ClassResult:
+    """:meth:`ClassResult.of_results`, its evidence (and weights) counted ``size`` times (:func:`sampled_classes`)."""
+    out = ClassResult.of_results(klass, res)
+    if size == 1:
+        return out
+    log_m = math.log(size)
+    return dataclasses.replace(out, logwt=out.logwt + log_m, log_evidence=out.log_evidence + log_m)
 
 
 def _parts(problem: FrequencyLikelihood, opts: SamplerOptions) -> list[Part]:
@@ -1037,7 +1077,7 @@ def _parts(problem: FrequencyLikelihood, opts: SamplerOptions) -> list[Part]:
 
 def _summaries(
     problem: FrequencyLikelihood,
-    classes: tuple[int | None, ...],
+    size: dict[int | None, int],
     mass: dict[int | None, float],
     live: list[int | None],
     comb: Combined,
@@ -1046,17 +1086,20 @@ def _summaries(
     seeds: list[int],
     probe: int,
 ) -> list[ClassSummary]:
+    """One summary per sampled class (:func:`sampled_classes`), its evidences counted as many times as the classes
+    it stands for."""
     out = []
-    for k in classes:
+    for k, m in size.items():
+        name = _class_label(problem, size, k)
         if k not in live:
-            out.append(ClassSummary(k, problem.class_label(k), 0.0, probe, math.nan, math.nan, 0.0, 0.0, [], True))
+            out.append(ClassSummary(k, name, 0.0, probe, math.nan, math.nan, 0.0, 0.0, [], True))
             continue
         j = live.index(k)
         out.append(
             ClassSummary(
-                k, problem.class_label(k), mass[k], probe, merged[j].log_evidence, merged[j].log_evidence_err,
+                k, name, mass[k], probe, merged[j].log_evidence, merged[j].log_evidence_err,
                 float(comb.weights[j]), float(comb.weights_sd[j]),
-                [float(run_of[(k, s)]["logz"][-1]) for s in seeds], False,
+                [float(run_of[(k, s)]["logz"][-1]) + math.log(m) for s in seeds], False,
             )
         )  # fmt: skip
     return out

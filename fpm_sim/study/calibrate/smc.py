@@ -57,6 +57,9 @@ class SmcSettings:
     """Accepted Metropolis moves per particle (on average) after each tempering step."""
     max_sweeps: int = 40
     min_sweeps: int = 2
+    periodic: tuple[int, ...] = ()
+    """Unit-cube coordinates whose two ends are one point (an angle over a whole turn): moves wrap around them, and
+    the differential-evolution differences there are the shorter way round, so a mode across the seam is one mode."""
 
 
 @dataclass
@@ -140,10 +143,14 @@ class ModeProposal:
         return out - math.log(len(self.means))
 
 
-def _fold(u: np.ndarray) -> np.ndarray:
-    """Reflect into [0, 1] (a symmetric map of a symmetric proposal)."""
+def _fold(u: np.ndarray, periodic: tuple[int, ...] = ()) -> np.ndarray:
+    """Reflect into [0, 1], or wrap around on the ``periodic`` coordinates (either a symmetric map of a symmetric
+    proposal)."""
     v = np.mod(u, 2.0)
     out: np.ndarray = np.where(v > 1.0, 2.0 - v, v)
+    if periodic:
+        p = list(periodic)
+        out[..., p] = np.mod(u[..., p], 1.0)
     return out
 
 
@@ -178,9 +185,10 @@ def _systematic(logw: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarra
 
 def _sweep(
     u: np.ndarray, la: np.ndarray, lb: np.ndarray, beta: float, gamma: float, evaluate: Evaluate,
-    rng: np.random.Generator,
+    rng: np.random.Generator, periodic: tuple[int, ...] = (),
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
-    """One differential-evolution Metropolis sweep of every particle (the population frozen at its start)."""
+    """One differential-evolution Metropolis sweep of every particle (the population frozen at its start; on the
+    ``periodic`` coordinates the differences the shorter way round, still symmetric in ``a, b``)."""
     n, d = u.shape
     a = rng.integers(0, n - 1, n)
     a = a + (a >= np.arange(n))  # a != i
@@ -189,7 +197,11 @@ def _sweep(
     b = b + (b >= lo)
     b = b + (b >= hi)  # b != i, b != a
     jitter = 1e-6 * rng.standard_normal((n, d))
-    prop = _fold(u + gamma * (u[a] - u[b]) + jitter)
+    diff = u[a] - u[b]
+    if periodic:
+        p = list(periodic)
+        diff[:, p] = np.mod(diff[:, p] + 0.5, 1.0) - 0.5
+    prop = _fold(u + gamma * diff + jitter, periodic)
     pa, pb = evaluate(prop)
     with np.errstate(invalid="ignore"):
         cur = la + beta * lb if beta > 0 else la
@@ -210,7 +222,7 @@ def _move(
     base = 2.38 / math.sqrt(2 * d)
     accepted, calls, sweeps = 0.0, 0, 0
     while sweeps < s.max_sweeps and (sweeps < s.min_sweeps or accepted < s.moves):
-        u, la, lb, acc = _sweep(u, la, lb, beta, base * scale, evaluate, rng)
+        u, la, lb, acc = _sweep(u, la, lb, beta, base * scale, evaluate, rng, s.periodic)
         calls += n
         sweeps += 1
         rate = float(np.mean(acc))
@@ -228,7 +240,7 @@ def spread_over_mode(
     grows the population to the mode's width (copies jittered 2.5 widths out, 0.005 on a needle of 0.002, left 1-2
     of 256 in another mode: measured). A search's final population sits at one point; these follow the mode's
     ridge, which kernels around them then cover (:class:`ModeProposal`). Returns ``(u, log L_a + log L_b)``."""
-    u = _fold(best[None, :] + jitter * rng.standard_normal((n, len(best))))
+    u = _fold(best[None, :] + jitter * rng.standard_normal((n, len(best))), s.periodic)
     la, lb = evaluate(u)
     u, la, lb, _, _, _ = _move(u, la, lb, 1.0, evaluate, s, rng, 1.0)
     with np.errstate(invalid="ignore"):

@@ -42,6 +42,7 @@ __all__ = [
     "IdentifyOptions",
     "Problem",
     "check_problem",
+    "cyclic_branch_orbits",
     "modes_needed",
     "pair_modes",
     "predict_observations",
@@ -76,6 +77,26 @@ ELBOW_BRANCHES: tuple[tuple[int, int, int], ...] = (
     (1, -1, -1),
 )
 """Every elbow-branch combination: the discrete variable of ``global_method="de"``."""
+
+
+def cyclic_branch_orbits() -> dict[int, int]:
+    """``{representative: orbit size}`` of the elbow-branch classes (indices into :data:`ELBOW_BRANCHES`) under the
+    chains' cyclic relabelling: a machine of class ``k`` with the motors' and the platform's rotations ``(a, b)`` is
+    the machine of class ``roll(k, -1)`` at ``(a + 120, b + 120)`` deg (the 3RRR's three chains alike, its joints
+    120 deg apart; ``tests/study/test_calibrate_orbits.py`` checks it on the segment model). The orbits are
+    ``(1, 1, 1)``, ``(-1, -1, -1)``, the three with one ``-1`` and the three with two; each is represented by its
+    first member in :data:`ELBOW_BRANCHES`' order."""
+    out: dict[int, int] = {}
+    seen: set[int] = set()
+    for k, b in enumerate(ELBOW_BRANCHES):
+        if k in seen:
+            continue
+        orbit = {ELBOW_BRANCHES.index(tuple(int(x) for x in np.roll(b, r))) for r in range(3)}
+        seen |= orbit
+        out[k] = len(orbit)
+    return out
+
+
 SURROGATE_BRANCHES: tuple[tuple[int, int, int], ...] = (
     (1, 1, 1),
     (-1, -1, -1),
