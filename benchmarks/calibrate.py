@@ -86,7 +86,9 @@ class EmulatedLikelihood(OneBlasThread):
         ok = np.flatnonzero(np.isfinite(cheap))[:N_TRAIN]
         self.u, self.theta = u[ok], theta[ok]
         f_seg = np.array([p.predict(t) for t in self.theta])
-        self.emulator = train_emulator(self.u, f_seg, f_sur[ok], n_free=len(p.priors.parameters), rng=rng)
+        self.emulator = train_emulator(
+            self.u, f_seg, f_sur[ok], n_free=len(p.priors.parameters), rng=rng, periodic=p.priors.periodic
+        )
         self.particles = np.repeat(self.u, 4000 // len(self.u) + 1, axis=0)[:4000]
 
     def emulated(self) -> np.ndarray:

@@ -85,6 +85,8 @@ class Emulator:
     held_out_rms_per_obs: np.ndarray
     """``(n_obs,)`` each pose's held-out rms of ``log(f_segments / f_emulated)``: its relative error."""
     held_out_max: float
+    periodic: tuple[int, ...] = ()
+    """Unit-cube coordinates that are whole-turn angles: read as a point on a circle (``_features``)."""
 
     @property
     def held_out_rms(self) -> float:
@@ -113,9 +115,15 @@ class Emulator:
 
 
 def _features(u: np.ndarray, log_f: np.ndarray, scaling: Any) -> np.ndarray:
-    """The fit's inputs: ``u`` beside ``s z`` (module docstring); ``scaling`` holds ``feature_scale``,
-    ``log_f_mean`` and ``log_f_sd``."""
+    """The fit's inputs: ``u`` beside ``s z`` (module docstring), each ``periodic`` coordinate as the point
+    ``(cos 2 pi u, sin 2 pi u) / (2 pi)`` of a circle (its two ends one point; near distances as along ``u``);
+    ``scaling`` holds ``feature_scale``, ``log_f_mean``, ``log_f_sd`` and ``periodic``."""
     z = (log_f - scaling.log_f_mean) / scaling.log_f_sd
+    per = list(scaling.periodic)
+    if per:
+        angle = 2.0 * np.pi * u[:, per]
+        keep = [i for i in range(u.shape[1]) if i not in per]
+        u = np.hstack([u[:, keep], np.cos(angle) / (2.0 * np.pi), np.sin(angle) / (2.0 * np.pi)])
     out: np.ndarray = np.hstack([u, scaling.feature_scale * z])
     return out
 
@@ -125,13 +133,16 @@ class _Scaling:
     feature_scale: float
     log_f_mean: np.ndarray
     log_f_sd: np.ndarray
+    periodic: tuple[int, ...]
 
 
 def train_emulator(
-    u: np.ndarray, f_segments: np.ndarray, f_surrogate: np.ndarray, *, n_free: int, rng: np.random.Generator
-) -> Emulator:
+    u: np.ndarray, f_segments: np.ndarray, f_surrogate: np.ndarray, *, n_free: int, rng: np.random.Generator,
+    periodic: tuple[int, ...] = (),
+) -> Emulator:  # fmt: skip
     """The emulator fitted to the log ratios at unit-cube rows ``u`` (``(n, >= n_free)``; ``f_*``: ``(n, n_obs)``
-    in Hz, rows with a non-finite or non-positive frequency left out): the feature scale of
+    in Hz, rows with a non-finite or non-positive frequency left out; ``periodic``: the coordinates that are
+    whole-turn angles, read on a circle): the feature scale of
     :data:`EMULATOR_FEATURE_SCALES` with the least held-out error (:data:`EMULATOR_HELD_OUT` of the rows held out),
     each pose's error measured there, then refitted on all of them."""
     from scipy.interpolate import RBFInterpolator
@@ -141,6 +152,7 @@ def train_emulator(
         y = np.log(np.asarray(f_segments, float)) - log_sur
     ok = np.all(np.isfinite(y) & np.isfinite(log_sur), axis=1)
     x, y, log_sur = np.asarray(u, float)[ok, :n_free], y[ok], log_sur[ok]
+    periodic = tuple(i for i in periodic if i < n_free)
     n = len(x)
     n_out = round(EMULATOR_HELD_OUT * n)
     if n - n_out < 2 * (n_free + y.shape[1] + 1) or n_out < 1:
@@ -161,7 +173,7 @@ def train_emulator(
 
     best: tuple[float, _Scaling, np.ndarray] | None = None
     for scale in EMULATOR_FEATURE_SCALES:
-        sc = _Scaling(scale, mean, sd)
+        sc = _Scaling(scale, mean, sd, tuple(periodic))
         res = y[held] - fitted(fit_on, sc)(_features(x[held], log_sur[held], sc))
         if best is None or np.mean(res**2) < best[0]:
             best = (float(np.mean(res**2)), sc, res)
@@ -170,6 +182,7 @@ def train_emulator(
     return Emulator(
         fit=fitted(np.arange(n), sc), n_free=n_free, feature_scale=sc.feature_scale, log_f_mean=mean, log_f_sd=sd,
         n_train=n, held_out_rms_per_obs=np.sqrt(np.mean(res**2, axis=0)), held_out_max=float(np.max(np.abs(res))),
+        periodic=tuple(periodic),
     )  # fmt: skip
 
 

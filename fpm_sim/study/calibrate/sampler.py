@@ -729,7 +729,9 @@ class _SegmentEmulator:
         u, keep = np.unique(u, axis=0, return_index=True)
         p, klass, part = self.problem, self.klass, self.part
         f_sur, _ = inplane_frequencies_batch(p, _class_thetas(u, klass, part))
-        emu = self.fitted = train_emulator(u, f_seg[keep], f_sur, n_free=len(p.priors.parameters), rng=self.rng)
+        emu = self.fitted = train_emulator(
+            u, f_seg[keep], f_sur, n_free=len(p.priors.parameters), rng=self.rng, periodic=_periodic(part)
+        )
 
         def evaluate(uq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             th = _class_thetas(uq, klass, part)
