@@ -172,7 +172,7 @@ def test_ctrl_c_during_identify_is_one_line_and_130(tmp_path):
     assert not out.exists()
 
 
-@pytest.mark.slow  # ~30-90 s on the shared machine: the first of the 16 (class, seed) runs must finish first
+@pytest.mark.slow  # ~30-90 s on the shared machine: the first of the 8 (class, seed) runs must finish first
 def test_ctrl_c_during_calibrate_is_one_line_and_130_and_stops_the_workers(tmp_path):
     """Ctrl-C to the whole process group while the (class, seed) runs of ``calibrate`` occupy a pool of worker
     processes: exit 130, the one "interrupted" line (besides the finished runs' progress lines), no worker's
@@ -187,8 +187,9 @@ def test_ctrl_c_during_calibrate_is_one_line_and_130_and_stops_the_workers(tmp_p
             "--runs", "2", "--workers", "2", "--out", str(out)]  # fmt: skip
     proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
-        for line in proc.stderr:  # a run has finished: the workers are busy with the next ones
-            if "(1/16 runs)" in line:
+        # a run has finished: the workers are busy with the next ones (4 classes, one of each cyclic orbit, x 2 runs)
+        for line in proc.stderr:
+            if "(1/8 runs)" in line:
                 break
         os.killpg(proc.pid, signal.SIGINT)
         _, err = proc.communicate(timeout=120)
