@@ -47,8 +47,8 @@ import numpy as np
 from fpm_sim.study.calibrate.problem import CalibrationError
 
 __all__ = [
-    "EMULATOR_ERROR_FACTOR", "EMULATOR_FEATURE_SCALES", "EMULATOR_HELD_OUT", "Emulator", "importance_diagnostics",
-    "train_emulator",
+    "EMULATOR_ERROR_FACTOR", "EMULATOR_FEATURE_SCALES", "EMULATOR_HELD_OUT", "Emulator", "Inputs",
+    "importance_diagnostics", "train_emulator",
 ]  # fmt: skip
 
 EMULATOR_ERROR_FACTOR = 1.0
@@ -68,25 +68,46 @@ lowest mode changes family; an exact interpolant rings there (held-out rms 0.056
 
 
 @dataclass(frozen=True)
-class Emulator:
-    """The fitted correction ``g`` (module docstring) and its measured error."""
+class Inputs:
+    """How the fit reads a row: its first ``n_free`` unit-cube coordinates (the free parameters'; the discrepancy's
+    excluded), each ``periodic`` one as the point ``(cos 2 pi u, sin 2 pi u) / (2 pi)`` of a circle (its two ends one
+    point; near distances as along ``u``), beside ``s z``, the surrogate's log frequencies standardised on the
+    training runs (module docstring)."""
 
-    fit: Any
-    """The :class:`scipy.interpolate.RBFInterpolator` of ``(n, n_free + n_obs) -> (n, n_obs)`` log ratios."""
     n_free: int
-    """The unit-cube coordinates it reads (the free parameters', the discrepancy's excluded)."""
     feature_scale: float
     """``s``: the weight of the surrogate's standardised log frequencies among the inputs."""
     log_f_mean: np.ndarray
     """``(n_obs,)`` the training runs' mean of the surrogate's log frequencies (the standardisation's)."""
     log_f_sd: np.ndarray
     """``(n_obs,)`` and their sd."""
+    periodic: tuple[int, ...] = ()
+    """Unit-cube coordinates that are whole-turn angles."""
+
+    def __call__(self, u: np.ndarray, log_f: np.ndarray) -> np.ndarray:
+        """The fit's input rows at unit-cube rows ``u`` given the surrogate's log frequencies ``log_f`` there."""
+        u = np.atleast_2d(u)[:, : self.n_free]
+        z = (log_f - self.log_f_mean) / self.log_f_sd
+        per = list(self.periodic)
+        if per:
+            angle = 2.0 * np.pi * u[:, per]
+            keep = [i for i in range(u.shape[1]) if i not in per]
+            u = np.hstack([u[:, keep], np.cos(angle) / (2.0 * np.pi), np.sin(angle) / (2.0 * np.pi)])
+        out: np.ndarray = np.hstack([u, self.feature_scale * z])
+        return out
+
+
+@dataclass(frozen=True)
+class Emulator:
+    """The fitted correction ``g`` (module docstring) and its measured error."""
+
+    fit: Any
+    """The :class:`scipy.interpolate.RBFInterpolator` of :attr:`inputs`' rows to ``(n, n_obs)`` log ratios."""
+    inputs: Inputs
     n_train: int
     held_out_rms_per_obs: np.ndarray
     """``(n_obs,)`` each pose's held-out rms of ``log(f_segments / f_emulated)``: its relative error."""
     held_out_max: float
-    periodic: tuple[int, ...] = ()
-    """Unit-cube coordinates that are whole-turn angles: read as a point on a circle (``_features``)."""
 
     @property
     def held_out_rms(self) -> float:
@@ -101,39 +122,15 @@ class Emulator:
         return out
 
     def frequencies(self, u: np.ndarray, f_surrogate: np.ndarray) -> np.ndarray:
-        """``(n, n_obs)`` the emulated frequencies (Hz) at unit-cube rows ``u`` (their first :attr:`n_free` columns
-        read) given the surrogate's there (``(n, n_obs)``, Hz); NaN where the surrogate's is not finite and
-        positive."""
+        """``(n, n_obs)`` the emulated frequencies (Hz) at unit-cube rows ``u`` given the surrogate's there (``(n,
+        n_obs)``, Hz); NaN where the surrogate's is not finite and positive."""
         with np.errstate(divide="ignore", invalid="ignore"):
             log_f = np.log(np.asarray(f_surrogate, float))
         ok = np.all(np.isfinite(log_f), axis=1)
         out = np.full(log_f.shape, np.nan)
         if ok.any():
-            x = _features(np.atleast_2d(u)[ok, : self.n_free], log_f[ok], self)
-            out[ok] = np.exp(log_f[ok] + self.fit(x))
+            out[ok] = np.exp(log_f[ok] + self.fit(self.inputs(np.atleast_2d(u)[ok], log_f[ok])))
         return out
-
-
-def _features(u: np.ndarray, log_f: np.ndarray, scaling: Any) -> np.ndarray:
-    """The fit's inputs: ``u`` beside ``s z`` (module docstring), each ``periodic`` coordinate as the point
-    ``(cos 2 pi u, sin 2 pi u) / (2 pi)`` of a circle (its two ends one point; near distances as along ``u``);
-    ``scaling`` holds ``feature_scale``, ``log_f_mean``, ``log_f_sd`` and ``periodic``."""
-    z = (log_f - scaling.log_f_mean) / scaling.log_f_sd
-    per = list(scaling.periodic)
-    if per:
-        angle = 2.0 * np.pi * u[:, per]
-        keep = [i for i in range(u.shape[1]) if i not in per]
-        u = np.hstack([u[:, keep], np.cos(angle) / (2.0 * np.pi), np.sin(angle) / (2.0 * np.pi)])
-    out: np.ndarray = np.hstack([u, scaling.feature_scale * z])
-    return out
-
-
-@dataclass(frozen=True)
-class _Scaling:
-    feature_scale: float
-    log_f_mean: np.ndarray
-    log_f_sd: np.ndarray
-    periodic: tuple[int, ...]
 
 
 def train_emulator(
@@ -165,24 +162,22 @@ def train_emulator(
     sd = np.std(log_sur, axis=0)
     mean, sd = np.mean(log_sur, axis=0), np.where(sd > 0, sd, 1.0)
 
-    def fitted(rows: np.ndarray, scaling: _Scaling) -> Any:
+    def fitted(rows: np.ndarray, inputs: Inputs) -> Any:
         return RBFInterpolator(
-            _features(x[rows], log_sur[rows], scaling), y[rows], kernel="thin_plate_spline",
-            smoothing=EMULATOR_SMOOTHING, degree=1,
-        )  # fmt: skip
+            inputs(x[rows], log_sur[rows]), y[rows], kernel="thin_plate_spline", smoothing=EMULATOR_SMOOTHING, degree=1
+        )
 
-    best: tuple[float, _Scaling, np.ndarray] | None = None
+    best: tuple[float, Inputs, np.ndarray] | None = None
     for scale in EMULATOR_FEATURE_SCALES:
-        sc = _Scaling(scale, mean, sd, tuple(periodic))
-        res = y[held] - fitted(fit_on, sc)(_features(x[held], log_sur[held], sc))
+        inputs = Inputs(n_free, scale, mean, sd, periodic)
+        res = y[held] - fitted(fit_on, inputs)(inputs(x[held], log_sur[held]))
         if best is None or np.mean(res**2) < best[0]:
-            best = (float(np.mean(res**2)), sc, res)
+            best = (float(np.mean(res**2)), inputs, res)
     assert best is not None
-    _, sc, res = best
+    _, inputs, res = best
     return Emulator(
-        fit=fitted(np.arange(n), sc), n_free=n_free, feature_scale=sc.feature_scale, log_f_mean=mean, log_f_sd=sd,
-        n_train=n, held_out_rms_per_obs=np.sqrt(np.mean(res**2, axis=0)), held_out_max=float(np.max(np.abs(res))),
-        periodic=tuple(periodic),
+        fit=fitted(np.arange(n), inputs), inputs=inputs, n_train=n, held_out_rms_per_obs=np.sqrt(np.mean(res**2, 0)),
+        held_out_max=float(np.max(np.abs(res))),
     )  # fmt: skip
 
 

@@ -184,7 +184,7 @@ def _class_lines(cal: Calibration) -> list[str]:
         for c, m in sorted(share.items(), key=lambda t: -t[1]):
             lines.append(f"- {ELBOW_BRANCHES[c]}: {100.0 * m / len(cal.draws):.1f} % of the draws")
         return lines
-    orbits = any(" x" in c.label for c in cal.classes)
+    orbits = any(c.size > 1 for c in cal.classes)
     lines = [
         "",
         "Elbow-branch classes (prior: uniform over the 8; each class's continuous posterior sampled on its own, "

@@ -304,6 +304,8 @@ class ClassSummary:
     """ln Z of each run (seeds in order)."""
     skipped: bool
     """No prior draw reached the measured poses: ``Z_k = 0``, not sampled."""
+    size: int = 1
+    """The classes it stands for (:func:`sampled_classes`): its evidences count that many times."""
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -1021,14 +1023,14 @@ def sample_classes(
     comb = combine_classes(merged, len(classes), opts.draws, rng)
     names = [n for n in problem.names if n != BRANCH_PARAMETER]
     check = None
+    per_run = [[_class_result(k, run_of[(k, s)], size[k]) for k in live] for s in seeds]
     if opts.runs > 1:
-        per_run = [[_class_result(k, run_of[(k, s)], size[k]) for k in live] for s in seeds]
         check = between_run_check(
             per_run, comb, seeds, names, n_classes=len(classes), n_draws=opts.draws, rng=rng,
             class_label=label, nsigma=opts.nsigma, quantile_tol=opts.quantile_tol,
             class_threshold=opts.class_threshold,
         )  # fmt: skip
-    summaries = _summaries(problem, size, mass, live, comb, merged, run_of, seeds, opts.probe_draws)
+    summaries = _summaries(problem, size, mass, live, comb, merged, per_run, opts.probe_draws)
     stats = {
         "n_calls": int(sum(np.sum(r["ncall"]) for r, _ in done.values())),
         "n_iterations": int(sum(int(r["niter"]) for r, _ in done.values())),
@@ -1084,24 +1086,22 @@ def _summaries(
     live: list[int | None],
     comb: Combined,
     merged: list[ClassResult],
-    run_of: dict[tuple[int | None, int], Any],
-    seeds: list[int],
+    per_run: list[list[ClassResult]],
     probe: int,
 ) -> list[ClassSummary]:
-    """One summary per sampled class (:func:`sampled_classes`), its evidences counted as many times as the classes
-    it stands for."""
+    """One summary per sampled class (:func:`sampled_classes`; ``per_run[r][j]``: run ``r``'s result of ``live[j]``,
+    its evidence counted as :func:`_class_result` counts it)."""
     out = []
     for k, m in size.items():
         name = _class_label(problem, size, k)
         if k not in live:
-            out.append(ClassSummary(k, name, 0.0, probe, math.nan, math.nan, 0.0, 0.0, [], True))
+            out.append(ClassSummary(k, name, 0.0, probe, math.nan, math.nan, 0.0, 0.0, [], True, m))
             continue
         j = live.index(k)
         out.append(
             ClassSummary(
                 k, name, mass[k], probe, merged[j].log_evidence, merged[j].log_evidence_err,
-                float(comb.weights[j]), float(comb.weights_sd[j]),
-                [float(run_of[(k, s)]["logz"][-1]) + math.log(m) for s in seeds], False,
+                float(comb.weights[j]), float(comb.weights_sd[j]), [r[j].log_evidence for r in per_run], False, m,
             )
         )  # fmt: skip
     return out

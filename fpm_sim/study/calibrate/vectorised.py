@@ -153,8 +153,9 @@ def inplane_split_log_likelihood_batch(
     """``((n,), (n,))``: the cheap log-likelihood and the rest of :func:`inplane_log_likelihood_batch`'s (``log L -
     log L_cheap``; both ``-inf`` off the support), the support and the statements computed once: an SMC data stage's
     evaluation (:data:`~fpm_sim.study.calibrate.smc.Evaluate`)."""
-    freq, cheap = inplane_frequencies_batch(problem, np.atleast_2d(thetas))
-    return split_log_likelihood_batch(problem, np.atleast_2d(thetas), freq, cheap)
+    thetas = np.atleast_2d(thetas)
+    freq, cheap = inplane_frequencies_batch(problem, thetas)
+    return split_log_likelihood_batch(problem, thetas, freq, cheap)
 
 
 def split_log_likelihood_batch(
