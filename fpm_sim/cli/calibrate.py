@@ -62,6 +62,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         particles=args.particles,
         cheap_particles=args.cheap_particles,
         emulator=args.emulator,
+        ess_fraction=args.ess_fraction,
+        moves=args.moves,
     )
     opts.check()
     out.mkdir(parents=True, exist_ok=True)
@@ -286,7 +288,21 @@ def _add_sampler_args(p: argparse.ArgumentParser) -> None:
         "the first stage's particles and as many at the data stage's (500 measured), then importance-weighted to "
         'the segment model, exact (docs/identification.md, "An emulator of '
         "the segment model\"); each run prints its weights' effective sample size and Pareto k. 0 (default): the "
-        "segment model throughout",
+        "segment model throughout. A run whose weights are heavy (Pareto k >= 0.7) samples its data stage once "
+        "more on a refit with every segment-model run so far",
+    )
+    p.add_argument(
+        "--ess-fraction",
+        type=float,
+        default=0.5,
+        help="smc: each tempering step keeps this fraction of the particles as effective sample size (default 0.5; "
+        "0.9 with --moves 10: runs that agree on the study, at about 4 times the time: docs/identification.md)",
+    )
+    p.add_argument(
+        "--moves",
+        type=float,
+        default=3.0,
+        help="smc: accepted Metropolis moves per particle after each tempering step of the data stage (default 3)",
     )
     p.add_argument(
         "--live-points", type=int, default=250, help="dynesty: nested sampling live points of each run (default 250)"

@@ -165,6 +165,8 @@ OPTION_NAMES: dict[str, tuple[str, float]] = {
     "calibrate:particles": ("--particles", 1.0),
     "cheap_particles": ("--cheap-particles", 1.0),
     "emulator": ("--emulator", 1.0),
+    "ess_fraction": ("--ess-fraction", 1.0),
+    "calibrate:moves": ("--moves", 1.0),
     # time domain (fpm_sim.sim.stepping, fpm_sim.sim.trajectory)
     "integrator": ("--integrator", 1.0),
     "step_band_hz": ("--step-band-hz", 1.0),

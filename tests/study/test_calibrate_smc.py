@@ -209,10 +209,12 @@ def test_the_cli_runs_the_smc_sampler_and_refuses_nested_sampling_options(cli_fi
 
     from fpm_sim.cli.main import main
 
-    argv = [*_argv(cli_files), "--sampler", "smc", "--particles", "60", "--cheap-particles", "60", "--json"]
+    argv = [*_argv(cli_files), "--sampler", "smc", "--particles", "60", "--cheap-particles", "60", "--json",
+            "--ess-fraction", "0.7", "--moves", "4"]  # fmt: skip
     assert main(argv) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["result"]["options"]["sampler"] == "smc"
+    assert (doc["result"]["options"]["ess_fraction"], doc["result"]["options"]["moves"]) == (0.7, 4.0)
     assert doc["result"]["runs_check"]["seeds"] == [5, 6, 7]
     assert "two-stage tempered SMC (60 particles" in (cli_files / "out" / "report.md").read_text()
     # a finished calibration's outputs are rewritten on --resume without sampling (the runs' .done files kept)
@@ -226,6 +228,11 @@ def test_the_cli_runs_the_smc_sampler_and_refuses_nested_sampling_options(cli_fi
     # too few particles: exit 2 naming the option
     assert main([*_argv(cli_files), "--sampler", "smc", "--particles", "3", "--overwrite"]) == 2
     assert capsys.readouterr().err.startswith("error: --particles: must be >= 10, got 3")
+    # the tempering's settings out of range: exit 2 naming the option
+    assert main([*_argv(cli_files), "--sampler", "smc", "--ess-fraction", "1.5", "--overwrite"]) == 2
+    assert capsys.readouterr().err.startswith("error: --ess-fraction: must be between 0 and 1, got 1.5")
+    assert main([*_argv(cli_files), "--sampler", "smc", "--moves", "0", "--overwrite"]) == 2
+    assert capsys.readouterr().err.startswith("error: --moves: must be > 0, got 0")
     # the emulator is the SMC's: exit 2 naming it
     assert main([*_argv(cli_files), "--emulator", "100", "--overwrite"]) == 2
     assert capsys.readouterr().err.startswith("error: --emulator: is the smc sampler's")
@@ -400,6 +407,35 @@ def test_a_data_stage_on_a_wrong_emulator_weighted_to_the_exact_likelihood_gives
         assert math.isclose(float(np.sum(w)), 1.0)
         assert np.array_equal(run.log_b, _full(run.u)[1])  # the exact likelihood is reported, not the emulator's
     assert trained_on == [one.particles] * 4  # trained on stage 1's particles
+
+
+def test_a_stage_whose_weights_are_heavy_is_sampled_again_on_the_refit_and_only_that_is_reported():
+    """``again``: given the first weighted stage's log weights it returns a refitted emulator (here the exact
+    likelihood, as a refit on enough runs would approach it); the data stage runs once more on it and the run reports
+    that stage: equal weights, ln Z = 0 within 4 of its stated error, the first mode's share 0.3 within 0.15 (as the
+    plain SMC's test), and its calls include both stages' and both weightings'. Returning ``None`` reports the first
+    stage, as without ``again``: the same numbers from the same seed."""
+    from fpm_sim.study.calibrate.smc import emulated_two_stage
+
+    seen: list[np.ndarray] = []
+
+    def again(log_w: np.ndarray):
+        seen.append(log_w)
+        return _full
+
+    one, two = SmcSettings(particles=500), SmcSettings(particles=1600)
+    for seed in range(2):
+        run = emulated_two_stage(_cheap, lambda u: _emulated, _full, D, one, two, np.random.default_rng(seed),
+                                 again=again)  # fmt: skip
+        assert len(seen) == seed + 1 and np.any(seen[-1] != seen[-1][0])  # given the first stage's unequal weights
+        assert run.log_weights is not None and np.allclose(run.log_weights, -math.log(len(run.u)))
+        assert abs(run.log_evidence) < 4 * run.log_evidence_err, (run.log_evidence, run.log_evidence_err)
+        assert abs(float(np.mean(_modes(run.u)[1])) - WEIGHTS[0]) < 0.15
+        plain = emulated_two_stage(_cheap, lambda u: _emulated, _full, D, one, two, np.random.default_rng(seed))
+        kept = emulated_two_stage(_cheap, lambda u: _emulated, _full, D, one, two, np.random.default_rng(seed),
+                                  again=lambda lw: None)  # fmt: skip
+        assert kept.log_evidence == plain.log_evidence and np.array_equal(kept.u, plain.u)
+        assert run.n_calls > plain.n_calls + two.particles  # a second data stage and its weighting counted
 
 
 @pytest.mark.slow  # ~15 s: some 300 segment-model runs

@@ -34,7 +34,10 @@ The emulated posterior is then made the segment model's by importance weights (m
 Peherstorfer, Willcox & Gunzburger 2016): each particle of the emulated data stage is weighted by
 ``L_segments / L_emulated``, and the evidence multiplied by their mean. That is exact whatever the emulator's error;
 its error shows only as fewer effective draws, measured by the weights' effective sample size and their Pareto
-shape ``k`` (Vehtari et al. 2024: the weighted estimates are reliable for ``k < 0.7``), both reported per run.
+shape ``k`` (Vehtari et al. 2024: the weighted estimates are reliable for ``k < 0.7``), both reported per run. Where
+``k >= 0.7`` the data stage went beyond the runs the emulator was fitted on; the segment-model runs at its particles
+(the weights' own) are where it was missing, so the run refits on every run so far and samples its data stage once
+more (:func:`~fpm_sim.study.calibrate.smc.emulated_two_stage`, ``again``).
 """
 
 from __future__ import annotations
@@ -47,12 +50,14 @@ import numpy as np
 from fpm_sim.study.calibrate.problem import CalibrationError
 
 __all__ = [
-    "EMULATOR_ERROR_FACTOR", "EMULATOR_FEATURE_SCALES", "EMULATOR_HELD_OUT", "Emulator", "Inputs",
+    "EMULATOR_ERROR_FACTOR", "EMULATOR_FEATURE_SCALES", "EMULATOR_HELD_OUT", "PARETO_K_MAX", "Emulator", "Inputs",
     "importance_diagnostics", "train_emulator",
 ]  # fmt: skip
 
 EMULATOR_ERROR_FACTOR = 1.0
 """The emulated likelihood's relative model error, in held-out rms errors of the emulator."""
+PARETO_K_MAX = 0.7
+"""Importance weights whose Pareto shape ``k`` is this or more are unreliable (Vehtari et al. 2024)."""
 EMULATOR_HELD_OUT = 0.2
 """The fraction of the training runs held out to measure the emulator's error."""
 EMULATOR_FEATURE_SCALES = (0.1, 0.3)

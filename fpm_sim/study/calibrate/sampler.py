@@ -22,7 +22,7 @@ import numpy as np
 
 from fpm_sim.batch.engine import spawn_pool
 from fpm_sim.figures import bands_against_measured
-from fpm_sim.study.calibrate.emulator import Emulator, importance_diagnostics, train_emulator
+from fpm_sim.study.calibrate.emulator import PARETO_K_MAX, Emulator, importance_diagnostics, train_emulator
 from fpm_sim.study.calibrate.priors import BRANCH_PARAMETER
 from fpm_sim.study.calibrate.problem import CalibrationError, CalibrationProblem, FrequencyLikelihood
 from fpm_sim.study.calibrate.runs import (
@@ -211,7 +211,9 @@ class SamplerOptions:
     stage's particles, then importance-weighted to the segment model (exact;
     :mod:`~fpm_sim.study.calibrate.emulator`). The data stage runs twice, the second time on the emulator refitted
     with as many segment-model runs more at the first's particles: about 2 ``emulator`` + ``particles``
-    segment-model calls a run instead of ~20 000. 0: the segment model throughout (the default). The 3RRR's problem
+    segment-model calls a run instead of ~20 000. Where the second's importance weights are heavy (Pareto k >= 0.7),
+    it runs a third time on a refit with every segment-model run so far, the weights' own included, and that is
+    reported (``particles`` more calls). 0: the segment model throughout (the default). The 3RRR's problem
     on the segment model only."""
     split: tuple[str, int] | None = None
     """``(name, n)``: the prior of parameter ``name`` cut into ``n`` parts of equal prior mass (its unit-cube
@@ -524,6 +526,9 @@ class Calibration:
                     "sampler",
                     "particles",
                     "cheap_particles",
+                    "ess_fraction",
+                    "moves",
+                    "emulator",
                     "live_points",
                     "dlogz",
                     "seed",
@@ -713,6 +718,8 @@ class _SegmentEmulator:
         self.u: list[np.ndarray] = []
         self.f: list[np.ndarray] = []
         self.fitted: Emulator | None = None
+        self.rounds = 0
+        """Data stages run again on a refit (:meth:`again`)."""
 
     def _segments(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The class's parameters at the rows of ``u`` and the segment model's frequencies there (each distinct row
@@ -753,6 +760,15 @@ class _SegmentEmulator:
         """Refitted with every segment-model run so far and new ones at ``n`` of the data stage's distinct particles
         ``u``."""
         return self.train(u)
+
+    def again(self, log_w: np.ndarray) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None:
+        """Given a weighted data stage's log weights: where their Pareto k is :data:`PARETO_K_MAX` or more, the
+        emulator refitted with every segment-model run so far (the weights' own included: where that stage went beyond
+        the earlier runs), for the data stage to run once more on it; else ``None``."""
+        if importance_diagnostics(log_w)[1] < PARETO_K_MAX:
+            return None
+        self.rounds += 1
+        return self._fit()
 
     def exact(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(log L_cheap, log L_data)`` on the segment model at the rows of ``u`` (as :func:`_smc_full`)."""
@@ -847,7 +863,7 @@ def _run_smc(
     emu = None
     if opts.emulator:
         emu = _SegmentEmulator(klass=klass, part=part, n=opts.emulator, pool=pool, rng=rng)
-        run = emulated_two_stage(cheap, emu.train, emu.exact, d, one, two, rng, refine=emu.refine)
+        run = emulated_two_stage(cheap, emu.train, emu.exact, d, one, two, rng, refine=emu.refine, again=emu.again)
     else:
         full = functools.partial(_smc_full, klass=klass, pool=pool, part=part)
         run = two_stage(cheap, full, d, one, two, rng, modes=modes, mode_particles=opts.cheap_particles)
@@ -858,7 +874,7 @@ def _run_smc(
         ess, k = importance_diagnostics(run.log_weights)
         e = emu.fitted
         out["emulator"] = {"n_train": e.n_train, "held_out_rms": e.held_out_rms, "held_out_max": e.held_out_max,
-                           "ess": ess, "pareto_k": k, "particles": len(run.u)}  # fmt: skip
+                           "ess": ess, "pareto_k": k, "particles": len(run.u), "again": emu.rounds}  # fmt: skip
     if done is not None:
         with done.open("wb") as fh:
             pickle.dump(out, fh, protocol=4)
@@ -947,7 +963,9 @@ def _emulator_note(res: Any) -> str:
         return ""
     note = (f"; emulator {100 * e['held_out_rms']:.1f} % rms on {e['n_train']} runs, weights ESS {e['ess']:.0f}/"
             f"{e['particles']}, Pareto k {e['pareto_k']:.2f}")  # fmt: skip
-    if not e["pareto_k"] < 0.7:
+    if e.get("again"):
+        note += " (sampled again on a refit: the first weights had k >= 0.7)"
+    if not e["pareto_k"] < PARETO_K_MAX:
         note += " (WARNING: k >= 0.7, the importance weights are unreliable: more particles or emulator runs)"
     return note
 

@@ -362,6 +362,7 @@ def _data_stage(one: SmcRun, full: Evaluate, s: SmcSettings, rng: np.random.Gene
 def emulated_two_stage(
     cheap: Evaluate, train: Callable[[np.ndarray], Evaluate], exact: Evaluate, d: int, stage1: SmcSettings,
     stage2: SmcSettings, rng: np.random.Generator, *, refine: Callable[[np.ndarray], Evaluate] | None = None,
+    again: Callable[[np.ndarray], Evaluate | None] | None = None,
 ) -> SmcRun:  # fmt: skip
     """:func:`two_stage` with the data stage on an emulator, then importance-weighted to the exact likelihood
     (:mod:`~fpm_sim.study.calibrate.emulator`). ``train(U)`` is given stage 1's particles and returns the emulator's
@@ -375,7 +376,13 @@ def emulated_two_stage(
     the data stage then runs again on it, from stage 1's particles, and only that second stage is weighted and
     reported (the weights stay exact: its particles are new draws given the refitted emulator). An emulator trained on
     the prior side of the posterior alone is least accurate where the posterior is; refitted there, its weights vary
-    less."""
+    less.
+
+    ``again(log_w)``: given a weighted stage's normalised log weights, ``None`` to report it, or an emulator refitted
+    with every exact run so far (the weights' own included) on which the data stage runs once more, from stage 1's
+    particles, and is weighted and reported instead (once at most: where a stage explored beyond the runs its
+    emulator was fitted on, its weights are heavy, and the exact runs at its particles are where the emulator was
+    missing)."""
     first = _stage_one(cheap, d, stage1, rng)
     if isinstance(first, SmcRun):
         return first
@@ -385,18 +392,33 @@ def emulated_two_stage(
         first_calls = two.n_calls
         two = _data_stage(one, refine(two.u), stage2, rng)
         two.n_calls += first_calls
+    run = _weighted(one, two, exact, log_mass + one.log_evidence, var_mass + one.log_evidence_var)
+    refit = None if again is None or run.log_weights is None else again(run.log_weights)
+    if refit is not None:
+        two = _data_stage(one, refit, stage2, rng)
+        two.n_calls += run.n_calls - one.n_calls  # the first weighted stage's calls and its exact runs
+        run = _weighted(one, two, exact, log_mass + one.log_evidence, var_mass + one.log_evidence_var)
+    run.n_calls += calls
+    return run
+
+
+def _weighted(one: SmcRun, two: SmcRun, exact: Evaluate, log_z1: float, var1: float) -> SmcRun:
+    """The emulated data stage ``two`` weighted to the exact likelihood (:func:`emulated_two_stage`); ``log_z1``,
+    ``var1``: the log of the support's mass times stage 1's evidence, and its variance. Its calls leave out the
+    support's."""
     la, lb = exact(two.u)
     with np.errstate(invalid="ignore"):
         log_w = np.where(np.isfinite(lb) & np.isfinite(two.log_b), lb - two.log_b, -math.inf)
     n = len(log_w)
+    calls = one.n_calls + two.n_calls + n
     if not np.any(np.isfinite(log_w)):
-        return SmcRun(two.u, la, lb, -math.inf, 0.0, calls + one.n_calls + two.n_calls + n)
+        return SmcRun(two.u, la, lb, -math.inf, 0.0, calls)
     log_mean = float(logsumexp(log_w)) - math.log(n)
     return SmcRun(
-        two.u, la, lb, log_mass + one.log_evidence + two.log_evidence + log_mean,
-        var_mass + one.log_evidence_var + two.log_evidence_var + max(1.0 / _ess(log_w) - 1.0 / n, 0.0),
-        calls + one.n_calls + two.n_calls + n, one.betas + [1.0 + b for b in two.betas],
-        one.acceptance + two.acceptance, log_weights=log_w - float(logsumexp(log_w)),
+        two.u, la, lb, log_z1 + two.log_evidence + log_mean,
+        var1 + two.log_evidence_var + max(1.0 / _ess(log_w) - 1.0 / n, 0.0), calls,
+        one.betas + [1.0 + b for b in two.betas], one.acceptance + two.acceptance,
+        log_weights=log_w - float(logsumexp(log_w)),
     )  # fmt: skip
 
 
