@@ -427,14 +427,17 @@ def test_a_stage_whose_weights_are_heavy_is_sampled_again_on_the_refit_and_only_
     for seed in range(2):
         run = emulated_two_stage(_cheap, lambda u: _emulated, _full, D, one, two, np.random.default_rng(seed),
                                  again=again)  # fmt: skip
-        assert len(seen) == seed + 1 and np.any(seen[-1] != seen[-1][0])  # given the first stage's unequal weights
-        assert run.log_weights is not None and np.allclose(run.log_weights, -math.log(len(run.u)))
+        assert len(seen) == seed + 1
+        assert np.any(seen[-1] != seen[-1][0])  # given the first stage's unequal weights
+        assert run.log_weights is not None
+        assert np.allclose(run.log_weights, -math.log(len(run.u)))
         assert abs(run.log_evidence) < 4 * run.log_evidence_err, (run.log_evidence, run.log_evidence_err)
         assert abs(float(np.mean(_modes(run.u)[1])) - WEIGHTS[0]) < 0.15
         plain = emulated_two_stage(_cheap, lambda u: _emulated, _full, D, one, two, np.random.default_rng(seed))
         kept = emulated_two_stage(_cheap, lambda u: _emulated, _full, D, one, two, np.random.default_rng(seed),
                                   again=lambda lw: None)  # fmt: skip
-        assert kept.log_evidence == plain.log_evidence and np.array_equal(kept.u, plain.u)
+        assert kept.log_evidence == plain.log_evidence
+        assert np.array_equal(kept.u, plain.u)
         assert run.n_calls > plain.n_calls + two.particles  # a second data stage and its weighting counted
 
 
