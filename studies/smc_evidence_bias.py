@@ -26,23 +26,10 @@ from fpm_sim.study.calibrate import smc as SM
 from tests.study.test_calibrate_smc import D, _cheap, _full
 
 
-def _metropolis(u: np.ndarray, la: np.ndarray, lb: np.ndarray, beta: float, prop: np.ndarray, evaluate: Any,
-                rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
-    pa, pb = evaluate(prop)
-    with np.errstate(invalid="ignore"):
-        cur = la + beta * lb if beta > 0 else la
-        new = pa + beta * pb if beta > 0 else pa
-        log_r = np.where(np.isfinite(new), new - cur, -np.inf)
-    acc = np.log(rng.random(len(u))) < log_r
-    u, la, lb = u.copy(), la.copy(), lb.copy()
-    u[acc], la[acc], lb[acc] = prop[acc], pa[acc], pb[acc]
-    return u, la, lb, acc
-
-
 def rw_sweep(u: np.ndarray, la: np.ndarray, lb: np.ndarray, beta: float, gamma: float, evaluate: Any,
              rng: np.random.Generator, periodic: tuple[int, ...] = ()) -> Any:  # fmt: skip
     """Random-walk Metropolis, steps of ``gamma`` times the modes' sd (0.01): no dependence on the population."""
-    return _metropolis(u, la, lb, beta, SM._fold(u + gamma * 0.01 * rng.standard_normal(u.shape), periodic),
+    return SM.metropolis(u, la, lb, beta, SM._fold(u + gamma * 0.01 * rng.standard_normal(u.shape), periodic),
                        evaluate, rng)  # fmt: skip
 
 
@@ -59,7 +46,7 @@ def nocopy_sweep(u: np.ndarray, la: np.ndarray, lb: np.ndarray, beta: float, gam
                 break
         a[i], b[i] = x, y
     prop = SM._fold(u + gamma * (u[a] - u[b]) + 1e-6 * rng.standard_normal(u.shape), periodic)
-    return _metropolis(u, la, lb, beta, prop, evaluate, rng)
+    return SM.metropolis(u, la, lb, beta, prop, evaluate, rng)
 
 
 def main() -> None:

@@ -201,13 +201,21 @@ def _sweep(
     if periodic:
         p = list(periodic)
         diff[:, p] = np.mod(diff[:, p] + 0.5, 1.0) - 0.5
-    prop = _fold(u + gamma * diff + jitter, periodic)
+    return metropolis(u, la, lb, beta, _fold(u + gamma * diff + jitter, periodic), evaluate, rng)
+
+
+def metropolis(
+    u: np.ndarray, la: np.ndarray, lb: np.ndarray, beta: float, prop: np.ndarray, evaluate: Evaluate,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """Each row's symmetric proposal ``prop`` accepted or not against ``pi L_a L_b^beta``: ``(u, log L_a, log L_b,
+    accepted)``."""
     pa, pb = evaluate(prop)
     with np.errstate(invalid="ignore"):
         cur = la + beta * lb if beta > 0 else la
         new = pa + beta * pb if beta > 0 else pa
         log_r = np.where(np.isfinite(new), new - cur, -np.inf)
-    acc = np.log(rng.random(n)) < log_r
+    acc = np.log(rng.random(len(u))) < log_r
     u, la, lb = u.copy(), la.copy(), lb.copy()
     u[acc], la[acc], lb[acc] = prop[acc], pa[acc], pb[acc]
     return u, la, lb, acc
