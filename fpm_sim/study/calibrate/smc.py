@@ -39,8 +39,8 @@ import numpy as np
 from scipy.special import logsumexp
 
 __all__ = [
-    "ModeProposal", "SmcRun", "SmcSettings", "emulated_two_stage", "merge_smc", "smc_results", "spread_over_mode",
-    "temper", "two_stage",
+    "ModeProposal", "SmcRun", "SmcSettings", "emulated_two_stage", "merge_smc", "metropolis", "smc_results",
+    "spread_over_mode", "temper", "two_stage",
 ]  # fmt: skip
 
 Evaluate = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
