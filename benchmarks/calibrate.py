@@ -114,3 +114,48 @@ class EmulatedLikelihood(OneBlasThread):
         t = time.process_time()
         self.emulated()
         return exact / ((time.process_time() - t) / len(self.particles))
+
+
+N_MATRICES = 12_000
+"""A data stage's evaluation: 1000 particles at the study's 12 measured poses."""
+
+
+class SmallMatrices(OneBlasThread):
+    """The closed forms of :mod:`fpm_sim.linalg3` against NumPy's batched LAPACK on ``N_MATRICES`` 3x3 matrices: the
+    singular-value ratio (the parallel singularity measure) against ``svd``, and the pencil's smallest eigenvalue (the
+    in-plane surrogate's first frequency) against ``eigvals(solve(M, K))``. ``track_*`` are LAPACK's CPU seconds over
+    the closed form's."""
+
+    timeout = 300
+
+    def setup(self) -> None:
+        self.limit_blas()
+        rng = np.random.default_rng(0)
+        self.j = rng.standard_normal((N_MATRICES, 3, 3))
+        jm = rng.standard_normal((N_MATRICES, 3, 3))
+        self.k = self.j @ np.swapaxes(self.j, 1, 2)
+        self.m = jm @ np.swapaxes(jm, 1, 2) + 0.1 * np.eye(3)
+
+    @staticmethod
+    def _ratio(fast, slow, repeat: int = 20) -> float:
+        t = time.process_time()
+        for _ in range(repeat):
+            slow()
+        s = time.process_time() - t
+        t = time.process_time()
+        for _ in range(repeat):
+            fast()
+        return s / (time.process_time() - t)
+
+    def track_svd_over_closed_form(self) -> float:
+        from fpm_sim.linalg3 import inverse_condition3
+
+        return self._ratio(lambda: inverse_condition3(self.j), lambda: np.linalg.svd(self.j, compute_uv=False))
+
+    def track_eigvals_over_closed_form(self) -> float:
+        from fpm_sim.linalg3 import smallest_generalized_eigenvalue3
+
+        return self._ratio(
+            lambda: smallest_generalized_eigenvalue3(self.k, self.m),
+            lambda: np.linalg.eigvals(np.linalg.solve(self.m, self.k)).real.min(axis=1),
+        )

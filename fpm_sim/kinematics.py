@@ -33,6 +33,7 @@ from numpy.typing import ArrayLike
 
 from fpm_sim.config import Geometry
 from fpm_sim.errors import FpmSimError, FpmSimWarning
+from fpm_sim.linalg3 import inverse_condition3
 
 __all__ = [
     "NEAR_SINGULAR_WARN",
@@ -254,6 +255,10 @@ class BatchAssemblies:
         measure: np.ndarray = np.minimum(self.serial, self.parallel)
         return measure
 
+    def rows(self, keep: np.ndarray) -> BatchAssemblies:
+        """The geometries ``keep`` selects (a boolean mask or indices over ``G``), every pose of each."""
+        return BatchAssemblies(*(getattr(self, f.name)[keep] for f in dataclasses.fields(BatchAssemblies)))
+
 
 @dataclass(frozen=True)
 class Assemblies(BatchAssemblies):
@@ -383,14 +388,12 @@ def assemble_batch(ga: GeometryArrays, x_m: ArrayLike, y_m: ArrayLike, phi_rad: 
     serial = np.min(np.abs(_cross2(w, u)), axis=-1)
     jxn = np.concatenate([u, (_cross2(r, u) / ga.char_length_m[:, None, None])[..., None]], axis=-1)
     jxn = np.where(reachable[..., None, None], jxn, 0.0)
-    sv = np.linalg.svd(jxn, compute_uv=False)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        parallel = sv[..., -1] / sv[..., 0]
+    parallel, det_jx = inverse_condition3(jxn)  # closed form: a batched SVD was most of the cost
     nan = np.full(reachable.shape, np.nan)
     return BatchAssemblies(
         b=b, c=c, r=r, motor_angles_rad=q, distance_m=dist, reachable=reachable,
         serial=np.where(reachable, serial, nan), parallel=np.where(reachable, parallel, nan),
-        det_jx=np.where(reachable, np.linalg.det(jxn), nan),
+        det_jx=np.where(reachable, det_jx, nan),
     )  # fmt: skip
 
 

@@ -30,7 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from fpm_sim.config import Manipulator
-from fpm_sim.kinematics import GeometryArrays, Pose, assemble_batch
+from fpm_sim.kinematics import BatchAssemblies, GeometryArrays, Pose, assemble_batch
+from fpm_sim.linalg3 import smallest_generalized_eigenvalue3
 
 __all__ = ["CANTILEVER_TIP_MASS_FRACTION", "InplaneArrays", "inplane_batch", "inplane_first_frequencies"]
 
@@ -108,12 +109,25 @@ def inplane_first_frequencies(config: Manipulator, poses: Sequence[Pose]) -> np.
     return out
 
 
-def inplane_batch(arrays: InplaneArrays, xyphi: np.ndarray) -> np.ndarray:
+def _gram(t: np.ndarray, weight: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """``(n, 3, 3)`` ``sum_i weight_i t_i^T s_i`` over the chains ``i`` of ``(n, 3, 2, 3)`` maps ``t``, ``s``: one
+    batched matrix product of the chains' stacked ``(6, 3)`` rows (five times as fast as the three-operand
+    ``einsum``; the same sums, in another order)."""
+    n = len(t)
+    w6 = np.repeat(weight, 2, axis=1)[..., None]
+    out: np.ndarray = np.matmul(np.swapaxes(t.reshape(n, 6, 3) * w6, 1, 2), s.reshape(n, 6, 3))
+    return out
+
+
+def inplane_batch(arrays: InplaneArrays, xyphi: np.ndarray, *, assembled: BatchAssemblies | None = None) -> np.ndarray:
     """``(G, P)`` first in-plane frequencies (Hz) of ``G`` descriptions at ``P`` poses (``xyphi``: ``(P, 3)``, m
-    and rad); NaN where unreachable or (serially) singular. :func:`inplane_first_frequencies` is ``G = 1``."""
+    and rad); NaN where unreachable or (serially) singular. :func:`inplane_first_frequencies` is ``G = 1``.
+
+    ``assembled``: the descriptions' kinematics at those poses (:func:`~fpm_sim.kinematics.assemble_batch` of
+    ``arrays.geometry`` at ``xyphi``) where the caller has them already; assembled here otherwise."""
     ga = arrays.geometry
     n_g, n_p = len(ga.proximal_m), len(xyphi)
-    many = assemble_batch(ga, xyphi[:, 0], xyphi[:, 1], xyphi[:, 2])
+    many = assembled if assembled is not None else assemble_batch(ga, xyphi[:, 0], xyphi[:, 1], xyphi[:, 2])
 
     def rows(v: np.ndarray) -> np.ndarray:  # (G, ...) per description -> (G * P, ...) per (description, pose)
         out: np.ndarray = np.repeat(v, n_p, axis=0)
@@ -147,17 +161,17 @@ def inplane_batch(arrays: InplaneArrays, xyphi: np.ndarray) -> np.ndarray:
     tc[..., 1, 2] = r[..., 0]
     nrm = np.stack([-w[..., 1], w[..., 0]], axis=2)
     tb = nrm[..., :, None] * (jx / cross[..., None])[..., None, :]  # (n, 3, 2, 3)
-    cc = np.einsum("nijk,nijl->nkl", tc, tc)
-    cc_d = np.einsum("nijk,nijl,ni->nkl", tc, tc, m_dist / 6.0)
-    bb_e = np.einsum("nijk,nijl,ni->nkl", tb, tb, m_elbow)
-    bb_d = np.einsum("nijk,nijl,ni->nkl", tb, tb, m_dist / 6.0)
-    bc_d = np.einsum("nijk,nijl,ni->nkl", tb, tc, m_dist / 6.0)
+    cc = _gram(tc, np.ones_like(m_dist), tc)
+    cc_d = _gram(tc, m_dist / 6.0, tc)
+    bb_e = _gram(tb, m_elbow, tb)
+    bb_d = _gram(tb, m_dist / 6.0, tb)
+    bc_d = _gram(tb, m_dist / 6.0, tc)
     mass = np.zeros((n, 3, 3))
     mass[:, 0, 0] = mass[:, 1, 1] = m_plat
     mass[:, 2, 2] = i_plat
     mass += m_pin[:, None, None] * cc + bb_e + bb_d + 0.5 * (bc_d + np.swapaxes(bc_d, 1, 2)) + cc_d
     out = np.full(n, np.nan)
     if np.any(ok):
-        w2 = np.linalg.eigvals(np.linalg.solve(mass[ok], stiff[ok])).real.min(axis=1)
+        w2 = smallest_generalized_eigenvalue3(stiff[ok], mass[ok])
         out[ok] = np.sqrt(np.maximum(w2, 0.0)) / (2.0 * math.pi)
     return out.reshape(n_g, n_p)

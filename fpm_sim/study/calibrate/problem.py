@@ -327,6 +327,12 @@ class CalibrationProblem(FrequencyLikelihood):
         """``(n, 3)`` the distinct measured poses (x_m, y_m, phi_rad)."""
         return np.array(sorted({(o.pose.x_m, o.pose.y_m, o.pose.phi_rad) for o in self.observations}))
 
+    @functools.cached_property
+    def observation_pose_index(self) -> np.ndarray:
+        """``(n_obs,)`` each observation's row of :attr:`measured_pose_array`."""
+        rows = {tuple(p): i for i, p in enumerate(self.measured_pose_array.tolist())}
+        return np.array([rows[(o.pose.x_m, o.pose.y_m, o.pose.phi_rad)] for o in self.observations], dtype=int)
+
     @property
     def branch_classes(self) -> tuple[int | None, ...]:
         """The elbow-branch classes enumerated (indices into :data:`ELBOW_BRANCHES`), each sampled on its own;

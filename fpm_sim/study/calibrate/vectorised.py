@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from fpm_sim.kinematics import GeometryArrays, assemble_batch
+from fpm_sim.kinematics import BatchAssemblies, GeometryArrays, assemble_batch
 from fpm_sim.study.calibrate.terms import independent_log_likelihood, statements_batch
 from fpm_sim.study.identify.parameters import apply_parameters_batch
 from fpm_sim.study.identify.problem import ELBOW_BRANCHES
@@ -110,15 +110,18 @@ def inplane_arrays(problem: CalibrationProblem, thetas: np.ndarray) -> tuple[Inp
     return arrays, valid
 
 
-def _support_and_statements(problem: CalibrationProblem, thetas: np.ndarray) -> tuple[InplaneArrays, np.ndarray]:
-    """The surrogate's arrays, and ``(n,)`` the cheap log-likelihood (``-inf`` off the support)."""
+def _support_and_statements(
+    problem: CalibrationProblem, thetas: np.ndarray
+) -> tuple[InplaneArrays, np.ndarray, BatchAssemblies]:
+    """The surrogate's arrays, ``(n,)`` the cheap log-likelihood (``-inf`` off the support), and the kinematics at
+    the distinct measured poses (``problem.measured_pose_array``)."""
     arrays, valid = inplane_arrays(problem, thetas)
     xyz = problem.measured_pose_array
     measured = assemble_batch(arrays.geometry, xyz[:, 0], xyz[:, 1], xyz[:, 2])  # the reach and statement (b)
     out = np.full(len(thetas), -math.inf)
     ok = valid & measured.reachable.all(axis=1)
     out[ok] = statements_batch(problem.priors, arrays.geometry.rows(ok), measured.singularity[ok])
-    return arrays, out
+    return arrays, out, measured
 
 
 def cheap_log_likelihood_batch(problem: CalibrationProblem, thetas: np.ndarray) -> np.ndarray:
@@ -130,12 +133,13 @@ def inplane_frequencies_batch(problem: CalibrationProblem, thetas: np.ndarray) -
     """``((n, n_obs), (n,))``: the in-plane surrogate's first frequencies (Hz) at the observations of every row
     (NaN off the support), and the cheap log-likelihood (``-inf`` off the support)."""
     thetas = np.atleast_2d(thetas)
-    arrays, cheap = _support_and_statements(problem, thetas)
+    arrays, cheap, measured = _support_and_statements(problem, thetas)
     ok = np.isfinite(cheap)
     freq = np.full((len(thetas), len(problem.observations)), np.nan)
-    if ok.any():
-        poses = np.array([[o.pose.x_m, o.pose.y_m, o.pose.phi_rad] for o in problem.observations])
-        freq[ok] = inplane_batch(arrays.rows(ok), poses)
+    if ok.any():  # at the distinct measured poses, on the kinematics the support assembled there
+        xyz = problem.measured_pose_array
+        at = inplane_batch(arrays.rows(ok), xyz, assembled=measured.rows(ok))
+        freq[ok] = at[:, problem.observation_pose_index]
     return freq, cheap
 
 
