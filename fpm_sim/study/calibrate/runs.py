@@ -15,14 +15,17 @@ the runs' own posteriors (each the mixture of its classes by its own evidences):
 - ln Z: every pair of runs within ``nsigma`` of their combined stated error (the total, and each class any run
   weights above ``class_threshold``);
 - every continuous parameter's 5/50/95 % quantiles: every pair of runs within ``quantile_tol`` of its merged
-  posterior sd, or within ``nsigma`` of the pair's Monte Carlo error where that is larger: a few hundred effective
+  posterior sd, or, where further apart, within ``nsigma`` of the pair's Monte Carlo error: a few hundred effective
   draws cannot place a skewed tail's 95 % point to 0.5 sd, and the check must not call that a disagreement. A run's
   posterior is the mixture ``F = sum_k w_k F_k`` of its classes, so its quantile ``x_q`` has two errors: the
   draws' (``var F(x_q) = q (1 - q) / n`` for ``n`` effective draws) and the class weights' (``w_k = Z_k / sum Z``
   moves with the error ``s_k`` of each ``ln Z_k``, to first order ``dF = sum_k w_k (F_k(x_q) - q) d ln Z_k``;
   :func:`class_weights_cdf_var` draws it rather than take the first order; it counts where the classes' draws lie
-  apart, as the rotations of two orbits do). Their sum, over the density ``p(x_q)`` read from the merged draws, is
-  the quantile's sd. The ln Z criterion above checks that the stated ``s_k`` are honest;
+  apart, as the rotations of two orbits do). The two runs' quantiles are compared in probability, where the error is
+  defined: each run's CDF at the other's quantile must lie within ``nsigma`` of the pair's CDF error of ``q`` (a
+  quantile in a gap between two classes, where the CDF is flat, may move far on a small change of the weights; the
+  delta method's quantile sd, the CDF's over the density at the quantile, kept in :attr:`RunsCheck.quantile_mc_sd`
+  for the record, does not hold there). The ln Z criterion above checks that the stated ``s_k`` are honest;
 - every class any run weights above ``class_threshold`` is in the merged posterior with at least
   ``class_threshold / runs`` of the weight (what it keeps when only one of the ``runs`` runs found it).
 """
@@ -221,12 +224,17 @@ class RunsCheck:
     merged_sd: np.ndarray
     """``(ndim,)`` the merged posterior's sd of each parameter."""
     quantile_mc_sd: np.ndarray
-    """``(runs, ndim, 3)`` each run's Monte Carlo error of each quantile (module docstring)."""
+    """``(runs, ndim, 3)`` each run's Monte Carlo error of each quantile (module docstring), by the delta method."""
     nsigma: float
     quantile_tol: float
     class_threshold: float
     failures: list[str] = field(default_factory=list)
     bad_parameters: list[str] = field(default_factory=list)
+    cdf_at: np.ndarray | None = None
+    """``(runs, runs, ndim, 3)``: ``[s, r]`` run ``s``'s CDF at run ``r``'s quantiles (``None``: a check saved before
+    the comparison in probability, which keeps the delta method's)."""
+    cdf_sd: np.ndarray | None = None
+    """``(runs, ndim, 3)`` each run's Monte Carlo error of its CDF at its quantiles (the draws' and the weights')."""
 
     @property
     def passed(self) -> bool:
@@ -239,23 +247,31 @@ class RunsCheck:
         return out
 
     def excess(self) -> np.ndarray:
-        """``(ndim, 3)`` the largest ratio, over the pairs of runs, of a quantile's difference to what is allowed
-        (``max(quantile_tol sd, nsigma * the pair's Monte Carlo error)``); above 1: the runs disagree."""
-        q, e = self.quantiles, self.quantile_mc_sd
+        """``(ndim, 3)`` the largest, over the pairs of runs, of the smaller of two ratios; above 1: the runs
+        disagree. The quantiles' difference over ``quantile_tol`` posterior sd; and, in probability, each run's CDF at
+        the other's quantile less ``q`` over ``nsigma`` of the pair's Monte Carlo error of the CDF (the module
+        docstring's error, compared where it is defined: a quantile in a gap between two classes' draws, where the
+        CDF is flat, moves far for a small change of the weights, which the delta method's sd does not hold)."""
+        q = self.quantiles
         d = np.abs(q[:, None] - q[None, :])
-        allowed = np.maximum(
-            self.quantile_tol * self.merged_sd[:, None], self.nsigma * np.sqrt(e[:, None] ** 2 + e[None, :] ** 2)
-        )
+        sd = np.where(self.merged_sd > 0, self.merged_sd, np.inf)
         with np.errstate(divide="ignore", invalid="ignore"):
-            r = np.where(d > 0, d / allowed, 0.0)
-        out: np.ndarray = np.max(r, axis=(0, 1))
+            by_sd = np.where(d > 0, d / (self.quantile_tol * sd[:, None]), 0.0)
+            if self.cdf_at is None or self.cdf_sd is None:  # saved before: the delta method's sd of the quantile
+                e = self.quantile_mc_sd
+                by_mc = np.where(d > 0, d / (self.nsigma * np.sqrt(e[:, None] ** 2 + e[None, :] ** 2)), 0.0)
+            else:
+                e, at = self.cdf_sd, self.cdf_at
+                gap = np.maximum(np.abs(at - np.array(QUANTILES)), np.abs(np.swapaxes(at, 0, 1) - QUANTILES))
+                by_mc = np.where(gap > 0, gap / (self.nsigma * np.sqrt(e[:, None] ** 2 + e[None, :] ** 2)), 0.0)
+        out: np.ndarray = np.max(np.minimum(by_sd, by_mc), axis=(0, 1))
         return out
 
     def criteria(self) -> str:
         return (
             f"ln Z of every pair of runs within {self.nsigma:g} sigma; 5/50/95 % quantiles of every pair within "
-            f"{self.quantile_tol:g} posterior sd (or {self.nsigma:g} sigma of their Monte Carlo error, the draws' and "
-            f"the class weights', where larger); "
+            f"{self.quantile_tol:g} posterior sd, or, where further apart, each run's CDF at the other's quantile "
+            f"within {self.nsigma:g} sigma of their Monte Carlo error there (the draws' and the class weights'); "
             f"every class weighted above "
             f"{100 * self.class_threshold:g} % by a run present in the merged posterior"
         )
@@ -294,6 +310,7 @@ class RunsCheck:
                     "quantiles": self.quantiles[:, i, :].tolist(),
                     "spread_sd": sp[i].tolist(),
                     "quantile_mc_sd": self.quantile_mc_sd[:, i, :].tolist(),
+                    "cdf_sd": None if self.cdf_sd is None else self.cdf_sd[:, i, :].tolist(),
                     "excess": ex[i].tolist(),
                 }
                 for i, n in enumerate(self.names)
@@ -357,7 +374,10 @@ def between_run_check(
     ce = np.array([[c.log_evidence_err for c in rr] for rr in per_run])
     q = np.array([np.quantile(r.draws, QUANTILES, axis=0).T for r in runs])
     weights_var = np.array([class_weights_cdf_var(r, qr, err, rng) for r, qr, err in zip(runs, q, ce)])
-    mc = quantile_mc_sd(merged.draws, np.array([r.ess_kish for r in runs]), weights_var=weights_var)
+    ess = np.array([r.ess_kish for r in runs])
+    mc = quantile_mc_sd(merged.draws, ess, weights_var=weights_var)
+    cdf_at = np.array([[np.mean(rs.draws[:, :, None] <= qr[None], axis=0) for qr in q] for rs in runs])
+    cdf_var = (np.array(QUANTILES) * (1 - np.array(QUANTILES)))[None, None, :] / np.maximum(ess, 1.0)[:, None, None]
     chk = RunsCheck(
         seeds=list(seeds),
         names=list(names),
@@ -371,6 +391,8 @@ def between_run_check(
         quantiles=q,
         merged_sd=np.std(merged.draws, axis=0),
         quantile_mc_sd=mc,
+        cdf_at=cdf_at,
+        cdf_sd=np.sqrt(cdf_var + weights_var),
         nsigma=nsigma,
         quantile_tol=quantile_tol,
         class_threshold=class_threshold,
@@ -439,6 +461,7 @@ def _judge(chk: RunsCheck, merged: Combined, class_label: Any) -> None:
     chk.bad_parameters = [n for n, b in zip(chk.names, bad) if b]
     if chk.bad_parameters:
         chk.failures.append(
-            f"quantiles disagree by more than {chk.quantile_tol:g} sd (and their Monte Carlo error) for: "
+            f"quantiles disagree by more than {chk.quantile_tol:g} sd (and, in probability, their Monte Carlo error) "
+            f"for: "
             f"{', '.join(chk.bad_parameters)}"
         )
