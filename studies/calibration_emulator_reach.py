@@ -5,8 +5,11 @@ kept (in this process), then compared across the runs:
 
     python studies/calibration_emulator_reach.py --branch -1 -1 1 --seeds 0 1 2 3 4 5
     python studies/calibration_emulator_reach.py --branch -1 -1 1 --seeds 0 1 2 --ess-fraction 0.9 --moves 10
+    python studies/calibration_emulator_reach.py --branch -1 -1 1 --seeds 0 1 2 --ess-fraction 0.9 --moves 10 \
+        --particles 2000 --cheap-particles 4000
 
-Prints per run its ln Z, weights' ESS and Pareto k and best exact log L; then, at each run's 20 best particles, every
+Prints per run its ln Z, weights' ESS and Pareto k, best exact log L and the weighted 5/50/95 % points of
+``--parameters``; then, at each run's 20 best particles, every
 run's emulator (first fit, at stage 1's particles; refit, with the first data stage's) against the segment model;
 then the runs' posteriors clustered (average linkage at unit-cube distance ``--cut``, whole-turn angles on a circle)
 with each run's share of each cluster.
@@ -97,6 +100,8 @@ def main() -> None:
     p.add_argument("--moves", type=float, default=3.0)
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--cut", type=float, default=0.35)
+    p.add_argument("--parameters", nargs="+", default=["geometry.distal_length_m", "geometry.platform_radius_m"],
+                   help="parameters whose weighted 5/50/95 %% points each run prints")  # fmt: skip
     a = p.parse_args()
     warnings.simplefilter("ignore")
     _keep()
@@ -115,6 +120,13 @@ def main() -> None:
         print(f"seed {seed}: ln Z {run.log_evidence:.2f} +- {run.log_evidence_err:.2f}, weights' ESS {ess:.0f}, "
               f"k {k:.2f}, best exact log L {np.max(run.log_b):.2f}, sampled again on a refit {emu.rounds} time(s), "
               f"{time.time() - t0:.0f} s", flush=True)  # fmt: skip
+        theta, w = prob.prior_transform(run.u), np.exp(run.log_weights)
+        for name in a.parameters:
+            x = theta[:, prob.names.index(name)]
+            order = np.argsort(x)
+            cum = np.cumsum(w[order]) / w.sum()
+            pts = [x[order][min(np.searchsorted(cum, q), len(x) - 1)] for q in (0.05, 0.5, 0.95)]
+            print(f"  {name} 5/50/95 %: {' / '.join(f'{v:.4g}' for v in pts)}", flush=True)
     for r in res:
         top = np.argsort(r["lb"])[-20:]
         print(f"at seed {r['seed']}'s 20 best particles (segment model's log L, median {np.median(r['lb'][top]):.2f}):")

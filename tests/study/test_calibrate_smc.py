@@ -238,6 +238,11 @@ def test_the_cli_runs_the_smc_sampler_and_refuses_nested_sampling_options(cli_fi
     assert capsys.readouterr().err.startswith("error: --emulator: is the smc sampler's")
     assert main([*_argv(cli_files), "--sampler", "smc", "--emulator", "10", "--overwrite"]) == 2
     assert capsys.readouterr().err.startswith("error: --emulator: must be 0 (off) or >= 50")
+    # the mode search's proposals are the segment model's data stage's (Python API): with the emulator, refused,
+    # not ignored
+    with pytest.raises(CalibrationError, match="is not used by the emulated data stage") as err:
+        SamplerOptions(sampler="smc", emulator=100, mode_starts=4).check()
+    assert err.value.parameter == "mode_starts"
     # on a problem whose model is not the segment model (here the surrogate itself) it is refused before sampling
     from fpm_sim.study.calibrate import run_calibration
 

@@ -275,6 +275,12 @@ class SamplerOptions:
                 "must be 0 (off) or >= 50 segment-model runs", parameter="emulator", value=self.emulator,
                 hint="the emulator's fit needs many more runs than its inputs; 500 is measured",
             )  # fmt: skip
+        if self.emulator and self.mode_starts:
+            raise CalibrationError(
+                "is not used by the emulated data stage (its search would run and its modes be ignored)",
+                parameter="mode_starts", value=self.mode_starts,
+                hint="leave it 0 with the emulator, or sample the data on the segment model (emulator 0)",
+            )  # fmt: skip
         if self.max_calls is not None:
             raise CalibrationError(
                 "is nested sampling's (dynesty's) limit", parameter="max_calls", value=self.max_calls,
