@@ -122,10 +122,7 @@ def main() -> None:
               f"{time.time() - t0:.0f} s", flush=True)  # fmt: skip
         theta, w = prob.prior_transform(run.u), np.exp(run.log_weights)
         for name in a.parameters:
-            x = theta[:, prob.names.index(name)]
-            order = np.argsort(x)
-            cum = np.cumsum(w[order]) / w.sum()
-            pts = [x[order][min(np.searchsorted(cum, q), len(x) - 1)] for q in (0.05, 0.5, 0.95)]
+            pts = np.quantile(theta[:, prob.names.index(name)], (0.05, 0.5, 0.95), weights=w, method="inverted_cdf")
             print(f"  {name} 5/50/95 %: {' / '.join(f'{v:.4g}' for v in pts)}", flush=True)
     for r in res:
         top = np.argsort(r["lb"])[-20:]

@@ -20,11 +20,7 @@ import numpy as np
 
 from fpm_sim.study.calibrate.problem import study_problem
 
-
-def _weighted_quantiles(x: np.ndarray, w: np.ndarray, qs: tuple[float, ...]) -> list[float]:
-    order = np.argsort(x)
-    c = np.cumsum(w[order])
-    return [float(x[order][min(np.searchsorted(c, q), len(x) - 1)]) for q in qs]
+QS = (0.05, 0.5, 0.95)
 
 
 def main() -> None:
@@ -43,7 +39,7 @@ def main() -> None:
             w = np.exp(lw - lw.max())
             w /= w.sum()
             points = "; ".join(
-                f"{n} {' / '.join(f'{v:.4g}' for v in _weighted_quantiles(x[:, c], w, (0.05, 0.5, 0.95)))}"
+                f"{n} {' / '.join(f'{v:.4g}' for v in np.quantile(x[:, c], QS, weights=w, method='inverted_cdf'))}"
                 for n, c in zip(a.parameters, cols)
             )
             print(f"class {k}, {done.name.split('.')[-2]}: weights' ESS {1 / np.sum(w**2):.0f}; {points}")

@@ -376,8 +376,7 @@ def between_run_check(
     weights_var = np.array([class_weights_cdf_var(r, qr, err, rng) for r, qr, err in zip(runs, q, ce)])
     ess = np.array([r.ess_kish for r in runs])
     mc = quantile_mc_sd(merged.draws, ess, weights_var=weights_var)
-    cdf_at = np.array([[np.mean(rs.draws[:, :, None] <= qr[None], axis=0) for qr in q] for rs in runs])
-    cdf_var = (np.array(QUANTILES) * (1 - np.array(QUANTILES)))[None, None, :] / np.maximum(ess, 1.0)[:, None, None]
+    cdf_at = np.array([[_cdf(rs.draws, qr) for qr in q] for rs in runs])
     chk = RunsCheck(
         seeds=list(seeds),
         names=list(names),
@@ -392,7 +391,7 @@ def between_run_check(
         merged_sd=np.std(merged.draws, axis=0),
         quantile_mc_sd=mc,
         cdf_at=cdf_at,
-        cdf_sd=np.sqrt(cdf_var + weights_var),
+        cdf_sd=np.sqrt(_draws_cdf_var(ess) + weights_var),
         nsigma=nsigma,
         quantile_tol=quantile_tol,
         class_threshold=class_threshold,
@@ -412,10 +411,23 @@ def quantile_mc_sd(
     lo = np.quantile(draws, np.clip(q - half_width, 0, 1), axis=0).T
     hi = np.quantile(draws, np.clip(q + half_width, 0, 1), axis=0).T
     inv_density = (hi - lo) / (np.clip(q + half_width, 0, 1) - np.clip(q - half_width, 0, 1))
-    var = (q * (1 - q))[None, None, :] / np.maximum(ess, 1.0)[:, None, None]
+    var = _draws_cdf_var(ess)
     if weights_var is not None:
         var = var + weights_var
     out: np.ndarray = np.sqrt(var) * inv_density[None, :, :]
+    return out
+
+
+def _draws_cdf_var(ess: np.ndarray) -> np.ndarray:
+    """``(runs, 1, 3)`` the variance ``q (1 - q) / ess`` of a run's CDF at its 5/50/95 % quantiles from its draws."""
+    q = np.array(QUANTILES)
+    out: np.ndarray = (q * (1 - q))[None, None, :] / np.maximum(ess, 1.0)[:, None, None]
+    return out
+
+
+def _cdf(draws: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """``(ndim, 3)`` the fraction of ``draws`` (``(n, ndim)``) at or below each of ``at`` (``(ndim, 3)``)."""
+    out: np.ndarray = np.mean(draws[:, :, None] <= at[None], axis=0)
     return out
 
 
@@ -431,7 +443,7 @@ def class_weights_cdf_var(
     for k, klass in enumerate(run.classes):
         mine = run.draws[run.klass == (-1 if klass is None else klass)]
         if len(mine):
-            cdf[k] = np.mean(mine[:, :, None] <= quantiles[None], axis=0)
+            cdf[k] = _cdf(mine, quantiles)
     with np.errstate(divide="ignore"):
         log_w = np.log(run.weights)[None, :] + np.asarray(log_z_err, float)[None, :] * rng.standard_normal(
             (draws, len(run.classes))
