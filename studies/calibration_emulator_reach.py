@@ -7,11 +7,17 @@ kept (in this process), then compared across the runs:
     python studies/calibration_emulator_reach.py --branch -1 -1 1 --seeds 0 1 2 --ess-fraction 0.9 --moves 10
     python studies/calibration_emulator_reach.py --branch -1 -1 1 --seeds 0 1 2 --ess-fraction 0.9 --moves 10 \
         --particles 2000 --cheap-particles 4000
+    python studies/calibration_emulator_reach.py --branch -1 -1 1 --seeds 2 0 1 --ess-fraction 0.9 --moves 10 \
+        --split geometry.base_rotation_deg 2 --part 0        # the motors' rotation's negative half alone
 
-Prints per run its ln Z, weights' ESS and Pareto k, best exact log L and the weighted 5/50/95 % points of
-``--parameters``; then, at each run's 20 best particles, every
-run's emulator (first fit, at stage 1's particles; refit, with the first data stage's) against the segment model;
-then the runs' posteriors clustered (average linkage at unit-cube distance ``--cut``, whole-turn angles on a circle)
+``--split NAME N --part K``: only part ``K`` (from 0) of ``N`` equal prior parts of ``NAME`` is sampled
+(``SamplerOptions.split``; the particles' unit-cube coordinates are then the part's own).
+
+Prints per run its ln Z, weights' ESS and Pareto k, best exact log L, the parameters there and the weighted
+5/50/95 % points of ``--parameters``; then, at each run's 20 best particles, every run's stage 1's nearest particle
+(unit-cube distance) and every run's emulator (first fit, at stage 1's particles; refit, with the first data stage's)
+against the segment model; then the runs' posteriors clustered (average linkage at unit-cube distance ``--cut``,
+whole-turn angles on a circle)
 with each run's share of each cluster.
 """
 
@@ -100,11 +106,17 @@ def main() -> None:
     p.add_argument("--moves", type=float, default=3.0)
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--cut", type=float, default=0.35)
+    p.add_argument("--split", nargs=2, metavar=("NAME", "N"), help="sample one part of this split (with --part)")
+    p.add_argument("--part", type=int, default=0, help="the part of --split sampled (from 0)")
     p.add_argument("--parameters", nargs="+", default=["geometry.distal_length_m", "geometry.platform_radius_m"],
                    help="parameters whose weighted 5/50/95 %% points each run prints")  # fmt: skip
     a = p.parse_args()
     warnings.simplefilter("ignore")
     _keep()
+    split = None if a.split is None else (a.split[0], int(a.split[1]))
+    if split is not None:
+        parts = S._parts
+        S._parts = lambda problem, opts: parts(problem, opts)[a.part : a.part + 1]  # type: ignore[assignment]
     prob = study_problem(model="segments", branch=tuple(a.branch))  # type: ignore[arg-type]
     res = []
     for seed in a.seeds:
@@ -112,15 +124,20 @@ def main() -> None:
         KEPT.clear()
         opts = SamplerOptions(sampler="smc", particles=a.particles, cheap_particles=a.cheap_particles, runs=1,
                               seed=seed, workers=a.workers, emulator=a.emulator, ess_fraction=a.ess_fraction,
-                              moves=a.moves)  # fmt: skip
+                              moves=a.moves, split=split)  # fmt: skip
         run_calibration(prob, opts, progress=False)
         run, emu = KEPT["run"], KEPT["emu"]
         ess, k = importance_diagnostics(run.log_weights)
-        res.append({"seed": seed, "u": run.u, "lb": run.log_b, "logw": run.log_weights, "fits": emu.fits})
+        res.append(
+            {"seed": seed, "u": run.u, "lb": run.log_b, "logw": run.log_weights, "fits": emu.fits, "one": KEPT["one"]}
+        )
         print(f"seed {seed}: ln Z {run.log_evidence:.2f} +- {run.log_evidence_err:.2f}, weights' ESS {ess:.0f}, "
               f"k {k:.2f}, best exact log L {np.max(run.log_b):.2f}, sampled again on a refit {emu.rounds} time(s), "
               f"{time.time() - t0:.0f} s", flush=True)  # fmt: skip
-        theta, w = prob.prior_transform(run.u), np.exp(run.log_weights)
+        part = None if split is None else S._parts(prob, opts)[0]
+        theta, w = S._class_thetas(run.u, None, part), np.exp(run.log_weights)
+        best = theta[int(np.argmax(run.log_b))]
+        print("  best particle: " + ", ".join(f"{n.split('.', 1)[1]} {v:.4g}" for n, v in zip(prob.names, best)))
         for name in a.parameters:
             pts = np.quantile(theta[:, prob.names.index(name)], (0.05, 0.5, 0.95), weights=w, method="inverted_cdf")
             print(f"  {name} 5/50/95 %: {' / '.join(f'{v:.4g}' for v in pts)}", flush=True)
@@ -129,7 +146,11 @@ def main() -> None:
         print(f"at seed {r['seed']}'s 20 best particles (segment model's log L, median {np.median(r['lb'][top]):.2f}):")
         for o in res:
             first, refit = (float(np.median(f(r["u"][top])[1])) for f in (o["fits"][0], o["fits"][-1]))
-            print(f"  seed {o['seed']}'s emulator: first fit {first:.2f}, refit {refit:.2f}")
+            near = np.min(np.linalg.norm(o["one"][:, None, :] - r["u"][top][None], axis=2), axis=0)
+            print(
+                f"  seed {o['seed']}'s emulator: first fit {first:.2f}, refit {refit:.2f}; its stage 1's nearest "
+                f"particle {np.median(near):.2f} away (median)"
+            )
     _clusters(res, tuple(prob.priors.periodic), a.cut)
 
 
