@@ -114,10 +114,12 @@ def main() -> None:
     warnings.simplefilter("ignore")
     _keep()
     split = None if a.split is None else (a.split[0], int(a.split[1]))
-    if split is not None:
+    prob = study_problem(model="segments", branch=tuple(a.branch))  # type: ignore[arg-type]
+    part = None
+    if split is not None:  # the sampler samples only that part (its unit-cube coordinates are the part's own)
         parts = S._parts
         S._parts = lambda problem, opts: parts(problem, opts)[a.part : a.part + 1]  # type: ignore[assignment]
-    prob = study_problem(model="segments", branch=tuple(a.branch))  # type: ignore[arg-type]
+        part = S._parts(prob, SamplerOptions(sampler="smc", split=split))[0]
     res = []
     for seed in a.seeds:
         t0 = time.time()
@@ -134,7 +136,6 @@ def main() -> None:
         print(f"seed {seed}: ln Z {run.log_evidence:.2f} +- {run.log_evidence_err:.2f}, weights' ESS {ess:.0f}, "
               f"k {k:.2f}, best exact log L {np.max(run.log_b):.2f}, sampled again on a refit {emu.rounds} time(s), "
               f"{time.time() - t0:.0f} s", flush=True)  # fmt: skip
-        part = None if split is None else S._parts(prob, opts)[0]
         theta, w = S._class_thetas(run.u, None, part), np.exp(run.log_weights)
         best = theta[int(np.argmax(run.log_b))]
         print("  best particle: " + ", ".join(f"{n.split('.', 1)[1]} {v:.4g}" for n, v in zip(prob.names, best)))

@@ -31,8 +31,8 @@ def _init(branch: tuple[int, int, int], split: tuple[str, int] | None, part: int
     warnings.simplefilter("ignore")
     prob = study_problem(model="segments", branch=branch)
     S._init_worker(prob)
-    parts = S._parts(prob, SamplerOptions(sampler="smc", split=split)) if split else [None]
-    STATE.update(prob=prob, part=parts[part] if split else None, d=d)
+    chosen = S._parts(prob, SamplerOptions(sampler="smc", split=split))[part] if split else None
+    STATE.update(prob=prob, part=chosen, d=d)
 
 
 def _theta(u: np.ndarray) -> np.ndarray:

@@ -258,12 +258,11 @@ class RunsCheck:
         with np.errstate(divide="ignore", invalid="ignore"):
             by_sd = np.where(d > 0, d / (self.quantile_tol * sd[:, None]), 0.0)
             if self.cdf_at is None or self.cdf_sd is None:  # saved before: the delta method's sd of the quantile
-                e = self.quantile_mc_sd
-                by_mc = np.where(d > 0, d / (self.nsigma * np.sqrt(e[:, None] ** 2 + e[None, :] ** 2)), 0.0)
+                e, gap = self.quantile_mc_sd, d
             else:
                 e, at = self.cdf_sd, self.cdf_at
                 gap = np.maximum(np.abs(at - np.array(QUANTILES)), np.abs(np.swapaxes(at, 0, 1) - QUANTILES))
-                by_mc = np.where(gap > 0, gap / (self.nsigma * np.sqrt(e[:, None] ** 2 + e[None, :] ** 2)), 0.0)
+            by_mc = np.where(gap > 0, gap / (self.nsigma * np.sqrt(e[:, None] ** 2 + e[None, :] ** 2)), 0.0)
         out: np.ndarray = np.max(np.minimum(by_sd, by_mc), axis=(0, 1))
         return out
 
