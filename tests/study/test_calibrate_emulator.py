@@ -75,3 +75,46 @@ def test_a_whole_turn_angle_is_read_on_a_circle():
     high, low = models(fresh)
     rms = np.sqrt(np.mean(np.log(emu.frequencies(fresh, low) / high) ** 2, axis=0))
     assert np.all(rms < 2.0 * emu.held_out_rms_per_obs), (rms, emu.held_out_rms_per_obs)
+
+
+def _two_families(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(f_high, f_low)`` ``(n, 2, N_OBS)`` (Hz) of two mode families, each high-fidelity one a smooth multiple of
+    its low-fidelity one (the in-plane family's 20 % below, the out-of-plane-like one's set by ``u2``, 5 % below):
+    the frequency is the lower family, whose switch the families' corrections need not follow."""
+    j = np.arange(N_OBS)[None, :]
+    low_in = 60.0 * (1.0 + u[:, [0]] + 0.5 * j * u[:, [1]] / N_OBS)
+    low_out = np.broadcast_to(60.0 + 30.0 * u[:, [2]], low_in.shape)
+    high_in = 0.8 * low_in * np.exp(0.05 * np.sin(3.0 * u[:, [1]]))
+    high_out = 0.95 * low_out * np.exp(0.02 * u[:, [0]])
+    return np.stack([high_in, high_out], axis=1), np.stack([low_in, low_out], axis=1)
+
+
+def test_an_emulator_of_two_families_follows_the_switch_that_one_correction_cannot():
+    # The same runs, emulated as one family (the lower high-fidelity frequency over the in-plane low-fidelity one:
+    # the correction must bend where the families cross) and as two (each family's smooth correction, then the
+    # lower): the second's error on fresh draws is what it states, and a fraction of the first's.
+    rng = np.random.default_rng(5)
+    u = rng.random((400, N_FREE))
+    high, low = _two_families(u)
+    two = train_emulator(u, high, low, n_free=N_FREE, rng=rng)
+    one = train_emulator(u, high.min(axis=1), low[:, 0], n_free=N_FREE, rng=rng)
+    fresh = rng.random((4000, N_FREE))
+    f_high, f_low = _two_families(fresh)
+    truth = f_high.min(axis=1)
+    rms_two = np.sqrt(np.mean(np.log(two.frequencies(fresh, f_low) / truth) ** 2, axis=0))
+    rms_one = np.sqrt(np.mean(np.log(one.frequencies(fresh, f_low[:, 0]) / truth) ** 2, axis=0))
+    assert np.all(rms_two < 0.25 * rms_one), (rms_two, rms_one)
+    assert np.all(rms_two < 2.0 * two.held_out_rms_per_obs), (rms_two, two.held_out_rms_per_obs)
+    assert np.all(rms_two > 0.5 * two.held_out_rms_per_obs), (rms_two, two.held_out_rms_per_obs)
+
+
+def test_a_family_missing_from_a_run_leaves_only_that_familys_fit():
+    # A run whose segment model has no in-plane mode among those computed (NaN) still trains the other family, and
+    # its frequency (the lower family) is still used for the stated error.
+    rng = np.random.default_rng(6)
+    u = rng.random((400, N_FREE))
+    high, low = _two_families(u)
+    high[:20, 0] = np.nan
+    emu = train_emulator(u, high, low, n_free=N_FREE, rng=rng)
+    assert emu.n_train == 400
+    assert np.all(np.isfinite(emu.frequencies(u[:20], low[:20])))

@@ -12,11 +12,14 @@ from fpm_sim.config import default_config
 from fpm_sim.study.calibrate.problem import study_problem
 from fpm_sim.study.calibrate.vectorised import (
     cheap_log_likelihood_batch,
+    family_frequencies_batch,
     inplane_log_likelihood_batch,
     supports,
 )
 from fpm_sim.study.identify import parameter_set
 from fpm_sim.study.identify.parameters import GROUPS, apply_parameters, apply_parameters_batch
+from fpm_sim.study.inplane_surrogate import inplane_first_frequencies
+from fpm_sim.study.outofplane_surrogate import outofplane_first_frequencies
 
 
 def _field(cfg, spec) -> np.ndarray:
@@ -76,6 +79,22 @@ def test_the_segment_model_has_no_vectorised_likelihood_but_its_cheap_part():
     batch = cheap_log_likelihood_batch(prob, thetas)
     np.testing.assert_array_equal(np.isfinite(batch), np.isfinite(one))
     np.testing.assert_allclose(batch[np.isfinite(one)], one[np.isfinite(one)], rtol=1e-10, atol=1e-9)
+
+
+def test_the_two_families_surrogates_are_each_descriptions_row_by_row():
+    prob = study_problem(model="segments")
+    u = np.random.default_rng(4).random((200, prob.ndim))
+    thetas = prob.prior_transform(u)
+    f, cheap = family_frequencies_batch(prob, thetas)
+    poses = [o.pose for o in prob.observations]
+    ok = np.isfinite(cheap)
+    assert 0.2 < ok.mean() < 0.9
+    assert np.all(np.isnan(f[~ok]))
+    for i in np.flatnonzero(ok)[:40]:
+        cfg = prob.config(thetas[i])
+        one = np.stack([inplane_first_frequencies(cfg, poses), outofplane_first_frequencies(cfg, poses)])
+        # the same formulas on the same kinematics, the section's and hardware's fields built another way
+        np.testing.assert_allclose(f[i], one, rtol=1e-10)
 
 
 @pytest.mark.parametrize(("klass", "part"), [(0, None), (5, (3, 2, 1)), (7, (0, 4, 0))])

@@ -50,8 +50,8 @@ import numpy as np
 from fpm_sim.study.calibrate.problem import CalibrationError
 
 __all__ = [
-    "EMULATOR_ERROR_FACTOR", "EMULATOR_FEATURE_SCALES", "EMULATOR_HELD_OUT", "PARETO_K_MAX", "Emulator", "Inputs",
-    "importance_diagnostics", "train_emulator",
+    "EMULATOR_ERROR_FACTOR", "EMULATOR_FEATURE_RANK", "EMULATOR_FEATURE_SCALES", "EMULATOR_HELD_OUT", "PARETO_K_MAX",
+    "Emulator", "Inputs", "importance_diagnostics", "train_emulator",
 ]  # fmt: skip
 
 EMULATOR_ERROR_FACTOR = 1.0
@@ -66,6 +66,9 @@ coordinates span 1): at the dominant class's posterior particles, fitted on stag
 rms 0.023/0.046/0.031 at 0.1, 0.018/0.036/0.024 at 0.3, 0.019/0.046/0.025 at 1, and 0.055/0.099/0.083 without
 (three runs; fitted on stage 1's runs alone, 0.14/0.08/0.14 at 0.1 and 0.18/0.12/0.15 at 0.3): the held-out error
 picks one per fit."""
+EMULATOR_FEATURE_RANK = 1e-6
+"""Principal directions of the standardised surrogate log frequencies kept among the fit's inputs: those whose
+singular value on the training runs is above this fraction of the largest (numerically independent ones)."""
 EMULATOR_SMOOTHING = 0.01
 """The radial-basis fit's smoothing: the segment model's log ratio is smooth in the parameters except where the
 lowest mode changes family; an exact interpolant rings there (held-out rms 0.056 at smoothing 1e-3, 0.055 at 0.01,
@@ -88,11 +91,17 @@ class Inputs:
     """``(n_obs,)`` and their sd."""
     periodic: tuple[int, ...] = ()
     """Unit-cube coordinates that are whole-turn angles."""
+    basis: np.ndarray | None = None
+    """``(n_obs, k)`` orthonormal directions the standardised log frequencies are projected on (their principal
+    ones on the training runs: a family whose frequency hardly changes between poses gives nearly equal columns, and
+    the fit's linear tail needs independent inputs); ``None``: all of them."""
 
     def __call__(self, u: np.ndarray, log_f: np.ndarray) -> np.ndarray:
         """The fit's input rows at unit-cube rows ``u`` given the surrogate's log frequencies ``log_f`` there."""
         u = np.atleast_2d(u)[:, : self.n_free]
         z = (log_f - self.log_f_mean) / self.log_f_sd
+        if self.basis is not None:
+            z = z @ self.basis
         per = list(self.periodic)
         if per:
             angle = 2.0 * np.pi * u[:, per]
@@ -104,11 +113,13 @@ class Inputs:
 
 @dataclass(frozen=True)
 class Emulator:
-    """The fitted correction ``g`` (module docstring) and its measured error."""
+    """The fitted corrections ``g`` (module docstring), one per mode family, and the measured error of their
+    minimum."""
 
-    fit: Any
-    """The :class:`scipy.interpolate.RBFInterpolator` of :attr:`inputs`' rows to ``(n, n_obs)`` log ratios."""
-    inputs: Inputs
+    fits: tuple[Any, ...]
+    """Per family, the :class:`scipy.interpolate.RBFInterpolator` of its :attr:`inputs`' rows to ``(n, n_obs)`` log
+    ratios."""
+    inputs: tuple[Inputs, ...]
     n_train: int
     held_out_rms_per_obs: np.ndarray
     """``(n_obs,)`` each pose's held-out rms of ``log(f_segments / f_emulated)``: its relative error."""
@@ -128,61 +139,102 @@ class Emulator:
 
     def frequencies(self, u: np.ndarray, f_surrogate: np.ndarray) -> np.ndarray:
         """``(n, n_obs)`` the emulated frequencies (Hz) at unit-cube rows ``u`` given the surrogate's there (``(n,
-        n_obs)``, Hz); NaN where the surrogate's is not finite and positive."""
-        with np.errstate(divide="ignore", invalid="ignore"):
-            log_f = np.log(np.asarray(f_surrogate, float))
-        ok = np.all(np.isfinite(log_f), axis=1)
-        out = np.full(log_f.shape, np.nan)
-        if ok.any():
-            out[ok] = np.exp(log_f[ok] + self.fit(self.inputs(np.atleast_2d(u)[ok], log_f[ok])))
-        return out
+        n_obs)``, or ``(n, F, n_obs)`` for ``F`` families: the lowest of the families'); NaN where a surrogate's is
+        not finite and positive."""
+        families = zip(self.fits, self.inputs, _families(f_surrogate))
+        return _lowest([_corrected(fit, inp, u, f) for fit, inp, f in families])
 
 
-def train_emulator(
-    u: np.ndarray, f_segments: np.ndarray, f_surrogate: np.ndarray, *, n_free: int, rng: np.random.Generator,
-    periodic: tuple[int, ...] = (),
-) -> Emulator:  # fmt: skip
-    """The emulator fitted to the log ratios at unit-cube rows ``u`` (``(n, >= n_free)``; ``f_*``: ``(n, n_obs)``
-    in Hz, rows with a non-finite or non-positive frequency left out; ``periodic``: the coordinates that are
-    whole-turn angles, read on a circle): the feature scale of
-    :data:`EMULATOR_FEATURE_SCALES` with the least held-out error (:data:`EMULATOR_HELD_OUT` of the rows held out),
-    each pose's error measured there, then refitted on all of them."""
+def _families(f: np.ndarray) -> list[np.ndarray]:
+    """``(n, n_obs)`` or ``(n, F, n_obs)`` frequencies as ``F`` arrays ``(n, n_obs)``."""
+    f = np.asarray(f, float)
+    return [f] if f.ndim == 2 else [f[:, k] for k in range(f.shape[1])]
+
+
+def _lowest(families: list[np.ndarray]) -> np.ndarray:
+    """The families' elementwise minimum; NaN where any is NaN."""
+    out: np.ndarray = np.minimum.reduce(families)
+    return out
+
+
+def _corrected(fit: Any, inputs: Inputs, u: np.ndarray, f_surrogate: np.ndarray) -> np.ndarray:
+    """One family's emulated frequencies: the surrogate's times ``exp(g)``; NaN where the surrogate's is not finite
+    and positive."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        log_f = np.log(f_surrogate)
+    ok = np.all(np.isfinite(log_f), axis=1)
+    out = np.full(log_f.shape, np.nan)
+    if ok.any():
+        out[ok] = np.exp(log_f[ok] + fit(inputs(np.atleast_2d(u)[ok], log_f[ok])))
+    return out
+
+
+def _fit_family(
+    x: np.ndarray, y: np.ndarray, log_sur: np.ndarray, fit_on: np.ndarray, *, n_free: int, periodic: tuple[int, ...]
+) -> tuple[Any, Inputs, Any]:  # fmt: skip
+    """One family's correction: the feature scale of :data:`EMULATOR_FEATURE_SCALES` with the least error at the
+    rows not in ``fit_on`` (the family's finite rows only), as ``(fit on fit_on, inputs, fit on every finite row)``."""
     from scipy.interpolate import RBFInterpolator
 
-    with np.errstate(divide="ignore", invalid="ignore"):
-        log_sur = np.log(np.asarray(f_surrogate, float))
-        y = np.log(np.asarray(f_segments, float)) - log_sur
-    ok = np.all(np.isfinite(y) & np.isfinite(log_sur), axis=1)
-    x, y, log_sur = np.asarray(u, float)[ok, :n_free], y[ok], log_sur[ok]
-    periodic = tuple(i for i in periodic if i < n_free)
-    n = len(x)
-    n_out = round(EMULATOR_HELD_OUT * n)
-    if n - n_out < 2 * (n_free + y.shape[1] + 1) or n_out < 1:
+    finite = np.all(np.isfinite(y), axis=1)
+    on = np.intersect1d(fit_on, np.flatnonzero(finite))
+    held = np.setdiff1d(np.flatnonzero(finite), on)
+    if len(on) < 2 * (n_free + y.shape[1] + 1) or len(held) < 1:
         raise CalibrationError(
-            f"too few usable segment-model runs to fit the emulator: {n} of {len(u)}", parameter="emulator",
-            value=len(u), hint="train it on more segment-model runs, or leave it 0",
+            f"too few usable segment-model runs to fit the emulator: {int(finite.sum())} of {len(x)}",
+            parameter="emulator", value=len(x), hint="train it on more segment-model runs, or leave it 0",
         )  # fmt: skip
-    order = rng.permutation(n)
-    fit_on, held = order[n_out:], order[:n_out]
-    sd = np.std(log_sur, axis=0)
-    mean, sd = np.mean(log_sur, axis=0), np.where(sd > 0, sd, 1.0)
+    sd = np.std(log_sur[finite], axis=0)
+    mean, sd = np.mean(log_sur[finite], axis=0), np.where(sd > 0, sd, 1.0)
+    _, sv, vt = np.linalg.svd((log_sur[finite] - mean) / sd, full_matrices=False)
+    basis = vt[sv > EMULATOR_FEATURE_RANK * sv[0]].T
 
     def fitted(rows: np.ndarray, inputs: Inputs) -> Any:
         return RBFInterpolator(
             inputs(x[rows], log_sur[rows]), y[rows], kernel="thin_plate_spline", smoothing=EMULATOR_SMOOTHING, degree=1
         )
 
-    best: tuple[float, Inputs, np.ndarray] | None = None
+    best: tuple[float, Inputs, Any] | None = None
     for scale in EMULATOR_FEATURE_SCALES:
-        inputs = Inputs(n_free, scale, mean, sd, periodic)
-        res = y[held] - fitted(fit_on, inputs)(inputs(x[held], log_sur[held]))
-        if best is None or np.mean(res**2) < best[0]:
-            best = (float(np.mean(res**2)), inputs, res)
+        inputs = Inputs(n_free, scale, mean, sd, periodic, basis)
+        fit = fitted(on, inputs)
+        err = float(np.mean((y[held] - fit(inputs(x[held], log_sur[held]))) ** 2))
+        if best is None or err < best[0]:
+            best = (err, inputs, fit)
     assert best is not None
-    _, inputs, res = best
+    return best[2], best[1], fitted(np.flatnonzero(finite), best[1])
+
+
+def train_emulator(
+    u: np.ndarray, f_segments: np.ndarray, f_surrogate: np.ndarray, *, n_free: int, rng: np.random.Generator,
+    periodic: tuple[int, ...] = (),
+) -> Emulator:  # fmt: skip
+    """The emulator fitted at unit-cube rows ``u`` (``(n, >= n_free)``; ``periodic``: the coordinates that are
+    whole-turn angles, read on a circle). ``f_*`` in Hz, ``(n, n_obs)`` for one family or ``(n, F, n_obs)`` for
+    ``F`` mode families whose lowest is the frequency (module docstring): each family's correction fitted to its
+    log ratios, with the feature scale of :data:`EMULATOR_FEATURE_SCALES` that has its least held-out error
+    (:data:`EMULATOR_HELD_OUT` of the rows held out; a family's rows where its segment-model frequency is not finite
+    and positive left out of its fit), each pose's error measured there on the lowest family, then every family
+    refitted on all its rows. Rows where a surrogate frequency is not finite and positive, or where the segment
+    model gives no frequency at all, are left out."""
+    seg, sur = _families(f_segments), _families(f_surrogate)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        log_sur = [np.log(f) for f in sur]
+        y = [np.log(fs) - ls for fs, ls in zip(seg, log_sur)]
+        low = np.log(_lowest([np.where(np.isfinite(v), v, np.inf) for v in seg]))
+    ok = np.all([np.all(np.isfinite(v), axis=1) for v in log_sur], axis=0) & np.all(np.isfinite(low), axis=1)
+    x = np.asarray(u, float)[ok, :n_free]
+    periodic = tuple(i for i in periodic if i < n_free)
+    n = len(x)
+    n_out = round(EMULATOR_HELD_OUT * n)
+    order = rng.permutation(n)
+    fit_on, held = np.sort(order[n_out:]), np.sort(order[:n_out])
+    parts = [_fit_family(x, v[ok], ls[ok], fit_on, n_free=n_free, periodic=periodic) for v, ls in zip(y, log_sur)]
+    pred = _lowest([_corrected(p[0], p[1], x[held], np.exp(ls[ok][held])) for p, ls in zip(parts, log_sur)])
+    res = low[ok][held] - np.log(pred)
     return Emulator(
-        fit=fitted(np.arange(n), inputs), inputs=inputs, n_train=n, held_out_rms_per_obs=np.sqrt(np.mean(res**2, 0)),
-        held_out_max=float(np.max(np.abs(res))),
+        fits=tuple(p[2] for p in parts), inputs=tuple(p[1] for p in parts), n_train=n,
+        held_out_rms_per_obs=np.sqrt(np.mean(res**2, 0)), held_out_max=float(np.max(np.abs(res))),
     )  # fmt: skip
 
 

@@ -41,7 +41,7 @@ from fpm_sim.study.calibrate.terms import independent_log_likelihood, log_sigmoi
 from fpm_sim.study.discrepancy import covariance, gaussian_log_likelihood, pose_features
 from fpm_sim.study.identify.data import Observation
 from fpm_sim.study.identify.parameters import ParameterSet, parameter_set
-from fpm_sim.study.identify.problem import ELBOW_BRANCHES, predict_observations
+from fpm_sim.study.identify.problem import ELBOW_BRANCHES, family_frequencies, predict_observations
 from fpm_sim.study.inplane_surrogate import inplane_first_frequencies
 from fpm_sim.study.readout import mixture_log_likelihood, read_probabilities, sensor_residues
 from fpm_sim.study.rigs import subsystem_frequencies
@@ -382,6 +382,16 @@ class CalibrationProblem(FrequencyLikelihood):
         if self.rig_tests:
             f = np.concatenate([f, self._rig_predictions(cfg)])
         return f
+
+    def predict_families(self, theta: np.ndarray) -> np.ndarray:
+        """``(2, n_obs)`` the lowest in-plane and out-of-plane frequency (Hz) at every observation
+        (:func:`~fpm_sim.study.identify.problem.family_frequencies`; NaN where the description is impossible):
+        the emulator's training runs (:mod:`.emulator`)."""
+        try:
+            cfg = self.config(theta)
+        except (ConfigError, ValueError):
+            return np.full((2, len(self.observations)), np.nan)
+        return family_frequencies(cfg, list(self.observations), options=fast_options(segments=self.segments))
 
     def _rig_predictions(self, cfg: Manipulator) -> np.ndarray:
         """The rig tests' frequencies (Hz) under ``cfg``."""

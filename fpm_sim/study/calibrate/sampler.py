@@ -44,7 +44,7 @@ from fpm_sim.study.calibrate.smc import (
 )
 from fpm_sim.study.calibrate.vectorised import (
     cheap_log_likelihood_batch,
-    inplane_frequencies_batch,
+    family_frequencies_batch,
     inplane_log_likelihood_batch,
     inplane_split_log_likelihood_batch,
     split_log_likelihood_batch,
@@ -92,6 +92,12 @@ def _worker_prior_transform(u: np.ndarray) -> np.ndarray:
 def _worker_predict(theta: np.ndarray) -> np.ndarray:
     assert _PROBLEM is not None, "the pool was started without _init_worker"
     return _PROBLEM.predict(theta)
+
+
+def _worker_families(theta: np.ndarray) -> np.ndarray:
+    assert _PROBLEM is not None, "the pool was started without _init_worker"
+    out: np.ndarray = _PROBLEM.predict_families(theta)  # type: ignore[attr-defined]
+    return out
 
 
 def _with_class(theta: np.ndarray, klass: int | None) -> np.ndarray:
@@ -728,29 +734,30 @@ class _SegmentEmulator:
         """Data stages run again on a refit (:meth:`again`)."""
 
     def _segments(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The class's parameters at the rows of ``u`` and the segment model's frequencies there (each distinct row
-        run once), kept for training."""
+        """The class's parameters at the rows of ``u`` and the segment model's first frequencies there (the lower of
+        its two mode families, each distinct row run once); the families kept for training."""
         theta = _class_thetas(u, self.klass, self.part)
         uniq, inverse = np.unique(theta, axis=0, return_inverse=True)
         p, pool = self.problem, self.pool
-        f = np.asarray(pool.map(_worker_predict, list(uniq)) if pool is not None else [p.predict(t) for t in uniq])
-        f = f.reshape(len(uniq), -1)[inverse.ravel()]
+        rows = list(uniq)
+        f = np.asarray(pool.map(_worker_families, rows) if pool is not None else [p.predict_families(t) for t in rows])
+        f = f.reshape(len(uniq), 2, -1)[inverse.ravel()]
         self.u.append(u)
         self.f.append(f)
-        return theta, f
+        return theta, np.fmin(f[:, 0], f[:, 1])
 
     def _fit(self) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]:
         u, f_seg = np.concatenate(self.u), np.concatenate(self.f)
         u, keep = np.unique(u, axis=0, return_index=True)
         p, klass, part = self.problem, self.klass, self.part
-        f_sur, _ = inplane_frequencies_batch(p, _class_thetas(u, klass, part))
+        f_sur, _ = family_frequencies_batch(p, _class_thetas(u, klass, part))
         emu = self.fitted = train_emulator(
             u, f_seg[keep], f_sur, n_free=len(p.priors.parameters), rng=self.rng, periodic=_periodic(part)
         )
 
         def evaluate(uq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             th = _class_thetas(uq, klass, part)
-            f, cheap = inplane_frequencies_batch(p, th)
+            f, cheap = family_frequencies_batch(p, th)
             return split_log_likelihood_batch(p, th, emu.frequencies(uq, f), cheap, model_error_rel=emu.model_error_rel)
 
         return evaluate

@@ -15,6 +15,8 @@ Only the 3RRR's problem (:func:`supports`): a described architecture has no clos
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -24,12 +26,14 @@ from fpm_sim.study.calibrate.terms import independent_log_likelihood, statements
 from fpm_sim.study.identify.parameters import apply_parameters_batch
 from fpm_sim.study.identify.problem import ELBOW_BRANCHES
 from fpm_sim.study.inplane_surrogate import InplaneArrays, inplane_batch
+from fpm_sim.study.outofplane_surrogate import OutofplaneArrays, outofplane_batch
 
 if TYPE_CHECKING:
     from fpm_sim.study.calibrate.problem import CalibrationProblem, FrequencyLikelihood
 
 __all__ = [
     "cheap_log_likelihood_batch",
+    "family_frequencies_batch",
     "frequencies_log_likelihood_batch",
     "inplane_arrays",
     "inplane_frequencies_batch",
@@ -61,10 +65,26 @@ def _branches(problem: CalibrationProblem, thetas: np.ndarray) -> np.ndarray:
     return np.asarray(ELBOW_BRANCHES, float)[np.rint(thetas[:, k]).astype(int)]
 
 
-def inplane_arrays(problem: CalibrationProblem, thetas: np.ndarray) -> tuple[InplaneArrays, np.ndarray]:
-    """The descriptions at the rows of ``thetas`` as the surrogate's arrays, and ``(n,)`` which rows are valid
-    descriptions (positive lengths and masses, the platform inside the base circle: what
-    :func:`~fpm_sim.config.validate` refuses of the fields a free parameter edits)."""
+@dataclass(frozen=True)
+class _Described:
+    """Descriptions as arrays over their rows (SI units; a lumped mass ``(n, 4)``: its mass, then its inertia's
+    diagonal; the payload in the platform's)."""
+
+    geometry: GeometryArrays
+    thickness: np.ndarray
+    height: np.ndarray
+    young: np.ndarray
+    density: np.ndarray
+    poisson: np.ndarray
+    platform: np.ndarray
+    elbow: np.ndarray
+    pin: np.ndarray
+
+
+def _described(problem: CalibrationProblem, thetas: np.ndarray) -> tuple[_Described, np.ndarray]:
+    """The descriptions at the rows of ``thetas`` as arrays, and ``(n,)`` which rows are valid descriptions
+    (positive lengths and masses, the platform inside the base circle: what :func:`~fpm_sim.config.validate`
+    refuses of the fields a free parameter edits)."""
     base = problem.base
     n_free = len(problem.priors.parameters)
     f = apply_parameters_batch(base, problem.parameters.parameters, thetas[:, :n_free])
@@ -85,43 +105,75 @@ def inplane_arrays(problem: CalibrationProblem, thetas: np.ndarray) -> tuple[Inp
     pr = get("geometry.platform_radius_m", g.platform_radius_per_chain)
     l1 = get("geometry.proximal_length_m", g.proximal_length_per_chain)
     l2 = get("geometry.distal_length_m", g.distal_length_per_chain)
-    thickness, height = get("section.thickness_m", sec.thickness_m), get("section.height_m", sec.height_m)
-    plat, payload = lump("platform"), lump("payload")
-    elbow, pin = lump("elbow_joint"), lump("platform_joint")
     ga = GeometryArrays.from_polar(
         base_radius_m=br, base_angles_rad=get("geometry.base_angles_rad", g.base_angles_rad), platform_radius_m=pr,
         platform_angles_rad=get("geometry.platform_angles_rad", g.platform_angles_rad), proximal_m=l1, distal_m=l2,
         elbow_branch=_branches(problem, thetas),
     )  # fmt: skip
-    arrays = InplaneArrays.build(
-        ga, young_pa=get("material.young_pa", mat.young_pa),
-        density_kg_m3=get("material.density_kg_m3", mat.density_kg_m3), area_m2=thickness * height,
-        i_inplane_m4=height * thickness**3 / 12.0, elbow_joint_kg=elbow[:, 0], platform_joint_kg=pin[:, 0],
-        platform_kg=plat[:, 0] + payload[:, 0], platform_izz_kg_m2=plat[:, 3] + payload[:, 3],
+    out = _Described(
+        geometry=ga, thickness=get("section.thickness_m", sec.thickness_m),
+        height=get("section.height_m", sec.height_m),
+        young=get("material.young_pa", mat.young_pa), density=get("material.density_kg_m3", mat.density_kg_m3),
+        poisson=get("material.poisson", mat.poisson), platform=lump("platform") + lump("payload"),
+        elbow=lump("elbow_joint"), pin=lump("platform_joint"),
     )  # fmt: skip
+    masses = np.stack([lump("platform"), lump("payload"), out.elbow, out.pin])[..., 0]
     with np.errstate(invalid="ignore"):
         valid = (
             np.all((br > 0) & (l1 > 0) & (l2 > 0) & (pr >= 0) & np.isfinite(br + l1 + l2 + pr), axis=1)
             & (np.max(pr, axis=1) < np.min(br, axis=1))
-            & (thickness > 0) & (height > 0)
-            & np.all(np.stack([plat, payload, elbow, pin])[..., 0] >= 0, axis=0)
-            & (plat[:, 0] + payload[:, 0] > 0)
+            & (out.thickness > 0) & (out.height > 0)
+            & np.all(masses >= 0, axis=0) & (out.platform[:, 0] > 0)
         )  # fmt: skip
-    return arrays, valid
+    return out, valid
+
+
+def _inplane(d: _Described) -> InplaneArrays:
+    """The in-plane surrogate's arrays of :func:`_described`'s descriptions."""
+    t, h = d.thickness, d.height
+    return InplaneArrays.build(
+        d.geometry, young_pa=d.young, density_kg_m3=d.density, area_m2=t * h, i_inplane_m4=h * t**3 / 12.0,
+        elbow_joint_kg=d.elbow[:, 0], platform_joint_kg=d.pin[:, 0], platform_kg=d.platform[:, 0],
+        platform_izz_kg_m2=d.platform[:, 3],
+    )  # fmt: skip
+
+
+def _outofplane(d: _Described) -> OutofplaneArrays:
+    """The out-of-plane surrogate's arrays of :func:`_described`'s descriptions (a rotary inertia about an in-plane
+    axis: the mean of the two)."""
+
+    def tilt(lump: np.ndarray) -> np.ndarray:
+        out: np.ndarray = 0.5 * (lump[:, 1] + lump[:, 2])
+        return out
+
+    return OutofplaneArrays.build(
+        d.geometry, young_pa=d.young, shear_pa=d.young / (2.0 * (1.0 + d.poisson)), density_kg_m3=d.density,
+        thickness_m=d.thickness, height_m=d.height, elbow_kg=d.elbow[:, 0], elbow_kg_m2=tilt(d.elbow),
+        platform_joint_kg=d.pin[:, 0], platform_joint_kg_m2=tilt(d.pin), platform_kg=d.platform[:, 0],
+        platform_kg_m2=tilt(d.platform),
+    )  # fmt: skip
+
+
+def inplane_arrays(problem: CalibrationProblem, thetas: np.ndarray) -> tuple[InplaneArrays, np.ndarray]:
+    """The descriptions at the rows of ``thetas`` as the in-plane surrogate's arrays, and ``(n,)`` which rows are
+    valid descriptions (:func:`_described`)."""
+    d, valid = _described(problem, thetas)
+    return _inplane(d), valid
 
 
 def _support_and_statements(
     problem: CalibrationProblem, thetas: np.ndarray
-) -> tuple[InplaneArrays, np.ndarray, BatchAssemblies]:
-    """The surrogate's arrays, ``(n,)`` the cheap log-likelihood (``-inf`` off the support), and the kinematics at
-    the distinct measured poses (``problem.measured_pose_array``)."""
-    arrays, valid = inplane_arrays(problem, thetas)
+) -> tuple[_Described, np.ndarray, BatchAssemblies]:
+    """:func:`_described`'s arrays, ``(n,)`` the cheap log-likelihood (``-inf`` off the support), and the
+    kinematics at the distinct measured poses (``problem.measured_pose_array``)."""
+    d, valid = _described(problem, thetas)
+    ga = d.geometry
     xyz = problem.measured_pose_array
-    measured = assemble_batch(arrays.geometry, xyz[:, 0], xyz[:, 1], xyz[:, 2])  # the reach and statement (b)
+    measured = assemble_batch(ga, xyz[:, 0], xyz[:, 1], xyz[:, 2])  # the reach and statement (b)
     out = np.full(len(thetas), -math.inf)
     ok = valid & measured.reachable.all(axis=1)
-    out[ok] = statements_batch(problem.priors, arrays.geometry.rows(ok), measured.singularity[ok])
-    return arrays, out, measured
+    out[ok] = statements_batch(problem.priors, ga.rows(ok), measured.singularity[ok])
+    return d, out, measured
 
 
 def cheap_log_likelihood_batch(problem: CalibrationProblem, thetas: np.ndarray) -> np.ndarray:
@@ -132,14 +184,30 @@ def cheap_log_likelihood_batch(problem: CalibrationProblem, thetas: np.ndarray) 
 def inplane_frequencies_batch(problem: CalibrationProblem, thetas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``((n, n_obs), (n,))``: the in-plane surrogate's first frequencies (Hz) at the observations of every row
     (NaN off the support), and the cheap log-likelihood (``-inf`` off the support)."""
-    thetas = np.atleast_2d(thetas)
-    arrays, cheap, measured = _support_and_statements(problem, thetas)
+    freq, cheap = _surrogates(problem, np.atleast_2d(thetas), (inplane_batch,))
+    return freq[:, 0], cheap
+
+
+def family_frequencies_batch(problem: CalibrationProblem, thetas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``((n, 2, n_obs), (n,))``: the in-plane and the out-of-plane surrogate's lowest frequencies (Hz) at the
+    observations of every row (NaN off the support), and the cheap log-likelihood (``-inf`` off the support): the
+    two mode families the emulator corrects (:mod:`~fpm_sim.study.calibrate.emulator`)."""
+    return _surrogates(problem, np.atleast_2d(thetas), (inplane_batch, outofplane_batch))
+
+
+def _surrogates(
+    problem: CalibrationProblem, thetas: np.ndarray, models: tuple[Callable[..., np.ndarray], ...]
+) -> tuple[np.ndarray, np.ndarray]:
+    """``((n, len(models), n_obs), (n,))`` each surrogate's frequencies at the observations, on the kinematics the
+    support assembled at the distinct measured poses, and the cheap log-likelihood."""
+    d, cheap, measured = _support_and_statements(problem, thetas)
     ok = np.isfinite(cheap)
-    freq = np.full((len(thetas), len(problem.observations)), np.nan)
-    if ok.any():  # at the distinct measured poses, on the kinematics the support assembled there
+    freq = np.full((len(thetas), len(models), len(problem.observations)), np.nan)
+    if ok.any():
         xyz = problem.measured_pose_array
-        at = inplane_batch(arrays.rows(ok), xyz, assembled=measured.rows(ok))
-        freq[ok] = at[:, problem.observation_pose_index]
+        for k, model in enumerate(models):
+            arrays = (_inplane if model is inplane_batch else _outofplane)(d).rows(ok)
+            freq[ok, k] = model(arrays, xyz, assembled=measured.rows(ok))[:, problem.observation_pose_index]
     return freq, cheap
 
 
