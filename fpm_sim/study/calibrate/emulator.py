@@ -11,24 +11,29 @@ surrogate's own posterior the segment model's log-likelihood is 14 nats lower at
 
 The emulator corrects it multiplicatively (Kennedy & O'Hagan's 2000 autoregressive form, on a log scale), with
 the surrogate's own frequencies among the correction's inputs (the nonlinear autoregressive form of Perdikaris et al.
-2017):
+2017), and it does so for each of the two mode families on its own. At zero gravity the planar 3RRR's modes are
+in-plane or out-of-plane, never both, so the segment model's first frequency is the lower of its lowest in-plane and
+its lowest out-of-plane one; each has a surrogate (:mod:`fpm_sim.study.inplane_surrogate`,
+:mod:`fpm_sim.study.outofplane_surrogate`), and
 
-    f_emulated(theta)_j = f_surrogate(theta)_j * exp(g_j(u, s z(theta))),
+    f_emulated(theta)_j = min over families k of f_surrogate,k(theta)_j * exp(g_kj(u, s_k z_k(theta))),
 
-``z`` the surrogate's log frequencies at the measured poses, standardised on the training runs, ``s`` a feature
-scale, and ``g`` a thin-plate-spline radial-basis fit (:class:`scipy.interpolate.RBFInterpolator`, smoothing 0.01, a
-linear tail) of ``log(f_segments / f_surrogate)`` at each measured pose ``j`` over the free parameters' unit-cube
-coordinates ``u`` (the discrepancy's left out: it does not change a frequency) and ``s z``. The surrogate's
-frequencies tell the fit where the two models' lowest modes part: where the posterior lies, the segment model's first
-mode is a nearly pose-independent one (about 50 Hz at every pose) while the surrogate's follows the platform's
-in-plane stiffness (55-156 Hz), and the log ratio there spans 0.03-0.29 per pose; a fit on ``u`` alone misses it by
-0.055-0.099 rms at the posterior's particles, one with ``s z`` by 0.018-0.036 (three runs of the dominant class,
-:data:`EMULATOR_FEATURE_SCALES`). ``s`` is chosen per fit from :data:`EMULATOR_FEATURE_SCALES` by the held-out
-error. It is trained on segment-model runs at the first stage's particles (the prior times the study's statements:
-where the posterior can be), then refitted with runs at the data stage's particles. A fifth of the runs is held out,
-and each pose's held-out rms of the log ratio is added to the emulated likelihood as that pose's relative model error
-(``s_j^2 = sigma_j^2 + (d f_j)^2 + (e_j f_j)^2``): the emulator's error is never silent, and it widens the emulated
-posterior where the emulator is least sure, which keeps it a proposal that covers the segment model's.
+``z_k`` family ``k``'s surrogate log frequencies at the measured poses, standardised on the training runs and
+projected on their principal directions (:data:`EMULATOR_FEATURE_RANK`), ``s_k`` a feature scale, and ``g_k`` a
+thin-plate-spline radial-basis fit (:class:`scipy.interpolate.RBFInterpolator`, smoothing 0.01, a linear tail) of
+``log(f_segments,k / f_surrogate,k)`` at each measured pose ``j`` over the free parameters' unit-cube coordinates ``u``
+(the discrepancy's left out: it does not change a frequency) and ``s_k z_k``. Each family's correction is smooth; the
+switch from one family to the other, which a single correction of the lowest frequency had to bend around, is the
+minimum's. Measured on the dominant class (docs/identification.md, "Two mode families"): one correction of the
+in-plane surrogate, 2-8 % held-out rms per pose; the two families, 0.4-1.3 % (the in-plane family's own 0.4-0.6 %, the
+out-of-plane family's 0.05 %), and, fitted to one run's stage-1 runs, within 0.1 nat of the segment model at another
+run's narrow peak where the single correction was 9.6 nats low. ``s_k`` is chosen per fit from
+:data:`EMULATOR_FEATURE_SCALES` by the family's held-out error. The emulator is trained on segment-model runs at the
+first stage's particles (the prior times the study's statements: where the posterior can be), then refitted with runs
+at the data stage's particles. A fifth of the runs is held out, and each pose's held-out rms of the log of the lowest
+frequency is added to the emulated likelihood as that pose's relative model error (``s_j^2 = sigma_j^2 + (d f_j)^2 +
+(e_j f_j)^2``): the emulator's error is never silent, and it widens the emulated posterior where the emulator is least
+sure, which keeps it a proposal that covers the segment model's.
 
 The emulated posterior is then made the segment model's by importance weights (multifidelity importance sampling,
 Peherstorfer, Willcox & Gunzburger 2016): each particle of the emulated data stage is weighted by
