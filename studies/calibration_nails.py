@@ -6,6 +6,7 @@ without the as-built tolerances (1 deg at each joint circle, 1 % of each link, p
 likelihood as a model error.
 
     python studies/calibration_nails.py --starts 64 256
+    python studies/calibration_nails.py --starts 256 --split geometry.base_rotation_deg 2 --part 0   # motors < 0
 
 The starts are stage 1's particles (the prior times the study's statements) chosen far apart (greedily by the
 emulated log-likelihood, each at least 0.25 from those before it in the unit cube). A compass search (pattern search,
@@ -176,21 +177,27 @@ def main() -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--check", type=int, default=6, help="optima checked on the segment model")
+    p.add_argument("--split", nargs=2, metavar=("NAME", "N"), help="search one part of this split prior (--part)")
+    p.add_argument("--part", type=int, default=0, help="the part of --split searched (from 0)")
     a = p.parse_args()
     warnings.simplefilter("ignore")
     prob = study_problem(model="segments", branch=tuple(a.branch))
     S._init_worker(prob)
     rng = np.random.default_rng(a.seed)
-    opts = SamplerOptions(sampler="smc", particles=1000, cheap_particles=2000, emulator=a.runs, seed=a.seed)
-    per = tuple(prob.priors.periodic)
+    split = None if a.split is None else (a.split[0], int(a.split[1]))
+    opts = SamplerOptions(
+        sampler="smc", particles=1000, cheap_particles=2000, emulator=a.runs, seed=a.seed, split=split
+    )
+    part = S._parts(prob, opts)[a.part if split else 0]
+    per = S._periodic(part)
     one_s = dataclasses.replace(opts.smc_settings()[0], periodic=per)
     d = prob.ndim
     t0 = time.time()
-    first = SM._stage_one(lambda u: S._smc_cheap(u, None), d, one_s, rng)
+    first = SM._stage_one(lambda u: S._smc_cheap(u, None, part), d, one_s, rng)
     assert not isinstance(first, SM.SmcRun), "no prior draw reaches every measured pose"
     one = first[0].u
     with S._pool(prob, a.workers) as pool:
-        emu = S._SegmentEmulator(klass=None, part=None, n=a.runs, pool=pool, rng=rng)
+        emu = S._SegmentEmulator(klass=None, part=part, n=a.runs, pool=pool, rng=rng)
         evaluate = emu.train(one)
     assert emu.fitted is not None
     print(
@@ -203,7 +210,7 @@ def main() -> None:
         start = spread_starts(one, la + lb, n, spacing=CompassSettings().spacing, periodic=per)
         x, fx, calls = compass_search(evaluate, start, CompassSettings(), periodic=per)
         top = np.argsort(-fx)[: a.check]
-        th = S._class_thetas(x[top], None, None)
+        th = S._class_thetas(x[top], None, part)
         f = np.array([prob.predict(t) for t in th])
         ea, eb = V.split_log_likelihood_batch(prob, th, f, V.cheap_log_likelihood_batch(prob, th))
         arrays, _ = V.inplane_arrays(prob, th)
@@ -214,19 +221,22 @@ def main() -> None:
         print(f"  the same on the segment model:                   {np.round(ea + eb, 2)}")
         print(f"  least singularity measure at a measured pose:    {np.round(measure, 3)}")
         print(f"  motors' / platform's rotation (deg): {np.round(th[:, 4], 1)} / {np.round(th[:, 5], 1)}")
-        _widths(prob, x[top[0]])
+        _widths(prob, x[top[0]], part)
 
 
-def _widths(prob: object, u0: np.ndarray) -> None:
+def _widths(prob: object, u0: np.ndarray, part: S.Part) -> None:
     """The best optimum's log L along the platform's rotation, with and without the as-built tolerances."""
     for h in (1e-3, 3e-3, 1e-2, 3e-2):
         u = np.array([u0, u0])
         u[0, 5], u[1, 5] = (u0[5] + h) % 1.0, (u0[5] - h) % 1.0
-        th = S._class_thetas(u, None, None)
+        th = S._class_thetas(u, None, part)
         f = np.array([prob.predict(t) for t in th])  # type: ignore[attr-defined]
         c = V.cheap_log_likelihood_batch(prob, th)  # type: ignore[arg-type]
         a0, b0 = V.split_log_likelihood_batch(prob, th, f, c)  # type: ignore[arg-type]
-        a1, b1 = V.split_log_likelihood_batch(prob, th, f, c, model_error_rel=tolerance_rel(prob, th))  # type: ignore[arg-type]
+        tol = tolerance_rel(prob, th)  # one row at a time: the library's model error is one value per datum
+        rows = [slice(i, i + 1) for i in range(len(th))]
+        with_tol = [V.split_log_likelihood_batch(prob, th[r], f[r], c[r], model_error_rel=tol[r][0]) for r in rows]  # type: ignore[arg-type]
+        a1, b1 = (np.concatenate(v) for v in zip(*with_tol))
         print(
             f"    platform rotation +-{360 * h:.2f} deg: log L {np.round(a0 + b0, 2)}, with the tolerances "
             f"{np.round(a1 + b1, 2)}"

@@ -246,8 +246,20 @@ def test_the_cli_runs_the_smc_sampler_and_refuses_nested_sampling_options(cli_fi
     # on a problem whose model is not the segment model (here the surrogate itself) it is refused before sampling
     from fpm_sim.study.calibrate import run_calibration
 
-    with pytest.raises(CalibrationError, match="the emulator corrects the 3RRR's vectorised in-plane surrogate"):
+    with pytest.raises(CalibrationError, match="the emulator corrects the 3RRR's vectorised surrogates"):
         run_calibration(_study_surrogate((-1, -1, -1)), SamplerOptions(sampler="smc", emulator=100))
+    # data labelled with a mode kind: the emulator's lower family is not the labelled one, refused, not mixed up
+    import dataclasses
+
+    from fpm_sim.study.calibrate.problem import study_problem
+
+    seg = study_problem(model="segments", branch=(-1, -1, -1))
+    labelled = dataclasses.replace(
+        seg, observations=tuple(dataclasses.replace(o, label="in_plane") for o in seg.observations)
+    )
+    with pytest.raises(CalibrationError, match="unlabelled first frequencies only") as err:
+        run_calibration(labelled, SamplerOptions(sampler="smc", emulator=100))
+    assert err.value.parameter == "emulator"
 
 
 def test_resuming_a_nested_sampling_calibration_with_the_smc_sampler_is_refused(cli_files, capsys):

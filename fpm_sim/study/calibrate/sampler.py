@@ -1138,6 +1138,29 @@ def _summaries(
     return out
 
 
+def _check_smc_options(problem: FrequencyLikelihood, opts: SamplerOptions) -> None:
+    """Refuse SMC options the problem cannot take (the emulator, the mode search), before sampling."""
+    segments = supports(problem) and getattr(problem, "model", "") == "segments"
+    if opts.sampler == "smc" and opts.emulator and not segments:
+        raise CalibrationError(
+            "the emulator corrects the 3RRR's vectorised surrogates to its segment model: first frequencies, "
+            "independent errors, no rig tests", parameter="emulator", value=opts.emulator,
+            hint="set it to 0 for this problem",
+        )  # fmt: skip
+    if opts.sampler == "smc" and opts.emulator and any(o.label is not None for o in problem.observations):
+        raise CalibrationError(
+            "the emulator's frequency is the lower of the in-plane and out-of-plane families: unlabelled first "
+            "frequencies only", parameter="emulator", value=opts.emulator,
+            hint="set it to 0 for data labelled with a mode kind, or remove the labels",
+        )  # fmt: skip
+    if opts.sampler == "smc" and opts.mode_starts and not supports(problem):
+        raise CalibrationError(
+            "the mode search runs on the 3RRR's vectorised in-plane surrogate: first in-plane frequencies, independent "
+            "errors, no rig tests", parameter="mode_starts", value=opts.mode_starts,
+            hint="set it to 0 for this problem",
+        )  # fmt: skip
+
+
 def run_calibration(
     problem: FrequencyLikelihood,
     options: SamplerOptions | None = None,
@@ -1161,19 +1184,7 @@ def run_calibration(
 
     opts = options or SamplerOptions()
     opts.check()
-    segments = supports(problem) and getattr(problem, "model", "") == "segments"
-    if opts.sampler == "smc" and opts.emulator and not segments:
-        raise CalibrationError(
-            "the emulator corrects the 3RRR's vectorised in-plane surrogate to its segment model: first in-plane "
-            "frequencies, independent errors, no rig tests", parameter="emulator", value=opts.emulator,
-            hint="set it to 0 for this problem",
-        )  # fmt: skip
-    if opts.sampler == "smc" and opts.mode_starts and not supports(problem):
-        raise CalibrationError(
-            "the mode search runs on the 3RRR's vectorised in-plane surrogate: first in-plane frequencies, independent "
-            "errors, no rig tests", parameter="mode_starts", value=opts.mode_starts,
-            hint="set it to 0 for this problem",
-        )  # fmt: skip
+    _check_smc_options(problem, opts)
     _init_worker(problem)  # this process too: serial runs and the probes run here
     t0 = time.time()
     say = print_func if print_func is not None else (lambda m: print(m, file=sys.stderr))
