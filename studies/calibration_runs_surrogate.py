@@ -5,6 +5,8 @@ disagree"): the study's calibration problem on the in-plane surrogate, one elbow
     python studies/calibration_runs_surrogate.py --branch -1 -1 -1 --sampler smc --particles 200 --cheap-particles 1000
     python studies/calibration_runs_surrogate.py --sampler smc --together --mode-starts 12 --workers 2 --seed 0 \
         --particles 1000 --cheap-particles 2000
+    python studies/calibration_runs_surrogate.py --model segments --branch -1 -1 1 --together --sampler smc \
+        --workers 2 --seed 0 --particles 1000 --cheap-particles 2000 --emulator 500 --min-measure 0.08
 
 ``--together``: one calibration of ``--runs`` runs (seeds ``--seed``, ``--seed + 1``, ...; a mode search pooled over
 them, ``--mode-starts`` per part; ``--split geometry.base_radius_m 5``) and its between-run check, instead of one
@@ -18,6 +20,7 @@ reported result (fpm_sim.study.calibrate.problem).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
 import warnings
 
@@ -51,9 +54,16 @@ def main() -> None:
     p.add_argument("--split", nargs=2, metavar=("NAME", "N"), help="SamplerOptions.split: NAME's prior in N parts")
     p.add_argument("--model", default="inplane", choices=("inplane", "segments"), help="segments: the reported model")
     p.add_argument("--emulator", type=int, default=0, help="SamplerOptions.emulator (with --model segments)")
+    p.add_argument(
+        "--min-measure", type=float, help="statement (b)'s least singularity measure at a measured pose (a diagnostic)"
+    )
     a = p.parse_args()
     warnings.simplefilter("ignore")
     prob = problem(tuple(a.branch), a.model)
+    if a.min_measure is not None:
+        assert prob.priors.measured_poses_clear is not None, "the study's priors state (b)"
+        clear = dataclasses.replace(prob.priors.measured_poses_clear, min_measure=a.min_measure)
+        prob = dataclasses.replace(prob, priors=dataclasses.replace(prob.priors, measured_poses_clear=clear))
     t = time.time()
     if a.together:
         together(prob, a)
