@@ -25,8 +25,8 @@ thin-plate-spline radial-basis fit (:class:`scipy.interpolate.RBFInterpolator`, 
 (the discrepancy's left out: it does not change a frequency) and ``s_k z_k``. Each family's correction is smooth; the
 switch from one family to the other, which a single correction of the lowest frequency had to bend around, is the
 minimum's. Measured on the dominant class (docs/identification.md, "Two mode families"): one correction of the
-in-plane surrogate, 2-8 % held-out rms per pose; the two families, 0.4-1.3 % (the in-plane family's own 0.4-0.6 %, the
-out-of-plane family's 0.05 %), and, fitted to one run's stage-1 runs, within 0.1 nat of the segment model at another
+in-plane surrogate, 2-8 % held-out rms per pose; the two families, 0.4-0.6 % (each family's own about the same), and,
+fitted to one run's stage-1 runs, within 0.2 nat of the segment model at another
 run's narrow peak where the single correction was 9.6 nats low. ``s_k`` is chosen per fit from
 :data:`EMULATOR_FEATURE_SCALES` by the family's held-out error. The emulator is trained on segment-model runs at the
 first stage's particles (the prior times the study's statements: where the posterior can be), then refitted with runs
