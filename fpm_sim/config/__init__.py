@@ -23,6 +23,7 @@ from fpm_sim.config.schema import (
     default_config_text,
     load_config,
     parse_config,
+    rectangle_torsion_constant_m4,
     validate,
 )
 
@@ -46,6 +47,7 @@ __all__ = [
     "load_config",
     "parameter_value",
     "parse_config",
+    "rectangle_torsion_constant_m4",
     "validate",
     "with_parameter",
 ]

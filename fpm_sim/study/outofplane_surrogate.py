@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fpm_sim.config import LumpedMass, Manipulator
+from fpm_sim.config import LumpedMass, Manipulator, rectangle_torsion_constant_m4
 from fpm_sim.kinematics import BatchAssemblies, GeometryArrays, Pose, assemble_batch
 from fpm_sim.linalg3 import smallest_generalized_eigenvalue3
 
@@ -73,11 +73,9 @@ class OutofplaneArrays:
         platform_kg_m2: np.ndarray,
     ) -> OutofplaneArrays:  # fmt: skip
         """From ``(G,)`` material, section (in-plane ``thickness_m``, out-of-plane ``height_m``) and hardware values;
-        the torsion constant as :attr:`~fpm_sim.config.Section.torsion_constant_m4`'s (Roark's series)."""
+        the torsion constant :attr:`~fpm_sim.config.Section.torsion_constant_m4`'s."""
         t, h = thickness_m, height_m
-        big, small = np.maximum(t, h), np.minimum(t, h)
-        r = small / big
-        torsion = big * small**3 * (1.0 / 3.0 - 0.21 * r * (1.0 - r**4 / 12.0))
+        torsion = rectangle_torsion_constant_m4(np.maximum(t, h), np.minimum(t, h))
         return cls(
             geometry=geometry, bending_n_m2=young_pa * t * h**3 / 12.0, torsion_n_m2=shear_pa * torsion,
             line_kg_per_m=density_kg_m3 * t * h, polar_kg_m=density_kg_m3 * t * h * (t**2 + h**2) / 12.0,

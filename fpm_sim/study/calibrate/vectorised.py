@@ -184,7 +184,7 @@ def cheap_log_likelihood_batch(problem: CalibrationProblem, thetas: np.ndarray) 
 def inplane_frequencies_batch(problem: CalibrationProblem, thetas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``((n, n_obs), (n,))``: the in-plane surrogate's first frequencies (Hz) at the observations of every row
     (NaN off the support), and the cheap log-likelihood (``-inf`` off the support)."""
-    freq, cheap = _surrogates(problem, np.atleast_2d(thetas), (inplane_batch,))
+    freq, cheap = _surrogates(problem, np.atleast_2d(thetas), (_INPLANE,))
     return freq[:, 0], cheap
 
 
@@ -192,11 +192,17 @@ def family_frequencies_batch(problem: CalibrationProblem, thetas: np.ndarray) ->
     """``((n, 2, n_obs), (n,))``: the in-plane and the out-of-plane surrogate's lowest frequencies (Hz) at the
     observations of every row (NaN off the support), and the cheap log-likelihood (``-inf`` off the support): the
     two mode families the emulator corrects (:mod:`~fpm_sim.study.calibrate.emulator`)."""
-    return _surrogates(problem, np.atleast_2d(thetas), (inplane_batch, outofplane_batch))
+    return _surrogates(problem, np.atleast_2d(thetas), (_INPLANE, _OUTOFPLANE))
+
+
+_Surrogate = tuple[Callable[[_Described], InplaneArrays | OutofplaneArrays], Callable[..., np.ndarray]]
+"""A surrogate: its arrays of :func:`_described`'s descriptions, and its batched frequencies of those arrays."""
+_INPLANE: _Surrogate = (_inplane, inplane_batch)
+_OUTOFPLANE: _Surrogate = (_outofplane, outofplane_batch)
 
 
 def _surrogates(
-    problem: CalibrationProblem, thetas: np.ndarray, models: tuple[Callable[..., np.ndarray], ...]
+    problem: CalibrationProblem, thetas: np.ndarray, models: tuple[_Surrogate, ...]
 ) -> tuple[np.ndarray, np.ndarray]:
     """``((n, len(models), n_obs), (n,))`` each surrogate's frequencies at the observations, on the kinematics the
     support assembled at the distinct measured poses, and the cheap log-likelihood."""
@@ -205,9 +211,9 @@ def _surrogates(
     freq = np.full((len(thetas), len(models), len(problem.observations)), np.nan)
     if ok.any():
         xyz = problem.measured_pose_array
-        for k, model in enumerate(models):
-            arrays = (_inplane if model is inplane_batch else _outofplane)(d).rows(ok)
-            freq[ok, k] = model(arrays, xyz, assembled=measured.rows(ok))[:, problem.observation_pose_index]
+        for k, (arrays_of, model) in enumerate(models):
+            at = model(arrays_of(d).rows(ok), xyz, assembled=measured.rows(ok))
+            freq[ok, k] = at[:, problem.observation_pose_index]
     return freq, cheap
 
 

@@ -22,7 +22,7 @@ from fpm_sim.config import Manipulator
 from fpm_sim.errors import FpmSimError, FpmSimWarning
 from fpm_sim.kinematics import NearSingularityWarning, Pose, assemble_many
 from fpm_sim.model.options import ModelOptions
-from fpm_sim.study.identify.data import Observation
+from fpm_sim.study.identify.data import MODE_LABELS, Observation
 from fpm_sim.study.identify.parameters import GEOMETRY_GROUPS, ParameterSet
 from fpm_sim.study.rigs import subsystem_frequencies
 from fpm_sim.study.tables import SubsystemTest
@@ -400,13 +400,12 @@ def family_frequencies(
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", NearSingularityWarning)
         pf = pose_frequencies(config, poses, n_modes=FAMILY_MODES, options=options or fast_options())
-    for j, ip in enumerate(index):
-        f, frac = np.asarray(pf.frequencies_hz[ip], float), np.asarray(pf.in_plane[ip], float)
-        usable = np.isfinite(f) & np.isfinite(frac)
-        for row, kind in enumerate((frac > IN_PLANE_THRESHOLD, frac <= IN_PLANE_THRESHOLD)):
-            hit = np.flatnonzero(usable & kind)
-            if hit.size:
-                out[row, j] = f[hit[0]]
+    # each observation's f1 read as each kind's (labelled matching), paired as predict_observations pairs
+    kinds = [dataclasses.replace(o, mode=1, label=label) for label in MODE_LABELS for o in observations]
+    which = pair_modes(kinds, list(index) * len(MODE_LABELS), list(pf.frequencies_hz), list(pf.in_plane))
+    for i, k in enumerate(which):
+        if k is not None:
+            out[divmod(i, len(observations))] = pf.frequencies_hz[index[i % len(observations)]][k]
     return out
 
 
