@@ -7,6 +7,8 @@ disagree"): the study's calibration problem on the in-plane surrogate, one elbow
         --particles 1000 --cheap-particles 2000
     python studies/calibration_runs_surrogate.py --model segments --branch -1 -1 1 --together --sampler smc \
         --workers 2 --seed 0 --particles 1000 --cheap-particles 2000 --emulator 500 --min-measure 0.08
+    python studies/calibration_runs_surrogate.py --model segments --branch -1 -1 1 --together --sampler smc \
+        --workers 2 --seed 0 --particles 1000 --cheap-particles 2000 --emulator 500 --as-built 1 0.01
 
 ``--together``: one calibration of ``--runs`` runs (seeds ``--seed``, ``--seed + 1``, ...; a mode search pooled over
 them, ``--mode-starts`` per part; ``--split geometry.base_radius_m 5``) and its between-run check, instead of one
@@ -30,10 +32,12 @@ from fpm_sim.study.calibrate import CalibrationProblem, SamplerOptions, run_cali
 from fpm_sim.study.calibrate.problem import study_problem
 
 
-def problem(branch: tuple[int, int, int], model: str = "inplane") -> CalibrationProblem:
+def problem(
+    branch: tuple[int, int, int], model: str = "inplane", as_built: tuple[float, float] | None = None
+) -> CalibrationProblem:
     """The study's calibration (its data, priors and statements) on the surrogate (or ``model``), the elbow branches
-    fixed."""
-    return study_problem(model=model, branch=branch)
+    fixed (``as_built``: :func:`~fpm_sim.study.calibrate.problem.study_problem`'s)."""
+    return study_problem(model=model, branch=branch, as_built=as_built)
 
 
 def main() -> None:
@@ -51,15 +55,22 @@ def main() -> None:
     p.add_argument("--together", action="store_true")
     p.add_argument("--ess-fraction", type=float, default=0.5)
     p.add_argument("--moves", type=float, default=3.0)
+    p.add_argument("--final-moves", type=float, default=0.0)
+    p.add_argument("--jumps", type=float, default=0.0)
     p.add_argument("--split", nargs=2, metavar=("NAME", "N"), help="SamplerOptions.split: NAME's prior in N parts")
     p.add_argument("--model", default="inplane", choices=("inplane", "segments"), help="segments: the reported model")
     p.add_argument("--emulator", type=int, default=0, help="SamplerOptions.emulator (with --model segments)")
     p.add_argument(
         "--min-measure", type=float, help="statement (b)'s least singularity measure at a measured pose (a diagnostic)"
     )
+    p.add_argument(
+        "--as-built", type=float, nargs=2, metavar=("ANGLE_SD_DEG", "LENGTH_SD_REL"),
+        help="free the as-built group too, with normal priors of these sds (e.g. 1 0.01)",
+    )  # fmt: skip
+    p.add_argument("--save", help="with --together: an .npz of the merged draws and each run's quantiles")
     a = p.parse_args()
     warnings.simplefilter("ignore")
-    prob = problem(tuple(a.branch), a.model)
+    prob = problem(tuple(a.branch), a.model, None if a.as_built is None else (a.as_built[0], a.as_built[1]))
     if a.min_measure is not None:
         assert prob.priors.measured_poses_clear is not None, "the study's priors state (b)"
         clear = dataclasses.replace(prob.priors.measured_poses_clear, min_measure=a.min_measure)
@@ -87,11 +98,15 @@ def together(prob: CalibrationProblem, a: argparse.Namespace) -> None:
     opts = SamplerOptions(
         sampler="smc", particles=a.particles, cheap_particles=a.cheap_particles, runs=a.runs, seed=a.seed,
         mode_starts=a.mode_starts, workers=a.workers, ess_fraction=a.ess_fraction, moves=a.moves, emulator=a.emulator,
+        final_moves=a.final_moves, jumps=a.jumps,
         split=None if a.split is None else (a.split[0], int(a.split[1])),
     )  # fmt: skip
     cal = run_calibration(prob, opts, progress=True, print_func=print)
     check = cal.runs_check
     assert check is not None
+    print(check.table())
+    if a.save:
+        np.savez(a.save, draws=cal.draws, names=np.array(prob.names), quantiles=check.quantiles, sd=check.merged_sd)
     base = prob.names.index("geometry.base_radius_m")
     for i, s in enumerate(check.seeds):
         print(f"seed {s}: ln Z {check.log_evidence[i]:.2f} +- {check.log_evidence_err[i]:.2f}, base radius 5/50/95 % "

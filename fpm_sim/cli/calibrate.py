@@ -64,6 +64,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         emulator=args.emulator,
         ess_fraction=args.ess_fraction,
         moves=args.moves,
+        final_moves=args.final_moves,
+        jumps=args.jumps,
     )
     opts.check()
     out.mkdir(parents=True, exist_ok=True)
@@ -296,13 +298,28 @@ def _add_sampler_args(p: argparse.ArgumentParser) -> None:
         type=float,
         default=0.5,
         help="smc: each tempering step keeps this fraction of the particles as effective sample size (default 0.5; "
-        "0.9 with --moves 10: runs that agree on the study, at about 4 times the time: docs/identification.md)",
+        "0.9 with --moves 10: runs that agree better on the study, at about 4 times the time: "
+        "docs/identification.md)",
     )
     p.add_argument(
         "--moves",
         type=float,
         default=3.0,
         help="smc: accepted Metropolis moves per particle after each tempering step of the data stage (default 3)",
+    )
+    p.add_argument(
+        "--jumps",
+        type=float,
+        default=0.0,
+        help="smc: the fraction of the data stage's sweeps whose proposals are draws of a Gaussian mixture fitted to "
+        "the particles, so that they move between modes in proportion to the posterior's mass (default 0: none)",
+    )
+    p.add_argument(
+        "--final-moves",
+        type=float,
+        default=0.0,
+        help="smc: accepted Metropolis moves per particle on the posterior after the data stage's last tempering "
+        "step, letting the particles travel along a ridge (default 0: none)",
     )
     p.add_argument(
         "--live-points", type=int, default=250, help="dynesty: nested sampling live points of each run (default 250)"

@@ -167,6 +167,8 @@ OPTION_NAMES: dict[str, tuple[str, float]] = {
     "emulator": ("--emulator", 1.0),
     "ess_fraction": ("--ess-fraction", 1.0),
     "calibrate:moves": ("--moves", 1.0),
+    "final_moves": ("--final-moves", 1.0),
+    "jumps": ("--jumps", 1.0),
     # time domain (fpm_sim.sim.stepping, fpm_sim.sim.trajectory)
     "integrator": ("--integrator", 1.0),
     "step_band_hz": ("--step-band-hz", 1.0),

@@ -17,7 +17,7 @@ from fpm_sim.study.calibrate.vectorised import (
     supports,
 )
 from fpm_sim.study.identify import parameter_set
-from fpm_sim.study.identify.parameters import GROUPS, apply_parameters, apply_parameters_batch
+from fpm_sim.study.identify.parameters import GROUPS, ParameterError, apply_parameters, apply_parameters_batch
 from fpm_sim.study.inplane_surrogate import inplane_first_frequencies
 from fpm_sim.study.outofplane_surrogate import outofplane_first_frequencies
 
@@ -27,7 +27,7 @@ def _field(cfg, spec) -> np.ndarray:
     owner = cfg
     for name in owners:
         owner = getattr(owner, name)
-    if spec.kind in ("chain_mean", "chain_item"):
+    if spec.kind in ("chain_mean", "chain_item", "chain_scale"):
         return np.asarray(getattr(owner, f"{leaf[:-2]}_per_chain"), float)
     if spec.kind == "lump_mass":
         lump = getattr(owner, leaf)
@@ -35,12 +35,12 @@ def _field(cfg, spec) -> np.ndarray:
     return np.asarray(getattr(owner, leaf), float)
 
 
-@pytest.mark.parametrize("group", [g for g in GROUPS if g != "rig"])
-def test_batch_parameters_are_the_one_at_a_time_fields(group):
+@pytest.mark.parametrize("groups", [[g] for g in GROUPS if g != "rig"] + [["as-built", "geometry", "hardware"]])
+def test_batch_parameters_are_the_one_at_a_time_fields(groups):
     start = default_config()
     # unequal chains: chain_mean shifts each chain, chain_item keeps the others
     start = start.replace(geometry=dataclasses.replace(start.geometry, proximal_length_m=(0.25, 0.26, 0.24)))
-    specs = parameter_set(start, [group]).parameters
+    specs = parameter_set(start, groups).parameters
     rng = np.random.default_rng(0)
     lo, hi = np.array([s.lower for s in specs]), np.array([s.upper for s in specs])
     x = lo + (hi - lo) * rng.random((20, len(specs)))
@@ -81,8 +81,9 @@ def test_the_segment_model_has_no_vectorised_likelihood_but_its_cheap_part():
     np.testing.assert_allclose(batch[np.isfinite(one)], one[np.isfinite(one)], rtol=1e-10, atol=1e-9)
 
 
-def test_the_two_families_surrogates_are_each_descriptions_row_by_row():
-    prob = study_problem(model="segments")
+@pytest.mark.parametrize("as_built", [None, (1.0, 0.01)])
+def test_the_two_families_surrogates_are_each_descriptions_row_by_row(as_built):
+    prob = study_problem(model="segments", as_built=as_built)
     u = np.random.default_rng(4).random((200, prob.ndim))
     thetas = prob.prior_transform(u)
     f, cheap = family_frequencies_batch(prob, thetas)
@@ -95,6 +96,25 @@ def test_the_two_families_surrogates_are_each_descriptions_row_by_row():
         one = np.stack([inplane_first_frequencies(cfg, poses), outofplane_first_frequencies(cfg, poses)])
         # the same formulas on the same kinematics, the section's and hardware's fields built another way
         np.testing.assert_allclose(f[i], one, rtol=1e-10)
+
+
+def test_as_built_deviations_come_after_the_layout_whatever_the_order_given():
+    start = default_config()
+    ps = parameter_set(start, ["as-built", "geometry"])
+    assert [s.group for s in ps.parameters] == ["geometry"] * 6 + ["as-built"] * 12
+    x = np.array([s.start for s in ps.parameters])
+    x[ps.names.index("geometry.base_rotation_deg")] = 10.0
+    x[ps.names.index("geometry.base_angle_dev_deg[1]")] = 1.5
+    x[ps.names.index("geometry.proximal_length_m")] = 0.3
+    x[ps.names.index("geometry.proximal_length_dev_rel[2]")] = 0.02
+    g, g0 = ps.apply(x).geometry, start.geometry
+    # the deviation adds to the layout's rotation rather than replacing it, and scales the mean length
+    np.testing.assert_allclose(
+        np.degrees(np.subtract(g.base_angles_rad, g0.base_angles_rad)), [10.0, 11.5, 10.0], rtol=0, atol=1e-12
+    )
+    np.testing.assert_allclose(g.proximal_length_per_chain, [0.3, 0.3, 0.306], rtol=1e-14)
+    with pytest.raises(ParameterError, match="overlap"):
+        parameter_set(start, ["geometry-per-chain", "as-built"])
 
 
 @pytest.mark.parametrize(("klass", "part"), [(0, None), (5, (3, 2, 1)), (7, (0, 4, 0))])

@@ -469,11 +469,16 @@ class CalibrationProblem(FrequencyLikelihood):
         return ll + self.statements_log_likelihood(cfg)
 
 
-def study_problem(*, model: str = "segments", branch: tuple[int, int, int] | None = None) -> CalibrationProblem:
+def study_problem(
+    *, model: str = "segments", branch: tuple[int, int, int] | None = None,
+    as_built: tuple[float, float] | None = None,
+) -> CalibrationProblem:  # fmt: skip
     """The study's calibration as docs/identification.md runs it: the embedded default, the study's measured first
     frequencies (``measured_table4_train.csv``, reading x+), the free groups :data:`STUDY_GROUPS` and the shipped
     priors and statements (``study_priors.toml``). ``branch``: the elbow branches fixed to one class (their prior
-    left out) instead of sampled; ``model``: :attr:`CalibrationProblem.model`."""
+    left out) instead of sampled; ``model``: :attr:`CalibrationProblem.model`; ``as_built``: ``(angle sd in deg,
+    relative length sd)``, the ``as-built`` group freed too, with normal priors of those sds
+    (:func:`as_built_priors`)."""
     import re
     from importlib.resources import files
 
@@ -489,6 +494,27 @@ def study_problem(*, model: str = "segments", branch: tuple[int, int, int] | Non
         start = start.replace(geometry=dataclasses.replace(start.geometry, elbow_branch=branch))
         text = re.sub(r'\[parameters\."geometry\.elbow_branch"\][^\[]*', "", text)
     measured = read_measured_csv(str(data.joinpath("measured_table4_train.csv")), reading=parse_reading("x+"))
-    names = parameter_set(start, list(STUDY_GROUPS)).names
+    groups = STUDY_GROUPS + (("as-built",) if as_built is not None else ())
+    names = parameter_set(start, list(groups)).names
+    if as_built is not None:
+        text = text.replace("[likelihood]", as_built_priors(*as_built) + "\n[likelihood]", 1)
     priors = read_priors("study_priors.toml", names, text=text)
-    return CalibrationProblem(start, STUDY_GROUPS, priors, tuple(measured.observations), (), model=model)
+    return CalibrationProblem(start, groups, priors, tuple(measured.observations), (), model=model)
+
+
+def as_built_priors(angle_sd_deg: float, length_sd_rel: float) -> str:
+    """Priors TOML of the ``as-built`` group's 12 parameters: each chain's joint angles normal with sd
+    ``angle_sd_deg``, its link lengths' relative deviations normal with sd ``length_sd_rel``, all of mean 0."""
+    out = []
+    for i in range(3):
+        for name, sd in (
+            ("base_angle_dev_deg", angle_sd_deg),
+            ("platform_angle_dev_deg", angle_sd_deg),
+            ("proximal_length_dev_rel", length_sd_rel),
+            ("distal_length_dev_rel", length_sd_rel),
+        ):
+            out.append(
+                f'[parameters."geometry.{name}[{i}]"]\ndist = "normal"\nmean = 0.0\nsd = {sd!r}\nreason = "assumed: '
+                'a bench-top machine built with its joint circles and links known to about this much"\n'
+            )  # fmt: skip
+    return "\n".join(out)

@@ -200,6 +200,14 @@ class SamplerOptions:
     """SMC: each tempering step keeps this fraction of the particles as effective sample size."""
     moves: float = 3.0
     """SMC: accepted Metropolis moves per particle (on average) after each tempering step of the data stage."""
+    jumps: float = 0.0
+    """SMC: the fraction of the data stage's sweeps that propose independent draws of the population's kernel
+    density estimate (:attr:`~fpm_sim.study.calibrate.smc.SmcSettings.jumps`): particles move between modes and along
+    a ridge in proportion to the posterior's mass there. 0: none (the default)."""
+    final_moves: float = 0.0
+    """SMC: accepted Metropolis moves per particle (on average) at the data stage's end, on the posterior
+    (:attr:`~fpm_sim.study.calibrate.smc.SmcSettings.final_moves`): the particles travel along the ridge the
+    tempering covered unevenly. 0: none (the default)."""
     cheap_moves: float = 10.0
     """SMC: the same in the first stage (cheap calls; its thin region needs the moves to be represented alike by
     independent runs: at 3 its particles' shares of the region's parts differed between runs by 0.1-0.13)."""
@@ -274,6 +282,10 @@ class SamplerOptions:
         for name in ("moves", "cheap_moves"):
             if not getattr(self, name) > 0:
                 raise CalibrationError("must be > 0", parameter=name, value=getattr(self, name))
+        if not self.final_moves >= 0:
+            raise CalibrationError("must be >= 0", parameter="final_moves", value=self.final_moves)
+        if not 0 <= self.jumps <= 1:
+            raise CalibrationError("must be between 0 and 1", parameter="jumps", value=self.jumps)
         if self.mode_starts < 0:
             raise CalibrationError("must be >= 0", parameter="mode_starts", value=self.mode_starts)
         if self.emulator and self.emulator < 50:
@@ -296,7 +308,9 @@ class SamplerOptions:
     def smc_settings(self) -> tuple[SmcSettings, SmcSettings]:
         """The two stages' :class:`~fpm_sim.study.calibrate.smc.SmcSettings`."""
         one = SmcSettings(self.cheap_particles, self.ess_fraction, self.cheap_moves, max_sweeps=200)
-        return one, SmcSettings(self.particles, self.ess_fraction, self.moves)
+        return one, SmcSettings(
+            self.particles, self.ess_fraction, self.moves, final_moves=self.final_moves, jumps=self.jumps
+        )
 
 
 @dataclass(frozen=True)
@@ -540,6 +554,8 @@ class Calibration:
                     "cheap_particles",
                     "ess_fraction",
                     "moves",
+                    "final_moves",
+                    "jumps",
                     "emulator",
                     "live_points",
                     "dlogz",
@@ -717,6 +733,14 @@ def _smc_full(u: np.ndarray, klass: int | None, pool: Any, part: Part = None) ->
     return cheap, np.where(np.isfinite(data), data, -math.inf)
 
 
+def _emulator_n_free(problem: Any) -> int:
+    """How many leading free parameters the emulator's correction reads: all but the ``as-built`` group's (last in
+    the parameter set; their effect reaches the correction through the surrogates' frequencies, which are computed
+    on the as-built geometry, and leaving 12 near-inert coordinates out keeps the fit's distances meaningful)."""
+    specs = getattr(getattr(problem, "parameters", None), "parameters", ())
+    return len(problem.priors.parameters) - sum(1 for s in specs if s.group == "as-built")
+
+
 class _SegmentEmulator:
     """The emulator of one run (:mod:`~fpm_sim.study.calibrate.emulator`) on class ``klass``'s part: ``n``
     segment-model runs (on ``pool``'s workers when given) at stage 1's particles train it (:meth:`train`), ``n`` more
@@ -752,7 +776,7 @@ class _SegmentEmulator:
         p, klass, part = self.problem, self.klass, self.part
         f_sur, _ = family_frequencies_batch(p, _class_thetas(u, klass, part))
         emu = self.fitted = train_emulator(
-            u, f_seg[keep], f_sur, n_free=len(p.priors.parameters), rng=self.rng, periodic=_periodic(part)
+            u, f_seg[keep], f_sur, n_free=_emulator_n_free(p), rng=self.rng, periodic=_periodic(part)
         )
 
         def evaluate(uq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

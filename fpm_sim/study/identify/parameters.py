@@ -19,6 +19,13 @@ Groups (:data:`GROUPS`):
 ``geometry-per-chain``
     Per chain: base radius, motor angle, proximal length, distal length, platform radius,
     platform-joint angle (18 parameters). Bounds: lengths 0.8-1.25 x the start, angles +-15 deg.
+``as-built``
+    Each chain's deviations from the other groups' symmetric layout, as built: its motor's and its platform
+    joint's angle (deg, added to the layout's) and its proximal and distal link's length (relative, the length
+    times ``1 + v``); 12 parameters, applied after every other group's whatever the order given. Bounds +-5 deg
+    and +-5 %. For a calibration whose priors say how well the machine was built (the machine's joint positions
+    and lengths known to about 1 deg and 1 %, not to the 0.1 deg a near-singular pose's frequency needs;
+    docs/identification.md, "As-built deviations as unknowns").
 ``hubs``
     The rigid length at each link end, ``geometry.hub_length_m`` (m), 0 .. 0.3 x the shortest link.
 ``hardware``
@@ -72,6 +79,7 @@ __all__ = [
 GROUPS = (
     "geometry",
     "geometry-per-chain",
+    "as-built",
     "hubs",
     "hardware",
     "section",
@@ -89,8 +97,10 @@ LOG_STIFF_BOUNDS = (2.0, 7.0)
 OFFSET_BOUNDS_M = (0.0, 0.06)
 """Bounds of the ``offsets`` group's layer heights (m)."""
 
-Kind = Literal["value", "log10", "chain_mean", "chain_item", "angle_deg", "lump_mass"]
-KINDS: tuple[Kind, ...] = ("value", "log10", "chain_mean", "chain_item", "angle_deg", "lump_mass")
+Kind = Literal["value", "log10", "chain_mean", "chain_item", "chain_scale", "angle_deg", "angle_add_deg", "lump_mass"]
+KINDS: tuple[Kind, ...] = (
+    "value", "log10", "chain_mean", "chain_item", "chain_scale", "angle_deg", "angle_add_deg", "lump_mass",
+)  # fmt: skip
 """How a :class:`ParameterSpec` turns its scalar ``v`` into the value of the field at its ``path``:
 
 ``value``
@@ -102,8 +112,12 @@ KINDS: tuple[Kind, ...] = ("value", "log10", "chain_mean", "chain_item", "angle_
     chain's start value shifted by ``v - mean(reference)``.
 ``chain_item``
     Chain ``index`` of a per-chain length set to ``v`` (the other chains as the description has them).
+``chain_scale``
+    Chain ``index`` of a per-chain length times ``1 + v`` (the length as the specs before it left it).
 ``angle_deg``
     A per-chain angle (rad): chains ``chains`` set to ``reference[i] + radians(v)``, the others kept.
+``angle_add_deg``
+    A per-chain angle (rad): ``radians(v)`` added to chains ``chains`` (the angles as the specs before it left them).
 ``lump_mass``
     A :class:`LumpedMass` of mass ``v``, its inertia scaled with the mass (a 15 mm radius of gyration where
     the description's mass is 0).
@@ -180,15 +194,15 @@ def _field_value(spec: ParameterSpec, current: Any, owner: Any, leaf: str, v: fl
     if spec.kind == "chain_mean":
         ref = spec.reference
         return v if len(set(ref)) == 1 else tuple(x + (v - _chain_mean(ref)) for x in ref)
-    if spec.kind == "chain_item":
+    if spec.kind in ("chain_item", "chain_scale"):
         assert spec.index is not None
         vals = list(getattr(owner, f"{leaf[:-2]}_per_chain"))
-        vals[spec.index] = v
+        vals[spec.index] = v if spec.kind == "chain_item" else vals[spec.index] * (1.0 + v)
         return tuple(vals)
-    if spec.kind == "angle_deg":
+    if spec.kind in ("angle_deg", "angle_add_deg"):
         cur = list(current)
         for i in spec.chains:
-            cur[i] = spec.reference[i] + math.radians(v)
+            cur[i] = (spec.reference[i] if spec.kind == "angle_deg" else cur[i]) + math.radians(v)
         return tuple(cur)
     if spec.kind == "lump_mass":
         return _scaled_lump(current, v)
@@ -257,7 +271,7 @@ def _batch_start(config: Manipulator, spec: ParameterSpec, n: int) -> np.ndarray
     owner: Any = config
     for name in owners:
         owner = getattr(owner, name)
-    if spec.kind in ("chain_mean", "chain_item"):
+    if spec.kind in ("chain_mean", "chain_item", "chain_scale"):
         value: Any = getattr(owner, f"{leaf[:-2]}_per_chain")
     elif spec.kind == "lump_mass":
         lump = getattr(owner, leaf)
@@ -283,13 +297,13 @@ def _batch_value(spec: ParameterSpec, current: np.ndarray, v: np.ndarray) -> np.
             return np.repeat(v[:, None], 3, axis=1)
         return np.asarray(ref, float)[None] + (v - _chain_mean(ref))[:, None]
     new = current.copy()
-    if spec.kind == "chain_item":
+    if spec.kind in ("chain_item", "chain_scale"):
         assert spec.index is not None
-        new[:, spec.index] = v
+        new[:, spec.index] = v if spec.kind == "chain_item" else current[:, spec.index] * (1.0 + v)
         return new
-    if spec.kind == "angle_deg":
+    if spec.kind in ("angle_deg", "angle_add_deg"):
         for i in spec.chains:
-            new[:, i] = spec.reference[i] + np.radians(v)
+            new[:, i] = (spec.reference[i] if spec.kind == "angle_deg" else current[:, i]) + np.radians(v)
         return new
     if spec.kind == "lump_mass":
         m0 = current[:, 0]
@@ -352,6 +366,30 @@ def _geometry_per_chain(cfg: Manipulator) -> list[ParameterSpec]:
                     reference=tuple(angles),
                 )
             )
+    return out
+
+
+AS_BUILT_BOUNDS = (5.0, 0.05)
+"""The ``as-built`` group's bounds: +-5 deg, +-5 %."""
+
+
+def _as_built(cfg: Manipulator) -> list[ParameterSpec]:
+    """Per chain: its motor's and platform joint's angle deviation (deg), its links' relative length deviations."""
+    deg, rel = AS_BUILT_BOUNDS
+    out = []
+    for i in range(3):
+        for name in ("base", "platform"):
+            out.append(
+                ParameterSpec(
+                    f"geometry.{name}_angle_dev_deg[{i}]", f"geometry.{name}_angles_rad", "angle_add_deg", 0.0,
+                    -deg, deg, "as-built", chains=(i,),
+                )
+            )  # fmt: skip
+        for f in ("proximal_length", "distal_length"):
+            out.append(
+                ParameterSpec(f"geometry.{f}_dev_rel[{i}]", f"geometry.{f}_m", "chain_scale", 0.0, -rel, rel,
+                              "as-built", index=i)
+            )  # fmt: skip
     return out
 
 
@@ -450,6 +488,7 @@ def _rig(cfg: Manipulator) -> list[ParameterSpec]:
 _BUILDERS: dict[str, Callable[[Manipulator], list[ParameterSpec]]] = {
     "geometry": _geometry,
     "geometry-per-chain": _geometry_per_chain,
+    "as-built": _as_built,
     "hubs": _hubs,
     "hardware": _hardware,
     "section": _section,
@@ -528,7 +567,8 @@ def parameter_set(start: Manipulator, groups: Sequence[str]) -> ParameterSet:
                 "unknown parameter group", parameter="free", value=g, hint=f"choose from {', '.join(GROUPS)}"
             )
         params += _BUILDERS[g](start)
-    for a, b in (GEOMETRY_GROUPS, ("section", "section-height")):
+    params = [p for p in params if p.group != "as-built"] + [p for p in params if p.group == "as-built"]
+    for a, b in (GEOMETRY_GROUPS, ("section", "section-height"), ("geometry-per-chain", "as-built")):
         if a in groups and b in groups:
             raise ParameterError(f"{a} and {b} overlap", parameter="free", hint="choose one of them")
     if not params:
