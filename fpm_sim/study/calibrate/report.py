@@ -75,7 +75,7 @@ def _sampler_line(cal: Calibration) -> str:
             f"- two-stage tempered SMC ({o.cheap_particles} particles for the prior times the statements, then "
             f"{o.particles} for the data, effective sample size kept at {o.ess_fraction:g} per step, "
             f"{getattr(o, 'cheap_moves', o.moves):g} / {o.moves:g} accepted moves per particle per step"
-            f"{_final_moves(o)}; {runs}): "
+            f"{_extra_moves(o)}; {runs}): "
             f"{cal.n_iterations} tempering steps, "
             f"{cal.n_calls} likelihood calls, {cal.seconds:.0f} s"
         )
@@ -318,7 +318,7 @@ def write_report(cal: Calibration, out: str | Path, *, command: str, data_note: 
         tmp.write_text(render_report(cal, command=command, data_note=data_note))
 
 
-def _final_moves(o: Any) -> str:
+def _extra_moves(o: Any) -> str:
     """The data stage's jumps and its moves on the posterior after its last step, in words (``""``: neither)."""
     m, j = getattr(o, "final_moves", 0.0), getattr(o, "jumps", 0.0)
     out = f", a fraction {j:g} of the sweeps jumps from a mixture fitted to the particles" if j else ""

@@ -201,9 +201,9 @@ class SamplerOptions:
     moves: float = 3.0
     """SMC: accepted Metropolis moves per particle (on average) after each tempering step of the data stage."""
     jumps: float = 0.0
-    """SMC: the fraction of the data stage's sweeps that propose independent draws of the population's kernel
-    density estimate (:attr:`~fpm_sim.study.calibrate.smc.SmcSettings.jumps`): particles move between modes and along
-    a ridge in proportion to the posterior's mass there. 0: none (the default)."""
+    """SMC: the fraction of the data stage's sweeps that propose independent draws of a Gaussian mixture fitted to
+    the particles (:attr:`~fpm_sim.study.calibrate.smc.SmcSettings.jumps`): particles move between modes and along a
+    ridge in proportion to the posterior's mass there. 0: none (the default)."""
     final_moves: float = 0.0
     """SMC: accepted Metropolis moves per particle (on average) at the data stage's end, on the posterior
     (:attr:`~fpm_sim.study.calibrate.smc.SmcSettings.final_moves`): the particles travel along the ridge the

@@ -97,13 +97,16 @@ class SmcRun:
 
 @dataclass(frozen=True)
 class ModeProposal:
-    """Gaussians around the modes a search found, on the unit cube, equally weighted: the part of the data stage's
-    starting population that is drawn near them (:func:`two_stage`, ``modes``)."""
+    """A mixture of Gaussians on the unit cube: around the modes a search found, equally weighted, the part of the
+    data stage's starting population that is drawn near them (:func:`two_stage`, ``modes``); or fitted to a
+    population, weighted by its clusters' sizes, a jump's proposal (:func:`_population_mixture`)."""
 
     means: np.ndarray
     """``(k, d)`` the modes."""
     covs: np.ndarray
     """``(k, d, d)`` each Gaussian's covariance."""
+    log_weights: np.ndarray | None = None
+    """``(k,)`` the Gaussians' normalised log weights; ``None``: equal."""
 
     @classmethod
     def around(cls, populations: list[np.ndarray], *, floor: float = 0.005) -> ModeProposal:
@@ -137,7 +140,10 @@ class ModeProposal:
 
     def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
         """``(n, d)`` draws (the mixture's; those outside the cube are kept: the stage's density is 0 there)."""
-        k = rng.integers(0, len(self.means), n)
+        if self.log_weights is None:
+            k = rng.integers(0, len(self.means), n)
+        else:
+            k = rng.choice(len(self.means), size=n, p=np.exp(self.log_weights))
         chol = self._chol
         z = rng.standard_normal((n, self.means.shape[1]))
         out: np.ndarray = self.means[k] + np.einsum("nij,nj->ni", chol[k], z)
@@ -147,12 +153,14 @@ class ModeProposal:
         """``(n,)`` the mixture's log-density at the rows of ``u`` (``block`` rows at a time: ``n x k x d`` work
         arrays stay small with many Gaussians)."""
         inv, norm = self._whiten
+        if self.log_weights is not None:
+            norm = norm + self.log_weights
         out = np.empty(len(u))
         for i in range(0, len(u), block):
             diff = u[i : i + block, None, :] - self.means[None]  # (b, k, d)
             z = np.einsum("kij,bkj->bki", inv, diff)
             out[i : i + block] = logsumexp(-0.5 * np.sum(z**2, axis=-1) + norm[None], axis=1)
-        return out - math.log(len(self.means))
+        return out if self.log_weights is not None else out - math.log(len(self.means))
 
 
 def _fold(u: np.ndarray, periodic: tuple[int, ...] = ()) -> np.ndarray:
@@ -218,15 +226,16 @@ def _sweep(
 
 def metropolis(
     u: np.ndarray, la: np.ndarray, lb: np.ndarray, beta: float, prop: np.ndarray, evaluate: Evaluate,
-    rng: np.random.Generator,
+    rng: np.random.Generator, *, log_q_ratio: np.ndarray | float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
-    """Each row's symmetric proposal ``prop`` accepted or not against ``pi L_a L_b^beta``: ``(u, log L_a, log L_b,
-    accepted)``."""
+    """Each row's proposal ``prop`` accepted or not against ``pi L_a L_b^beta``: ``(u, log L_a, log L_b,
+    accepted)``. ``log_q_ratio``: ``log q(u) - log q(prop)`` of an asymmetric proposal (Metropolis-Hastings); 0 for a
+    symmetric one."""
     pa, pb = evaluate(prop)
     with np.errstate(invalid="ignore"):
         cur = la + beta * lb if beta > 0 else la
         new = pa + beta * pb if beta > 0 else pa
-        log_r = np.where(np.isfinite(new), new - cur, -np.inf)
+        log_r = np.where(np.isfinite(new), new - cur + log_q_ratio, -np.inf)
     acc = np.log(rng.random(len(u))) < log_r
     u, la, lb = u.copy(), la.copy(), lb.copy()
     u[acc], la[acc], lb[acc] = prop[acc], pa[acc], pb[acc]
@@ -239,21 +248,18 @@ def _jump(
     """One independence Metropolis-Hastings sweep (:attr:`SmcSettings.jumps`): each particle proposes a draw of a
     Gaussian mixture ``q`` fitted to the population at the sweep's start (:func:`_population_mixture`, fixed during
     it) and accepts it with ``min(1, pi(u') q(u) / (pi(u) q(u')))``. A draw outside the cube has target 0 and is
-    refused."""
-    sample, log_q = _population_mixture(u, rng)
-    prop = sample(len(u), rng)
-    inside = np.all((prop >= 0.0) & (prop <= 1.0), axis=1)
-    pa, pb = np.full(len(u), -math.inf), np.full(len(u), -math.inf)
-    if inside.any():
-        pa[inside], pb[inside] = evaluate(prop[inside])
-    with np.errstate(invalid="ignore"):
-        cur = la + beta * lb if beta > 0 else la
-        new = pa + beta * pb if beta > 0 else pa
-        log_r = np.where(np.isfinite(new), new - cur + log_q(u) - log_q(prop), -np.inf)
-    acc = np.log(rng.random(len(u))) < log_r
-    u, la, lb = u.copy(), la.copy(), lb.copy()
-    u[acc], la[acc], lb[acc] = prop[acc], pa[acc], pb[acc]
-    return u, la, lb, acc
+    refused without a call."""
+    q = _population_mixture(u, rng)
+    prop = q.sample(len(u), rng)
+
+    def inside_only(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        inside = np.all((x >= 0.0) & (x <= 1.0), axis=1)
+        pa, pb = np.full(len(x), -math.inf), np.full(len(x), -math.inf)
+        if inside.any():
+            pa[inside], pb[inside] = evaluate(x[inside])
+        return pa, pb
+
+    return metropolis(u, la, lb, beta, prop, inside_only, rng, log_q_ratio=q.log_density(u) - q.log_density(prop))
 
 
 JUMP_COMPONENTS = 8
@@ -263,16 +269,13 @@ JUMP_INFLATE = 1.5
 proposal covers the target's tails, where a ratio ``q(u) / q(u')`` of a too-narrow proposal would trap particles."""
 
 
-def _population_mixture(
-    pop: np.ndarray, rng: np.random.Generator, *, floor: float = 0.005
-) -> tuple[Callable[[int, np.random.Generator], np.ndarray], Callable[[np.ndarray], np.ndarray]]:
-    """``(sample(n, rng), log_density(u))`` of a Gaussian mixture fitted to the population ``pop``: k-means clusters
-    (at most :data:`JUMP_COMPONENTS`, each of at least ``4 d`` particles) weighted by their sizes, each Gaussian its
-    cluster's mean and covariance times :data:`JUMP_INFLATE` plus ``floor`` squared per coordinate. A few
-    parameters estimated from the whole population, so the proposal hardly depends on any one particle (a kernel
-    density estimate centred on the particles themselves does: its own kernel makes ``q(u)`` at a particle many
-    times the density elsewhere in 20 dimensions, and the sweep then accepts moves the target refuses, which biased
-    the first stage's ln Z of the study by -0.37; measured)."""
+def _population_mixture(pop: np.ndarray, rng: np.random.Generator, *, floor: float = 0.005) -> ModeProposal:
+    """A Gaussian mixture fitted to the population ``pop``: k-means clusters (at most :data:`JUMP_COMPONENTS`, each
+    of at least ``2 d`` particles) weighted by their sizes, each Gaussian its cluster's mean and covariance times
+    :data:`JUMP_INFLATE` plus ``floor`` squared per coordinate. A few parameters estimated from the whole population,
+    so the proposal hardly depends on any one particle (a kernel density estimate centred on the particles themselves
+    does: its own kernel makes ``q(u)`` at a particle many times the density elsewhere in 20 dimensions, and the sweep
+    then accepts moves the target refuses, which biased the first stage's ln Z of the study by -0.37; measured)."""
     from scipy.cluster.vq import kmeans2
 
     n, d = pop.shape
@@ -281,24 +284,11 @@ def _population_mixture(
     labels = kmeans2(pop / scale, k, seed=rng, minit="++")[1] if k > 1 else np.zeros(n, int)
     sizes = np.bincount(labels, minlength=k)
     keep = [j for j in range(k) if sizes[j] >= 2 * d] or [int(np.argmax(sizes))]
-    means = np.array([pop[labels == j].mean(axis=0) for j in keep])
-    covs = np.array([JUMP_INFLATE * np.cov(pop[labels == j].T) + floor**2 * np.eye(d) for j in keep])
-    chol = np.linalg.cholesky(covs)
-    inv = np.linalg.inv(chol)
-    log_w = np.log(sizes[keep] / sizes[keep].sum())
-    norm = log_w - np.sum(np.log(np.diagonal(chol, axis1=1, axis2=2)), axis=1) - 0.5 * d * math.log(2.0 * math.pi)
-
-    def sample(m: int, rng: np.random.Generator) -> np.ndarray:
-        c = rng.choice(len(keep), size=m, p=np.exp(log_w))
-        out: np.ndarray = means[c] + np.einsum("nij,nj->ni", chol[c], rng.standard_normal((m, d)))
-        return out
-
-    def log_density(x: np.ndarray) -> np.ndarray:
-        z = np.einsum("kij,nkj->nki", inv, x[:, None, :] - means[None])
-        out: np.ndarray = logsumexp(norm[None] - 0.5 * np.sum(z**2, axis=-1), axis=1)
-        return out
-
-    return sample, log_density
+    return ModeProposal(
+        means=np.array([pop[labels == j].mean(axis=0) for j in keep]),
+        covs=np.array([JUMP_INFLATE * np.cov(pop[labels == j].T) + floor**2 * np.eye(d) for j in keep]),
+        log_weights=np.log(sizes[keep] / sizes[keep].sum()),
+    )
 
 
 def _move(
