@@ -57,6 +57,9 @@ def main() -> None:
     p.add_argument("--moves", type=float, default=3.0)
     p.add_argument("--final-moves", type=float, default=0.0)
     p.add_argument("--jumps", type=float, default=0.0)
+    p.add_argument("--importance", type=int, default=0, help="SamplerOptions.importance: independent draws")
+    p.add_argument("--islands", type=int, default=1, help="SamplerOptions.islands: independent islands per run")
+    p.add_argument("--crossover", action="store_true", help="SamplerOptions.crossover: moves in random subspaces")
     p.add_argument("--split", nargs=2, metavar=("NAME", "N"), help="SamplerOptions.split: NAME's prior in N parts")
     p.add_argument("--model", default="inplane", choices=("inplane", "segments"), help="segments: the reported model")
     p.add_argument("--emulator", type=int, default=0, help="SamplerOptions.emulator (with --model segments)")
@@ -98,7 +101,7 @@ def together(prob: CalibrationProblem, a: argparse.Namespace) -> None:
     opts = SamplerOptions(
         sampler="smc", particles=a.particles, cheap_particles=a.cheap_particles, runs=a.runs, seed=a.seed,
         mode_starts=a.mode_starts, workers=a.workers, ess_fraction=a.ess_fraction, moves=a.moves, emulator=a.emulator,
-        final_moves=a.final_moves, jumps=a.jumps,
+        importance=a.importance, islands=a.islands, crossover=a.crossover, final_moves=a.final_moves, jumps=a.jumps,
         split=None if a.split is None else (a.split[0], int(a.split[1])),
     )  # fmt: skip
     cal = run_calibration(prob, opts, progress=True, print_func=print)

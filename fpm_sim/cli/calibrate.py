@@ -66,6 +66,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         moves=args.moves,
         final_moves=args.final_moves,
         jumps=args.jumps,
+        importance=args.importance,
+        islands=args.islands,
+        crossover=args.crossover,
     )
     opts.check()
     out.mkdir(parents=True, exist_ok=True)
@@ -307,20 +310,7 @@ def _add_sampler_args(p: argparse.ArgumentParser) -> None:
         default=3.0,
         help="smc: accepted Metropolis moves per particle after each tempering step of the data stage (default 3)",
     )
-    p.add_argument(
-        "--jumps",
-        type=float,
-        default=0.0,
-        help="smc: the fraction of the data stage's sweeps whose proposals are draws of a Gaussian mixture fitted to "
-        "the particles, so that they move between modes in proportion to the posterior's mass (default 0: none)",
-    )
-    p.add_argument(
-        "--final-moves",
-        type=float,
-        default=0.0,
-        help="smc: accepted Metropolis moves per particle on the posterior after the data stage's last tempering "
-        "step, letting the particles travel along a ridge (default 0: none)",
-    )
+    _add_smc_move_args(p)
     p.add_argument(
         "--live-points", type=int, default=250, help="dynesty: nested sampling live points of each run (default 250)"
     )
@@ -338,4 +328,44 @@ def _add_sampler_args(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--max-calls", type=int, default=None, help="stop each run after this many likelihood calls (not converged)"
+    )
+
+
+def _add_smc_move_args(p: argparse.ArgumentParser) -> None:
+    """The SMC's moves beyond the tempering's, its islands and its importance sampling."""
+    p.add_argument(
+        "--jumps",
+        type=float,
+        default=0.0,
+        help="smc: the fraction of the data stage's sweeps whose proposals are draws of a Gaussian mixture fitted to "
+        "the particles, so that they move between modes in proportion to the posterior's mass (default 0: none)",
+    )
+    p.add_argument(
+        "--crossover",
+        action="store_true",
+        help="smc: each Metropolis move of the data stage in a random subspace of the parameters (DREAM's crossover), "
+        "so that loose parameters travel at their own width (default: all parameters at once)",
+    )
+    p.add_argument(
+        "--islands",
+        type=int,
+        default=1,
+        help="smc: independent islands of each run, each of --particles and --cheap-particles; the run's ln Z error "
+        "and its quantiles' Monte Carlo errors are read from their spread (default 1: the particles' genealogy's; "
+        "docs/identification.md)",
+    )
+    p.add_argument(
+        "--importance",
+        type=int,
+        default=0,
+        help="smc: independent draws of a mixture fitted to the data stage's particles, whose importance weights give "
+        "each run's evidence and posterior with an error of their own (default 0: the tempering's; on the study's 35 "
+        "parameters 20000 draws gave an ESS of tens: docs/identification.md)",
+    )
+    p.add_argument(
+        "--final-moves",
+        type=float,
+        default=0.0,
+        help="smc: accepted Metropolis moves per particle on the posterior after the data stage's last tempering "
+        "step, letting the particles travel along a ridge (default 0: none)",
     )

@@ -169,6 +169,9 @@ OPTION_NAMES: dict[str, tuple[str, float]] = {
     "calibrate:moves": ("--moves", 1.0),
     "final_moves": ("--final-moves", 1.0),
     "jumps": ("--jumps", 1.0),
+    "importance": ("--importance", 1.0),
+    "islands": ("--islands", 1.0),
+    "crossover": ("--crossover", 1.0),
     # time domain (fpm_sim.sim.stepping, fpm_sim.sim.trajectory)
     "integrator": ("--integrator", 1.0),
     "step_band_hz": ("--step-band-hz", 1.0),

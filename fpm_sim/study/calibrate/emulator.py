@@ -52,6 +52,7 @@ from typing import Any
 
 import numpy as np
 
+from fpm_sim.study.calibrate.importance import importance_diagnostics
 from fpm_sim.study.calibrate.problem import CalibrationError
 
 __all__ = [
@@ -241,16 +242,3 @@ def train_emulator(
         fits=tuple(p[2] for p in parts), inputs=tuple(p[1] for p in parts), n_train=n,
         held_out_rms_per_obs=np.sqrt(np.mean(res**2, 0)), held_out_max=float(np.max(np.abs(res))),
     )  # fmt: skip
-
-
-def importance_diagnostics(log_w: np.ndarray) -> tuple[float, float]:
-    """``(effective sample size, Pareto k)`` of importance weights given as ``log_w`` (``-inf``: weight 0; ``k``
-    from ArviZ's Pareto-smoothed importance sampling: reliable below 0.7)."""
-    import arviz as az
-
-    ok = np.isfinite(log_w)
-    if ok.sum() < 2:
-        return float(ok.sum()), float("inf")
-    w = np.exp(log_w[ok] - np.max(log_w[ok]))
-    _, k = az.psislw(log_w[ok].copy())
-    return float(w.sum() ** 2 / np.sum(w**2)), float(k)

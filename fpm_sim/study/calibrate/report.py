@@ -80,6 +80,19 @@ def _sampler_line(cal: Calibration) -> str:
             f"{cal.n_calls} likelihood calls, {cal.seconds:.0f} s"
         )
         err = "the error is the SMC's estimate from the particles' genealogy (Lee & Whiteley 2018)"
+        if getattr(o, "importance", 0):
+            head += (
+                f"; each run's evidence and posterior by importance sampling, {o.importance} independent draws of "
+                f"a Student-t mixture fitted to its final particles (each run's effective sample size and Pareto k "
+                f"are in the run lines of the command's output)"
+            )
+            err = "the error is the independent importance draws' own"
+        if getattr(o, "islands", 1) > 1:
+            head += (
+                f"; each run {o.islands} independent islands, its ln Z their mean and its error at least their "
+                f"spread's (Verge et al. 2015)"
+            )
+            err += ", or the islands' spread where larger"
         if getattr(o, "emulator", 0):
             head += (
                 f"; the data stage on an emulator of the segment model fitted to {o.emulator} segment-model runs (and "

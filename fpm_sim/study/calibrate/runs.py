@@ -49,6 +49,7 @@ __all__ = [
     "combine_classes",
     "combine_parts",
     "evidence_weights",
+    "islands_cdf_var",
     "quantile_mc_sd",
 ]
 
@@ -67,11 +68,15 @@ class ClassResult:
     logl: np.ndarray
     log_evidence: float
     log_evidence_err: float
+    island: np.ndarray | None = None
+    """``(n_samples,)`` each sample's island (an SMC run of independent islands,
+    :attr:`~fpm_sim.study.calibrate.sampler.SamplerOptions.islands`); ``None``: one island."""
 
     @classmethod
     def of_results(cls, klass: int | None, res: Any) -> ClassResult:
-        """From a dynesty ``Results``."""
+        """From a dynesty ``Results`` (or an SMC run's, with its ``"island"`` labels where it has them)."""
         err = float(res["logzerr"][-1])
+        island = res.get("island") if isinstance(res, dict) else None
         return cls(
             klass,
             np.asarray(res["samples"], float),
@@ -79,6 +84,7 @@ class ClassResult:
             np.asarray(res["logl"], float),
             float(res["logz"][-1]),
             err if math.isfinite(err) else 0.0,
+            None if island is None else np.asarray(island, int),
         )
 
 
@@ -235,6 +241,21 @@ class RunsCheck:
     the comparison in probability, which keeps the delta method's)."""
     cdf_sd: np.ndarray | None = None
     """``(runs, ndim, 3)`` each run's Monte Carlo error of its CDF at its quantiles (the draws' and the weights')."""
+    mc_dof: int = 0
+    """The degrees of freedom of the draws' Monte Carlo error where it is estimated from the runs' islands (pooled
+    over the runs, :func:`islands_cdf_var`); 0: not estimated (the binomial's of the effective draws)."""
+
+    @property
+    def mc_nsigma(self) -> float:
+        """The comparisons in probability's threshold: ``nsigma`` where their error is known; where it is estimated
+        from ``mc_dof`` degrees of freedom, Student's t quantile of the same tail probability (a difference over an
+        estimated sd is t-distributed: with 9 degrees of freedom a 3-sigma test's false alarms are 0.27 % at 4.09,
+        and 2.4 % at 3 -- over the check's ~200 comparisons, most runs of a sound sampler would fail)."""
+        if not self.mc_dof:
+            return self.nsigma
+        from scipy import stats
+
+        return float(stats.t.ppf(stats.norm.cdf(self.nsigma), self.mc_dof))
 
     @property
     def passed(self) -> bool:
@@ -262,17 +283,19 @@ class RunsCheck:
             else:
                 e, at = self.cdf_sd, self.cdf_at
                 gap = np.maximum(np.abs(at - np.array(QUANTILES)), np.abs(np.swapaxes(at, 0, 1) - QUANTILES))
-            by_mc = np.where(gap > 0, gap / (self.nsigma * np.sqrt(e[:, None] ** 2 + e[None, :] ** 2)), 0.0)
+            by_mc = np.where(gap > 0, gap / (self.mc_nsigma * np.sqrt(e[:, None] ** 2 + e[None, :] ** 2)), 0.0)
         out: np.ndarray = np.max(np.minimum(by_sd, by_mc), axis=(0, 1))
         return out
 
     def criteria(self) -> str:
+        dof = self.mc_dof
+        islands = f"; the draws' from the runs' islands, {dof} degrees of freedom, Student's t" if dof else ""
         return (
             f"ln Z of every pair of runs within {self.nsigma:g} sigma; 5/50/95 % quantiles of every pair within "
             f"{self.quantile_tol:g} posterior sd, or, where further apart, each run's CDF at the other's quantile "
-            f"within {self.nsigma:g} sigma of their Monte Carlo error there (the draws' and the class weights'); "
-            f"every class weighted above "
-            f"{100 * self.class_threshold:g} % by a run present in the merged posterior"
+            f"within {self.mc_nsigma:.3g} sigma of their Monte Carlo error there (the draws' and the class "
+            f"weights'{islands}); every class weighted above {100 * self.class_threshold:g} % by a run present in "
+            f"the merged posterior"
         )
 
     def summary_line(self) -> str:
@@ -288,6 +311,8 @@ class RunsCheck:
             "passed": self.passed,
             "seeds": self.seeds,
             "nsigma": self.nsigma,
+            "mc_dof": self.mc_dof,
+            "mc_nsigma": self.mc_nsigma,
             "quantile_tol_sd": self.quantile_tol,
             "class_threshold": self.class_threshold,
             "failures": self.failures,
@@ -374,7 +399,12 @@ def between_run_check(
     q = np.array([np.quantile(r.draws, QUANTILES, axis=0).T for r in runs])
     weights_var = np.array([class_weights_cdf_var(r, qr, err, rng) for r, qr, err in zip(runs, q, ce)])
     ess = np.array([r.ess_kish for r in runs])
-    mc = quantile_mc_sd(merged.draws, ess, weights_var=weights_var)
+    draws_var, dof = _draws_cdf_var(ess), 0
+    by_islands = [islands_cdf_var(list(rr), r.weights, qr) for rr, r, qr in zip(per_run, runs, q)]
+    if all(v is not None for v in by_islands):  # the runs sample one posterior alike (the check's hypothesis): pooled
+        draws_var = np.maximum(draws_var, np.mean(np.array(by_islands), axis=0)[None])
+        dof = sum(_islands(rr) - 1 for rr in per_run)
+    mc = quantile_mc_sd(merged.draws, ess, weights_var=weights_var, draws_var=draws_var)
     cdf_at = np.array([[_cdf(rs.draws, qr) for qr in q] for rs in runs])
     chk = RunsCheck(
         seeds=list(seeds),
@@ -390,7 +420,8 @@ def between_run_check(
         merged_sd=np.std(merged.draws, axis=0),
         quantile_mc_sd=mc,
         cdf_at=cdf_at,
-        cdf_sd=np.sqrt(_draws_cdf_var(ess) + weights_var),
+        cdf_sd=np.sqrt(draws_var + weights_var),
+        mc_dof=dof,
         nsigma=nsigma,
         quantile_tol=quantile_tol,
         class_threshold=class_threshold,
@@ -400,17 +431,20 @@ def between_run_check(
 
 
 def quantile_mc_sd(
-    draws: np.ndarray, ess: np.ndarray, *, half_width: float = 0.025, weights_var: np.ndarray | None = None
-) -> np.ndarray:
+    draws: np.ndarray, ess: np.ndarray, *, half_width: float = 0.025, weights_var: np.ndarray | None = None,
+    draws_var: np.ndarray | None = None,
+) -> np.ndarray:  # fmt: skip
     """``(runs, ndim, 3)`` the Monte Carlo sd of the 5/50/95 % quantiles of a run of effective sample size
     ``ess[r]``: ``sqrt(q (1 - q) / ess + weights_var) / p(x_q)``, the density at the quantile read from ``draws`` as
     ``2 half_width / (x_{q + half_width} - x_{q - half_width})``; ``weights_var``: ``(runs, ndim, 3)`` the variance
-    of the run's CDF at its quantiles from its class weights (:func:`class_weights_cdf_var`), none by default."""
+    of the run's CDF at its quantiles from its class weights (:func:`class_weights_cdf_var`), none by default;
+    ``draws_var``: the draws' variance of the CDF where it is known better than ``q (1 - q) / ess`` (from islands,
+    :func:`islands_cdf_var`)."""
     q = np.array(QUANTILES)
     lo = np.quantile(draws, np.clip(q - half_width, 0, 1), axis=0).T
     hi = np.quantile(draws, np.clip(q + half_width, 0, 1), axis=0).T
     inv_density = (hi - lo) / (np.clip(q + half_width, 0, 1) - np.clip(q - half_width, 0, 1))
-    var = _draws_cdf_var(ess)
+    var = _draws_cdf_var(ess) if draws_var is None else draws_var
     if weights_var is not None:
         var = var + weights_var
     out: np.ndarray = np.sqrt(var) * inv_density[None, :, :]
@@ -422,6 +456,39 @@ def _draws_cdf_var(ess: np.ndarray) -> np.ndarray:
     q = np.array(QUANTILES)
     out: np.ndarray = (q * (1 - q))[None, None, :] / np.maximum(ess, 1.0)[:, None, None]
     return out
+
+
+def islands_cdf_var(results: Sequence[ClassResult], weights: np.ndarray, at: np.ndarray) -> np.ndarray | None:
+    """``(ndim, 3)`` the variance of a run's CDF at ``at`` (``(ndim, 3)``) from the spread of its independent islands:
+    the run's CDF is ``F = sum_k W_k F_k`` over its classes (``weights``), each class's the weighted mean of its ``K``
+    islands' (each carries ``p_ki`` of the class's weight, ``1 / K`` in :func:`~fpm_sim.study.calibrate.smc.merge_smc`),
+    so ``var F = sum_k W_k^2 K / (K - 1) sum_i (A_ki - p_ki F_k)^2`` (a ratio estimator's), ``A_ki`` island ``i``'s
+    weight at or below ``at``. Unlike
+    ``q (1 - q) / ESS`` of the pooled draws it counts the correlation between an island's particles (the moves'
+    along a ridge). ``None`` where a sampled class has no island labels or one island."""
+    out = np.zeros(at.shape)
+    for r, w_k in zip(results, weights):
+        if not len(r.samples) or not w_k > 0:
+            continue
+        labels = np.unique(r.island) if r.island is not None else np.zeros(0, int)
+        if len(labels) < 2:
+            return None
+        assert r.island is not None
+        p = np.exp(r.logwt - np.max(r.logwt))
+        p /= p.sum()
+        below = r.samples[:, :, None] <= at[None]
+        f_k = np.einsum("n,nij->ij", p, below)
+        acc = np.zeros(at.shape)
+        for i in labels:
+            mine = r.island == i
+            acc += (np.einsum("n,nij->ij", p[mine], below[mine]) - p[mine].sum() * f_k) ** 2
+        out += w_k**2 * len(labels) / (len(labels) - 1) * acc
+    return out
+
+
+def _islands(results: Sequence[ClassResult]) -> int:
+    """The fewest islands any sampled class of a run has."""
+    return min(len(np.unique(r.island)) for r in results if r.island is not None and len(r.samples))
 
 
 def _cdf(draws: np.ndarray, at: np.ndarray) -> np.ndarray:

@@ -204,6 +204,21 @@ class SamplerOptions:
     """SMC: the fraction of the data stage's sweeps that propose independent draws of a Gaussian mixture fitted to
     the particles (:attr:`~fpm_sim.study.calibrate.smc.SmcSettings.jumps`): particles move between modes and along a
     ridge in proportion to the posterior's mass there. 0: none (the default)."""
+    importance: int = 0
+    """SMC: independent draws of a Student-t mixture fitted to the data stage's final particles whose importance
+    weights give each run's evidence and posterior (:mod:`~fpm_sim.study.calibrate.importance`): the stated error is
+    then the independent draws' own, where the tempering's misses the correlation its moves leave along a ridge. 0:
+    none, the tempering's (the default)."""
+    crossover: bool = False
+    """SMC: the data stage's Metropolis moves each in a random subspace of the coordinates (DREAM's randomised
+    subspace sampling, :attr:`~fpm_sim.study.calibrate.smc.SmcSettings.crossover`): loose coordinates then travel at
+    their own width. ``False``: every move in all coordinates (the default)."""
+    islands: int = 1
+    """SMC: independent islands of each run (Verge et al. 2015), each a whole two-stage SMC of ``particles`` and
+    ``cheap_particles`` (and its own emulator): the run's evidence is their mean and its stated error at least their
+    spread's, and the between-run check reads each quantile's Monte Carlo error from the islands' spread
+    (:func:`~fpm_sim.study.calibrate.runs.islands_cdf_var`), both of which count the correlation the moves leave
+    along a ridge that the particles' genealogy misses. 1: none, the genealogy's error (the default)."""
     final_moves: float = 0.0
     """SMC: accepted Metropolis moves per particle (on average) at the data stage's end, on the posterior
     (:attr:`~fpm_sim.study.calibrate.smc.SmcSettings.final_moves`): the particles travel along the ridge the
@@ -254,11 +269,14 @@ class SamplerOptions:
             raise CalibrationError(f"must be one of {', '.join(SAMPLERS)}", parameter="sampler", value=self.sampler)
         if self.sampler == "smc":
             self._check_smc()
-        elif self.emulator or self.mode_starts:
-            name = "emulator" if self.emulator else "mode_starts"
+        elif smc_only := [
+            n for n, on in (("emulator", self.emulator), ("mode_starts", self.mode_starts),
+                            ("islands", self.islands != 1), ("crossover", self.crossover)) if on
+        ]:  # fmt: skip
+            name = smc_only[0]
             raise CalibrationError(
                 "is the smc sampler's", parameter=name, value=getattr(self, name),
-                hint="use the smc sampler, or leave it 0 with nested sampling",
+                hint="use the smc sampler, or leave it at its default with nested sampling",
             )  # fmt: skip
         if self.split is not None and (len(self.split) != 2 or not isinstance(self.split[1], int) or self.split[1] < 2):
             raise CalibrationError(
@@ -286,6 +304,13 @@ class SamplerOptions:
             raise CalibrationError("must be >= 0", parameter="final_moves", value=self.final_moves)
         if not 0 <= self.jumps <= 1:
             raise CalibrationError("must be between 0 and 1", parameter="jumps", value=self.jumps)
+        if self.islands < 1:
+            raise CalibrationError("must be >= 1", parameter="islands", value=self.islands)
+        if self.importance and self.importance < self.particles:
+            raise CalibrationError(
+                "must be 0 (off) or at least the data stage's particles", parameter="importance", value=self.importance,
+                hint="independent draws are worth their calls only by the thousand (docs/identification.md)",
+            )  # fmt: skip
         if self.mode_starts < 0:
             raise CalibrationError("must be >= 0", parameter="mode_starts", value=self.mode_starts)
         if self.emulator and self.emulator < 50:
@@ -309,8 +334,9 @@ class SamplerOptions:
         """The two stages' :class:`~fpm_sim.study.calibrate.smc.SmcSettings`."""
         one = SmcSettings(self.cheap_particles, self.ess_fraction, self.cheap_moves, max_sweeps=200)
         return one, SmcSettings(
-            self.particles, self.ess_fraction, self.moves, final_moves=self.final_moves, jumps=self.jumps
-        )
+            self.particles, self.ess_fraction, self.moves, final_moves=self.final_moves, jumps=self.jumps,
+            importance=self.importance, crossover=self.crossover,
+        )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -556,6 +582,9 @@ class Calibration:
                     "moves",
                     "final_moves",
                     "jumps",
+                    "importance",
+                    "islands",
+                    "crossover",
                     "emulator",
                     "live_points",
                     "dlogz",
@@ -894,12 +923,38 @@ def _run_smc(
         return dict(out)
     per = _periodic(part)
     one, two = (dataclasses.replace(x, periodic=per) for x in opts.smc_settings())
+    islands = []
+    for i in range(opts.islands):  # the first island's stream is the run's seed's: one island is the plain run
+        rng = np.random.default_rng(seed if i == 0 else [seed, i])
+        emu = _SegmentEmulator(klass=klass, part=part, n=opts.emulator, pool=pool, rng=rng) if opts.emulator else None
+        islands.append(_smc_island(klass, part, one, two, rng, opts, emu=emu, pool=pool, modes=modes))
+    out = islands[0] if len(islands) == 1 else merge_smc(islands, islands=True)
+    if len(islands) > 1:
+        out["islands"] = [{"log_evidence": float(r["logz"][-1]), "log_evidence_err": float(r["logzerr"][-1])}
+                          for r in islands]  # fmt: skip
+        for key in ("importance", "emulator"):  # the island whose weights are least reliable speaks for the run
+            diag = [r[key] for r in islands if key in r]
+            if diag:
+                out[key] = max(diag, key=lambda x: x["pareto_k"])
+    if done is not None:
+        with done.open("wb") as fh:
+            pickle.dump(out, fh, protocol=4)
+    return out
+
+
+def _smc_island(
+    klass: int | None, part: Part, one: SmcSettings, two: SmcSettings, rng: np.random.Generator,
+    opts: SamplerOptions, *, emu: _SegmentEmulator | None, pool: Any, modes: ModeProposal | None,
+) -> dict[str, Any]:  # fmt: skip
+    """One island of :func:`_run_smc` (the whole run when it has one): a two-stage SMC, on its own emulator ``emu``
+    where given, as :func:`~fpm_sim.study.calibrate.smc.smc_results` with its diagnostics. Each island trains its own:
+    islands that shared one run's emulator agreed among themselves but not with another run's (class (1, 1, 1) of
+    the study: one run's four islands -71.56 to -72.64, the other's -73.14 to -76.58), since the exact weights correct
+    the emulator only where its posterior reaches, so its misses were common to the islands and out of their spread."""
+    assert _PROBLEM is not None, "the pool was started without _init_worker"
     d = _PROBLEM.ndim - (klass is not None)
     cheap = functools.partial(_smc_cheap, klass=klass, part=part)
-    rng = np.random.default_rng(seed)
-    emu = None
-    if opts.emulator:
-        emu = _SegmentEmulator(klass=klass, part=part, n=opts.emulator, pool=pool, rng=rng)
+    if emu is not None:
         run = emulated_two_stage(cheap, emu.train, emu.exact, d, one, two, rng, refine=emu.refine, again=emu.again)
     else:
         full = functools.partial(_smc_full, klass=klass, pool=pool, part=part)
@@ -907,14 +962,13 @@ def _run_smc(
     theta = np.array([_class_prior_transform(x, klass, part) for x in run.u]).reshape(len(run.u), d)
     out = smc_results(theta, run.log_a + run.log_b, run.log_evidence, run.log_evidence_err, run.n_calls,
                       len(run.betas), log_weights=run.log_weights)  # fmt: skip
+    if run.importance is not None:
+        out["importance"] = dict(run.importance)
     if emu is not None and emu.fitted is not None and run.log_weights is not None:
         ess, k = importance_diagnostics(run.log_weights)
         e = emu.fitted
         out["emulator"] = {"n_train": e.n_train, "held_out_rms": e.held_out_rms, "held_out_max": e.held_out_max,
                            "ess": ess, "pareto_k": k, "particles": len(run.u), "again": emu.rounds}  # fmt: skip
-    if done is not None:
-        with done.open("wb") as fh:
-            pickle.dump(out, fh, protocol=4)
     return out
 
 
@@ -993,13 +1047,24 @@ def _sample_jobs(
 
 
 def _emulator_note(res: Any) -> str:
-    """A run's emulator and importance weights in a few words (``""`` without an emulator); a warning where the
-    weights' Pareto ``k`` is 0.7 or more (the weighted posterior of that run is not reliable)."""
+    """A run's islands, importance sampling, emulator and importance weights in a few words (``""`` with none); a
+    warning where a set of weights' Pareto ``k`` is 0.7 or more (the weighted posterior of that run is not reliable)."""
+    isl = res.get("islands") if isinstance(res, dict) else None
+    i = res.get("importance") if isinstance(res, dict) else None
     e = res.get("emulator") if isinstance(res, dict) else None
+    note = ""
+    if isl:
+        z = ", ".join(f"{x['log_evidence']:.2f}" for x in isl)
+        note += f"; {len(isl)} islands' ln Z {z}"
+    if i:
+        note += (f"; {i['draws']} importance draws, ESS {i['ess']:.0f}, Pareto k {i['pareto_k']:.2f}, ln Z error "
+                 f"{i['log_evidence_err']:.2f}")  # fmt: skip
+        if not i["pareto_k"] < PARETO_K_MAX:
+            note += " (WARNING: k >= 0.7, the draws' error is unreliable: more draws or particles)"
     if not e:
-        return ""
-    note = (f"; emulator {100 * e['held_out_rms']:.1f} % rms on {e['n_train']} runs, weights ESS {e['ess']:.0f}/"
-            f"{e['particles']}, Pareto k {e['pareto_k']:.2f}")  # fmt: skip
+        return note
+    note += (f"; emulator {100 * e['held_out_rms']:.1f} % rms on {e['n_train']} runs, weights ESS {e['ess']:.0f}/"
+             f"{e['particles']}, Pareto k {e['pareto_k']:.2f}")  # fmt: skip
     if e.get("again"):
         note += " (sampled again on a refit: the first weights had k >= 0.7)"
     if not e["pareto_k"] < PARETO_K_MAX:
