@@ -947,10 +947,9 @@ def _smc_island(
     opts: SamplerOptions, *, emu: _SegmentEmulator | None, pool: Any, modes: ModeProposal | None,
 ) -> dict[str, Any]:  # fmt: skip
     """One island of :func:`_run_smc` (the whole run when it has one): a two-stage SMC, on its own emulator ``emu``
-    where given, as :func:`~fpm_sim.study.calibrate.smc.smc_results` with its diagnostics. Each island trains its own:
-    islands that shared one run's emulator agreed among themselves but not with another run's (class (1, 1, 1) of
-    the study: one run's four islands -71.56 to -72.64, the other's -73.14 to -76.58), since the exact weights correct
-    the emulator only where its posterior reaches, so its misses were common to the islands and out of their spread."""
+    where given, as :func:`~fpm_sim.study.calibrate.smc.smc_results` with its diagnostics. Each island trains its own,
+    so that the islands are independent: the exact weights correct an emulator only where its posterior reaches, and
+    islands sharing one would share its misses, which their spread would not show."""
     assert _PROBLEM is not None, "the pool was started without _init_worker"
     d = _PROBLEM.ndim - (klass is not None)
     cheap = functools.partial(_smc_cheap, klass=klass, part=part)
