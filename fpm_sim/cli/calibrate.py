@@ -359,7 +359,7 @@ def _add_smc_move_args(p: argparse.ArgumentParser) -> None:
         type=int,
         default=0,
         help="smc: independent draws of a mixture fitted to the data stage's particles, whose importance weights give "
-        "each run's evidence and posterior with an error of their own (default 0: the tempering's; on the study's 35 "
+        "each run's evidence and posterior with an error of their own (default 0: the tempering's; on the study's 23 "
         "parameters 20000 draws gave an ESS of tens: docs/identification.md)",
     )
     p.add_argument(
