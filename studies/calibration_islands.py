@@ -5,6 +5,7 @@ importance sampling"): the dominant class with the as-built model, each island g
 stream: the same whatever ran before it.
 
     python studies/calibration_islands.py 0,1 2,3 0,5 0,6 2,5 2,6
+    python studies/calibration_islands.py --cheap-particles 10000 3,1 3,2 3,3 3,4
 """
 
 from __future__ import annotations
@@ -36,11 +37,15 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("islands", nargs="+", type=island, help="SEED,I of each island, in order")
     p.add_argument("--branch", type=int, nargs=3, default=[-1, -1, 1])
+    p.add_argument("--particles", type=int, default=500, help="the data stage's (default 500)")
+    p.add_argument("--cheap-particles", type=int, default=1500, help="the statements stage's (default 1500)")
     a = p.parse_args()
     warnings.simplefilter("ignore")
     prob = study_problem(model="segments", branch=tuple(a.branch), as_built=(1.0, 0.01))
     smc_sampler._init_worker(prob)
-    opts = SamplerOptions(sampler="smc", particles=500, cheap_particles=1500, emulator=500, moves=10, jumps=0.2)
+    opts = SamplerOptions(
+        sampler="smc", particles=a.particles, cheap_particles=a.cheap_particles, emulator=500, moves=10, jumps=0.2
+    )
     one, two = (dataclasses.replace(x, periodic=smc_sampler._periodic(None)) for x in opts.smc_settings())
     for seed, i in a.islands:
         rng = np.random.default_rng(seed if i == 0 else [seed, i])
