@@ -36,6 +36,7 @@ from scipy.special import gammaln, logsumexp, ndtr, ndtri
 
 __all__ = [
     "IMPORTANCE_DF", "IMPORTANCE_INFLATE", "Importance", "ProbitMixture", "importance_diagnostics", "importance_sample",
+    "kmeans_clusters",
 ]  # fmt: skip
 
 IMPORTANCE_DF = 5.0
@@ -74,13 +75,11 @@ class ProbitMixture:
         cls, pop: np.ndarray, rng: np.random.Generator, *, periodic: tuple[int, ...] = (),
         components: int = IMPORTANCE_COMPONENTS, inflate: float = IMPORTANCE_INFLATE, df: float = IMPORTANCE_DF,
     ) -> ProbitMixture:  # fmt: skip
-        """Fitted to the particles ``pop`` (``(n, d)``, unit cube): k-means clusters in probit coordinates, each
-        component its cluster's mean and covariance, the covariance shrunk towards the clusters' pooled one ``W``
-        (``(n_k S_k + d W) / (n_k + d)``, so a small cluster is not degenerate) times ``inflate``, weighted by the
-        clusters' sizes."""
-        from scipy.cluster.vq import kmeans2
-
-        n, d = pop.shape
+        """Fitted to the particles ``pop`` (``(n, d)``, unit cube): k-means clusters in probit coordinates
+        (:func:`kmeans_clusters`), each component its cluster's mean and covariance, the covariance shrunk towards the
+        clusters' pooled one ``W`` (``(n_k S_k + d W) / (n_k + d)``, so a small cluster is not degenerate) times
+        ``inflate``, weighted by the clusters' sizes."""
+        d = pop.shape[1]
         shift = np.zeros(d)
         if periodic:
             p = list(periodic)
@@ -88,11 +87,7 @@ class ProbitMixture:
             centre = np.mod(np.arctan2(np.sin(ang).mean(axis=0), np.cos(ang).mean(axis=0)) / (2.0 * math.pi), 1.0)
             shift[p] = np.mod(0.5 - centre, 1.0)
         z = ndtri(np.clip(np.mod(pop + shift, 1.0) if periodic else pop, _EDGE, 1.0 - _EDGE))
-        k = max(1, min(components, n // (4 * d)))
-        scale = np.std(z, axis=0) + 1e-9
-        labels = kmeans2(z / scale, k, seed=rng, minit="++")[1] if k > 1 else np.zeros(n, int)
-        sizes = np.bincount(labels, minlength=k)
-        keep = [j for j in range(k) if sizes[j] > 1] or [int(np.argmax(sizes))]
+        labels, sizes, keep = kmeans_clusters(z, components, rng, scale_floor=1e-9, min_size=2)
         own = {j: np.atleast_2d(np.cov(z[labels == j].T, bias=True)) for j in keep}
         within = sum(sizes[j] * own[j] for j in keep) / sizes[keep].sum() + 1e-9 * np.eye(d)
         means, chols = [], []
@@ -135,6 +130,23 @@ class ProbitMixture:
             u[:, p] = np.mod(u[:, p] - self.shift[p], 1.0)
         out: np.ndarray = u
         return out
+
+
+def kmeans_clusters(
+    x: np.ndarray, components: int, rng: np.random.Generator, *, scale_floor: float, min_size: int
+) -> tuple[np.ndarray, np.ndarray, list[int]]:  # fmt: skip
+    """k-means clusters of the rows of ``x`` (``(n, d)``; each coordinate over its sd plus ``scale_floor``; k-means++
+    starts): at most ``components`` and ``n / (4 d)`` of them. Returns ``(each row's cluster, each cluster's size,
+    the clusters of at least min_size rows, or the largest where none is)``: the mixtures fitted to a population
+    (this module's, and the SMC's jumps') share it."""
+    from scipy.cluster.vq import kmeans2
+
+    n, d = x.shape
+    k = max(1, min(components, n // (4 * d)))
+    labels = kmeans2(x / (np.std(x, axis=0) + scale_floor), k, seed=rng, minit="++")[1] if k > 1 else np.zeros(n, int)
+    sizes = np.bincount(labels, minlength=k)
+    keep = [j for j in range(k) if sizes[j] >= min_size] or [int(np.argmax(sizes))]
+    return labels, sizes, keep
 
 
 @dataclass(frozen=True)

@@ -39,6 +39,8 @@ from typing import Any
 
 import numpy as np
 
+from fpm_sim.study.calibrate.smc import mean_evidence
+
 __all__ = [
     "ClassResult",
     "Combined",
@@ -180,19 +182,9 @@ def combine_parts(results: Sequence[Any]) -> Any:
     calls and iterations summed); one result is returned as it is."""
     if len(results) == 1:
         return results[0]
-    from scipy.special import logsumexp
-
     n = len(results)
-    lz = np.array([float(r["logz"][-1]) for r in results])
     ls = np.array([float(r["logzerr"][-1]) for r in results])
-    ok = np.isfinite(lz)
-    if not ok.any():
-        log_z, err = -math.inf, 0.0
-    else:
-        w = np.exp(lz[ok] - np.max(lz[ok]))
-        w /= w.sum()
-        log_z = float(logsumexp(lz[ok])) - math.log(n)
-        err = float(np.sqrt(np.sum(w**2 * np.where(np.isfinite(ls[ok]), ls[ok], 0.0) ** 2)))
+    log_z, err = mean_evidence(np.array([float(r["logz"][-1]) for r in results]), np.where(np.isfinite(ls), ls, 0.0))
     return {
         "samples": np.concatenate([np.asarray(r["samples"], float) for r in results]),
         "logwt": np.concatenate([np.asarray(r["logwt"], float) - math.log(n) for r in results]),

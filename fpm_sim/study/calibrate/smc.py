@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 from scipy.special import logsumexp
 
-from fpm_sim.study.calibrate.importance import importance_sample
+from fpm_sim.study.calibrate.importance import importance_sample, kmeans_clusters
 
 __all__ = [
     "ModeProposal", "SmcRun", "SmcSettings", "emulated_two_stage", "mean_evidence", "merge_smc", "metropolis",
@@ -305,14 +305,8 @@ def _population_mixture(pop: np.ndarray, rng: np.random.Generator, *, floor: flo
     so the proposal hardly depends on any one particle (a kernel density estimate centred on the particles themselves
     does: its own kernel makes ``q(u)`` at a particle many times the density elsewhere in 20 dimensions, and the sweep
     then accepts moves the target refuses, which biased the first stage's ln Z of the study by -0.37; measured)."""
-    from scipy.cluster.vq import kmeans2
-
-    n, d = pop.shape
-    k = max(1, min(JUMP_COMPONENTS, n // (4 * d)))
-    scale = np.std(pop, axis=0) + floor
-    labels = kmeans2(pop / scale, k, seed=rng, minit="++")[1] if k > 1 else np.zeros(n, int)
-    sizes = np.bincount(labels, minlength=k)
-    keep = [j for j in range(k) if sizes[j] >= 2 * d] or [int(np.argmax(sizes))]
+    d = pop.shape[1]
+    labels, sizes, keep = kmeans_clusters(pop, JUMP_COMPONENTS, rng, scale_floor=floor, min_size=2 * d)
     return ModeProposal(
         means=np.array([pop[labels == j].mean(axis=0) for j in keep]),
         covs=np.array([JUMP_INFLATE * np.cov(pop[labels == j].T) + floor**2 * np.eye(d) for j in keep]),
