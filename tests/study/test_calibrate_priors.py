@@ -133,3 +133,27 @@ def test_the_shipped_study_priors_cover_the_study_groups(default_manip):
     for p, x in zip(pr.parameters, ps.x0):
         lo, hi = p.transform(0.0), p.transform(1.0)
         assert lo <= x <= hi, p.name
+
+
+def test_the_shipped_as_built_priors_are_the_study_priors_and_the_as_built_group(default_manip):
+    """``study_priors_as_built.toml`` (the shipped posterior's priors) is the study's priors with the as-built
+    group's 1 deg / 1 % deviations and nothing else: parsed, the same distributions and statements as
+    ``study_priors.toml`` plus ``as_built_priors(1.0, 0.01)``, each with its reason."""
+    from importlib.resources import files
+
+    from fpm_sim.study.calibrate.problem import as_built_priors
+    from fpm_sim.study.identify import parameter_set
+
+    data = files("fpm_sim.data")
+    names = parameter_set(default_manip, ["geometry", "hardware", "section-height", "as-built"]).names
+    shipped = read_priors("as_built", names, text=data.joinpath("study_priors_as_built.toml").read_text())
+    study = data.joinpath("study_priors.toml").read_text()
+    with_group = study.replace("[likelihood]", as_built_priors(1.0, 0.01) + "\n[likelihood]")
+    built = read_priors("built", names, text=with_group)
+    assert [p.describe() for p in shipped.parameters] == [p.describe() for p in built.parameters]
+    assert [p.name for p in shipped.parameters] == [p.name for p in built.parameters]
+    assert [h.describe() for h in shipped.hyperpriors] == [h.describe() for h in built.hyperpriors]
+    assert shipped.singular_at_phi0 == built.singular_at_phi0
+    assert shipped.measured_poses_clear == built.measured_poses_clear
+    assert sum("_dev_" in p.name for p in shipped.parameters) == 12
+    assert all(p.reason.startswith(("assumed: ", "study: ")) for p in shipped.parameters)

@@ -17,11 +17,20 @@ from fpm_sim.study.readout import setup_weights
 __all__ = ["corner_figure", "render_report", "write_report"]
 
 
+CORNER_MAX_PANELS = 12
+"""Above this many continuous coordinates the corner leaves out the per-chain ones (names ending in ``[i]``, such
+as the ``as-built`` group's deviations): 23 panels a side make every label unreadable, and report.md's marginals
+give them all."""
+
+
 def corner_figure(cal: Calibration, *, max_points: int = 1500) -> Any:
-    """Pairwise scatter of the continuous coordinates (diagonal: histograms), the draws coloured by branch class."""
+    """Pairwise scatter of the continuous coordinates (diagonal: histograms), the draws coloured by branch class;
+    with more than :data:`CORNER_MAX_PANELS` of them, the per-chain ones are left out and the title says so."""
     import matplotlib.pyplot as plt
 
     names = [n for n in cal.names if n != BRANCH_PARAMETER]
+    left_out = [n for n in names if n.endswith("]")] if len(names) > CORNER_MAX_PANELS else []
+    names = [n for n in names if n not in left_out]
     idx = [cal.names.index(n) for n in names]
     d = cal.draws[: min(max_points, len(cal.draws))]
     colour = d[:, cal.names.index(BRANCH_PARAMETER)] if BRANCH_PARAMETER in cal.names else np.zeros(len(d))
@@ -47,7 +56,10 @@ def corner_figure(cal: Calibration, *, max_points: int = 1500) -> Any:
                 ax.set_ylabel(names[i].replace("geometry.", "").replace("hardware.", ""), fontsize=6)
             elif j > 0:
                 ax.set_yticklabels([])
-    fig.suptitle("posterior draws (colour: elbow-branch class)" if BRANCH_PARAMETER in cal.names else "posterior draws")
+    title = "posterior draws (colour: elbow-branch class)" if BRANCH_PARAMETER in cal.names else "posterior draws"
+    if left_out:
+        title += f"\n{len(left_out)} per-chain parameters left out (report.md's marginals give them)"
+    fig.suptitle(title)
     fig.tight_layout()
     return fig
 
