@@ -419,7 +419,27 @@ class Posterior:
             cfg = ps.apply(np.asarray(x)[order], base=base)
         except ConfigError as exc:
             raise self._error(f"{label} is not a valid description ({exc})") from None
-        return dataclasses.replace(cfg, name=f"{self.base.name} [posterior {label}]")
+        return dataclasses.replace(
+            cfg, name=f"{self.base.name} [posterior {label}]", provenance=self._provenance(cfg, label)
+        )
+
+    def _provenance(self, cfg: Manipulator, label: str) -> dict[str, str]:
+        """``cfg``'s provenance with every field a free parameter sets (and the elbow branches) marked as this
+        posterior's draw, so that a draw written as a description does not keep the base's sources."""
+        from fpm_sim.study.identify.report import provenance_key
+
+        prov = dict(cfg.provenance)
+        where = f"{DRAW_SOURCE}, {label} of {self.source.name if self.source else 'the posterior'}"
+        fields: dict[str, list[str]] = {}
+        for name in self.names:
+            fields.setdefault(provenance_key(name), []).append(name)
+        for key, names in fields.items():
+            prov[key] = f"identified: {where}; sets {', '.join(names)}"
+            if key.startswith("hardware.") and key.endswith(".mass_kg"):
+                prov[key.replace("mass_kg", "inertia_kg_m2")] = "identified: scaled with the identified mass"
+        if self.elbow_branch is not None:
+            prov["geometry.elbow_branch"] = f"identified: {where}"
+        return prov
 
     @property
     def length_scale_m(self) -> np.ndarray | None:
@@ -479,7 +499,10 @@ class Posterior:
             assert isinstance(cfg, Manipulator)
             assert all(isinstance(p, Pose) for p in poses)
             f, res = sensor_residues(
-                cfg, [p for p in poses if isinstance(p, Pose)], n_modes=read.reference_modes, points=read.points,
+                cfg,
+                [p for p in poses if isinstance(p, Pose)],
+                n_modes=read.reference_modes,
+                points=read.points,
                 options=options,
             )
             probs = read_probabilities(np.transpose(res, (1, 0, 2)), read)  # (setups, poses, modes)

@@ -346,3 +346,29 @@ def test_the_likelihoods_resolution_is_inside_the_bands():
     loo = post.leave_one_out()
     assert loo is not None
     assert diff.max() < 0.1 * float(np.median(loo.half_width))
+
+
+def test_a_draw_written_as_a_description_says_it_is_a_posterior_draw():
+    """A draw of the shipped posterior (as built: per-chain deviations set the per-chain lists) written as TOML
+    names the posterior draw as the source of every field its parameters set, not the base description's."""
+    import tomllib
+    from importlib import resources
+
+    from fpm_sim.config import config_to_toml, parse_config
+    from fpm_sim.study.identify.report import provenance_key
+    from fpm_sim.study.posterior import DRAW_SOURCE, Posterior
+
+    assert provenance_key("geometry.proximal_length_dev_rel[2]") == "geometry.proximal_length_m"
+    assert provenance_key("geometry.base_angle_dev_deg[0]") == "geometry.base_angles_deg"
+    post = Posterior.from_netcdf(str(resources.files("fpm_sim.data") / "default_posterior.nc"))
+    cfg = post.config(7)
+    for key in ("geometry.base_radius_m", "geometry.proximal_length_m", "geometry.base_angles_deg",
+                "hardware.platform.mass_kg", "section.height_m", "geometry.elbow_branch"):  # fmt: skip
+        assert cfg.provenance[key].startswith(f"identified: {DRAW_SOURCE}, draw 7 of default_posterior.nc"), key
+    assert "geometry.proximal_length_dev_rel[1]" in cfg.provenance["geometry.proximal_length_m"]
+    assert cfg.provenance["hardware.platform.inertia_kg_m2"] == "identified: scaled with the identified mass"
+    # fields no parameter sets keep the base's source
+    assert cfg.provenance["material.young_pa"] == post.base.provenance["material.young_pa"]
+    again = parse_config(tomllib.loads(config_to_toml(cfg)))
+    assert again.provenance["section.height_m"] == cfg.provenance["section.height_m"]
+    assert again.geometry.proximal_length_m == cfg.geometry.proximal_length_m

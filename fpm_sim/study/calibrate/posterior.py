@@ -191,13 +191,16 @@ def median_config(cal: Calibration, *, data_note: str) -> Manipulator:
     cfg = p.config(theta)
     prov = dict(cfg.provenance)
     n_free = len(p.priors.parameters)
+    set_here: set[str] = set()
     for i, name in enumerate(p.names[:n_free]):
         col = cal.draws[:, i]
         key = provenance_key(name)
-        prov[key] = (
-            f"identified: posterior median +- sd (fpm-sim calibrate, {data_note}); {name} = "
-            f"{_fmt(float(np.median(col)))} +- {_fmt(float(np.std(col)))}"
-        )
+        value = f"{name} = {_fmt(float(np.median(col)))} +- {_fmt(float(np.std(col)))}"
+        if key in set_here:  # several parameters set one field (a rotation and each chain's deviation)
+            prov[key] += f"; {value}"
+        else:
+            prov[key] = f"identified: posterior median +- sd (fpm-sim calibrate, {data_note}); {value}"
+        set_here.add(key)
         if key.startswith(("hardware.", "rig.chain_hinge")) and key.endswith(".mass_kg"):
             prov[key.replace("mass_kg", "inertia_kg_m2")] = "identified: scaled with the identified mass"
     if p.priors.sample_branches:

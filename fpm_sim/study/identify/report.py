@@ -32,6 +32,11 @@ def provenance_key(name: str) -> str:
         "geometry.platform_rotation_deg": "geometry.platform_angles_deg",
         "geometry.base_angle_deg": "geometry.base_angles_deg",
         "geometry.platform_angle_deg": "geometry.platform_angles_deg",
+        # the as-built group's per-chain deviations set the per-chain lists
+        "geometry.base_angle_dev_deg": "geometry.base_angles_deg",
+        "geometry.platform_angle_dev_deg": "geometry.platform_angles_deg",
+        "geometry.proximal_length_dev_rel": "geometry.proximal_length_m",
+        "geometry.distal_length_dev_rel": "geometry.distal_length_m",
     }
     if n in mapping:
         return mapping[n]
