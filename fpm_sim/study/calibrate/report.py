@@ -61,7 +61,23 @@ def corner_figure(cal: Calibration, *, max_points: int = 1500) -> Any:
         title += f"\n{len(left_out)} per-chain parameters left out (report.md's marginals give them)"
     fig.suptitle(title)
     fig.tight_layout()
+    if BRANCH_PARAMETER in cal.names and k > 1:  # in the empty upper triangle's top right corner
+        _class_legend(fig, axes[0, k - 1], colour)
     return fig
+
+
+def _class_legend(fig: Any, anchor: Any, colour: np.ndarray) -> None:
+    """A legend of the classes the corner's colours stand for (tab10 by class index), its top right corner at
+    ``anchor``'s (an axes of the hidden upper triangle)."""
+    import matplotlib
+    from matplotlib.lines import Line2D
+
+    cmap = matplotlib.colormaps["tab10"]
+    classes = sorted({round(float(c)) for c in colour})
+    handles = [Line2D([], [], ls="", marker="o", color=cmap(c / 9.0), label=str(ELBOW_BRANCHES[c])) for c in classes]
+    x0, y0, w, h = anchor.get_position().bounds
+    fig.legend(handles=handles, title="elbow branches", loc="upper right", fontsize=8, title_fontsize=8,
+               bbox_to_anchor=(x0 + w, y0 + h), bbox_transform=fig.transFigure)  # fmt: skip
 
 
 def _prior_of(cal: Calibration, name: str) -> str:
