@@ -54,6 +54,9 @@ def test_a_tiny_run_writes_the_three_outputs(files, capsys):
     text = (out / "report.md").read_text()
     assert "log-evidence" in text
     assert "likelihood calls" in text
+    # the leave-one-out summary once: the table under it does not repeat it
+    assert text.count("leave-one-out (PSIS): ") == 1
+    assert "datum" in text[text.index("## Leave-one-out predictions") :]
     # a finished run's outputs are rewritten from its saved result with --resume (no sampling)
     assert main([*_argv(files), "--resume"]) == 0
 
