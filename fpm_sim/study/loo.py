@@ -141,9 +141,11 @@ class LeaveOneOut:
             + (" (above 0.7: unreliable there)" if np.max(self.pareto_k) > PARETO_K_LIMIT else "")
         )
 
-    def table(self) -> str:
+    def table(self, *, summary: bool = True) -> str:
+        """The per-datum table (pose, measured, 5/50/95 %, error, Pareto k), under :meth:`summary_line` unless
+        ``summary`` is false (where the caller gives that line itself)."""
         lines = [
-            self.summary_line(),
+            *([self.summary_line()] if summary else []),
             f"{'datum':<34} {'measured':>9} {'5 %':>7} {'50 %':>7} {'95 %':>7} {'error':>7} {'k':>5}",
         ]
         for i, lab in enumerate(self.labels):

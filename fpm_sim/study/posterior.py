@@ -426,17 +426,10 @@ class Posterior:
     def _provenance(self, cfg: Manipulator, label: str) -> dict[str, str]:
         """``cfg``'s provenance with every field a free parameter sets (and the elbow branches) marked as this
         posterior's draw, so that a draw written as a description does not keep the base's sources."""
-        from fpm_sim.study.identify.report import provenance_key
+        from fpm_sim.study.identify.report import identified_provenance
 
-        prov = dict(cfg.provenance)
         where = f"{DRAW_SOURCE}, {label} of {self.source.name if self.source else 'the posterior'}"
-        fields: dict[str, list[str]] = {}
-        for name in self.names:
-            fields.setdefault(provenance_key(name), []).append(name)
-        for key, names in fields.items():
-            prov[key] = f"identified: {where}; sets {', '.join(names)}"
-            if key.startswith("hardware.") and key.endswith(".mass_kg"):
-                prov[key.replace("mass_kg", "inertia_kg_m2")] = "identified: scaled with the identified mass"
+        prov = identified_provenance(cfg.provenance, [(n, n) for n in self.names], where)
         if self.elbow_branch is not None:
             prov["geometry.elbow_branch"] = f"identified: {where}"
         return prov

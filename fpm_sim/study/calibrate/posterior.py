@@ -179,7 +179,7 @@ def median_config(cal: Calibration, *, data_note: str) -> Manipulator:
     """The description at the posterior median of every continuous parameter (the most frequent elbow-branch
     class among the draws), each set value's provenance
     ``identified: posterior median +- sd (fpm-sim calibrate, DATA)``."""
-    from fpm_sim.study.identify.report import provenance_key
+    from fpm_sim.study.identify.report import identified_provenance
 
     p = cal.problem
     assert isinstance(p, CalibrationProblem), "a described machine's median is median_description's"
@@ -189,20 +189,11 @@ def median_config(cal: Calibration, *, data_note: str) -> Manipulator:
         classes, counts = np.unique(np.round(cal.draws[:, k]).astype(int), return_counts=True)
         theta[k] = float(classes[np.argmax(counts)])
     cfg = p.config(theta)
-    prov = dict(cfg.provenance)
-    n_free = len(p.priors.parameters)
-    set_here: set[str] = set()
-    for i, name in enumerate(p.names[:n_free]):
-        col = cal.draws[:, i]
-        key = provenance_key(name)
-        value = f"{name} = {_fmt(float(np.median(col)))} +- {_fmt(float(np.std(col)))}"
-        if key in set_here:  # several parameters set one field (a rotation and each chain's deviation)
-            prov[key] += f"; {value}"
-        else:
-            prov[key] = f"identified: posterior median +- sd (fpm-sim calibrate, {data_note}); {value}"
-        set_here.add(key)
-        if key.startswith(("hardware.", "rig.chain_hinge")) and key.endswith(".mass_kg"):
-            prov[key.replace("mass_kg", "inertia_kg_m2")] = "identified: scaled with the identified mass"
+    parts = [
+        (name, f"{name} = {_fmt(float(np.median(cal.draws[:, i])))} +- {_fmt(float(np.std(cal.draws[:, i])))}")
+        for i, name in enumerate(p.names[: len(p.priors.parameters)])
+    ]
+    prov = identified_provenance(cfg.provenance, parts, f"posterior median +- sd (fpm-sim calibrate, {data_note})")
     if p.priors.sample_branches:
         k = p.names.index(BRANCH_PARAMETER)
         share = float(np.mean(np.round(cal.draws[:, k]) == theta[k]))

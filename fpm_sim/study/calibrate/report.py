@@ -331,7 +331,7 @@ def _loo_lines(cal: Calibration) -> list[str]:
         loo.summary_line() + ".",
         "",
         "```",
-        loo.table().split("\n", 1)[1],  # the table without its summary line, which the paragraph above gives
+        loo.table(summary=False),  # the paragraph above gives the summary line
         "```",
     ]
 

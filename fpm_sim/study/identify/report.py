@@ -21,7 +21,7 @@ from fpm_sim.results import to_jsonable
 from fpm_sim.study.identify.engine import CrossValidation, Identification, variance_scale
 from fpm_sim.study.identify.problem import workspace_measures
 
-__all__ = ["identified_config", "provenance_key", "render_report", "write_identification"]
+__all__ = ["identified_config", "identified_provenance", "provenance_key", "render_report", "write_identification"]
 
 
 def provenance_key(name: str) -> str:
@@ -49,22 +49,32 @@ def _fmt(v: float) -> str:
     return f"{v:.4g}"
 
 
+def identified_provenance(provenance: dict[str, str], parts: Sequence[tuple[str, str]], source: str) -> dict[str, str]:
+    """``provenance`` with every field that the parameters of ``parts`` (``(parameter name, its text)``) set marked
+    ``identified: <source>; <text>; <text> ...`` (several parameters can set one field: a rotation and each chain's
+    deviation), and each identified mass's inertia ``identified: scaled with the identified mass``."""
+    prov = dict(provenance)
+    by_key: dict[str, list[str]] = {}
+    for name, text in parts:
+        by_key.setdefault(provenance_key(name), []).append(text)
+    for key, texts in by_key.items():
+        prov[key] = f"identified: {source}; " + "; ".join(texts)
+        if key.startswith(("hardware.", "rig.chain_hinge.")) and key.endswith(".mass_kg"):
+            prov[key.replace("mass_kg", "inertia_kg_m2")] = "identified: scaled with the identified mass"
+    return prov
+
+
 def identified_config(result: Identification, *, data_note: str, method_note: str) -> Manipulator:
     """``result.config`` with each identified field's provenance ``identified: <data, method>; value +- std``."""
     cfg = result.config
-    prov = dict(cfg.provenance)
-    by_key: dict[str, list[str]] = {}
+    parts = []
     for name, v, s in zip(result.names, result.values, result.std):
         unit = "log10(N m/rad)" if "log10_" in name else name.rsplit("_", 1)[-1].split("[")[0]
-        by_key.setdefault(provenance_key(name), []).append(f"{name} = {_fmt(v)} +- {_fmt(s)} {unit}")
-    for key, parts in by_key.items():
+        parts.append((name, f"{name} = {_fmt(v)} +- {_fmt(s)} {unit}"))
+    prov = identified_provenance(cfg.provenance, parts, f"{data_note}, {method_note}")
+    for key in {provenance_key(n) for n in result.at_bound} & {provenance_key(n) for n, _ in parts}:
         at_bound = [n for n in result.at_bound if provenance_key(n) == key]
-        note = f" (at its bound: {', '.join(at_bound)}; the std is then not a confidence interval)" if at_bound else ""
-        prov[key] = f"identified: {data_note}, {method_note}; " + "; ".join(parts) + note
-        if key.startswith("hardware.") and key.endswith(".mass_kg"):
-            prov[key.replace("mass_kg", "inertia_kg_m2")] = "identified: scaled with the identified mass"
-        if key == "rig.chain_hinge.mass_kg":
-            prov["rig.chain_hinge.inertia_kg_m2"] = "identified: scaled with the identified mass"
+        prov[key] += f" (at its bound: {', '.join(at_bound)}; the std is then not a confidence interval)"
     start_branch = result.start_elbow_branch or result.problem.parameters.start.geometry.elbow_branch
     if start_branch != cfg.geometry.elbow_branch:
         prov["geometry.elbow_branch"] = f"identified: {data_note}, the elbow-branch class of the best global-search fit"
